@@ -1,0 +1,226 @@
+"""Pose vectors, rotation conventions and homogeneous transforms.
+
+A pose is ``[Tx, Ty, Tz, Rx, Ry, Rz]`` (mm, deg) of a frame B relative to a
+frame A; its transform ``B2A`` maps coordinates in B to coordinates in A
+(``p_A = B2A @ p_B``). Names of transforms follow that rule: ``platform2cmm``
+takes platform coordinates to CMM coordinates, ``platform2origin`` is the pose of
+the platform relative to frame O.
+
+Two conventions:
+
+``symetrie`` (default, "Euler type II", fixed axes)
+    ``R = Rz(Rz) @ Ry(Ry) @ Rx(Rx)``, the same as scipy's
+    ``Rotation.from_euler("xyz", [Rx, Ry, Rz], degrees=True)``.
+``pi`` (mobile axes)
+    ``R = Rx(Rx) @ Ry(Ry) @ Rz(Rz)``, scipy's ``from_euler("XYZ", ...)``.
+
+Every function takes one pose ``(6,)`` or a stack ``(N, 6)`` and returns the
+matching shape.
+
+>>> import numpy as np
+>>> T = transform_from_pose([1.0, 2.0, 3.0, 0.0, 0.0, 90.0])
+>>> np.round(T @ [1.0, 0.0, 0.0, 1.0], 12)
+array([1., 3., 3., 1.])
+>>> pose_from_transform(T) + 0.0   # + 0.0 turns -0.0 into 0.0
+array([ 1.,  2.,  3.,  0.,  0., 90.])
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+
+Convention = Literal["symetrie", "pi"]
+CONVENTIONS: tuple[Convention, ...] = ("symetrie", "pi")
+
+FloatArray = npt.NDArray[np.float64]
+
+
+def check_convention(convention: str) -> Convention:
+    """Return ``convention`` if it is a known rotation convention, else raise ValueError.
+
+    >>> check_convention("pi")
+    'pi'
+    """
+    if convention not in CONVENTIONS:
+        raise ValueError(
+            f"unknown rotation convention {convention!r}; expected one of {', '.join(CONVENTIONS)}"
+        )
+    return convention  # type: ignore[return-value]
+
+
+def check_poses(poses: npt.ArrayLike, name: str = "pose") -> FloatArray:
+    """Return ``poses`` as a float array of shape (6,) or (N, 6), checked finite.
+
+    >>> check_poses([0, 0, 1, 0, 0, 0]).shape
+    (6,)
+    >>> check_poses([[0, 0, 1]])
+    Traceback (most recent call last):
+    ...
+    ValueError: pose must have shape (6,) or (N, 6), got (1, 3)
+    """
+    array = np.asarray(poses, dtype=float)
+    if array.ndim not in (1, 2) or array.shape[-1] != 6:
+        raise ValueError(f"{name} must have shape (6,) or (N, 6), got {array.shape}")
+    if not np.all(np.isfinite(array)):
+        bad = np.argwhere(~np.isfinite(np.atleast_2d(array)))[0]
+        raise ValueError(f"{name} has a non-finite value (row {bad[0]}, component {bad[1]})")
+    return array
+
+
+def check_transforms(transforms: npt.ArrayLike, name: str = "transform") -> FloatArray:
+    """Return ``transforms`` as (4, 4) or (N, 4, 4) rigid transforms, checked.
+
+    The rotation part must be orthonormal with determinant +1 (to 1e-9) and the
+    last row ``[0, 0, 0, 1]``.
+    """
+    array = np.asarray(transforms, dtype=float)
+    if array.shape[-2:] != (4, 4) or array.ndim not in (2, 3):
+        raise ValueError(f"{name} must have shape (4, 4) or (N, 4, 4), got {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{name} has a non-finite value")
+    rot = array[..., :3, :3]
+    err = np.abs(np.swapaxes(rot, -1, -2) @ rot - np.eye(3)).max(axis=(-1, -2))
+    if np.any(err > 1e-9) or np.any(np.linalg.det(rot) < 0):
+        raise ValueError(f"{name} has a rotation part that is not a proper rotation")
+    if np.any(np.abs(array[..., 3, :] - [0.0, 0.0, 0.0, 1.0]) > 0):
+        raise ValueError(f"{name} must have [0, 0, 0, 1] as last row")
+    return array
+
+
+def _rx(a: FloatArray) -> FloatArray:
+    c, s = np.cos(a), np.sin(a)
+    o, z = np.ones_like(a), np.zeros_like(a)
+    return np.stack([o, z, z, z, c, -s, z, s, c], axis=-1).reshape(a.shape + (3, 3))
+
+
+def _ry(a: FloatArray) -> FloatArray:
+    c, s = np.cos(a), np.sin(a)
+    o, z = np.ones_like(a), np.zeros_like(a)
+    return np.stack([c, z, s, z, o, z, -s, z, c], axis=-1).reshape(a.shape + (3, 3))
+
+
+def _rz(a: FloatArray) -> FloatArray:
+    c, s = np.cos(a), np.sin(a)
+    o, z = np.ones_like(a), np.zeros_like(a)
+    return np.stack([c, -s, z, s, c, z, z, z, o], axis=-1).reshape(a.shape + (3, 3))
+
+
+def _drx(a: FloatArray) -> FloatArray:
+    c, s = np.cos(a), np.sin(a)
+    z = np.zeros_like(a)
+    return np.stack([z, z, z, z, -s, -c, z, c, -s], axis=-1).reshape(a.shape + (3, 3))
+
+
+def _dry(a: FloatArray) -> FloatArray:
+    c, s = np.cos(a), np.sin(a)
+    z = np.zeros_like(a)
+    return np.stack([-s, z, c, z, z, z, -c, z, -s], axis=-1).reshape(a.shape + (3, 3))
+
+
+def _drz(a: FloatArray) -> FloatArray:
+    c, s = np.cos(a), np.sin(a)
+    z = np.zeros_like(a)
+    return np.stack([-s, -c, z, c, -s, z, z, z, z], axis=-1).reshape(a.shape + (3, 3))
+
+
+def rotation_from_angles(angles_deg: npt.ArrayLike, convention: str = "symetrie") -> FloatArray:
+    """Rotation matrices from ``[Rx, Ry, Rz]`` angles in degrees, shape (..., 3, 3).
+
+    >>> import numpy as np
+    >>> np.round(rotation_from_angles([0, 0, 90]), 12)
+    array([[ 0., -1.,  0.],
+           [ 1.,  0.,  0.],
+           [ 0.,  0.,  1.]])
+    """
+    convention = check_convention(convention)
+    a = np.deg2rad(np.asarray(angles_deg, dtype=float))
+    rx, ry, rz = _rx(a[..., 0]), _ry(a[..., 1]), _rz(a[..., 2])
+    if convention == "symetrie":
+        return rz @ ry @ rx
+    return rx @ ry @ rz
+
+
+def rotation_derivatives(angles_deg: npt.ArrayLike, convention: str = "symetrie") -> FloatArray:
+    """Partial derivatives of the rotation matrix w.r.t. Rx, Ry, Rz, per degree.
+
+    Returns shape (..., 3, 3, 3): index ``[..., k, :, :]`` is ``dR/dangle_k``.
+    """
+    convention = check_convention(convention)
+    a = np.deg2rad(np.asarray(angles_deg, dtype=float))
+    x, y, z = a[..., 0], a[..., 1], a[..., 2]
+    rx, ry, rz = _rx(x), _ry(y), _rz(z)
+    drx, dry, drz = _drx(x), _dry(y), _drz(z)
+    if convention == "symetrie":
+        parts = [rz @ ry @ drx, rz @ dry @ rx, drz @ ry @ rx]
+    else:
+        parts = [drx @ ry @ rz, rx @ dry @ rz, rx @ ry @ drz]
+    return np.stack(parts, axis=-3) * (np.pi / 180.0)
+
+
+def angles_from_rotation(rotation: npt.ArrayLike, convention: str = "symetrie") -> FloatArray:
+    """``[Rx, Ry, Rz]`` in degrees from rotation matrices (..., 3, 3).
+
+    Angles are in (-180, 180]; ``Ry`` is in [-90, 90] (hexapod rotations are far
+    from the gimbal lock at ``Ry = +-90``).
+    """
+    convention = check_convention(convention)
+    r = np.asarray(rotation, dtype=float)
+    if convention == "symetrie":
+        ry = np.arctan2(-r[..., 2, 0], np.hypot(r[..., 0, 0], r[..., 1, 0]))
+        rx = np.arctan2(r[..., 2, 1], r[..., 2, 2])
+        rz = np.arctan2(r[..., 1, 0], r[..., 0, 0])
+    else:
+        ry = np.arctan2(r[..., 0, 2], np.hypot(r[..., 0, 0], r[..., 0, 1]))
+        rx = np.arctan2(-r[..., 1, 2], r[..., 2, 2])
+        rz = np.arctan2(-r[..., 0, 1], r[..., 0, 0])
+    return np.rad2deg(np.stack([rx, ry, rz], axis=-1))
+
+
+def transform_from_pose(poses: npt.ArrayLike, convention: str = "symetrie") -> FloatArray:
+    """4x4 transforms ``B2A`` from pose vectors of B relative to A, shape (..., 4, 4)."""
+    p = check_poses(poses)
+    out = np.zeros(p.shape[:-1] + (4, 4))
+    out[..., :3, :3] = rotation_from_angles(p[..., 3:], convention)
+    out[..., :3, 3] = p[..., :3]
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def pose_from_transform(transforms: npt.ArrayLike, convention: str = "symetrie") -> FloatArray:
+    """Pose vectors ``[Tx, Ty, Tz, Rx, Ry, Rz]`` (mm, deg) from 4x4 transforms."""
+    t = np.asarray(transforms, dtype=float)
+    if t.shape[-2:] != (4, 4):
+        raise ValueError(f"transform must have shape (..., 4, 4), got {t.shape}")
+    return np.concatenate([t[..., :3, 3], angles_from_rotation(t[..., :3, :3], convention)], -1)
+
+
+def invert_transform(transforms: npt.ArrayLike) -> FloatArray:
+    """Inverse of rigid transforms (..., 4, 4), exact for the rigid structure.
+
+    >>> import numpy as np
+    >>> A2B = transform_from_pose([1, 2, 3, 10, 20, 30])
+    >>> np.allclose(invert_transform(A2B) @ A2B, np.eye(4))
+    True
+    """
+    t = np.asarray(transforms, dtype=float)
+    out = np.zeros_like(t)
+    rot_t = np.swapaxes(t[..., :3, :3], -1, -2)
+    out[..., :3, :3] = rot_t
+    out[..., :3, 3] = -(rot_t @ t[..., :3, 3, None])[..., 0]
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def relative_transform(a2m: npt.ArrayLike, b2m: npt.ArrayLike) -> FloatArray:
+    """``B2A`` from two frames known in a common frame M: ``inv(A2M) @ B2M``."""
+    return invert_transform(a2m) @ np.asarray(b2m, dtype=float)
+
+
+def apply_transform(transforms: npt.ArrayLike, points: npt.ArrayLike) -> FloatArray:
+    """Apply transforms (..., 4, 4) to points (..., k, 3); broadcasts over the leading axes."""
+    t = np.asarray(transforms, dtype=float)
+    p = np.asarray(points, dtype=float)
+    return np.einsum("...ij,...kj->...ki", t[..., :3, :3], p) + t[..., None, :3, 3]

@@ -1,0 +1,227 @@
+"""The thermal deflection decoupled pose measurement method (Kalas et al.).
+
+Given the platform frames measured at every step of a plan (O, R0, then targets
+S_i with references R next to them), compute for every target:
+
+* the **conventional** pose ``T(O, S_i)``: the measured frame of S_i relative to
+  the measured frame O;
+* the **corrected** pose: the pose S_i would have had with the legs in the
+  thermal state of the first reference R0.
+
+Steps of the correction, all vectorized over targets:
+
+1. Poses of every step relative to O, then leg lengths ``q`` by the IGM.
+2. Thermal growth at R: ``dq_R(t) = q_R(t) - q_R0`` for every reference step.
+3. Growth at R at S_i's time: the neighbouring reference(s); with a reference on
+   both sides, interpolated linearly in time (``interpolation="linear"``), or
+   one neighbour as in the paper (``"before"``, ``"after"``, ``"nearest"``).
+4. Scaled to S_i's leg lengths with the leg model: ``dT = dq_R / s(q_R0)``,
+   ``dq_S = dT * s(q_S0)`` where ``s`` is the leg's sensitivity (mm/K) and
+   ``q_S0 = q_S - dq_S`` (one fixed-point refinement; the difference is far below
+   a nanometre but costs nothing).
+5. ``q_S0 = q_S - dq_S``, corrected pose ``= FGM(q_S0)``.
+
+Signs: a leg that grew (``dq > 0``) made the measured pose longer in that leg; the
+corrected pose takes the growth off.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from hexatherm.core.geometry import invert_transform, pose_from_transform
+from hexatherm.core.hexapod import Hexapod
+from hexatherm.core.plan import Plan
+from hexatherm.errors import PlanError
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.intp]
+Interpolation = Literal["linear", "before", "after", "nearest"]
+INTERPOLATIONS: tuple[Interpolation, ...] = ("linear", "before", "after", "nearest")
+
+
+@dataclass(frozen=True)
+class StepPoses:
+    """Every step's measured pose relative to O and its IGM leg lengths.
+
+    Attributes
+    ----------
+    platform2origin : ndarray, shape (N, 4, 4)
+    pose : ndarray, shape (N, 6)
+        ``[Tx, Ty, Tz, Rx, Ry, Rz]`` relative to O, mm and deg.
+    q_mm : ndarray, shape (N, 6)
+        Leg lengths of each step by the IGM.
+    """
+
+    platform2origin: FloatArray
+    pose: FloatArray
+    q_mm: FloatArray
+
+
+@dataclass(frozen=True)
+class Correction:
+    """Conventional and corrected poses of the M targets of a plan.
+
+    Attributes
+    ----------
+    target_index : ndarray of int, shape (M,)
+        Step index of each target.
+    conventional : ndarray, shape (M, 6)
+        ``T(O, S_i)`` as measured, mm and deg.
+    corrected : ndarray, shape (M, 6)
+        The pose at the thermal state of R0, mm and deg.
+    growth_mm : ndarray, shape (M, 6)
+        Thermal growth of each leg at S_i, subtracted from its leg lengths.
+    reference_growth_mm : ndarray, shape (M, 6)
+        Growth at R (relative to R0) at S_i's time, before scaling to S_i.
+    before_index, after_index : ndarray of int, shape (M,)
+        Step index of the reference used before / after S_i (-1: not used).
+    weight_after : ndarray, shape (M,)
+        Weight of the reference after S_i in the interpolation (0 to 1).
+    dt_before_s, dt_after_s : ndarray, shape (M,)
+        ``t_S - t_Rbefore`` and ``t_Rafter - t_S`` of the references used (NaN: not used).
+    q_corrected_mm : ndarray, shape (M, 6)
+        Leg lengths given to the FGM.
+    """
+
+    target_index: IntArray
+    conventional: FloatArray
+    corrected: FloatArray
+    growth_mm: FloatArray
+    reference_growth_mm: FloatArray
+    before_index: IntArray
+    after_index: IntArray
+    weight_after: FloatArray
+    dt_before_s: FloatArray
+    dt_after_s: FloatArray
+    q_corrected_mm: FloatArray
+
+
+def step_poses(hexapod: Hexapod, platform2cmm: npt.ArrayLike, origin_index: int = 0) -> StepPoses:
+    """Poses relative to the origin step and IGM leg lengths of every measured step.
+
+    Parameters
+    ----------
+    hexapod : Hexapod
+    platform2cmm : array_like, shape (N, 4, 4)
+        Measured platform frame of every step in the CMM frame.
+    origin_index : int
+        Which step is the origin O.
+    """
+    frames = np.asarray(platform2cmm, dtype=float)
+    origin2cmm = frames[origin_index]
+    platform2origin = invert_transform(origin2cmm) @ frames
+    pose = pose_from_transform(platform2origin, hexapod.convention)
+    return StepPoses(platform2origin=platform2origin, pose=pose, q_mm=hexapod.igm(pose))
+
+
+def choose_references(
+    plan: Plan, times_s: npt.ArrayLike, interpolation: Interpolation = "linear"
+) -> tuple[IntArray, IntArray, FloatArray]:
+    """Which references each target uses, and the interpolation weight of the later one.
+
+    Returns ``(before_index, after_index, weight_after)`` with -1 for an unused side.
+    With ``"linear"`` and references on both sides the weight is
+    ``(t_S - t_b) / (t_a - t_b)``; with one side only, that side is used.
+    """
+    if interpolation not in INTERPOLATIONS:
+        raise ValueError(f"interpolation must be one of {INTERPOLATIONS}, got {interpolation!r}")
+    t = np.asarray(times_s, dtype=float)
+    adjacent = np.array(plan.adjacent_references(), dtype=np.intp).reshape(-1, 2)
+    before, after = adjacent[:, 0].copy(), adjacent[:, 1].copy()
+    targets = plan.target_indices
+    both = (before >= 0) & (after >= 0)
+    if interpolation == "before":
+        after[both] = -1
+    elif interpolation == "after":
+        before[both] = -1
+    elif interpolation == "nearest":
+        closer_after = both & ((t[after] - t[targets]) < (t[targets] - t[before]))
+        before[closer_after] = -1
+        after[both & ~closer_after] = -1
+    weight = np.where(after >= 0, 1.0, 0.0)
+    both = (before >= 0) & (after >= 0)
+    if np.any(both):
+        tb, ta, ts = t[before[both]], t[after[both]], t[targets[both]]
+        span = ta - tb
+        if np.any(span <= 0):
+            bad = targets[both][np.argmax(span <= 0)]
+            raise PlanError(
+                f"step {plan.labels[bad]}: its references are not in time order "
+                "(the reference after it was measured no later than the one before)"
+            )
+        weight[both] = (ts - tb) / span
+    return before, after, weight
+
+
+def correct(
+    hexapod: Hexapod,
+    plan: Plan,
+    times_s: npt.ArrayLike,
+    platform2cmm: npt.ArrayLike,
+    interpolation: Interpolation = "linear",
+) -> tuple[StepPoses, Correction]:
+    """Run the thermal deflection decoupled method on one session.
+
+    Parameters
+    ----------
+    hexapod : Hexapod
+        Geometry and leg thermal model (``hexapod.legs`` is required).
+    plan : Plan
+        The steps, validated.
+    times_s : array_like, shape (N,)
+        Time of every step, seconds.
+    platform2cmm : array_like, shape (N, 4, 4)
+        Measured platform frame of every step in the CMM frame.
+    interpolation : {"linear", "before", "after", "nearest"}
+        How a target with references on both sides uses them.
+
+    Returns
+    -------
+    (StepPoses, Correction)
+    """
+    if hexapod.legs is None:
+        raise PlanError("the hexapod file has no leg model (legs:): cannot scale thermal growth")
+    t = np.asarray(times_s, dtype=float)
+    frames = np.asarray(platform2cmm, dtype=float)
+    if t.shape != (len(plan.labels),) or frames.shape != (len(plan.labels), 4, 4):
+        raise ValueError("times and frames must have one entry per plan step")
+    steps = step_poses(hexapod, frames, plan.origin_index)
+    targets = plan.target_indices
+    refs = plan.reference_indices
+    before, after, w_after = choose_references(plan, t, interpolation)
+
+    q = steps.q_mm
+    q_r0 = q[refs[0]] if refs.size else np.full(6, np.nan)
+    growth_r = q - q_r0  # meaningful on reference rows only
+    g_before = np.where((before >= 0)[:, None], growth_r[np.maximum(before, 0)], 0.0)
+    g_after = np.where((after >= 0)[:, None], growth_r[np.maximum(after, 0)], 0.0)
+    reference_growth = (1.0 - w_after)[:, None] * g_before + w_after[:, None] * g_after
+
+    legs = hexapod.legs
+    q_s = q[targets]
+    growth_s = legs.scale_growth(reference_growth, q_r0, q_s)
+    growth_s = legs.scale_growth(reference_growth, q_r0, q_s - growth_s)
+    q_corr = q_s - growth_s
+    corrected = hexapod.fgm(q_corr, initial_poses=steps.pose[targets])
+
+    dt_before = np.where(before >= 0, t[targets] - t[np.maximum(before, 0)], np.nan)
+    dt_after = np.where(after >= 0, t[np.maximum(after, 0)] - t[targets], np.nan)
+    correction = Correction(
+        target_index=targets,
+        conventional=steps.pose[targets],
+        corrected=corrected,
+        growth_mm=growth_s,
+        reference_growth_mm=reference_growth,
+        before_index=before,
+        after_index=after,
+        weight_after=w_after,
+        dt_before_s=dt_before,
+        dt_after_s=dt_after,
+        q_corrected_mm=q_corr,
+    )
+    return steps, correction

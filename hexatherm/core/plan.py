@@ -1,0 +1,152 @@
+"""The measuring plan: which pose is measured at which step, in which order.
+
+The method needs the steps in the paper's order: the origin O first, then the
+first reference R0 (it fixes the thermal state that corrected poses refer to),
+then targets, each with a reference step right before and/or right after it.
+
+>>> plan = Plan.from_steps([("O", "origin", [0] * 6), ("R0", "reference", [0, 0, -40, 0, 0, 0]),
+...                         ("S1", "target", [1, 0, 0, 0, 0, 0]),
+...                         ("R1", "reference", [0, 0, -40, 0, 0, 0])])
+>>> plan.adjacent_references()
+[(1, 3)]
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from hexatherm.errors import PlanError
+
+StepKind = Literal["origin", "reference", "target"]
+STEP_KINDS: tuple[StepKind, ...] = ("origin", "reference", "target")
+NAME_PATTERN = re.compile(r"[A-Za-z0-9-]+")
+#: commanded reference poses equal to this tolerance are the same pose (mm, deg)
+SAME_POSE_TOL = 1e-9
+
+
+class StepError(PlanError):
+    """A plan error attached to one step (``step`` is its label, ``index`` its position)."""
+
+    def __init__(self, message: str, *, step: str | None = None, index: int | None = None):
+        self.step = step
+        self.index = index
+        super().__init__(f"step {step}: {message}" if step is not None else message)
+
+
+@dataclass(frozen=True)
+class Plan:
+    """Steps of a measuring session, in measuring order.
+
+    Attributes
+    ----------
+    labels : tuple of str
+    kinds : tuple of {"origin", "reference", "target"}
+    poses : ndarray, shape (N, 6)
+        Commanded pose of each step relative to frame O (mm, deg).
+    reference_pose : ndarray, shape (6,)
+    points_per_ball : int
+    """
+
+    labels: tuple[str, ...]
+    kinds: tuple[StepKind, ...]
+    poses: npt.NDArray[np.float64]
+    reference_pose: npt.NDArray[np.float64]
+    points_per_ball: int = 25
+
+    @classmethod
+    def from_steps(
+        cls,
+        steps: Iterable[tuple[str, str, Sequence[float]]],
+        reference_pose: Sequence[float] | None = None,
+        points_per_ball: int = 25,
+    ) -> Plan:
+        """Build and validate a plan from ``(label, kind, pose)`` triples."""
+        steps = list(steps)
+        labels = tuple(str(s[0]) for s in steps)
+        kinds = tuple(s[1] for s in steps)
+        poses = np.array([np.asarray(s[2], dtype=float) for s in steps]).reshape(-1, 6)
+        if reference_pose is None:
+            refs = [p for p, k in zip(poses, kinds, strict=True) if k == "reference"]
+            reference_pose = refs[0] if refs else np.zeros(6)
+        plan = cls(labels, kinds, poses, np.asarray(reference_pose, float),  # type: ignore[arg-type]
+                   int(points_per_ball))
+        plan.validate()
+        return plan
+
+    def validate(self) -> None:
+        """Raise :class:`StepError` naming the step when the plan cannot be processed."""
+        if not self.labels:
+            raise StepError("the plan has no steps")
+        seen: dict[str, int] = {}
+        for i, (label, kind) in enumerate(zip(self.labels, self.kinds, strict=True)):
+            if not NAME_PATTERN.fullmatch(label):
+                raise StepError("label must match [A-Za-z0-9-]+", step=label, index=i)
+            if label in seen:
+                raise StepError(f"duplicate label (also step {seen[label] + 1})", step=label,
+                                index=i)
+            seen[label] = i
+            if kind not in STEP_KINDS:
+                raise StepError(f"unknown kind {kind!r}; expected origin, reference or target",
+                                step=label, index=i)
+            if not np.all(np.isfinite(self.poses[i])):
+                raise StepError("pose has a non-finite value", step=label, index=i)
+        if self.kinds[0] != "origin":
+            raise StepError("the first step must be the origin (kind: origin)",
+                            step=self.labels[0], index=0)
+        extra = [i for i, k in enumerate(self.kinds) if k == "origin"][1:]
+        if extra:
+            raise StepError("only one origin step is allowed", step=self.labels[extra[0]],
+                            index=extra[0])
+        refs = self.reference_indices
+        if self.target_indices.size and not refs.size:
+            raise StepError("the plan has targets but no reference step")
+        for i in refs:
+            if np.abs(self.poses[i] - self.poses[refs[0]]).max() > SAME_POSE_TOL:
+                raise StepError(
+                    f"reference pose differs from the first reference {self.labels[refs[0]]}; "
+                    "all reference steps must command the same pose",
+                    step=self.labels[i], index=int(i),
+                )
+        for i in self.target_indices:
+            if refs.size and i < refs[0]:
+                raise StepError(
+                    f"target comes before the first reference {self.labels[refs[0]]}, which "
+                    "fixes the thermal state of the corrected poses", step=self.labels[i],
+                    index=int(i))
+        for i, (before, after) in zip(self.target_indices, self.adjacent_references(),
+                                      strict=True):
+            if before < 0 and after < 0:
+                raise StepError(
+                    "target has no reference step adjacent to it (right before or after)",
+                    step=self.labels[i], index=int(i),
+                )
+
+    @property
+    def reference_indices(self) -> npt.NDArray[np.intp]:
+        """Indices of the reference steps, in order."""
+        return np.array([i for i, k in enumerate(self.kinds) if k == "reference"], dtype=np.intp)
+
+    @property
+    def target_indices(self) -> npt.NDArray[np.intp]:
+        """Indices of the target steps, in order."""
+        return np.array([i for i, k in enumerate(self.kinds) if k == "target"], dtype=np.intp)
+
+    @property
+    def origin_index(self) -> int:
+        """Index of the origin step (always 0 in a valid plan)."""
+        return self.kinds.index("origin")
+
+    def adjacent_references(self) -> list[tuple[int, int]]:
+        """For each target, the indices of the reference right before and after it (-1: none)."""
+        out = []
+        for i in self.target_indices:
+            before = i - 1 if i > 0 and self.kinds[i - 1] == "reference" else -1
+            after = i + 1 if i + 1 < len(self.kinds) and self.kinds[i + 1] == "reference" else -1
+            out.append((int(before), int(after)))
+        return out

@@ -1,0 +1,67 @@
+"""The errors hexatherm raises on purpose.
+
+Every error a user can provoke with bad input derives from :class:`HexathermError`;
+the command line turns them into a one-line message and a non-zero exit.
+"""
+
+from __future__ import annotations
+
+import os
+
+
+class HexathermError(Exception):
+    """Base class of every error hexatherm raises deliberately."""
+
+
+class InputError(HexathermError):
+    """Bad content in an input file, located by file, line and field.
+
+    >>> str(InputError("not a number: 'abc'", path="centres.csv", line=12, field="x"))
+    "centres.csv:12: field 'x': not a number: 'abc'"
+    """
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        path: str | os.PathLike[str] | None = None,
+        line: int | None = None,
+        field: str | None = None,
+    ) -> None:
+        self.message = message
+        self.path = None if path is None else os.fspath(path)
+        self.line = line
+        self.field = field
+        super().__init__(self._format())
+
+    def _format(self) -> str:
+        where = ""
+        if self.path is not None:
+            where = self.path
+            if self.line is not None:
+                where += f":{self.line}"
+            where += ": "
+        elif self.line is not None:
+            where = f"line {self.line}: "
+        what = f"field '{self.field}': " if self.field is not None else ""
+        return f"{where}{what}{self.message}"
+
+
+class PlanError(HexathermError):
+    """A plan or session whose steps cannot be processed (names the step)."""
+
+
+class ConvergenceError(HexathermError):
+    """An iterative solver did not reach its tolerance."""
+
+
+class SingularityError(ConvergenceError):
+    """A Jacobian is singular or too ill-conditioned to trust the solution."""
+
+
+class FitError(HexathermError):
+    """A geometric fit whose preconditions are not met (too few points, coplanar, ...)."""
+
+
+class RegistrationError(HexathermError):
+    """Ball centres that cannot be registered to the balls file."""

@@ -1,0 +1,52 @@
+"""Shared fixtures: a realistic hexapod, balls and plans built in code (independent of files)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hexatherm.core.hexapod import Hexapod
+from hexatherm.core.plan import Plan
+from hexatherm.core.thermal import LegThermalModel
+
+REFERENCE_POSE = [0.0, 0.0, -40.0, 0.0, 0.0, 0.0]
+
+
+def make_hexapod(convention: str = "symetrie") -> Hexapod:
+    legs = LegThermalModel.uniform(
+        [("body", "aluminium", 23.1e-6, 148.0), ("screw", "steel", 11.5e-6, None)]
+    )
+    return Hexapod.symmetric(
+        base_radius_mm=150.0, platform_radius_mm=100.0, base_half_angle_deg=10.0,
+        platform_half_angle_deg=10.0, height_mm=220.0, rotation_deg=-120.0,
+        legs=legs, convention=convention,  # type: ignore[arg-type]
+    )
+
+
+def make_plan(target_poses: np.ndarray, reference_every: str = "both") -> Plan:
+    """O, R0, then targets each followed (and so preceded) by a reference."""
+    steps = [("O", "origin", [0.0] * 6), ("R0", "reference", REFERENCE_POSE)]
+    for i, pose in enumerate(target_poses, start=1):
+        steps.append((f"S{i}", "target", list(pose)))
+        if reference_every == "both" or i == len(target_poses):
+            steps.append((f"R{i}", "reference", REFERENCE_POSE))
+    return Plan.from_steps(steps)
+
+
+BALLS = np.array([[80.0, 0.0, 20.0], [-40.0, 69.28, 20.0], [-40.0, -69.28, 25.0]])
+
+
+def random_poses(rng: np.random.Generator, n: int, scale: float = 1.0) -> np.ndarray:
+    """Poses within a realistic workspace: +-20 mm, +-20 mm, +-10 mm, +-5 deg, +-5 deg, +-10 deg."""
+    bounds = np.array([20.0, 20.0, 10.0, 5.0, 5.0, 10.0]) * scale
+    return rng.uniform(-bounds, bounds, size=(n, 6))
+
+
+@pytest.fixture
+def hexapod() -> Hexapod:
+    return make_hexapod()
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(20261121)

@@ -1,0 +1,65 @@
+"""Kabsch registration: exact recovery, no reflections, weights, preconditions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hexatherm.core.geometry import apply_transform, transform_from_pose
+from hexatherm.core.registration import check_ball_layout, register
+from hexatherm.errors import RegistrationError
+from tests.conftest import BALLS
+
+
+def random_transforms(rng, n):
+    poses = np.column_stack([rng.uniform(-800, 800, (n, 3)), rng.uniform(-180, 180, (n, 1)),
+                             rng.uniform(-89, 89, (n, 1)), rng.uniform(-180, 180, (n, 1))])
+    return transform_from_pose(poses)
+
+
+def test_recovers_random_transforms_exactly(rng):
+    truth = random_transforms(rng, 500)
+    centres = apply_transform(truth, BALLS)
+    fit = register(centres, BALLS)
+    np.testing.assert_allclose(fit.platform2cmm, truth, atol=1e-11)
+    assert fit.rms_um.max() < 1e-8
+
+
+def test_never_returns_a_reflection(rng):
+    # mirrored measurements: the best proper rotation, not the reflection
+    truth = random_transforms(rng, 50)
+    centres = apply_transform(truth, BALLS * [1, 1, -1])
+    fit = register(centres, BALLS)
+    np.testing.assert_allclose(np.linalg.det(fit.platform2cmm[:, :3, :3]), 1.0, atol=1e-12)
+
+
+def test_least_squares_optimum_with_noise(rng):
+    # the residuals of a least-squares rigid fit sum to zero and are orthogonal
+    # to the rotation generators: no small rigid move lowers the cost
+    truth = random_transforms(rng, 1)
+    centres = apply_transform(truth, BALLS) + rng.normal(scale=1e-3, size=(1, 3, 3))
+    fit = register(centres, BALLS)
+    res = fit.residuals_mm[0]
+    np.testing.assert_allclose(res.sum(axis=0), 0.0, atol=1e-12)
+    moved = apply_transform(fit.platform2cmm[0], BALLS)
+    np.testing.assert_allclose(np.cross(moved - moved.mean(0), res).sum(axis=0), 0.0, atol=1e-10)
+
+
+def test_weights_ignore_a_zero_weight_ball(rng):
+    balls = np.vstack([BALLS, [[0.0, 0.0, 60.0]]])
+    truth = random_transforms(rng, 1)
+    centres = apply_transform(truth, balls)
+    centres[0, 3] += [0.5, -0.3, 0.2]  # a bad fourth ball
+    fit = register(centres, balls, weights=[1, 1, 1, 0])
+    np.testing.assert_allclose(fit.platform2cmm[0], truth[0], atol=1e-11)
+
+
+def test_preconditions_have_messages():
+    with pytest.raises(RegistrationError, match="at least 3 balls"):
+        check_ball_layout(BALLS[:2])
+    with pytest.raises(RegistrationError, match="collinear"):
+        check_ball_layout([[0, 0, 0], [10, 10, 10], [20.0, 20.0, 20.0 + 1e-12]])
+    with pytest.raises(RegistrationError, match=r"shape \(N, 3, 3\)"):
+        register(np.zeros((2, 4, 3)), BALLS)
+    with pytest.raises(RegistrationError, match="step index 1 have a non-finite"):
+        register(np.stack([BALLS, BALLS * np.nan]), BALLS)
