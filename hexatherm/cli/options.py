@@ -1,0 +1,49 @@
+"""Options and error handling shared by every command."""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+import click
+
+from hexatherm.errors import HexathermError
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+overwrite_option = click.option(
+    "--overwrite", is_flag=True, help="Replace the output if it exists (never by default)."
+)
+output_dir_option = click.option(
+    "-o", "--out", "out", type=click.Path(file_okay=False), default=None,
+    help="Output folder [default: SESSION/results].",
+)
+interpolation_option = click.option(
+    "--interpolation",
+    type=click.Choice(["linear", "before", "after", "nearest"]),
+    default="linear", show_default=True,
+    help="With references on both sides of a target: interpolate their growth linearly in "
+    "time, or use one neighbour as in the paper.",
+)
+
+
+def clean_errors(func: F) -> F:
+    """Turn hexatherm's own errors into a one-line message on stderr and exit status 1.
+
+    Anything else is a bug and keeps its traceback.
+    """
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return func(*args, **kwargs)
+        except HexathermError as exc:
+            raise click.ClickException(str(exc)) from None
+
+    return wrapper  # type: ignore[return-value]
+
+
+def echo_err(message: str) -> None:
+    """A log line on standard error (data goes to standard output)."""
+    click.echo(message, err=True)

@@ -1,0 +1,392 @@
+"""Readers and writers of the YAML contracts: hexapod, balls, plan and session files.
+
+Every reader checks the ``format:`` key, rejects unknown keys and bad values with
+an :class:`~hexatherm.errors.InputError` that names the file, the line and the
+field, and returns the core's typed objects.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import yaml
+
+from hexatherm.core.geometry import CONVENTIONS
+from hexatherm.core.hexapod import Hexapod
+from hexatherm.core.plan import NAME_PATTERN, STEP_KINDS, Plan, StepError
+from hexatherm.core.registration import check_ball_layout
+from hexatherm.core.thermal import LegThermalModel, SegmentSpec
+from hexatherm.errors import InputError, RegistrationError
+from hexatherm.io.atomic import atomic_write_text
+from hexatherm.io.yamlfile import YamlDoc
+
+HEXAPOD_FORMAT = "hexatherm-hexapod/1"
+BALLS_FORMAT = "hexatherm-balls/1"
+PLAN_FORMAT = "hexatherm-plan/1"
+SESSION_FORMAT = "hexatherm-session/1"
+
+#: effect names and parameters of the spec's table ("The hexapod twin and its effects")
+EFFECT_PARAMETERS: dict[str, tuple[str, ...]] = {
+    "leg_thermal_lag": ("tau_s",),
+    "steel_overheat": ("ratio",),
+    "leg_cte_error": tuple(f"leg{i}" for i in range(1, 7)),
+    "base_expansion": ("alpha_per_K",),
+    "cmm_drift": ("vx_um_per_h", "vy_um_per_h", "vz_um_per_h"),
+    "leg_offset": tuple(f"leg{i}" for i in range(1, 7)),
+}
+
+
+# --------------------------------------------------------------------- hexapod
+def read_hexapod(path: str | os.PathLike[str]) -> Hexapod:
+    """Read and validate a hexapod file (``format: hexatherm-hexapod/1``)."""
+    return _hexapod_from_doc(YamlDoc.load(path))
+
+
+def read_hexapod_text(text: str, path: str) -> Hexapod:
+    """Read a hexapod file's text (``path`` names it in messages)."""
+    return _hexapod_from_doc(YamlDoc.from_text(text, path))
+
+
+def _hexapod_from_doc(doc: YamlDoc) -> Hexapod:
+    doc.check_format(HEXAPOD_FORMAT)
+    doc.check_keys(["format", "name", "convention", "base_joints", "platform_joints", "stroke",
+                    "legs", "thermal_model"])
+    name = doc.string("name", default=Path(doc.path).stem)
+    convention = doc.string("convention", default="symetrie", choices=CONVENTIONS)
+    joints = {}
+    for key in ("base_joints", "platform_joints"):
+        items = doc.get(key)
+        if not isinstance(items, list) or len(items) != 6:
+            raise doc.error(f"expected six [x, y, z] joints (legs 1..6), got {items!r}", key)
+        joints[key] = np.array([doc.vector(key, i, size=3) for i in range(6)])
+    stroke = None
+    if doc.get("stroke", default=None) is not None:
+        stroke = np.array(doc.vector("stroke", size=2))
+        if not stroke[0] < stroke[1]:
+            raise doc.error(f"expected [min, max] with min < max, got {stroke.tolist()}", "stroke")
+    legs = _read_legs(doc)
+    effects = _read_effects(doc)
+    hexapod = Hexapod(name=name, convention=convention,  # type: ignore[arg-type]
+                      base_joints_mm=joints["base_joints"],
+                      platform_joints_mm=joints["platform_joints"], stroke_mm=stroke,
+                      legs=legs, effects=effects)
+    q0 = hexapod.zero_pose_leg_length_mm()
+    variable = q0 - legs.total_fixed_length_mm
+    if np.any(variable <= 0):
+        leg = int(np.argmax(variable <= 0))
+        raise doc.error(
+            f"leg {leg + 1}: the fixed segments ({legs.total_fixed_length_mm[leg]:.3f} mm) are "
+            f"longer than the leg in the zero pose ({q0[leg]:.3f} mm)", "legs")
+    if stroke is not None and np.any(hexapod.check_stroke(q0)):
+        raise doc.error(f"the zero pose leg lengths {q0.round(3).tolist()} are outside the stroke",
+                        "stroke")
+    return hexapod
+
+
+def _read_segments(doc: YamlDoc, *keys: Any) -> list[SegmentSpec]:
+    items = doc.get(*keys)
+    if not isinstance(items, list) or not items:
+        raise doc.error("expected a list of segments", *keys)
+    segments: list[SegmentSpec] = []
+    for j in range(len(items)):
+        doc.check_keys(["name", "material", "cte", "length"], *keys, j)
+        name = doc.string(*keys, j, "name")
+        material = doc.string(*keys, j, "material", default="")
+        cte = doc.number(*keys, j, "cte")
+        length_value = doc.get(*keys, j, "length")
+        length = None if length_value == "variable" else doc.number(*keys, j, "length",
+                                                                    positive=True)
+        segments.append((name, material, cte, length))
+    n_var = sum(1 for s in segments if s[3] is None)
+    if n_var != 1:
+        raise doc.error(f"exactly one segment must have 'length: variable', found {n_var}", *keys)
+    return segments
+
+
+def _read_legs(doc: YamlDoc) -> LegThermalModel:
+    doc.check_keys(["reference_temperature", "segments", "per_leg"], "legs")
+    t_ref = doc.number("legs", "reference_temperature", default=20.0)
+    has_segments = doc.get("legs", "segments", default=None) is not None
+    has_per_leg = doc.get("legs", "per_leg", default=None) is not None
+    if has_segments == has_per_leg:
+        raise doc.error("give either 'segments' (all legs alike) or 'per_leg' (six lists)", "legs")
+    if has_segments:
+        return LegThermalModel.uniform(_read_segments(doc, "legs", "segments"), t_ref)
+    per_leg = doc.get("legs", "per_leg")
+    if not isinstance(per_leg, list) or len(per_leg) != 6:
+        raise doc.error("expected six segment lists (legs 1..6)", "legs", "per_leg")
+    return LegThermalModel.from_segments(
+        [_read_segments(doc, "legs", "per_leg", i) for i in range(6)], t_ref)
+
+
+def _read_effects(doc: YamlDoc) -> tuple[dict[str, Any], ...]:
+    if doc.get("thermal_model", default=None) is None:
+        return ()
+    doc.check_keys(["effects"], "thermal_model")
+    items = doc.get("thermal_model", "effects", default=[])
+    if not isinstance(items, list):
+        raise doc.error("expected a list of effects", "thermal_model", "effects")
+    effects = []
+    for i in range(len(items)):
+        keys = ("thermal_model", "effects", i)
+        doc.check_keys(["name", "parameters"], *keys)
+        name = doc.string(*keys, "name", choices=tuple(EFFECT_PARAMETERS))
+        doc.check_keys(EFFECT_PARAMETERS[name], *keys, "parameters")
+        params = {p: doc.number(*keys, "parameters", p) for p in EFFECT_PARAMETERS[name]}
+        effects.append({"name": name, "parameters": params})
+    return tuple(effects)
+
+
+def hexapod_to_yaml(hexapod: Hexapod) -> str:
+    """The hexapod file text of ``hexapod`` (reads back to the same model)."""
+    legs = hexapod.legs
+    doc: dict[str, Any] = {
+        "format": HEXAPOD_FORMAT,
+        "name": hexapod.name,
+        "convention": hexapod.convention,
+        "base_joints": hexapod.base_joints_mm.tolist(),
+        "platform_joints": hexapod.platform_joints_mm.tolist(),
+    }
+    if hexapod.stroke_mm is not None:
+        doc["stroke"] = hexapod.stroke_mm.tolist()
+    if legs is not None:
+        per_leg = []
+        for i in range(6):
+            segs = []
+            for j, name in enumerate(legs.names[i]):
+                length: Any = "variable" if legs.variable[i, j] else float(
+                    legs.fixed_length_mm[i, j])
+                segs.append({"name": name, "material": legs.materials[i][j],
+                             "cte": float(legs.cte_per_K[i, j]), "length": length})
+            per_leg.append(segs)
+        leg_doc: dict[str, Any] = {"reference_temperature": legs.reference_temperature_C}
+        if all(p == per_leg[0] for p in per_leg):
+            leg_doc["segments"] = per_leg[0]
+        else:
+            leg_doc["per_leg"] = per_leg
+        doc["legs"] = leg_doc
+    if hexapod.effects:
+        doc["thermal_model"] = {"effects": [dict(e) for e in hexapod.effects]}
+    return _dump(doc)
+
+
+# ----------------------------------------------------------------------- balls
+@dataclass(frozen=True)
+class Balls:
+    """The precision balls on the platform (balls file).
+
+    Attributes
+    ----------
+    names : tuple of str
+    centres_mm : ndarray, shape (k, 3)
+        Centres in the platform frame.
+    diameters_mm : ndarray, shape (k,)
+    probe_compensated : bool
+        True when probed points are surface points (probe radius compensated).
+    tip_diameter_mm : float
+    """
+
+    names: tuple[str, ...]
+    centres_mm: npt.NDArray[np.float64]
+    diameters_mm: npt.NDArray[np.float64]
+    probe_compensated: bool = True
+    tip_diameter_mm: float = 0.0
+
+
+def read_balls(path: str | os.PathLike[str]) -> Balls:
+    """Read and validate a balls file (``format: hexatherm-balls/1``)."""
+    doc = YamlDoc.load(path)
+    doc.check_format(BALLS_FORMAT)
+    doc.check_keys(["format", "balls", "probe"])
+    balls = doc.get("balls")
+    if not isinstance(balls, dict):
+        raise doc.error("expected a mapping of ball names", "balls")
+    names, centres, diameters = [], [], []
+    for name in balls:
+        if not NAME_PATTERN.fullmatch(name):
+            raise doc.error("ball name must match [A-Za-z0-9-]+", "balls", name)
+        doc.check_keys(["centre", "diameter"], "balls", name)
+        names.append(name)
+        centres.append(doc.vector("balls", name, "centre", size=3))
+        diameters.append(doc.number("balls", name, "diameter", positive=True))
+    if len(names) < 3:
+        raise doc.error(f"at least three balls are needed, got {len(names)}", "balls")
+    try:
+        check_ball_layout(centres)
+    except RegistrationError as exc:
+        raise doc.error(str(exc), "balls") from None
+    compensated, tip = True, 0.0
+    if doc.get("probe", default=None) is not None:
+        doc.check_keys(["compensated", "tip_diameter"], "probe")
+        compensated = doc.get("probe", "compensated", default=True)
+        if not isinstance(compensated, bool):
+            raise doc.error(f"expected true or false, got {compensated!r}", "probe",
+                            "compensated")
+        tip = doc.number("probe", "tip_diameter", default=0.0)
+        if tip < 0:
+            raise doc.error("must not be negative", "probe", "tip_diameter")
+    return Balls(tuple(names), np.array(centres), np.array(diameters), compensated, tip)
+
+
+def balls_to_yaml(balls: Balls) -> str:
+    """The balls file text of ``balls``."""
+    doc = {
+        "format": BALLS_FORMAT,
+        "balls": {n: {"centre": c.tolist(), "diameter": float(d)}
+                  for n, c, d in zip(balls.names, balls.centres_mm, balls.diameters_mm,
+                                     strict=True)},
+        "probe": {"compensated": balls.probe_compensated,
+                  "tip_diameter": float(balls.tip_diameter_mm)},
+    }
+    return _dump(doc)
+
+
+# ------------------------------------------------------------------------ plan
+def read_plan(path: str | os.PathLike[str]) -> Plan:
+    """Read and validate a plan file (``format: hexatherm-plan/1``)."""
+    doc = YamlDoc.load(path)
+    doc.check_format(PLAN_FORMAT)
+    doc.check_keys(["format", "reference_pose", "points_per_ball", "steps"])
+    reference = doc.vector("reference_pose", size=6)
+    ppb = doc.number("points_per_ball", default=25, positive=True)
+    if ppb != int(ppb):
+        raise doc.error(f"expected a whole number, got {ppb}", "points_per_ball")
+    items = doc.get("steps")
+    if not isinstance(items, list) or not items:
+        raise doc.error("expected a list of steps", "steps")
+    steps = []
+    for i in range(len(items)):
+        doc.check_keys(["label", "kind", "pose"], "steps", i)
+        label = doc.get("steps", i, "label")
+        if not isinstance(label, str | int) or isinstance(label, bool):
+            raise doc.error(f"expected a label, got {label!r}", "steps", i, "label")
+        kind = doc.string("steps", i, "kind", choices=STEP_KINDS)
+        pose = doc.vector("steps", i, "pose", size=6)
+        if kind == "reference" and np.abs(np.subtract(pose, reference)).max() > 1e-9:
+            raise doc.error(f"reference step pose {pose} differs from reference_pose {reference}",
+                            "steps", i, "pose")
+        steps.append((str(label), kind, pose))
+    try:
+        return Plan.from_steps(steps, reference_pose=reference, points_per_ball=int(ppb))
+    except StepError as exc:
+        index = exc.index
+        raise doc.error(str(exc), *(("steps", index) if index is not None else ("steps",))) \
+            from None
+
+
+def plan_to_yaml(plan: Plan) -> str:
+    """The plan file text of ``plan``, one step per line."""
+    lines = [
+        f"format: {PLAN_FORMAT}",
+        f"reference_pose: {_flow(plan.reference_pose)}",
+        f"points_per_ball: {plan.points_per_ball}",
+        "steps:",
+    ]
+    for label, kind, pose in zip(plan.labels, plan.kinds, plan.poses, strict=True):
+        lines.append(f"  - {{label: {label}, kind: {kind}, pose: {_flow(pose)}}}")
+    return "\n".join(lines) + "\n"
+
+
+# --------------------------------------------------------------------- session
+@dataclass(frozen=True)
+class Session:
+    """A session folder as described by its ``session.yaml``.
+
+    Attributes
+    ----------
+    path : Path
+        The session file.
+    name : str
+    hexapod : Hexapod
+    balls : Balls
+    plan : Plan
+    measurements : tuple of Path
+    temperatures : Path or None
+    """
+
+    path: Path
+    name: str
+    hexapod: Hexapod
+    balls: Balls
+    plan: Plan
+    measurements: tuple[Path, ...]
+    temperatures: Path | None
+
+
+def read_session(path: str | os.PathLike[str]) -> Session:
+    """Read a session file, or the ``session.yaml`` of a session folder, and its configs."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "session.yaml"
+    doc = YamlDoc.load(path)
+    doc.check_format(SESSION_FORMAT)
+    doc.check_keys(["format", "name", "hexapod", "balls", "plan", "measurements",
+                    "temperatures"])
+    name = doc.string("name", default=path.parent.name)
+
+    def existing(*keys: Any) -> Path:
+        rel = doc.string(*keys)
+        target = doc.resolve(rel)
+        if not target.is_file():
+            raise doc.error(f"file not found: {target}", *keys)
+        return target
+
+    hexapod = read_hexapod(existing("hexapod"))
+    balls = read_balls(existing("balls"))
+    plan = read_plan(existing("plan"))
+    files = doc.get("measurements")
+    if isinstance(files, str):
+        raise doc.error("expected a list of files, e.g. [centres.csv]", "measurements")
+    if not isinstance(files, list) or not files:
+        raise doc.error("expected a non-empty list of measurement files", "measurements")
+    measurements = tuple(existing("measurements", i) for i in range(len(files)))
+    temperatures = None
+    if doc.get("temperatures", default=None) is not None:
+        temperatures = existing("temperatures")
+    return Session(path, name, hexapod, balls, plan, measurements, temperatures)
+
+
+def session_to_yaml(name: str, hexapod: str, balls: str, plan: str, measurements: list[str],
+                    temperatures: str | None = None) -> str:
+    """The session file text (paths relative to the session file)."""
+    doc: dict[str, Any] = {"format": SESSION_FORMAT, "name": name, "hexapod": hexapod,
+                           "balls": balls, "plan": plan, "measurements": list(measurements)}
+    if temperatures is not None:
+        doc["temperatures"] = temperatures
+    return _dump(doc)
+
+
+# --------------------------------------------------------------------- helpers
+def _number(value: float) -> str:
+    """Shortest round-tripping text of a number that every YAML reader takes as one."""
+    value = float(value)
+    if value.is_integer() and abs(value) < 1e15:
+        return str(int(value))
+    text = repr(value)
+    if "e" in text and "." not in text:
+        text = text.replace("e", ".0e")
+    return text
+
+
+def _flow(values: Any) -> str:
+    return "[" + ", ".join(_number(v) for v in np.asarray(values, float)) + "]"
+
+
+def _dump(doc: dict[str, Any]) -> str:
+    return yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=100)
+
+
+def write_text(path: str | os.PathLike[str], text: str) -> None:
+    """Write a config file atomically."""
+    atomic_write_text(path, text)
+
+
+__all__ = [
+    "Balls", "Session", "read_hexapod", "read_balls", "read_plan", "read_session",
+    "hexapod_to_yaml", "balls_to_yaml", "plan_to_yaml", "session_to_yaml", "InputError",
+]

@@ -1,0 +1,215 @@
+"""YAML documents that remember where each value came from.
+
+hexatherm's YAML files (hexapod, balls, plan, session) are read into plain
+Python values together with the line of every key and item, so that a
+validation error can say ``hexapod.yaml:12: field 'legs.segments[1].cte': ...``.
+Duplicate keys, which YAML would silently collapse, are errors.
+
+>>> doc = YamlDoc.from_text("a: 1\\nb:\\n  - [1, 2]\\n  - x\\n", "demo.yaml")
+>>> doc.data
+{'a': 1, 'b': [[1, 2], 'x']}
+>>> doc.line("b", 1)
+4
+>>> str(doc.error("not a vector", "b", 1))
+"demo.yaml:4: field 'b[1]': not a vector"
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from hexatherm.errors import InputError
+
+Key = str | int
+
+
+class _Loader(yaml.SafeLoader):
+    """SafeLoader that also reads YAML 1.2 floats such as ``1e-5`` as numbers."""
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."),
+)
+
+
+def field_name(keys: Sequence[Key]) -> str:
+    """Dotted field name: ``("legs", "segments", 1, "cte")`` -> ``legs.segments[1].cte``."""
+    out = ""
+    for key in keys:
+        out += f"[{key}]" if isinstance(key, int) else (f".{key}" if out else str(key))
+    return out
+
+
+@dataclass
+class YamlDoc:
+    """A parsed YAML mapping with the line of every value.
+
+    Attributes
+    ----------
+    data : dict
+        The document's top-level mapping.
+    path : str
+        The file (for messages).
+    lines : dict
+        ``tuple(keys) -> 1-based line`` for every mapping value and sequence item.
+    """
+
+    data: dict[str, Any]
+    path: str
+    lines: dict[tuple[Key, ...], int] = field(default_factory=dict)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> YamlDoc:
+        """Read a YAML file; InputError when it is missing, unreadable or not a mapping."""
+        path = os.fspath(path)
+        try:
+            text = Path(path).read_bytes().decode("utf-8-sig")
+        except FileNotFoundError:
+            raise InputError("file not found", path=path) from None
+        except IsADirectoryError:
+            raise InputError("is a directory, expected a file", path=path) from None
+        except UnicodeDecodeError as exc:
+            raise InputError(f"not UTF-8 text ({exc.reason} at byte {exc.start})",
+                             path=path) from None
+        except OSError as exc:
+            raise InputError(f"cannot read: {exc.strerror}", path=path) from None
+        return cls.from_text(text, path)
+
+    @classmethod
+    def from_text(cls, text: str, path: str) -> YamlDoc:
+        """Parse YAML text; InputError with the line on syntax errors."""
+        try:
+            node = yaml.compose(text, Loader=_Loader)
+        except yaml.MarkedYAMLError as exc:
+            mark = exc.problem_mark
+            line = None if mark is None else mark.line + 1
+            raise InputError(f"invalid YAML: {exc.problem}", path=path, line=line) from None
+        except yaml.YAMLError as exc:
+            raise InputError(f"invalid YAML: {exc}", path=path) from None
+        if node is None or not isinstance(node, yaml.MappingNode):
+            raise InputError("expected a YAML mapping (key: value lines) at the top level",
+                             path=path, line=1 if node is None else node.start_mark.line + 1)
+        doc = cls(data={}, path=path)
+        constructor = _Loader("")
+        doc.data = doc._build(node, (), constructor)
+        return doc
+
+    def _build(self, node: yaml.Node, keys: tuple[Key, ...], constructor: Any) -> Any:
+        self.lines[keys] = node.start_mark.line + 1
+        if isinstance(node, yaml.MappingNode):
+            out: dict[Any, Any] = {}
+            for key_node, value_node in node.value:
+                try:
+                    key = constructor.construct_object(key_node, deep=True)
+                except yaml.YAMLError as exc:
+                    raise InputError(f"invalid key: {exc}", path=self.path,
+                                     line=key_node.start_mark.line + 1) from None
+                if not isinstance(key, str | int | float | bool) or key is None:
+                    raise InputError("keys must be plain names", path=self.path,
+                                     line=key_node.start_mark.line + 1)
+                key = str(key)
+                if key in out:
+                    raise InputError("duplicate key", path=self.path,
+                                     line=key_node.start_mark.line + 1,
+                                     field=field_name(keys + (key,)))
+                out[key] = self._build(value_node, keys + (key,), constructor)
+            return out
+        if isinstance(node, yaml.SequenceNode):
+            return [self._build(item, keys + (i,), constructor)
+                    for i, item in enumerate(node.value)]
+        try:
+            return constructor.construct_object(node, deep=True)
+        except (yaml.YAMLError, ValueError, TypeError) as exc:
+            raise InputError(f"invalid value: {exc}", path=self.path,
+                             line=node.start_mark.line + 1, field=field_name(keys)) from None
+
+    # ---------------------------------------------------------------- access
+    def line(self, *keys: Key) -> int | None:
+        """Line of a value, or of its nearest ancestor that exists."""
+        k = tuple(keys)
+        while k not in self.lines and k:
+            k = k[:-1]
+        return self.lines.get(k)
+
+    def error(self, message: str, *keys: Key) -> InputError:
+        """An InputError located at the value ``keys``."""
+        return InputError(message, path=self.path, line=self.line(*keys),
+                          field=field_name(keys) if keys else None)
+
+    def get(self, *keys: Key, default: Any = ..., where: Any = None) -> Any:
+        """The value at ``keys``; InputError if missing and no default is given."""
+        node: Any = self.data
+        for i, key in enumerate(keys):
+            container_ok = isinstance(node, dict) if isinstance(key, str) else isinstance(
+                node, list)
+            if not container_ok:
+                expected = "expected a mapping" if isinstance(key, str) else "expected a list"
+                raise self.error(expected, *keys[:i])
+            if (isinstance(key, str) and key not in node) or (
+                isinstance(key, int) and key >= len(node)
+            ):
+                if default is not ...:
+                    return default
+                raise self.error("missing (required)", *keys)
+            node = node[key]
+        return node
+
+    def check_keys(self, allowed: Sequence[str], *keys: Key) -> None:
+        """Reject keys of the mapping at ``keys`` that the contract does not know."""
+        mapping = self.get(*keys)
+        if not isinstance(mapping, dict):
+            raise self.error("expected a mapping", *keys)
+        for key in mapping:
+            if key not in allowed:
+                raise self.error(f"unknown key; expected one of: {', '.join(allowed)}",
+                                 *keys, key)
+
+    def number(self, *keys: Key, default: Any = ..., positive: bool = False) -> float:
+        """A finite number at ``keys``."""
+        value = self.get(*keys, default=default)
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise self.error(f"expected a number, got {value!r}", *keys)
+        value = float(value)
+        if not math.isfinite(value):
+            raise self.error(f"expected a finite number, got {value!r}", *keys)
+        if positive and value <= 0:
+            raise self.error(f"must be positive, got {value!r}", *keys)
+        return value
+
+    def vector(self, *keys: Key, size: int, default: Any = ...) -> list[float]:
+        """A list of ``size`` finite numbers at ``keys``."""
+        value = self.get(*keys, default=default)
+        if not isinstance(value, list) or len(value) != size:
+            raise self.error(f"expected a list of {size} numbers, got {value!r}", *keys)
+        return [self.number(*keys, i) for i in range(size)]
+
+    def string(self, *keys: Key, default: Any = ..., choices: Sequence[str] | None = None) -> str:
+        """A string at ``keys``, optionally one of ``choices``."""
+        value = self.get(*keys, default=default)
+        if not isinstance(value, str):
+            raise self.error(f"expected a text value, got {value!r}", *keys)
+        if choices is not None and value not in choices:
+            raise self.error(f"expected one of {', '.join(choices)}, got {value!r}", *keys)
+        return value
+
+    def check_format(self, expected: str) -> None:
+        """The ``format:`` key must name this file's contract exactly."""
+        value = self.get("format", default=None)
+        if value is None:
+            raise self.error(f"missing 'format: {expected}'", "format")
+        if value != expected:
+            raise self.error(f"expected format {expected!r}, got {value!r}", "format")
+
+    def resolve(self, relative: str) -> Path:
+        """A path written in this file, resolved relative to the file's folder."""
+        return (Path(self.path).parent / relative).resolve()

@@ -1,0 +1,159 @@
+"""``hexatherm process`` end to end on twin sessions, and its refusals."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+
+from hexatherm.cli import main
+from hexatherm.io.results import CONTRACT_COLUMNS
+from tests.sessions import make_session
+
+UM, URAD = 1e3, np.pi / 180 * 1e6
+
+
+def run(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def pose_errors(poses, truth, tag):
+    truth = truth.set_index("label").loc[poses["label"]]
+    t = np.column_stack([poses[f"{c}_{tag}_mm"].to_numpy() - truth[f"{c}_truecorr_mm"].to_numpy()
+                         for c in ("Tx", "Ty", "Tz")])
+    r = np.column_stack([poses[f"{c}_{tag}_deg"].to_numpy()
+                         - truth[f"{c}_truecorr_deg"].to_numpy() for c in ("Rx", "Ry", "Rz")])
+    return np.abs(t).max() * UM, np.abs(r).max() * URAD
+
+
+def test_process_noise_free_session_recovers_the_truth(tmp_path):
+    # slow heating: the growth is linear in time between references, so the
+    # interpolated correction is exact
+    make_session(tmp_path / "s", n_targets=4, tau_s=1e6, gain=(300.0, 700, 200, 300, 900, 350))
+    result = run("process", tmp_path / "s")
+    assert result.exit_code == 0, result.output
+    poses = pd.read_csv(tmp_path / "s" / "results" / "poses.csv")
+    assert list(poses.columns[: len(CONTRACT_COLUMNS)]) == CONTRACT_COLUMNS
+    assert list(poses["label"]) == ["S1", "S2", "S3", "S4"]
+    truth = pd.read_csv(tmp_path / "s" / "truth" / "steps.csv")
+    t_err, r_err = pose_errors(poses, truth, "corr")
+    assert t_err < 0.05 and r_err < 0.1
+    c_err, _ = pose_errors(poses, truth, "conv")
+    assert c_err > 1.0
+    # the times are written back as ISO timestamps, like the input
+    assert poses["time"].str.match(r"\d{4}-\d\d-\d\dT").all()
+    legs = pd.read_csv(tmp_path / "s" / "results" / "legs.csv")
+    assert len(legs) == 10 and legs.loc[1, "dq_leg1_um"] == 0.0
+    # the table shows deviations in um/urad for every target
+    assert "conventional - commanded" in result.output and "S4" in result.output
+
+
+def test_process_refuses_to_overwrite(tmp_path):
+    make_session(tmp_path / "s")
+    assert run("process", tmp_path / "s").exit_code == 0
+    again = run("process", tmp_path / "s")
+    assert again.exit_code != 0 and "use --overwrite" in again.output
+    assert run("process", tmp_path / "s", "--overwrite").exit_code == 0
+
+
+def test_interpolation_option_changes_the_result(tmp_path):
+    make_session(tmp_path / "s", n_targets=3, tau_s=1200.0)
+    assert run("process", tmp_path / "s", "-o", tmp_path / "lin").exit_code == 0
+    assert run("process", tmp_path / "s", "-o", tmp_path / "one",
+               "--interpolation", "before").exit_code == 0
+    lin = pd.read_csv(tmp_path / "lin" / "poses.csv")
+    one = pd.read_csv(tmp_path / "one" / "poses.csv")
+    assert one["ref_after"].isna().all() and lin["ref_after"].notna().all()
+    assert np.abs(lin["Tx_corr_mm"] - one["Tx_corr_mm"]).max() > 1e-5
+
+
+def replace_in(path, old, new):
+    text = path.read_text()
+    assert old in text
+    path.write_text(text.replace(old, new, 1))
+
+
+def drop_line(path, startswith):
+    lines = path.read_text().splitlines(keepends=True)
+    path.write_text("".join(ln for ln in lines if not ln.startswith(startswith)))
+
+
+def line_of(path, startswith):
+    return next(i for i, ln in enumerate(path.read_text().splitlines(), 1)
+                if ln.startswith(startswith))
+
+
+def set_field(path, startswith, column, value):
+    lines = path.read_text().splitlines(keepends=True)
+    i = next(i for i, ln in enumerate(lines) if ln.startswith(startswith))
+    fields = lines[i].rstrip("\n").split(",")
+    fields[column] = value
+    lines[i] = ",".join(fields) + "\n"
+    path.write_text("".join(lines))
+    return i + 1
+
+
+def duplicate_row(path, startswith):
+    lines = path.read_text().splitlines(keepends=True)
+    path.write_text("".join(lines) + next(ln for ln in lines if ln.startswith(startswith)))
+    return len(lines) + 1
+
+
+def drop_ball_b3(session):
+    text = (session / "balls.yaml").read_text()
+    start = text.index("  B3:")
+    end = text.index("probe:")
+    (session / "balls.yaml").write_text(text[:start] + text[end:])
+
+
+def collinear(session):
+    replace_in(session / "balls.yaml", "[-73.6, -42.5, 30.0]", "[0.0, 10.0, 30.0]")
+    replace_in(session / "balls.yaml", "[82.3, -47.5, 30.0]", "[0.0, -20.0, 30.0]")
+
+
+BAD_INPUTS = {
+    "missing file": (lambda s: (s / "balls.yaml").unlink(),
+                     r"session.yaml:4: field 'balls': file not found"),
+    "wrong format": (lambda s: replace_in(s / "plan.yaml", "hexatherm-plan/1", "hexatherm-plan/9"),
+                     r"plan.yaml:1: field 'format': expected format 'hexatherm-plan/1'"),
+    "step missing a ball": (lambda s: drop_line(s / "centres.csv", "S2,B3,"),
+                            r"step S2: ball B3 not measured"),
+    "non-numeric coordinate": (lambda s: set_field(s / "centres.csv", "R1,B2,", 2, "12.x"),
+                               r"centres.csv:{line}: field 'x': not a finite number: '12.x'"),
+    "duplicate label": (lambda s: duplicate_row(s / "centres.csv", "S1,B1,"),
+                        r"centres.csv:{line}: field 'label': duplicate centre for step S1 ball "
+                        r"B1 \(also on line 8\)"),
+    "fewer than 3 balls": (drop_ball_b3,
+                           r"balls.yaml:3: field 'balls': at least three balls are needed"),
+    "collinear balls": (collinear, r"balls.yaml:3: field 'balls': the balls are collinear"),
+    "no adjacent reference": (
+        lambda s: (drop_line(s / "plan.yaml", "  - {label: R1,"),
+                   drop_line(s / "plan.yaml", "  - {label: R2,")),
+        r"plan.yaml:8: field 'steps\[3\]': step S2: target has no reference step adjacent"),
+    "wrong number of fields": (lambda s: set_field(s / "centres.csv", "S3,B1,", 2, "1,2"),
+                               r"centres.csv:{line}: expected 6 comma-separated fields, found 7"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_INPUTS))
+def test_bad_input_exits_nonzero_names_the_place_and_writes_nothing(tmp_path, case):
+    session = tmp_path / "s"
+    make_session(session)
+    mutate, pattern = BAD_INPUTS[case]
+    line = mutate(session)
+    before = sorted(p.name for p in session.iterdir())
+    result = run("process", session)
+    assert result.exit_code == 1
+    assert result.output.startswith("Error: ") and "Traceback" not in result.output
+    assert re.search(pattern.replace("{line}", str(line)), result.output), result.output
+    assert sorted(p.name for p in session.iterdir()) == before  # no results/ folder
+
+
+def test_help_and_version():
+    result = run("--help")
+    assert result.exit_code == 0 and "process" in result.output
+    result = run("--version")
+    assert result.exit_code == 0 and "hexatherm, version" in result.output
