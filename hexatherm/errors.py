@@ -60,7 +60,14 @@ class SingularityError(ConvergenceError):
 
 
 class FitError(HexathermError):
-    """A geometric fit whose preconditions are not met (too few points, coplanar, ...)."""
+    """A geometric fit whose preconditions are not met (too few points, coplanar, ...).
+
+    ``index`` is the group (sphere, circle) the message is about, when known.
+    """
+
+    def __init__(self, message: str, *, index: int | None = None) -> None:
+        self.index = index
+        super().__init__(message)
 
 
 class RegistrationError(HexathermError):

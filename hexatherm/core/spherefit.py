@@ -1,0 +1,709 @@
+"""Metrology-grade least-squares sphere fits, vectorized over many spheres.
+
+The fit minimises the sum of squared *geometric* (orthogonal) distances
+``|p_i - c| - r`` of the points to the sphere, as ISO 10360-6 style reference
+software does.  The algebraic (Kasa) fit, which minimises ``|p - c|^2 - r^2``
+instead, is used only to start the iteration: it is biased on partial caps.
+
+Algorithm
+---------
+1. Points are grouped by sphere, sorted by group (stable) and centred on their
+   group centroid, so that far-from-origin coordinates do not cost precision.
+2. Start: the linear Kasa fit, solved through the eigen-decomposition of the
+   3x3 scatter matrix ``S = sum q q^T`` of each group.  With a fixed radius the
+   start is the best (by geometric cost) of the Kasa centre and the two mirror
+   points at distance ``sqrt(R^2 - rho^2)`` either side of the best-fit plane.
+3. Gauss-Newton on the normal equations ``J^T J delta = -J^T e`` of all spheres
+   at once (per-sphere sums with :func:`numpy.add.reduceat`, batched
+   :func:`numpy.linalg.solve`).  A step that increases a sphere's cost is
+   rejected and retried with Levenberg-Marquardt damping
+   ``J^T J + lambda diag(J^T J)``.
+4. A sphere has converged when its undamped Gauss-Newton step is at most
+   ``tol_mm`` in every parameter, or when the step changes the residuals by
+   less than floating-point rounding can resolve (RMS of ``J delta`` below
+   ``64 eps max(r, rms|q|)``), whichever comes first.
+
+Thresholds
+----------
+``COPLANAR_RTOL = 1e-6``
+    A free-radius fit needs points that are not coplanar.  The ratio of the
+    smallest to the largest singular value of the centred points of a group
+    (computed as the square root of the eigenvalue ratio of ``S``) must be at
+    least ``1e-6``.  Eigenvalues of ``S`` carry an absolute error of about
+    ``eps * lambda_max``, so this ratio cannot be resolved below
+    ``sqrt(eps) ~ 1.5e-8``: exactly coplanar points (e.g. on one circle) show
+    ratios of 1e-8 and less, hence the margin.  A ratio of 1e-6 already makes
+    the condition number of ``J^T J`` about 1e12 in the most favourable
+    geometry (a thin equatorial belt), so nothing usable is rejected.  With a
+    fixed radius the same test detects the mirror ambiguity: the centre could
+    lie on either side of the plane of coplanar points.
+``COND_MAX = 1e12``
+    Largest accepted condition number of the normal matrix ``J^T J`` (its
+    columns are dimensionless, so no scaling is needed).  Solving it in
+    float64 loses about ``log10(cond)`` of the 16 significant digits; at 1e12
+    the Gauss-Newton steps still carry about four correct digits, enough for
+    the iteration to converge to rounding level, beyond that the solution is
+    dictated by rounding.  Small caps with a free radius reach this limit
+    first (the condition number grows like ``theta^-4`` with the cap
+    half-angle ``theta``): fix the radius there.
+
+Units: millimetres in, millimetres out; the RMS and form figures are in
+micrometres.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from hexatherm.errors import FitError
+
+__all__ = [
+    "COND_MAX",
+    "COPLANAR_RTOL",
+    "SphereFits",
+    "fit_sphere",
+    "fit_spheres",
+    "probe_radius_mm",
+]
+
+COPLANAR_RTOL = 1e-6
+"""Smallest accepted ratio of smallest to largest singular value of the centred points."""
+
+COND_MAX = 1e12
+"""Largest accepted condition number of the Gauss-Newton normal matrix ``J^T J``."""
+
+_EPS = float(np.finfo(float).eps)
+_ROUNDING_FACTOR = 64.0  # convergence floor: RMS of J delta below 64 eps * scale
+_LAMBDA_START = 1e-3  # first Levenberg-Marquardt damping after a rejected step
+_LAMBDA_MIN = 1e-9  # damping below this is switched off (pure Gauss-Newton)
+
+
+@dataclass(frozen=True)
+class SphereFits:
+    """Least-squares fits of ``m`` spheres.
+
+    Attributes
+    ----------
+    centre_mm : numpy.ndarray
+        (m, 3) sphere centres.
+    radius_mm : numpy.ndarray
+        (m,) radii (the given radii for a fixed-radius fit).
+    rms_um : numpy.ndarray
+        (m,) RMS of the point-to-sphere distances, micrometres.
+    form_um : numpy.ndarray
+        (m,) form error: max minus min of the signed residuals, micrometres.
+    cov_centre_mm2 : numpy.ndarray
+        (m, 3, 3) covariance of the centre estimated from the residuals,
+        ``s^2 (J^T J)^-1`` with ``s^2 = SSR / (n - p)``; NaN where ``n == p``
+        (no redundancy: an interpolating sphere).
+    n : numpy.ndarray
+        (m,) number of points of each sphere.
+    cap_half_angle_deg : numpy.ndarray
+        (m,) half-angle of the cap covered by the points seen from the centre:
+        the largest angle between the mean point direction and a point
+        direction.  180 when the point directions cancel exactly (e.g. the six
+        points on the axes).
+    residuals_mm : numpy.ndarray
+        (N,) signed residual ``|p - c| - r`` of each input point, in input
+        order (positive outside the sphere).
+    fixed_radius : bool
+        Whether the radius was fixed rather than fitted.
+    iterations : numpy.ndarray
+        (m,) Gauss-Newton / Levenberg-Marquardt iterations used per sphere.
+    """
+
+    centre_mm: np.ndarray
+    radius_mm: np.ndarray
+    rms_um: np.ndarray
+    form_um: np.ndarray
+    cov_centre_mm2: np.ndarray
+    n: np.ndarray
+    cap_half_angle_deg: np.ndarray
+    residuals_mm: np.ndarray
+    fixed_radius: bool
+    iterations: np.ndarray
+
+
+# --------------------------------------------------------------------------------------
+# Messages
+
+
+def _raise_first(bad: NDArray[np.bool_], label: str, describe: Callable[[int], str]) -> None:
+    """Raise a FitError naming the first flagged group (and how many others are flagged)."""
+    idx = np.flatnonzero(bad)
+    if idx.size == 0:
+        return
+    k = int(idx[0])
+    msg = f"{label} {k}: {describe(k)}"
+    if idx.size > 1:
+        shown = ", ".join(str(int(i)) for i in idx[1:6])
+        more = ", ..." if idx.size > 6 else ""
+        msg += f" (also {label}s {shown}{more}; {idx.size} {label}s in all)"
+    raise FitError(msg, index=k)
+
+
+# --------------------------------------------------------------------------------------
+# The dimension-generic engine (d = 3: spheres, d = 2: circles)
+
+
+@dataclass(frozen=True)
+class _Solution:
+    centre: NDArray[np.float64]  # (m, d), in the centred coordinates
+    radius: NDArray[np.float64]  # (m,)
+    residuals: NDArray[np.float64]  # (N,), sorted order
+    directions: NDArray[np.float64]  # (N, d) unit vectors from centre to points
+    normal_matrix: NDArray[np.float64]  # (m, p, p) J^T J at the solution
+    cost: NDArray[np.float64]  # (m,) sum of squared residuals
+    iterations: NDArray[np.int64]  # (m,)
+    coverage_deg: NDArray[np.float64]  # (m,) cap / arc half-angle
+
+
+def _starts(counts: NDArray[np.int64]) -> NDArray[np.int64]:
+    starts = np.zeros(counts.size, dtype=np.int64)
+    np.cumsum(counts[:-1], out=starts[1:])
+    return starts
+
+
+def _geometry(
+    q: NDArray[np.float64], c: NDArray[np.float64], r: NDArray[np.float64], counts: NDArray
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Vectors centre->point, their lengths and the residuals |q - c| - r."""
+    v = q - np.repeat(c, counts, axis=0)
+    dist = np.sqrt(np.einsum("ij,ij->i", v, v))
+    e = dist - np.repeat(r, counts)
+    return v, dist, e
+
+
+def _cost(
+    q: NDArray[np.float64],
+    c: NDArray[np.float64],
+    r: NDArray[np.float64],
+    counts: NDArray,
+    starts: NDArray,
+) -> NDArray[np.float64]:
+    _, _, e = _geometry(q, c, r, counts)
+    return np.add.reduceat(e * e, starts)
+
+
+def _unit(v: NDArray[np.float64], dist: NDArray[np.float64]) -> NDArray[np.float64]:
+    safe = np.where(dist > 0.0, dist, 1.0)
+    return v / safe[:, None]
+
+
+def _normal_equations(
+    u: NDArray[np.float64],
+    e: NDArray[np.float64],
+    counts: NDArray,
+    starts: NDArray,
+    free: bool,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Per-group ``J^T J``, ``-J^T e`` and ``e^T e`` for J = [-u, -1] (free) or [-u]."""
+    n_pts, d = u.shape
+    ia, ib = np.triu_indices(d)
+    nt = ia.size
+    p = d + 1 if free else d
+    ncol = nt + d + (d + 1 if free else 0) + 1
+    w = np.empty((n_pts, ncol))
+    w[:, :nt] = u[:, ia] * u[:, ib]
+    w[:, nt : nt + d] = u * e[:, None]
+    if free:
+        w[:, nt + d : nt + 2 * d] = u
+        w[:, nt + 2 * d] = e
+    w[:, -1] = e * e
+    s = np.add.reduceat(w, starts, axis=0)
+    m = counts.size
+    a = np.empty((m, p, p))
+    a[:, ia, ib] = s[:, :nt]
+    a[:, ib, ia] = s[:, :nt]
+    b = np.empty((m, p))
+    b[:, :d] = s[:, nt : nt + d]
+    if free:
+        a[:, :d, d] = s[:, nt + d : nt + 2 * d]
+        a[:, d, :d] = s[:, nt + d : nt + 2 * d]
+        a[:, d, d] = counts
+        b[:, d] = s[:, nt + 2 * d]
+    return a, b, s[:, -1]
+
+
+def _solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    return np.linalg.solve(a, b[..., None])[..., 0]
+
+
+def _condition(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    lam = np.linalg.eigvalsh(a)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cond = np.where(lam[:, 0] > 0.0, lam[:, -1] / lam[:, 0], np.inf)
+    return cond
+
+
+def _coverage_deg(u: NDArray[np.float64], counts: NDArray, starts: NDArray) -> NDArray[np.float64]:
+    """Half-angle between the mean direction and the farthest point direction."""
+    total = np.add.reduceat(u, starts, axis=0)
+    norm = np.linalg.norm(total, axis=1)
+    cancelled = norm <= 1e-12 * counts
+    mean_dir = total / np.where(cancelled, 1.0, norm)[:, None]
+    md = np.repeat(mean_dir, counts, axis=0)
+    cos = np.einsum("ij,ij->i", u, md)
+    if u.shape[1] == 3:
+        sin = np.linalg.norm(np.cross(u, md), axis=1)
+    else:
+        sin = np.abs(u[:, 0] * md[:, 1] - u[:, 1] * md[:, 0])
+    ang = np.degrees(np.arctan2(sin, cos))
+    cov = np.maximum.reduceat(ang, starts)
+    return np.where(cancelled, 180.0, cov)
+
+
+def _ill_conditioned(
+    cond: NDArray[np.float64],
+    coverage: NDArray[np.float64],
+    label: str,
+    free: bool,
+) -> None:
+    region = "cap" if label == "sphere" else "arc"
+    what = "centre and radius" if free else "centre"
+    # Only the sphere fit offers a fixed radius (the circle fit does not).
+    fixable = free and label == "sphere"
+    advice = f"measure a larger {region}"
+    if fixable:
+        advice = "fix the radius or " + advice
+
+    def describe(k: int) -> str:
+        return (
+            f"the normal equations are ill-conditioned (condition number {cond[k]:.3g} > "
+            f"{COND_MAX:.0e}): the points cover a {region} of half-angle "
+            f"{coverage[k]:.3g} deg, too small to determine the {what}; {advice}"
+        )
+
+    _raise_first(~(cond <= COND_MAX), label, describe)
+
+
+def _fit_nspheres(
+    q: NDArray[np.float64],
+    counts: NDArray[np.int64],
+    radius: NDArray[np.float64] | None,
+    *,
+    tol_mm: float,
+    max_iter: int,
+    label: str,
+) -> _Solution:
+    """Geometric least-squares fit of m hyperspheres (d = 2 or 3) to grouped points.
+
+    ``q`` holds the points sorted by group and centred on their group centroid,
+    ``counts`` the group sizes (all groups non-empty), ``radius`` None (free)
+    or the (m,) fixed radii.
+    """
+    m = counts.size
+    d = q.shape[1]
+    free = radius is None
+    starts = _starts(counts)
+    flat = "coplanar" if d == 3 else "collinear"
+
+    need = d + 1 if free else d
+    kind = "free-radius" if free else "fixed-radius"
+    _raise_first(
+        counts < need,
+        label,
+        lambda k: f"only {counts[k]} points; a {kind} fit needs at least {need}",
+    )
+
+    # Scatter matrices and degeneracy (coplanarity) test.
+    ia, ib = np.triu_indices(d)
+    s_up = np.add.reduceat(q[:, ia] * q[:, ib], starts, axis=0)
+    scatter = np.empty((m, d, d))
+    scatter[:, ia, ib] = s_up
+    scatter[:, ib, ia] = s_up
+    lam, vec = np.linalg.eigh(scatter)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.sqrt(np.clip(lam[:, 0], 0.0, None) / lam[:, -1])
+    ratio = np.where(lam[:, -1] > 0.0, ratio, 0.0)
+
+    def degenerate(k: int) -> str:
+        if lam[k, -1] <= 0.0:
+            return "all points coincide"
+        msg = (
+            f"the points are {flat} or nearly so (smallest/largest singular value of the "
+            f"centred points {ratio[k]:.3g} < {COPLANAR_RTOL:.0e})"
+        )
+        if free:
+            return msg + "; the radius cannot be determined"
+        side = "plane" if d == 3 else "line"
+        return (
+            msg + f"; with a fixed radius the centre could lie on either side of their "
+            f"{side} (two mirror solutions): measure points off that {side}"
+        )
+
+    _raise_first(~(ratio >= COPLANAR_RTOL), label, degenerate)
+
+    # Algebraic (Kasa) start, decoupled because the points are centred:
+    # c = S^-1 sum(q |q|^2) / 2,  r^2 = mean|q|^2 + |c|^2.
+    q2 = np.einsum("ij,ij->i", q, q)
+    t = np.add.reduceat(q * q2[:, None], starts, axis=0)
+    mean_q2 = np.add.reduceat(q2, starts) / counts
+    t_eig = np.einsum("mji,mj->mi", vec, t) / (2.0 * lam)
+    c = np.einsum("mij,mj->mi", vec, t_eig)
+    if free:
+        r = np.sqrt(mean_q2 + np.einsum("ij,ij->i", c, c))
+    else:
+        r = np.asarray(radius, dtype=float)
+        # Mirror candidates either side of the best-fit plane (line), through the
+        # in-plane part of the Kasa centre; keep the best of the three by geometric cost.
+        normal = vec[:, :, 0]
+        a_in = c - np.einsum("ij,ij->i", c, normal)[:, None] * normal
+        qa = q - np.repeat(a_in, counts, axis=0)
+        depth = np.einsum("ij,ij->i", q, np.repeat(normal, counts, axis=0))
+        rho2 = np.add.reduceat(np.einsum("ij,ij->i", qa, qa) - depth**2, starts) / counts
+        h = np.sqrt(np.clip(r**2 - rho2, 0.0, None))
+        cands = [c, a_in + h[:, None] * normal, a_in - h[:, None] * normal]
+        costs = np.stack([_cost(q, cc, r, counts, starts) for cc in cands])
+        best = np.argmin(costs, axis=0)
+        c = np.stack(cands)[best, np.arange(m)]
+
+    radius_scale = np.sqrt(mean_q2)
+    lam_lm = np.zeros(m)
+    iterations = np.zeros(m, dtype=np.int64)
+    active = np.ones(m, dtype=bool)
+    last_step = np.full(m, np.inf)
+    first = True
+    for _ in range(max_iter):
+        idx = np.flatnonzero(active)
+        if idx.size == 0:
+            break
+        if idx.size == m:
+            qs, cnt, st = q, counts, starts
+        else:
+            cnt = counts[idx]
+            st = _starts(cnt)
+            qs = q[np.repeat(active, counts)]
+        ca, ra = c[idx], r[idx]
+        v, dist, e = _geometry(qs, ca, ra, cnt)
+        u = _unit(v, dist)
+        a, b, cost = _normal_equations(u, e, cnt, st, free)
+        if first:
+            _ill_conditioned(_condition(a), _coverage_deg(u, cnt, st), label, free)
+            first = False
+        try:
+            step = _solve(a, b)
+        except np.linalg.LinAlgError:
+            cond = np.zeros(m)
+            cond[idx] = _condition(a)
+            cover = np.zeros(m)
+            cover[idx] = _coverage_deg(u, cnt, st)
+            _ill_conditioned(cond, cover, label, free)
+            raise FitError(
+                f"singular normal equations for {label}s {idx.tolist()}", index=int(idx[0])
+            ) from None
+        # Converged when the undamped step is below tol or below rounding.
+        jd = np.sqrt(np.clip(np.einsum("ki,kij,kj->k", step, a, step), 0.0, None))
+        scale = np.maximum(np.abs(ra), radius_scale[idx])
+        small = (np.max(np.abs(step), axis=1) <= tol_mm) | (
+            jd <= _ROUNDING_FACTOR * _EPS * scale * np.sqrt(cnt)
+        )
+        lam_a = lam_lm[idx]
+        damp = (lam_a > 0.0) & ~small
+        if damp.any():
+            ad = a[damp].copy()
+            diag = np.einsum("kii->ki", ad)
+            diag *= 1.0 + lam_a[damp, None]
+            step[damp] = _solve(ad, b[damp])
+        c_new = ca + step[:, :d]
+        r_new = ra + step[:, d] if free else ra
+        cost_new = _cost(qs, c_new, r_new, cnt, st)
+        # Cost changes below the rounding error of the cost itself (each residual
+        # carries ~ eps * scale) cannot reject a step: near the solution the
+        # Gauss-Newton steps still improve the fit but no longer the computed cost.
+        cost_tol = 16.0 * _EPS * scale * np.sqrt(cnt * cost)
+        accept = small | (cost_new <= cost + cost_tol)
+        c[idx[accept]] = c_new[accept]
+        if free:
+            r[idx[accept]] = r_new[accept]
+        lam_a = np.where(accept, lam_a / 10.0, np.maximum(lam_a * 10.0, _LAMBDA_START))
+        lam_lm[idx] = np.where(lam_a < _LAMBDA_MIN, 0.0, lam_a)
+        iterations[idx] += 1
+        last_step[idx] = np.max(np.abs(step), axis=1)
+        active[idx[small]] = False
+
+    _raise_first(
+        active,
+        label,
+        lambda k: (
+            f"the geometric fit did not converge in {max_iter} iteration"
+            f"{'' if max_iter == 1 else 's'} "
+            f"(last step {last_step[k]:.3g} mm, tolerance {tol_mm:.3g} mm)"
+        ),
+    )
+
+    v, dist, e = _geometry(q, c, r, counts)
+    u = _unit(v, dist)
+    a, _, cost = _normal_equations(u, e, counts, starts, free)
+    coverage = _coverage_deg(u, counts, starts)
+    _ill_conditioned(_condition(a), coverage, label, free)
+    if free:
+        _raise_first(
+            ~(r > 0.0), label, lambda k: f"the fit converged to a non-positive radius {r[k]:.6g}"
+        )
+    return _Solution(
+        centre=c,
+        radius=r,
+        residuals=e,
+        directions=u,
+        normal_matrix=a,
+        cost=cost,
+        iterations=iterations,
+        coverage_deg=coverage,
+    )
+
+
+def _covariance(sol: _Solution, counts: NDArray[np.int64]) -> NDArray[np.float64]:
+    """Parameter covariance ``s^2 (J^T J)^-1`` with ``s^2 = SSR / (n - p)`` (NaN if n == p)."""
+    p = sol.normal_matrix.shape[1]
+    dof = counts - p
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s2 = np.where(dof > 0, sol.cost / np.where(dof > 0, dof, 1), np.nan)
+    return s2[:, None, None] * np.linalg.inv(sol.normal_matrix)
+
+
+# --------------------------------------------------------------------------------------
+# Public API
+
+
+def _as_points(points_mm: ArrayLike, dim: int = 3) -> NDArray[np.float64]:
+    try:
+        pts = np.asarray(points_mm, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise FitError(f"points_mm must be a numeric (N, {dim}) array: {exc}") from None
+    if pts.ndim != 2 or pts.shape[1] != dim:
+        raise FitError(f"points_mm must have shape (N, {dim}), got {pts.shape}")
+    return pts
+
+
+def _as_groups(groups: ArrayLike | None, n_points: int) -> NDArray[np.int64]:
+    if groups is None:
+        return np.zeros(n_points, dtype=np.int64)
+    g = np.asarray(groups)
+    if g.shape != (n_points,):
+        raise FitError(f"groups must have shape ({n_points},) like the points, got {g.shape}")
+    if n_points and not np.issubdtype(g.dtype, np.integer):
+        raise FitError(f"groups must be integer sphere indices, got dtype {g.dtype}")
+    g = g.astype(np.int64, copy=False)
+    if n_points and g.min() < 0:
+        i = int(np.argmin(g))
+        raise FitError(f"groups must be >= 0: point {i} has group {int(g[i])}")
+    return g
+
+
+def fit_spheres(
+    points_mm: ArrayLike,
+    groups: ArrayLike | None = None,
+    *,
+    radius_mm: ArrayLike | None = None,
+    tol_mm: float = 1e-12,
+    max_iter: int = 50,
+) -> SphereFits:
+    """Fit many spheres at once by geometric least squares.
+
+    Parameters
+    ----------
+    points_mm : array_like
+        (N, 3) measured points, mm.
+    groups : array_like of int, optional
+        (N,) sphere index ``0 .. m-1`` of each point, in any order, groups of any
+        sizes.  Every index up to the largest must be used.  None: one sphere.
+    radius_mm : float or array_like, optional
+        Fix the radius (scalar for all spheres, or (m,)); only the centre is
+        fitted (3 parameters), which is much better conditioned on small caps.
+        None (default): the radius is fitted as well (4 parameters).
+    tol_mm : float
+        Convergence tolerance on the Gauss-Newton step, mm (a step that is
+        below floating-point resolution also counts as converged).
+    max_iter : int
+        Maximum Gauss-Newton / Levenberg-Marquardt iterations per sphere.
+
+    Returns
+    -------
+    SphereFits
+        Per-sphere centre, radius, RMS, form, centre covariance, cap half-angle,
+        and the per-point residuals in input order.
+
+    Raises
+    ------
+    FitError
+        With the offending sphere index: non-finite coordinates; fewer than 4
+        points (3 with a fixed radius); coplanar points (relative spread below
+        :data:`COPLANAR_RTOL`; with a fixed radius the centre would be
+        ambiguous between two mirror positions); normal equations with a
+        condition number above :data:`COND_MAX`; no convergence within
+        ``max_iter`` iterations.  Also for malformed arguments.
+
+    Notes
+    -----
+    Only the iteration loop is in Python; every iteration handles all the
+    spheres that have not converged yet with :func:`numpy.add.reduceat` and a
+    batched :func:`numpy.linalg.solve`.  See the module docstring for the
+    algorithm and the thresholds.
+
+    Examples
+    --------
+    Two spheres, the second one given as probe-tip centres on a 10 deg to 70 deg
+    band of polar angles:
+
+    >>> import numpy as np
+    >>> axes = np.vstack([np.eye(3), -np.eye(3)])
+    >>> theta = np.radians([10, 40, 70, 40, 70, 70])
+    >>> phi = np.radians([0, 0, 60, 180, 180, 300])
+    >>> u = np.c_[np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)]
+    >>> pts = np.vstack([[100.0, 0.0, 50.0] + 12.7 * axes, [0.0, 200.0, 0.0] + 5.5 * u])
+    >>> fits = fit_spheres(pts, [0] * 6 + [1] * 6)
+    >>> print(np.round(fits.centre_mm, 9) + 0.0)
+    [[100.   0.  50.]
+     [  0. 200.   0.]]
+    >>> print(np.round(fits.radius_mm, 9), fits.n, np.round(fits.cap_half_angle_deg, 1))
+    [12.7  5.5] [6 6] [180.   72.8]
+    """
+    pts = _as_points(points_mm)
+    n_points = pts.shape[0]
+    g = _as_groups(groups, n_points)
+    if not (np.isfinite(tol_mm) and tol_mm > 0):
+        raise FitError(f"tol_mm must be a positive number, got {tol_mm!r}")
+    if int(max_iter) != max_iter or max_iter < 1:
+        raise FitError(f"max_iter must be a positive integer, got {max_iter!r}")
+    m = int(g.max()) + 1 if n_points else 1
+    counts = np.bincount(g, minlength=m).astype(np.int64)
+
+    bad_rows = ~np.isfinite(pts).all(axis=1)
+    if bad_rows.any():
+        first_row = np.flatnonzero(bad_rows)
+        by_group = np.zeros(m, dtype=bool)
+        by_group[g[first_row]] = True
+        row_of = {int(g[i]): int(i) for i in first_row[::-1]}
+        _raise_first(
+            by_group,
+            "sphere",
+            lambda k: (
+                f"point {row_of[k]} has a non-finite coordinate {pts[row_of[k]].tolist()} "
+                f"({int(bad_rows[g == k].sum())} such points in this sphere)"
+            ),
+        )
+
+    radius: NDArray[np.float64] | None = None
+    if radius_mm is not None:
+        try:
+            rad = np.asarray(radius_mm, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise FitError(f"radius_mm must be numeric: {exc}") from None
+        if rad.ndim == 0:
+            rad = np.full(m, float(rad))
+        elif rad.shape != (m,):
+            raise FitError(f"radius_mm must be a scalar or have shape ({m},), got {rad.shape}")
+        _raise_first(
+            ~(np.isfinite(rad) & (rad > 0)),
+            "sphere",
+            lambda k: f"the fixed radius must be finite and positive, got {rad[k]!r}",
+        )
+        radius = rad.copy()
+
+    order = np.argsort(g, kind="stable")
+    ps = pts[order]
+    need = 4 if radius is None else 3
+    kind = "free-radius" if radius is None else "fixed-radius"
+    _raise_first(
+        counts < need,
+        "sphere",
+        lambda k: f"only {counts[k]} points; a {kind} fit needs at least {need}",
+    )
+    starts = _starts(counts)
+    centroid = np.add.reduceat(ps, starts, axis=0) / counts[:, None]
+    q = ps - np.repeat(centroid, counts, axis=0)
+
+    sol = _fit_nspheres(
+        q, counts, radius, tol_mm=float(tol_mm), max_iter=int(max_iter), label="sphere"
+    )
+
+    residuals = np.empty(n_points)
+    residuals[order] = sol.residuals
+    e = sol.residuals
+    form = np.maximum.reduceat(e, starts) - np.minimum.reduceat(e, starts)
+    cov = _covariance(sol, counts)[:, :3, :3]
+    return SphereFits(
+        centre_mm=centroid + sol.centre,
+        radius_mm=sol.radius.copy(),
+        rms_um=1e3 * np.sqrt(sol.cost / counts),
+        form_um=1e3 * form,
+        cov_centre_mm2=cov,
+        n=counts,
+        cap_half_angle_deg=sol.coverage_deg,
+        residuals_mm=residuals,
+        fixed_radius=radius is not None,
+        iterations=sol.iterations,
+    )
+
+
+def fit_sphere(points_mm: ArrayLike, *, radius_mm: float | None = None) -> SphereFits:
+    """Fit one sphere: :func:`fit_spheres` with a single group (results have m = 1).
+
+    Parameters
+    ----------
+    points_mm : array_like
+        (N, 3) points, mm.
+    radius_mm : float, optional
+        Fixed radius; None to fit it.
+
+    Returns
+    -------
+    SphereFits
+        With arrays of length 1 (``centre_mm[0]``, ``radius_mm[0]``, ...).
+
+    Examples
+    --------
+    A fixed-radius fit on a 30 deg cap:
+
+    >>> import numpy as np
+    >>> t = np.radians(30.0)
+    >>> phi = np.radians(np.arange(0, 360, 60))
+    >>> u = np.c_[np.sin(t) * np.cos(phi), np.sin(t) * np.sin(phi), np.full(6, np.cos(t))]
+    >>> u = np.vstack([u, [0.0, 0.0, 1.0]])
+    >>> fit = fit_sphere([10.0, -5.0, 3.0] + 2.0 * u, radius_mm=2.0)
+    >>> print(np.round(fit.centre_mm[0], 9) + 0.0, fit.fixed_radius)
+    [10. -5.  3.] True
+    >>> print(round(float(fit.cap_half_angle_deg[0]), 6))
+    30.0
+    """
+    return fit_spheres(points_mm, None, radius_mm=radius_mm)
+
+
+def probe_radius_mm(ball_diameter_mm: float, tip_diameter_mm: float, compensated: bool) -> float:
+    """Radius to expect (or to fix) when fitting points probed on a ball.
+
+    Parameters
+    ----------
+    ball_diameter_mm : float
+        Diameter of the measured ball.
+    tip_diameter_mm : float
+        Diameter of the probe tip (stylus ball).
+    compensated : bool
+        True if the points are already compensated to the ball surface; False
+        if they are probe-tip centre points, which lie on a sphere of radius
+        ball radius + tip radius (the ball is probed from outside).
+
+    Returns
+    -------
+    float
+        The radius of the sphere the points lie on, mm.
+
+    Examples
+    --------
+    >>> probe_radius_mm(25.4, 2.0, compensated=False)
+    13.7
+    >>> probe_radius_mm(25.4, 2.0, compensated=True)
+    12.7
+    """
+    ball = float(ball_diameter_mm)
+    tip = float(tip_diameter_mm)
+    if not (np.isfinite(ball) and ball > 0):
+        raise FitError(f"ball diameter must be finite and positive, got {ball_diameter_mm!r}")
+    if not (np.isfinite(tip) and tip >= 0):
+        raise FitError(f"tip diameter must be finite and non-negative, got {tip_diameter_mm!r}")
+    return ball / 2.0 if compensated else (ball + tip) / 2.0

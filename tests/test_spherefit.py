@@ -1,0 +1,397 @@
+"""Tests of hexatherm.core.spherefit against reference data with a known solution.
+
+Reference data (the null-space method): with unit directions u_i, a centre c and a
+radius R, residuals e_i orthogonal to the rows of [1; u_i^T] (sum e_i = 0 and
+sum e_i u_i = 0) make p_i = c + (R + e_i) u_i a data set whose geometric
+least-squares sphere is exactly (c, R): the gradient J^T e vanishes there.  For a
+fixed radius only sum e_i u_i = 0 is needed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+
+from hexatherm.core.spherefit import (
+    COND_MAX,
+    COPLANAR_RTOL,
+    SphereFits,
+    fit_sphere,
+    fit_spheres,
+    probe_radius_mm,
+)
+from hexatherm.errors import FitError
+
+CENTRE = np.array([412.3, -873.1, 129.7])
+RADIUS = 12.7
+
+
+def cap_directions(
+    n: int, half_angle_deg: float, rng: np.random.Generator, axis: np.ndarray | None = None
+) -> np.ndarray:
+    """n random unit vectors, uniform on the cap of the given half-angle around axis."""
+    z = rng.uniform(np.cos(np.radians(half_angle_deg)), 1.0, n)
+    phi = rng.uniform(0.0, 2.0 * np.pi, n)
+    s = np.sqrt(1.0 - z * z)
+    u = np.c_[s * np.cos(phi), s * np.sin(phi), z]
+    if axis is not None:
+        rot, _ = Rotation.align_vectors([axis], [[0.0, 0.0, 1.0]])
+        u = rot.apply(u)
+    return u
+
+
+def nullspace_residuals(
+    u: np.ndarray, rms_mm: float, rng: np.random.Generator, *, fixed: bool = False
+) -> np.ndarray:
+    """Random residuals orthogonal to [1; u^T] (or to u^T only, fixed radius), given RMS."""
+    m = u.T if fixed else np.vstack([np.ones(len(u)), u.T])
+    v = rng.normal(size=len(u))
+    e = v - m.T @ np.linalg.lstsq(m.T, v, rcond=None)[0]
+    return e * rms_mm / np.sqrt(np.mean(e**2))
+
+
+def reference_points(
+    u: np.ndarray, e: np.ndarray, centre: np.ndarray = CENTRE, radius: float = RADIUS
+) -> np.ndarray:
+    return centre + (radius + e)[:, None] * u
+
+
+# --------------------------------------------------------------------------------------
+# Known least-squares solutions
+
+
+@pytest.mark.parametrize("half_angle", [30.0, 45.0, 60.0, 90.0])
+def test_free_radius_recovers_nullspace_solution(half_angle: float) -> None:
+    rng = np.random.default_rng(int(half_angle))
+    u = cap_directions(40, half_angle, rng, axis=rng.normal(size=3))
+    e = nullspace_residuals(u, 5e-3, rng)
+    assert abs(e.sum()) < 1e-12 and np.abs(e @ u).max() < 1e-12
+    fit = fit_sphere(reference_points(u, e))
+    assert isinstance(fit, SphereFits)
+    np.testing.assert_allclose(fit.centre_mm[0], CENTRE, rtol=0, atol=1e-9)
+    assert abs(fit.radius_mm[0] - RADIUS) < 1e-9
+    np.testing.assert_allclose(fit.residuals_mm, e, rtol=0, atol=1e-9)
+    assert np.sum(fit.residuals_mm**2) == pytest.approx(np.sum(e**2), rel=1e-9)
+    assert fit.rms_um[0] == pytest.approx(5.0, rel=1e-6)
+    assert fit.form_um[0] == pytest.approx(1e3 * np.ptp(e), rel=1e-6)
+    assert fit.n.tolist() == [40]
+    assert not fit.fixed_radius
+    assert fit.iterations[0] >= 1
+
+
+@pytest.mark.parametrize("half_angle", [5.0, 15.0, 30.0, 45.0, 60.0, 90.0])
+def test_fixed_radius_recovers_nullspace_solution(half_angle: float) -> None:
+    rng = np.random.default_rng(100 + int(half_angle))
+    u = cap_directions(30, half_angle, rng, axis=rng.normal(size=3))
+    e = nullspace_residuals(u, 2e-3, rng, fixed=True)
+    if half_angle >= 30.0:
+        assert abs(e.sum()) > 1e-6  # the mean residual is free: only sum(e u) = 0
+    fit = fit_sphere(reference_points(u, e), radius_mm=RADIUS)
+    np.testing.assert_allclose(fit.centre_mm[0], CENTRE, rtol=0, atol=1e-9)
+    assert fit.radius_mm[0] == RADIUS
+    assert fit.fixed_radius
+    np.testing.assert_allclose(fit.residuals_mm, e, rtol=0, atol=1e-9)
+
+
+def test_fixed_radius_is_not_a_free_fit() -> None:
+    # On fixed-radius reference data the free fit finds a different (better) sphere.
+    rng = np.random.default_rng(7)
+    u = cap_directions(30, 45.0, rng)
+    e = nullspace_residuals(u, 2e-3, rng, fixed=True) + 1e-3
+    pts = reference_points(u, e)
+    free, fixed = fit_sphere(pts), fit_sphere(pts, radius_mm=RADIUS)
+    assert abs(free.radius_mm[0] - RADIUS) > 1e-4
+    assert np.sum(free.residuals_mm**2) < np.sum(fixed.residuals_mm**2)
+
+
+def test_noiseless_points_far_from_origin() -> None:
+    rng = np.random.default_rng(3)
+    u = cap_directions(12, 50.0, rng)
+    centre = np.array([1.0e4, -2.5e4, 7.5e3])
+    fit = fit_sphere(centre + 3.0 * u)
+    np.testing.assert_allclose(fit.centre_mm[0], centre, rtol=0, atol=1e-9)
+    assert abs(fit.radius_mm[0] - 3.0) < 1e-10
+    assert fit.rms_um[0] < 1e-6
+
+
+def test_interpolating_sphere_has_nan_covariance() -> None:
+    u = np.vstack([np.eye(3), [[0.0, 0.6, -0.8]]])
+    fit = fit_sphere(CENTRE + RADIUS * u)
+    np.testing.assert_allclose(fit.centre_mm[0], CENTRE, atol=1e-9)
+    assert np.isnan(fit.cov_centre_mm2).all()
+
+
+# --------------------------------------------------------------------------------------
+# Vectorization
+
+
+def _ragged_problem(rng: np.random.Generator, m: int) -> tuple[np.ndarray, np.ndarray]:
+    sizes = rng.integers(5, 60, m)
+    pts, groups = [], []
+    for k, n in enumerate(sizes):
+        u = cap_directions(n, rng.uniform(25.0, 150.0), rng, axis=rng.normal(size=3))
+        r = rng.uniform(3.0, 30.0)
+        centre = rng.uniform(-800.0, 800.0, 3)
+        pts.append(centre + (r + rng.normal(0.0, 3e-3, n))[:, None] * u)
+        groups.append(np.full(n, k))
+    p, g = np.vstack(pts), np.concatenate(groups)
+    perm = rng.permutation(len(g))  # interleave the spheres
+    return p[perm], g[perm]
+
+
+@pytest.mark.parametrize("fixed", [False, True])
+def test_vectorized_ragged_equals_one_by_one(fixed: bool) -> None:
+    rng = np.random.default_rng(11)
+    m = 40
+    p, g = _ragged_problem(rng, m)
+    radii = None
+    if fixed:
+        radii = np.array([fit_sphere(p[g == k]).radius_mm[0] + 1e-3 for k in range(m)])
+    fits = fit_spheres(p, g, radius_mm=radii)
+    assert fits.centre_mm.shape == (m, 3) and fits.cov_centre_mm2.shape == (m, 3, 3)
+    assert fits.residuals_mm.shape == (len(g),)
+    for k in range(m):
+        one = fit_sphere(p[g == k], radius_mm=None if radii is None else radii[k])
+        np.testing.assert_allclose(fits.centre_mm[k], one.centre_mm[0], rtol=0, atol=1e-10)
+        assert fits.radius_mm[k] == pytest.approx(one.radius_mm[0], abs=1e-10)
+        assert fits.rms_um[k] == pytest.approx(one.rms_um[0], rel=1e-8)
+        assert fits.form_um[k] == pytest.approx(one.form_um[0], rel=1e-8)
+        assert fits.cap_half_angle_deg[k] == pytest.approx(one.cap_half_angle_deg[0], abs=1e-9)
+        np.testing.assert_allclose(fits.cov_centre_mm2[k], one.cov_centre_mm2[0], rtol=1e-6)
+        np.testing.assert_allclose(fits.residuals_mm[g == k], one.residuals_mm, atol=1e-10)
+        assert fits.n[k] == np.sum(g == k)
+
+
+def test_scalar_fixed_radius_applies_to_all_spheres() -> None:
+    rng = np.random.default_rng(5)
+    pts, groups = [], []
+    centres = rng.uniform(-100, 100, (3, 3))
+    for k in range(3):
+        u = cap_directions(10, 40.0, rng)
+        pts.append(reference_points(u, nullspace_residuals(u, 1e-3, rng, fixed=True), centres[k]))
+        groups += [k] * 10
+    fits = fit_spheres(np.vstack(pts), groups, radius_mm=RADIUS)
+    np.testing.assert_allclose(fits.centre_mm, centres, atol=1e-9)
+    np.testing.assert_array_equal(fits.radius_mm, np.full(3, RADIUS))
+
+
+# --------------------------------------------------------------------------------------
+# Cap angle, covariance, probe radius
+
+
+@pytest.mark.parametrize("half_angle", [12.5, 30.0, 60.0, 90.0, 100.0])
+def test_cap_angle_of_symmetric_rings(half_angle: float) -> None:
+    t = np.radians(half_angle)
+    phi = np.radians(np.arange(0.0, 360.0, 45.0))
+    ring = np.c_[np.sin(t) * np.cos(phi), np.sin(t) * np.sin(phi), np.full(8, np.cos(t))]
+    inner = ring.copy()
+    inner[:, :2] *= np.sin(t / 2) / np.sin(t)
+    inner[:, 2] = np.cos(t / 2)
+    u = Rotation.from_rotvec([0.3, -1.1, 0.4]).apply(np.vstack([[0, 0, 1], ring, inner]))
+    fit = fit_sphere(CENTRE + RADIUS * u)
+    assert fit.cap_half_angle_deg[0] == pytest.approx(half_angle, abs=1e-8)
+
+
+def test_cap_angle_matches_direct_computation() -> None:
+    rng = np.random.default_rng(21)
+    u = cap_directions(25, 70.0, rng, axis=[1.0, 2.0, -0.5])
+    fit = fit_sphere(reference_points(u, np.zeros(25)))
+    mean = u.sum(axis=0) / np.linalg.norm(u.sum(axis=0))
+    expected = np.degrees(np.arccos(np.clip(u @ mean, -1, 1))).max()
+    assert fit.cap_half_angle_deg[0] == pytest.approx(expected, abs=1e-6)
+
+
+def test_cap_angle_is_180_when_directions_cancel() -> None:
+    u = np.vstack([np.eye(3), -np.eye(3)])
+    assert fit_sphere(CENTRE + RADIUS * u).cap_half_angle_deg[0] == 180.0
+
+
+@pytest.mark.parametrize("fixed", [False, True])
+def test_covariance_matches_monte_carlo(fixed: bool) -> None:
+    rng = np.random.default_rng(2024)
+    n, reps, sigma = 20, 4000, 2e-3
+    u = cap_directions(n, 60.0, rng)
+    noise = rng.normal(0.0, sigma, (reps, n))
+    pts = CENTRE + (RADIUS + noise)[:, :, None] * u
+    fits = fit_spheres(
+        pts.reshape(-1, 3), np.repeat(np.arange(reps), n), radius_mm=RADIUS if fixed else None
+    )
+    empirical = np.cov(fits.centre_mm.T)
+    reported = fits.cov_centre_mm2.mean(axis=0)
+    j = -u if fixed else np.c_[-u, -np.ones(n)]
+    theory = sigma**2 * np.linalg.inv(j.T @ j)[:3, :3]
+    np.testing.assert_allclose(reported, theory, rtol=0.03, atol=0.03 * np.abs(theory).max())
+    scale = np.abs(theory).max()
+    assert np.abs(empirical - theory).max() < 0.1 * scale
+    np.testing.assert_allclose(np.diag(empirical), np.diag(theory), rtol=0.1)
+    # The mean of the fitted centres is unbiased to well within its standard error.
+    se = np.sqrt(np.diag(theory) / reps)
+    assert np.all(np.abs(fits.centre_mm.mean(axis=0) - CENTRE) < 4 * se)
+
+
+def test_probe_radius() -> None:
+    assert probe_radius_mm(25.4, 3.0, compensated=True) == pytest.approx(12.7)
+    assert probe_radius_mm(25.4, 3.0, compensated=False) == pytest.approx(14.2)
+    assert probe_radius_mm(10.0, 0.0, compensated=False) == 5.0
+    with pytest.raises(FitError, match="ball diameter must be finite and positive"):
+        probe_radius_mm(-1.0, 2.0, compensated=True)
+    with pytest.raises(FitError, match="tip diameter must be finite and non-negative"):
+        probe_radius_mm(25.4, float("nan"), compensated=False)
+
+
+def test_probe_tip_centre_points_fit_ball_plus_tip_radius() -> None:
+    rng = np.random.default_rng(9)
+    u = cap_directions(20, 75.0, rng)
+    tip_centres = CENTRE + probe_radius_mm(25.4, 2.0, compensated=False) * u
+    fit = fit_sphere(tip_centres)
+    assert fit.radius_mm[0] == pytest.approx(13.7, abs=1e-10)
+    fixed = fit_sphere(tip_centres, radius_mm=probe_radius_mm(25.4, 2.0, compensated=False))
+    np.testing.assert_allclose(fixed.centre_mm[0], CENTRE, atol=1e-10)
+
+
+# --------------------------------------------------------------------------------------
+# Property: a rigid motion of the points moves the centre with them
+
+
+_BASE_U = cap_directions(15, 55.0, np.random.default_rng(42))
+_BASE_E = nullspace_residuals(_BASE_U, 4e-3, np.random.default_rng(43))
+_BASE_FIT = fit_sphere(reference_points(_BASE_U, _BASE_E))
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    rotvec=st.lists(st.floats(-3.0, 3.0), min_size=3, max_size=3),
+    shift=st.lists(st.floats(-2000.0, 2000.0), min_size=3, max_size=3),
+)
+def test_rigid_motion_moves_centre(rotvec: list[float], shift: list[float]) -> None:
+    rot = Rotation.from_rotvec(rotvec)
+    pts = rot.apply(reference_points(_BASE_U, _BASE_E)) + shift
+    fit = fit_sphere(pts)
+    expected = rot.apply(_BASE_FIT.centre_mm[0]) + shift
+    np.testing.assert_allclose(fit.centre_mm[0], expected, rtol=0, atol=1e-9)
+    assert fit.radius_mm[0] == pytest.approx(_BASE_FIT.radius_mm[0], abs=1e-9)
+    np.testing.assert_allclose(fit.residuals_mm, _BASE_FIT.residuals_mm, atol=1e-9)
+    assert fit.cap_half_angle_deg[0] == pytest.approx(_BASE_FIT.cap_half_angle_deg[0], abs=1e-6)
+
+
+# --------------------------------------------------------------------------------------
+# Preconditions
+
+
+def _three_spheres(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    pts = np.vstack([CENTRE + k * 50.0 + RADIUS * cap_directions(8, 60.0, rng) for k in range(3)])
+    return pts, np.repeat(np.arange(3), 8)
+
+
+def test_non_finite_point_names_sphere_and_point() -> None:
+    pts, g = _three_spheres(np.random.default_rng(0))
+    pts[19, 1] = np.nan
+    pts[21, 0] = np.inf
+    with pytest.raises(FitError, match=r"^sphere 2: point 19 has a non-finite coordinate .*2 such"):
+        fit_spheres(pts, g)
+
+
+@pytest.mark.parametrize(
+    ("n", "radius", "match"),
+    [
+        (3, None, r"^sphere 1: only 3 points; a free-radius fit needs at least 4$"),
+        (2, RADIUS, r"^sphere 1: only 2 points; a fixed-radius fit needs at least 3$"),
+    ],
+)
+def test_too_few_points(n: int, radius: float | None, match: str) -> None:
+    pts, g = _three_spheres(np.random.default_rng(1))
+    keep = (g != 1) | (np.cumsum(g == 1) <= n)
+    with pytest.raises(FitError, match=match):
+        fit_spheres(pts[keep], g[keep], radius_mm=radius)
+
+
+def test_unused_group_index_is_an_empty_sphere() -> None:
+    pts, g = _three_spheres(np.random.default_rng(2))
+    with pytest.raises(FitError, match=r"^sphere 1: only 0 points"):
+        fit_spheres(pts[g != 1], g[g != 1])
+
+
+def test_several_bad_spheres_are_counted() -> None:
+    pts, g = _three_spheres(np.random.default_rng(3))
+    keep = np.isin(np.arange(len(g)) % 8, [0, 1, 2]) | (g == 0)
+    with pytest.raises(FitError, match=r"^sphere 1: only 3 points.*\(also spheres 2; 2 spheres"):
+        fit_spheres(pts[keep], g[keep])
+
+
+def _circle_points(n: int = 12) -> np.ndarray:
+    a = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+    ring = np.c_[np.cos(a), np.sin(a), np.zeros(n)] * RADIUS
+    return Rotation.from_rotvec([0.2, 0.7, -0.3]).apply(ring) + CENTRE
+
+
+def test_coplanar_points_free_radius() -> None:
+    with pytest.raises(
+        FitError, match=r"^sphere 0: the points are coplanar .*< 1e-06\); the radius cannot"
+    ):
+        fit_sphere(_circle_points())
+
+
+def test_nearly_coplanar_points_free_radius() -> None:
+    pts = _circle_points()
+    pts[0] += 1e-8 * RADIUS * Rotation.from_rotvec([0.2, 0.7, -0.3]).apply([0, 0, 1])
+    with pytest.raises(FitError, match=r"^sphere 0: the points are coplanar or nearly so"):
+        fit_sphere(pts)
+    assert COPLANAR_RTOL == 1e-6
+
+
+def test_coplanar_points_fixed_radius_are_ambiguous() -> None:
+    with pytest.raises(FitError, match=r"^sphere 0: the points are coplanar.*either side"):
+        fit_sphere(_circle_points(), radius_mm=20.0)
+    with pytest.raises(FitError, match=r"either side of their plane \(two mirror solutions\)"):
+        fit_sphere(_circle_points(3), radius_mm=20.0)
+
+
+def test_coincident_points() -> None:
+    with pytest.raises(FitError, match=r"^sphere 0: all points coincide"):
+        fit_sphere(np.tile(CENTRE, (5, 1)))
+
+
+def test_tiny_cap_is_ill_conditioned_for_free_radius_but_fine_fixed() -> None:
+    rng = np.random.default_rng(4)
+    u = cap_directions(25, 0.05, rng)
+    pts = CENTRE + RADIUS * u
+    with pytest.raises(
+        FitError,
+        match=r"^sphere 0: the normal equations are ill-conditioned \(condition number "
+        r"\S+ > 1e\+12\): the points cover a cap of half-angle 0\.0\d+ deg.*fix the radius",
+    ):
+        fit_sphere(pts)
+    fit = fit_sphere(pts, radius_mm=RADIUS)
+    np.testing.assert_allclose(fit.centre_mm[0], CENTRE, atol=1e-9)
+    assert COND_MAX == 1e12
+
+
+def test_non_convergence() -> None:
+    rng = np.random.default_rng(6)
+    u = cap_directions(25, 20.0, rng)
+    pts = CENTRE + (RADIUS + rng.normal(0.0, 0.05, 25))[:, None] * u
+    with pytest.raises(FitError, match=r"^sphere 0: the geometric fit did not converge in 1 it"):
+        fit_spheres(pts, max_iter=1)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"points_mm": np.zeros((5, 2))}, r"points_mm must have shape \(N, 3\), got \(5, 2\)"),
+        ({"points_mm": [["a", "b", "c"]] * 4}, "points_mm must be a numeric"),
+        ({"groups": [0, 1]}, r"groups must have shape \(6,\)"),
+        ({"groups": [0.0] * 6}, "groups must be integer sphere indices"),
+        ({"groups": [0, 0, 0, -1, 0, 0]}, "groups must be >= 0: point 3 has group -1"),
+        ({"radius_mm": -2.0}, r"^sphere 0: the fixed radius must be finite and positive"),
+        ({"radius_mm": [1.0, 2.0]}, r"radius_mm must be a scalar or have shape \(1,\)"),
+        ({"tol_mm": 0.0}, "tol_mm must be a positive number"),
+        ({"max_iter": 0}, "max_iter must be a positive integer"),
+    ],
+)
+def test_malformed_arguments(kwargs: dict, match: str) -> None:
+    args = {"points_mm": CENTRE + RADIUS * np.vstack([np.eye(3), -np.eye(3)])} | kwargs
+    with pytest.raises(FitError, match=match):
+        fit_spheres(**args)
