@@ -15,9 +15,10 @@ import numpy as np
 import numpy.typing as npt
 
 from hexatherm.core.method import Correction, Interpolation, StepPoses, correct
-from hexatherm.core.registration import Registration, register
-from hexatherm.errors import InputError, PlanError
-from hexatherm.io.config import Session, read_session
+from hexatherm.core.registration import Registration, check_distances, register
+from hexatherm.core.spherefit import fit_spheres, probe_radius_mm
+from hexatherm.errors import FitError, InputError, PlanError
+from hexatherm.io.config import Balls, Session, read_session
 from hexatherm.io.csvfile import Temperatures, read_measurements, read_temperatures
 from hexatherm.io.records import Records, TimeKind
 
@@ -33,13 +34,17 @@ class StepCentres:
     centres_mm : ndarray, shape (N, k, 3)
         CMM frame.
     times_s : ndarray, shape (N,)
-        Mean time of each step's records.
+        Time of each step: the mean of its balls' times (a ball's time is the
+        mean time of its records).
     time_kind : {"iso", "seconds"}
+    u_um : ndarray, shape (N, k)
+        Standard uncertainty of each centre (NaN when the file gave none).
     """
 
     centres_mm: FloatArray
     times_s: FloatArray
     time_kind: TimeKind
+    u_um: FloatArray
 
 
 @dataclass(frozen=True)
@@ -53,6 +58,79 @@ class ProcessResult:
     correction: Correction
     temperatures: Temperatures | None
     interpolation: Interpolation
+    records: tuple[Records, ...] = ()
+    warnings: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Checks:
+    """Tolerances of the checks ``process`` makes before and after registration.
+
+    Attributes
+    ----------
+    distance_tolerance_um : float
+        Largest deviation of a measured inter-ball distance from the balls file;
+        beyond it the step is refused with a diagnosis (swapped balls, inch/mm).
+    registration_tolerance_um : float
+        Largest registration RMS residual of a step.
+    registration_fails : bool
+        Whether exceeding ``registration_tolerance_um`` is an error (else a warning).
+    """
+
+    distance_tolerance_um: float = 50.0
+    registration_tolerance_um: float = 10.0
+    registration_fails: bool = False
+
+
+def nominal_fit_diameter_mm(balls: Balls) -> FloatArray:
+    """Diameter a sphere fit should find for each ball (probe tip added if uncompensated)."""
+    return np.array([2 * probe_radius_mm(d, balls.tip_diameter_mm, balls.probe_compensated)
+                     for d in balls.diameters_mm])
+
+
+def fit_points(records: Records, balls: Balls | None = None, fixed_diameter_mm: float | None = None
+               ) -> Records:
+    """Fit a sphere to every ``(label, ball)`` group of a points file; return centres.
+
+    The centres' ``extra`` holds per-row ``n``, ``form_um``, ``rms_um``, ``cap_deg``,
+    ``u_um`` and ``diameter_mm``. With ``fixed_diameter_mm`` (or, when it is 0 and
+    ``balls`` is given, the nominal fit diameter of each ball) the radius is fixed.
+    """
+    keys = np.char.add(np.char.add(records.label.astype(str), "\x1f"), records.ball.astype(str))
+    unique, first, groups = np.unique(keys, return_index=True, return_inverse=True)
+    order = np.argsort(first)  # groups in file order
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    groups = rank[groups]
+    first = first[order]
+    radius = None
+    if fixed_diameter_mm is not None:
+        if fixed_diameter_mm > 0:
+            radius = fixed_diameter_mm / 2
+        elif balls is not None:
+            nominal = dict(zip(balls.names, nominal_fit_diameter_mm(balls) / 2, strict=True))
+            missing = [b for b in records.ball[first] if b not in nominal]
+            if missing:
+                row = int(first[[b in missing for b in records.ball[first]]][0])
+                raise InputError(f"ball {str(records.ball[row])!r} is not in the balls file",
+                                 path=records.path, line=int(records.line[row]), field="ball")
+            radius = np.array([nominal[b] for b in records.ball[first]])
+    try:
+        fits = fit_spheres(records.xyz_mm, groups, radius_mm=radius)
+    except FitError as exc:
+        row = None if exc.index is None else int(first[exc.index])
+        where = "" if row is None else (f"step {records.label[row]} ball {records.ball[row]}: ")
+        raise InputError(f"{where}sphere fit: {exc}", path=records.path,
+                         line=None if row is None else int(records.line[row])) from None
+    counts = np.bincount(groups)
+    times = np.bincount(groups, weights=records.time_s) / counts
+    u_um = np.sqrt(np.trace(fits.cov_centre_mm2, axis1=1, axis2=2) / 3) * 1e3
+    extra = {"n": fits.n, "form_um": fits.form_um, "rms_um": fits.rms_um,
+             "cap_deg": fits.cap_half_angle_deg, "u_um": u_um}
+    return Records(path=records.path, kind="centres", label=records.label[first],
+                   ball=records.ball[first], xyz_mm=fits.centre_mm, time_s=times,
+                   time_kind=records.time_kind, line=records.line[first],
+                   diameter_mm=2 * fits.radius_mm, extra=extra)
 
 
 def assemble_centres(records: list[Records], session: Session) -> StepCentres:
@@ -68,7 +146,8 @@ def assemble_centres(records: list[Records], session: Session) -> StepCentres:
     n, k = len(plan.labels), len(balls.names)
     sums = np.zeros((n, k, 3))
     counts = np.zeros((n, k), dtype=int)
-    time_sum, time_count = np.zeros(n), np.zeros(n)
+    ball_time = np.zeros((n, k))
+    u_um = np.full((n, k), np.nan)
     kinds = {r.time_kind for r in records}
     if len(kinds) > 1:
         iso = next(r for r in records if r.time_kind == "iso")
@@ -78,9 +157,7 @@ def assemble_centres(records: list[Records], session: Session) -> StepCentres:
                          field="time")
     for rec in records:
         if rec.kind != "centres":
-            raise InputError("holds probed points: sphere fitting of points comes with the "
-                             "points readers; give ball centres", path=rec.path,
-                             line=int(rec.line[0]))
+            raise ValueError("fit points records before assembling centres")
         si = np.array([step_index.get(s, -1) for s in rec.label])
         bi = np.array([ball_index.get(b, -1) for b in rec.ball])
         if np.any(si < 0):
@@ -98,11 +175,12 @@ def assemble_centres(records: list[Records], session: Session) -> StepCentres:
             raise InputError(f"step {rec.label[row]} ball {rec.ball[row]} is measured again "
                              "(already in an earlier file)", path=rec.path,
                              line=int(rec.line[row]), field="label")
-        np.add.at(sums, (si, bi), rec.xyz_mm)
-        np.add.at(counts, (si, bi), 1)
-        np.add.at(time_sum, si, rec.time_s)
-        np.add.at(time_count, si, 1)
-    missing_step = time_count == 0
+        sums[si, bi] = rec.xyz_mm
+        counts[si, bi] = 1
+        ball_time[si, bi] = rec.time_s
+        if "u_um" in rec.extra:
+            u_um[si, bi] = np.asarray(rec.extra["u_um"], dtype=float)
+    missing_step = counts.sum(axis=1) == 0
     if np.any(missing_step):
         i = int(np.argmax(missing_step))
         raise PlanError(f"step {plan.labels[i]}: not measured (no record in "
@@ -111,18 +189,34 @@ def assemble_centres(records: list[Records], session: Session) -> StepCentres:
     if np.any(missing_ball):
         i, j = np.argwhere(missing_ball)[0]
         raise PlanError(f"step {plan.labels[i]}: ball {balls.names[j]} not measured")
-    return StepCentres(sums / counts[..., None], time_sum / time_count,
-                       kinds.pop() if kinds else "seconds")
+    return StepCentres(sums, ball_time.mean(axis=1), kinds.pop() if kinds else "seconds", u_um)
+
+
+def registration_weights(u_um: FloatArray, floor_um: float = 1e-3) -> FloatArray | None:
+    """Weights ``1/u^2`` of each step's balls when every centre has an uncertainty.
+
+    Steps with a missing uncertainty get equal weights; ``u`` is floored at
+    ``floor_um`` so that noise-free fits do not get infinite weights.
+    """
+    if np.all(np.isnan(u_um)):
+        return None
+    u = np.maximum(np.nan_to_num(u_um, nan=1.0), floor_um)
+    weights = 1.0 / u**2
+    weights[np.isnan(u_um).any(axis=1)] = 1.0
+    return weights
 
 
 def process_session(
-    path: str | Path, interpolation: Interpolation = "linear"
+    path: str | Path, interpolation: Interpolation = "linear",
+    fixed_diameter_mm: float | None = None, checks: Checks | None = None,
 ) -> ProcessResult:
     """Read a session and compute conventional and corrected poses of every target."""
     session = read_session(path)
     records: list[Records] = []
     for file in session.measurements:
-        records.extend(read_measurements(file))
+        for rec in read_measurements(file):
+            records.append(rec if rec.kind == "centres" else fit_points(
+                rec, session.balls, fixed_diameter_mm))
     centres = assemble_centres(records, session)
     temperatures = None
     if session.temperatures is not None:
@@ -131,8 +225,32 @@ def process_session(
             raise InputError(f"times are {temperatures.time_kind} here but "
                              f"{centres.time_kind} in the measurements: use one kind",
                              path=temperatures.path, line=2, field="time")
-    registration = register(centres.centres_mm, session.balls.centres_mm)
+    checks = checks or Checks()
+    plan, balls = session.plan, session.balls
+    distances = check_distances(centres.centres_mm, balls.centres_mm, balls.names,
+                                checks.distance_tolerance_um * 1e-3)
+    bad = [i for i, text in enumerate(distances.diagnosis) if text]
+    if bad:
+        more = f" ({len(bad) - 1} more step(s) too)" if len(bad) > 1 else ""
+        raise PlanError(f"step {plan.labels[bad[0]]}: {distances.diagnosis[bad[0]]}{more}")
+    registration = register(centres.centres_mm, balls.centres_mm,
+                            registration_weights(centres.u_um))
+    warnings = []
+    over = np.flatnonzero(registration.rms_um > checks.registration_tolerance_um)
+    if over.size:
+        message = (f"step {plan.labels[over[0]]}: registration residual "
+                   f"{registration.rms_um[over[0]]:.2f} um RMS exceeds "
+                   f"{checks.registration_tolerance_um:g} um"
+                   + (f" ({over.size - 1} more step(s) too)" if over.size > 1 else ""))
+        if checks.registration_fails:
+            raise PlanError(message)
+        warnings.append(message)
+    q_steps = session.hexapod.igm(plan.poses)
+    outside = np.flatnonzero(session.hexapod.check_stroke(q_steps).any(axis=1))
+    if outside.size:
+        warnings.append(f"step {plan.labels[outside[0]]}: commanded pose is outside the stroke "
+                        f"{session.hexapod.stroke_mm.tolist()} mm")
     steps, correction = correct(session.hexapod, session.plan, centres.times_s,
                                 registration.platform2cmm, interpolation)
     return ProcessResult(session, centres, registration, steps, correction, temperatures,
-                         interpolation)
+                         interpolation, tuple(records), tuple(warnings))

@@ -18,7 +18,8 @@ import pandas as pd
 
 from hexatherm.core.geometry import transform_from_pose
 from hexatherm.core.plan import Plan
-from hexatherm.core.twin import TwinSteps, predict_steps
+from hexatherm.core.spherefit import probe_radius_mm
+from hexatherm.core.twin import TwinSteps, predict_steps, probe_points
 from hexatherm.io.atomic import atomic_output_dir
 from hexatherm.io.config import (
     Balls,
@@ -27,6 +28,7 @@ from hexatherm.io.config import (
     read_hexapod_text,
     session_to_yaml,
 )
+from hexatherm.io.dmisout import dmis_output
 from hexatherm.io.records import iso_to_seconds, seconds_to_iso
 from hexatherm.io.results import pose_columns, to_csv_text
 
@@ -77,6 +79,10 @@ class TwinSessionSpec:
     seed: int = 0
     readme: str = ""
     extra: dict[str, str] = field(default_factory=dict)
+    output: str = "centres"  # centres | points | dmis
+    points_per_ball: int = 25
+    cap_half_angle_deg: float = 70.0
+    point_noise_mm: float = 0.0
 
 
 def step_timing(n_steps: int, n_balls: int, seconds_per_ball: float, seconds_per_move: float
@@ -101,13 +107,7 @@ def write_twin_session(spec: TwinSessionSpec, out: str | Path, overwrite: bool =
     centres = truth.centres_cmm_mm + rng.normal(scale=spec.centre_noise_mm, size=(n, k, 3))
 
     t0 = iso_to_seconds(spec.start)
-    centres_frame = pd.DataFrame({
-        "label": np.repeat(plan.labels, k),
-        "ball": np.tile(balls.names, n),
-        "x": centres[..., 0].ravel(), "y": centres[..., 1].ravel(),
-        "z": centres[..., 2].ravel(),
-        "time": [seconds_to_iso(t0 + t) for t in ball_t.ravel()],
-    })
+    measurement_name, measurement_text = _measurements(spec, centres, ball_t + t0, rng)
     end = ball_t.max() + spec.seconds_per_ball
     sample_t = np.arange(0.0, end + spec.sample_period_s, spec.sample_period_s)
     true_legs = spec.heating.legs(sample_t)
@@ -135,8 +135,8 @@ def write_twin_session(spec: TwinSessionSpec, out: str | Path, overwrite: bool =
         "balls.yaml": balls_to_yaml(balls),
         "plan.yaml": plan_to_yaml(plan),
         "session.yaml": session_to_yaml(spec.name, "hexapod.yaml", "balls.yaml", "plan.yaml",
-                                        ["centres.csv"], "temperatures.csv"),
-        "centres.csv": to_csv_text(centres_frame),
+                                        [measurement_name], "temperatures.csv"),
+        measurement_name: measurement_text,
         "temperatures.csv": to_csv_text(temps_frame),
         "truth/steps.csv": to_csv_text(pd.DataFrame(truth_data)),
         **spec.extra,
@@ -149,3 +149,40 @@ def write_twin_session(spec: TwinSessionSpec, out: str | Path, overwrite: bool =
             target.parent.mkdir(parents=True, exist_ok=True)
             target.write_text(text, encoding="utf-8", newline="")
     return truth
+
+
+def _measurements(spec: TwinSessionSpec, centres: FloatArray, ball_t: FloatArray,
+                  rng: np.random.Generator) -> tuple[str, str]:
+    """The measurement file (name, text) in the spec's output format."""
+    plan, balls = spec.plan, spec.balls
+    n, k = centres.shape[:2]
+    labels, names = np.repeat(plan.labels, k), np.tile(balls.names, n)
+    if spec.output == "centres":
+        frame = pd.DataFrame({"label": labels, "ball": names, "x": centres[..., 0].ravel(),
+                              "y": centres[..., 1].ravel(), "z": centres[..., 2].ravel(),
+                              "time": [seconds_to_iso(t) for t in ball_t.ravel()]})
+        return "centres.csv", to_csv_text(frame)
+    if spec.output not in ("points", "dmis"):
+        raise ValueError(f"output must be centres, points or dmis, got {spec.output!r}")
+    m = spec.points_per_ball
+    radius = np.array([probe_radius_mm(d, balls.tip_diameter_mm, balls.probe_compensated)
+                       for d in balls.diameters_mm])
+    points, dirs = probe_points(centres, radius[None, :], m, spec.cap_half_angle_deg,
+                                spec.point_noise_mm, rng)
+    dt = spec.seconds_per_ball / m
+    times = ball_t[..., None] + (np.arange(m) - (m - 1) / 2) * dt  # mean = the ball's time
+    xyz = points.reshape(-1, 3)
+    ijk = np.broadcast_to(-dirs, points.shape).reshape(-1, 3)
+    point_labels = np.repeat(labels, m)
+    point_balls = np.repeat(names, m)
+    if spec.output == "points":
+        frame = pd.DataFrame({"label": point_labels, "ball": point_balls, "x": xyz[:, 0],
+                              "y": xyz[:, 1], "z": xyz[:, 2],
+                              "time": [seconds_to_iso(t) for t in times.ravel()],
+                              "i": ijk[:, 0], "j": ijk[:, 1], "k": ijk[:, 2]})
+        return "points.csv", to_csv_text(frame)
+    numbers = np.tile(np.arange(1, m + 1), n * k).astype(str)
+    feature = np.char.add(np.char.add(np.char.add(np.char.add(point_labels, "_"), point_balls),
+                                      "_"), numbers)
+    return "points.dmo", dmis_output(feature, xyz, times.ravel(), "POINT", ijk=ijk,
+                                     name=spec.name)

@@ -16,6 +16,8 @@ from hexatherm import __version__
 #: command name -> (module, one-line help shown by ``hexatherm --help``)
 COMMANDS: dict[str, tuple[str, str]] = {
     "process": ("hexatherm.cli.process", "Process a session: conventional and corrected poses."),
+    "fit-spheres": ("hexatherm.cli.fit_spheres", "Fit ball centres to probed points (CSV, DMIS)."),
+    "inspect": ("hexatherm.cli.inspect", "List the features of a measurement file."),
 }
 
 

@@ -19,6 +19,7 @@ True
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import permutations
 
 import numpy as np
 import numpy.typing as npt
@@ -136,3 +137,108 @@ def register(
     residuals = centres - apply_transform(transforms, balls)
     rms = np.sqrt((residuals**2).sum(axis=-1).mean(axis=-1)) * 1e3
     return Registration(platform2cmm=transforms, residuals_mm=residuals, rms_um=rms)
+
+
+#: millimetres per inch, for telling an inch/mm mix-up from other errors
+MM_PER_INCH = 25.4
+
+
+@dataclass(frozen=True)
+class DistanceCheck:
+    """Measured inter-ball distances compared with the balls file, for N steps.
+
+    Attributes
+    ----------
+    deviation_mm : ndarray, shape (N, P)
+        Measured minus nominal distance of each ball pair.
+    pairs : list of (int, int)
+        The ball pairs, in the order of the last axis.
+    worst_mm : ndarray, shape (N,)
+        Largest absolute deviation of each step.
+    diagnosis : list of str
+        For each step, "" when within tolerance, else what looks wrong.
+    """
+
+    deviation_mm: FloatArray
+    pairs: list[tuple[int, int]]
+    worst_mm: FloatArray
+    diagnosis: list[str]
+
+
+def _pair_distances(points: FloatArray, pairs: list[tuple[int, int]]) -> FloatArray:
+    i, j = np.array(pairs).T
+    return np.linalg.norm(points[..., i, :] - points[..., j, :], axis=-1)
+
+
+def check_distances(
+    centres_mm: npt.ArrayLike,
+    balls_mm: npt.ArrayLike,
+    names: tuple[str, ...] | list[str],
+    tolerance_mm: float = 0.05,
+) -> DistanceCheck:
+    """Compare every step's inter-ball distances with the balls file and say what is wrong.
+
+    A step whose distances are all within ``tolerance_mm`` passes. Otherwise the
+    diagnosis names the likeliest cause: distances off by a factor 25.4 (inch/mm
+    mix-up), a relabelling of the balls that matches (swapped or mislabelled
+    balls), or the ball whose pairs deviate most.
+
+    >>> import numpy as np
+    >>> balls = np.array([[0.0, 90, 30], [-73.6, -42.5, 30], [82.3, -47.5, 30]])
+    >>> check = check_distances(balls[[1, 0, 2]][None], balls, ["B1", "B2", "B3"])
+    >>> check.diagnosis[0]
+    'balls B1 and B2 look swapped (their distances match the balls file when exchanged)'
+    """
+    balls = np.asarray(balls_mm, dtype=float)
+    centres = np.asarray(centres_mm, dtype=float)
+    if centres.ndim == 2:
+        centres = centres[None]
+    k = balls.shape[0]
+    pairs = [(a, b) for a in range(k) for b in range(a + 1, k)]
+    nominal = _pair_distances(balls, pairs)
+    measured = _pair_distances(centres, pairs)
+    deviation = measured - nominal
+    worst = np.abs(deviation).max(axis=1)
+    text = [""] * centres.shape[0]
+    for step in np.flatnonzero(worst > tolerance_mm):
+        text[step] = _diagnose(measured[step], nominal, centres[step], pairs, list(names),
+                               tolerance_mm)
+    return DistanceCheck(deviation, pairs, worst, text)
+
+
+def _diagnose(
+    measured: FloatArray,
+    nominal: FloatArray,
+    centres: FloatArray,
+    pairs: list[tuple[int, int]],
+    names: list[str],
+    tolerance_mm: float,
+) -> str:
+    for factor, what in ((1.0 / MM_PER_INCH, "millimetre values read as inches"),
+                         (MM_PER_INCH, "inch values read as millimetres")):
+        if np.abs(measured * factor - nominal).max() <= tolerance_mm * max(factor, 1.0):
+            return (f"inter-ball distances are {1 / factor:g} times the balls file: "
+                    f"{what}? (check UNITS of the measurement file)")
+    k = len(names)
+    if k <= 6:
+        for perm in permutations(range(k)):
+            if perm == tuple(range(k)):
+                continue
+            relabelled = _pair_distances(centres[list(perm)], pairs)
+            # measured ball perm[a] is really ball a
+            if np.abs(relabelled - nominal).max() <= tolerance_mm:
+                moved = [a for a in range(k) if perm[a] != a]
+                if len(moved) == 2:
+                    return (f"balls {names[moved[0]]} and {names[moved[1]]} look swapped "
+                            "(their distances match the balls file when exchanged)")
+                mapping = ", ".join(f"{names[perm[a]]} is {names[a]}" for a in moved)
+                return f"balls look mislabelled ({mapping} would match the balls file)"
+    per_ball = np.zeros(k)
+    for (a, b), dev in zip(pairs, np.abs(measured - nominal), strict=True):
+        per_ball[a] += dev
+        per_ball[b] += dev
+    worst = int(np.argmax(per_ball))
+    off = np.abs(measured - nominal).max()
+    return (f"inter-ball distances deviate by up to {off * 1e3:.1f} um from the balls file; "
+            f"ball {names[worst]} is the likeliest culprit (wrong ball probed, bad fit, or "
+            "a balls file that does not match this platform)")

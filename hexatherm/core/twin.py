@@ -116,3 +116,58 @@ def predict_steps(
         corrected_pose=pose_from_transform(corrected, hexapod.convention),
         centres_cmm_mm=centres,
     )
+
+
+def cap_directions(n_points: int, cap_half_angle_deg: float) -> FloatArray:
+    """``n_points`` unit vectors spread evenly over a cap around +Z (a Fibonacci spiral).
+
+    >>> d = cap_directions(25, 60.0)
+    >>> bool(np.allclose(np.linalg.norm(d, axis=1), 1.0)), bool(d[:, 2].min() >= 0.5 - 1e-12)
+    (True, True)
+    """
+    if n_points < 1:
+        raise ValueError("need at least one point")
+    i = np.arange(n_points) + 0.5
+    cos_min = np.cos(np.deg2rad(cap_half_angle_deg))
+    z = 1.0 - (1.0 - cos_min) * i / n_points
+    golden = np.pi * (3.0 - np.sqrt(5.0))
+    phi = golden * i
+    rho = np.sqrt(np.clip(1.0 - z**2, 0.0, None))
+    return np.column_stack([rho * np.cos(phi), rho * np.sin(phi), z])
+
+
+def probe_points(
+    centres_mm: npt.ArrayLike,
+    radius_mm: npt.ArrayLike,
+    n_points: int,
+    cap_half_angle_deg: float,
+    noise_mm: float = 0.0,
+    rng: np.random.Generator | None = None,
+) -> tuple[FloatArray, FloatArray]:
+    """Surface points probed on the upper caps (CMM +Z) of balls, with normal noise.
+
+    Parameters
+    ----------
+    centres_mm : array_like, shape (..., 3)
+        Ball centres in the CMM frame.
+    radius_mm : array_like, broadcastable to ``centres_mm.shape[:-1]``
+        Radius of the surface the points lie on (ball radius for compensated points,
+        plus the tip radius for tip-centre points).
+    n_points, cap_half_angle_deg : int, float
+        Points per ball and the half-angle of the probed cap.
+    noise_mm : float
+        Standard deviation of the probing error along the surface normal.
+
+    Returns
+    -------
+    points : ndarray, shape (..., n_points, 3)
+    directions : ndarray, shape (n_points, 3)
+        Outward normals (the probing direction is their opposite).
+    """
+    rng = rng or np.random.default_rng(0)
+    centres = np.asarray(centres_mm, dtype=float)
+    radius = np.broadcast_to(np.asarray(radius_mm, dtype=float), centres.shape[:-1])
+    dirs = cap_directions(n_points, cap_half_angle_deg)
+    noise = rng.normal(scale=noise_mm, size=centres.shape[:-1] + (n_points,)) if noise_mm else 0.0
+    dist = radius[..., None] + noise
+    return centres[..., None, :] + dist[..., None] * dirs, dirs

@@ -3,8 +3,8 @@
 Centres and points files share the header ``label,ball,x,y,z,time``; centres may
 add ``diameter``, points ``i,j,k`` (probing direction). Which of the two a file
 holds is told by (in this order) its extra columns, its name (``centres``,
-``centers`` or ``points`` in it), or its content (one row per step and ball means
-centres). ``time`` is an ISO 8601 timestamp or a number of seconds, the same kind
+``centers`` or ``points`` in it), or its content (at least half the steps and balls
+with one row means centres). ``time`` is an ISO 8601 timestamp or a number of seconds, the same kind
 on every row.
 
 Errors name the file, the line (header = line 1) and the column.
@@ -24,10 +24,10 @@ import pandas as pd
 
 from hexatherm.core.plan import NAME_PATTERN
 from hexatherm.errors import InputError
-from hexatherm.io.records import RecordKind, Records, TimeKind
+from hexatherm.io.records import RecordKind, Records, TimeKind, seconds_to_iso
 
 BASE_COLUMNS = ("label", "ball", "x", "y", "z", "time")
-CENTRE_EXTRA = ("diameter",)
+CENTRE_EXTRA = ("diameter", "form_um", "n", "u_um")  # all but diameter: extensions
 POINT_EXTRA = ("i", "j", "k")
 
 
@@ -140,7 +140,7 @@ def _names(frame: pd.DataFrame, column: str, path: str) -> npt.NDArray[np.str_]:
     ok = np.array([bool(NAME_PATTERN.fullmatch(v)) for v in values], dtype=bool)
     if not np.all(ok):
         row = int(np.argmax(~ok))
-        raise InputError(f"{values[row]!r} must match [A-Za-z0-9-]+", path=path,
+        raise InputError(f"{str(values[row])!r} must match [A-Za-z0-9-]+", path=path,
                          line=int(frame.index[row]), field=column)
     return values
 
@@ -157,7 +157,7 @@ def _kind(frame: pd.DataFrame, path: str) -> RecordKind:
     if "point" in name:
         return "points"
     counts = frame.groupby(["label", "ball"]).size()
-    return "centres" if len(counts) and counts.max() == 1 else "points"
+    return "centres" if len(counts) and (counts == 1).mean() >= 0.5 else "points"
 
 
 def read_measurement_csv(path: str | os.PathLike[str], kind: RecordKind | None = None) -> Records:
@@ -179,6 +179,7 @@ def read_measurement_csv(path: str | os.PathLike[str], kind: RecordKind | None =
     time, time_kind = _times(frame, path)
     lines = frame.index.to_numpy(dtype=np.int64)
     diameter = ijk = None
+    extra: dict[str, object] = {}
     if kind == "centres":
         keys = pd.Series(label).str.cat(pd.Series(ball), sep="\x1f")
         dup = keys.duplicated().to_numpy()
@@ -190,12 +191,35 @@ def read_measurement_csv(path: str | os.PathLike[str], kind: RecordKind | None =
                              field="label")
         if "diameter" in frame.columns:
             diameter = _numbers(frame, "diameter", path, allow_empty=True)
+        for column in ("form_um", "n", "u_um"):
+            if column in frame.columns:
+                extra[column] = _numbers(frame, column, path, allow_empty=True)
     elif all(c in frame.columns for c in POINT_EXTRA):
         ijk = np.column_stack([_numbers(frame, c, path, allow_empty=True) for c in POINT_EXTRA])
     elif any(c in frame.columns for c in POINT_EXTRA):
         raise InputError("give all of i, j, k or none", path=path, line=1)
     return Records(path=path, kind=kind, label=label, ball=ball, xyz_mm=xyz, time_s=time,
-                   time_kind=time_kind, line=lines, diameter_mm=diameter, ijk=ijk)
+                   time_kind=time_kind, line=lines, diameter_mm=diameter, ijk=ijk, extra=extra)
+
+
+def centres_to_csv(records: Records) -> str:
+    """Centres CSV text: the contract columns, then ``diameter`` and, when known, the
+    extension columns ``form_um``, ``n``, ``u_um`` (written by ``fit-spheres``)."""
+    if records.time_kind == "iso":
+        times: object = [seconds_to_iso(t) for t in records.time_s]
+    else:
+        times = records.time_s
+    data: dict[str, object] = {"label": records.label, "ball": records.ball,
+                               "x": records.xyz_mm[:, 0], "y": records.xyz_mm[:, 1],
+                               "z": records.xyz_mm[:, 2], "time": times}
+    if records.diameter_mm is not None:
+        data["diameter"] = records.diameter_mm
+    for column in ("form_um", "n", "u_um"):
+        if column in records.extra:
+            data[column] = records.extra[column]
+    buffer = io.StringIO()
+    pd.DataFrame(data).to_csv(buffer, index=False, lineterminator="\n")
+    return buffer.getvalue()
 
 
 @dataclass(frozen=True)

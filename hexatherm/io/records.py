@@ -84,3 +84,25 @@ def seconds_to_iso(seconds: float) -> str:
     """
     stamp = datetime.fromtimestamp(float(seconds), tz=UTC).replace(tzinfo=None)
     return stamp.isoformat(timespec="microseconds")
+
+
+def concat_records(records: list[Records]) -> Records:
+    """Join records of one kind and time kind (the first one's path names the result)."""
+    first = records[0]
+    if any(r.kind != first.kind or r.time_kind != first.time_kind for r in records):
+        raise ValueError("records of different kinds or time kinds cannot be joined")
+
+    def join(name: str) -> npt.NDArray[np.float64] | None:
+        values = [getattr(r, name) for r in records]
+        return None if any(v is None for v in values) else np.concatenate(values)
+
+    keys = set.intersection(*(set(r.extra) for r in records))
+    extra = {key: np.concatenate([np.asarray(r.extra[key]) for r in records]) for key in keys}
+    return Records(path=first.path, kind=first.kind,
+                   label=np.concatenate([r.label for r in records]),
+                   ball=np.concatenate([r.ball for r in records]),
+                   xyz_mm=np.concatenate([r.xyz_mm for r in records]),
+                   time_s=np.concatenate([r.time_s for r in records]),
+                   time_kind=first.time_kind,
+                   line=np.concatenate([r.line for r in records]),
+                   diameter_mm=join("diameter_mm"), ijk=join("ijk"), extra=extra)

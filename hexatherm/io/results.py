@@ -91,7 +91,40 @@ def legs_frame(result: ProcessResult) -> pd.DataFrame:
         growth[refs] = (steps.q_mm[refs] - steps.q_mm[refs[0]]) * 1e3
     for leg in LEGS:
         data[f"dq_leg{leg}_um"] = growth[:, leg - 1]
+    data["registration_rms_um"] = result.registration.rms_um
     return pd.DataFrame(data)
+
+
+def fits_frame(result: ProcessResult) -> pd.DataFrame:
+    """The ``fits.csv`` table: quality of every ball centre, one row per step and ball.
+
+    ``source`` is ``points`` (fitted by hexatherm) or ``centres`` (given by the
+    file); ``diameter_dev_um`` is the fitted diameter minus the nominal one (ball
+    diameter, plus the tip's when points are not probe-compensated).
+    """
+    from hexatherm.pipeline import nominal_fit_diameter_mm
+
+    balls = result.session.balls
+    nominal = dict(zip(balls.names, nominal_fit_diameter_mm(balls), strict=True))
+    frames = []
+    for rec in result.records:
+        n = len(rec)
+        nan = np.full(n, np.nan)
+        diameter = rec.diameter_mm if rec.diameter_mm is not None else nan
+        fitted = "n" in rec.extra
+        frames.append(pd.DataFrame({
+            "label": rec.label, "ball": rec.ball,
+            "source": "points" if fitted else "centres",
+            "file": Path(rec.path).name,
+            "n": rec.extra.get("n", np.full(n, 1)),
+            "diameter_mm": diameter,
+            "diameter_dev_um": (diameter - np.array([nominal[b] for b in rec.ball])) * 1e3,
+            "form_um": rec.extra.get("form_um", nan),
+            "rms_um": rec.extra.get("rms_um", nan),
+            "cap_deg": rec.extra.get("cap_deg", nan),
+            "u_centre_um": rec.extra.get("u_um", nan),
+        }))
+    return pd.concat(frames, ignore_index=True)
 
 
 def to_csv_text(frame: pd.DataFrame) -> str:
@@ -102,8 +135,9 @@ def to_csv_text(frame: pd.DataFrame) -> str:
 
 
 def write_results(result: ProcessResult, out: str | Path, overwrite: bool = False) -> list[Path]:
-    """Write ``poses.csv`` and ``legs.csv`` into ``out`` as one atomic folder replacement."""
-    tables = {"poses.csv": poses_frame(result), "legs.csv": legs_frame(result)}
+    """Write ``poses.csv``, ``legs.csv``, ``fits.csv`` into ``out``, replacing it atomically."""
+    tables = {"poses.csv": poses_frame(result), "legs.csv": legs_frame(result),
+              "fits.csv": fits_frame(result)}
     texts = {name: to_csv_text(frame) for name, frame in tables.items()}
     with atomic_output_dir(out, overwrite=overwrite) as tmp:
         for name, text in texts.items():

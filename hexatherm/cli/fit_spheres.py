@@ -1,0 +1,56 @@
+"""``hexatherm fit-spheres``: ball centres from probed points (CSV or DMIS)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from hexatherm.cli.options import clean_errors, echo_err, overwrite_option
+
+
+@click.command("fit-spheres")
+@click.argument("points", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("-o", "--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Centres CSV to write [default: standard output].")
+@click.option("--fixed-diameter", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Fix the sphere diameter (mm) instead of fitting it: better on small caps.")
+@overwrite_option
+@clean_errors
+def command(points: tuple[Path, ...], out: Path | None, fixed_diameter: float | None,
+            overwrite: bool) -> None:
+    """Fit a sphere to every (label, ball) group of the POINTS files.
+
+    Writes a centres file: label,ball,x,y,z,time (time: mean of the points),
+    then diameter, form_um (max-min residual), n and u_um (standard uncertainty
+    of the centre from the residuals).
+    """
+    from hexatherm.io.atomic import OutputExistsError, atomic_write_text
+    from hexatherm.io.csvfile import centres_to_csv, read_measurements
+    from hexatherm.io.records import Records, concat_records
+    from hexatherm.pipeline import fit_points
+
+    if out is not None and out.exists() and not overwrite:
+        raise OutputExistsError(f"{out} exists; use --overwrite to replace it")
+    fitted: list[Records] = []
+    for path in points:
+        found = [r for r in read_measurements(path) if r.kind == "points"]
+        if not found:
+            echo_err(f"{path}: no probed points, skipped")
+        fitted.extend(fit_points(r, fixed_diameter_mm=fixed_diameter) for r in found)
+    if not fitted:
+        raise click.ClickException("no probed points in the given files")
+    kinds = {r.time_kind for r in fitted}
+    if len(kinds) > 1:
+        raise click.ClickException("the files mix ISO 8601 times and seconds")
+    text = centres_to_csv(concat_records(fitted))
+    if out is None:
+        sys.stdout.write(text)
+    else:
+        atomic_write_text(out, text)
+        echo_err(f"wrote {out}")
+    for rec in fitted:
+        form = rec.extra["form_um"]
+        echo_err(f"{rec.path}: {len(rec)} spheres, form error up to {max(form):.2f} um")
+

@@ -1,0 +1,40 @@
+"""A flat listing of the features of any measurement file (for ``hexatherm inspect``)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from hexatherm.io.csvfile import read_measurement_csv, read_text
+from hexatherm.io.dmis import DMIS_SUFFIXES, looks_like_dmis, read_dmis_features
+from hexatherm.io.records import seconds_to_iso
+
+COLUMNS = ["line", "label", "type", "x_mm", "y_mm", "z_mm", "size_mm", "time"]
+
+
+def feature_table(path: str | os.PathLike[str]) -> pd.DataFrame:
+    """Every feature of a DMIS output or a centres/points CSV, one row each."""
+    path = Path(path)
+    if path.suffix.lower() in DMIS_SUFFIXES or (
+        path.suffix.lower() != ".csv" and looks_like_dmis(read_text(path)[:4096])
+    ):
+        rows = []
+        for feat in read_dmis_features(path):
+            xyz = feat.xyz_mm if feat.xyz_mm is not None else (np.nan,) * 3
+            rows.append([feat.line, feat.label, feat.type, *xyz,
+                         np.nan if feat.size_mm is None else feat.size_mm,
+                         "" if feat.time is None else feat.time.isoformat()])
+        return pd.DataFrame(rows, columns=COLUMNS)
+    rec = read_measurement_csv(path)
+    times = ([seconds_to_iso(t) for t in rec.time_s] if rec.time_kind == "iso"
+             else rec.time_s)
+    return pd.DataFrame({
+        "line": rec.line, "label": np.char.add(np.char.add(rec.label, "_"), rec.ball),
+        "type": "SPHERE" if rec.kind == "centres" else "POINT",
+        "x_mm": rec.xyz_mm[:, 0], "y_mm": rec.xyz_mm[:, 1], "z_mm": rec.xyz_mm[:, 2],
+        "size_mm": rec.diameter_mm if rec.diameter_mm is not None else np.nan,
+        "time": times,
+    })[COLUMNS]
