@@ -18,6 +18,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "process": ("hexatherm.cli.process", "Process a session: conventional and corrected poses."),
     "fit-spheres": ("hexatherm.cli.fit_spheres", "Fit ball centres to probed points (CSV, DMIS)."),
     "inspect": ("hexatherm.cli.inspect", "List the features of a measurement file."),
+    "register": ("hexatherm.cli.register", "Balls file from a measurement of the platform datums."),
 }
 
 

@@ -390,3 +390,70 @@ __all__ = [
     "Balls", "Session", "read_hexapod", "read_balls", "read_plan", "read_session",
     "hexapod_to_yaml", "balls_to_yaml", "plan_to_yaml", "session_to_yaml", "InputError",
 ]
+
+
+# ---------------------------------------------------------------------- datums
+DATUMS_FORMAT = "hexatherm-datums/1"
+
+
+@dataclass(frozen=True)
+class Datums:
+    """How ``hexatherm register`` finds the platform frame (an extension file).
+
+    Attributes
+    ----------
+    step : str or None
+        Label of the records to use (None: the file's only label).
+    plane : str
+        Feature name of the points on the top face.
+    bores : (str, str)
+        Feature names of the points in the two bores (origin, X direction).
+    origin_offset_mm : ndarray, shape (3,)
+        The platform origin in the datum frame.
+    balls : dict of str to float
+        Ball names and diameters, mm.
+    probe_compensated : bool
+    tip_diameter_mm : float
+    """
+
+    step: str | None
+    plane: str
+    bores: tuple[str, str]
+    origin_offset_mm: npt.NDArray[np.float64]
+    balls: dict[str, float]
+    probe_compensated: bool
+    tip_diameter_mm: float
+
+
+def read_datums(path: str | os.PathLike[str]) -> Datums:
+    """Read a datums file (``format: hexatherm-datums/1``)."""
+    doc = YamlDoc.load(path)
+    doc.check_format(DATUMS_FORMAT)
+    doc.check_keys(["format", "step", "plane", "bores", "origin_offset", "balls", "probe"])
+    step = doc.get("step", default=None)
+    if step is not None:
+        step = doc.string("step")
+    names = {"plane": doc.string("plane")}
+    bores = doc.get("bores")
+    if not isinstance(bores, list) or len(bores) != 2:
+        raise doc.error("expected two bore names [origin, x-direction]", "bores")
+    names["bore 1"], names["bore 2"] = doc.string("bores", 0), doc.string("bores", 1)
+    offset = np.array(doc.vector("origin_offset", size=3, default=[0.0, 0.0, 0.0]))
+    balls = doc.get("balls")
+    if not isinstance(balls, dict) or len(balls) < 3:
+        raise doc.error("expected at least three balls, name: diameter", "balls")
+    diameters = {name: doc.number("balls", name, positive=True) for name in balls}
+    for key, name in [*names.items(), *((f"ball {b}", b) for b in diameters)]:
+        if not NAME_PATTERN.fullmatch(name):
+            raise doc.error(f"{key} name {name!r} must match [A-Za-z0-9-]+")
+    if len(set(names.values()) | set(diameters)) != len(names) + len(diameters):
+        raise doc.error("plane, bores and balls must have different names")
+    compensated, tip = True, 0.0
+    if doc.get("probe", default=None) is not None:
+        doc.check_keys(["compensated", "tip_diameter"], "probe")
+        compensated = doc.get("probe", "compensated", default=True)
+        if not isinstance(compensated, bool):
+            raise doc.error("expected true or false", "probe", "compensated")
+        tip = doc.number("probe", "tip_diameter", default=0.0)
+    return Datums(step, names["plane"], (names["bore 1"], names["bore 2"]), offset, diameters,
+                  compensated, tip)
