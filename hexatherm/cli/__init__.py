@@ -19,6 +19,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "fit-spheres": ("hexatherm.cli.fit_spheres", "Fit ball centres to probed points (CSV, DMIS)."),
     "inspect": ("hexatherm.cli.inspect", "List the features of a measurement file."),
     "register": ("hexatherm.cli.register", "Balls file from a measurement of the platform datums."),
+    "replay": ("hexatherm.cli.replay", "Re-process recorded sessions against their expected/."),
 }
 
 

@@ -1,0 +1,48 @@
+"""``hexatherm replay``: re-process recorded sessions and compare with ``expected/``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from hexatherm.cli.options import clean_errors, echo_err
+
+
+@click.command("replay")
+@click.argument("sessions_dir", required=False, default="sessions",
+                type=click.Path(exists=True, file_okay=False, path_type=Path))
+@click.option("--update", is_flag=True,
+              help="Rewrite expected/ with the new results (after a deliberate change) and "
+              "say what changed.")
+@click.option("--tol-mm", type=float, default=1e-7, show_default=True,
+              help="Tolerance of columns in mm.")
+@click.option("--tol-deg", type=float, default=1e-6, show_default=True,
+              help="Tolerance of columns in deg.")
+@clean_errors
+def command(sessions_dir: Path, update: bool, tol_mm: float, tol_deg: float) -> None:
+    """Re-process every session of SESSIONS_DIR that has an expected/ folder.
+
+    Each output column is compared with expected/ (mm and deg as set, um and urad
+    1e-4, s 1e-6, others relative 1e-9). Prints one line per session with the
+    worst deviation per unit; exits 1 on any mismatch, naming session, file, row
+    and column.
+    """
+    from hexatherm.replay import DEFAULT_TOLERANCES, find_sessions, format_worst, replay_session
+
+    tolerances = {**DEFAULT_TOLERANCES, "mm": tol_mm, "deg": tol_deg}
+    sessions = find_sessions(sessions_dir)
+    if not sessions:
+        raise click.ClickException(f"no session with an expected/ folder in {sessions_dir}")
+    failed = 0
+    click.echo(f"{'session':28} {'status':8} worst deviation")
+    for folder in sessions:
+        result = replay_session(folder, tolerances, update=update)
+        status = "ok" if result.ok else ("updated" if update else "MISMATCH")
+        click.echo(f"{folder.name:28} {status:8} {format_worst(result.worst)}")
+        for line in result.mismatches:
+            echo_err(("changed: " if update else "mismatch: ") + line)
+        failed += (not result.ok) and not update
+    if failed:
+        raise click.ClickException(f"{failed} of {len(sessions)} session(s) do not replay")
+    echo_err(f"{len(sessions)} session(s) replayed")

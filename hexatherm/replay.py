@@ -1,0 +1,130 @@
+"""Re-process recorded sessions and compare with their ``expected/`` results.
+
+Every session folder that holds an ``expected/`` folder is processed again with
+the default options; each CSV of ``expected/`` is compared with the new one:
+same columns, same rows, text cells equal, numbers within a tolerance chosen by
+the column's unit suffix (``_mm``, ``_deg``, ``_um``, ``_urad``, ``_s``; others
+relative 1e-9).
+"""
+
+from __future__ import annotations
+
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from hexatherm.io.results import write_results
+from hexatherm.pipeline import process_session
+
+DEFAULT_TOLERANCES = {"mm": 1e-7, "deg": 1e-6, "um": 1e-4, "urad": 1e-4, "s": 1e-6}
+
+
+@dataclass
+class Comparison:
+    """Outcome of replaying one session."""
+
+    session: str
+    mismatches: list[str] = field(default_factory=list)
+    worst: dict[str, float] = field(default_factory=dict)  # unit -> worst |difference|
+    files: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return not self.mismatches
+
+
+def tolerance_for(column: str, tolerances: dict[str, float]) -> tuple[str, float]:
+    """Unit and absolute tolerance of a column (unit ``rel`` means relative 1e-9)."""
+    unit = column.rsplit("_", 1)[-1] if "_" in column else ""
+    if unit in tolerances:
+        return unit, tolerances[unit]
+    return "rel", 1e-9
+
+
+def compare_tables(name: str, expected: pd.DataFrame, got: pd.DataFrame,
+                   tolerances: dict[str, float], result: Comparison) -> None:
+    """Compare two tables cell by cell, recording mismatches that name row and column."""
+    if list(expected.columns) != list(got.columns):
+        missing = [c for c in expected.columns if c not in got.columns]
+        extra = [c for c in got.columns if c not in expected.columns]
+        result.mismatches.append(f"{result.session}/{name}: columns differ (missing {missing}, "
+                                 f"new {extra})")
+        return
+    if len(expected) != len(got):
+        result.mismatches.append(f"{result.session}/{name}: {len(got)} rows, expected "
+                                 f"{len(expected)}")
+        return
+    key = expected["label"].astype(str).tolist() if "label" in expected else None
+    for column in expected.columns:
+        a, b = expected[column], got[column]
+        row_name = (lambda i: f"row {i + 2} ({key[i]})") if key else (lambda i: f"row {i + 2}")
+        if pd.api.types.is_numeric_dtype(a) and pd.api.types.is_numeric_dtype(b):
+            x, y = a.to_numpy(dtype=float), b.to_numpy(dtype=float)
+            unit, tol = tolerance_for(column, tolerances)
+            both_nan = np.isnan(x) & np.isnan(y)
+            diff = np.where(both_nan, 0.0, np.abs(x - y))
+            limit = tol if unit != "rel" else tol * np.maximum(np.abs(x), 1.0)
+            bad = ~(diff <= limit)
+            finite = diff[np.isfinite(diff)]
+            if finite.size and unit != "rel":
+                result.worst[unit] = max(result.worst.get(unit, 0.0), float(finite.max()))
+            if np.any(bad):
+                i = int(np.argmax(bad))
+                result.mismatches.append(
+                    f"{result.session}/{name}: {row_name(i)}, column {column}: "
+                    f"expected {x[i]!r}, got {y[i]!r} (|diff| {diff[i]:.3g} > {tol:g})")
+        else:
+            sa, sb = a.fillna("").astype(str), b.fillna("").astype(str)
+            bad = (sa != sb).to_numpy()
+            if np.any(bad):
+                i = int(np.argmax(bad))
+                result.mismatches.append(
+                    f"{result.session}/{name}: {row_name(i)}, column {column}: "
+                    f"expected {sa.iloc[i]!r}, got {sb.iloc[i]!r}")
+
+
+def replay_session(folder: Path, tolerances: dict[str, float] | None = None,
+                   update: bool = False) -> Comparison:
+    """Process ``folder`` and compare with (or, with ``update``, rewrite) ``expected/``."""
+    tolerances = tolerances or DEFAULT_TOLERANCES
+    result = Comparison(folder.name)
+    expected_dir = folder / "expected"
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "out"
+        write_results(process_session(folder), out)
+        names = sorted(p.name for p in out.glob("*.csv"))
+        result.files = names
+        for name in names:
+            got = pd.read_csv(out / name)
+            exp_path = expected_dir / name
+            if not exp_path.exists():
+                result.mismatches.append(f"{folder.name}/{name}: not in expected/")
+                continue
+            compare_tables(name, pd.read_csv(exp_path), got, tolerances, result)
+        for stale in sorted(p.name for p in expected_dir.glob("*.csv")):
+            if stale not in names:
+                result.mismatches.append(f"{folder.name}/{stale}: no longer written by process")
+        if update:
+            from hexatherm.io.atomic import atomic_output_dir
+
+            texts = {n: (out / n).read_text() for n in names}
+            with atomic_output_dir(expected_dir, overwrite=True) as target:
+                for n, text in texts.items():
+                    (target / n).write_text(text, encoding="utf-8", newline="")
+    return result
+
+
+def find_sessions(root: Path) -> list[Path]:
+    """Session folders under ``root`` (or ``root`` itself) that have an ``expected/``."""
+    candidates = [root] if (root / "session.yaml").exists() else sorted(
+        p for p in root.iterdir() if p.is_dir())
+    return [p for p in candidates if (p / "expected").is_dir() and (p / "session.yaml").exists()]
+
+
+def format_worst(worst: dict[str, float]) -> str:
+    """``mm 1.2e-12, deg 3e-13`` style summary."""
+    return ", ".join(f"{unit} {value:.1e}" for unit, value in sorted(worst.items())) or "-"
+
