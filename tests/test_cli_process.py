@@ -157,3 +157,12 @@ def test_help_and_version():
     assert result.exit_code == 0 and "process" in result.output
     result = run("--version")
     assert result.exit_code == 0 and "hexatherm, version" in result.output
+
+
+def test_commanded_pose_outside_the_stroke_is_reported(tmp_path):
+    make_session(tmp_path / "s")
+    replace_in(tmp_path / "s" / "hexapod.yaml", "stroke: [220.0, 310.0]", "stroke: [250.0, 310.0]")
+    result = run("process", tmp_path / "s")
+    assert result.exit_code == 0
+    assert "warning: step R0: commanded pose is outside the stroke [250.0, 310.0] mm" \
+        in result.output

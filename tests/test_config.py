@@ -137,3 +137,29 @@ def test_yaml_syntax_error_has_line(tmp_path):
     path.write_text("format: hexatherm-plan/1\nsteps: [\n  {label: O\n")
     with pytest.raises(InputError, match=r"plan.yaml:\d+: invalid YAML"):
         read_plan(path)
+
+
+def test_per_leg_segments_and_effects(tmp_path):
+    text = HEXAPOD.read_text()
+    per_leg = "  per_leg:\n" + "".join(
+        f"  - - {{name: body, material: aluminium, cte: 2.31e-05, length: {150 + i}.0}}\n"
+        "    - {name: screw, material: steel, cte: 1.15e-05, length: variable}\n"
+        for i in range(6))
+    start = text.index("  segments:")
+    text = text[:start] + per_leg + ("thermal_model:\n  effects:\n"
+                                     "  - {name: leg_thermal_lag, parameters: {tau_s: 1800.0}}\n")
+    path = tmp_path / "h.yaml"
+    path.write_text(text)
+    hexapod = read_hexapod(path)
+    np.testing.assert_array_equal(hexapod.legs.total_fixed_length_mm, 150.0 + np.arange(6))
+    assert hexapod.effects == ({"name": "leg_thermal_lag", "parameters": {"tau_s": 1800.0}},)
+    again = tmp_path / "again.yaml"
+    again.write_text(hexapod_to_yaml(hexapod))
+    assert read_hexapod(again).effects == hexapod.effects
+    path.write_text(text.replace("tau_s: 1800.0", "tau: 1800.0"))
+    with pytest.raises(InputError, match=r"field 'thermal_model.effects\[0\].parameters.tau': "
+                                         "unknown key; expected one of: tau_s"):
+        read_hexapod(path)
+    path.write_text(text.replace("leg_thermal_lag", "leg_lag"))
+    with pytest.raises(InputError, match=r"effects\[0\].name': expected one of leg_thermal_lag"):
+        read_hexapod(path)
