@@ -20,6 +20,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "inspect": ("hexatherm.cli.inspect", "List the features of a measurement file."),
     "register": ("hexatherm.cli.register", "Balls file from a measurement of the platform datums."),
     "replay": ("hexatherm.cli.replay", "Re-process recorded sessions against their expected/."),
+    "simulate": ("hexatherm.cli.simulate", "Simulate a session (and its truth) from a scenario."),
 }
 
 

@@ -4,7 +4,9 @@ Frame O is the platform frame with the hexapod in its zero pose. Leg i runs from
 base joint ``b_i`` (in O) to platform joint ``p_i`` (in the platform frame); for
 a platform pose ``X`` relative to O with transform ``platform2origin = (R, t)``
 its length is ``q_i = |t + R p_i - b_i|`` (IGM). The FGM inverts this by
-Newton-Raphson with the analytic Jacobian ``dq/dX``.
+Newton-Raphson with the analytic Jacobian ``dq/dX``. IGM, Jacobian and FGM take
+an optional ``base_joints_mm`` override, one set (6, 3) or one per pose (N, 6,
+3), for a base whose joints move (the twin's base expansion).
 
 >>> import numpy as np
 >>> hexapod = Hexapod.symmetric(base_radius_mm=150, platform_radius_mm=100,
@@ -128,21 +130,59 @@ class Hexapod:
                    else np.asarray(stroke_mm, float), legs=legs)
 
     # ------------------------------------------------------------------ IGM
-    def leg_vectors(self, poses: npt.ArrayLike) -> FloatArray:
-        """Leg vectors ``t + R p_i - b_i`` in frame O, shape (N, 6, 3)."""
+    def base_joints_for(self, base_joints_mm: npt.ArrayLike | None, n_poses: int) -> FloatArray:
+        """Base joints to use for ``n_poses`` poses: nominal, one override, or one per pose.
+
+        Parameters
+        ----------
+        base_joints_mm : array_like, shape (6, 3) or (N, 6, 3), optional
+            ``None`` for the hexapod's nominal base joints; one set for every pose;
+            or one set per pose (a base that changes from pose to pose, e.g. with
+            its temperature).
+        n_poses : int
+
+        Returns
+        -------
+        ndarray, shape (6, 3) or (N, 6, 3)
+        """
+        if base_joints_mm is None:
+            return self.base_joints_mm
+        base = np.asarray(base_joints_mm, dtype=float)
+        if base.shape not in ((6, 3), (n_poses, 6, 3)):
+            raise ValueError(f"base joints must have shape (6, 3) or ({n_poses}, 6, 3), got "
+                             f"{base.shape}")
+        if not np.all(np.isfinite(base)):
+            raise ValueError("base joints have a non-finite value")
+        return base
+
+    def leg_vectors(self, poses: npt.ArrayLike,
+                    base_joints_mm: npt.ArrayLike | None = None) -> FloatArray:
+        """Leg vectors ``t + R p_i - b_i`` in frame O, shape (N, 6, 3).
+
+        ``base_joints_mm`` overrides the base joints (see :meth:`base_joints_for`).
+        """
         x = np.atleast_2d(check_poses(poses))
         rot = rotation_from_angles(x[:, 3:], self.convention)
         plat = np.einsum("nij,kj->nki", rot, self.platform_joints_mm)
-        return plat + x[:, None, :3] - self.base_joints_mm
+        return plat + x[:, None, :3] - self.base_joints_for(base_joints_mm, x.shape[0])
 
-    def igm(self, poses: npt.ArrayLike) -> FloatArray:
-        """Leg lengths (N, 6) of platform poses (N, 6) relative to frame O (mm, deg)."""
-        return np.linalg.norm(self.leg_vectors(poses), axis=-1)
+    def igm(self, poses: npt.ArrayLike, base_joints_mm: npt.ArrayLike | None = None
+            ) -> FloatArray:
+        """Leg lengths (N, 6) of platform poses (N, 6) relative to frame O (mm, deg).
 
-    def jacobian(self, poses: npt.ArrayLike) -> FloatArray:
-        """Analytic Jacobian ``dq/dX`` (N, 6, 6): mm per mm and mm per degree."""
+        ``base_joints_mm`` overrides the base joints, for all poses (6, 3) or per
+        pose (N, 6, 3).
+        """
+        return np.linalg.norm(self.leg_vectors(poses, base_joints_mm), axis=-1)
+
+    def jacobian(self, poses: npt.ArrayLike, base_joints_mm: npt.ArrayLike | None = None
+                 ) -> FloatArray:
+        """Analytic Jacobian ``dq/dX`` (N, 6, 6): mm per mm and mm per degree.
+
+        ``base_joints_mm`` overrides the base joints as in :meth:`igm`.
+        """
         x = np.atleast_2d(check_poses(poses))
-        legs = self.leg_vectors(x)
+        legs = self.leg_vectors(x, base_joints_mm)
         units = legs / np.linalg.norm(legs, axis=-1, keepdims=True)
         d_rot = rotation_derivatives(x[:, 3:], self.convention)  # (N, 3, 3, 3)
         d_plat = np.einsum("nkij,lj->nlki", d_rot, self.platform_joints_mm)  # (N, 6, 3, 3)
@@ -170,31 +210,37 @@ class Hexapod:
         *,
         tol_mm: float = FGM_TOLERANCE_MM,
         max_iter: int = 30,
+        base_joints_mm: npt.ArrayLike | None = None,
     ) -> FloatArray:
         """Platform poses (N, 6) from leg lengths (N, 6) by Newton-Raphson.
 
         Every pose is iterated until ``max|IGM(X) - q| <= tol_mm``. Raises
         :class:`SingularityError` when a Jacobian is singular (naming the pose)
         and :class:`ConvergenceError` when a pose does not converge (naming it
-        and how far off it is): never a silent wrong answer.
+        and how far off it is): never a silent wrong answer. ``base_joints_mm``
+        overrides the base joints, for all poses (6, 3) or per pose (N, 6, 3).
         """
         q = np.atleast_2d(np.asarray(q_mm, dtype=float))
         if q.ndim != 2 or q.shape[1] != 6:
             raise ValueError(f"leg lengths must have shape (N, 6), got {q.shape}")
         if not np.all(np.isfinite(q)):
             raise ValueError("leg lengths have a non-finite value")
+        base = None
+        if base_joints_mm is not None:
+            base = np.broadcast_to(self.base_joints_for(base_joints_mm, q.shape[0]),
+                                   (q.shape[0], 6, 3))
         if initial_poses is None:
             x = np.zeros((q.shape[0], 6))
         else:
             x = np.array(np.broadcast_to(check_poses(initial_poses), q.shape), dtype=float)
         active = np.arange(q.shape[0])
         for iteration in range(max_iter + 1):
-            err = self.igm(x[active]) - q[active]
+            err = self.igm(x[active], None if base is None else base[active]) - q[active]
             worst = np.abs(err).max(axis=1)
             done = worst <= tol_mm
             active, err, worst = active[~done], err[~done], worst[~done]
             if active.size == 0:
-                self._check_conditioning(x, np.arange(x.shape[0]))
+                self._check_conditioning(x, np.arange(x.shape[0]), base)
                 return x
             if iteration == max_iter:
                 raise ConvergenceError(
@@ -202,13 +248,14 @@ class Hexapod:
                     f"iterations; first: pose index {active[0]}, leg length residual "
                     f"{worst[0]:.3e} mm (tolerance {tol_mm:.0e} mm)"
                 )
-            jac = self._check_conditioning(x, active)
+            jac = self._check_conditioning(x, active, base)
             x[active] -= np.linalg.solve(jac, err[..., None])[..., 0]
         raise AssertionError("unreachable")  # pragma: no cover
 
-    def _check_conditioning(self, x: FloatArray, index: npt.NDArray[np.intp]) -> FloatArray:
+    def _check_conditioning(self, x: FloatArray, index: npt.NDArray[np.intp],
+                            base: FloatArray | None = None) -> FloatArray:
         """Jacobians at poses ``x[index]``; SingularityError when one is (nearly) singular."""
-        jac = self.jacobian(x[index])
+        jac = self.jacobian(x[index], None if base is None else base[index])
         singular_values = np.linalg.svd(jac, compute_uv=False)
         rcond = singular_values[:, -1] / singular_values[:, 0]
         singular = ~(rcond >= SINGULAR_RCOND)

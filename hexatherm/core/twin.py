@@ -1,18 +1,25 @@
-"""The hexapod twin: what the CMM sees at each step of a plan (no effects yet).
+"""The hexapod twin: what the CMM sees at each step of a plan.
 
 For step k measured at time ``t_k`` with commanded pose ``X_k`` (spec, "The
-hexapod twin"):
+hexapod twin and its effects"):
 
 1. ``q_cmd = IGM(X_k)`` with the nominal geometry.
 2. Leg temperatures ``T_i(t_k)``: thermocouple samples interpolated linearly in
-   time; each leg grows by ``dq_i = sum_s cte_s L_s (T_i - T_ref)`` with the
+   time; each leg grows by ``dq_i = sum_s cte_s L_s (T_s - T_ref)`` with the
    variable segment's length ``q_cmd_i - sum(fixed)``.
 3. ``q = q_cmd + dq``; the platform pose is ``FGM(q)``; the measured pose is that
    pose relative to the predicted pose of the origin step.
 
+Effects (:mod:`hexatherm.core.effects`) change this model stage by stage: the
+leg temperatures (lag), the segment temperatures (overheat), the growth (CTE
+error), the leg lengths (offsets), the base joints of each step (base expansion)
+and the coordinates the CMM reports (drift). A hexapod's positioning error
+(repeatability) may be added to the leg lengths of each step.
+
 The ball centres in the CMM frame follow from a placement ``origin2cmm`` of the
 nominal frame O on the CMM. The *true corrected* pose of a step is the pose it
-would have had with the legs at the temperatures of the first reference step.
+would have had in the thermal state of the first reference step (its segment
+temperatures and its base joints), relative to the measured origin step.
 
 >>> import numpy as np
 >>> leg_temperatures_at([0.0, 100.0], [[20.0] * 6, [30.0] * 6], [50.0])[0, 0]
@@ -21,11 +28,13 @@ np.float64(25.0)
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
+from hexatherm.core.effects import Effect, ThermocoupleLog, check_distinct
 from hexatherm.core.geometry import (
     apply_transform,
     invert_transform,
@@ -34,6 +43,7 @@ from hexatherm.core.geometry import (
 )
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
+from hexatherm.core.thermal import LegThermalModel
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -57,6 +67,24 @@ class TwinSteps:
         relative to the measured origin step (equals ``pose`` for that step).
     centres_cmm_mm : ndarray, shape (N, k, 3)
         True ball centres in the CMM frame.
+    q_mm : ndarray, shape (N, 6)
+        True leg lengths: commanded plus growth, offsets and positioning error.
+    leg_temperature_C : ndarray, shape (N, 6)
+        Effective temperature of each leg (after a lag).
+    segment_temperature_C : ndarray, shape (N, 6, S)
+        Temperature of every segment of every leg.
+    base_joints_mm : ndarray, shape (N, 6, 3)
+        Base joints of each step in the nominal frame O.
+    reference_growth_mm : ndarray, shape (N, 6)
+        Thermal growth of each leg of each step in the reference thermal state.
+    reference_q_mm : ndarray, shape (N, 6)
+        Leg lengths of each step in the reference thermal state.
+    reference_index : int
+        The step whose thermal state the corrected poses refer to (the first
+        reference step, or the origin when the plan has none).
+    measured_centres_cmm_mm : ndarray, shape (N, k, 3)
+        Ball centres as the CMM reports them (CMM effects applied at each ball's
+        time); equal to ``centres_cmm_mm`` without such effects.
     """
 
     q_cmd_mm: FloatArray
@@ -65,6 +93,14 @@ class TwinSteps:
     pose: FloatArray
     corrected_pose: FloatArray
     centres_cmm_mm: FloatArray
+    q_mm: FloatArray
+    leg_temperature_C: FloatArray
+    segment_temperature_C: FloatArray
+    base_joints_mm: FloatArray
+    reference_growth_mm: FloatArray
+    reference_q_mm: FloatArray
+    reference_index: int
+    measured_centres_cmm_mm: FloatArray
 
 
 def leg_temperatures_at(
@@ -87,27 +123,170 @@ def predict_steps(
     balls_mm: npt.ArrayLike,
     origin2cmm: npt.ArrayLike,
 ) -> TwinSteps:
-    """Predict every step of ``plan`` given each step's leg temperatures (N, 6)."""
+    """Predict every step of ``plan`` given each step's leg temperatures (N, 6), no effect."""
+    legs = _leg_model(hexapod)
+    temps = np.asarray(leg_temperature_C, dtype=float)
+    segments = np.broadcast_to(temps[..., None], temps.shape + (legs.variable.shape[1],))
+    return _solve(hexapod, plan, temps, segments, None, (), balls_mm, origin2cmm, None, None, None)
+
+
+def predict(
+    hexapod: Hexapod,
+    plan: Plan,
+    times_s: npt.ArrayLike,
+    log: ThermocoupleLog,
+    balls_mm: npt.ArrayLike,
+    origin2cmm: npt.ArrayLike,
+    effects: Sequence[Effect] = (),
+    *,
+    ball_times_s: npt.ArrayLike | None = None,
+    positioning_error_mm: npt.ArrayLike | None = None,
+) -> TwinSteps:
+    """Predict every step of ``plan`` from its times, a thermocouple log and effects.
+
+    Parameters
+    ----------
+    hexapod : Hexapod
+        Nominal geometry and leg model (``hexapod.legs`` is required).
+    plan : Plan
+    times_s : array_like, shape (N,)
+        Time of every step (seconds, the log's time base).
+    log : ThermocoupleLog
+        Thermocouple samples; its first sample is ``t_0``.
+    balls_mm : array_like, shape (k, 3)
+        Ball centres in the platform frame.
+    origin2cmm : array_like, shape (4, 4)
+        The nominal frame O in the CMM frame.
+    effects : sequence of Effect
+        Applied stage by stage (see :mod:`hexatherm.core.effects`); one of each name.
+    ball_times_s : array_like, shape (N, k), optional
+        When each ball was measured, for the CMM effects (default: the step's time).
+    positioning_error_mm : array_like, shape (N, 6), optional
+        The hexapod's positioning error of each step, added to its leg lengths
+        (the same in the reference thermal state: it is not thermal).
+
+    Returns
+    -------
+    TwinSteps
+    """
+    legs = _leg_model(hexapod)
+    effects = tuple(effects)
+    check_distinct(effects)
+    t = np.asarray(times_s, dtype=float).reshape(-1)
+    if t.shape != (len(plan.labels),):
+        raise ValueError(f"need one time per step ({len(plan.labels)}), got {t.shape}")
+    leg = effective_leg_temperatures(log, np.concatenate([[log.t0_s], t]), effects)
+    leg0, leg = leg[0], leg[1:]
+    segments = np.broadcast_to(leg[..., None], leg.shape + (legs.variable.shape[1],))
+    for effect in effects:
+        segments = effect.segment_temperature_C(segments, leg, leg0, legs.variable)
+    base = hexapod.base_joints_mm
+    for effect in effects:
+        base = effect.base_joints_mm(base, t, log)
+    step_base = None if base is hexapod.base_joints_mm else np.broadcast_to(base, (t.size, 6, 3))
+    if ball_times_s is None:
+        ball_t = np.broadcast_to(t[:, None], (t.size, np.asarray(balls_mm).shape[0]))
+    else:
+        ball_t = np.asarray(ball_times_s, dtype=float)
+    return _solve(
+        hexapod,
+        plan,
+        leg,
+        segments,
+        step_base,
+        effects,
+        balls_mm,
+        origin2cmm,
+        positioning_error_mm,
+        log,
+        ball_t,
+    )
+
+
+def effective_leg_temperatures(
+    log: ThermocoupleLog, times_s: npt.ArrayLike, effects: Sequence[Effect] = ()
+) -> FloatArray:
+    """Each leg's effective temperature (n, 6) at ``times_s``.
+
+    The thermocouple log joined by straight lines, then the leg temperature stage
+    of the effects (a lag).
+    """
+    t = np.asarray(times_s, dtype=float).reshape(-1)
+    leg = log.legs_at(t)
+    for effect in effects:
+        leg = effect.leg_temperature_C(leg, t, log)
+    return leg
+
+
+def cmm_readings(
+    xyz_mm: npt.ArrayLike,
+    times_s: npt.ArrayLike,
+    log: ThermocoupleLog,
+    effects: Sequence[Effect] = (),
+) -> FloatArray:
+    """What the CMM reports for true coordinates (..., 3) measured at ``times_s`` (...)."""
+    xyz = np.asarray(xyz_mm, dtype=float)
+    t = np.broadcast_to(np.asarray(times_s, dtype=float), xyz.shape[:-1])
+    for effect in effects:
+        xyz = effect.cmm_coordinates_mm(xyz, t, log)
+    return xyz
+
+
+def _leg_model(hexapod: Hexapod) -> LegThermalModel:
     if hexapod.legs is None:
         raise ValueError("the twin needs the hexapod's leg model (legs:)")
-    temps = np.asarray(leg_temperature_C, dtype=float)
+    return hexapod.legs
+
+
+def _solve(
+    hexapod: Hexapod,
+    plan: Plan,
+    leg_C: FloatArray,
+    segment_C: FloatArray,
+    base: FloatArray | None,
+    effects: tuple[Effect, ...],
+    balls_mm: npt.ArrayLike,
+    origin2cmm: npt.ArrayLike,
+    positioning_error_mm: npt.ArrayLike | None,
+    log: ThermocoupleLog | None,
+    ball_times_s: FloatArray | None,
+) -> TwinSteps:
+    """Leg lengths, poses and centres from the segment temperatures and base joints."""
+    legs = _leg_model(hexapod)
     q_cmd = hexapod.igm(plan.poses)
-    growth = hexapod.legs.growth_mm(q_cmd, temps)
-    absolute = hexapod.fgm(q_cmd + growth, initial_poses=plan.poses)
+    error = None if positioning_error_mm is None else np.asarray(positioning_error_mm, float)
+
+    def lengths(segments: FloatArray) -> tuple[FloatArray, FloatArray]:
+        growth = legs.growth_mm(q_cmd, segments, per_segment=True)
+        for effect in effects:
+            growth = effect.growth_mm(growth)
+        q = q_cmd + growth
+        for effect in effects:
+            q = effect.leg_length_mm(q)
+        if error is not None:
+            q = q + error
+        return growth, q
+
+    growth, q = lengths(segment_C)
+    absolute = hexapod.fgm(q, initial_poses=plan.poses, base_joints_mm=base)
     platform2origin = transform_from_pose(absolute, hexapod.convention)
     origin = plan.origin_index
-    measured = invert_transform(platform2origin[origin]) @ platform2origin
+    origin2measured = invert_transform(platform2origin[origin])
+    measured = origin2measured @ platform2origin
 
     refs = plan.reference_indices
-    state = temps[refs[0]] if refs.size else temps[origin]
-    growth0 = hexapod.legs.growth_mm(q_cmd, np.broadcast_to(state, temps.shape))
-    absolute0 = hexapod.fgm(q_cmd + growth0, initial_poses=plan.poses)
-    corrected = invert_transform(platform2origin[origin]) @ transform_from_pose(
-        absolute0, hexapod.convention
-    )
+    r = int(refs[0]) if refs.size else origin
+    growth0, q0 = lengths(np.broadcast_to(segment_C[r], segment_C.shape))
+    base0 = None if base is None else np.broadcast_to(base[r], base.shape)
+    absolute0 = hexapod.fgm(q0, initial_poses=plan.poses, base_joints_mm=base0)
+    corrected = origin2measured @ transform_from_pose(absolute0, hexapod.convention)
 
     frames = np.asarray(origin2cmm, dtype=float) @ platform2origin
     centres = apply_transform(frames, np.asarray(balls_mm, dtype=float))
+    measured_centres = centres
+    if log is not None and ball_times_s is not None:
+        measured_centres = cmm_readings(centres, ball_times_s, log, effects)
+    n = q_cmd.shape[0]
     return TwinSteps(
         q_cmd_mm=q_cmd,
         growth_mm=growth,
@@ -115,6 +294,16 @@ def predict_steps(
         pose=pose_from_transform(measured, hexapod.convention),
         corrected_pose=pose_from_transform(corrected, hexapod.convention),
         centres_cmm_mm=centres,
+        q_mm=q,
+        leg_temperature_C=np.array(leg_C, dtype=float),
+        segment_temperature_C=np.array(segment_C, dtype=float),
+        base_joints_mm=np.array(
+            np.broadcast_to(hexapod.base_joints_mm if base is None else base, (n, 6, 3))
+        ),
+        reference_growth_mm=growth0,
+        reference_q_mm=q0,
+        reference_index=r,
+        measured_centres_cmm_mm=measured_centres,
     )
 
 

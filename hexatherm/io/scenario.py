@@ -1,0 +1,458 @@
+"""Reader of simulation scenarios (``format: hexatherm-scenario/1``, an extension).
+
+A scenario says what ``hexatherm simulate`` should simulate: which hexapod,
+balls and plan, where frame O sits on the CMM, how long things take, how the
+legs are heated, how noisy the thermocouples, the CMM and the hexapod are, what
+the CMM writes, and which effects the truth has that the session's files do
+not tell. Paths are relative to the scenario file. Every field but ``format``,
+``hexapod``, ``balls`` and ``plan`` has a default (the value shown, or the
+one in parentheses)::
+
+    format: hexatherm-scenario/1
+    name: my-campaign                  # default: the file's name
+    hexapod: ../symetrie-like.yaml
+    balls: ../balls-3.yaml
+    plan: plan.yaml                    # a plan file, or inline:
+    # plan: {targets: [[Tx, Ty, Tz, Rx, Ry, Rz], ...], reference_pose: [0, 0, -40, 0, 0, 0],
+    #        cycles: 2, references: both, points_per_ball: 25}
+    origin_on_cmm: [450, 320, 210, 0, 0, 15]   # frame O on the CMM (hexapod's convention)
+    start: "2024-03-05T08:00:00"       # t_0, the first thermocouple sample (2024-01-01T08:00:00)
+    seed: 0                            # --seed overrides it
+    timing: {seconds_per_point: 2.4, seconds_per_move: 20}
+    heating:
+      air_C: 20.0                      # or a history [[t_s, degC], ...] (straight lines)
+      mats:                            # legs 1..6 (none: the legs follow the air)
+        - {gain_C: 3.0, tau_s: 2400, power: [[300, null]]}   # on/off times, s; null: stays on
+    thermocouples: {period_s: 30, noise_C: 0.02}   # noise default 0
+    cmm:
+      point_noise_um: 0.5              # sigma along the normal (0); or mpe_um (sigma = MPE/2)
+      points_per_ball: 25              # default: the plan's
+      cap_angle_deg: 70                # half-angle of the probed cap
+      probe: {compensated: true, tip_diameter: 2.0}   # default: the balls file's
+    hexapod_repeatability_um: 0.0      # sigma of each leg's positioning error, per step
+    output: centres                    # centres | points | dmis
+    hidden_effects:                    # applied to the truth only (none)
+      - {name: leg_thermal_lag, parameters: {tau_s: 1800}}
+    readme: |                          # written as README.md in the session folder
+      # my-campaign ...
+
+Inline plans are O, R0, then the targets (repeated ``cycles`` times) with a
+reference between every two targets (``references: both``: each target has a
+reference on both sides) or between every pair of targets (``one-side``: R0 S1
+S2 R1 S3 S4 R2 ..., each target has a reference on one side only).
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import os
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hexatherm.core.effects import EFFECTS, Effect, effects_from_dicts
+from hexatherm.core.heating import Mat, MatHeating
+from hexatherm.core.hexapod import Hexapod
+from hexatherm.core.plan import Plan, StepError
+from hexatherm.errors import InputError
+from hexatherm.io.config import Balls, read_balls, read_hexapod_text, read_plan
+from hexatherm.io.records import iso_to_seconds
+from hexatherm.io.yamlfile import YamlDoc
+
+SCENARIO_FORMAT = "hexatherm-scenario/1"
+#: what ``output:`` may say; ``serial`` (a capture for ``acquire --replay``) is not simulated yet
+OUTPUT_FORMATS = ("centres", "points", "dmis")
+REFERENCE_LAYOUTS = ("both", "one-side")
+DEFAULT_REFERENCE = (0.0, 0.0, -40.0, 0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A validated scenario.
+
+    Attributes
+    ----------
+    path : str
+    text : str
+        The scenario file's text (kept with the truth).
+    name : str
+    hexapod_text : str
+        The hexapod file, copied as is into the session.
+    hexapod : Hexapod
+    balls : Balls
+        With the scenario's probe settings.
+    plan : Plan
+        With the scenario's points per ball.
+    origin_on_cmm : tuple of 6 floats
+    start : str
+        ISO 8601 time of the session start.
+    seed : int
+    seconds_per_point, seconds_per_move : float
+    heating : MatHeating
+    sample_period_s, thermocouple_noise_C : float
+    point_noise_mm : float
+    cap_half_angle_deg : float
+    repeatability_mm : float
+    output : {"centres", "points", "dmis"}
+    model_effects : tuple of Effect
+        The hexapod file's ``thermal_model`` (part of the truth too).
+    hidden_effects : tuple of Effect
+        The scenario's hidden effects.
+    readme : str
+        Written as the session's ``README.md`` when not empty.
+    """
+
+    path: str
+    text: str
+    name: str
+    hexapod_text: str
+    hexapod: Hexapod
+    balls: Balls
+    plan: Plan
+    origin_on_cmm: tuple[float, ...]
+    start: str
+    seed: int
+    seconds_per_point: float
+    seconds_per_move: float
+    heating: MatHeating
+    sample_period_s: float
+    thermocouple_noise_C: float
+    point_noise_mm: float
+    cap_half_angle_deg: float
+    repeatability_mm: float
+    output: str
+    model_effects: tuple[Effect, ...]
+    hidden_effects: tuple[Effect, ...]
+    readme: str = ""
+
+    @property
+    def effects(self) -> tuple[Effect, ...]:
+        """Every effect of the truth: the hexapod file's, then the hidden ones."""
+        return self.model_effects + self.hidden_effects
+
+
+def read_scenario(path: str | os.PathLike[str]) -> Scenario:
+    """Read and validate a scenario file; InputError naming file, line and field."""
+    doc = YamlDoc.load(path)
+    doc.check_format(SCENARIO_FORMAT)
+    doc.check_keys(
+        [
+            "format",
+            "name",
+            "hexapod",
+            "balls",
+            "plan",
+            "origin_on_cmm",
+            "start",
+            "seed",
+            "timing",
+            "heating",
+            "thermocouples",
+            "cmm",
+            "hexapod_repeatability_um",
+            "output",
+            "hidden_effects",
+            "readme",
+        ]
+    )
+    text = Path(doc.path).read_bytes().decode("utf-8-sig")
+    name = doc.string("name", default=Path(doc.path).stem)
+
+    hexapod_path = _existing(doc, "hexapod")
+    hexapod_text = _read_text(hexapod_path)
+    hexapod = read_hexapod_text(hexapod_text, str(hexapod_path))
+    balls = read_balls(_existing(doc, "balls"))
+    plan = _plan(doc)
+    _check_stroke(doc, hexapod, plan)
+
+    origin = tuple(
+        doc.vector("origin_on_cmm", size=6, default=[450.0, 320.0, 210.0, 0.0, 0.0, 15.0])
+    )
+    start = _start(doc)
+    seed = _whole(doc, "seed", default=0, minimum=0)
+
+    _mapping(doc, "timing", ["seconds_per_point", "seconds_per_move"])
+    per_point = _non_negative(doc, "timing", "seconds_per_point", default=2.4)
+    per_move = _non_negative(doc, "timing", "seconds_per_move", default=20.0)
+
+    heating = _heating(doc)
+    _mapping(doc, "thermocouples", ["period_s", "noise_C"])
+    period = doc.number("thermocouples", "period_s", default=30.0, positive=True)
+    tc_noise = _non_negative(doc, "thermocouples", "noise_C", default=0.0)
+
+    _mapping(doc, "cmm", ["point_noise_um", "mpe_um", "points_per_ball", "cap_angle_deg", "probe"])
+    if (
+        doc.get("cmm", "point_noise_um", default=None) is not None
+        and doc.get("cmm", "mpe_um", default=None) is not None
+    ):
+        raise doc.error("give point_noise_um or mpe_um, not both", "cmm", "mpe_um")
+    if doc.get("cmm", "mpe_um", default=None) is not None:
+        point_noise_um = _non_negative(doc, "cmm", "mpe_um") / 2.0
+    else:
+        point_noise_um = _non_negative(doc, "cmm", "point_noise_um", default=0.0)
+    if doc.get("cmm", "points_per_ball", default=None) is not None:
+        plan = replace(plan, points_per_ball=_whole(doc, "cmm", "points_per_ball", minimum=4))
+    elif plan.points_per_ball < 4:
+        raise doc.error(
+            f"the plan's points_per_ball ({plan.points_per_ball}) is below 4: a "
+            "sphere needs at least 4 points",
+            "plan",
+        )
+    cap = doc.number("cmm", "cap_angle_deg", default=70.0, positive=True)
+    if cap > 90.0:
+        raise doc.error(
+            f"a vertical probe reaches at most the upper half: must be at most 90, got {cap:g}",
+            "cmm",
+            "cap_angle_deg",
+        )
+    balls = _probe(doc, balls)
+
+    repeatability_um = _non_negative(doc, "hexapod_repeatability_um", default=0.0)
+    output = doc.string("output", default="centres")
+    if output == "serial":
+        raise doc.error(
+            "the serial capture format is not simulated (yet): it comes with "
+            "'hexatherm acquire'; use centres, points or dmis",
+            "output",
+        )
+    if output not in OUTPUT_FORMATS:
+        raise doc.error(f"expected one of {', '.join(OUTPUT_FORMATS)}, got {output!r}", "output")
+
+    model_effects = effects_from_dicts(hexapod.effects)
+    hidden = _hidden_effects(doc, {e.name for e in model_effects})
+    return Scenario(
+        path=doc.path,
+        text=text,
+        name=name,
+        hexapod_text=hexapod_text,
+        hexapod=hexapod,
+        balls=balls,
+        plan=plan,
+        origin_on_cmm=origin,
+        start=start,
+        seed=seed,
+        seconds_per_point=per_point,
+        seconds_per_move=per_move,
+        heating=heating,
+        sample_period_s=period,
+        thermocouple_noise_C=tc_noise,
+        point_noise_mm=point_noise_um * 1e-3,
+        cap_half_angle_deg=cap,
+        repeatability_mm=repeatability_um * 1e-3,
+        output=output,
+        model_effects=model_effects,
+        hidden_effects=hidden,
+        readme=doc.string("readme", default=""),
+    )
+
+
+# ---------------------------------------------------------------------- pieces
+def _read_text(path: Path) -> str:
+    try:
+        return path.read_bytes().decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"not UTF-8 text ({exc.reason} at byte {exc.start})", path=path) from None
+
+
+def _existing(doc: YamlDoc, *keys: Any) -> Path:
+    target = doc.resolve(doc.string(*keys))
+    if not target.is_file():
+        raise doc.error(f"file not found: {target}", *keys)
+    return target
+
+
+def _mapping(doc: YamlDoc, key: str, allowed: list[str]) -> None:
+    if doc.get(key, default=None) is not None:
+        doc.check_keys(allowed, key)
+
+
+def _non_negative(doc: YamlDoc, *keys: Any, default: Any = ...) -> float:
+    value = doc.number(*keys, default=default)
+    if value < 0:
+        raise doc.error(f"must not be negative, got {value:g}", *keys)
+    return value
+
+
+def _whole(doc: YamlDoc, *keys: Any, default: Any = ..., minimum: int = 0) -> int:
+    value = doc.number(*keys, default=default)
+    if value != int(value) or value < minimum:
+        raise doc.error(f"expected a whole number of at least {minimum}, got {value:g}", *keys)
+    return int(value)
+
+
+def _start(doc: YamlDoc) -> str:
+    value = doc.get("start", default="2024-01-01T08:00:00")
+    if isinstance(value, dt.datetime):  # YAML reads an unquoted timestamp as one
+        value = value.isoformat()
+    if not isinstance(value, str):
+        raise doc.error(f"expected an ISO 8601 time, got {value!r}", "start")
+    try:
+        iso_to_seconds(value)
+    except ValueError:
+        raise doc.error(f"expected an ISO 8601 time, got {value!r}", "start") from None
+    return value
+
+
+def _plan(doc: YamlDoc) -> Plan:
+    value = doc.get("plan")
+    if isinstance(value, str):
+        return read_plan(_existing(doc, "plan"))
+    if not isinstance(value, dict):
+        raise doc.error(
+            "expected a plan file or a mapping {targets, reference_pose, cycles}", "plan"
+        )
+    doc.check_keys(["targets", "reference_pose", "cycles", "references", "points_per_ball"], "plan")
+    items = doc.get("plan", "targets")
+    if not isinstance(items, list) or not items:
+        raise doc.error(
+            "expected a list of target poses [Tx, Ty, Tz, Rx, Ry, Rz]", "plan", "targets"
+        )
+    targets = [doc.vector("plan", "targets", i, size=6) for i in range(len(items))]
+    reference = doc.vector("plan", "reference_pose", size=6, default=list(DEFAULT_REFERENCE))
+    cycles = _whole(doc, "plan", "cycles", default=1, minimum=1)
+    layout = doc.string("plan", "references", default="both", choices=REFERENCE_LAYOUTS)
+    ppb = _whole(doc, "plan", "points_per_ball", default=25, minimum=4)
+    try:
+        return Plan.from_steps(
+            sequence_steps(targets * cycles, reference, layout),
+            reference_pose=reference,
+            points_per_ball=ppb,
+        )
+    except StepError as exc:
+        raise doc.error(str(exc), "plan") from None
+
+
+def sequence_steps(
+    targets: list[list[float]], reference: list[float], layout: str = "both"
+) -> list[tuple[str, str, list[float]]]:
+    """O, R0, then the targets with references between them (see the module's text).
+
+    >>> [s[0] for s in sequence_steps([[0.0] * 6] * 3, [0, 0, -40, 0, 0, 0], "one-side")]
+    ['O', 'R0', 'S1', 'S2', 'R1', 'S3', 'R2']
+    """
+    steps: list[tuple[str, str, list[float]]] = [
+        ("O", "origin", [0.0] * 6),
+        ("R0", "reference", list(reference)),
+    ]
+    every = 1 if layout == "both" else 2
+    n_refs = 0
+    for i, pose in enumerate(targets, start=1):
+        steps.append((f"S{i}", "target", list(pose)))
+        if i % every == 0 or i == len(targets):
+            n_refs += 1
+            steps.append((f"R{n_refs}", "reference", list(reference)))
+    return steps
+
+
+def _check_stroke(doc: YamlDoc, hexapod: Hexapod, plan: Plan) -> None:
+    outside = hexapod.check_stroke(hexapod.igm(plan.poses)).any(axis=1)
+    if np.any(outside):
+        i = int(np.argmax(outside))
+        keys: tuple[Any, ...] = ("plan",)
+        inline = doc.get("plan", "targets", default=None)
+        if isinstance(inline, list) and plan.kinds[i] == "target":
+            keys = ("plan", "targets", (int(plan.labels[i][1:]) - 1) % len(inline))
+        raise doc.error(
+            f"step {plan.labels[i]}: pose {plan.poses[i].tolist()} is outside the "
+            f"hexapod's stroke {hexapod.stroke_mm.tolist()} mm",  # type: ignore[union-attr]
+            *keys,
+        )
+
+
+def _air(doc: YamlDoc) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    value = doc.get("heating", "air_C", default=20.0)
+    if not isinstance(value, list):
+        return (0.0,), (doc.number("heating", "air_C", default=20.0),)
+    if not value:
+        raise doc.error("expected a temperature or a list of [t_s, degC]", "heating", "air_C")
+    pairs = [doc.vector("heating", "air_C", i, size=2) for i in range(len(value))]
+    for i in range(1, len(pairs)):
+        if pairs[i][0] <= pairs[i - 1][0]:
+            raise doc.error("times must increase", "heating", "air_C", i)
+    return tuple(p[0] for p in pairs), tuple(p[1] for p in pairs)
+
+
+def _heating(doc: YamlDoc) -> MatHeating:
+    if doc.get("heating", default=None) is None:
+        return MatHeating(mats=(Mat(),) * 6)
+    doc.check_keys(["air_C", "mats"], "heating")
+    air_t, air_c = _air(doc)
+    items = doc.get("heating", "mats", default=None)
+    if items is None:
+        return MatHeating((Mat(),) * 6, air_t, air_c)
+    if not isinstance(items, list) or len(items) != 6:
+        raise doc.error("expected six mats (legs 1..6)", "heating", "mats")
+    mats = []
+    for leg in range(6):
+        keys = ("heating", "mats", leg)
+        doc.check_keys(["gain_C", "tau_s", "power"], *keys)
+        gain = doc.number(*keys, "gain_C", default=0.0)
+        tau = doc.number(*keys, "tau_s", default=2400.0, positive=True)
+        periods = doc.get(*keys, "power", default=[])
+        if not isinstance(periods, list):
+            raise doc.error(
+                "expected a list of [on_s, off_s] (off_s null: stays on)", *keys, "power"
+            )
+        parsed: list[tuple[float, float]] = []
+        for j, period in enumerate(periods):
+            if not isinstance(period, list) or len(period) != 2:
+                raise doc.error("expected [on_s, off_s] (off_s null: stays on)", *keys, "power", j)
+            on = doc.number(*keys, "power", j, 0)
+            off = np.inf if period[1] is None else doc.number(*keys, "power", j, 1)
+            if on < 0:
+                raise doc.error(
+                    "the mats start at t_0 or later: on_s must not be negative",
+                    *keys,
+                    "power",
+                    j,
+                    0,
+                )
+            if not off > on:
+                raise doc.error(
+                    f"off_s ({off:g}) must come after on_s ({on:g})", *keys, "power", j, 1
+                )
+            if parsed and on < parsed[-1][1]:
+                raise doc.error("power periods must not overlap", *keys, "power", j)
+            parsed.append((on, off))
+        mats.append(Mat(gain_C=gain, tau_s=tau, periods=tuple(parsed)))
+    return MatHeating(tuple(mats), air_t, air_c)
+
+
+def _probe(doc: YamlDoc, balls: Balls) -> Balls:
+    if doc.get("cmm", "probe", default=None) is None:
+        return balls
+    doc.check_keys(["compensated", "tip_diameter"], "cmm", "probe")
+    compensated = doc.get("cmm", "probe", "compensated", default=balls.probe_compensated)
+    if not isinstance(compensated, bool):
+        raise doc.error(
+            f"expected true or false, got {compensated!r}", "cmm", "probe", "compensated"
+        )
+    tip = _non_negative(doc, "cmm", "probe", "tip_diameter", default=balls.tip_diameter_mm)
+    return replace(balls, probe_compensated=compensated, tip_diameter_mm=tip)
+
+
+def _hidden_effects(doc: YamlDoc, model: set[str]) -> tuple[Effect, ...]:
+    items = doc.get("hidden_effects", default=[])
+    if items is None:
+        return ()
+    if not isinstance(items, list):
+        raise doc.error("expected a list of {name, parameters}", "hidden_effects")
+    effects: list[Effect] = []
+    for i in range(len(items)):
+        keys = ("hidden_effects", i)
+        doc.check_keys(["name", "parameters"], *keys)
+        name = doc.string(*keys, "name", choices=tuple(EFFECTS))
+        if name in model:
+            raise doc.error(f"the hexapod file's thermal model already has {name}", *keys, "name")
+        if any(e.name == name for e in effects):
+            raise doc.error(f"{name} is given twice", *keys, "name")
+        cls = EFFECTS[name]
+        doc.check_keys(cls.parameters, *keys, "parameters")
+        values = {p: doc.number(*keys, "parameters", p) for p in cls.parameters}
+        effect = cls(**values)
+        for p, problem in effect.out_of_range().items():
+            raise doc.error(problem, *keys, "parameters", p)
+        effects.append(effect)
+    return tuple(effects)

@@ -1,0 +1,80 @@
+"""``hexatherm simulate``: a scenario file -> a session folder and its truth.
+
+Glue between the scenario reader (:mod:`hexatherm.io.scenario`) and the twin
+session writer (:mod:`hexatherm.twinsession`): the scenario's timing, heating,
+noise and effects become a :class:`~hexatherm.twinsession.TwinSessionSpec`.
+
+Choices the scenario does not spell out:
+
+- The CMM probes ``points_per_ball`` points spread evenly over the upper cap of
+  each ball, one after the other, ``seconds_per_point`` apart; each point gets
+  normal noise of ``point_noise_um`` along the surface normal (with an ISO 10360
+  MPE instead, sigma = MPE / 2: the MPE as roughly a 2-sigma bound).
+- A centres file holds what the CMM reports: the sphere (free radius) fitted to
+  each ball's noisy points, at the mean time of the points.
+- The truth's effects are the hexapod file's thermal model followed by the
+  scenario's hidden effects; the session's hexapod file is the scenario's, as
+  is, so ``process`` knows only what the hexapod file says.
+- The hexapod's repeatability is a normal error of each leg's length at each
+  step (the same error in the reference thermal state: it is not thermal).
+- ``truth/scenario.yaml`` is the scenario file as it was read; its ``readme``
+  becomes the session's ``README.md``.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from hexatherm.io.scenario import Scenario, read_scenario
+from hexatherm.twinsession import SimulatedSession, TwinSessionSpec, simulate_session, write_files
+
+
+def scenario_spec(scenario: Scenario, seed: int | None = None) -> TwinSessionSpec:
+    """The twin session of ``scenario`` (``seed`` overrides the scenario's)."""
+    ppb = scenario.plan.points_per_ball
+    return TwinSessionSpec(
+        name=scenario.name,
+        hexapod_text=scenario.hexapod_text,
+        balls=scenario.balls,
+        plan=scenario.plan,
+        heating=scenario.heating,
+        origin_on_cmm=scenario.origin_on_cmm,
+        start=scenario.start,
+        seconds_per_ball=ppb * scenario.seconds_per_point,
+        seconds_per_move=scenario.seconds_per_move,
+        sample_period_s=scenario.sample_period_s,
+        thermocouple_noise_C=scenario.thermocouple_noise_C,
+        seed=scenario.seed if seed is None else seed,
+        extra={"truth/scenario.yaml": scenario.text},
+        readme=scenario.readme,
+        output=scenario.output,
+        points_per_ball=ppb,
+        cap_half_angle_deg=scenario.cap_half_angle_deg,
+        point_noise_mm=scenario.point_noise_mm,
+        effects=scenario.effects,
+        repeatability_mm=scenario.repeatability_mm,
+        fit_centres=True,
+    )
+
+
+def simulate(scenario: Scenario, seed: int | None = None) -> SimulatedSession:
+    """Simulate ``scenario``: the session's files and the truth, nothing written."""
+    return simulate_session(scenario_spec(scenario, seed))
+
+
+def simulate_file(
+    path: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    seed: int | None = None,
+    overwrite: bool = False,
+) -> tuple[Scenario, SimulatedSession, list[Path]]:
+    """Read the scenario ``path``, simulate it and write the session folder ``out``.
+
+    Nothing is written when the scenario is invalid or the simulation fails;
+    ``out`` is replaced only with ``overwrite``.
+    """
+    scenario = read_scenario(path)
+    simulated = simulate(scenario, seed)
+    written = write_files(simulated.files, out, overwrite)
+    return scenario, simulated, written
