@@ -16,6 +16,8 @@ from hexatherm import __version__
 #: command name -> (module, one-line help shown by ``hexatherm --help``)
 COMMANDS: dict[str, tuple[str, str]] = {
     "process": ("hexatherm.cli.process", "Process a session: conventional and corrected poses."),
+    "plan": ("hexatherm.cli.plan", "Write a measuring plan (and its DMIS program, checklist)."),
+    "acquire": ("hexatherm.cli.acquire", "Record a session from a serial probe stream."),
     "fit-spheres": ("hexatherm.cli.fit_spheres", "Fit ball centres to probed points (CSV, DMIS)."),
     "inspect": ("hexatherm.cli.inspect", "List the features of a measurement file."),
     "register": ("hexatherm.cli.register", "Balls file from a measurement of the platform datums."),

@@ -1,0 +1,276 @@
+"""``hexatherm acquire``: record a session from a serial probe stream, resume it, replay it."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import click
+
+from hexatherm.cli.options import clean_errors, echo_err
+
+if TYPE_CHECKING:
+    from hexatherm.acquisition import BallFit
+
+
+def _fits_table(fits: Sequence[BallFit]) -> str:
+    """CSV table of the live ball fits (standard output)."""
+    lines = ["label,ball,n,x,y,z,radius_mm,form_um,warnings"]
+    for fit in fits:
+        centre = fit.centre_mm or (float("nan"),) * 3
+        lines.append(
+            ",".join(
+                [fit.label, fit.ball, str(fit.n)]
+                + [f"{v:.6f}" for v in centre]
+                + [f"{fit.radius_mm:.6f}", f"{fit.form_um:.2f}", str(len(fit.warnings))]
+            )
+        )
+    return "\n".join(lines)
+
+
+@click.command("acquire")
+@click.argument("plan", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "--hexapod",
+    "hexapod_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Hexapod file [with --resume or --replay: the session's copy].",
+)
+@click.option(
+    "--balls",
+    "balls_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Balls file [with --resume or --replay: the session's copy].",
+)
+@click.option(
+    "--port",
+    help="Probe port: a device (/dev/ttyUSB0, COM3) or a pyserial URL "
+    "(socket://host:port, rfc2217://host:port, loop://).",
+)
+@click.option(
+    "--session",
+    "session",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Session folder to record into (or, with --replay, to create).",
+)
+@click.option("--baud", type=click.IntRange(min=1), default=9600, show_default=True)
+@click.option("--bytesize", type=click.Choice(["5", "6", "7", "8"]), default="8", show_default=True)
+@click.option(
+    "--parity",
+    type=click.Choice(["N", "E", "O", "M", "S"], case_sensitive=False),
+    default="N",
+    show_default=True,
+)
+@click.option("--stopbits", type=click.Choice(["1", "1.5", "2"]), default="1", show_default=True)
+@click.option("--xonxoff", is_flag=True, help="Software flow control.")
+@click.option("--rtscts", is_flag=True, help="Hardware (RTS/CTS) flow control.")
+@click.option("--dsrdtr", is_flag=True, help="Hardware (DSR/DTR) flow control.")
+@click.option(
+    "--read-timeout",
+    type=click.FloatRange(min=0.001),
+    default=0.1,
+    show_default=True,
+    help="Serial read timeout (s); partial lines are kept.",
+)
+@click.option(
+    "--reopen-interval",
+    type=click.FloatRange(min=0.001),
+    default=1.0,
+    show_default=True,
+    help="Seconds between attempts to reopen a lost port.",
+)
+@click.option(
+    "--units",
+    "unit",
+    type=click.Choice(["mm", "inch", "um"]),
+    default="mm",
+    show_default=True,
+    help="Unit of numbers the probe sends without a unit.",
+)
+@click.option(
+    "--auto",
+    is_flag=True,
+    help="Non-interactive: move to the next ball as soon as it has its points.",
+)
+@click.option(
+    "--resume", is_flag=True, help="Continue an interrupted session at its first incomplete ball."
+)
+@click.option(
+    "--replay",
+    "replay_log",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Re-run a recorded serial.log instead of reading a port.",
+)
+@click.option(
+    "--idle-timeout",
+    type=click.FloatRange(min=0),
+    default=None,
+    help="Stop (resumable) when the probe sends nothing for this long (s).",
+)
+@click.option(
+    "--max-gap",
+    type=click.FloatRange(min=0),
+    default=600.0,
+    show_default=True,
+    help="Warn when a target and its reference are further apart (s).",
+)
+@click.option(
+    "--radius-tol-um",
+    type=click.FloatRange(min=0),
+    default=20.0,
+    show_default=True,
+    help="Warn when a ball's fitted radius is further off.",
+)
+@click.option(
+    "--form-tol-um",
+    type=click.FloatRange(min=0),
+    default=15.0,
+    show_default=True,
+    help="Warn when a ball's form error is larger.",
+)
+@click.option(
+    "--min-points",
+    type=click.IntRange(min=1),
+    default=5,
+    show_default=True,
+    help="Warn when a ball has fewer points.",
+)
+@click.option(
+    "--temperatures",
+    "temperatures_file",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Thermocouple log to attach to the session (copied at the end).",
+)
+@click.option(
+    "--temperature-port",
+    help="Second port with a thermocouple logger (lines of "
+    "six or more numbers: leg1..leg6, then others).",
+)
+@click.option("--temperature-baud", type=click.IntRange(min=1), default=9600, show_default=True)
+@clean_errors
+def command(
+    plan: Path,
+    hexapod_path: Path | None,
+    balls_path: Path | None,
+    port: str | None,
+    session: Path,
+    baud: int,
+    bytesize: str,
+    parity: str,
+    stopbits: str,
+    xonxoff: bool,
+    rtscts: bool,
+    dsrdtr: bool,
+    read_timeout: float,
+    reopen_interval: float,
+    unit: str,
+    auto: bool,
+    resume: bool,
+    replay_log: Path | None,
+    idle_timeout: float | None,
+    max_gap: float,
+    radius_tol_um: float,
+    form_tol_um: float,
+    min_points: int,
+    temperatures_file: Path | None,
+    temperature_port: str | None,
+    temperature_baud: int,
+) -> None:
+    """Record a session following PLAN from a probe on a serial port.
+
+    Walks the operator through the plan (pose to command, ball to probe, points
+    to go), assigns each point the probe sends to its step and ball, and writes
+    SESSION/serial.log (every byte, time-stamped) and SESSION/points.csv as the
+    data arrives. A sphere is fitted to each ball when it has its points. At
+    the end SESSION/session.yaml makes the folder a session for
+    ``hexatherm process``. Interactive commands (standard input): Enter or
+    'next', 'redo', 'quit'. The fits go to standard output as CSV.
+    """
+    from hexatherm.acquisition import (
+        AcquireOptions,
+        FitChecks,
+        PortSettings,
+        load_files,
+        replay,
+    )
+    from hexatherm.acquisition import (
+        acquire as run_acquisition,
+    )
+
+    if replay_log is not None:
+        if port is not None or resume or temperature_port is not None:
+            raise click.UsageError(
+                "--replay reads a recording: no --port, --resume or --temperature-port"
+            )
+        config_dir = replay_log.parent
+    else:
+        if port is None:
+            raise click.UsageError("give the probe's --port (or --replay a recording)")
+        if temperatures_file is not None and temperature_port is not None:
+            raise click.UsageError("give --temperatures or --temperature-port, not both")
+        config_dir = session
+    if (hexapod_path is None or balls_path is None) and replay_log is None and not resume:
+        raise click.UsageError(
+            "--hexapod and --balls are needed (except with --resume or "
+            "--replay, which use the session's copies)"
+        )
+    hexapod_path = hexapod_path or config_dir / "hexapod.yaml"
+    balls_path = balls_path or config_dir / "balls.yaml"
+    files = load_files(plan, hexapod_path, balls_path)
+
+    def notify(level: str, message: str) -> None:
+        if level == "progress" and auto:
+            return
+        echo_err(("warning: " if level == "warn" else "") + message)
+
+    if replay_log is not None:
+        result = replay(files, replay_log, session, notify, temperatures_file)
+    else:
+        assert port is not None
+        probe = PortSettings(
+            port,
+            baudrate=baud,
+            bytesize=int(bytesize),
+            parity=parity.upper(),
+            stopbits=float(stopbits),
+            xonxoff=xonxoff,
+            rtscts=rtscts,
+            dsrdtr=dsrdtr,
+            timeout_s=read_timeout,
+        )
+        options = AcquireOptions(
+            session=session,
+            probe=probe,
+            temperature_port=None
+            if temperature_port is None
+            else PortSettings(temperature_port, baudrate=temperature_baud, timeout_s=read_timeout),
+            temperatures_file=temperatures_file,
+            auto=auto,
+            resume=resume,
+            unit=unit,
+            idle_timeout_s=idle_timeout,
+            reopen_interval_s=reopen_interval,
+            checks=FitChecks(
+                radius_tol_mm=radius_tol_um / 1e3, form_tol_um=form_tol_um, min_points=min_points
+            ),
+            max_gap_s=max_gap,
+        )
+        operator_lines: Iterable[str] | None = None
+        if not auto:
+            operator_lines = sys.stdin
+        try:
+            result = run_acquisition(files, options, notify, operator_lines)
+        except KeyboardInterrupt:
+            echo_err(f"interrupted: everything received is in {session}; continue with --resume")
+            sys.exit(130)
+    click.echo(_fits_table(result.fits))
+    n_warn = sum(bool(f.warnings) for f in result.fits)
+    echo_err(
+        f"{result.n_points} points in {result.session / 'points.csv'}"
+        + (f"; {n_warn} ball(s) with warnings" if n_warn else "")
+    )
+    if result.session_file is not None:
+        echo_err(f"wrote {result.session_file}")

@@ -1,0 +1,377 @@
+"""``hexatherm plan``: a measuring plan, its DMIS program and the operator's checklist."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import click
+
+from hexatherm.cli.options import clean_errors, echo_err, overwrite_option
+
+AXES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
+
+
+def parse_pose(text: str, what: str) -> list[float]:
+    """A pose ``Tx,Ty,Tz,Rx,Ry,Rz`` from an option value (click.BadParameter when bad)."""
+    cells = [c.strip() for c in text.replace(";", ",").split(",")]
+    try:
+        values = [float(c) for c in cells]
+    except ValueError:
+        raise click.BadParameter(
+            f"{text!r}: expected six numbers Tx,Ty,Tz,Rx,Ry,Rz", param_hint=what
+        ) from None
+    if len(values) != 6 or not all(abs(v) < float("inf") for v in values):
+        raise click.BadParameter(
+            f"{text!r}: expected six finite numbers Tx,Ty,Tz,Rx,Ry,Rz", param_hint=what
+        )
+    return values
+
+
+def parse_box(specs: Sequence[str]) -> tuple[list[float], list[float]]:
+    """The workspace box from ``AXIS=MIN:MAX`` items; axes not given are fixed at 0."""
+    lower, upper = [0.0] * 6, [0.0] * 6
+    seen: set[str] = set()
+    for spec in specs:
+        name, _, bounds = spec.partition("=")
+        axis = next((a for a in AXES if a.lower() == name.strip().lower()), None)
+        lo_text, sep, hi_text = bounds.partition(":")
+        try:
+            lo, hi = float(lo_text), float(hi_text)
+        except ValueError:
+            lo = hi = float("nan")
+        if axis is None or not sep or not lo <= hi:
+            raise click.BadParameter(
+                f"{spec!r}: expected AXIS=MIN:MAX with AXIS one of "
+                f"{', '.join(AXES)} and MIN <= MAX",
+                param_hint="--box",
+            )
+        if axis in seen:
+            raise click.BadParameter(f"{axis} given twice", param_hint="--box")
+        seen.add(axis)
+        lower[AXES.index(axis)], upper[AXES.index(axis)] = lo, hi
+    return lower, upper
+
+
+def parse_levels(text: str) -> list[int]:
+    """Grid levels: one count for every axis, or six counts."""
+    try:
+        counts = [int(c) for c in text.split(",")]
+    except ValueError:
+        counts = []
+    if len(counts) not in (1, 6) or min(counts, default=0) < 1:
+        raise click.BadParameter(
+            f"{text!r}: expected a count >= 1, or six counts Tx,Ty,Tz,Rx,Ry,Rz", param_hint="--grid"
+        )
+    return counts * 6 if len(counts) == 1 else counts
+
+
+@click.command("plan")
+@click.option(
+    "--hexapod",
+    "hexapod_path",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Hexapod file.",
+)
+@click.option(
+    "--balls",
+    "balls_path",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Balls file.",
+)
+@click.option(
+    "--targets",
+    "targets_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="CSV of target poses Tx,Ty,Tz,Rx,Ry,Rz (mm, deg), one per line.",
+)
+@click.option(
+    "--grid",
+    "grid",
+    metavar="N|N1,..,N6",
+    help="Targets on a grid over the --box: N values per axis (or one count per axis).",
+)
+@click.option(
+    "--random",
+    "n_random",
+    type=click.IntRange(min=1),
+    metavar="N",
+    help="N targets drawn uniformly in the --box (poses out of reach are drawn again).",
+)
+@click.option("--seed", type=int, default=None, help="Seed of --random.")
+@click.option(
+    "--box",
+    "box",
+    multiple=True,
+    metavar="AXIS=MIN:MAX",
+    help="Workspace box of --grid/--random, one axis per option (e.g. "
+    "--box Tx=-10:10 --box Rz=-2:2); axes not given stay at 0.",
+)
+@click.option(
+    "--reference",
+    default="0,0,-40,0,0,0",
+    show_default=True,
+    metavar="Tx,Ty,Tz,Rx,Ry,Rz",
+    help="The reference pose R.",
+)
+@click.option(
+    "--cycles",
+    type=click.IntRange(min=1),
+    default=1,
+    show_default=True,
+    help="Measure the targets this many times.",
+)
+@click.option(
+    "--reference-every",
+    type=click.Choice(["both", "before", "after"]),
+    default="both",
+    show_default=True,
+    help="both/after: one R between consecutive targets and one after the last, so "
+    "each target has R on both sides; before: no R after the last target.",
+)
+@click.option("--points-per-ball", type=click.IntRange(min=1), default=25, show_default=True)
+@click.option(
+    "--seconds-per-point",
+    type=click.FloatRange(min=0),
+    default=2.0,
+    show_default=True,
+    help="Estimated probing time per point.",
+)
+@click.option(
+    "--seconds-per-move",
+    type=click.FloatRange(min=0),
+    default=30.0,
+    show_default=True,
+    help="Estimated time to command a pose and settle.",
+)
+@click.option(
+    "--max-gap",
+    type=click.FloatRange(min=0),
+    default=600.0,
+    show_default=True,
+    help="Warn when a target and its reference are further apart (s).",
+)
+@click.option(
+    "--min-rcond",
+    type=click.FloatRange(min=0),
+    default=None,
+    help="Refuse poses whose Jacobian's reciprocal condition number is below this [default: 1e-2].",
+)
+@click.option(
+    "--dmis",
+    "dmis_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Also write a DMIS measurement program for the CMM.",
+)
+@click.option(
+    "--origin-on-cmm",
+    metavar="Tx,Ty,Tz,Rx,Ry,Rz",
+    help="Nominal placement of frame O on the CMM (needed by --dmis).",
+)
+@click.option(
+    "--cap-angle",
+    type=click.FloatRange(min=1, max=180),
+    default=75.0,
+    show_default=True,
+    help="Half-angle of the ball cap the touch points cover (deg).",
+)
+@click.option(
+    "--clearance",
+    type=click.FloatRange(min=0),
+    default=30.0,
+    show_default=True,
+    help="Probe clearance above the balls between balls (mm).",
+)
+@click.option(
+    "--checklist",
+    "checklist_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Also write the operator's checklist (Markdown).",
+)
+@click.option(
+    "-o",
+    "--out",
+    "out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Plan file to write [default: standard output].",
+)
+@overwrite_option
+@clean_errors
+def command(
+    hexapod_path: Path,
+    balls_path: Path,
+    targets_path: Path | None,
+    grid: str | None,
+    n_random: int | None,
+    seed: int | None,
+    box: tuple[str, ...],
+    reference: str,
+    cycles: int,
+    reference_every: str,
+    points_per_ball: int,
+    seconds_per_point: float,
+    seconds_per_move: float,
+    max_gap: float,
+    min_rcond: float | None,
+    dmis_path: Path | None,
+    origin_on_cmm: str | None,
+    cap_angle: float,
+    clearance: float,
+    checklist_path: Path | None,
+    out: Path | None,
+    overwrite: bool,
+) -> None:
+    """Write a measuring plan in the paper's order: O, R0, then S_i with R around them.
+
+    Targets come from --targets (a CSV file), --grid or --random over a --box.
+    Every commanded pose is checked against the legs' stroke and for a
+    near-singular Jacobian; nothing is written when one fails. The plan goes to
+    OUT (or standard output); --dmis and --checklist add the CMM program and the
+    operator's sheet.
+    """
+    import numpy as np
+    import numpy.typing as npt
+
+    from hexatherm.core.planning import (
+        DEFAULT_MIN_RCOND,
+        build_plan,
+        check_plan_poses,
+        estimate_timing,
+        grid_targets,
+        parse_targets,
+        pose_problems,
+        random_targets,
+        reference_gaps,
+        touch_points,
+    )
+    from hexatherm.io.atomic import atomic_write_text
+    from hexatherm.io.checklist import checklist_markdown
+    from hexatherm.io.config import plan_to_yaml, read_balls, read_hexapod
+    from hexatherm.io.csvfile import read_text
+    from hexatherm.io.dmisprog import dmis_program
+
+    sources_given = sum(x is not None for x in (targets_path, grid, n_random))
+    if sources_given != 1:
+        raise click.UsageError("give exactly one of --targets, --grid and --random")
+    if box and targets_path is not None:
+        raise click.UsageError("--box goes with --grid or --random, not with --targets")
+    if (grid is not None or n_random is not None) and not box:
+        raise click.UsageError("--grid and --random need the workspace: --box AXIS=MIN:MAX")
+    if seed is not None and n_random is None:
+        raise click.UsageError("--seed goes with --random")
+    if dmis_path is not None and origin_on_cmm is None:
+        raise click.UsageError(
+            "--dmis needs --origin-on-cmm: where frame O nominally is on "
+            "the CMM (the probe would otherwise go to made-up positions)"
+        )
+    reference_pose = parse_pose(reference, "--reference")
+    origin_pose = None if origin_on_cmm is None else parse_pose(origin_on_cmm, "--origin-on-cmm")
+    outputs = [p for p in (out, dmis_path, checklist_path) if p is not None]
+    if len({os.path.realpath(p) for p in outputs}) != len(outputs):
+        raise click.UsageError("-o, --dmis and --checklist must be different files")
+    for path in outputs:
+        if path.exists() and not overwrite:
+            raise click.ClickException(f"{path} exists; use --overwrite to replace it")
+    rcond = DEFAULT_MIN_RCOND if min_rcond is None else min_rcond
+
+    hexapod = read_hexapod(hexapod_path)
+    balls = read_balls(balls_path)
+    if targets_path is not None:
+        targets, lines = parse_targets(read_text(targets_path), os.fspath(targets_path))
+        target_sources = [f"{targets_path}:{line}" for line in lines]
+    elif grid is not None:
+        lower, upper = parse_box(box)
+        targets = grid_targets(lower, upper, parse_levels(grid))
+        target_sources = [f"grid point {k + 1} of {len(targets)}" for k in range(len(targets))]
+    else:
+        assert n_random is not None
+        lower, upper = parse_box(box)
+
+        def feasible(poses: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
+            return np.array([p is None for p in pose_problems(hexapod, poses, rcond)])
+
+        targets, rejected = random_targets(lower, upper, n_random, seed, feasible)
+        if rejected:
+            echo_err(f"drew {rejected} random pose(s) again: out of the stroke or near-singular")
+        target_sources = [f"random pose {k + 1}" for k in range(len(targets))]
+
+    plan = build_plan(
+        targets,
+        reference_pose,
+        cycles=cycles,
+        reference_every=reference_every,  # type: ignore[arg-type]
+        points_per_ball=points_per_ball,
+    )
+    sources: list[str | None] = []
+    n_targets = 0
+    for kind in plan.kinds:
+        if kind == "target":
+            sources.append(target_sources[n_targets % len(target_sources)])
+            n_targets += 1
+        else:
+            sources.append("origin" if kind == "origin" else "--reference")
+    check_plan_poses(hexapod, plan, rcond, sources)
+
+    timing = estimate_timing(plan, len(balls.names), seconds_per_point, seconds_per_move)
+    gaps = [g for g in reference_gaps(plan, timing.time_s) if g.gap_s > max_gap]
+    for gap in gaps:
+        echo_err(
+            f"warning: {gap.target} and its reference {gap.reference} are expected "
+            f"{gap.gap_s / 60:.1f} min apart (--max-gap {max_gap / 60:.1f} min): fewer "
+            "points per ball or a faster CMM program keep the thermal state comparable"
+        )
+
+    texts: list[tuple[Path | None, str]] = [(out, plan_to_yaml(plan))]
+    if dmis_path is not None:
+        assert origin_pose is not None
+        touch = touch_points(
+            plan,
+            balls.centres_mm,
+            balls.diameters_mm,
+            origin_pose,
+            hexapod.convention,
+            cap_half_angle_deg=cap_angle,
+        )
+        texts.append(
+            (
+                dmis_path,
+                dmis_program(
+                    plan,
+                    balls,
+                    touch,
+                    origin_on_cmm=origin_pose,
+                    name=Path(dmis_path).stem,
+                    clearance_mm=clearance,
+                    timing=timing,
+                ),
+            )
+        )
+    if checklist_path is not None:
+        texts.append(
+            (
+                checklist_path,
+                checklist_markdown(
+                    plan,
+                    balls.names,
+                    timing,
+                    gaps=gaps,
+                    max_gap_s=max_gap,
+                    hexapod_name=hexapod.name,
+                ),
+            )
+        )
+
+    for target, text in texts:
+        if target is None:
+            click.echo(text, nl=False)
+        else:
+            atomic_write_text(target, text)
+            echo_err(f"wrote {target}")
+    echo_err(
+        f"plan: {len(plan.labels)} steps ({len(plan.target_indices)} targets x "
+        f"{len(balls.names)} balls x {points_per_ball} points), estimated "
+        f"{timing.total_s / 3600:.2f} h"
+    )
