@@ -63,3 +63,12 @@ def test_update_rewrites_expected_and_says_what_changed(tmp_path):
 def test_no_sessions_is_an_error(tmp_path):
     result = run("replay", tmp_path)
     assert result.exit_code == 1 and "no session with an expected/ folder" in result.output
+
+
+def test_serial_capture_replays_to_the_same_points_byte_for_byte(tmp_path):
+    folder = ROOT / "sessions" / "serial-capture"
+    result = run("acquire", folder / "plan.yaml", "--replay", folder / "serial.log",
+                 "--session", tmp_path / "again")
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "again" / "points.csv").read_bytes() == \
+        (folder / "points.csv").read_bytes()
