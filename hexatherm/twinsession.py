@@ -65,7 +65,7 @@ from hexatherm.io.records import iso_to_seconds, seconds_to_iso
 from hexatherm.io.results import pose_columns, to_csv_text
 
 FloatArray = npt.NDArray[np.float64]
-OUTPUTS = ("centres", "points", "dmis")
+OUTPUTS = ("centres", "points", "dmis", "serial")
 
 __all__ = [
     "Heating",
@@ -255,6 +255,8 @@ def simulate_session(spec: TwinSessionSpec) -> SimulatedSession:
         ),
         **spec.extra,
     }
+    if spec.output == "serial":
+        del files["session.yaml"]  # a capture, not a session yet: acquire --replay makes it one
     if spec.readme:
         files["README.md"] = spec.readme
     return SimulatedSession(files, truth, step_t)
@@ -407,6 +409,8 @@ def _measurements(
     point_labels = np.repeat(labels, m)
     point_balls = np.repeat(names, m)
     abs_times = ((ball_t + t0)[..., None] + offsets).ravel()
+    if spec.output == "serial":
+        return "serial.log", _serial_capture(xyz, abs_times)
     if spec.output == "points":
         frame = pd.DataFrame(
             {
@@ -427,3 +431,21 @@ def _measurements(
         np.char.add(np.char.add(np.char.add(point_labels, "_"), point_balls), "_"), numbers
     )
     return "points.dmo", dmis_output(feature, xyz, abs_times, "POINT", ijk=ijk, name=spec.name)
+
+
+def _serial_capture(xyz: FloatArray, times_s: FloatArray) -> str:
+    """A ``serial.log`` as ``hexatherm acquire --auto`` records a probe sending the points.
+
+    One ``rx`` entry per point, at the point's time, as the line
+    ``X+427.451688 Y+408.847293 Z+252.532346`` (1 nm resolution) with CRLF.
+    """
+    from hexatherm.acquisition import LOG_MAGIC, entry
+
+    start = seconds_to_iso(float(times_s[0]) - 1.0)
+    lines = [f"{LOG_MAGIC}\n", entry("config", "-", "units=mm", start).format(),
+             entry("mode", "-", "auto", start).format(),
+             entry("open", "probe", "twin", start).format()]
+    for (x, y, z), t in zip(xyz, times_s, strict=True):
+        lines.append(entry("rx", "probe", f"X{x:+.6f} Y{y:+.6f} Z{z:+.6f}\r\n",
+                           seconds_to_iso(float(t))).format())
+    return "".join(lines)
