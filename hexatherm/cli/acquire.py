@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from hexatherm.cli.options import clean_errors, echo_err
+from hexatherm.cli.options import clean_errors, echo_err, max_gap_option
 
 if TYPE_CHECKING:
     from hexatherm.acquisition import BallFit
@@ -110,13 +110,7 @@ def _fits_table(fits: Sequence[BallFit]) -> str:
     default=None,
     help="Stop (resumable) when the probe sends nothing for this long (s).",
 )
-@click.option(
-    "--max-gap",
-    type=click.FloatRange(min=0),
-    default=600.0,
-    show_default=True,
-    help="Warn when a target and its reference are further apart (s).",
-)
+@max_gap_option
 @click.option(
     "--radius-tol-um",
     type=click.FloatRange(min=0),

@@ -26,6 +26,13 @@ interpolation_option = click.option(
     help="With references on both sides of a target: interpolate their growth linearly in "
     "time, or use one neighbour as in the paper.",
 )
+max_gap_option = click.option(
+    "--max-gap",
+    type=click.FloatRange(min=0),
+    default=600.0,
+    show_default=True,
+    help="Warn when a target and its reference are further apart (s).",
+)
 
 
 def clean_errors(func: F) -> F:

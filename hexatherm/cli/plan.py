@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from hexatherm.cli.options import clean_errors, echo_err, overwrite_option
+from hexatherm.cli.options import clean_errors, echo_err, max_gap_option, overwrite_option
 
 AXES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
 
@@ -147,13 +147,7 @@ def parse_levels(text: str) -> list[int]:
     show_default=True,
     help="Estimated time to command a pose and settle.",
 )
-@click.option(
-    "--max-gap",
-    type=click.FloatRange(min=0),
-    default=600.0,
-    show_default=True,
-    help="Warn when a target and its reference are further apart (s).",
-)
+@max_gap_option
 @click.option(
     "--min-rcond",
     type=click.FloatRange(min=0),
