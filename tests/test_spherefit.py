@@ -178,6 +178,56 @@ def test_scalar_fixed_radius_applies_to_all_spheres() -> None:
     np.testing.assert_array_equal(fits.radius_mm, np.full(3, RADIUS))
 
 
+def _hard_sphere(seed: int) -> np.ndarray:
+    """8 points on a 30 deg cap with noise 0.3 mm: about a quarter of the sagitta."""
+    rng = np.random.default_rng(seed)
+    z = rng.uniform(np.cos(np.radians(30.0)), 1.0, 8)
+    phi = rng.uniform(0.0, 2.0 * np.pi, 8)
+    s = np.sqrt(1.0 - z * z)
+    u = np.c_[s * np.cos(phi), s * np.sin(phi), z]
+    return (10.0 + rng.normal(0.0, 0.3, 8))[:, None] * u
+
+
+@pytest.mark.parametrize("seed", [14, 67])
+def test_large_residuals_damped_steps_reach_the_minimum(
+    seed: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from scipy.optimize import least_squares
+
+    import hexatherm.core.spherefit as sf
+
+    pts = _hard_sphere(seed)
+    calls = []
+    original = sf._solve
+    monkeypatch.setattr(sf, "_solve", lambda a, b: calls.append(len(a)) or original(a, b))
+    fit = fit_sphere(pts)
+    monkeypatch.undo()
+    assert len(calls) > fit.iterations[0]  # some steps were rejected and damped
+    c, r = fit.centre_mm[0], fit.radius_mm[0]
+    d = pts - c
+    dist = np.linalg.norm(d, axis=1)
+    e = dist - r
+    gradient = np.r_[-(d / dist[:, None]).T @ e, -e.sum()]
+    assert np.abs(gradient).max() < 1e-12
+    ref = least_squares(
+        lambda x: np.linalg.norm(pts - x[:3], axis=1) - x[3],
+        np.r_[pts.mean(axis=0), 10.0],
+        method="lm",
+        xtol=1e-15,
+        ftol=1e-15,
+    )
+    assert np.sum(e**2) <= 2.0 * ref.cost * (1 + 1e-12)
+    np.testing.assert_allclose(fit.residuals_mm, e, atol=1e-12)
+    # The same sphere among easy ones: vectorized result unchanged.
+    rng = np.random.default_rng(seed)
+    easy = [CENTRE + RADIUS * cap_directions(20, 60.0, rng) for _ in range(3)]
+    fits = fit_spheres(
+        np.vstack([easy[0], pts, *easy[1:]]), np.repeat([0, 1, 2, 3], [20, 8, 20, 20])
+    )
+    np.testing.assert_allclose(fits.centre_mm[1], c, atol=1e-10)
+    assert fits.iterations[1] == fit.iterations[0] and fits.iterations.max() > fits.iterations.min()
+
+
 # --------------------------------------------------------------------------------------
 # Cap angle, covariance, probe radius
 
@@ -373,8 +423,22 @@ def test_non_convergence() -> None:
     rng = np.random.default_rng(6)
     u = cap_directions(25, 20.0, rng)
     pts = CENTRE + (RADIUS + rng.normal(0.0, 0.05, 25))[:, None] * u
-    with pytest.raises(FitError, match=r"^sphere 0: the geometric fit did not converge in 1 it"):
+    with pytest.raises(
+        FitError, match=r"^sphere 0: the geometric fit did not converge in 1 iteration \(last step"
+    ):
         fit_spheres(pts, max_iter=1)
+
+
+def test_non_convergence_towards_a_plane_is_explained() -> None:
+    # Noise far larger than the sagitta: the best "sphere" runs off towards a plane.
+    rng = np.random.default_rng(37)
+    u = cap_directions(10, 30.0, rng)
+    pts = (10.0 + rng.normal(0.0, 1.0, 10))[:, None] * u
+    with pytest.raises(FitError, match=r"did not converge.*the points look coplanar within noise"):
+        fit_sphere(pts)
+    with pytest.raises(FitError, match=r"radius \S+ mm, growing far beyond") as info:
+        fit_sphere(pts, max_iter=500)
+    assert info.value.index == 0
 
 
 @pytest.mark.parametrize(
