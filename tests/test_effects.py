@@ -281,8 +281,20 @@ def test_no_effect_is_the_plain_twin_at_the_logged_temperatures(case):
 
 
 # ----------------------------------------------------------------------- registry
+#: the spec's table of effects, written out independently of the code
+SPEC_EFFECTS = {
+    "leg_thermal_lag": ("tau_s",),
+    "steel_overheat": ("ratio",),
+    "leg_cte_error": tuple(f"leg{i}" for i in range(1, 7)),
+    "base_expansion": ("alpha_per_K",),
+    "cmm_drift": ("vx_um_per_h", "vy_um_per_h", "vz_um_per_h"),
+    "leg_offset": tuple(f"leg{i}" for i in range(1, 7)),
+}
+
+
 def test_registry_matches_the_contract():
-    assert {name: cls.parameters for name, cls in EFFECTS.items()} == EFFECT_PARAMETERS
+    assert {name: tuple(cls.parameters) for name, cls in EFFECTS.items()} == SPEC_EFFECTS
+    assert EFFECT_PARAMETERS == SPEC_EFFECTS
     for cls in EFFECTS.values():
         assert len(cls.units) == len(cls.ranges) == len(cls.parameters)
         assert all(lo < hi for lo, hi in cls.ranges)

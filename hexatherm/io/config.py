@@ -16,6 +16,7 @@ import numpy as np
 import numpy.typing as npt
 import yaml
 
+from hexatherm.core.effects import EFFECTS
 from hexatherm.core.geometry import CONVENTIONS
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import NAME_PATTERN, STEP_KINDS, Plan, StepError
@@ -30,14 +31,10 @@ BALLS_FORMAT = "hexatherm-balls/1"
 PLAN_FORMAT = "hexatherm-plan/1"
 SESSION_FORMAT = "hexatherm-session/1"
 
-#: effect names and parameters of the spec's table ("The hexapod twin and its effects")
+#: effect names and parameters (spec: "The hexapod twin and its effects"), from the one
+#: registry of effects that the twin and the diagnosis use
 EFFECT_PARAMETERS: dict[str, tuple[str, ...]] = {
-    "leg_thermal_lag": ("tau_s",),
-    "steel_overheat": ("ratio",),
-    "leg_cte_error": tuple(f"leg{i}" for i in range(1, 7)),
-    "base_expansion": ("alpha_per_K",),
-    "cmm_drift": ("vx_um_per_h", "vy_um_per_h", "vz_um_per_h"),
-    "leg_offset": tuple(f"leg{i}" for i in range(1, 7)),
+    name: tuple(cls.parameters) for name, cls in EFFECTS.items()
 }
 
 
@@ -135,9 +132,10 @@ def _read_effects(doc: YamlDoc) -> tuple[dict[str, Any], ...]:
     for i in range(len(items)):
         keys = ("thermal_model", "effects", i)
         doc.check_keys(["name", "parameters"], *keys)
-        name = doc.string(*keys, "name", choices=tuple(EFFECT_PARAMETERS))
-        doc.check_keys(EFFECT_PARAMETERS[name], *keys, "parameters")
-        params = {p: doc.number(*keys, "parameters", p) for p in EFFECT_PARAMETERS[name]}
+        name = doc.string(*keys, "name", choices=tuple(EFFECTS))
+        parameters = tuple(EFFECTS[name].parameters)
+        doc.check_keys(parameters, *keys, "parameters")
+        params = {p: doc.number(*keys, "parameters", p) for p in parameters}
         effects.append({"name": name, "parameters": params})
     return tuple(effects)
 

@@ -25,7 +25,7 @@ import pandas as pd
 
 from hexatherm.io.atomic import atomic_output_dir
 from hexatherm.io.records import seconds_to_iso
-from hexatherm.pipeline import ProcessResult
+from hexatherm.pipeline import ProcessResult, nominal_fit_diameter_mm
 
 POSE_NAMES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
 POSE_UNITS = ("mm", "mm", "mm", "deg", "deg", "deg")
@@ -102,8 +102,6 @@ def fits_frame(result: ProcessResult) -> pd.DataFrame:
     file); ``diameter_dev_um`` is the fitted diameter minus the nominal one (ball
     diameter, plus the tip's when points are not probe-compensated).
     """
-    from hexatherm.pipeline import nominal_fit_diameter_mm
-
     balls = result.session.balls
     nominal = dict(zip(balls.names, nominal_fit_diameter_mm(balls), strict=True))
     frames = []
