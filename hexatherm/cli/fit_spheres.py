@@ -26,13 +26,13 @@ def command(points: tuple[Path, ...], out: Path | None, fixed_diameter: float | 
     then diameter, form_um (max-min residual), n and u_um (standard uncertainty
     of the centre from the residuals).
     """
-    from hexatherm.io.atomic import OutputExistsError, atomic_write_text
+    from hexatherm.io.atomic import atomic_write_text, refuse_existing
     from hexatherm.io.csvfile import centres_to_csv, read_measurements
     from hexatherm.io.records import Records, concat_records
     from hexatherm.pipeline import fit_points
 
-    if out is not None and out.exists() and not overwrite:
-        raise OutputExistsError(f"{out} exists; use --overwrite to replace it")
+    if out is not None:
+        refuse_existing(out, overwrite)
     fitted: list[Records] = []
     for path in points:
         found = [r for r in read_measurements(path) if r.kind == "points"]

@@ -241,7 +241,7 @@ def command(
         reference_gaps,
         touch_points,
     )
-    from hexatherm.io.atomic import atomic_write_text
+    from hexatherm.io.atomic import atomic_write_text, refuse_existing
     from hexatherm.io.checklist import checklist_markdown
     from hexatherm.io.config import plan_to_yaml, read_balls, read_hexapod
     from hexatherm.io.csvfile import read_text
@@ -267,8 +267,7 @@ def command(
     if len({os.path.realpath(p) for p in outputs}) != len(outputs):
         raise click.UsageError("-o, --dmis and --checklist must be different files")
     for path in outputs:
-        if path.exists() and not overwrite:
-            raise click.ClickException(f"{path} exists; use --overwrite to replace it")
+        refuse_existing(path, overwrite)
     rcond = DEFAULT_MIN_RCOND if min_rcond is None else min_rcond
 
     hexapod = read_hexapod(hexapod_path)

@@ -42,13 +42,13 @@ def command(session: Path, out: str | None, overwrite: bool, interpolation: str,
     centre), and prints the deviations from the commanded poses side by side, in
     um and urad.
     """
+    from hexatherm.io.atomic import refuse_existing
     from hexatherm.io.results import deviation_table, write_results
     from hexatherm.pipeline import Checks, process_session
 
     folder = session if session.is_dir() else session.parent
     out_dir = Path(out) if out is not None else folder / "results"
-    if out_dir.exists() and not overwrite:
-        raise click.ClickException(f"{out_dir} exists; use --overwrite to replace it")
+    refuse_existing(out_dir, overwrite)
     checks = Checks(distance_tolerance_um, registration_tolerance_um, strict_registration)
     result = process_session(session, interpolation,  # type: ignore[arg-type]
                              0.0 if fixed_diameter else None, checks)

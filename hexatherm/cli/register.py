@@ -30,12 +30,11 @@ def command(measurement: Path, datums_path: Path, out: Path, fixed_diameter: boo
     face's normal (towards the balls), X runs from the first bore's centre to the
     second's, the origin is the first bore's centre on the face plus the offset.
     """
-    from hexatherm.io.atomic import OutputExistsError, atomic_write_text
+    from hexatherm.io.atomic import atomic_write_text, refuse_existing
     from hexatherm.io.config import balls_to_yaml, read_datums
     from hexatherm.registering import register_balls
 
-    if out.exists() and not overwrite:
-        raise OutputExistsError(f"{out} exists; use --overwrite to replace it")
+    refuse_existing(out, overwrite)
     datums = read_datums(datums_path)
     result = register_balls(measurement, datums, fixed_diameter)
     atomic_write_text(out, balls_to_yaml(result.balls))

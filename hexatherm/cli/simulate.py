@@ -40,10 +40,10 @@ def command(scenario: Path, out: Path, seed: int | None, overwrite: bool) -> Non
     """
     import numpy as np
 
+    from hexatherm.io.atomic import refuse_existing
     from hexatherm.simulation import simulate_file
 
-    if out.exists() and not overwrite:
-        raise click.ClickException(f"{out} exists; use --overwrite to replace it")
+    refuse_existing(out, overwrite)
     read, simulated, written = simulate_file(scenario, out, seed, overwrite)
     plan, truth = read.plan, simulated.truth
     duration_h = float(simulated.step_times_s[-1]) / 3600.0

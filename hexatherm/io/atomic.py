@@ -23,6 +23,12 @@ class OutputExistsError(HexathermError):
     """The output exists and overwriting was not asked for."""
 
 
+def refuse_existing(path: str | os.PathLike[str], overwrite: bool) -> None:
+    """Raise :class:`OutputExistsError` when ``path`` exists and overwriting was not asked."""
+    if Path(path).exists() and not overwrite:
+        raise OutputExistsError(f"{path} exists; use --overwrite to replace it")
+
+
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:
     """Write ``text`` to ``path`` through a temporary file in the same folder and a rename."""
     path = Path(path)
@@ -49,8 +55,7 @@ def atomic_output_dir(path: str | os.PathLike[str], overwrite: bool = False) -> 
     removed and ``path`` is left as it was.
     """
     path = Path(path)
-    if path.exists() and not overwrite:
-        raise OutputExistsError(f"{path} exists; use --overwrite to replace it")
+    refuse_existing(path, overwrite)
     if path.exists() and not path.is_dir():
         raise OutputExistsError(f"{path} exists and is not a folder")
     path.parent.mkdir(parents=True, exist_ok=True)
