@@ -271,6 +271,28 @@ class Effect:
             raise ValueError(f"effect {cls.name}: expected {len(cls.parameters)} values")
         return cls(**dict(zip(cls.parameters, (float(v) for v in values), strict=True)))
 
+    @classmethod
+    def neutral(cls) -> FloatArray:
+        """Parameter values that make the effect vanish (or nearly: a fit starts here).
+
+        By default zero, brought into each parameter's range.
+        """
+        return np.array([min(max(0.0, lo), hi) for lo, hi in cls.ranges])
+
+    @classmethod
+    def scales(cls) -> FloatArray:
+        """A typical magnitude of each parameter: a fit's unit step (default: range / 10)."""
+        return np.array([(hi - lo) / 10.0 for lo, hi in cls.ranges])
+
+    @classmethod
+    def start_values(cls) -> list[FloatArray]:
+        """Where a fit of the parameters may start (the best of them is kept).
+
+        By default only :meth:`neutral`; an effect that is far from linear in its
+        parameters gives several.
+        """
+        return [cls.neutral()]
+
     def out_of_range(self) -> dict[str, str]:
         """The parameters outside their sensible range: name -> what is wrong."""
         problems = {}
@@ -346,6 +368,15 @@ class LegThermalLag(Effect):
     units = ("s",)
     ranges = ((1.0, 86400.0),)
     summary = "each leg's temperature is the first-order lag of its thermocouple"
+
+    @classmethod
+    def scales(cls) -> FloatArray:
+        return np.array([600.0])
+
+    @classmethod
+    def start_values(cls) -> list[FloatArray]:
+        # far from linear in tau: start from a few time constants, minutes to hours
+        return [np.array([tau]) for tau in (120.0, 600.0, 1800.0, 5400.0, 14400.0)]
 
     def leg_temperature_C(
         self, leg_C: FloatArray, times_s: FloatArray, log: ThermocoupleLog

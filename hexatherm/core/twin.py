@@ -127,7 +127,8 @@ def predict_steps(
     legs = _leg_model(hexapod)
     temps = np.asarray(leg_temperature_C, dtype=float)
     segments = np.broadcast_to(temps[..., None], temps.shape + (legs.variable.shape[1],))
-    return _solve(hexapod, plan, temps, segments, None, (), balls_mm, origin2cmm, None, None, None)
+    return _solve(hexapod, plan, temps, segments, None, (), balls_mm, origin2cmm, None, None, None,
+                  True)
 
 
 def predict(
@@ -141,6 +142,7 @@ def predict(
     *,
     ball_times_s: npt.ArrayLike | None = None,
     positioning_error_mm: npt.ArrayLike | None = None,
+    reference_state: bool = True,
 ) -> TwinSteps:
     """Predict every step of ``plan`` from its times, a thermocouple log and effects.
 
@@ -164,6 +166,10 @@ def predict(
     positioning_error_mm : array_like, shape (N, 6), optional
         The hexapod's positioning error of each step, added to its leg lengths
         (the same in the reference thermal state: it is not thermal).
+    reference_state : bool
+        Also solve every step in the reference thermal state (``corrected_pose``,
+        ``reference_growth_mm``, ``reference_q_mm``); when False those are NaN and
+        the prediction costs one forward model instead of two (the diagnosis).
 
     Returns
     -------
@@ -200,6 +206,7 @@ def predict(
         positioning_error_mm,
         log,
         ball_t,
+        reference_state,
     )
 
 
@@ -250,6 +257,7 @@ def _solve(
     positioning_error_mm: npt.ArrayLike | None,
     log: ThermocoupleLog | None,
     ball_times_s: FloatArray | None,
+    reference_state: bool,
 ) -> TwinSteps:
     """Leg lengths, poses and centres from the segment temperatures and base joints."""
     legs = _leg_model(hexapod)
@@ -276,10 +284,17 @@ def _solve(
 
     refs = plan.reference_indices
     r = int(refs[0]) if refs.size else origin
-    growth0, q0 = lengths(np.broadcast_to(segment_C[r], segment_C.shape))
-    base0 = None if base is None else np.broadcast_to(base[r], base.shape)
-    absolute0 = hexapod.fgm(q0, initial_poses=plan.poses, base_joints_mm=base0)
-    corrected = origin2measured @ transform_from_pose(absolute0, hexapod.convention)
+    if reference_state:
+        growth0, q0 = lengths(np.broadcast_to(segment_C[r], segment_C.shape))
+        base0 = None if base is None else np.broadcast_to(base[r], base.shape)
+        absolute0 = hexapod.fgm(q0, initial_poses=plan.poses, base_joints_mm=base0)
+        corrected = pose_from_transform(
+            origin2measured @ transform_from_pose(absolute0, hexapod.convention),
+            hexapod.convention,
+        )
+    else:
+        growth0 = q0 = np.full_like(q, np.nan)
+        corrected = np.full((q.shape[0], 6), np.nan)
 
     frames = np.asarray(origin2cmm, dtype=float) @ platform2origin
     centres = apply_transform(frames, np.asarray(balls_mm, dtype=float))
@@ -292,7 +307,7 @@ def _solve(
         growth_mm=growth,
         platform2origin_nominal=platform2origin,
         pose=pose_from_transform(measured, hexapod.convention),
-        corrected_pose=pose_from_transform(corrected, hexapod.convention),
+        corrected_pose=corrected,
         centres_cmm_mm=centres,
         q_mm=q,
         leg_temperature_C=np.array(leg_C, dtype=float),

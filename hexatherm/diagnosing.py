@@ -1,0 +1,117 @@
+"""From a session folder to a diagnosis: read, assemble, then :func:`core.diagnosis.diagnose`.
+
+The glue of ``hexatherm diagnose``: it reads the session like ``process`` does
+(fitting spheres to probed points), builds the thermocouple log, takes the
+current model from the hexapod file (the session's, or ``--hexapod``) and runs
+the diagnosis. Writing is :mod:`hexatherm.io.diagnosisfiles`' job.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from hexatherm.core.diagnosis import (
+    Diagnosis,
+    Observations,
+    PoseResiduals,
+    diagnose,
+    pose_residuals,
+)
+from hexatherm.core.effects import Effect, ThermocoupleLog, effects_from_dicts
+from hexatherm.core.hexapod import Hexapod
+from hexatherm.errors import InputError
+from hexatherm.io.config import Session, read_hexapod, read_session
+from hexatherm.io.csvfile import Temperatures, read_measurements, read_temperatures
+from hexatherm.pipeline import assemble_centres, fit_points
+
+
+@dataclass(frozen=True)
+class SessionData:
+    """A session read for the diagnosis.
+
+    Attributes
+    ----------
+    session : Session
+    hexapod : Hexapod
+        The model diagnosed (the session's hexapod or the one given).
+    hexapod_source : str
+        Where the hexapod came from (the session, or the file given).
+    current : tuple of Effect
+        The model's own effects (its ``thermal_model``).
+    observations : Observations
+    temperatures : Temperatures
+    uncertainty_source : str
+        Where the centres' uncertainties come from, in words.
+    """
+
+    session: Session
+    hexapod: Hexapod
+    hexapod_source: str
+    current: tuple[Effect, ...]
+    observations: Observations
+    temperatures: Temperatures
+    uncertainty_source: str
+
+
+@dataclass(frozen=True)
+class DiagnosisResult:
+    """A diagnosis with the residuals before and after, in pose and leg space."""
+
+    data: SessionData
+    diagnosis: Diagnosis
+    before: PoseResiduals
+    after: PoseResiduals
+
+
+def read_for_diagnosis(path: str | Path, hexapod_path: str | Path | None = None) -> SessionData:
+    """Read a session (and optionally another hexapod file) for the diagnosis."""
+    session = read_session(path)
+    if session.temperatures is None:
+        raise InputError("the diagnosis compares the measurements with the twin, which needs "
+                         "the thermocouple log: add 'temperatures: temperatures.csv' "
+                         "(time,leg1..leg6[,air]) to the session", path=str(session.path),
+                         field="temperatures")
+    hexapod = session.hexapod if hexapod_path is None else read_hexapod(hexapod_path)
+    if hexapod.legs is None:
+        raise InputError("the twin needs the hexapod's leg model ('legs:')",
+                         path=str(hexapod_path or session.path), field="legs")
+    try:
+        current = effects_from_dicts(hexapod.effects)
+    except ValueError as exc:
+        raise InputError(str(exc), path=str(hexapod_path or session.path),
+                         field="thermal_model") from None
+    records = []
+    for file in session.measurements:
+        for rec in read_measurements(file):
+            records.append(rec if rec.kind == "centres" else fit_points(rec, session.balls))
+    centres = assemble_centres(records, session)
+    temperatures = read_temperatures(session.temperatures)
+    if temperatures.time_kind != centres.time_kind:
+        raise InputError(f"times are {temperatures.time_kind} here but {centres.time_kind} in "
+                         "the measurements: use one kind", path=temperatures.path, line=2,
+                         field="time")
+    air = temperatures.others_C.get("air")
+    log = ThermocoupleLog(temperatures.time_s, temperatures.legs_C, air)
+    u_um = centres.u_um
+    if np.all(np.isnan(u_um)):
+        u_mm = np.full(u_um.shape, 1e-3)
+        source = "none given: all centres weighted alike (the noise level is estimated)"
+    else:
+        median = float(np.nanmedian(u_um))
+        u_mm = np.maximum(np.where(np.isnan(u_um), median, u_um), 1e-3) * 1e-3
+        source = f"sphere fits (median {median:.2f} um)"
+    obs = Observations(session.plan, centres.times_s, centres.centres_mm,
+                       session.balls.centres_mm, log, u_mm)
+    source_hexapod = "the session's" if hexapod_path is None else str(hexapod_path)
+    return SessionData(session, hexapod, source_hexapod, current, obs, temperatures, source)
+
+
+def run_diagnosis(data: SessionData) -> DiagnosisResult:
+    """Diagnose a session read by :func:`read_for_diagnosis`."""
+    diagnosis = diagnose(data.hexapod, data.observations, data.current)
+    before = pose_residuals(data.hexapod, data.observations, diagnosis.baseline)
+    after = pose_residuals(data.hexapod, data.observations, diagnosis.final)
+    return DiagnosisResult(data, diagnosis, before, after)
