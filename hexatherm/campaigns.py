@@ -48,7 +48,7 @@ def diagnosis_campaign(
     n_targets: int = 16,
     cycles: int = 2,
     point_noise_um: float = 1.0,
-    air_rise_C: float = 3.0,
+    air_rise_C: float = 4.0,
     repeatability_um: float = 0.2,
     name: str = "campaign",
 ) -> TwinSessionSpec:
@@ -107,3 +107,18 @@ def diagnosis_campaign(
         effects=tuple(hidden),
         repeatability_mm=repeatability_um * 1e-3,
     )
+
+
+#: one hidden effect of each kind, sized to move the measured ball centres by a
+#: few micrometres in a campaign of :func:`diagnosis_campaign` (its air warms by
+#: 4 K: a base of aluminium, 25e-6/K, gives about 1.5 um)
+NOMINAL_HIDDEN: dict[str, dict[str, float]] = {
+    "leg_thermal_lag": {"tau_s": 1500.0},
+    "steel_overheat": {"ratio": 1.0},
+    "leg_cte_error": {"leg1": 0.2, "leg2": -0.15, "leg3": 0.1, "leg4": -0.2, "leg5": 0.15,
+                      "leg6": 0.25},
+    "base_expansion": {"alpha_per_K": 25e-6},
+    "cmm_drift": {"vx_um_per_h": 3.0, "vy_um_per_h": -2.0, "vz_um_per_h": 4.0},
+    "leg_offset": {"leg1": 0.05, "leg2": -0.04, "leg3": 0.03, "leg4": -0.05, "leg5": 0.04,
+                   "leg6": -0.03},
+}

@@ -1,0 +1,197 @@
+"""The diagnosis finds, names and sizes hidden effects in simulated campaigns (issue 6).
+
+Every campaign is written as a session folder by the twin with the effect hidden
+(the session's hexapod file does not name it) and read back as ``hexatherm
+diagnose`` reads it. The truth is the effect's parameters given to the simulator.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from hexatherm.campaigns import NOMINAL_HIDDEN, diagnosis_campaign
+from hexatherm.core.diagnosis import (
+    DELTA_BIC_THRESHOLD,
+    Observations,
+    diagnose,
+    fit_model,
+    rms_um,
+    time_blocks,
+)
+from hexatherm.core.effects import EFFECTS, make_effect
+from hexatherm.diagnosing import DiagnosisResult, read_for_diagnosis, run_diagnosis
+from hexatherm.errors import InputError
+from hexatherm.io.config import read_hexapod_text
+from hexatherm.io.diagnosisfiles import diagnosed_hexapod_yaml, diagnosis_document
+from hexatherm.twinsession import write_twin_session
+
+
+def campaign(folder: Path, names: tuple[str, ...], seed: int, **kwargs: object) -> DiagnosisResult:
+    hidden = tuple(make_effect(n, NOMINAL_HIDDEN[n]) for n in names)
+    write_twin_session(diagnosis_campaign(hidden, seed, **kwargs), folder)  # type: ignore[arg-type]
+    return run_diagnosis(read_for_diagnosis(folder))
+
+
+@pytest.mark.parametrize("name", sorted(NOMINAL_HIDDEN))
+def test_each_hidden_effect_is_named_first_and_sized(tmp_path: Path, name: str) -> None:
+    result = campaign(tmp_path / name, (name,), seed=21)
+    d = result.diagnosis
+    assert d.added, f"nothing added; round 1: {[(c.name, c.delta_bic) for c in d.rounds[0]]}"
+    first = d.added[0]
+    assert first.effect.name == name
+    assert first.delta_bic > DELTA_BIC_THRESHOLD
+    truth = NOMINAL_HIDDEN[name]
+    fitted, errors = d.final.effects[0], d.final.std_errors[0]
+    assert fitted.name == name
+    if len(truth) == 1:
+        (p, value), = truth.items()
+        assert fitted.values[p] == pytest.approx(value, rel=0.25)
+    else:
+        # "within 2 standard errors" for k parameters at once: inside the ellipsoid of
+        # the fit's covariance that holds as much probability as +-2 sigma in one
+        # dimension (95.45 %); one by one, 2 sigma would fail a correct fit of six
+        # parameters one time in four
+        k = len(truth)
+        diff = fitted.vector() - np.array([truth[p] for p in fitted.parameters])
+        cov = d.final.covariance[:k, :k]
+        assert diff @ np.linalg.solve(cov, diff) <= chi2.ppf(chi2.cdf(4.0, 1), k)
+        for p, value in truth.items():
+            assert abs(fitted.values[p] - value) <= 3 * errors[p], (p, fitted.values[p], errors[p])
+    assert first.heldout_rms_after_um <= 0.5 * first.heldout_rms_before_um
+    # the gap left is the CMM's noise: about 0.8 um RMS with 1 um per probed point
+    assert d.final_rms_um < 1.0
+
+
+def test_two_hidden_effects_are_both_named(tmp_path: Path) -> None:
+    result = campaign(tmp_path / "two", ("leg_thermal_lag", "cmm_drift"), seed=4)
+    d = result.diagnosis
+    assert {a.effect.name for a in d.added} == {"leg_thermal_lag", "cmm_drift"}
+    # the joint refit recovers both
+    fitted = {e.name: e for e in d.final.effects}
+    assert fitted["leg_thermal_lag"].values["tau_s"] == pytest.approx(1500.0, rel=0.1)
+    errors = dict(zip([e.name for e in d.final.effects], d.final.std_errors, strict=True))
+    for p, value in NOMINAL_HIDDEN["cmm_drift"].items():
+        assert abs(fitted["cmm_drift"].values[p] - value) <= 3 * errors["cmm_drift"][p]
+    # the file written for the twin holds the joint fit
+    model = read_hexapod_text(diagnosed_hexapod_yaml(result), "hexapod.yaml")
+    assert [e["name"] for e in model.effects] == [a.effect.name for a in d.added]
+    assert model.effects[0]["parameters"] == pytest.approx(d.final.effects[0].values)
+
+
+def test_null_campaigns_add_at_most_one_false_effect_over_20_seeds(tmp_path: Path) -> None:
+    false = {}
+    for seed in range(20):
+        folder = tmp_path / f"null{seed}"
+        result = campaign(folder, (), seed=100 + seed, n_targets=8)
+        if result.diagnosis.added:
+            false[seed] = [a.effect.name for a in result.diagnosis.added]
+    assert sum(len(v) for v in false.values()) <= 1, false
+
+
+@pytest.fixture(scope="module")
+def null_session(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("diag") / "null"
+    write_twin_session(diagnosis_campaign((), 5, n_targets=6, point_noise_um=0.0,
+                                          repeatability_um=0.0), folder)
+    return folder
+
+
+def noise_free(folder: Path) -> Observations:
+    """The session's observations (thermocouple noise is in the log; no CMM noise)."""
+    return read_for_diagnosis(folder).observations
+
+
+def test_the_twin_reproduces_a_noise_free_session(null_session: Path) -> None:
+    data = read_for_diagnosis(null_session)
+    fit = fit_model(data.hexapod, data.observations, (), ())
+    # thermocouple noise (0.02 K, rounded to 1 mK) is what is left: far below a micrometre
+    assert rms_um(fit.residual_mm) < 0.1
+
+
+def test_an_error_of_the_origin_measurement_is_a_nuisance_not_an_effect(null_session: Path
+                                                                         ) -> None:
+    data = read_for_diagnosis(null_session)
+    obs = data.observations
+    centres = obs.centres_mm.copy()
+    origin = obs.plan.origin_index
+    centres[origin] += [0.004, -0.003, 0.005]  # O measured 7 um off: every pose relative to it
+    shifted = Observations(obs.plan, obs.times_s, centres, obs.balls_mm, obs.log, obs.u_mm)
+    d = diagnose(data.hexapod, shifted, candidates=["leg_offset", "cmm_drift"])
+    assert d.added == ()
+    # frame O is fitted to all steps: the bad O measurement stands out alone
+    step_rms = np.sqrt(np.mean(d.baseline.residual_mm ** 2, axis=(1, 2))) * 1e3
+    assert np.argmax(step_rms) == origin
+    assert np.delete(step_rms, origin).max() < 0.5
+
+
+def test_candidates_needing_air_are_skipped_without_it(null_session: Path, tmp_path: Path
+                                                       ) -> None:
+    import shutil
+
+    folder = tmp_path / "noair"
+    shutil.copytree(null_session, folder)
+    temps = folder / "temperatures.csv"
+    lines = temps.read_text().splitlines()
+    temps.write_text("\n".join(",".join(line.split(",")[:7]) for line in lines) + "\n")
+    data = read_for_diagnosis(folder)
+    d = diagnose(data.hexapod, data.observations, candidates=["base_expansion", "cmm_drift"])
+    assert "base_expansion" in d.skipped and "air" in d.skipped["base_expansion"]
+    assert [c.name for c in d.rounds[0]] == ["cmm_drift"]
+
+
+def test_a_session_without_thermocouples_is_refused_clearly(null_session: Path, tmp_path: Path
+                                                            ) -> None:
+    import shutil
+
+    folder = tmp_path / "notemps"
+    shutil.copytree(null_session, folder)
+    session = folder / "session.yaml"
+    session.write_text("".join(line for line in session.read_text().splitlines(keepends=True)
+                               if not line.startswith("temperatures")))
+    with pytest.raises(InputError, match="thermocouple log") as info:
+        read_for_diagnosis(folder)
+    assert "session.yaml" in str(info.value)
+
+
+def test_the_effects_of_the_model_are_kept_and_not_tried_again(tmp_path: Path) -> None:
+    folder = tmp_path / "lag"
+    hidden = make_effect("leg_thermal_lag", NOMINAL_HIDDEN["leg_thermal_lag"])
+    write_twin_session(diagnosis_campaign((hidden,), 8, n_targets=6), folder)
+    model = tmp_path / "hexapod.yaml"
+    hexapod = read_for_diagnosis(folder).hexapod
+    import dataclasses
+
+    from hexatherm.io.config import hexapod_to_yaml
+
+    model.write_text(hexapod_to_yaml(dataclasses.replace(hexapod, effects=(hidden.as_dict(),))))
+    data = read_for_diagnosis(folder, model)
+    assert data.current == (hidden,)
+    d = diagnose(data.hexapod, data.observations, data.current)
+    assert "leg_thermal_lag" not in [c.name for c in d.rounds[0]]
+    assert d.added == ()
+    assert d.baseline_rms_um < 1.0
+
+
+def test_the_json_document_has_the_spec_keys(tmp_path: Path) -> None:
+    result = campaign(tmp_path / "drift", ("cmm_drift",), seed=3, n_targets=6)
+    doc = json.loads(json.dumps(diagnosis_document(result)))
+    assert list(doc)[:3] == ["baseline_rms_um", "added", "final_rms_um"]
+    entry = doc["added"][0]
+    for key in ("effect", "parameters", "std_errors", "delta_bic", "rms_before_um",
+                "rms_after_um", "heldout_rms_before_um", "heldout_rms_after_um"):
+        assert key in entry
+    assert entry["effect"] == "cmm_drift"
+    assert set(entry["parameters"]) == set(EFFECTS["cmm_drift"].parameters)
+    assert doc["baseline_rms_um"] == pytest.approx(entry["rms_before_um"])
+    assert doc["final_rms_um"] == pytest.approx(result.diagnosis.final_rms_um)
+    assert len(doc["rounds"][0]) == len(EFFECTS)
+
+
+def test_time_blocks_alternate_in_time_order() -> None:
+    blocks = time_blocks(np.arange(12.0)[::-1], 4)
+    assert blocks.tolist() == [3, 3, 3, 2, 2, 2, 1, 1, 1, 0, 0, 0]
