@@ -375,3 +375,54 @@ def probe_points(
     noise = rng.normal(scale=noise_mm, size=centres.shape[:-1] + (n_points,)) if noise_mm else 0.0
     dist = radius[..., None] + noise
     return centres[..., None, :] + dist[..., None] * dirs, dirs
+
+
+def twin_corrected(
+    hexapod: Hexapod,
+    plan: Plan,
+    times_s: npt.ArrayLike,
+    log: ThermocoupleLog,
+    balls_mm: npt.ArrayLike,
+    platform2cmm: npt.ArrayLike,
+    effects: Sequence[Effect] = (),
+    *,
+    ball_times_s: npt.ArrayLike | None = None,
+) -> FloatArray:
+    """Every step's measured pose corrected by the twin from the thermocouples alone.
+
+    The twin predicts each step twice: as the CMM sees it at its time (``P_k``,
+    relative to the origin step, CMM effects included) and in the thermal state
+    of the first reference step (``Pc_k``). The measured pose ``M_k`` (relative to
+    the measured origin) is corrected by the predicted thermal deflection:
+    ``M_k P_k^-1 Pc_k``. With a perfect twin and no noise that is the true
+    corrected pose; no reference measurement is used.
+
+    Parameters
+    ----------
+    hexapod, plan : Hexapod, Plan
+    times_s : array_like, shape (N,)
+        Step times in the log's time base.
+    log : ThermocoupleLog
+    balls_mm : array_like, shape (k, 3)
+    platform2cmm : array_like, shape (N, 4, 4)
+        The measured (registered) platform frame of every step.
+    effects : sequence of Effect
+        The twin's effects (a hexapod file's ``thermal_model``).
+    ball_times_s : array_like, shape (N, k), optional
+
+    Returns
+    -------
+    ndarray, shape (N, 6)
+        Twin-corrected pose of every step, mm and deg, relative to the measured O.
+    """
+    from hexatherm.core.registration import register
+
+    frames = np.asarray(platform2cmm, dtype=float)
+    origin = plan.origin_index
+    steps = predict(hexapod, plan, times_s, log, balls_mm, frames[origin], effects,
+                    ball_times_s=ball_times_s)
+    predicted = register(steps.measured_centres_cmm_mm, balls_mm).platform2cmm
+    seen = invert_transform(predicted[origin]) @ predicted
+    measured = invert_transform(frames[origin]) @ frames
+    corrected = transform_from_pose(steps.corrected_pose, hexapod.convention)
+    return pose_from_transform(measured @ invert_transform(seen) @ corrected, hexapod.convention)
