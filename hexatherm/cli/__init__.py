@@ -22,6 +22,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "inspect": ("hexatherm.cli.inspect", "List the features of a measurement file."),
     "register": ("hexatherm.cli.register", "Balls file from a measurement of the platform datums."),
     "replay": ("hexatherm.cli.replay", "Re-process recorded sessions against their expected/."),
+    "diagnose": ("hexatherm.cli.diagnose", "Find where the twin and a session disagree, and why."),
     "simulate": ("hexatherm.cli.simulate", "Simulate a session (and its truth) from a scenario."),
 }
 

@@ -1,0 +1,59 @@
+"""``hexatherm diagnose``: where the twin and the measurements disagree, and what is missing."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from hexatherm.cli.options import clean_errors, echo_err, overwrite_option
+
+
+@click.command("diagnose")
+@click.argument("session", type=click.Path(exists=True, path_type=Path))
+@click.option("-o", "--out", "out", type=click.Path(file_okay=False), default=None,
+              help="Output folder [default: SESSION/diagnosis].")
+@overwrite_option
+@click.option("--hexapod", "hexapod_path", type=click.Path(exists=True, dir_okay=False,
+              path_type=Path), default=None,
+              help="The model to diagnose (a hexapod file, e.g. an earlier diagnosis' "
+              "hexapod.yaml) instead of the session's; its thermal_model effects are kept.")
+@clean_errors
+def command(session: Path, out: str | None, overwrite: bool, hexapod_path: Path | None) -> None:
+    """Compare SESSION's measurements with the twin and find the missing effects.
+
+    The twin predicts every ball of every step from the commanded poses and the
+    thermocouple log (temperatures.csv, required). Each candidate effect of the
+    twin is fitted to the measured ball centres, frame O being fitted as a
+    nuisance in every model; the best is added when it lowers BIC by more than 10
+    and lowers the RMS of held-out steps, and the search repeats.
+
+    Writes OUT/diagnosis.json, OUT/hexapod.yaml (the model with the added
+    effects in its thermal_model, for simulate and process --method twin) and
+    OUT/report.md with its figures; prints the story to standard output.
+    """
+    from hexatherm.diagnosing import read_for_diagnosis, run_diagnosis
+    from hexatherm.io.atomic import atomic_output_dir, refuse_existing
+    from hexatherm.io.diagnosisfiles import diagnosed_hexapod_yaml, diagnosis_json, story
+    from hexatherm.io.diagnosisreport import terminal_tables, write_report_files
+
+    folder = session if session.is_dir() else session.parent
+    out_dir = Path(out) if out is not None else folder / "diagnosis"
+    refuse_existing(out_dir, overwrite)
+    data = read_for_diagnosis(session, hexapod_path)
+    echo_err(f"diagnosing {data.session.name}: {data.observations.n_steps} steps ...")
+    result = run_diagnosis(data)
+    files = {"diagnosis.json": diagnosis_json(result),
+             "hexapod.yaml": diagnosed_hexapod_yaml(result)}
+    written: list[Path] = []
+    with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
+        for name, text in files.items():
+            (tmp / name).write_text(text, encoding="utf-8")
+            written.append(out_dir / name)
+        written += [out_dir / p.relative_to(tmp) for p in write_report_files(result, tmp)]
+    click.echo(terminal_tables(result, tests=False))
+    click.echo()
+    click.echo(story(result))
+    for path in written:
+        echo_err(f"wrote {path}")
+

@@ -1,0 +1,198 @@
+"""report.md, the tables and the figures of ``hexatherm diagnose`` (hexatherm.io.diagnosisreport).
+
+One small simulated campaign with a hidden leg thermal lag is diagnosed once for
+the module; the figures' data are compared with the residual arrays and the
+session's own times and temperatures, the tables with numbers computed here.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hexatherm.campaigns import diagnosis_campaign
+from hexatherm.core.effects import make_effect
+from hexatherm.diagnosing import DiagnosisResult, read_for_diagnosis, run_diagnosis
+from hexatherm.io import diagnosisreport as dr
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def result(tmp_path_factory: pytest.TempPathFactory) -> DiagnosisResult:
+    from hexatherm.twinsession import write_twin_session
+
+    folder = tmp_path_factory.mktemp("diag") / "session"
+    spec = diagnosis_campaign([make_effect("leg_thermal_lag", {"tau_s": 1500.0})], seed=1,
+                              n_targets=6)
+    write_twin_session(spec, folder)
+    return run_diagnosis(read_for_diagnosis(folder))
+
+
+@pytest.fixture(scope="module")
+def written(result: DiagnosisResult, tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
+    out = tmp_path_factory.mktemp("out")
+    return dr.write_report_files(result, out, dpi=50)  # small: fast
+
+
+def _hours(result: DiagnosisResult) -> tuple[np.ndarray, np.ndarray]:
+    obs = result.data.observations
+    order = np.argsort(obs.times_s, kind="stable")
+    start = min(obs.log.t0_s, obs.times_s.min())
+    return order, (obs.times_s[order] - start) / 3600.0
+
+
+def _line(ax: object, label: str) -> object:
+    lines = [ln for ln in ax.get_lines() if ln.get_label() == label]  # type: ignore[attr-defined]
+    assert len(lines) == 1, [ln.get_label() for ln in ax.get_lines()]  # type: ignore[attr-defined]
+    return lines[0]
+
+
+# ------------------------------------------------------------------ report.md
+def test_report_tells_the_story(result: DiagnosisResult, written: list[Path]) -> None:
+    text = written[0].read_text(encoding="utf-8")
+    assert written[0].name == "report.md"
+    added = result.diagnosis.added
+    assert [a.effect.name for a in added] == ["leg_thermal_lag"]
+    tau = added[0].effect.values["tau_s"]
+    se = added[0].std_errors["tau_s"]
+    assert abs(tau - 1500.0) < 150.0
+    assert f"{tau:.0f} ± {se:.0f} s" in text
+    assert f"{added[0].delta_bic:.1f}" in text
+    d = result.diagnosis
+    for value in (d.baseline_rms_um, d.final_rms_um, d.baseline_heldout_rms_um,
+                  d.final_heldout_rms_um):
+        assert f"{value:.2f}" in text
+    headline = text.split("## Session")[0]
+    assert "leg_thermal_lag" in headline and f"{tau:.0f}" in headline
+
+
+def test_report_lists_every_candidate_of_every_round(result: DiagnosisResult,
+                                                     written: list[Path]) -> None:
+    text = written[0].read_text(encoding="utf-8")
+    section = text.split("## Candidates")[1].split("## Where")[0]
+    rounds = section.split("### Round ")[1:]
+    assert len(rounds) == len(result.diagnosis.rounds) >= 2
+    for block, candidates in zip(rounds, result.diagnosis.rounds, strict=True):
+        rows = [ln for ln in block.splitlines() if ln.startswith("| ") and "candidate" not in ln]
+        assert [r.split("|")[1].strip() for r in rows] == [c.name for c in candidates]
+        for row, c in zip(rows, candidates, strict=True):
+            cells = [x.strip() for x in row.split("|")[1:-1]]
+            assert cells[2] == f"{c.delta_bic:.1f}"
+            assert cells[4] == f"{c.heldout_rms_um:.2f}"
+            assert cells[5].startswith("yes") == c.passes
+    assert "yes, added" in rounds[0]
+    assert "Flagged alternatives" in text
+
+
+def test_report_links_pngs_that_exist(written: list[Path]) -> None:
+    from matplotlib.image import imread
+
+    text = written[0].read_text(encoding="utf-8")
+    links = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", text)
+    assert sorted(links) == sorted(dr.FIGURE_FILES.values())
+    folder = written[0].parent
+    assert sorted(p.name for p in written[1:]) == sorted(links)
+    for link in links:
+        path = folder / link
+        assert not Path(link).is_absolute() and path.is_file()
+        assert path.read_bytes()[:8] == PNG_SIGNATURE
+        image = imread(path)
+        assert image.ndim == 3 and image.shape[0] > 200 and image.shape[1] > 400
+
+
+# -------------------------------------------------------------------- figures
+def test_pose_and_leg_figures_hold_the_residuals(result: DiagnosisResult) -> None:
+    order, hours = _hours(result)
+    for fig, attr in ((dr.pose_time_figure(result), "pose_um"),
+                      (dr.legs_time_figure(result), "legs_um")):
+        axes = np.array(fig.axes).reshape(6, 2)
+        for c, (state, res) in enumerate((("before", result.before), ("after", result.after))):
+            values = getattr(res, attr)
+            for j in range(6):
+                line = _line(axes[j, c], state)
+                np.testing.assert_allclose(line.get_xdata(), hours)
+                np.testing.assert_allclose(line.get_ydata(), values[order, j])
+
+
+def test_centre_and_temperature_figures(result: DiagnosisResult) -> None:
+    order, hours = _hours(result)
+    obs = result.data.observations
+    fig = dr.centre_rms_figure(result)
+    ax, temp_ax = fig.axes
+    for label, fit in (("before", result.diagnosis.baseline), ("after", result.diagnosis.final)):
+        line = [ln for ln in ax.get_lines() if ln.get_label().startswith(label + ":")][0]
+        step_rms = np.sqrt(np.mean(fit.residual_mm**2, axis=(1, 2))) * 1e3
+        np.testing.assert_allclose(line.get_ydata(), step_rms[order])
+        np.testing.assert_allclose(line.get_xdata(), hours)
+    mean_temp = np.array([np.mean([np.interp(t, obs.log.times_s, obs.log.legs_C[:, i])
+                                   for i in range(6)]) for t in obs.times_s[order]])
+    np.testing.assert_allclose(_line(temp_ax, "mean leg temperature").get_ydata(), mean_temp)
+
+    fig = dr.temperature_figure(result)
+    assert len(fig.axes) == 6
+    for j, ax in enumerate(fig.axes):
+        for state, res in (("before", result.before), ("after", result.after)):
+            line = _line(ax, state)
+            np.testing.assert_allclose(line.get_xdata(), mean_temp)
+            np.testing.assert_allclose(line.get_ydata(), res.pose_um[order, j])
+
+
+# --------------------------------------------------------------------- tables
+def _rows(text: str, title_start: str) -> dict[str, list[str]]:
+    block = text.split(title_start)[1].split("\n\n")[0].splitlines()[3:]
+    return {ln.split()[0]: ln.split()[1:] for ln in block}
+
+
+def test_terminal_tables_before_and_after(result: DiagnosisResult) -> None:
+    text = dr.terminal_tables(result)
+    comp = _rows(text, "Pose residuals by component")
+    for j, name in enumerate(("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")):
+        before = np.sqrt(np.mean(result.before.pose_um[:, j] ** 2))
+        after = np.sqrt(np.mean(result.after.pose_um[:, j] ** 2))
+        assert comp[name][1:3] == [f"{before:.2f}", f"{after:.2f}"]
+    legs = _rows(text, "Leg-space residuals")
+    for j in range(6):
+        before = np.sqrt(np.mean(result.before.legs_um[:, j] ** 2))
+        assert legs[f"leg{j + 1}"][0] == f"{before:.2f}"
+    kinds = _rows(text, "Centre residuals by step kind")
+    assert kinds["all"][1:] == [f"{result.diagnosis.baseline_rms_um:.2f}",
+                                f"{result.diagnosis.final_rms_um:.2f}"]
+    plan_kinds = np.array(result.data.observations.plan.kinds)
+    assert kinds["reference"][0] == str(int(np.sum(plan_kinds == "reference")))
+    worst = _rows(text, "Worst steps before")
+    top = int(np.argmax(result.before.centre_rms_um))
+    assert worst["1"][0] == result.data.observations.plan.labels[top]
+    assert "Whiteness and trend before" in text and "Whiteness and trend after" in text
+    # the headers carry the units; each table's rule is as wide as its header
+    for block in text.strip().split("\n\n"):
+        lines = block.splitlines()
+        assert len(lines[2]) == max(len(ln) for ln in lines[1:])
+    assert "RMS before (um)" in text
+
+
+def test_the_lag_is_what_made_the_residuals_structured(result: DiagnosisResult) -> None:
+    before, after = dr.summaries(result)
+    white_before = sum(t.whiteness.white() for t in before.leg_tests)
+    white_after = sum(t.whiteness.white() for t in after.leg_tests)
+    assert white_before <= 2 and white_after >= 5
+
+
+def test_nothing_added(result: DiagnosisResult, tmp_path: Path) -> None:
+    d = result.diagnosis
+    nothing = dataclasses.replace(
+        result, after=result.before,
+        diagnosis=dataclasses.replace(d, final=d.baseline, added=(), rounds=d.rounds[:1],
+                                      final_heldout_rms_um=d.baseline_heldout_rms_um))
+    text = dr.report_markdown(nothing, {"pose_time": "p.png"})
+    assert "Nothing added" in text and "RMS after" not in text
+    assert re.findall(r"\]\(([^)]+)\)", text) == ["p.png"]
+    fig = dr.pose_time_figure(nothing)
+    assert len(fig.axes) == 6
+    np.testing.assert_allclose(_line(fig.axes[2], "before").get_ydata(),
+                               result.before.pose_um[_hours(result)[0], 2])
+    assert "after" not in dr.terminal_tables(nothing, tests=False)
