@@ -39,12 +39,16 @@ class StepCentres:
     time_kind : {"iso", "seconds"}
     u_um : ndarray, shape (N, k)
         Standard uncertainty of each centre (NaN when the file gave none).
+    cov_mm2 : ndarray, shape (N, k, 3, 3), optional
+        Covariance of each centre from its sphere fit (NaN for centres given as
+        such); None when not gathered.
     """
 
     centres_mm: FloatArray
     times_s: FloatArray
     time_kind: TimeKind
     u_um: FloatArray
+    cov_mm2: FloatArray | None = None
 
 
 @dataclass(frozen=True)
@@ -93,8 +97,9 @@ def fit_points(records: Records, balls: Balls | None = None, fixed_diameter_mm: 
     """Fit a sphere to every ``(label, ball)`` group of a points file; return centres.
 
     The centres' ``extra`` holds per-row ``n``, ``form_um``, ``rms_um``, ``cap_deg``,
-    ``u_um`` and ``diameter_mm``. With ``fixed_diameter_mm`` (or, when it is 0 and
-    ``balls`` is given, the nominal fit diameter of each ball) the radius is fixed.
+    ``u_um`` and ``cov_centre_mm2`` (3x3 covariance of the centre from the residuals).
+    With ``fixed_diameter_mm`` (or, when it is 0 and ``balls`` is given, the nominal
+    fit diameter of each ball) the radius is fixed.
     """
     keys = np.char.add(np.char.add(records.label.astype(str), "\x1f"), records.ball.astype(str))
     unique, first, groups = np.unique(keys, return_index=True, return_inverse=True)
@@ -126,7 +131,8 @@ def fit_points(records: Records, balls: Balls | None = None, fixed_diameter_mm: 
     times = np.bincount(groups, weights=records.time_s) / counts
     u_um = np.sqrt(np.trace(fits.cov_centre_mm2, axis1=1, axis2=2) / 3) * 1e3
     extra = {"n": fits.n, "form_um": fits.form_um, "rms_um": fits.rms_um,
-             "cap_deg": fits.cap_half_angle_deg, "u_um": u_um}
+             "cap_deg": fits.cap_half_angle_deg, "u_um": u_um,
+             "cov_centre_mm2": fits.cov_centre_mm2}
     return Records(path=records.path, kind="centres", label=records.label[first],
                    ball=records.ball[first], xyz_mm=fits.centre_mm, time_s=times,
                    time_kind=records.time_kind, line=records.line[first],
@@ -148,6 +154,7 @@ def assemble_centres(records: list[Records], session: Session) -> StepCentres:
     counts = np.zeros((n, k), dtype=int)
     ball_time = np.zeros((n, k))
     u_um = np.full((n, k), np.nan)
+    cov = np.full((n, k, 3, 3), np.nan)
     kinds = {r.time_kind for r in records}
     if len(kinds) > 1:
         iso = next(r for r in records if r.time_kind == "iso")
@@ -180,6 +187,8 @@ def assemble_centres(records: list[Records], session: Session) -> StepCentres:
         ball_time[si, bi] = rec.time_s
         if "u_um" in rec.extra:
             u_um[si, bi] = np.asarray(rec.extra["u_um"], dtype=float)
+        if "cov_centre_mm2" in rec.extra:
+            cov[si, bi] = np.asarray(rec.extra["cov_centre_mm2"], dtype=float)
     missing_step = counts.sum(axis=1) == 0
     if np.any(missing_step):
         i = int(np.argmax(missing_step))
@@ -189,7 +198,8 @@ def assemble_centres(records: list[Records], session: Session) -> StepCentres:
     if np.any(missing_ball):
         i, j = np.argwhere(missing_ball)[0]
         raise PlanError(f"step {plan.labels[i]}: ball {balls.names[j]} not measured")
-    return StepCentres(sums, ball_time.mean(axis=1), kinds.pop() if kinds else "seconds", u_um)
+    return StepCentres(sums, ball_time.mean(axis=1), kinds.pop() if kinds else "seconds", u_um,
+                       cov)
 
 
 def registration_weights(u_um: FloatArray, floor_um: float = 1e-3) -> FloatArray | None:

@@ -18,6 +18,7 @@ import pandas as pd
 
 from hexatherm.io.results import write_results
 from hexatherm.pipeline import process_session
+from hexatherm.quality import quality_checks
 
 DEFAULT_TOLERANCES = {"mm": 1e-7, "deg": 1e-6, "um": 1e-4, "urad": 1e-4, "s": 1e-6}
 
@@ -67,7 +68,7 @@ def compare_tables(name: str, expected: pd.DataFrame, got: pd.DataFrame,
             both_nan = np.isnan(x) & np.isnan(y)
             diff = np.where(both_nan, 0.0, np.abs(x - y))
             limit = tol if unit != "rel" else tol * np.maximum(np.abs(x), 1.0)
-            bad = ~(diff <= limit)
+            bad = ~(diff <= limit) & ~both_nan
             finite = diff[np.isfinite(diff)]
             if finite.size and unit != "rel":
                 result.worst[unit] = max(result.worst.get(unit, 0.0), float(finite.max()))
@@ -94,7 +95,8 @@ def replay_session(folder: Path, tolerances: dict[str, float] | None = None,
     expected_dir = folder / "expected"
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "out"
-        write_results(process_session(folder), out)
+        processed = process_session(folder)
+        write_results(processed, out, quality=quality_checks(processed))
         names = sorted(p.name for p in out.glob("*.csv"))
         result.files = names
         for name in names:

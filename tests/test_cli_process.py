@@ -10,7 +10,7 @@ import pytest
 from click.testing import CliRunner
 
 from hexatherm.cli import main
-from hexatherm.io.results import CONTRACT_COLUMNS
+from hexatherm.io.results import CONTRACT_COLUMNS, pose_columns
 from tests.sessions import make_session
 
 UM, URAD = 1e3, np.pi / 180 * 1e6
@@ -135,7 +135,15 @@ BAD_INPUTS = {
         r"plan.yaml:8: field 'steps\[3\]': step S2: target has no reference step adjacent"),
     "wrong number of fields": (lambda s: set_field(s / "centres.csv", "S3,B1,", 2, "1,2"),
                                r"centres.csv:{line}: expected 6 comma-separated fields, found 7"),
+    "bad cmm noise": (lambda s: append(s / "session.yaml", "cmm: {mpe_um: zero}\n"),
+                      r"session.yaml:{line}: field 'cmm.mpe_um': expected a number"),
 }
+
+
+def append(path, text):
+    with path.open("a") as f:
+        f.write(text)
+    return len(path.read_text().splitlines())
 
 
 @pytest.mark.parametrize("case", sorted(BAD_INPUTS))
@@ -166,3 +174,67 @@ def test_commanded_pose_outside_the_stroke_is_reported(tmp_path):
     assert result.exit_code == 0
     assert "warning: step R0: commanded pose is outside the stroke [250.0, 310.0] mm" \
         in result.output
+
+
+U_COLUMNS = [f"u_{c}" for c in pose_columns("conv") + pose_columns("corr")]
+
+
+def test_process_writes_uncertainties_and_quality(tmp_path):
+    make_session(tmp_path / "s", noise_mm=1e-3)
+    result = run("process", tmp_path / "s")
+    assert result.exit_code == 0, result.output
+    poses = pd.read_csv(tmp_path / "s" / "results" / "poses.csv")
+    assert list(poses.columns[: len(CONTRACT_COLUMNS)]) == CONTRACT_COLUMNS
+    assert list(poses.columns[-12:]) == U_COLUMNS
+    assert (poses[U_COLUMNS] > 0).all().all()
+    # 1 um per centre coordinate: corrected poses about 1 um, 15 urad
+    assert 0.5e-3 < poses["u_Tx_corr_mm"].mean() < 3e-3
+    assert "uncertainty: centres from registration residuals" in result.output
+    assert "u (linear, k=1) of the corrected poses" in result.output
+    quality = pd.read_csv(tmp_path / "s" / "results" / "quality.csv")
+    assert len(quality) == 8 and quality["failed"].isna().all()
+    assert "quality checks of 8 steps:" in result.output
+    assert "wrote " + str(tmp_path / "s" / "results" / "quality.csv") in result.output
+
+
+def test_process_monte_carlo_option(tmp_path):
+    make_session(tmp_path / "s", noise_mm=1e-3)
+    assert run("process", tmp_path / "s", "-o", tmp_path / "lin").exit_code == 0
+    result = run("process", tmp_path / "s", "-o", tmp_path / "mc", "--mc", 400, "--seed", 3)
+    assert result.exit_code == 0, result.output
+    assert "Monte Carlo (400 draws, seed 3) over linear propagation" in result.output
+    lin = pd.read_csv(tmp_path / "lin" / "poses.csv")[U_COLUMNS].to_numpy()
+    mc = pd.read_csv(tmp_path / "mc" / "poses.csv")[U_COLUMNS].to_numpy()
+    assert np.all(np.abs(mc / lin - 1) < 0.25) and not np.allclose(mc, lin)
+    bad = run("process", tmp_path / "s", "-o", tmp_path / "x", "--mc", 1)
+    assert bad.exit_code == 2 and "at least 2 draws" in bad.output
+
+
+def test_failed_quality_check_warns_or_exits_3_with_strict(tmp_path):
+    make_session(tmp_path / "s", gain=(30.0, 7.0, 2.0, 3.0, 9.0, 3.5))  # legs heat fast
+    result = run("process", tmp_path / "s")
+    assert result.exit_code == 0, result.output
+    assert "warning: quality checks failed at 3 step(s) (S1, S2, S3)" in result.output
+    assert re.search(r"temperature +temperature_change_C +worst +[\d.]+ +\(limit <= 1\) +"
+                     r"FAILED at 3 step\(s\): S1, S2, S3", result.output), result.output
+    strict = run("process", tmp_path / "s", "--overwrite", "--strict")
+    assert strict.exit_code == 3
+    assert "exit status 3 (--strict)" in strict.output
+    quality = pd.read_csv(tmp_path / "s" / "results" / "quality.csv")  # still written
+    assert quality.loc[quality["kind"] == "target", "failed"].eq("temperature").all()
+    relaxed = run("process", tmp_path / "s", "--overwrite", "--strict",
+                  "--quality-threshold", "temperature_change_C=inf")
+    assert relaxed.exit_code == 0, relaxed.output
+
+
+@pytest.mark.parametrize("value, message", [
+    ("form=3", "unknown name 'form'; expected one of form_um"),
+    ("form_um", "expected NAME=VALUE"),
+    ("time_gap_s=soon", "'soon' is not a number"),
+])
+def test_bad_quality_threshold_is_refused_before_anything_is_written(tmp_path, value, message):
+    make_session(tmp_path / "s")
+    result = run("process", tmp_path / "s", "--quality-threshold", value)
+    assert result.exit_code == 1 and "Traceback" not in result.output
+    assert result.output.startswith(f"Error: --quality-threshold {value!r}: {message}")
+    assert not (tmp_path / "s" / "results").exists()

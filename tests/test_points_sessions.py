@@ -46,7 +46,9 @@ def test_points_session_equals_the_centres_it_fits(tmp_path, output):
     result = run("process", other, "-o", tmp_path / "b")
     assert result.exit_code == 0, result.output
     a, b = poses(tmp_path / "a"), poses(tmp_path / "b")
-    numeric = [c for c in a.columns if c.endswith(("_mm", "_deg"))]
+    # the uncertainties differ: a points session has each fit's full covariance, a
+    # centres file one u_um per centre (the fit is looser along the cap's axis)
+    numeric = [c for c in a.columns if c.endswith(("_mm", "_deg")) and not c.startswith("u_")]
     np.testing.assert_allclose(a[numeric], b[numeric], atol=1e-9, rtol=0)
     assert (a["time"] == b["time"]).all()
 

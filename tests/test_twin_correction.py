@@ -56,3 +56,42 @@ def test_a_better_model_pays_off_on_a_noisy_campaign(tmp_path: Path) -> None:
     assert rms(with_lag) < 0.25 * rms(without)
     # as good as the references' correction, within the noise of one measured frame
     assert rms(with_lag) < 1.5 * rms(by_references)
+
+
+def test_process_method_twin_adds_the_twin_columns(tmp_path: Path) -> None:
+    import yaml
+    from click.testing import CliRunner
+
+    from hexatherm.cli import main
+    from hexatherm.io.results import CONTRACT_COLUMNS, pose_columns
+
+    write_twin_session(diagnosis_campaign((LAG,), 6, n_targets=4), tmp_path / "s")
+    model = yaml.safe_load((tmp_path / "s" / "hexapod.yaml").read_text())
+    model["thermal_model"] = {"effects": [LAG.as_dict()]}
+    (tmp_path / "lag.yaml").write_text(yaml.safe_dump(model))
+    runner = CliRunner()
+    out = tmp_path / "out"
+    result = runner.invoke(main, ["process", str(tmp_path / "s"), "-o", str(out), "--method",
+                                  "twin", "--hexapod", str(tmp_path / "lag.yaml")])
+    assert result.exit_code == 0, result.output
+    poses = pd.read_csv(out / "poses.csv")
+    assert list(poses.columns[:14]) == CONTRACT_COLUMNS
+    assert list(poses.columns[14:20]) == pose_columns("twin")
+    assert "twin-corrected - commanded" in result.stdout
+    truth = pd.read_csv(tmp_path / "s" / "truth" / "steps.csv").set_index("label")
+    true_corr = truth.loc[poses["label"], pose_columns("truecorr")[:3]].to_numpy()
+    twin_err = poses[pose_columns("twin")[:3]].to_numpy() - true_corr
+    conv_err = poses[pose_columns("conv")[:3]].to_numpy() - true_corr
+    assert np.sqrt(np.mean(twin_err**2)) < 0.2 * np.sqrt(np.mean(conv_err**2))
+    # the session's own hexapod (no lag) is the default model: a worse twin
+    plain = runner.invoke(main, ["process", str(tmp_path / "s"), "-o", str(tmp_path / "p"),
+                                 "--method", "twin"])
+    assert plain.exit_code == 0, plain.output
+    plain_err = (pd.read_csv(tmp_path / "p" / "poses.csv")[pose_columns("twin")[:3]].to_numpy()
+                 - true_corr)
+    assert np.sqrt(np.mean(twin_err**2)) < 0.5 * np.sqrt(np.mean(plain_err**2))
+    # --hexapod alone is a mistake, not silently ignored
+    alone = runner.invoke(main, ["process", str(tmp_path / "s"), "-o", str(tmp_path / "q"),
+                                 "--hexapod", str(tmp_path / "lag.yaml")])
+    assert alone.exit_code == 2 and "--method twin" in alone.output
+    assert not (tmp_path / "q").exists()

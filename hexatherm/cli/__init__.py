@@ -24,6 +24,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "replay": ("hexatherm.cli.replay", "Re-process recorded sessions against their expected/."),
     "diagnose": ("hexatherm.cli.diagnose", "Find where the twin and a session disagree, and why."),
     "simulate": ("hexatherm.cli.simulate", "Simulate a session (and its truth) from a scenario."),
+    "report": ("hexatherm.cli.report", "Write an HTML report of a session with figures."),
 }
 
 

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
+import numpy as np
 
 from hexatherm.cli.options import (
     clean_errors,
@@ -13,6 +15,12 @@ from hexatherm.cli.options import (
     output_dir_option,
     overwrite_option,
 )
+
+if TYPE_CHECKING:
+    from hexatherm.uncertainty import PoseUncertainty
+
+#: exit status of ``process --strict`` when a quality check fails
+QUALITY_EXIT = 3
 
 
 @click.command("process")
@@ -29,23 +37,51 @@ from hexatherm.cli.options import (
               show_default=True, help="Warn about a step whose registration RMS is larger.")
 @click.option("--strict-registration", is_flag=True,
               help="Fail instead of warning when a registration exceeds its tolerance.")
+@click.option("--mc", "mc", type=click.IntRange(min=0), default=0, show_default=True,
+              metavar="N", help="Monte Carlo uncertainty with N draws (GUM Supplement 1), "
+              "checked against the linear propagation; 0: linear propagation only.")
+@click.option("--seed", type=int, default=0, show_default=True,
+              help="Seed of the Monte Carlo draws.")
+@click.option("--quality-threshold", "quality_threshold", multiple=True, metavar="NAME=VALUE",
+              help="Override a quality check's limit (repeatable): form_um, radius_dev_um, "
+              "distance_dev_um, registration_rms_um, time_gap_s, temperature_change_C, "
+              "min_rcond; inf (0 for min_rcond) disables a check.")
+@click.option("--method", "methods", type=click.Choice(["references", "twin"]), multiple=True,
+              default=("references",), show_default=True,
+              help="Corrections to report; 'twin' adds the poses corrected by the twin from "
+              "the thermocouples alone (Tx_twin_mm ...), no reference needed.")
+@click.option("--hexapod", "hexapod_path", type=click.Path(exists=True, dir_okay=False,
+              path_type=Path), default=None,
+              help="The twin's model for --method twin (e.g. the hexapod.yaml of hexatherm "
+              "diagnose); default: the session's hexapod file.")
+@click.option("--strict", is_flag=True,
+              help=f"Exit with status {QUALITY_EXIT} when a quality check fails (the results "
+              "are still written); without it a failed check is a warning.")
 @clean_errors
 def command(session: Path, out: str | None, overwrite: bool, interpolation: str,
             fixed_diameter: bool, distance_tolerance_um: float,
-            registration_tolerance_um: float, strict_registration: bool) -> None:
+            registration_tolerance_um: float, strict_registration: bool, mc: int, seed: int,
+            quality_threshold: tuple[str, ...], methods: tuple[str, ...],
+            hexapod_path: Path | None, strict: bool) -> None:
     """Process SESSION (a folder with session.yaml, or the file itself).
 
     Measurement files may hold ball centres or probed points (CSV or DMIS);
     points are fitted with spheres. Writes OUT/poses.csv (conventional and
-    corrected pose of every target), OUT/legs.csv (pose, IGM leg lengths and
-    registration residual of every step) and OUT/fits.csv (quality of every ball
-    centre), and prints the deviations from the commanded poses side by side, in
+    corrected pose of every target, with standard uncertainties), OUT/legs.csv
+    (pose, IGM leg lengths and registration residual of every step), OUT/fits.csv
+    (quality of every ball centre) and OUT/quality.csv (quality checks of every
+    step), and prints the deviations from the commanded poses side by side, in
     um and urad.
     """
     from hexatherm.io.atomic import refuse_existing
     from hexatherm.io.results import deviation_table, write_results
     from hexatherm.pipeline import Checks, process_session
+    from hexatherm.quality import QualityThresholds, parse_threshold, quality_checks
+    from hexatherm.uncertainty import pose_uncertainty
 
+    if mc == 1:
+        raise click.BadParameter("Monte Carlo needs at least 2 draws", param_hint="'--mc'")
+    thresholds = QualityThresholds(**dict(parse_threshold(t) for t in quality_threshold))
     folder = session if session.is_dir() else session.parent
     out_dir = Path(out) if out is not None else folder / "results"
     refuse_existing(out_dir, overwrite)
@@ -54,10 +90,60 @@ def command(session: Path, out: str | None, overwrite: bool, interpolation: str,
                              0.0 if fixed_diameter else None, checks)
     for warning in result.warnings:
         echo_err(f"warning: {warning}")
-    written = write_results(result, out_dir, overwrite=overwrite)
+    twin = None
+    if "twin" in methods:
+        from hexatherm.io.config import read_hexapod
+        from hexatherm.twinmethod import twin_poses
+
+        model = result.session.hexapod if hexapod_path is None else read_hexapod(hexapod_path)
+        twin = twin_poses(result, model, str(hexapod_path or ""))
+        gap = (twin - result.correction.corrected)[:, :3] * 1e3
+        effects = ", ".join(e["name"] for e in model.effects) or "none"
+        echo_err(f"twin ({hexapod_path or 'the session hexapod'}; effects: {effects}): "
+                 f"twin-corrected minus corrected by the references, RMS "
+                 f"{np.sqrt(np.mean(gap**2)):.3f} um over the targets' translations")
+    elif hexapod_path is not None:
+        raise click.BadParameter("--hexapod is the twin's model: use it with --method twin",
+                                 param_hint="'--hexapod'")
+    uncertainty = pose_uncertainty(result, mc=mc, seed=seed)
+    quality = quality_checks(result, thresholds)
+    written = write_results(result, out_dir, overwrite=overwrite, uncertainty=uncertainty,
+                            quality=quality, twin=twin)
     n = len(result.correction.target_index)
     echo_err(f"session {result.session.name}: {len(result.session.plan.labels)} steps, "
              f"{n} targets, interpolation {interpolation}")
-    click.echo(deviation_table(result))
+    click.echo(deviation_table(result, twin))
+    for line in uncertainty_summary(uncertainty):
+        echo_err(line)
+    echo_err(f"quality checks of {len(quality.frame)} steps:")
+    for line in quality.summary():
+        echo_err(line)
     for path in written:
         echo_err(f"wrote {path}")
+    if quality.any_failed:
+        steps = quality.failed_steps
+        what = (f"quality checks failed at {len(steps)} step(s) ({', '.join(steps[:5])}"
+                + (" ..." if len(steps) > 5 else "") + ")")
+        if strict:
+            echo_err(f"error: {what}; exit status {QUALITY_EXIT} (--strict)")
+            raise SystemExit(QUALITY_EXIT)
+        echo_err(f"warning: {what}")
+
+
+def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
+    """Screen lines: where the centre uncertainties came from, and the largest pose ones."""
+    lines = [f"uncertainty: centres from {uncertainty.centres.description}"]
+    for name, u in (("conventional", uncertainty.conventional_u),
+                    ("corrected", uncertainty.corrected_u)):
+        if u.size == 0:
+            continue
+        t_um, r_urad = u[:, :3].max() * 1e3, np.deg2rad(u[:, 3:]).max() * 1e6
+        lines.append(f"  u ({uncertainty.method}, k=1) of the {name} poses: up to "
+                     f"{t_um:.3f} um, {r_urad:.2f} urad")
+    if uncertainty.method == "monte-carlo":
+        ratio = uncertainty.ratio_to_linear()
+        if np.isfinite(ratio).any():
+            lines.append(f"  Monte Carlo ({uncertainty.draws} draws, seed {uncertainty.seed}) "
+                         f"over linear propagation: {np.nanmin(ratio):.3f} to "
+                         f"{np.nanmax(ratio):.3f}")
+    return lines

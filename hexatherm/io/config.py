@@ -292,6 +292,30 @@ def plan_to_yaml(plan: Plan) -> str:
 
 # --------------------------------------------------------------------- session
 @dataclass(frozen=True)
+class CmmNoise:
+    """The CMM's probing noise, from the session's optional ``cmm:`` mapping (an extension).
+
+    Used for the uncertainty of ball centres that come without fit residuals
+    (centres files): the centre covariance of a free-radius sphere fit to
+    ``points_per_ball`` points spread over a cap of ``cap_angle_deg``.
+
+    Attributes
+    ----------
+    point_noise_um : float
+        Standard deviation of a probed point along the surface normal
+        (``point_noise_um``, or ``mpe_um / 2`` as for an ISO 10360 MPE).
+    points_per_ball : int or None
+        Points probed per ball (None: the plan's ``points_per_ball``).
+    cap_angle_deg : float
+        Half-angle of the probed cap (default 70).
+    """
+
+    point_noise_um: float
+    points_per_ball: int | None = None
+    cap_angle_deg: float = 70.0
+
+
+@dataclass(frozen=True)
 class Session:
     """A session folder as described by its ``session.yaml``.
 
@@ -305,6 +329,9 @@ class Session:
     plan : Plan
     measurements : tuple of Path
     temperatures : Path or None
+    cmm : CmmNoise or None
+        The optional ``cmm:`` mapping (``point_noise_um`` or ``mpe_um``,
+        ``points_per_ball``, ``cap_angle_deg``).
     """
 
     path: Path
@@ -314,6 +341,7 @@ class Session:
     plan: Plan
     measurements: tuple[Path, ...]
     temperatures: Path | None
+    cmm: CmmNoise | None = None
 
 
 def read_session(path: str | os.PathLike[str]) -> Session:
@@ -324,7 +352,7 @@ def read_session(path: str | os.PathLike[str]) -> Session:
     doc = YamlDoc.load(path)
     doc.check_format(SESSION_FORMAT)
     doc.check_keys(["format", "name", "hexapod", "balls", "plan", "measurements",
-                    "temperatures"])
+                    "temperatures", "cmm"])
     name = doc.string("name", default=path.parent.name)
 
     def existing(*keys: Any) -> Path:
@@ -346,16 +374,45 @@ def read_session(path: str | os.PathLike[str]) -> Session:
     temperatures = None
     if doc.get("temperatures", default=None) is not None:
         temperatures = existing("temperatures")
-    return Session(path, name, hexapod, balls, plan, measurements, temperatures)
+    return Session(path, name, hexapod, balls, plan, measurements, temperatures,
+                   _read_cmm(doc))
+
+
+def _read_cmm(doc: YamlDoc) -> CmmNoise | None:
+    """The optional ``cmm:`` mapping of a session file."""
+    if doc.get("cmm", default=None) is None:
+        return None
+    doc.check_keys(["point_noise_um", "mpe_um", "points_per_ball", "cap_angle_deg"], "cmm")
+    given = [k for k in ("point_noise_um", "mpe_um") if doc.get("cmm", k, default=None) is not None]
+    if len(given) != 1:
+        raise doc.error("give point_noise_um or mpe_um (sigma = MPE/2), exactly one", "cmm",
+                        *given[1:])
+    sigma = doc.number("cmm", given[0], positive=True)
+    if given[0] == "mpe_um":
+        sigma /= 2.0
+    points = doc.get("cmm", "points_per_ball", default=None)
+    if points is not None and (isinstance(points, bool) or not isinstance(points, int)
+                               or points < 4):
+        raise doc.error(f"expected a whole number >= 4, got {points!r}", "cmm", "points_per_ball")
+    cap = doc.number("cmm", "cap_angle_deg", default=70.0, positive=True)
+    if cap > 180.0:
+        raise doc.error(f"must be at most 180, got {cap!r}", "cmm", "cap_angle_deg")
+    return CmmNoise(sigma, points, cap)
 
 
 def session_to_yaml(name: str, hexapod: str, balls: str, plan: str, measurements: list[str],
-                    temperatures: str | None = None) -> str:
-    """The session file text (paths relative to the session file)."""
+                    temperatures: str | None = None, cmm: dict[str, float] | None = None
+                    ) -> str:
+    """The session file text (paths relative to the session file).
+
+    ``cmm`` is the optional ``cmm:`` mapping, e.g. ``{"mpe_um": 1.0}``.
+    """
     doc: dict[str, Any] = {"format": SESSION_FORMAT, "name": name, "hexapod": hexapod,
                            "balls": balls, "plan": plan, "measurements": list(measurements)}
     if temperatures is not None:
         doc["temperatures"] = temperatures
+    if cmm:
+        doc["cmm"] = dict(cmm)
     return _dump(doc)
 
 
@@ -385,7 +442,7 @@ def write_text(path: str | os.PathLike[str], text: str) -> None:
 
 
 __all__ = [
-    "Balls", "Session", "read_hexapod", "read_balls", "read_plan", "read_session",
+    "Balls", "CmmNoise", "Session", "read_hexapod", "read_balls", "read_plan", "read_session",
     "hexapod_to_yaml", "balls_to_yaml", "plan_to_yaml", "session_to_yaml", "InputError",
 ]
 

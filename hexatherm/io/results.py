@@ -1,4 +1,4 @@
-"""Result tables of ``hexatherm process``: ``poses.csv``, ``legs.csv`` and the screen table.
+"""Result tables of ``hexatherm process``: poses, legs, fits, quality and the screen table.
 
 ``poses.csv`` has the contract columns first (spec: "Results of hexatherm
 process"), then these extensions, documented in the README:
@@ -8,7 +8,13 @@ process"), then these extensions, documented in the README:
   to the first reference), subtracted from its leg lengths;
 * ``ref_before``, ``ref_after``: labels of the references used (empty: none);
 * ``dt_before_s``, ``dt_after_s``: ``t_S - t_before`` and ``t_after - t_S``;
-* ``weight_after``: weight of the later reference in the time interpolation.
+* ``weight_after``: weight of the later reference in the time interpolation;
+* ``u_Tx_conv_mm`` .. ``u_Rz_conv_deg``, ``u_Tx_corr_mm`` .. ``u_Rz_corr_deg``:
+  standard uncertainties (k = 1) of the conventional and corrected poses
+  (:mod:`hexatherm.uncertainty`).
+
+``quality.csv`` has one row per step with the quality checks of
+:mod:`hexatherm.quality`.
 
 ``legs.csv`` has one row per step: ``label,kind,time``, the step's measured pose
 relative to O (``Tx_mm`` ...), its IGM leg lengths ``q_leg1_mm`` .. and, for
@@ -19,6 +25,7 @@ from __future__ import annotations
 
 import io
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -26,6 +33,10 @@ import pandas as pd
 from hexatherm.io.atomic import atomic_output_dir
 from hexatherm.io.records import seconds_to_iso
 from hexatherm.pipeline import ProcessResult, nominal_fit_diameter_mm
+
+if TYPE_CHECKING:
+    from hexatherm.quality import QualityReport
+    from hexatherm.uncertainty import PoseUncertainty
 
 POSE_NAMES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
 POSE_UNITS = ("mm", "mm", "mm", "deg", "deg", "deg")
@@ -47,8 +58,13 @@ def _times(result: ProcessResult, seconds: np.ndarray) -> list[str] | np.ndarray
     return seconds
 
 
-def poses_frame(result: ProcessResult) -> pd.DataFrame:
-    """The ``poses.csv`` table, one row per target."""
+def poses_frame(result: ProcessResult, uncertainty: PoseUncertainty | None = None,
+                twin: np.ndarray | None = None) -> pd.DataFrame:
+    """The ``poses.csv`` table, one row per target.
+
+    ``u_*`` columns with ``uncertainty``; ``*_twin_*`` columns (after the contract
+    columns) with ``twin``, the twin-corrected poses (M, 6).
+    """
     corr = result.correction
     plan = result.session.plan
     idx = corr.target_index
@@ -57,9 +73,11 @@ def poses_frame(result: ProcessResult) -> pd.DataFrame:
         "label": labels[idx],
         "time": _times(result, result.centres.times_s[idx]),
     }
-    for cols, values in ((pose_columns("conv"), corr.conventional),
-                         (pose_columns("corr"), corr.corrected),
-                         (pose_columns("cmd"), plan.poses[idx])):
+    blocks = [(pose_columns("conv"), corr.conventional), (pose_columns("corr"), corr.corrected)]
+    if twin is not None:
+        blocks.append((pose_columns("twin"), np.asarray(twin)))
+    blocks.append((pose_columns("cmd"), plan.poses[idx]))
+    for cols, values in blocks:
         for j, col in enumerate(cols):
             data[col] = values[:, j]
     for leg in LEGS:
@@ -69,6 +87,11 @@ def poses_frame(result: ProcessResult) -> pd.DataFrame:
     data["dt_before_s"] = corr.dt_before_s
     data["dt_after_s"] = corr.dt_after_s
     data["weight_after"] = corr.weight_after
+    if uncertainty is not None:
+        for tag, values in (("conv", uncertainty.conventional_u),
+                            ("corr", uncertainty.corrected_u)):
+            for j, col in enumerate(pose_columns(tag)):
+                data[f"u_{col}"] = values[:, j]
     return pd.DataFrame(data)
 
 
@@ -132,10 +155,25 @@ def to_csv_text(frame: pd.DataFrame) -> str:
     return buffer.getvalue()
 
 
-def write_results(result: ProcessResult, out: str | Path, overwrite: bool = False) -> list[Path]:
-    """Write ``poses.csv``, ``legs.csv``, ``fits.csv`` into ``out``, replacing it atomically."""
-    tables = {"poses.csv": poses_frame(result), "legs.csv": legs_frame(result),
+def write_results(result: ProcessResult, out: str | Path, overwrite: bool = False,
+                  uncertainty: PoseUncertainty | None = None,
+                  quality: QualityReport | None = None, twin: np.ndarray | None = None
+                  ) -> list[Path]:
+    """Write ``poses.csv``, ``legs.csv``, ``fits.csv`` (and ``quality.csv``) into ``out``.
+
+    The folder is replaced atomically. ``uncertainty`` defaults to linear
+    propagation (:func:`hexatherm.uncertainty.pose_uncertainty`); ``quality.csv``
+    is written when ``quality`` is given (``hexatherm process`` always gives it);
+    ``twin`` (M, 6) adds the twin-corrected poses (``process --method twin``).
+    """
+    if uncertainty is None:
+        from hexatherm.uncertainty import pose_uncertainty
+
+        uncertainty = pose_uncertainty(result)
+    tables = {"poses.csv": poses_frame(result, uncertainty, twin), "legs.csv": legs_frame(result),
               "fits.csv": fits_frame(result)}
+    if quality is not None:
+        tables["quality.csv"] = quality.frame
     texts = {name: to_csv_text(frame) for name, frame in tables.items()}
     with atomic_output_dir(out, overwrite=overwrite) as tmp:
         for name, text in texts.items():
@@ -143,10 +181,11 @@ def write_results(result: ProcessResult, out: str | Path, overwrite: bool = Fals
     return [Path(out) / name for name in texts]
 
 
-def deviation_table(result: ProcessResult) -> str:
+def deviation_table(result: ProcessResult, twin: np.ndarray | None = None) -> str:
     """Side-by-side table of conventional and corrected deviations from the commanded pose.
 
-    Translations in micrometres, rotations in microradians.
+    Translations in micrometres, rotations in microradians; with ``twin`` (M, 6) a
+    third block: the poses corrected by the twin from the thermocouples.
     """
     corr = result.correction
     plan = result.session.plan
@@ -156,23 +195,25 @@ def deviation_table(result: ProcessResult) -> str:
         dev = pose - cmd
         return np.column_stack([dev[:, :3] * 1e3, np.deg2rad(dev[:, 3:]) * 1e6])
 
-    conv, cor = deviations(corr.conventional), deviations(corr.corrected)
+    tables = [deviations(corr.conventional), deviations(corr.corrected)]
+    titles = ["conventional - commanded", "corrected - commanded"]
+    if twin is not None:
+        tables.append(deviations(np.asarray(twin)))
+        titles.append("twin-corrected - commanded")
     labels = [plan.labels[i] for i in corr.target_index]
     width = max([5, *map(len, labels)])
     names = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
     block = " ".join(f"{n:>8}" for n in names)
+    units = f"{'(um)':>26} {'(urad)':>26}"
     lines = [
-        f"{'':{width}}  {'conventional - commanded':^53}  |  {'corrected - commanded':^53}",
-        f"{'step':{width}}  {block}  |  {block}",
-        f"{'':{width}}  {'(um)':>26} {'(urad)':>26}  |  {'(um)':>26} {'(urad)':>26}",
+        f"{'':{width}}  " + "  |  ".join(f"{t:^53}" for t in titles),
+        f"{'step':{width}}  " + "  |  ".join(block for _ in titles),
+        f"{'':{width}}  " + "  |  ".join(units for _ in titles),
     ]
-    for label, a, b in zip(labels, conv, cor, strict=True):
-        left = " ".join(f"{v:8.3f}" for v in a)
-        right = " ".join(f"{v:8.3f}" for v in b)
-        lines.append(f"{label:{width}}  {left}  |  {right}")
+    for i, label in enumerate(labels):
+        lines.append(f"{label:{width}}  " + "  |  ".join(
+            " ".join(f"{v:8.3f}" for v in table[i]) for table in tables))
     if len(labels) > 1:
-        lines.append(
-            f"{'spread':{width}}  " + " ".join(f"{v:8.3f}" for v in np.ptp(conv, axis=0))
-            + "  |  " + " ".join(f"{v:8.3f}" for v in np.ptp(cor, axis=0))
-        )
+        lines.append(f"{'spread':{width}}  " + "  |  ".join(
+            " ".join(f"{v:8.3f}" for v in np.ptp(table, axis=0)) for table in tables))
     return "\n".join(lines)

@@ -1,0 +1,53 @@
+"""``hexatherm report``: a self-contained HTML page of a session, with figures."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from hexatherm.cli.options import clean_errors, echo_err, interpolation_option, overwrite_option
+
+
+@click.command("report")
+@click.argument("session", type=click.Path(exists=True, path_type=Path))
+@click.option("-o", "--out", "out", type=click.Path(dir_okay=False, path_type=Path),
+              default=None, help="Output HTML file [default: SESSION/report.html].")
+@overwrite_option
+@interpolation_option
+@click.option("--fixed-diameter", "fixed_diameter", is_flag=True,
+              help="Fit spheres to probed points with the radius fixed to the balls file's "
+              "(as in process); default: free radius.")
+@click.option("--mc", type=click.IntRange(min=0), default=0, show_default=True,
+              help="Monte Carlo draws for the pose uncertainty (0: linear propagation).")
+@click.option("--seed", type=int, default=0, show_default=True,
+              help="Seed of the Monte Carlo draws.")
+@click.option("--quality-threshold", "quality_thresholds", multiple=True, metavar="NAME=VALUE",
+              help="Change a quality check's limit, e.g. form_um=5 (repeatable).")
+@clean_errors
+def command(session: Path, out: Path | None, overwrite: bool, interpolation: str,
+            fixed_diameter: bool, mc: int, seed: int,
+            quality_thresholds: tuple[str, ...]) -> None:
+    """Process SESSION (a folder with session.yaml, or the file itself) and write its report.
+
+    One HTML file, figures embedded: the pose parameters of every target,
+    conventional and corrected, as deviations from the commanded pose with their
+    uncertainty (the paper's Figure 6); the temperatures (Figure 7); the legs'
+    growth at the references; the registration residuals; quality flags; and the
+    session's metadata. Nothing is written when processing fails.
+    """
+    from hexatherm.io.atomic import atomic_write_text, refuse_existing
+    from hexatherm.pipeline import process_session
+    from hexatherm.quality import QualityThresholds, parse_threshold
+    from hexatherm.report import build_report
+
+    thresholds = QualityThresholds(**dict(parse_threshold(t) for t in quality_thresholds))
+    folder = session if session.is_dir() else session.parent
+    out_file = out if out is not None else folder / "report.html"
+    refuse_existing(out_file, overwrite)
+    result = process_session(session, interpolation,  # type: ignore[arg-type]
+                             0.0 if fixed_diameter else None)
+    for warning in result.warnings:
+        echo_err(f"warning: {warning}")
+    atomic_write_text(out_file, build_report(result, mc, seed, thresholds))
+    echo_err(f"wrote {out_file}")

@@ -1,0 +1,263 @@
+"""Quality checks of every step of a processed session (``OUT/quality.csv``).
+
+One row per plan step; each check has a measured value (units in the column
+name) and a pass/fail column ``ok_<check>``. A value that does not apply to a
+step (no sphere fit, not a target, no temperature log) is NaN and the check
+passes.
+
+==============  =========================  ===============================================
+check           value                      fails when
+==============  =========================  ===============================================
+form            ``form_um``                largest sphere form error (max - min residual)
+                                           of the step's balls > ``form_um``
+radius          ``radius_dev_um``          fitted radius - nominal (the ball of largest
+                                           deviation, signed), ``|.|`` > ``radius_dev_um``
+distance        ``distance_dev_um``        measured - nominal inter-ball distance (the
+                                           worst pair, signed), ``|.|`` > ``distance_dev_um``
+registration    ``registration_rms_um``    registration RMS residual > ``registration_rms_um``
+time_gap        ``time_gap_s``             a target's largest time to a reference it uses
+                                           > ``time_gap_s``
+temperature     ``temperature_change_C``   a target's largest leg temperature change to a
+                                           reference it uses > ``temperature_change_C``
+conditioning    ``jacobian_rcond``         reciprocal condition number of the Jacobian at a
+                                           target's corrected pose (the FGM) < ``min_rcond``
+==============  =========================  ===============================================
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from hexatherm.core.planning import DEFAULT_MIN_RCOND
+from hexatherm.core.registration import check_distances
+from hexatherm.errors import HexathermError
+from hexatherm.pipeline import ProcessResult, nominal_fit_diameter_mm
+
+FloatArray = npt.NDArray[np.float64]
+
+__all__ = ["CHECKS", "QualityReport", "QualityThresholds", "parse_threshold",
+           "quality_checks"]
+
+
+@dataclass(frozen=True)
+class QualityThresholds:
+    """Limits of the quality checks (``--quality-threshold NAME=VALUE`` overrides one).
+
+    Attributes
+    ----------
+    form_um : float
+        Largest sphere form error (max - min residual) of a ball: about 4 sigma of
+        the probing noise for 25 points, so 10 um holds CMMs of up to 2.5 um noise.
+    radius_dev_um : float
+        Largest deviation of a fitted radius from the nominal one (a wrong ball,
+        a missed probe compensation, a bad fit).
+    distance_dev_um : float
+        Largest deviation of an inter-ball distance from the balls file (``process``
+        refuses a step beyond ``--distance-tolerance-um``, 50 um; this flags less).
+    registration_rms_um : float
+        Largest registration RMS residual of a step.
+    time_gap_s : float
+        Largest time between a target and a reference it uses (the plan's ``--max-gap``).
+    temperature_change_C : float
+        Largest leg temperature change between a target and a reference it uses
+        (1 K is about 4.5 um of growth per leg for the Symetrie-like legs, left to
+        the correction's model and interpolation to carry over).
+    min_rcond : float
+        Smallest reciprocal condition number of the Jacobian at a target (as ``plan``).
+    """
+
+    form_um: float = 10.0
+    radius_dev_um: float = 10.0
+    distance_dev_um: float = 10.0
+    registration_rms_um: float = 5.0
+    time_gap_s: float = 600.0
+    temperature_change_C: float = 1.0
+    min_rcond: float = DEFAULT_MIN_RCOND
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if not (isinstance(value, int | float) and value >= 0 and not np.isnan(value)):
+                raise ValueError(f"quality threshold {f.name} must be a number >= 0, "
+                                 f"got {value!r}")
+
+
+#: check name -> (value column, threshold field, value must be at least the threshold)
+CHECKS: dict[str, tuple[str, str, bool]] = {
+    "form": ("form_um", "form_um", False),
+    "radius": ("radius_dev_um", "radius_dev_um", False),
+    "distance": ("distance_dev_um", "distance_dev_um", False),
+    "registration": ("registration_rms_um", "registration_rms_um", False),
+    "time_gap": ("time_gap_s", "time_gap_s", False),
+    "temperature": ("temperature_change_C", "temperature_change_C", False),
+    "conditioning": ("jacobian_rcond", "min_rcond", True),
+}
+
+
+@dataclass(frozen=True)
+class QualityReport:
+    """The quality checks of a session.
+
+    Attributes
+    ----------
+    frame : pandas.DataFrame
+        One row per step: ``label``, ``kind``, the values of :data:`CHECKS`,
+        ``ok_<check>`` for each check, ``failed`` (the failed checks, ``;``-separated).
+    thresholds : QualityThresholds
+    """
+
+    frame: pd.DataFrame
+    thresholds: QualityThresholds
+
+    @property
+    def failed_steps(self) -> list[str]:
+        """Labels of the steps with a failed check."""
+        return self.frame.loc[self.frame["failed"] != "", "label"].tolist()
+
+    @property
+    def any_failed(self) -> bool:
+        """Whether any check failed on any step."""
+        return bool((self.frame["failed"] != "").any())
+
+    def summary(self) -> list[str]:
+        """Screen lines: per check the worst value, its limit and the failing steps."""
+        lines = []
+        for check, (column, field, at_least) in CHECKS.items():
+            values = self.frame[column].to_numpy(dtype=float)
+            limit = getattr(self.thresholds, field)
+            shown = values if at_least else np.abs(values)
+            if np.all(np.isnan(shown)):
+                worst_text = "n/a"
+            else:
+                worst = np.nanmin(shown) if at_least else np.nanmax(shown)
+                worst_text = f"{worst:.4g}"
+            failing = self.frame.loc[~self.frame[f"ok_{check}"], "label"].tolist()
+            status = "ok" if not failing else (
+                f"FAILED at {len(failing)} step(s): " + ", ".join(failing[:5])
+                + (" ..." if len(failing) > 5 else ""))
+            sign = ">=" if at_least else "<="
+            lines.append(f"  {check:<13} {column:<22} worst {worst_text:>9}  "
+                         f"(limit {sign} {limit:g})  {status}")
+        return lines
+
+
+def parse_threshold(text: str) -> tuple[str, float]:
+    """``NAME=VALUE`` -> ``(name, value)``, checked against :class:`QualityThresholds`.
+
+    >>> parse_threshold("form_um=5")
+    ('form_um', 5.0)
+    >>> parse_threshold("form=5")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    hexatherm.errors.HexathermError: --quality-threshold 'form=5': unknown name 'form'; ...
+    """
+    names = [f.name for f in dataclasses.fields(QualityThresholds)]
+    name, sep, value = text.partition("=")
+    name = name.strip()
+    if not sep:
+        raise HexathermError(f"--quality-threshold {text!r}: expected NAME=VALUE, NAME one of "
+                             f"{', '.join(names)}")
+    if name not in names:
+        raise HexathermError(f"--quality-threshold {text!r}: unknown name {name!r}; expected one "
+                             f"of {', '.join(names)}")
+    try:
+        number = float(value)
+    except ValueError:
+        raise HexathermError(f"--quality-threshold {text!r}: {value.strip()!r} is not a "
+                             "number") from None
+    if not number >= 0:
+        raise HexathermError(f"--quality-threshold {text!r}: must be a number >= 0 "
+                             "(inf disables a limit)")
+    return name, number
+
+
+def _signed_worst(values: FloatArray) -> FloatArray:
+    """Per row the entry of largest magnitude, with its sign (NaN when all are NaN)."""
+    mag = np.where(np.isnan(values), -1.0, np.abs(values))
+    pick = np.take_along_axis(values, np.argmax(mag, axis=1)[:, None], axis=1)[:, 0]
+    return np.where(np.isnan(values).all(axis=1), np.nan, pick)
+
+
+def _row_max(values: FloatArray) -> FloatArray:
+    """Per row the largest entry ignoring NaN (NaN when all are NaN)."""
+    filled = np.where(np.isnan(values), -np.inf, values)
+    return np.where(np.isnan(values).all(axis=1), np.nan, filled.max(axis=1))
+
+
+def _ball_values(result: ProcessResult) -> tuple[FloatArray, FloatArray]:
+    """Form error (um) and radius deviation (um) of every step and ball (NaN: unknown)."""
+    plan, balls = result.session.plan, result.session.balls
+    step_index = {label: i for i, label in enumerate(plan.labels)}
+    ball_index = {name: j for j, name in enumerate(balls.names)}
+    nominal_mm = nominal_fit_diameter_mm(balls)
+    shape = (len(plan.labels), len(balls.names))
+    form, radius = np.full(shape, np.nan), np.full(shape, np.nan)
+    for rec in result.records:
+        si = np.array([step_index[s] for s in rec.label], dtype=np.intp)
+        bi = np.array([ball_index[b] for b in rec.ball], dtype=np.intp)
+        if "form_um" in rec.extra:
+            form[si, bi] = pd.to_numeric(pd.Series(rec.extra["form_um"]), errors="coerce")
+        if rec.diameter_mm is not None:
+            radius[si, bi] = (rec.diameter_mm - nominal_mm[bi]) / 2 * 1e3
+    return form, radius
+
+
+def _leg_temperatures(result: ProcessResult) -> FloatArray | None:
+    """Thermocouple temperatures of the legs at every step's time, (N, 6), or None."""
+    temps = result.temperatures
+    if temps is None:
+        return None
+    t = result.centres.times_s
+    return np.column_stack([np.interp(t, temps.time_s, temps.legs_C[:, i]) for i in range(6)])
+
+
+def quality_checks(result: ProcessResult,
+                   thresholds: QualityThresholds | None = None) -> QualityReport:
+    """Run every check of :data:`CHECKS` on every step of ``result``."""
+    thresholds = thresholds or QualityThresholds()
+    session = result.session
+    plan, balls, corr = session.plan, session.balls, result.correction
+    n = len(plan.labels)
+    targets = corr.target_index
+    form, radius = _ball_values(result)
+    distances = check_distances(result.centres.centres_mm, balls.centres_mm, balls.names)
+    values: dict[str, FloatArray] = {
+        "form_um": _row_max(form),
+        "radius_dev_um": _signed_worst(radius),
+        "distance_dev_um": _signed_worst(distances.deviation_mm * 1e3),
+        "registration_rms_um": np.asarray(result.registration.rms_um, dtype=float),
+    }
+    gap = np.full(n, np.nan)
+    gap[targets] = _row_max(np.column_stack([corr.dt_before_s, corr.dt_after_s]))
+    values["time_gap_s"] = gap
+    change = np.full(n, np.nan)
+    legs_c = _leg_temperatures(result)
+    if legs_c is not None and targets.size:
+        per_ref = []
+        for ref in (corr.before_index, corr.after_index):
+            diff = np.abs(legs_c[targets] - legs_c[np.maximum(ref, 0)]).max(axis=1)
+            per_ref.append(np.where(ref >= 0, diff, np.nan))
+        change[targets] = _row_max(np.column_stack(per_ref))
+    values["temperature_change_C"] = change
+    rcond = np.full(n, np.nan)
+    if targets.size:
+        sv = np.linalg.svd(session.hexapod.jacobian(corr.corrected), compute_uv=False)
+        rcond[targets] = sv[:, -1] / sv[:, 0]
+    values["jacobian_rcond"] = rcond
+
+    frame = pd.DataFrame({"label": list(plan.labels), "kind": list(plan.kinds), **values})
+    failed = [[] for _ in range(n)]  # type: list[list[str]]
+    for check, (column, field, at_least) in CHECKS.items():
+        value, limit = values[column], getattr(thresholds, field)
+        bad = (value < limit) if at_least else (np.abs(value) > limit)
+        bad &= ~np.isnan(value)
+        frame[f"ok_{check}"] = ~bad
+        for i in np.flatnonzero(bad):
+            failed[i].append(check)
+    frame["failed"] = [";".join(f) for f in failed]
+    return QualityReport(frame, thresholds)

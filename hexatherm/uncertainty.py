@@ -1,0 +1,182 @@
+"""Standard uncertainties of the conventional and corrected poses of a processed session.
+
+Glue between :class:`~hexatherm.pipeline.ProcessResult` and the pure math of
+:mod:`hexatherm.core.uncertainty`. The covariance of every ball centre comes
+from, in this order of preference:
+
+1. the sphere fit of its probed points (``s^2 (J^T J)^-1``, the full 3x3
+   covariance from the fit residuals);
+2. the ``u_um`` column of a centres file (isotropic: ``u^2 I``);
+3. the session's ``cmm:`` mapping (point noise, or MPE / 2): the covariance of
+   a free-radius fit to ``points_per_ball`` points over a cap of
+   ``cap_angle_deg`` around the CMM's +Z;
+4. the registration residuals: ``s^2 I`` with ``s^2`` pooled over all steps
+   (``3k - 6`` degrees of freedom per step).
+
+It is then propagated through registration, IGM, correction and FGM, by the
+linear law (GUM) or by Monte Carlo (GUM Supplement 1).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from hexatherm.core.uncertainty import (
+    PoseChain,
+    cap_centre_covariance,
+    linear_covariance,
+    monte_carlo_covariance,
+    pooled_registration_variance,
+)
+from hexatherm.pipeline import ProcessResult, registration_weights
+
+FloatArray = npt.NDArray[np.float64]
+Method = Literal["linear", "monte-carlo"]
+
+__all__ = ["CentreCovariance", "PoseUncertainty", "centre_covariance", "pose_chain",
+           "pose_uncertainty"]
+
+
+@dataclass(frozen=True)
+class CentreCovariance:
+    """Covariance of every ball centre and where it came from.
+
+    Attributes
+    ----------
+    cov_mm2 : ndarray, shape (N, k, 3, 3)
+    source : ndarray of str, shape (N, k)
+        ``fit``, ``file``, ``cmm`` or ``registration`` (see the module docstring).
+    description : str
+        One line saying which sources were used, with their figures.
+    """
+
+    cov_mm2: FloatArray
+    source: npt.NDArray[np.str_]
+    description: str
+
+    @property
+    def u_um(self) -> FloatArray:
+        """RMS standard uncertainty per coordinate of each centre, ``sqrt(trace / 3)``, um."""
+        return np.sqrt(np.trace(self.cov_mm2, axis1=-2, axis2=-1) / 3) * 1e3
+
+
+@dataclass(frozen=True)
+class PoseUncertainty:
+    """Standard uncertainties (k = 1) of the M targets' poses.
+
+    Attributes
+    ----------
+    conventional_u, corrected_u : ndarray, shape (M, 6)
+        mm and deg, one row per target in ``result.correction.target_index`` order.
+    covariance : ndarray, shape (M, 12, 12)
+        Covariance of ``[conventional, corrected]`` of each target (the reported one).
+    linear_covariance : ndarray, shape (M, 12, 12)
+        By linear propagation (equal to ``covariance`` when ``method`` is linear).
+    method : {"linear", "monte-carlo"}
+    draws : int
+        Monte Carlo draws (0 for linear).
+    seed : int or None
+        Seed of the Monte Carlo generator.
+    centres : CentreCovariance
+        The input covariances.
+    """
+
+    conventional_u: FloatArray
+    corrected_u: FloatArray
+    covariance: FloatArray
+    linear_covariance: FloatArray
+    method: Method
+    draws: int
+    seed: int | None
+    centres: CentreCovariance
+
+    def ratio_to_linear(self) -> FloatArray:
+        """Reported over linear standard uncertainty, (M, 12) (1 for the linear method)."""
+        lin = np.sqrt(np.diagonal(self.linear_covariance, axis1=1, axis2=2))
+        rep = np.sqrt(np.diagonal(self.covariance, axis1=1, axis2=2))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(lin > 0, rep / np.where(lin > 0, lin, 1.0), np.nan)
+
+
+def centre_covariance(result: ProcessResult) -> CentreCovariance:
+    """Covariance (N, k, 3, 3) of every ball centre of ``result``, with its source."""
+    centres = result.centres
+    n, k = centres.centres_mm.shape[:2]
+    cov = np.full((n, k, 3, 3), np.nan)
+    source = np.full((n, k), "", dtype=object)
+    parts = []
+    if centres.cov_mm2 is not None:
+        fit = np.isfinite(centres.cov_mm2).all(axis=(-2, -1))
+        cov[fit] = centres.cov_mm2[fit]
+        source[fit] = "fit"
+        if fit.any():
+            u = np.sqrt(np.trace(cov[fit], axis1=-2, axis2=-1) / 3) * 1e3
+            parts.append(f"sphere fits of the probed points ({int(fit.sum())} centres, "
+                         f"u {np.median(u):.3g} um median per coordinate)")
+    file = (source == "") & np.isfinite(centres.u_um)
+    if file.any():
+        cov[file] = (centres.u_um[file] * 1e-3)[:, None, None] ** 2 * np.eye(3)
+        source[file] = "file"
+        parts.append(f"u_um of the centres file ({int(file.sum())} centres)")
+    rest = source == ""
+    cmm = result.session.cmm
+    if rest.any() and cmm is not None:
+        points = cmm.points_per_ball or result.session.plan.points_per_ball
+        cov[rest] = cap_centre_covariance(points, cmm.cap_angle_deg, cmm.point_noise_um * 1e-3)
+        source[rest] = "cmm"
+        parts.append(f"session cmm: point noise {cmm.point_noise_um:g} um, {points} points "
+                     f"over a {cmm.cap_angle_deg:g} deg cap ({int(rest.sum())} centres)")
+    elif rest.any():
+        var = pooled_registration_variance(result.registration.residuals_mm)
+        cov[rest] = var * np.eye(3)
+        source[rest] = "registration"
+        parts.append(f"registration residuals: {np.sqrt(var) * 1e3:.3g} um per coordinate, "
+                     f"pooled over {n} steps ({int(rest.sum())} centres; give cmm: in "
+                     "session.yaml for a stated CMM noise)")
+    return CentreCovariance(cov, source.astype(str), "; ".join(parts))
+
+
+def pose_chain(result: ProcessResult) -> PoseChain:
+    """The registration + correction chain of ``result`` as a function of the centres."""
+    corr = result.correction
+    return PoseChain(
+        hexapod=result.session.hexapod, plan=result.session.plan,
+        balls_mm=result.session.balls.centres_mm, before_index=corr.before_index,
+        after_index=corr.after_index, weight_after=corr.weight_after,
+        weights=registration_weights(result.centres.u_um), initial_poses=corr.corrected,
+    )
+
+
+def pose_uncertainty(result: ProcessResult, mc: int = 0, seed: int = 0) -> PoseUncertainty:
+    """Standard uncertainties of the conventional and corrected poses of every target.
+
+    Parameters
+    ----------
+    result : ProcessResult
+    mc : int
+        0 for linear propagation; otherwise the number of Monte Carlo draws
+        (at least 2; GUM Supplement 1 suggests 10^5 for 95 % intervals, a few
+        thousand are plenty for standard uncertainties).
+    seed : int
+        Seed of the Monte Carlo generator (``numpy.random.default_rng``).
+
+    Returns
+    -------
+    PoseUncertainty
+    """
+    centres = centre_covariance(result)
+    chain = pose_chain(result)
+    linear = linear_covariance(chain, result.centres.centres_mm, centres.cov_mm2)
+    covariance, method, draws = linear, "linear", 0
+    if mc:
+        covariance, _ = monte_carlo_covariance(chain, result.centres.centres_mm,
+                                               centres.cov_mm2, mc, np.random.default_rng(seed))
+        method, draws = "monte-carlo", int(mc)
+    u = np.sqrt(np.clip(np.diagonal(covariance, axis1=1, axis2=2), 0.0, None))
+    return PoseUncertainty(conventional_u=u[:, :6], corrected_u=u[:, 6:], covariance=covariance,
+                           linear_covariance=linear, method=method,  # type: ignore[arg-type]
+                           draws=draws, seed=seed if mc else None, centres=centres)

@@ -1,0 +1,88 @@
+"""``hexatherm report``: writes one HTML file, never replaces one unasked, fails cleanly."""
+
+from __future__ import annotations
+
+import base64
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+import hexatherm.report
+from hexatherm.cli import main
+
+SESSION = Path(__file__).resolve().parent.parent / "sessions" / "paper-zero-pose"
+IMG = re.compile(r'<img src="data:image/png;base64,([A-Za-z0-9+/=]+)"')
+
+
+def run(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+@pytest.fixture
+def session(tmp_path):
+    """A copy of the shipped session (the default output goes into the session folder)."""
+    folder = tmp_path / "paper"
+    shutil.copytree(SESSION, folder, ignore=shutil.ignore_patterns("expected", "truth"))
+    return folder
+
+
+def test_report_writes_the_page_into_the_session_folder(session):
+    result = run("report", session)
+    assert result.exit_code == 0, result.output
+    page = (session / "report.html").read_text(encoding="utf-8")
+    images = IMG.findall(page)
+    assert len(images) == 4
+    assert all(base64.b64decode(data).startswith(b"\x89PNG\r\n\x1a\n") for data in images)
+    assert "paper-zero-pose" in page and "<td>S10</td>" in page
+    assert f"wrote {session / 'report.html'}" in result.output
+    assert sorted(p.name for p in session.iterdir() if p.name.startswith(".")) == []
+
+
+def test_report_refuses_to_overwrite_unless_asked(session, tmp_path, monkeypatch):
+    out = tmp_path / "out" / "r.html"
+    out.parent.mkdir()
+    out.write_text("keep me\n")
+    again = run("report", session, "-o", out)
+    assert again.exit_code == 1 and "use --overwrite" in again.output
+    assert out.read_text() == "keep me\n"
+    # the page itself is tested above; here that --overwrite replaces the file and
+    # that the options reach the report
+    calls = []
+
+    def fake_report(result, mc, seed, thresholds):
+        calls.append((result.interpolation, mc, seed, thresholds.registration_rms_um))
+        return "<html>new</html>\n"
+
+    monkeypatch.setattr(hexatherm.report, "build_report", fake_report)
+    replaced = run("report", session, "-o", out, "--overwrite", "--interpolation", "before",
+                   "--mc", 50, "--seed", 3, "--quality-threshold", "registration_rms_um=1.5")
+    assert replaced.exit_code == 0, replaced.output
+    assert calls == [("before", 50, 3, 1.5)]
+    assert out.read_text() == "<html>new</html>\n"
+    assert [p.name for p in out.parent.iterdir()] == ["r.html"]
+
+
+def test_report_of_a_bad_session_fails_cleanly_and_writes_nothing(session):
+    lines = (session / "centres.csv").read_text().splitlines(keepends=True)
+    (session / "centres.csv").write_text("".join(line for line in lines
+                                                 if not line.startswith("S3,")))
+    result = run("report", session)
+    assert result.exit_code == 1
+    assert "step S3: not measured" in result.output and "Traceback" not in result.output
+    assert not (session / "report.html").exists()
+    assert not any(p.name.startswith(".") for p in session.iterdir())
+
+
+def test_report_refuses_a_bad_quality_threshold(session):
+    result = run("report", session, "--quality-threshold", "form=5")
+    assert result.exit_code == 1 and "unknown name 'form'" in result.output
+    assert not (session / "report.html").exists()
+
+
+def test_report_is_listed_by_help():
+    result = run("--help")
+    assert result.exit_code == 0 and "report" in result.output
+    assert "Write an HTML report of a session with figures." in result.output

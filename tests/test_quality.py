@@ -1,0 +1,130 @@
+"""Quality checks: each fires on a session made to fail it, and none on a good session."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from hexatherm.core.plan import Plan
+from hexatherm.errors import HexathermError
+from hexatherm.pipeline import process_session
+from hexatherm.quality import CHECKS, QualityThresholds, parse_threshold, quality_checks
+from hexatherm.twinsession import Heating, TwinSessionSpec, simulate_session, write_files
+from tests.sessions import BALLS, REFERENCE, ROOT, small_plan
+
+HEXAPOD_TEXT = (ROOT / "configs" / "symetrie-like.yaml").read_text()
+GAIN = (3.0, 7.0, 2.0, 3.0, 9.0, 3.5)
+
+
+def session(folder, *, plan=None, gain=GAIN, output="points", noise_mm=0.5e-3, **kw):
+    spec = TwinSessionSpec(name=folder.name, hexapod_text=HEXAPOD_TEXT, balls=BALLS,
+                           plan=plan or small_plan(3, 1),
+                           heating=Heating(on_s=0.0, tau_s=2400.0, gain_C=gain), seed=2,
+                           output=output, point_noise_mm=noise_mm, **kw)
+    write_files(simulate_session(spec).files, folder)
+    return folder
+
+
+def failing(folder, **kw):
+    """{check: labels of the steps where it failed}."""
+    frame = quality_checks(process_session(folder), **kw).frame
+    return {check: frame.loc[~frame[f"ok_{check}"], "label"].tolist() for check in CHECKS
+            if not frame[f"ok_{check}"].all()}
+
+
+def edit_points(folder, label, ball, dx=0.0, dz=0.0, first_only=False):
+    frame = pd.read_csv(folder / "points.csv", dtype={"time": str})
+    rows = np.flatnonzero((frame["label"] == label) & (frame["ball"] == ball))
+    rows = rows[:1] if first_only else rows
+    frame.loc[rows, "x"] += dx
+    frame.loc[rows, "z"] += dz
+    frame.to_csv(folder / "points.csv", index=False, float_format="%.9f")
+
+
+def replace_in(path, old, new):
+    text = path.read_text()
+    assert old in text
+    path.write_text(text.replace(old, new))
+
+
+def test_good_session_passes_every_check(tmp_path):
+    result = process_session(session(tmp_path / "s"))
+    report = quality_checks(result)
+    frame = report.frame
+    assert not report.any_failed and report.failed_steps == []
+    assert list(frame.columns[:2]) == ["label", "kind"] and len(frame) == 8
+    assert (frame["failed"] == "").all()
+    # every value is there: points (form, radius), temperatures, targets
+    targets = frame["kind"] == "target"
+    assert frame[["form_um", "radius_dev_um", "distance_dev_um",
+                  "registration_rms_um"]].notna().all().all()
+    assert frame.loc[targets, ["time_gap_s", "temperature_change_C",
+                               "jacobian_rcond"]].notna().all().all()
+    assert frame.loc[~targets, "time_gap_s"].isna().all()
+    assert all("ok" in line for line in report.summary())
+
+
+def test_form_error(tmp_path):
+    s = session(tmp_path / "s")
+    edit_points(s, "S2", "B1", dz=0.03, first_only=True)  # one point 30 um off the ball
+    assert failing(s) == {"form": ["S2"]}
+
+
+def test_radius_deviation(tmp_path):
+    s = session(tmp_path / "s")
+    replace_in(s / "balls.yaml", "diameter: 25.4", "diameter: 25.45")  # a 25 um wrong radius
+    assert failing(s) == {"radius": ["O", "R0", "S1", "R1", "S2", "R2", "S3", "R3"]}
+
+
+def test_inter_ball_distance_and_registration(tmp_path):
+    s = session(tmp_path / "s")
+    edit_points(s, "R2", "B3", dx=0.025)  # ball B3 of R2 25 um off: distances and residual
+    assert failing(s) == {"distance": ["R2"], "registration": ["R2"]}
+    # a registration residual beyond a tighter limit, with distances within theirs
+    assert failing(session(tmp_path / "t"),
+                   thresholds=QualityThresholds(registration_rms_um=0.05)) == {
+        "registration": ["O", "R0", "S1", "R1", "S2", "R2", "S3", "R3"]}
+
+
+def test_time_gap(tmp_path):
+    # the hexapod takes 800 s to move: targets 980 s from their references; little heating
+    s = session(tmp_path / "s", seconds_per_move=800.0, gain=(0.3,) * 6)
+    assert failing(s) == {"time_gap": ["S1", "S2", "S3"]}
+
+
+def test_temperature_change(tmp_path):
+    s = session(tmp_path / "s", gain=(30.0, 7.0, 2.0, 3.0, 9.0, 3.5))  # leg 1 heats fast
+    assert set(failing(s)) == {"temperature"}
+    # no temperatures file: not checked
+    replace_in(s / "session.yaml", "temperatures: temperatures.csv\n", "")
+    frame = quality_checks(process_session(s)).frame
+    assert frame["temperature_change_C"].isna().all() and frame["ok_temperature"].all()
+
+
+def test_fgm_conditioning(tmp_path):
+    # a target at Rz = 89.5 deg, next to the hexapod's singularity at 90 deg
+    plan = Plan.from_steps([("O", "origin", [0.0] * 6), ("R0", "reference", REFERENCE),
+                            ("S1", "target", [1.0, 2.0, 0.0, 0.1, 0.2, 3.0]),
+                            ("R1", "reference", REFERENCE),
+                            ("S2", "target", [0.0, 0.0, 0.0, 0.0, 0.0, 89.5]),
+                            ("R2", "reference", REFERENCE)], reference_pose=REFERENCE)
+    s = session(tmp_path / "s", plan=plan, output="centres", noise_mm=0.0)
+    assert failing(s) == {"conditioning": ["S2"]}
+
+
+def test_centres_session_skips_the_sphere_checks(tmp_path):
+    frame = quality_checks(process_session(session(tmp_path / "s", output="centres"))).frame
+    assert frame["form_um"].isna().all() and frame["radius_dev_um"].isna().all()
+    assert frame["ok_form"].all() and frame["ok_radius"].all()
+
+
+def test_thresholds_parse_and_refuse():
+    assert parse_threshold("time_gap_s=900") == ("time_gap_s", 900.0)
+    assert parse_threshold(" form_um = inf") == ("form_um", float("inf"))
+    for bad, message in (("form_um", "expected NAME=VALUE"), ("form=5", "unknown name 'form'"),
+                         ("form_um=abc", "'abc' is not a number"), ("form_um=-1", ">= 0")):
+        with pytest.raises(HexathermError, match=message):
+            parse_threshold(bad)
+    with pytest.raises(ValueError, match="form_um"):
+        QualityThresholds(form_um=float("nan"))

@@ -1,0 +1,181 @@
+"""Uncertainty of the poses: linear propagation, Monte Carlo, spread of repeated sessions."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from hexatherm.core.spherefit import fit_spheres
+from hexatherm.core.twin import probe_points
+from hexatherm.core.uncertainty import (
+    cap_centre_covariance,
+    colour_steps,
+    dependencies,
+    linear_covariance,
+    monte_carlo_covariance,
+    output_difference,
+)
+from hexatherm.errors import InputError
+from hexatherm.io.config import read_session
+from hexatherm.pipeline import process_session
+from hexatherm.twinsession import Heating, TwinSessionSpec, simulate_session, write_files
+from hexatherm.uncertainty import centre_covariance, pose_chain, pose_uncertainty
+from tests.sessions import BALLS, ROOT, make_session, small_plan
+
+HEXAPOD_TEXT = (ROOT / "configs" / "symetrie-like.yaml").read_text()
+GAIN = (3.0, 7.0, 2.0, 3.0, 9.0, 3.5)
+
+
+def points_session(folder, seed=0, n_targets=3, noise_mm=1e-3, **kw):
+    spec = TwinSessionSpec(name=folder.name, hexapod_text=HEXAPOD_TEXT, balls=BALLS,
+                           plan=small_plan(n_targets, 1),
+                           heating=Heating(on_s=0.0, tau_s=2400.0, gain_C=GAIN), seed=seed,
+                           output="points", point_noise_mm=noise_mm, **kw)
+    write_files(simulate_session(spec).files, folder)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def noisy(tmp_path_factory):
+    return process_session(points_session(tmp_path_factory.mktemp("u") / "s"))
+
+
+def test_chain_reproduces_the_method(noisy):
+    out = pose_chain(noisy)(noisy.centres.centres_mm)
+    expected = np.concatenate([noisy.correction.conventional, noisy.correction.corrected], 1)
+    assert np.abs(output_difference(out, expected)).max() < 1e-12
+
+
+def brute_force_covariance(chain, centres, cov, step_mm=1e-3):
+    """Full Jacobian of all outputs by all N*k*3 coordinates, one at a time."""
+    n, k = centres.shape[:2]
+    pert = np.broadcast_to(centres, (n, k, 3, 2, n, k, 3)).copy()
+    for s in range(n):
+        for b in range(k):
+            for a in range(3):
+                pert[s, b, a, 0, s, b, a] += step_mm
+                pert[s, b, a, 1, s, b, a] -= step_mm
+    out = chain(pert)
+    jac = output_difference(out[:, :, :, 0], out[:, :, :, 1]) / (2 * step_mm)  # (n,k,3,M,12)
+    jac = jac.reshape(n * k * 3, -1).T  # (M*12, n*k*3)
+    big = np.zeros((n * k * 3, n * k * 3))
+    for i in range(n * k):
+        big[3 * i:3 * i + 3, 3 * i:3 * i + 3] = cov.reshape(-1, 3, 3)[i]
+    full = jac @ big @ jac.T
+    m = full.shape[0] // 12
+    return np.array([full[12 * i:12 * i + 12, 12 * i:12 * i + 12] for i in range(m)])
+
+
+@pytest.mark.parametrize("interpolation", ["linear", "before", "nearest"])
+def test_coloured_jacobian_equals_the_brute_force_one(tmp_path, interpolation):
+    # one-sided references too: R S S R S S R
+    session = points_session(tmp_path / "s", n_targets=4)
+    plan_text = (session / "plan.yaml").read_text()
+    (session / "plan.yaml").write_text(re.sub(r"  - \{label: R[13],.*\n", "", plan_text))
+    (session / "points.csv").write_text("".join(
+        ln for ln in (session / "points.csv").read_text().splitlines(keepends=True)
+        if not ln.startswith(("R1,", "R3,"))))
+    result = process_session(session, interpolation=interpolation)
+    chain = pose_chain(result)
+    cov = centre_covariance(result).cov_mm2
+    fast = linear_covariance(chain, result.centres.centres_mm, cov)
+    slow = brute_force_covariance(chain, result.centres.centres_mm, cov)
+    scale = np.sqrt(np.einsum("mii->mi", slow))
+    assert np.abs(fast - slow).max() <= 1e-6 * scale.max() ** 2
+    np.testing.assert_allclose(np.sqrt(np.einsum("mii->mi", fast)), scale, rtol=1e-6)
+
+
+def test_colouring_separates_the_steps_of_every_target():
+    plan = small_plan(5)
+    adjacent = np.array(plan.adjacent_references())
+    deps = dependencies(plan, adjacent[:, 0], adjacent[:, 1])
+    colour = colour_steps(deps, len(plan.labels))
+    for row in deps:
+        used = colour[row[row >= 0]]
+        assert len(set(used.tolist())) == len(used)
+    assert colour.max() + 1 == 5  # O; R0; targets; two alternating sets of references
+
+
+def test_monte_carlo_agrees_with_linear_propagation_within_10_percent(noisy):
+    u = pose_uncertainty(noisy, mc=2000, seed=7)
+    assert u.method == "monte-carlo" and u.draws == 2000
+    ratio = u.ratio_to_linear()
+    assert np.all(np.abs(ratio - 1) < 0.10), ratio
+    again = pose_uncertainty(noisy, mc=2000, seed=7)
+    np.testing.assert_array_equal(again.corrected_u, u.corrected_u)  # seeded
+
+
+def test_monte_carlo_mean_is_the_measured_value(noisy):
+    chain = pose_chain(noisy)
+    cov = centre_covariance(noisy).cov_mm2
+    _, mean = monte_carlo_covariance(chain, noisy.centres.centres_mm, cov, 500,
+                                     np.random.default_rng(1))
+    u = pose_uncertainty(noisy)
+    measured = np.concatenate([noisy.correction.conventional, noisy.correction.corrected], 1)
+    both_u = np.concatenate([u.conventional_u, u.corrected_u], 1)
+    assert np.all(np.abs(output_difference(mean, measured)) < 4 * both_u / np.sqrt(500))
+
+
+def test_spread_of_repeated_sessions_matches_the_reported_uncertainty(tmp_path):
+    # the same session (truth) with 40 different CMM noise draws; points fitted by process
+    poses, u2 = [], []
+    for seed in range(40):
+        result = process_session(points_session(tmp_path / f"s{seed}", seed=seed, n_targets=4))
+        u = pose_uncertainty(result)
+        poses.append(np.concatenate([result.correction.conventional,
+                                     result.correction.corrected], 1))
+        u2.append(np.concatenate([u.conventional_u, u.corrected_u], 1) ** 2)
+    spread_var = np.var(poses, axis=0, ddof=1)  # (M, 12)
+    ratio = np.sqrt(spread_var.mean(axis=0) / np.mean(u2, axis=(0, 1)))
+    assert np.all(np.abs(ratio - 1) < 0.20), ratio
+
+
+def test_cap_covariance_matches_the_scatter_of_sphere_fits():
+    rng = np.random.default_rng(3)
+    centres = np.zeros((4000, 3))
+    points, _ = probe_points(centres, 12.7, 25, 70.0, 1e-3, rng)
+    fits = fit_spheres(points.reshape(-1, 3), np.repeat(np.arange(4000), 25))
+    empirical = np.cov(fits.centre_mm.T)
+    formula = cap_centre_covariance(25, 70.0, 1e-3)
+    np.testing.assert_allclose(np.sqrt(np.diag(empirical)), np.sqrt(np.diag(formula)),
+                               rtol=0.05)
+
+
+def test_centre_covariance_sources(tmp_path, noisy):
+    assert set(centre_covariance(noisy).source.ravel()) == {"fit"}
+    make_session(tmp_path / "c", noise_mm=1e-3)
+    result = process_session(tmp_path / "c")
+    cc = centre_covariance(result)
+    assert set(cc.source.ravel()) == {"registration"}
+    assert "registration residuals" in cc.description
+    assert 0.5 < cc.u_um.mean() < 1.5  # the twin's 1 um per coordinate
+    with (tmp_path / "c" / "session.yaml").open("a") as f:
+        f.write("cmm: {mpe_um: 2.0, points_per_ball: 16, cap_angle_deg: 60}\n")
+    session = read_session(tmp_path / "c")
+    assert session.cmm is not None and session.cmm.point_noise_um == 1.0
+    cc = centre_covariance(process_session(tmp_path / "c"))
+    assert set(cc.source.ravel()) == {"cmm"}
+    np.testing.assert_allclose(cc.cov_mm2[3, 1], cap_centre_covariance(16, 60.0, 1e-3))
+
+
+BAD_CMM = {
+    "both": ("cmm: {mpe_um: 2.0, point_noise_um: 1.0}",
+             r":8: field 'cmm.mpe_um': give point_noise_um or mpe_um"),
+    "none": ("cmm: {cap_angle_deg: 60}", r":8: field 'cmm': give point_noise_um or mpe_um"),
+    "negative": ("cmm: {mpe_um: -1}", r":8: field 'cmm.mpe_um': must be positive"),
+    "unknown": ("cmm: {sigma: 1}", r":8: field 'cmm.sigma': unknown key"),
+    "points": ("cmm: {mpe_um: 1, points_per_ball: 2}", r":8: field 'cmm.points_per_ball'"),
+    "text": ("cmm:\n  point_noise_um: abc", r":9: field 'cmm.point_noise_um': expected a number"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_CMM))
+def test_bad_cmm_mapping_names_file_line_and_field(tmp_path, case):
+    make_session(tmp_path / "s")
+    text, pattern = BAD_CMM[case]
+    with (tmp_path / "s" / "session.yaml").open("a") as f:
+        f.write(text + "\n")
+    with pytest.raises(InputError, match=r"session\.yaml" + pattern):
+        read_session(tmp_path / "s")
