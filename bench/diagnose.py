@@ -80,6 +80,12 @@ def main() -> None:
                 for noise in noises:
                     if size != 1.0 and noise != 1.0:
                         continue  # a cross, not a grid: size at 1 um, noise at nominal size
+                    scaled = make_effect(name, {p: v * size
+                                                for p, v in NOMINAL_HIDDEN[name].items()})
+                    if scaled.out_of_range():
+                        print(f"| {name} | {size:g} | {noise:g} | outside the effect's range: "
+                              f"{'; '.join(scaled.out_of_range().values())} ||||")
+                        continue
                     first = params = halved = 0
                     before, after = [], []
                     for seed in range(args.seeds):
