@@ -28,8 +28,6 @@ from hexatherm.core.geometry import (
     Convention,
     check_convention,
     check_poses,
-    rotation_derivatives,
-    rotation_from_angles,
 )
 from hexatherm.core.thermal import LegThermalModel
 from hexatherm.errors import ConvergenceError, SingularityError
@@ -162,9 +160,49 @@ class Hexapod:
         ``base_joints_mm`` overrides the base joints (see :meth:`base_joints_for`).
         """
         x = np.atleast_2d(check_poses(poses))
-        rot = rotation_from_angles(x[:, 3:], self.convention)
-        plat = np.einsum("nij,kj->nki", rot, self.platform_joints_mm)
-        return plat + x[:, None, :3] - self.base_joints_for(base_joints_mm, x.shape[0])
+        return self._legs(x, self.base_joints_for(base_joints_mm, x.shape[0]))[0]
+
+    def _legs(self, x: FloatArray, base: FloatArray
+              ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Leg vectors (N, 6, 3) of checked poses (N, 6), the rotated platform joints
+        ``R p_i`` (N, 6, 3), and the cosines and sines of the angles (N, 3) each.
+
+        ``R`` is written out from the angles' cosines and sines (the product of the
+        three elementary rotations of :func:`~hexatherm.core.geometry.rotation_from_angles`,
+        without its 3x3 matrix products).
+        """
+        angles = np.deg2rad(x[:, 3:])
+        cos, sin = np.cos(angles), np.sin(angles)
+        ca, cb, cc = cos[:, 0], cos[:, 1], cos[:, 2]
+        sa, sb, sc = sin[:, 0], sin[:, 1], sin[:, 2]
+        rot = np.empty((x.shape[0], 3, 3))
+        if self.convention == "symetrie":  # Rz(c) Ry(b) Rx(a)
+            rot[:, 0, 0] = cc * cb
+            rot[:, 0, 1] = cc * sb * sa - sc * ca
+            rot[:, 0, 2] = cc * sb * ca + sc * sa
+            rot[:, 1, 0] = sc * cb
+            rot[:, 1, 1] = sc * sb * sa + cc * ca
+            rot[:, 1, 2] = sc * sb * ca - cc * sa
+            rot[:, 2, 0] = -sb
+            rot[:, 2, 1] = cb * sa
+            rot[:, 2, 2] = cb * ca
+        else:  # Rx(a) Ry(b) Rz(c)
+            rot[:, 0, 0] = cb * cc
+            rot[:, 0, 1] = -cb * sc
+            rot[:, 0, 2] = sb
+            rot[:, 1, 0] = sa * sb * cc + ca * sc
+            rot[:, 1, 1] = ca * cc - sa * sb * sc
+            rot[:, 1, 2] = -sa * cb
+            rot[:, 2, 0] = sa * sc - ca * sb * cc
+            rot[:, 2, 1] = ca * sb * sc + sa * cc
+            rot[:, 2, 2] = ca * cb
+        plat = self.platform_joints_mm @ np.swapaxes(rot, 1, 2)
+        return plat + x[:, None, :3] - base, plat, cos, sin
+
+    @staticmethod
+    def _lengths(legs: FloatArray) -> FloatArray:
+        """Lengths (N, 6) of leg vectors (N, 6, 3)."""
+        return np.sqrt(np.einsum("nij,nij->ni", legs, legs))
 
     def igm(self, poses: npt.ArrayLike, base_joints_mm: npt.ArrayLike | None = None
             ) -> FloatArray:
@@ -173,7 +211,7 @@ class Hexapod:
         ``base_joints_mm`` overrides the base joints, for all poses (6, 3) or per
         pose (N, 6, 3).
         """
-        return np.linalg.norm(self.leg_vectors(poses, base_joints_mm), axis=-1)
+        return self._lengths(self.leg_vectors(poses, base_joints_mm))
 
     def jacobian(self, poses: npt.ArrayLike, base_joints_mm: npt.ArrayLike | None = None
                  ) -> FloatArray:
@@ -182,13 +220,46 @@ class Hexapod:
         ``base_joints_mm`` overrides the base joints as in :meth:`igm`.
         """
         x = np.atleast_2d(check_poses(poses))
-        legs = self.leg_vectors(x, base_joints_mm)
-        units = legs / np.linalg.norm(legs, axis=-1, keepdims=True)
-        d_rot = rotation_derivatives(x[:, 3:], self.convention)  # (N, 3, 3, 3)
-        d_plat = np.einsum("nkij,lj->nlki", d_rot, self.platform_joints_mm)  # (N, 6, 3, 3)
-        jac = np.empty(x.shape[:1] + (6, 6))
-        jac[:, :, :3] = units
-        jac[:, :, 3:] = np.einsum("nli,nlki->nlk", units, d_plat)
+        legs, plat, cos, sin = self._legs(x, self.base_joints_for(base_joints_mm, x.shape[0]))
+        return self._jacobian(legs, self._lengths(legs), plat, cos, sin)
+
+    def _jacobian(self, legs: FloatArray, lengths: FloatArray, plat: FloatArray,
+                  cos: FloatArray, sin: FloatArray) -> FloatArray:
+        """Jacobian (N, 6, 6) from what :meth:`_legs` returns and the leg lengths.
+
+        With ``u_i`` the unit leg vectors, ``dq_i/dt = u_i`` and, since
+        ``dR/da_k = [w_k]x R`` for the rotation axis ``w_k`` of angle ``a_k`` in frame O,
+        ``dq_i/da_k = u_i . (w_k x R p_i) = w_k . (R p_i x u_i)`` (per degree).
+        """
+        jac = np.empty(legs.shape[:1] + (6, 6))
+        units = jac[:, :, :3]
+        np.divide(legs, lengths[..., None], out=units)
+        ca, cb, cc = cos[:, 0], cos[:, 1], cos[:, 2]
+        sa, sb = sin[:, 0], sin[:, 1]
+        per_degree = np.pi / 180.0
+        axes = np.zeros((legs.shape[0], 3, 3))  # axes[n, :, k]: w_k, per degree
+        if self.convention == "symetrie":  # w = Rz Ry ex, Rz ey, ez
+            sc = sin[:, 2]
+            axes[:, 0, 0] = cc * cb * per_degree
+            axes[:, 1, 0] = sc * cb * per_degree
+            axes[:, 2, 0] = -sb * per_degree
+            axes[:, 0, 1] = -sc * per_degree
+            axes[:, 1, 1] = cc * per_degree
+            axes[:, 2, 2] = per_degree
+        else:  # w = ex, Rx ey, Rx Ry ez
+            axes[:, 0, 0] = per_degree
+            axes[:, 1, 1] = ca * per_degree
+            axes[:, 2, 1] = sa * per_degree
+            axes[:, 0, 2] = sb * per_degree
+            axes[:, 1, 2] = -sa * cb * per_degree
+            axes[:, 2, 2] = ca * cb * per_degree
+        px, py, pz = plat[..., 0], plat[..., 1], plat[..., 2]
+        ux, uy, uz = units[..., 0], units[..., 1], units[..., 2]
+        moment = np.empty(units.shape)  # R p_i x u_i
+        moment[..., 0] = py * uz - pz * uy
+        moment[..., 1] = pz * ux - px * uz
+        moment[..., 2] = px * uy - py * ux
+        np.matmul(moment, axes, out=jac[:, :, 3:])
         return jac
 
     def zero_pose_leg_length_mm(self) -> FloatArray:
@@ -233,14 +304,39 @@ class Hexapod:
             x = np.zeros((q.shape[0], 6))
         else:
             x = np.array(np.broadcast_to(check_poses(initial_poses), q.shape), dtype=float)
-        active = np.arange(q.shape[0])
+        n = q.shape[0]
+        rcond = np.full(n, np.inf)  # at each pose's final Jacobian, where computed
+        # The poses still iterating, in index order, and what goes with them: leg
+        # lengths, base joints, and for the conditioning check their last Jacobian and
+        # a lower bound on its smallest singular value (NaN: none yet).
+        active = np.arange(n)
+        x_a, q_a = x.copy(), q
+        base_a = self.base_joints_mm if base is None else base
+        last_jac: FloatArray | None = None
+        sigma_low = np.full(n, np.nan)
         for iteration in range(max_iter + 1):
-            err = self.igm(x[active], None if base is None else base[active]) - q[active]
+            legs, plat, cos, sin = self._legs(x_a, base_a)
+            lengths = self._lengths(legs)
+            err = lengths - q_a
             worst = np.abs(err).max(axis=1)
             done = worst <= tol_mm
-            active, err, worst = active[~done], err[~done], worst[~done]
+            # Every pose's Jacobian at its current pose: the Newton step of the poses
+            # still iterating, the final conditioning check of the poses that are done.
+            jac = self._jacobian(legs, lengths, plat, cos, sin)
+            rcond_a, sigma_low, inverse = self._conditioning(jac, last_jac, sigma_low)
+            if done.any():
+                rcond[active[done]] = rcond_a[done]
+                x[active[done]] = x_a[done]
+                keep = ~done
+                active, x_a, q_a, err, worst = active[keep], x_a[keep], q_a[keep], err[keep], \
+                    worst[keep]
+                jac, rcond_a, sigma_low = jac[keep], rcond_a[keep], sigma_low[keep]
+                if inverse is not None:
+                    inverse = inverse[keep]
+                if base is not None:
+                    base_a = base_a[keep]
             if active.size == 0:
-                self._check_conditioning(x, np.arange(x.shape[0]), base)
+                self._raise_singular(rcond, np.arange(n))
                 return x
             if iteration == max_iter:
                 raise ConvergenceError(
@@ -248,16 +344,60 @@ class Hexapod:
                     f"iterations; first: pose index {active[0]}, leg length residual "
                     f"{worst[0]:.3e} mm (tolerance {tol_mm:.0e} mm)"
                 )
-            jac = self._check_conditioning(x, active, base)
-            x[active] -= np.linalg.solve(jac, err[..., None])[..., 0]
+            self._raise_singular(rcond_a, active)
+            if inverse is None:
+                x_a = x_a - np.linalg.solve(jac, err[..., None])[..., 0]
+            else:  # the inverses the conditioning check computed anyway
+                x_a = x_a - (inverse @ err[..., None])[..., 0]
+            last_jac = jac
         raise AssertionError("unreachable")  # pragma: no cover
 
-    def _check_conditioning(self, x: FloatArray, index: npt.NDArray[np.intp],
-                            base: FloatArray | None = None) -> FloatArray:
-        """Jacobians at poses ``x[index]``; SingularityError when one is (nearly) singular."""
-        jac = self.jacobian(x[index], None if base is None else base[index])
-        singular_values = np.linalg.svd(jac, compute_uv=False)
-        rcond = singular_values[:, -1] / singular_values[:, 0]
+    #: lower bound on the reciprocal condition above which a Jacobian needs no SVD
+    _SURELY_REGULAR = 1e-6
+
+    def _conditioning(self, jac: FloatArray, last_jac: FloatArray | None,
+                      sigma_low: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+        """Reciprocal condition numbers of Jacobians (N, 6, 6), where they could be small.
+
+        An SVD per pose and iteration would cost more than the rest of the FGM. Instead
+        ``sigma_min(J) >= 1 / |J^-1|_F`` bounds the smallest singular value from below at
+        a pose's first Jacobian, and Weyl's inequality ``sigma_min(J') >= sigma_min(J) -
+        |J' - J|_F`` carries the bound over to its next Jacobian ``J'``; with
+        ``sigma_max(J) <= |J|_F`` this bounds the reciprocal condition from below. Where
+        the bound is not at least ``1e-6`` (a thousand times :data:`SINGULAR_RCOND`, far
+        beyond rounding) a fresh bound is computed, and where even that one is not, the
+        exact value by SVD; elsewhere the result is ``inf`` (surely regular).
+
+        ``last_jac`` (N, 6, 6) holds each pose's previous Jacobian (None: none yet) and
+        ``sigma_low`` (N,) the bound there (NaN: none yet). Returns the reciprocal
+        conditions, the bounds at ``jac``, and the inverses of ``jac`` when every one
+        was computed (else None).
+        """
+        norm = np.sqrt(np.einsum("nij,nij->n", jac, jac))
+        if last_jac is None:
+            low = np.full(jac.shape[0], np.nan)
+        else:
+            change = jac - last_jac
+            low = sigma_low - np.sqrt(np.einsum("nij,nij->n", change, change))
+        fresh = ~(low >= self._SURELY_REGULAR * norm)
+        inverse = None
+        if fresh.any():
+            try:
+                inverse = np.linalg.inv(jac if fresh.all() else jac[fresh])
+                low[fresh] = 1.0 / np.sqrt(np.einsum("nij,nij->n", inverse, inverse))
+            except np.linalg.LinAlgError:
+                inverse = None
+                low[fresh] = 0.0
+        out = np.full(jac.shape[0], np.inf)
+        unsure = ~(low >= self._SURELY_REGULAR * norm)
+        if unsure.any():
+            values = np.linalg.svd(jac[unsure], compute_uv=False)
+            out[unsure] = values[:, -1] / values[:, 0]
+        return out, low, inverse if inverse is not None and fresh.all() else None
+
+    @staticmethod
+    def _raise_singular(rcond: FloatArray, index: npt.NDArray[np.intp]) -> None:
+        """SingularityError naming the first pose whose reciprocal condition is too small."""
         singular = ~(rcond >= SINGULAR_RCOND)
         if np.any(singular):
             raise SingularityError(
@@ -266,4 +406,3 @@ class Hexapod:
                 f"{int(singular.sum())} pose(s) affected): the leg lengths do not "
                 "determine the pose there"
             )
-        return jac

@@ -3,8 +3,11 @@
 For a step, the three (or more) ball centres measured in the CMM frame M are
 matched to the same balls' centres known in the platform frame P. The rigid
 transform ``platform2cmm`` minimising ``sum w_k |platform2cmm(b_k) - c_k|^2`` is
-found by the Kabsch/Umeyama SVD method with the reflection excluded
-(determinant +1), for many steps at once.
+the Kabsch/Umeyama solution with the reflection excluded (determinant +1), for
+many steps at once. Its rotation is computed in Horn's quaternion form (the same
+minimiser), written out as array operations over all steps; steps where that
+form would lose digits (a rotation the weighted balls hardly determine) get the
+SVD of the Kabsch/Umeyama method.
 
 >>> import numpy as np
 >>> from hexatherm.core.geometry import transform_from_pose, apply_transform
@@ -24,7 +27,6 @@ from itertools import permutations
 import numpy as np
 import numpy.typing as npt
 
-from hexatherm.core.geometry import apply_transform
 from hexatherm.errors import RegistrationError
 
 FloatArray = npt.NDArray[np.float64]
@@ -119,24 +121,121 @@ def register(
     if np.any(w < 0) or not np.all(np.isfinite(w)) or np.any(w.sum(axis=1) <= 0):
         raise RegistrationError("registration weights must be finite, non-negative, not all 0")
     w_norm = w / w.sum(axis=1, keepdims=True)
-    balls_mean = np.einsum("nk,ki->ni", w_norm, balls)
-    centres_mean = np.einsum("nk,nki->ni", w_norm, centres)
+    balls_mean = w_norm @ balls
+    centres_mean = (w_norm[:, None, :] @ centres)[:, 0]
     b = balls[None] - balls_mean[:, None]
     c = centres - centres_mean[:, None]
-    cov = np.einsum("nk,nki,nkj->nij", w_norm, c, b)
+    cov = np.swapaxes(c * w_norm[..., None], 1, 2) @ b  # sum_k w_k c_k b_k^T
+    scale = 0.5 * (np.einsum("nk,nki,nki->n", w_norm, b, b)
+                   + np.einsum("nk,nki,nki->n", w_norm, c, c))
+    rot = _rotations(cov, scale)
+    transforms = np.zeros((centres.shape[0], 4, 4))
+    transforms[:, :3, :3] = rot
+    transforms[:, :3, 3] = centres_mean - (rot @ balls_mean[..., None])[..., 0]
+    transforms[:, 3, 3] = 1.0
+    residuals = centres - (balls @ np.swapaxes(rot, 1, 2) + transforms[:, None, :3, 3])
+    rms = np.sqrt((residuals**2).sum(axis=-1).mean(axis=-1)) * 1e3
+    return Registration(platform2cmm=transforms, residuals_mm=residuals, rms_um=rms)
+
+
+def _kabsch(cov: FloatArray) -> FloatArray:
+    """Proper rotations maximising ``trace(R^T cov)``, by SVD (Kabsch/Umeyama)."""
     u, _, vt = np.linalg.svd(cov)
     d = np.sign(np.linalg.det(u @ vt))
     d[d == 0] = 1.0
     fix = np.ones((len(d), 3))
     fix[:, 2] = d
-    rot = (u * fix[:, None, :]) @ vt
-    transforms = np.zeros((centres.shape[0], 4, 4))
-    transforms[:, :3, :3] = rot
-    transforms[:, :3, 3] = centres_mean - np.einsum("nij,nj->ni", rot, balls_mean)
-    transforms[:, 3, 3] = 1.0
-    residuals = centres - apply_transform(transforms, balls)
-    rms = np.sqrt((residuals**2).sum(axis=-1).mean(axis=-1)) * 1e3
-    return Registration(platform2cmm=transforms, residuals_mm=residuals, rms_um=rms)
+    return (u * fix[:, None, :]) @ vt
+
+
+#: relative gap between the two largest eigenvalues of Horn's matrix below which the
+#: rotation is computed by SVD instead (where Horn's eigenvector loses digits)
+_SEPARATION = 0.05
+
+
+def _det3(a: FloatArray, b: FloatArray, c: FloatArray, d: FloatArray, e: FloatArray,
+          f: FloatArray, g: FloatArray, h: FloatArray, i: FloatArray) -> FloatArray:
+    return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+
+
+def _rotations(cov: FloatArray, scale: FloatArray) -> FloatArray:
+    """Proper rotations ``R`` (N, 3, 3) maximising ``trace(R^T cov)``, as :func:`_kabsch`.
+
+    Horn's quaternion method, written out so that it runs as array operations over
+    all N instead of one LAPACK call per 3x3 matrix: the rotation's unit quaternion
+    is the eigenvector of the largest eigenvalue of a symmetric, traceless 4x4 matrix
+    ``K`` built from ``cov``. That eigenvalue is found by Newton's method on the
+    characteristic polynomial ``l^4 + c2 l^2 + c1 l + c0`` from ``scale`` (half the
+    sum of the weighted squared spreads of the two point sets, an upper bound: the
+    iteration decreases monotonically onto the largest root, as in Theobald's QCP
+    method), the eigenvector is the largest column of the adjugate of ``K - l I``.
+    Where that is not sure to be accurate (the largest eigenvalue nearly repeated:
+    a rotation the data hardly determine, or no convergence) the rows are done by SVD.
+    """
+    # s[i, j] = sum_k w_k b_i c_j (the source b onto c), as contiguous arrays
+    sxx, syx, szx, sxy, syy, szy, sxz, syz, szz = np.ascontiguousarray(cov.reshape(-1, 9).T)
+    diagonal = [sxx + syy + szz, sxx - syy - szz, -sxx + syy - szz, -sxx - syy + szz]
+    upper = {(0, 1): syz - szy, (0, 2): szx - sxz, (0, 3): sxy - syx,
+             (1, 2): sxy + syx, (1, 3): szx + sxz, (2, 3): syz + szy}
+    k = np.empty((cov.shape[0], 4, 4))
+    for i in range(4):
+        k[:, i, i] = diagonal[i]
+    for (i, j), value in upper.items():
+        k[:, i, j] = k[:, j, i] = value
+    m = [[diagonal[i] if i == j else upper[min(i, j), max(i, j)] for j in range(4)]
+         for i in range(4)]
+    c2 = -2.0 * np.einsum("nij,nij->n", cov, cov)
+    c1 = -8.0 * _det3(sxx, sxy, sxz, syx, syy, syz, szx, szy, szz)
+
+    def minor(i: int, j: int) -> FloatArray:
+        rows = [r for r in range(4) if r != i]
+        cols = [c for c in range(4) if c != j]
+        return _det3(*(m[r][c] for r in rows for c in cols))
+
+    c0 = m[0][0] * minor(0, 0) - m[0][1] * minor(0, 1) + m[0][2] * minor(0, 2) \
+        - m[0][3] * minor(0, 3)
+    lam = scale.astype(float, copy=True)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        converged = np.zeros(lam.size, dtype=bool)
+        for _ in range(60):
+            step = (((lam * lam + c2) * lam + c1) * lam + c0) / \
+                ((4.0 * lam * lam + 2.0 * c2) * lam + c1)
+            lam = np.where(converged, lam, lam - step)
+            converged |= np.abs(step) <= 4 * np.finfo(float).eps * np.abs(lam)
+            if converged.all():
+                break
+        for refine in range(2):
+            for i in range(4):
+                m[i][i] = diagonal[i] - lam
+            # the adjugate of K - l I is (product of the other eigenvalue gaps) q q^T
+            adj = np.empty((lam.size, 4, 4))
+            for i in range(4):
+                for j in range(i, 4):
+                    adj[:, i, j] = adj[:, j, i] = (-1) ** (i + j) * minor(i, j)
+            best = np.argmax(np.abs(np.einsum("nii->ni", adj)), axis=1)
+            q = adj[np.arange(lam.size), best]
+            size = np.sqrt(np.einsum("ni,ni->n", q, q))
+            q = q / size[:, None]
+            if refine == 0:
+                # The root's rounding error grows with the square of 1 / (relative gap to
+                # the next eigenvalue); the Rayleigh quotient of its eigenvector does not.
+                lam = np.einsum("ni,nij,nj->n", q, k, q)
+        # size ~ gap * l^2: keep the rows whose largest eigenvalue is well separated
+        sure = converged & (size > _SEPARATION * np.abs(lam) ** 3) & np.isfinite(size)
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    rot = np.empty((lam.size, 3, 3))
+    rot[:, 0, 0] = w * w + x * x - y * y - z * z
+    rot[:, 0, 1] = 2.0 * (x * y - w * z)
+    rot[:, 0, 2] = 2.0 * (x * z + w * y)
+    rot[:, 1, 0] = 2.0 * (y * x + w * z)
+    rot[:, 1, 1] = w * w - x * x + y * y - z * z
+    rot[:, 1, 2] = 2.0 * (y * z - w * x)
+    rot[:, 2, 0] = 2.0 * (z * x - w * y)
+    rot[:, 2, 1] = 2.0 * (z * y + w * x)
+    rot[:, 2, 2] = w * w - x * x - y * y + z * z
+    if not sure.all():
+        rot[~sure] = _kabsch(cov[~sure])
+    return rot
 
 
 #: millimetres per inch, for telling an inch/mm mix-up from other errors

@@ -15,6 +15,7 @@ from __future__ import annotations
 import io
 import os
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -102,10 +103,13 @@ def _times(frame: pd.DataFrame, path: str) -> tuple[npt.NDArray[np.float64], Tim
     if np.any(empty):
         row = int(np.argmax(empty))
         raise InputError("missing time", path=path, line=int(frame.index[row]), field="time")
-    numeric = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
-    is_number = np.isfinite(numeric)
-    if np.all(is_number):
-        return numeric, "seconds"
+    if all(":" in value for value in text.to_numpy()):
+        is_number = np.zeros(len(text), dtype=bool)  # numbers have no ':': skip parsing them
+    else:
+        numeric = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
+        is_number = np.isfinite(numeric)
+        if np.all(is_number):
+            return numeric, "seconds"
     if np.any(is_number):
         row = int(np.argmax(is_number))
         raise InputError(f"time {text.iloc[row]!r} is a number of seconds but other rows are "
@@ -163,7 +167,11 @@ def _kind(frame: pd.DataFrame, path: str) -> RecordKind:
 def read_measurement_csv(path: str | os.PathLike[str], kind: RecordKind | None = None) -> Records:
     """Read a centres or points CSV file into :class:`Records`."""
     path = os.fspath(path)
-    frame = _frame(read_text(path), path)
+    text = read_text(path)
+    fast = _fast_measurement_csv(text, path, kind)
+    if fast is not None:
+        return fast
+    frame = _frame(text, path)
     _check_header(frame, path, CENTRE_EXTRA + POINT_EXTRA)
     frame = _drop_blank(frame)
     if frame.empty:
@@ -198,6 +206,74 @@ def read_measurement_csv(path: str | os.PathLike[str], kind: RecordKind | None =
         ijk = np.column_stack([_numbers(frame, c, path, allow_empty=True) for c in POINT_EXTRA])
     elif any(c in frame.columns for c in POINT_EXTRA):
         raise InputError("give all of i, j, k or none", path=path, line=1)
+    return Records(path=path, kind=kind, label=label, ball=ball, xyz_mm=xyz, time_s=time,
+                   time_kind=time_kind, line=lines, diameter_mm=diameter, ijk=ijk, extra=extra)
+
+
+def _fast_measurement_csv(text: str, path: str, kind: RecordKind | None) -> Records | None:
+    """:func:`read_measurement_csv` for a clean file, or None: then the general reader must.
+
+    Clean: a header of known column names without blanks, no quotes, no blank lines, and
+    every value that the general reader would take without complaint and without
+    stripping blanks (names, times), with no empty or non-finite number. The numbers are
+    parsed by pandas' C parser straight to floats (the converter of ``pd.to_numeric``,
+    correctly rounded), instead of strings that are stripped and converted one column
+    after the other. Anything else (and any error) is left to the general reader, so that
+    results and errors are the same.
+    """
+    if '"' in text:
+        return None
+    if "\r" in text:
+        text = text.replace("\r\n", "\n").replace("\r", "\n")
+    columns = text.partition("\n")[0].split(",")
+    known = set(BASE_COLUMNS + CENTRE_EXTRA + POINT_EXTRA)
+    if (tuple(columns[:6]) != BASE_COLUMNS or not set(columns) <= known
+            or len(set(columns)) != len(columns)):
+        return None
+    numeric = [c for c in columns if c not in ("label", "ball", "time")]
+    try:
+        frame = pd.read_csv(io.StringIO(text), dtype={"label": object, "ball": object,
+                                                     "time": object,
+                                                     **dict.fromkeys(numeric, float)},
+                            keep_default_na=False, na_values=dict.fromkeys(numeric, [""]),
+                            skipinitialspace=True, skip_blank_lines=False, engine="c")
+    except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError):
+        return None
+    if frame.empty or list(frame.columns) != columns:
+        return None
+    frame.index = np.arange(len(frame)) + 2
+    for column in ("label", "ball"):
+        names = pd.unique(frame[column].to_numpy())
+        if not all(isinstance(v, str) and NAME_PATTERN.fullmatch(v) for v in names):
+            return None
+    if not all(isinstance(v, str) and v and v == v.strip() for v in frame["time"].to_numpy()):
+        return None
+    values = {c: frame[c].to_numpy(dtype=np.float64) for c in numeric}
+    if not all(np.isfinite(v).all() for v in values.values()):
+        return None  # empty or non-finite numbers: the general reader tells them apart
+    kind = kind or _kind(frame, path)
+    extras = CENTRE_EXTRA if kind == "centres" else POINT_EXTRA
+    if any(c not in extras for c in columns[6:]):
+        return None
+    label, ball = frame["label"].to_numpy(dtype=str), frame["ball"].to_numpy(dtype=str)
+    try:
+        time, time_kind = _times(frame, path)
+    except InputError:
+        return None
+    lines = frame.index.to_numpy(dtype=np.int64)
+    diameter = ijk = None
+    extra: dict[str, object] = {}
+    if kind == "centres":
+        if pd.Series(label).str.cat(pd.Series(ball), sep="\x1f").duplicated().any():
+            return None
+        if "diameter" in values:
+            diameter = values["diameter"]
+        extra = {c: values[c] for c in ("form_um", "n", "u_um") if c in values}
+    elif all(c in values for c in POINT_EXTRA):
+        ijk = np.column_stack([values[c] for c in POINT_EXTRA])
+    elif any(c in values for c in POINT_EXTRA):
+        return None
+    xyz = np.column_stack([values[c] for c in ("x", "y", "z")])
     return Records(path=path, kind=kind, label=label, ball=ball, xyz_mm=xyz, time_s=time,
                    time_kind=time_kind, line=lines, diameter_mm=diameter, ijk=ijk, extra=extra)
 
@@ -270,18 +346,28 @@ def read_temperatures(path: str | os.PathLike[str]) -> Temperatures:
     return Temperatures(path, time, kind, legs, others)
 
 
-def read_measurements(path: str | os.PathLike[str]) -> list[Records]:
-    """Read any measurement file: centres/points CSV or DMIS output (by extension or content)."""
+def read_measurements(
+    path: str | os.PathLike[str], *, progress: Callable[[int, int], None] | None = None
+) -> list[Records]:
+    """Read any measurement file: centres/points CSV or DMIS output (by extension or content).
+
+    ``progress(lines_done, lines_total)``, when given, is called now and then while a
+    DMIS file is read the slow way (one with continuations or comments: seconds for
+    a hundred thousand points); a CSV file or a plain DMIS file reports once, done.
+    """
     path = os.fspath(path)
     suffix = Path(path).suffix.lower()
     if suffix in (".dmo", ".dms", ".dmi"):
         from hexatherm.io.dmis import read_dmis
 
-        return read_dmis(path)
+        return read_dmis(path, progress=progress)
     if suffix != ".csv":
         text = read_text(path)
         from hexatherm.io.dmis import looks_like_dmis, read_dmis
 
         if looks_like_dmis(text[:4096]):
-            return read_dmis(path)
-    return [read_measurement_csv(path)]
+            return read_dmis(path, progress=progress)
+    records = [read_measurement_csv(path)]
+    if progress is not None:
+        progress(len(records[0]) + 1, len(records[0]) + 1)
+    return records

@@ -33,7 +33,7 @@ import os
 import re
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
-from datetime import UTC, date, datetime, time
+from datetime import UTC, date, datetime, time, timedelta
 from pathlib import Path
 from typing import NoReturn
 
@@ -56,6 +56,10 @@ __all__ = [
 DMIS_SUFFIXES = (".dmo", ".dms", ".dmi")
 
 Value = float | str | None
+#: ``progress(lines_done, lines_total)``
+Progress = Callable[[int, int], None]
+#: statements between two calls of a progress callback
+_PROGRESS_EVERY = 10_000
 
 
 @dataclass(frozen=True)
@@ -225,13 +229,18 @@ def looks_like_dmis(text_head: str) -> bool:
     return False
 
 
-def read_dmis_features(path: str | os.PathLike[str]) -> list[Feature]:
+def read_dmis_features(
+    path: str | os.PathLike[str], *, progress: Progress | None = None
+) -> list[Feature]:
     """Read every actual feature ``FA(...)`` of a DMIS output file, in file order.
 
     Parameters
     ----------
     path : str or path-like
         The DMIS file (UTF-8, CRLF or LF line ends).
+    progress : callable, optional
+        Called as ``progress(lines_done, lines_total)`` now and then while the
+        statements are read (for a progress bar: large files take seconds).
 
     Returns
     -------
@@ -248,10 +257,12 @@ def read_dmis_features(path: str | os.PathLike[str]) -> list[Feature]:
     --------
     features_from_text : the same from text already in memory.
     """
-    return features_from_text(_read_text(path), path)
+    return features_from_text(_read_text(path), path, progress=progress)
 
 
-def read_dmis(path: str | os.PathLike[str]) -> list[Records]:
+def read_dmis(
+    path: str | os.PathLike[str], *, progress: Progress | None = None
+) -> list[Records]:
     """Read the hexatherm measurements of a DMIS output file.
 
     Sphere actuals ``FA(<label>_<ball>)=FEAT/SPHERE,...`` give ball centres,
@@ -262,6 +273,8 @@ def read_dmis(path: str | os.PathLike[str]) -> list[Records]:
     ----------
     path : str or path-like
         The DMIS file.
+    progress : callable, optional
+        As for :func:`read_dmis_features`.
 
     Returns
     -------
@@ -278,10 +291,20 @@ def read_dmis(path: str | os.PathLike[str]) -> list[Records]:
         follow hexatherm's naming or a sphere or point has no ``DATE=`` and
         ``TIME=`` before it.
     """
-    return records_from_features(read_dmis_features(path), path)
+    data = _read_bytes(path)
+    text = _decode(data, path)
+    fast = _fast_records(data, path)
+    if fast is not None:
+        if progress is not None:
+            lines = text.count("\n") + 1
+            progress(lines, lines)
+        return fast
+    return records_from_features(features_from_text(text, path, progress=progress), path)
 
 
-def features_from_text(text: str, path: str | os.PathLike[str] = "<string>") -> list[Feature]:
+def features_from_text(
+    text: str, path: str | os.PathLike[str] = "<string>", *, progress: Progress | None = None
+) -> list[Feature]:
     """Read the actual features of DMIS text (see :func:`read_dmis_features`).
 
     Parameters
@@ -290,6 +313,8 @@ def features_from_text(text: str, path: str | os.PathLike[str] = "<string>") -> 
         The content of a DMIS file.
     path : str or path-like, optional
         The file name used in error messages.
+    progress : callable, optional
+        As for :func:`read_dmis_features`.
 
     Returns
     -------
@@ -320,7 +345,11 @@ def features_from_text(text: str, path: str | os.PathLike[str] = "<string>") -> 
     angle_unit = "ANGDEC"
     day: date | None = None
     clock: time | None = None
-    for line, statement in _statements(text, path):
+    statements = _statements(text, path)
+    total = statements[-1][0] if statements else 0
+    for count, (line, statement) in enumerate(statements):
+        if progress is not None and count % _PROGRESS_EVERY == 0:
+            progress(line, total)
         if _FA_START.match(statement):
             when = None if day is None or clock is None else datetime.combine(day, clock)
             features.append(_parse_actual(statement, line, path, scale, angle_unit, when))
@@ -330,6 +359,8 @@ def features_from_text(text: str, path: str | os.PathLike[str] = "<string>") -> 
             day = _parse_date(match.group(1), line, path)
         elif (match := _TIME.match(statement)) is not None:
             clock = _parse_time(match.group(1), line, path)
+    if progress is not None:
+        progress(total, total)
     return features
 
 
@@ -366,50 +397,56 @@ def records_from_features(
     where = os.fspath(path)
     rows: dict[str, list[_Row]] = {"centres": [], "points": []}
     for feature in features:
-        if feature.type == "SPHERE":
-            kind, match = "centres", _CENTRE_LABEL.fullmatch(feature.label)
-        elif feature.type == "POINT":
-            kind, match = "points", _POINT_LABEL.fullmatch(feature.label)
-        else:
-            continue
-        if match is None:
-            naming = "<label>_<ball>" if kind == "centres" else "<label>_<ball>_<n>"
-            raise InputError(
-                f"{feature.type.lower()} label {feature.label!r} does not follow hexatherm's "
-                f"naming {naming} (each part [A-Za-z0-9-]+)",
-                path=where,
-                line=feature.line,
-                field="label",
-            )
-        if feature.time is None:
-            raise InputError(
-                f"FA({feature.label}) has no DATE= and TIME= statements before it",
-                path=where,
-                line=feature.line,
-                field="time",
-            )
-        if feature.xyz_mm is None:  # pragma: no cover - spheres and points always have one
-            raise InputError(f"FA({feature.label}) has no position", path=where, line=feature.line)
-        rows[kind].append(
-            _Row(
-                step=match.group(1),
-                ball=match.group(2),
-                n=match.group(3) if kind == "points" else "",
-                xyz=feature.xyz_mm,
-                seconds=feature.time.replace(tzinfo=UTC).timestamp(),
-                line=feature.line,
-                diameter=_nan(feature.size_mm),
-                ijk=feature.ijk if feature.ijk is not None else (math.nan,) * 3,
-            )
-        )
+        row = _feature_row(feature, where)
+        if row is not None:
+            rows[row[0]].append(row[1])
+    return _rows_to_records(where, rows["centres"], rows["points"])
 
+
+def _feature_row(feature: Feature, where: str) -> tuple[str, _Row] | None:
+    """The records row of a sphere or point feature (None for other types)."""
+    if feature.type == "SPHERE":
+        kind, match = "centres", _CENTRE_LABEL.fullmatch(feature.label)
+    elif feature.type == "POINT":
+        kind, match = "points", _POINT_LABEL.fullmatch(feature.label)
+    else:
+        return None
+    if match is None:
+        naming = "<label>_<ball>" if kind == "centres" else "<label>_<ball>_<n>"
+        raise InputError(
+            f"{feature.type.lower()} label {feature.label!r} does not follow hexatherm's "
+            f"naming {naming} (each part [A-Za-z0-9-]+)",
+            path=where,
+            line=feature.line,
+            field="label",
+        )
+    if feature.time is None:
+        raise InputError(
+            f"FA({feature.label}) has no DATE= and TIME= statements before it",
+            path=where,
+            line=feature.line,
+            field="time",
+        )
+    if feature.xyz_mm is None:  # pragma: no cover - spheres and points always have one
+        raise InputError(f"FA({feature.label}) has no position", path=where, line=feature.line)
+    return kind, _Row(
+        step=match.group(1),
+        ball=match.group(2),
+        n=match.group(3) if kind == "points" else "",
+        xyz=feature.xyz_mm,
+        seconds=feature.time.replace(tzinfo=UTC).timestamp(),
+        line=feature.line,
+        diameter=_nan(feature.size_mm),
+        ijk=feature.ijk if feature.ijk is not None else (math.nan,) * 3,
+    )
+
+
+def _rows_to_records(where: str, centres: list[_Row], points: list[_Row]) -> list[Records]:
     records: list[Records] = []
-    if rows["centres"]:
-        centres = rows["centres"]
+    if centres:
         diameter = np.array([row.diameter for row in centres], dtype=np.float64)
         records.append(_records(where, "centres", centres, diameter_mm=diameter))
-    if rows["points"]:
-        points = rows["points"]
+    if points:
         ijk = np.array([row.ijk for row in points], dtype=np.float64).reshape(-1, 3)
         number = np.array([row.n for row in points], dtype=np.str_)
         records.append(_records(where, "points", points, ijk=ijk, extra={"n": number}))
@@ -421,10 +458,17 @@ def records_from_features(
 
 
 def _read_text(path: str | os.PathLike[str]) -> str:
+    return _decode(_read_bytes(path), path)
+
+
+def _read_bytes(path: str | os.PathLike[str]) -> bytes:
     try:
-        data = Path(path).read_bytes()
+        return Path(path).read_bytes()
     except OSError as exc:
         raise InputError(f"cannot read the file: {exc.strerror or exc}", path=path) from exc
+
+
+def _decode(data: bytes, path: str | os.PathLike[str]) -> str:
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
@@ -744,3 +788,313 @@ def _records(path: str, kind: RecordKind, rows: list[_Row], **optional: object) 
         line=np.array([row.line for row in rows], dtype=np.int64),
         **optional,  # type: ignore[arg-type]
     )
+
+
+# ---------------------------------------------------------------------------
+# The fast lane of read_dmis
+#
+# A DMIS file of a hexatherm session holds tens of thousands of points, one
+# ``FA(<step>_<ball>_<n>)=FEAT/POINT,CART,x,y,z,i,j,k`` line each, between ``DATE=``
+# and ``TIME=`` lines. When a file has no continuations and no comments (no ``$``,
+# no line starting with a comma) every non-blank line is one statement, and the
+# lines are sorted out with numpy on the file's bytes: the canonical point lines
+# (exactly as above, no blanks) are checked byte by byte as arrays and read by
+# pandas' C parser (numbers correctly rounded, as ``float``); the canonical
+# ``DATE=YYYY/MM/DD`` and ``TIME=HH:MM:SS`` lines are decoded as arrays.
+# Every other line that matters (spheres, other features, ``UNITS``, other
+# spellings, leading or trailing blanks) goes through the general parser one by
+# one, in its context. Whenever something is off (a value the general reader
+# would refuse, a feature without a time, ...) the fast lane gives up and the
+# general reader reads the whole file, so that results and errors are exactly
+# those of :func:`records_from_features` of :func:`features_from_text`.
+
+# First and last bytes of lines that are statements as they are, with no blanks to strip:
+# printable ASCII (bytes >= 0x80 may be blanks too), and not ',' first (a continuation)
+_REGULAR_FIRST = np.zeros(256, dtype=bool)
+_REGULAR_FIRST[0x21:0x7F] = True
+_REGULAR_FIRST[ord(",")] = False
+_REGULAR_LAST = np.zeros(256, dtype=bool)
+_REGULAR_LAST[0x21:0x7F] = True
+# First bytes of statements that could matter (FA(, UNITS/, DATE=, TIME= in any case)
+_MAYBE_RELEVANT = np.zeros(256, dtype=bool)
+_MAYBE_RELEVANT[list(b"FfUuDdTt")] = True
+_MICROSECONDS_PER_DAY = 86_400_000_000
+_EPOCH_ORDINAL = date(1970, 1, 1).toordinal()
+
+
+class _GiveUp(Exception):
+    """The fast lane cannot read this file the way the general reader would."""
+
+
+def _fast_records(data: bytes, path: str | os.PathLike[str]) -> list[Records] | None:
+    """:func:`read_dmis` of a file without continuations; None when the general reader must."""
+    try:
+        return _fast_lane(data, os.fspath(path))
+    except Exception:  # _GiveUp, the general parser's InputError, anything unforeseen
+        return None
+
+
+def _prefixed(padded: np.ndarray, starts: np.ndarray, prefix: bytes) -> np.ndarray:
+    mask = np.ones(starts.size, dtype=bool)
+    for k, byte in enumerate(prefix):
+        mask &= padded[starts + k] == byte
+    return mask
+
+
+def _fast_lane(data: bytes, where: str) -> list[Records]:
+    if data.startswith(b"\xef\xbb\xbf"):
+        data = data[3:]
+    if b"$" in data:
+        raise _GiveUp
+    if not data:
+        return []
+    arr = np.frombuffer(data, dtype=np.uint8)
+    size = arr.size
+    carriage = np.flatnonzero(arr == 13)
+    if carriage.size and (carriage[-1] + 1 >= size or np.any(arr[carriage + 1] != 10)):
+        raise _GiveUp  # a CR that does not end a line
+    newlines = np.flatnonzero(arr == 10)
+    starts = np.concatenate(([0], newlines + 1))
+    ends = np.concatenate((newlines, [size]))  # exclusive, without the LF
+    spans = ends - starts
+    ends = ends - ((spans > 0) & (arr[np.maximum(ends - 1, 0)] == 13))  # without the CR
+    lengths = ends - starts
+    padded = np.concatenate((arr, np.zeros(8, dtype=np.uint8)))
+    nonempty = lengths > 0
+    regular = (nonempty & _REGULAR_FIRST[padded[starts]]
+               & _REGULAR_LAST[padded[np.maximum(ends - 1, 0)]])
+    line_no = np.arange(1, starts.size + 1)
+
+    is_point = regular & _prefixed(padded, starts, b"FA(")
+    is_date = regular & _prefixed(padded, starts, b"DATE=") & (lengths == 15)
+    is_time = regular & _prefixed(padded, starts, b"TIME=") & (lengths == 13)
+    if is_time.any():  # TIME=HH:MM:SS exactly, else the general parser
+        at = starts[is_time][:, None] + np.arange(5, 13)
+        chars = padded[at]
+        digits = chars[:, [0, 1, 3, 4, 6, 7]]
+        strict = (np.all((digits >= 48) & (digits <= 57), axis=1)
+                  & (chars[:, 2] == 58) & (chars[:, 5] == 58))
+        is_time[np.flatnonzero(is_time)[~strict]] = False
+    # Lines read one by one: irregular ones, and regular ones that may be relevant.
+    special = nonempty & ~regular
+    special |= regular & ~(is_point | is_date | is_time) & _MAYBE_RELEVANT[padded[starts]]
+    units: list[tuple[int, float, str]] = []
+    dates: list[tuple[int, date]] = []
+    times: list[tuple[int, time]] = []
+    actuals: list[tuple[int, str]] = []
+    for index in np.flatnonzero(special).tolist():
+        statement = data[starts[index]:ends[index]].decode("utf-8").strip()
+        if not statement:
+            continue
+        if statement.startswith(","):
+            raise _GiveUp  # a continuation
+        line = index + 1
+        if _FA_START.match(statement):
+            actuals.append((line, statement))
+        elif (match := _UNITS.match(statement)) is not None:
+            units.append((line, *_parse_units(match.group(1), line, where)))
+        elif (match := _DATE.match(statement)) is not None:
+            dates.append((line, _parse_date(match.group(1), line, where)))
+        elif (match := _TIME.match(statement)) is not None:
+            times.append((line, _parse_time(match.group(1), line, where)))
+
+    # Context: UNITS, DATE and TIME in effect at each line.
+    date_lines, date_days = _fast_dates(data, starts, line_no, is_date, dates, where)
+    time_lines = np.concatenate((line_no[is_time], [line for line, _ in times])).astype(np.int64)
+    time_us = np.empty(time_lines.size, dtype=np.int64)
+    if is_time.any():
+        chars = padded[starts[is_time][:, None] + np.array([5, 6, 8, 9, 11, 12])].astype(np.int64)
+        chars -= 48
+        hour, minute, second = (chars[:, 0] * 10 + chars[:, 1], chars[:, 2] * 10 + chars[:, 3],
+                                chars[:, 4] * 10 + chars[:, 5])
+        if np.any(hour > 23) or np.any(minute > 59) or np.any(second > 59):
+            raise _GiveUp  # time() refuses them: the general reader says so
+        time_us[:hour.size] = (hour * 3600 + minute * 60 + second) * 1_000_000
+    time_us[time_us.size - len(times):] = [
+        ((c.hour * 60 + c.minute) * 60 + c.second) * 1_000_000 + c.microsecond for _, c in times]
+    order = np.argsort(time_lines, kind="stable")
+    time_lines, time_us = time_lines[order], time_us[order]
+    unit_lines = np.array([u[0] for u in units], dtype=np.int64)
+
+    def context(lines: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """At each line: index of the UNITS in effect (-1: none), POSIX microseconds of
+        the DATE and TIME in effect, and whether both were given."""
+        u = np.searchsorted(unit_lines, lines) - 1
+        d = np.searchsorted(date_lines, lines) - 1
+        t = np.searchsorted(time_lines, lines) - 1
+        known = (d >= 0) & (t >= 0)
+        day = np.append(date_days, 0)[d]  # index -1: the appended 0, masked below
+        clock = np.append(time_us, 0)[t]
+        return u, np.where(known, day * _MICROSECONDS_PER_DAY + clock, 0), known
+
+    # Canonical point lines, all at once.
+    point_lines = line_no[is_point]
+    steps = balls = numbers = np.empty(0, dtype=np.str_)
+    values = np.empty((0, 6))
+    if point_lines.size:
+        keep = np.repeat(is_point, np.concatenate((spans[:-1] + 1, spans[-1:])))
+        keep[carriage] = False
+        blob = arr[keep]
+        if blob[-1] == 10:
+            blob = blob[:-1]
+        canonical, steps, balls, numbers, values = _canonical_points(blob)
+        if not canonical.all():  # FA( lines that are not canonical points: one by one
+            for line in point_lines[~canonical].tolist():
+                actuals.append((line, data[starts[line - 1]:ends[line - 1]].decode("utf-8")))
+            point_lines = point_lines[canonical]
+    u, stamp, known = context(point_lines)
+    if not known.all():
+        raise _GiveUp  # a point without DATE= and TIME= before it
+    scale = np.array([1.0] + [s for _, s, _ in units])[u + 1]
+    with np.errstate(over="ignore"):  # an overflow is refused below
+        xyz = values[:, :3] * scale[:, None]
+    ijk = values[:, 3:]
+    if not np.isfinite(xyz).all():
+        raise _GiveUp
+    given = np.isfinite(ijk)
+    if not np.all(given.all(axis=1) | np.isnan(ijk).all(axis=1)):
+        raise _GiveUp  # an incomplete or infinite direction
+    if np.abs(stamp).max(initial=0) >= 2**53:
+        raise _GiveUp  # POSIX microseconds that a double cannot hold exactly
+    seconds = stamp.astype(np.float64) / 1e6
+
+    # The other actual features, one by one, each in its context.
+    centre_rows: list[_Row] = []
+    point_rows: list[_Row] = []
+    if actuals:
+        actuals.sort()  # in file order
+        lines = np.array([line for line, _ in actuals], dtype=np.int64)
+        u_other, stamp_other, known_other = context(lines)
+        for (line, statement), ui, us, ok in zip(actuals, u_other.tolist(), stamp_other.tolist(),
+                                                 known_other.tolist(), strict=True):
+            scale_here, angle = (1.0, "ANGDEC") if ui < 0 else units[ui][1:]
+            when = None
+            if ok:
+                when = datetime(1970, 1, 1) + timedelta(microseconds=us)
+            row = _feature_row(_parse_actual(statement, line, where, scale_here, angle, when),
+                               where)
+            if row is not None:
+                (centre_rows if row[0] == "centres" else point_rows).append(row[1])
+
+    records: list[Records] = []
+    if centre_rows:
+        records.extend(_rows_to_records(where, centre_rows, []))
+    if point_lines.size or point_rows:
+        lines = point_lines
+        if point_rows:
+            lines = np.concatenate((lines, [r.line for r in point_rows]))
+            steps, balls, numbers = (
+                np.concatenate((column, np.array(more, dtype=np.str_)))
+                for column, more in ((steps, [r.step for r in point_rows]),
+                                     (balls, [r.ball for r in point_rows]),
+                                     (numbers, [r.n for r in point_rows])))
+            xyz = np.concatenate((xyz, [r.xyz for r in point_rows]))
+            ijk = np.concatenate((ijk, [r.ijk for r in point_rows]))
+            seconds = np.concatenate((seconds, [r.seconds for r in point_rows]))
+        order = np.argsort(lines, kind="stable")
+        records.append(Records(path=where, kind="points", label=steps[order], ball=balls[order],
+                               xyz_mm=xyz[order], time_s=seconds[order], time_kind="iso",
+                               line=lines[order].astype(np.int64), ijk=ijk[order],
+                               extra={"n": numbers[order]}))
+    return records
+
+
+def _fast_dates(data: bytes, starts: np.ndarray, line_no: np.ndarray, is_date: np.ndarray,
+                dates: list[tuple[int, date]], where: str) -> tuple[np.ndarray, np.ndarray]:
+    """Lines of the DATE= statements, in order, and their days since 1970-01-01."""
+    lines = line_no[is_date]
+    days = np.empty(lines.size, dtype=np.int64)
+    if lines.size:
+        padded = np.frombuffer(data + b"\0" * 16, dtype=np.uint8)
+        values = padded[starts[is_date][:, None] + np.arange(5, 15)]
+        unique, inverse = np.unique(values.view("S10")[:, 0], return_inverse=True)
+        first = np.zeros(unique.size, dtype=np.int64)
+        first[inverse[::-1]] = np.arange(lines.size)[::-1]
+        ordinals = np.array([
+            _parse_date(text.decode("utf-8"), int(lines[k]), where).toordinal()
+            for text, k in zip(unique.tolist(), first.tolist(), strict=True)], dtype=np.int64)
+        days = ordinals[inverse.ravel()] - _EPOCH_ORDINAL
+    all_lines = np.concatenate((lines, [line for line, _ in dates])).astype(np.int64)
+    all_days = np.concatenate((days, [d.toordinal() - _EPOCH_ORDINAL for _, d in dates]))
+    order = np.argsort(all_lines, kind="stable")
+    return all_lines[order], all_days[order].astype(np.int64)
+
+
+_POINT_TOKEN = np.frombuffer(b")=FEAT/POINT,CART,", dtype=np.uint8)
+# Per byte, as a bytes.translate table: bit 0 set when it does not belong in a label
+# ([A-Za-z0-9-] and _), bit 1 when it does not belong in the numbers (digits, "eE+-.",
+# blanks and commas).
+_BAD_IN = np.full(256, 3, dtype=np.uint8)
+_BAD_IN[list(b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz_")] = 2
+_BAD_IN[list(b"0123456789-")] = 0
+_BAD_IN[list(b"eE")] = 0
+_BAD_IN[list(b"+. ,")] = 1
+_BAD_IN_TABLE = _BAD_IN.tobytes()
+
+def _canonical_points(
+    blob: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Parse lines ``FA(<step>_<ball>_<n>)=FEAT/POINT,CART,x,y,z[,i,j,k]`` all at once.
+
+    ``blob`` holds the bytes of lines that start with ``FA(``, joined by LF. Returns
+    which lines are such canonical points (the others are left to the general
+    parser), and for those the step, ball and point labels and the numbers (n, 6)
+    (NaN where a line has fewer than six). A line counts as canonical when its label
+    is three non-empty ``[A-Za-z0-9-]+`` parts joined by ``_``, ``)=FEAT/POINT,CART,``
+    follows it, and 3 to 6 comma-separated fields made of digits, ``eE+-.`` and
+    blanks come after that; pandas' C parser reads the numbers (correctly rounded,
+    as ``float``), and a malformed number makes the whole lane give up.
+    """
+    import io
+
+    import pandas as pd
+
+    size = blob.size
+    newlines = np.flatnonzero(blob == 10)
+    first = np.concatenate(([0], newlines + 1))
+    last = np.concatenate((newlines, [size]))
+    padded = np.concatenate((blob, np.zeros(_POINT_TOKEN.size + 1, dtype=np.uint8)))
+    parens = np.flatnonzero(blob == 41)
+    paren = np.append(parens, size)[np.searchsorted(parens, first + 3)]  # first ')' (or none)
+    ok = paren + _POINT_TOKEN.size <= last
+    ok &= np.all(padded[np.minimum(paren, size)[:, None] + np.arange(_POINT_TOKEN.size)]
+                 == _POINT_TOKEN, axis=1)
+    # Per byte of the lines still ok: 1 in the label, 2 in the numbers (with the comma
+    # before them), 0 elsewhere.
+    label_start, number_start = first + 3, paren + _POINT_TOKEN.size - 1
+
+    def regions() -> np.ndarray:
+        edges = np.column_stack((label_start, paren, number_start, last))[ok].ravel()
+        lengths = np.diff(np.concatenate(([0], edges, [size])))
+        codes = np.tile(np.array([0, 1, 0, 2], dtype=np.uint8), edges.size // 4 + 1)
+        return np.repeat(codes[:lengths.size], lengths)
+
+    def line_of(positions: np.ndarray) -> np.ndarray:
+        return np.searchsorted(first, positions, side="right") - 1
+
+    bad_in = np.frombuffer(blob.tobytes().translate(_BAD_IN_TABLE), dtype=np.uint8)
+    ok[line_of(np.flatnonzero(bad_in & regions()))] = False
+    # Exactly two "_" (the label is the only place they may be), not first, not last,
+    # not side by side; 3 to 6 fields after the token (which holds two commas).
+    bounds = np.append(first, size)
+    underscores = np.flatnonzero(blob == 95)
+    ok &= np.diff(np.searchsorted(underscores, bounds)) == 2
+    ok &= (padded[label_start] != 95) & (padded[np.maximum(paren - 1, 0)] != 95)
+    ok[line_of(underscores[:-1][np.diff(underscores) == 1])] = False
+    commas = np.diff(np.searchsorted(np.flatnonzero(blob == 44), bounds)) - 2
+    ok &= (commas >= 2) & (commas <= 5)
+    if not ok.any():
+        empty = np.empty(0, dtype=np.str_)
+        return ok, empty, empty, empty, np.empty((0, 6))
+    # The canonical lines as CSV: "step,ball,n,x,y,z[,i,j,k]" (the label's "_" made commas)
+    keep = regions() > 0
+    keep[newlines[ok[:-1]]] = True
+    text = blob[keep].tobytes().replace(b"_", b",")
+    labels, numbers = ["step", "ball", "n"], ["x", "y", "z", "i", "j", "k"]
+    frame = pd.read_csv(io.BytesIO(text), header=None, names=labels + numbers, engine="c",
+                        dtype={**dict.fromkeys(labels, object), **dict.fromkeys(numbers, float)},
+                        keep_default_na=False, na_values=dict.fromkeys(numbers, [""]))
+    if len(frame) != int(ok.sum()):
+        raise _GiveUp
+    step, ball, n = (frame[name].to_numpy().astype(np.str_) for name in labels)
+    return ok, step, ball, n, frame[numbers].to_numpy(dtype=np.float64)

@@ -97,7 +97,8 @@ def concat_records(records: list[Records]) -> Records:
         return None if any(v is None for v in values) else np.concatenate(values)
 
     keys = set.intersection(*(set(r.extra) for r in records))
-    extra = {key: np.concatenate([np.asarray(r.extra[key]) for r in records]) for key in keys}
+    extra: dict[str, object] = {
+        key: np.concatenate([np.asarray(r.extra[key]) for r in records]) for key in keys}
     return Records(path=first.path, kind=first.kind,
                    label=np.concatenate([r.label for r in records]),
                    ball=np.concatenate([r.ball for r in records]),
