@@ -225,7 +225,7 @@ def linear_covariance(
         step_of[colour[deps[ok, j]], np.flatnonzero(ok)] = deps[ok, j]
     gathered = np.where((step_of >= 0)[..., None, None, None],
                         cov[np.maximum(step_of, 0)], 0.0)  # (C, M, k, 3, 3)
-    return np.einsum("cbamy,cmbae,cbemz->myz", jac, gathered, jac)
+    return np.einsum("cbamy,cmbae,cbemz->myz", jac, gathered, jac, optimize=True)
 
 
 def monte_carlo_covariance(

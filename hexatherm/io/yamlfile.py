@@ -35,11 +35,21 @@ class _Loader(yaml.SafeLoader):
     """SafeLoader that also reads YAML 1.2 floats such as ``1e-5`` as numbers."""
 
 
-_Loader.add_implicit_resolver(
-    "tag:yaml.org,2002:float",
-    re.compile(r"^[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)[eE][-+]?[0-9]+$"),
-    list("-+0123456789."),
-)
+#: the composer: libyaml's (C, about 3x faster on a long plan) when PyYAML has it
+_Composer: type[Any] = _Loader
+if getattr(yaml, "__with_libyaml__", False):
+
+    class _CLoader(yaml.CSafeLoader):  # type: ignore[misc,name-defined]
+        """libyaml's SafeLoader with the same resolvers (composes; never constructs)."""
+
+    _Composer = _CLoader
+
+for _loader in {_Loader, _Composer}:
+    _loader.add_implicit_resolver(
+        "tag:yaml.org,2002:float",
+        re.compile(r"^[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)[eE][-+]?[0-9]+$"),
+        list("-+0123456789."),
+    )
 
 
 def field_name(keys: Sequence[Key]) -> str:
@@ -89,7 +99,7 @@ class YamlDoc:
     def from_text(cls, text: str, path: str) -> YamlDoc:
         """Parse YAML text; InputError with the line on syntax errors."""
         try:
-            node = yaml.compose(text, Loader=_Loader)
+            node = yaml.compose(text, Loader=_Composer)
         except yaml.MarkedYAMLError as exc:
             mark = exc.problem_mark
             line = None if mark is None else mark.line + 1
