@@ -8,6 +8,7 @@ the diagnosis. Writing is :mod:`hexatherm.io.diagnosisfiles`' job.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -109,9 +110,10 @@ def read_for_diagnosis(path: str | Path, hexapod_path: str | Path | None = None)
     return SessionData(session, hexapod, source_hexapod, current, obs, temperatures, source)
 
 
-def run_diagnosis(data: SessionData) -> DiagnosisResult:
-    """Diagnose a session read by :func:`read_for_diagnosis`."""
-    diagnosis = diagnose(data.hexapod, data.observations, data.current)
+def run_diagnosis(data: SessionData,
+                  progress: Callable[[int, int, int], None] | None = None) -> DiagnosisResult:
+    """Diagnose a session read by :func:`read_for_diagnosis` (``progress``: see ``diagnose``)."""
+    diagnosis = diagnose(data.hexapod, data.observations, data.current, progress=progress)
     before = pose_residuals(data.hexapod, data.observations, diagnosis.baseline)
     after = pose_residuals(data.hexapod, data.observations, diagnosis.final)
     return DiagnosisResult(data, diagnosis, before, after)

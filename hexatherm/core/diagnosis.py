@@ -37,7 +37,7 @@ one's (cosine above 0.9), both are named and the choice is the smaller BIC.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -518,6 +518,7 @@ def diagnose(
     *,
     n_blocks: int = 6,
     max_additions: int = 3,
+    progress: Callable[[int, int, int], None] | None = None,
 ) -> Diagnosis:
     """Find the effects missing from the model, one by one (see the module's text).
 
@@ -534,6 +535,8 @@ def diagnose(
         Blocks of time for the held-out check.
     max_additions : int
         Stop after adding this many effects.
+    progress : callable, optional
+        Called as ``progress(round, done, total)`` after every candidate fitted.
 
     Returns
     -------
@@ -556,7 +559,7 @@ def diagnose(
     added_classes: list[type[Effect]] = []
     while names and len(added) < max_additions:
         starts: list[FloatArray | None] = [e.vector() for e in model.effects]
-        tried = []
+        tried: list[Candidate] = []
         for name in names:
             cls = EFFECTS[name]
             free = [*added_classes, cls]
@@ -565,6 +568,8 @@ def diagnose(
             note = _bound_note(fit.effects[-1])
             tried.append(Candidate(name, fit, delta, rms_um(fit.residual_mm), held,
                                    bool(delta > DELTA_BIC_THRESHOLD and held < heldout), note))
+            if progress is not None:
+                progress(len(rounds) + 1, len(tried), len(names))
         rounds.append(tuple(tried))
         passing = sorted((c for c in tried if c.passes), key=lambda c: -c.delta_bic)
         if not passing:
