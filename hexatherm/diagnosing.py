@@ -21,12 +21,13 @@ from hexatherm.core.diagnosis import (
     diagnose,
     pose_residuals,
 )
-from hexatherm.core.effects import Effect, ThermocoupleLog, effects_from_dicts
+from hexatherm.core.effects import Effect
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.errors import InputError
 from hexatherm.io.config import Session, read_hexapod, read_session
-from hexatherm.io.csvfile import Temperatures, read_measurements, read_temperatures
-from hexatherm.pipeline import assemble_centres, fit_points
+from hexatherm.io.csvfile import Temperatures
+from hexatherm.pipeline import read_measured
+from hexatherm.twinmethod import model_effects, thermocouple_log
 
 
 @dataclass(frozen=True)
@@ -76,26 +77,10 @@ def read_for_diagnosis(path: str | Path, hexapod_path: str | Path | None = None)
                          "(time,leg1..leg6[,air]) to the session", path=str(session.path),
                          field="temperatures")
     hexapod = session.hexapod if hexapod_path is None else read_hexapod(hexapod_path)
-    if hexapod.legs is None:
-        raise InputError("the twin needs the hexapod's leg model ('legs:')",
-                         path=str(hexapod_path or session.path), field="legs")
-    try:
-        current = effects_from_dicts(hexapod.effects)
-    except ValueError as exc:
-        raise InputError(str(exc), path=str(hexapod_path or session.path),
-                         field="thermal_model") from None
-    records = []
-    for file in session.measurements:
-        for rec in read_measurements(file):
-            records.append(rec if rec.kind == "centres" else fit_points(rec, session.balls))
-    centres = assemble_centres(records, session)
-    temperatures = read_temperatures(session.temperatures)
-    if temperatures.time_kind != centres.time_kind:
-        raise InputError(f"times are {temperatures.time_kind} here but {centres.time_kind} in "
-                         "the measurements: use one kind", path=temperatures.path, line=2,
-                         field="time")
-    air = temperatures.others_C.get("air")
-    log = ThermocoupleLog(temperatures.time_s, temperatures.legs_C, air)
+    current = model_effects(hexapod, str(hexapod_path or session.path))
+    _, centres, temperatures = read_measured(session)
+    assert temperatures is not None  # the session names them (checked above)
+    log = thermocouple_log(temperatures)
     u_um = centres.u_um
     if np.all(np.isnan(u_um)):
         u_mm = np.full(u_um.shape, 1e-3)

@@ -216,12 +216,14 @@ def registration_weights(u_um: FloatArray, floor_um: float = 1e-3) -> FloatArray
     return weights
 
 
-def process_session(
-    path: str | Path, interpolation: Interpolation = "linear",
-    fixed_diameter_mm: float | None = None, checks: Checks | None = None,
-) -> ProcessResult:
-    """Read a session and compute conventional and corrected poses of every target."""
-    session = read_session(path)
+def read_measured(session: Session, fixed_diameter_mm: float | None = None
+                  ) -> tuple[list[Records], StepCentres, Temperatures | None]:
+    """Every measurement file of ``session`` (points fitted) and its thermocouple log.
+
+    Returns the records (centres), the centres of every step and the temperatures
+    (None when the session has none); InputError when the temperatures and the
+    measurements use different kinds of time.
+    """
     records: list[Records] = []
     for file in session.measurements:
         for rec in read_measurements(file):
@@ -235,6 +237,16 @@ def process_session(
             raise InputError(f"times are {temperatures.time_kind} here but "
                              f"{centres.time_kind} in the measurements: use one kind",
                              path=temperatures.path, line=2, field="time")
+    return records, centres, temperatures
+
+
+def process_session(
+    path: str | Path, interpolation: Interpolation = "linear",
+    fixed_diameter_mm: float | None = None, checks: Checks | None = None,
+) -> ProcessResult:
+    """Read a session and compute conventional and corrected poses of every target."""
+    session = read_session(path)
+    records, centres, temperatures = read_measured(session, fixed_diameter_mm)
     checks = checks or Checks()
     plan, balls = session.plan, session.balls
     distances = check_distances(centres.centres_mm, balls.centres_mm, balls.names,

@@ -13,10 +13,11 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from hexatherm.core.effects import ThermocoupleLog, effects_from_dicts
+from hexatherm.core.effects import Effect, ThermocoupleLog, effects_from_dicts
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.twin import twin_corrected
 from hexatherm.errors import InputError
+from hexatherm.io.csvfile import Temperatures
 from hexatherm.pipeline import ProcessResult
 
 
@@ -31,20 +32,33 @@ def twin_poses(result: ProcessResult, hexapod: Hexapod, source: str = ""
         raise InputError("the twin corrects from the thermocouple log: add 'temperatures: "
                          "temperatures.csv' to the session", path=str(session.path),
                          field="temperatures")
-    if hexapod.legs is None:
-        raise InputError("the twin needs the hexapod's leg model ('legs:')",
-                         path=source or None, field="legs")
-    try:
-        effects = effects_from_dicts(hexapod.effects)
-    except ValueError as exc:
-        raise InputError(str(exc), path=source or None, field="thermal_model") from None
-    temps = result.temperatures
-    air = temps.others_C.get("air")
-    if air is None and any(type(e).needs_air for e in effects):
+    effects = model_effects(hexapod, source or None)
+    log = thermocouple_log(result.temperatures)
+    if log.air_C is None and any(type(e).needs_air for e in effects):
         raise InputError("the thermal model's effects need the air temperature: the "
-                         "temperatures have no 'air' column", path=temps.path, line=1,
-                         field="air")
-    log = ThermocoupleLog(temps.time_s, temps.legs_C, air)
+                         "temperatures have no 'air' column", path=result.temperatures.path,
+                         line=1, field="air")
     poses = twin_corrected(hexapod, session.plan, result.centres.times_s, log,
                            session.balls.centres_mm, result.registration.platform2cmm, effects)
     return poses[result.correction.target_index]
+
+
+def model_effects(hexapod: Hexapod, source: str | None) -> tuple[Effect, ...]:
+    """The twin's effects of ``hexapod`` (its ``thermal_model``), checked.
+
+    InputError naming ``source`` (the hexapod file) when the leg model is missing
+    or an effect is invalid.
+    """
+    if hexapod.legs is None:
+        raise InputError("the twin needs the hexapod's leg model ('legs:')", path=source,
+                         field="legs")
+    try:
+        return effects_from_dicts(hexapod.effects)
+    except ValueError as exc:
+        raise InputError(str(exc), path=source, field="thermal_model") from None
+
+
+def thermocouple_log(temperatures: Temperatures) -> ThermocoupleLog:
+    """The twin's thermocouple log of ``temperatures.csv`` (with its ``air`` column if any)."""
+    return ThermocoupleLog(temperatures.time_s, temperatures.legs_C,
+                           temperatures.others_C.get("air"))
