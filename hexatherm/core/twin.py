@@ -43,6 +43,7 @@ from hexatherm.core.geometry import (
 )
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
+from hexatherm.core.registration import register
 from hexatherm.core.thermal import LegThermalModel
 
 FloatArray = npt.NDArray[np.float64]
@@ -415,8 +416,6 @@ def twin_corrected(
     ndarray, shape (N, 6)
         Twin-corrected pose of every step, mm and deg, relative to the measured O.
     """
-    from hexatherm.core.registration import register
-
     frames = np.asarray(platform2cmm, dtype=float)
     origin = plan.origin_index
     steps = predict(hexapod, plan, times_s, log, balls_mm, frames[origin], effects,
