@@ -8,6 +8,8 @@ writes nothing: :mod:`hexatherm.io.results` does.
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,6 +25,8 @@ from hexatherm.io.csvfile import Temperatures, read_measurements, read_temperatu
 from hexatherm.io.records import Records, TimeKind
 
 FloatArray = npt.NDArray[np.float64]
+#: ``progress(path, lines_done, lines_total)`` while a measurement file is read
+FileProgress = Callable[[str, int, int], None]
 
 
 @dataclass(frozen=True)
@@ -216,9 +220,13 @@ def registration_weights(u_um: FloatArray, floor_um: float = 1e-3) -> FloatArray
     return weights
 
 
-def read_measured(session: Session, fixed_diameter_mm: float | None = None
+def read_measured(session: Session, fixed_diameter_mm: float | None = None,
+                  progress: FileProgress | None = None
                   ) -> tuple[list[Records], StepCentres, Temperatures | None]:
     """Every measurement file of ``session`` (points fitted) and its thermocouple log.
+
+    ``progress(path, lines_done, lines_total)``, when given, is called now and then
+    while a measurement file is read (see :func:`~hexatherm.io.csvfile.read_measurements`).
 
     Returns the records (centres), the centres of every step and the temperatures
     (None when the session has none); InputError when the temperatures and the
@@ -226,7 +234,8 @@ def read_measured(session: Session, fixed_diameter_mm: float | None = None
     """
     records: list[Records] = []
     for file in session.measurements:
-        for rec in read_measurements(file):
+        report = None if progress is None else functools.partial(progress, str(file))
+        for rec in read_measurements(file, progress=report):
             records.append(rec if rec.kind == "centres" else fit_points(
                 rec, session.balls, fixed_diameter_mm))
     centres = assemble_centres(records, session)
@@ -243,10 +252,14 @@ def read_measured(session: Session, fixed_diameter_mm: float | None = None
 def process_session(
     path: str | Path, interpolation: Interpolation = "linear",
     fixed_diameter_mm: float | None = None, checks: Checks | None = None,
+    progress: FileProgress | None = None,
 ) -> ProcessResult:
-    """Read a session and compute conventional and corrected poses of every target."""
+    """Read a session and compute conventional and corrected poses of every target.
+
+    ``progress`` reports the reading of the measurement files (see :func:`read_measured`).
+    """
     session = read_session(path)
-    records, centres, temperatures = read_measured(session, fixed_diameter_mm)
+    records, centres, temperatures = read_measured(session, fixed_diameter_mm, progress)
     checks = checks or Checks()
     plan, balls = session.plan, session.balls
     distances = check_distances(centres.centres_mm, balls.centres_mm, balls.names,

@@ -19,6 +19,7 @@ linear law (GUM) or by Monte Carlo (GUM Supplement 1).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal
 
@@ -151,7 +152,8 @@ def pose_chain(result: ProcessResult) -> PoseChain:
     )
 
 
-def pose_uncertainty(result: ProcessResult, mc: int = 0, seed: int = 0) -> PoseUncertainty:
+def pose_uncertainty(result: ProcessResult, mc: int = 0, seed: int = 0,
+                     progress: Callable[[int, int], None] | None = None) -> PoseUncertainty:
     """Standard uncertainties of the conventional and corrected poses of every target.
 
     Parameters
@@ -163,6 +165,8 @@ def pose_uncertainty(result: ProcessResult, mc: int = 0, seed: int = 0) -> PoseU
         thousand are plenty for standard uncertainties).
     seed : int
         Seed of the Monte Carlo generator (``numpy.random.default_rng``).
+    progress : callable, optional
+        ``progress(draws_done, draws)`` during the Monte Carlo draws.
 
     Returns
     -------
@@ -174,7 +178,8 @@ def pose_uncertainty(result: ProcessResult, mc: int = 0, seed: int = 0) -> PoseU
     covariance, method, draws = linear, "linear", 0
     if mc:
         covariance, _ = monte_carlo_covariance(chain, result.centres.centres_mm,
-                                               centres.cov_mm2, mc, np.random.default_rng(seed))
+                                               centres.cov_mm2, mc, np.random.default_rng(seed),
+                                               progress=progress)
         method, draws = "monte-carlo", int(mc)
     u = np.sqrt(np.clip(np.diagonal(covariance, axis1=1, axis2=2), 0.0, None))
     return PoseUncertainty(conventional_u=u[:, :6], corrected_u=u[:, 6:], covariance=covariance,

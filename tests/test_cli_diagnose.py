@@ -48,6 +48,8 @@ def test_diagnose_writes_the_files_and_tells_the_story(diagnosed) -> None:
     assert f"tau_s = {tau:.4g}" in story
     assert f"{doc['baseline_rms_um']:.3f} -> {doc['final_rms_um']:.3f} um" in story
     assert "wrote" not in story and "wrote" in result.stderr  # data out, logs err
+    # a progress bar per round (its label, off a terminal), on standard error
+    assert "round 1: candidates" in result.stderr and "round 2: candidates" in result.stderr
 
 
 def test_the_written_model_is_a_hexapod_file_with_the_effect(diagnosed, lagging: Path) -> None:

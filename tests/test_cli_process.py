@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import shutil
 
 import numpy as np
 import pandas as pd
@@ -11,7 +12,7 @@ from click.testing import CliRunner
 
 from hexatherm.cli import main
 from hexatherm.io.results import CONTRACT_COLUMNS, pose_columns
-from tests.sessions import make_session
+from tests.sessions import ROOT, make_session
 
 UM, URAD = 1e3, np.pi / 180 * 1e6
 
@@ -203,6 +204,8 @@ def test_process_monte_carlo_option(tmp_path):
     result = run("process", tmp_path / "s", "-o", tmp_path / "mc", "--mc", 400, "--seed", 3)
     assert result.exit_code == 0, result.output
     assert "Monte Carlo (400 draws, seed 3) over linear propagation" in result.output
+    assert "Monte Carlo draws" in result.output  # the progress bar (its label off a terminal)
+    assert "Monte Carlo draws" not in run("process", tmp_path / "s", "-o", tmp_path / "l2").output
     lin = pd.read_csv(tmp_path / "lin" / "poses.csv")[U_COLUMNS].to_numpy()
     mc = pd.read_csv(tmp_path / "mc" / "poses.csv")[U_COLUMNS].to_numpy()
     assert np.all(np.abs(mc / lin - 1) < 0.25) and not np.allclose(mc, lin)
@@ -238,3 +241,19 @@ def test_bad_quality_threshold_is_refused_before_anything_is_written(tmp_path, v
     assert result.exit_code == 1 and "Traceback" not in result.output
     assert result.output.startswith(f"Error: --quality-threshold {value!r}: {message}")
     assert not (tmp_path / "s" / "results").exists()
+
+
+def test_slow_dmis_read_shows_a_progress_bar_and_gives_the_same_poses(tmp_path):
+    shutil.copytree(ROOT / "sessions" / "paper-zero-pose-dmis", tmp_path / "s",
+                    ignore=shutil.ignore_patterns("expected", "results"))
+    fast = run("process", tmp_path / "s", "-o", tmp_path / "fast")
+    assert fast.exit_code == 0, fast.output
+    assert "reading points.dmo" not in fast.output  # the fast path: done at once, no bar
+    dmo = tmp_path / "s" / "points.dmo"
+    lines = dmo.read_text().splitlines(keepends=True)
+    dmo.write_text("".join(lines[:3] + ["$$ a comment: the general reader\n"] + lines[3:]))
+    slow = run("process", tmp_path / "s", "-o", tmp_path / "slow")
+    assert slow.exit_code == 0, slow.output
+    assert "reading points.dmo" in slow.output
+    pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "slow" / "poses.csv"),
+                                  pd.read_csv(tmp_path / "fast" / "poses.csv"))

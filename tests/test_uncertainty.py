@@ -11,8 +11,6 @@ from hexatherm.core.spherefit import fit_spheres
 from hexatherm.core.twin import probe_points
 from hexatherm.core.uncertainty import (
     cap_centre_covariance,
-    colour_steps,
-    dependencies,
     linear_covariance,
     monte_carlo_covariance,
     output_difference,
@@ -68,8 +66,8 @@ def brute_force_covariance(chain, centres, cov, step_mm=1e-3):
     return np.array([full[12 * i:12 * i + 12, 12 * i:12 * i + 12] for i in range(m)])
 
 
-@pytest.mark.parametrize("interpolation", ["linear", "before", "nearest"])
-def test_coloured_jacobian_equals_the_brute_force_one(tmp_path, interpolation):
+@pytest.mark.parametrize("interpolation", ["linear", "before", "after", "nearest"])
+def test_chain_rule_jacobian_equals_the_brute_force_one(tmp_path, interpolation):
     # one-sided references too: R S S R S S R
     session = points_session(tmp_path / "s", n_targets=4)
     plan_text = (session / "plan.yaml").read_text()
@@ -85,17 +83,6 @@ def test_coloured_jacobian_equals_the_brute_force_one(tmp_path, interpolation):
     scale = np.sqrt(np.einsum("mii->mi", slow))
     assert np.abs(fast - slow).max() <= 1e-6 * scale.max() ** 2
     np.testing.assert_allclose(np.sqrt(np.einsum("mii->mi", fast)), scale, rtol=1e-6)
-
-
-def test_colouring_separates_the_steps_of_every_target():
-    plan = small_plan(5)
-    adjacent = np.array(plan.adjacent_references())
-    deps = dependencies(plan, adjacent[:, 0], adjacent[:, 1])
-    colour = colour_steps(deps, len(plan.labels))
-    for row in deps:
-        used = colour[row[row >= 0]]
-        assert len(set(used.tolist())) == len(used)
-    assert colour.max() + 1 == 5  # O; R0; targets; two alternating sets of references
 
 
 def test_monte_carlo_agrees_with_linear_propagation_within_10_percent(noisy):

@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
-from typing import Any
 
 import click
 
-from hexatherm.cli.options import clean_errors, echo_err, overwrite_option
+from hexatherm.cli.options import ProgressBars, clean_errors, echo_err, overwrite_option
 
 
 @click.command("diagnose")
@@ -44,8 +42,10 @@ def command(session: Path, out: str | None, overwrite: bool, hexapod_path: Path 
     refuse_existing(out_dir, overwrite)
     data = read_for_diagnosis(session, hexapod_path)
     echo_err(f"diagnosing {data.session.name}: {data.observations.n_steps} steps")
-    with _RoundBars() as bars:
-        result = run_diagnosis(data, bars.update)
+    with ProgressBars() as bars:
+        result = run_diagnosis(
+            data, lambda round_, done, total: bars.update(f"round {round_}: candidates",
+                                                          done, total))
     files = {"diagnosis.json": diagnosis_json(result),
              "hexapod.yaml": diagnosed_hexapod_yaml(result)}
     written: list[Path] = []
@@ -59,32 +59,3 @@ def command(session: Path, out: str | None, overwrite: bool, hexapod_path: Path 
     click.echo(story(result))
     for path in written:
         echo_err(f"wrote {path}")
-
-
-
-class _RoundBars:
-    """One click progress bar (on standard error) per round of candidates."""
-
-    def __init__(self) -> None:
-        self.round = 0
-        self.bar: Any = None
-
-    def update(self, round_: int, done: int, total: int) -> None:
-        if round_ != self.round:
-            self.close()
-            self.round = round_
-            self.bar = click.progressbar(length=total, label=f"round {round_}: candidates",
-                                         file=sys.stderr)
-            self.bar.__enter__()
-        self.bar.update(1)
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.__exit__(None, None, None)
-            self.bar = None
-
-    def __enter__(self) -> _RoundBars:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

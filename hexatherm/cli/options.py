@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import sys
 from collections.abc import Callable
 from typing import Any, TypeVar
 
@@ -54,3 +55,41 @@ def clean_errors(func: F) -> F:
 def echo_err(message: str) -> None:
     """A log line on standard error (data goes to standard output)."""
     click.echo(message, err=True)
+
+
+class ProgressBars:
+    """Click progress bars on standard error, one per task, fed by ``update(label, done, total)``.
+
+    A bar opens when a task first reports that it is under way (``done < total``), so
+    that work that finishes at once (a fast file read) shows none; a new label closes
+    the previous bar. Use as a context manager so that the last bar is closed.
+    """
+
+    def __init__(self) -> None:
+        self.label: str | None = None
+        self.bar: Any = None
+
+    def update(self, label: str, done: int, total: int) -> None:
+        """Task ``label`` has done ``done`` of ``total`` units."""
+        if label != self.label:
+            self.close()
+            self.label = label
+            if done >= total:
+                return
+            self.bar = click.progressbar(length=total, label=label, file=sys.stderr)
+            self.bar.__enter__()
+        if self.bar is not None:
+            self.bar.update(max(0, min(done, total) - self.bar.pos))
+
+    def close(self) -> None:
+        """Close the open bar, if any."""
+        if self.bar is not None:
+            self.bar.__exit__(None, None, None)
+        self.bar = None
+        self.label = None
+
+    def __enter__(self) -> ProgressBars:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -9,6 +9,7 @@ import click
 import numpy as np
 
 from hexatherm.cli.options import (
+    ProgressBars,
     clean_errors,
     echo_err,
     interpolation_option,
@@ -86,8 +87,11 @@ def command(session: Path, out: str | None, overwrite: bool, interpolation: str,
     out_dir = Path(out) if out is not None else folder / "results"
     refuse_existing(out_dir, overwrite)
     checks = Checks(distance_tolerance_um, registration_tolerance_um, strict_registration)
-    result = process_session(session, interpolation,  # type: ignore[arg-type]
-                             0.0 if fixed_diameter else None, checks)
+    with ProgressBars() as bars:
+        result = process_session(
+            session, interpolation, 0.0 if fixed_diameter else None,  # type: ignore[arg-type]
+            checks, lambda path, done, total: bars.update(f"reading {Path(path).name}", done,
+                                                          total))
     for warning in result.warnings:
         echo_err(f"warning: {warning}")
     twin = None
@@ -105,7 +109,10 @@ def command(session: Path, out: str | None, overwrite: bool, interpolation: str,
     elif hexapod_path is not None:
         raise click.BadParameter("--hexapod is the twin's model: use it with --method twin",
                                  param_hint="'--hexapod'")
-    uncertainty = pose_uncertainty(result, mc=mc, seed=seed)
+    with ProgressBars() as bars:
+        uncertainty = pose_uncertainty(
+            result, mc=mc, seed=seed,
+            progress=lambda done, total: bars.update("Monte Carlo draws", done, total))
     quality = quality_checks(result, thresholds)
     written = write_results(result, out_dir, overwrite=overwrite, uncertainty=uncertainty,
                             quality=quality, twin=twin)

@@ -36,6 +36,7 @@ import numpy.typing as npt
 from hexatherm.core.geometry import invert_transform, pose_from_transform
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
+from hexatherm.core.thermal import LegThermalModel
 from hexatherm.errors import PlanError
 
 FloatArray = npt.NDArray[np.float64]
@@ -197,15 +198,9 @@ def correct(
 
     q = steps.q_mm
     q_r0 = q[refs[0]] if refs.size else np.full(6, np.nan)
-    growth_r = q - q_r0  # meaningful on reference rows only
-    g_before = np.where((before >= 0)[:, None], growth_r[np.maximum(before, 0)], 0.0)
-    g_after = np.where((after >= 0)[:, None], growth_r[np.maximum(after, 0)], 0.0)
-    reference_growth = (1.0 - w_after)[:, None] * g_before + w_after[:, None] * g_after
-
-    legs = hexapod.legs
+    reference_growth = interpolated_growth(q, q_r0, before, after, w_after)
     q_s = q[targets]
-    growth_s = legs.scale_growth(reference_growth, q_r0, q_s)
-    growth_s = legs.scale_growth(reference_growth, q_r0, q_s - growth_s)
+    growth_s = target_growth(hexapod.legs, reference_growth, q_r0, q_s)
     q_corr = q_s - growth_s
     corrected = hexapod.fgm(q_corr, initial_poses=steps.pose[targets])
 
@@ -225,3 +220,55 @@ def correct(
         q_corrected_mm=q_corr,
     )
     return steps, correction
+
+
+def interpolated_growth(q_mm: npt.ArrayLike, q_r0_mm: npt.ArrayLike, before_index: npt.ArrayLike,
+                        after_index: npt.ArrayLike, weight_after: npt.ArrayLike) -> FloatArray:
+    """Growth since R0 at the references, interpolated to each target (steps 2 and 3).
+
+    Parameters
+    ----------
+    q_mm : array_like, shape (..., N, 6)
+        Leg lengths of every step.
+    q_r0_mm : array_like, shape (..., 6)
+        Leg lengths of R0.
+    before_index, after_index : array_like of int, shape (M,)
+        The references each target uses (-1: none), as in :class:`Correction`.
+    weight_after : array_like, shape (M,)
+        Weight of the later reference.
+
+    Returns
+    -------
+    ndarray, shape (..., M, 6)
+    """
+    q = np.asarray(q_mm, dtype=float)
+    before = np.asarray(before_index, dtype=np.intp)
+    after = np.asarray(after_index, dtype=np.intp)
+    w_after = np.asarray(weight_after, dtype=float)
+    growth_r = q - np.asarray(q_r0_mm, dtype=float)[..., None, :]  # meaningful at references
+    g_before = np.where((before >= 0)[:, None], growth_r[..., np.maximum(before, 0), :], 0.0)
+    g_after = np.where((after >= 0)[:, None], growth_r[..., np.maximum(after, 0), :], 0.0)
+    return (1.0 - w_after)[:, None] * g_before + w_after[:, None] * g_after
+
+
+def target_growth(legs: LegThermalModel, reference_growth_mm: npt.ArrayLike,
+                  q_r0_mm: npt.ArrayLike, q_s_mm: npt.ArrayLike) -> FloatArray:
+    """Growth of the targets' legs (step 4): the growth at the references scaled by the
+    leg model from R0's leg lengths to the target's less its growth (one fixed-point
+    pass from the measured ones).
+
+    Parameters
+    ----------
+    legs : LegThermalModel
+    reference_growth_mm : array_like, shape (..., M, 6)
+    q_r0_mm : array_like, shape (..., 6) or (..., 1, 6)
+    q_s_mm : array_like, shape (..., M, 6)
+        Measured leg lengths of the targets.
+
+    Returns
+    -------
+    ndarray, shape (..., M, 6)
+    """
+    q_s = np.asarray(q_s_mm, dtype=float)
+    growth_s = legs.scale_growth(reference_growth_mm, q_r0_mm, q_s)
+    return legs.scale_growth(reference_growth_mm, q_r0_mm, q_s - growth_s)

@@ -10,15 +10,13 @@ The times, the registration weights and the hexapod model are taken as exact;
 the centres are independent from ball to ball and step to step, each with its
 own 3x3 covariance.
 
-* **Linear propagation** (GUM): ``U_y = J U_c J^T`` with the Jacobian ``J``
-  by central differences (:func:`linear_covariance`). Target S_i depends on at
-  most five steps: O, R0, S_i and its references before and after. The steps
-  are coloured so that no target depends on two steps of one colour
-  (:func:`colour_steps`: usually O; R0; the targets; every other reference;
-  the others); perturbing one coordinate of all steps of a colour at once then
-  gives the derivatives of every target by that coordinate of the one step it
-  depends on. That is ``2 x colours x 3k`` evaluations of the vectorized chain,
-  whatever the number of targets.
+* **Linear propagation** (GUM): ``U_y = J U_c J^T`` (:func:`linear_covariance`).
+  Target S_i depends on at most five steps: O, R0, S_i and its references
+  before and after. ``J`` is put together by the chain rule, vectorized over
+  the steps: the registration's derivatives by central differences (every
+  step's coordinate moved at once), the IGM's analytic Jacobian, the leg-by-leg
+  derivatives of the correction, and the FGM as the inverse of the IGM's
+  Jacobian at the corrected pose.
 * **Monte Carlo** (GUM Supplement 1): the centres are drawn from
   ``N(c, U_c)`` with a seeded generator, the chain is run on every draw and
   the covariance of the outputs is the estimate (:func:`monte_carlo_covariance`).
@@ -32,6 +30,7 @@ True
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,6 +38,7 @@ import numpy.typing as npt
 
 from hexatherm.core.geometry import invert_transform, pose_from_transform
 from hexatherm.core.hexapod import Hexapod
+from hexatherm.core.method import interpolated_growth, target_growth
 from hexatherm.core.plan import Plan
 from hexatherm.core.registration import register
 from hexatherm.core.twin import cap_directions
@@ -94,36 +94,42 @@ class PoseChain:
         c = np.asarray(centres_mm, dtype=float)
         lead, (n, k) = c.shape[:-3], c.shape[-3:-1]
         flat = c.reshape(-1, n, k, 3)
-        b = flat.shape[0]
-        w = None if self.weights is None else np.broadcast_to(self.weights, (b, n, k)).reshape(
-            -1, k)
-        frames = register(flat.reshape(-1, k, 3), self.balls_mm, w).platform2cmm.reshape(
-            b, n, 4, 4)
-        p2o = invert_transform(frames[:, self.plan.origin_index])[:, None] @ frames
-        pose = pose_from_transform(p2o, self.hexapod.convention)  # (b, n, 6)
-        targets, refs = self.plan.target_indices, self.plan.reference_indices
+        frames = self.frames(flat)
+        pose = pose_from_transform(invert_transform(frames[:, self.plan.origin_index])[:, None]
+                                   @ frames, self.hexapod.convention)  # (b, n, 6)
+        out = self.outputs_from_poses(pose)
+        return out.reshape(lead + out.shape[1:])
+
+    def frames(self, centres_mm: FloatArray) -> FloatArray:
+        """Platform frames in the CMM (..., N, 4, 4) of centres (..., N, k, 3)."""
+        n, k = centres_mm.shape[-3:-1]
+        flat = centres_mm.reshape(-1, k, 3)
+        w = None if self.weights is None else np.broadcast_to(
+            self.weights, centres_mm.shape[:-1]).reshape(-1, k)
+        return register(flat, self.balls_mm, w).platform2cmm.reshape(
+            centres_mm.shape[:-2] + (4, 4))
+
+    def outputs_from_poses(self, pose: FloatArray) -> FloatArray:
+        """Outputs (b, M, 12) from the poses (b, N, 6) of every step relative to O."""
+        b, n = pose.shape[:2]
+        targets = self.plan.target_indices
         m = targets.size
         if m == 0:
-            return np.zeros(lead + (0, OUTPUTS_PER_TARGET))
+            return np.zeros((b, 0, OUTPUTS_PER_TARGET))
         q = self.hexapod.igm(pose.reshape(-1, 6)).reshape(b, n, 6)
-        q_r0 = q[:, refs[0]][:, None]  # (b, 1, 6)
-        growth_r = q - q_r0
-        before, after, w_after = self.before_index, self.after_index, self.weight_after
-        g_before = np.where((before >= 0)[:, None], growth_r[:, np.maximum(before, 0)], 0.0)
-        g_after = np.where((after >= 0)[:, None], growth_r[:, np.maximum(after, 0)], 0.0)
-        reference_growth = (1.0 - w_after)[:, None] * g_before + w_after[:, None] * g_after
         legs = self.hexapod.legs
         if legs is None:
             raise ValueError("the hexapod has no leg model")
+        q_r0 = q[:, self.plan.reference_indices[0]]
+        reference_growth = interpolated_growth(q, q_r0, self.before_index, self.after_index,
+                                               self.weight_after)
         q_s = q[:, targets]
-        growth_s = legs.scale_growth(reference_growth, q_r0, q_s)
-        growth_s = legs.scale_growth(reference_growth, q_r0, q_s - growth_s)
+        corrected_q = q_s - target_growth(legs, reference_growth, q_r0[:, None], q_s)
         start = pose[:, targets] if self.initial_poses is None else np.broadcast_to(
             self.initial_poses, (b, m, 6))
-        corrected = self.hexapod.fgm((q_s - growth_s).reshape(-1, 6),
+        corrected = self.hexapod.fgm(corrected_q.reshape(-1, 6),
                                      initial_poses=start.reshape(-1, 6)).reshape(b, m, 6)
-        out = np.concatenate([pose[:, targets], corrected], axis=-1)
-        return out.reshape(lead + (m, OUTPUTS_PER_TARGET))
+        return np.concatenate([pose[:, targets], corrected], axis=-1)
 
 
 def output_difference(a: npt.ArrayLike, b: npt.ArrayLike) -> FloatArray:
@@ -134,49 +140,6 @@ def output_difference(a: npt.ArrayLike, b: npt.ArrayLike) -> FloatArray:
     return d
 
 
-def dependencies(plan: Plan, before_index: npt.ArrayLike, after_index: npt.ArrayLike
-                 ) -> IntArray:
-    """The steps each target's outputs depend on, (M, 5): O, R0, S, before, after.
-
-    -1 marks a reference that is not used and a step already named earlier in
-    the row (e.g. R0 as the reference before the first target).
-    """
-    targets, refs = plan.target_indices, plan.reference_indices
-    m = targets.size
-    r0 = refs[0] if refs.size else -1
-    deps = np.column_stack([np.full(m, plan.origin_index), np.full(m, r0), targets,
-                            np.asarray(before_index, dtype=np.intp).reshape(m),
-                            np.asarray(after_index, dtype=np.intp).reshape(m)]).astype(np.intp)
-    for j in range(1, deps.shape[1]):
-        repeated = (deps[:, j:j + 1] == deps[:, :j]).any(axis=1)
-        deps[repeated, j] = -1
-    return deps
-
-
-def colour_steps(deps: npt.ArrayLike, n_steps: int) -> IntArray:
-    """Colour the steps so that no row of ``deps`` holds two steps of one colour.
-
-    Greedy colouring of the graph joining the steps of every row, in step
-    order; steps no output depends on get -1.
-
-    >>> colour_steps([[0, 1, 2, -1, 3], [0, 1, 4, 3, 5], [0, 1, 6, 5, 7]], 8).tolist()
-    [0, 1, 2, 3, 2, 4, 2, 3]
-    """
-    rows = np.asarray(deps, dtype=np.intp)
-    neighbours: list[set[int]] = [set() for _ in range(n_steps)]
-    for row in rows:
-        members = [int(s) for s in row if s >= 0]
-        for s in members:
-            neighbours[s].update(members)
-    colour = np.full(n_steps, -1, dtype=np.intp)
-    for s in range(n_steps):
-        if not neighbours[s]:
-            continue
-        taken = {int(colour[t]) for t in neighbours[s] if t != s}
-        colour[s] = next(c for c in range(n_steps + 1) if c not in taken)
-    return colour
-
-
 def linear_covariance(
     chain: PoseChain,
     centres_mm: npt.ArrayLike,
@@ -184,6 +147,25 @@ def linear_covariance(
     step_mm: float = DEFAULT_STEP_MM,
 ) -> FloatArray:
     """Covariance (M, 12, 12) of every target's outputs by linear propagation.
+
+    The Jacobian of target S_i's outputs by the centres of the (at most) five
+    steps they depend on (O, R0, S_i, its references before and after) is put
+    together by the chain rule, vectorized over the steps:
+
+    1. ``dX_j/dc_j`` and ``dX_j/dc_O``: the pose of every step j relative to O by
+       its own centres and by O's, by central differences of the registration
+       (every step's coordinate moved at once: ``2 x 3k`` registrations of all
+       steps, and as many of O);
+    2. ``dq_j = J(X_j) dX_j`` with the IGM's analytic Jacobian ``J``;
+    3. the growth at the references and its scaling to the target, leg by leg:
+       ``q_corr = q_S - g(G, q_R0, q_S)`` with
+       ``G = (1 - w)(q_B - q_R0) + w (q_A - q_R0)``; the partial derivatives of
+       ``q_corr`` by ``G``, ``q_R0`` and ``q_S`` are diagonal (central differences);
+    4. ``dX_corr = J(X_corr)^-1 dq_corr`` (the FGM inverts the IGM).
+
+    A step that plays two parts for a target (R0 as the reference before the
+    first targets) gets the sum of both Jacobians. The result equals the
+    Jacobian of :class:`PoseChain` by brute force (a test checks it).
 
     Parameters
     ----------
@@ -202,30 +184,82 @@ def linear_covariance(
     c = np.asarray(centres_mm, dtype=float)
     cov = np.asarray(centre_cov_mm2, dtype=float)
     n, k = c.shape[:2]
-    deps = dependencies(chain.plan, chain.before_index, chain.after_index)
-    m = deps.shape[0]
+    plan, hexapod = chain.plan, chain.hexapod
+    targets, origin = plan.target_indices, plan.origin_index
+    m = targets.size
     if m == 0:
         return np.zeros((0, OUTPUTS_PER_TARGET, OUTPUTS_PER_TARGET))
-    colour = colour_steps(deps, n)
-    n_colours = int(colour.max()) + 1
-    # perturbed centres: (colour, ball, axis, sign, N, k, 3)
-    pert = np.broadcast_to(c, (n_colours, k, 3, 2, n, k, 3)).copy()
-    for col in range(n_colours):
-        steps = colour == col
-        for ball in range(k):
-            for axis in range(3):
-                pert[col, ball, axis, 0, steps, ball, axis] += step_mm
-                pert[col, ball, axis, 1, steps, ball, axis] -= step_mm
-    out = chain(pert)  # (C, k, 3, 2, M, 12)
-    jac = output_difference(out[:, :, :, 0], out[:, :, :, 1]) / (2 * step_mm)  # (C, k, 3, M, 12)
-    # the step of each colour each target depends on
-    step_of = np.full((n_colours, m), -1, dtype=np.intp)
-    for j in range(deps.shape[1]):
-        ok = deps[:, j] >= 0
-        step_of[colour[deps[ok, j]], np.flatnonzero(ok)] = deps[ok, j]
-    gathered = np.where((step_of >= 0)[..., None, None, None],
-                        cov[np.maximum(step_of, 0)], 0.0)  # (C, M, k, 3, 3)
-    return np.einsum("cbamy,cmbae,cbemz->myz", jac, gathered, jac, optimize=True)
+    legs = hexapod.legs
+    if legs is None:
+        raise ValueError("the hexapod has no leg model")
+    # 1. poses relative to O, nominal and with one coordinate of every step's centres
+    # (own) or of O's centres moved: (3k, 2, N, 6)
+    frames = chain.frames(c)
+    o2cmm_inv = invert_transform(frames[origin])
+    pose = pose_from_transform(o2cmm_inv @ frames, hexapod.convention)  # (N, 6)
+    moved = np.broadcast_to(c, (k, 3, 2, n, k, 3)).copy()
+    for ball in range(k):
+        for axis in range(3):
+            moved[ball, axis, 0, :, ball, axis] += step_mm
+            moved[ball, axis, 1, :, ball, axis] -= step_mm
+    moved_frames = chain.frames(moved).reshape(3 * k, 2, n, 4, 4)
+    own = pose_from_transform(o2cmm_inv @ moved_frames, hexapod.convention)
+    by_origin = pose_from_transform(invert_transform(moved_frames[:, :, origin])[:, :, None]
+                                    @ frames, hexapod.convention)
+
+    def derivative(plus_minus: FloatArray) -> FloatArray:  # (3k, 2, N, 6) -> (N, 6, 3k)
+        d = plus_minus[:, 0] - plus_minus[:, 1]
+        d[..., 3:] = (d[..., 3:] + 180.0) % 360.0 - 180.0
+        return np.moveaxis(d / (2 * step_mm), 0, -1)
+
+    dpose_own, dpose_origin = derivative(own), derivative(by_origin)
+    dpose_own[origin] = 0.0  # O's pose relative to itself is zero whatever its centres
+    dpose_origin[origin] = 0.0
+    jac_igm = hexapod.jacobian(pose)
+    dq_own, dq_origin = jac_igm @ dpose_own, jac_igm @ dpose_origin  # (N, 6, 3k)
+    # 3. the correction's leg-by-leg partial derivatives, (M, 6) each
+    q = hexapod.igm(pose)
+    r0 = plan.reference_indices[0]
+    before, after, w_after = chain.before_index, chain.after_index, chain.weight_after
+    growth = interpolated_growth(q, q[r0], before, after, w_after)
+    q_s = q[targets]
+
+    def q_corr(g: FloatArray, q_r0: FloatArray, qs: FloatArray) -> FloatArray:
+        return np.asarray(qs - target_growth(legs, g, q_r0, qs), dtype=float)
+
+    h = step_mm
+    q_r0 = np.broadcast_to(q[r0], q_s.shape)
+    d_growth = (q_corr(growth + h, q_r0, q_s) - q_corr(growth - h, q_r0, q_s)) / (2 * h)
+    d_r0 = (q_corr(growth, q_r0 + h, q_s) - q_corr(growth, q_r0 - h, q_s)) / (2 * h)
+    d_s = (q_corr(growth, q_r0, q_s + h) - q_corr(growth, q_r0, q_s - h)) / (2 * h)
+    w_before = np.where(before >= 0, 1.0 - w_after, 0.0)[:, None]
+    w_after_used = np.where(after >= 0, w_after, 0.0)[:, None]
+    # coefficient of dq of each part: O (none: through the others), R0, S, before, after
+    coef = np.stack([np.zeros_like(d_s), d_r0 - d_growth * (w_before + w_after_used), d_s,
+                     d_growth * w_before, d_growth * w_after_used], axis=1)  # (M, 5, 6)
+    steps = np.column_stack([np.full(m, origin), np.full(m, r0), targets,
+                             before, after]).astype(np.intp)  # (M, 5)
+    used = (steps >= 0) & (np.arange(5) != 0)
+    at = np.maximum(steps, 0)
+    # 4. dq_corr and the outputs by each part's centres: (M, 5, 12, 3k)
+    dq_corr = np.where(used[..., None, None], coef[..., None] * dq_own[at], 0.0)
+    dq_corr[:, 0] = np.einsum("mpl,mplj->mlj", np.where(used[..., None], coef, 0.0),
+                              dq_origin[at])
+    jac_fgm_inv = np.linalg.inv(hexapod.jacobian(chain.outputs_from_poses(pose[None])[0, :, 6:]))
+    jac = np.zeros((m, 5, OUTPUTS_PER_TARGET, 3 * k))
+    jac[:, 0, :6] = dpose_origin[targets]
+    jac[:, 2, :6] = dpose_own[targets]
+    jac[:, :, 6:] = jac_fgm_inv[:, None] @ dq_corr
+    # a step in two parts: one Jacobian, the sum
+    for part in range(1, 5):
+        for earlier in range(part):
+            same = (steps[:, part] == steps[:, earlier]) & (steps[:, part] >= 0)
+            jac[same, earlier] += jac[same, part]
+            jac[same, part] = 0.0
+            steps[same, part] = -1
+    part_cov = np.where((steps >= 0)[..., None, None, None], cov[at], 0.0)  # (M, 5, k, 3, 3)
+    jac = jac.reshape(m, 5, OUTPUTS_PER_TARGET, k, 3)
+    return np.einsum("mpybi,mpbij,mpzbj->myz", jac, part_cov, jac, optimize=True)
 
 
 def monte_carlo_covariance(
@@ -235,12 +269,15 @@ def monte_carlo_covariance(
     draws: int,
     rng: np.random.Generator,
     batch: int = DEFAULT_BATCH,
+    progress: Callable[[int, int], None] | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """Covariance (M, 12, 12) and mean (M, 12) of the outputs over Monte Carlo draws.
 
     Every centre is drawn from the normal distribution with its covariance;
     the outputs' deviations from the chain's value at the measured centres
     (angles wrapped) give the sample covariance (``draws - 1`` degrees of freedom).
+    The draws are evaluated ``batch`` at a time; ``progress(done, draws)``, when
+    given, is called after each batch.
     """
     if draws < 2:
         raise ValueError(f"Monte Carlo needs at least 2 draws, got {draws}")
@@ -258,6 +295,8 @@ def monte_carlo_covariance(
         total += d.sum(axis=0)
         outer += np.einsum("dmy,dmz->myz", d, d)
         done += size
+        if progress is not None:
+            progress(done, draws)
     mean = total / draws
     covariance = (outer - draws * np.einsum("my,mz->myz", mean, mean)) / (draws - 1)
     return covariance, nominal + mean
