@@ -139,6 +139,20 @@ def test_yaml_syntax_error_has_line(tmp_path):
         read_plan(path)
 
 
+def test_plan_file_errors(tmp_path):
+    with pytest.raises(InputError, match=r"^.*nothere.yaml: file not found$"):
+        read_plan(tmp_path / "nothere.yaml")
+    with pytest.raises(InputError, match=r"^.*: is a directory, expected a file$"):
+        read_plan(tmp_path)
+    path = tmp_path / "plan.yaml"
+    path.write_bytes(plan_to_yaml(small_plan(2)).encode() + b"# \xff\n")
+    with pytest.raises(InputError, match=r"plan.yaml: not UTF-8 text \(invalid start byte at "
+                                         r"byte \d+\)$"):
+        read_plan(path)
+    path.write_text("\ufeff" + plan_to_yaml(small_plan(2)))  # a BOM is read past
+    assert read_plan(path).labels[-1] == "R2"
+
+
 def test_per_leg_segments_and_effects(tmp_path):
     text = HEXAPOD.read_text()
     per_leg = "  per_leg:\n" + "".join(

@@ -12,6 +12,14 @@ Duplicate keys, which YAML would silently collapse, are errors.
 4
 >>> str(doc.error("not a vector", "b", 1))
 "demo.yaml:4: field 'b[1]': not a vector"
+
+Readers of long files in a fixed layout (the plan) may parse their lines
+themselves, with :data:`PLAIN_NUMBER`, :func:`plain_numbers` and :func:`plain_tag`
+giving the values that the loader would, and fall back to :class:`YamlDoc` for
+anything else, so that errors stay those of :class:`YamlDoc`.
+
+>>> plain_numbers(["1", "-2.5", "1e-3"]), plain_tag("yes"), plain_tag("S1")
+([1.0, -2.5, 0.001], 'bool', 'str')
 """
 
 from __future__ import annotations
@@ -19,7 +27,7 @@ from __future__ import annotations
 import math
 import os
 import re
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -52,6 +60,70 @@ for _loader in {_Loader, _Composer}:
     )
 
 
+#: the composer's tag resolution, for :func:`plain_tag`
+_resolver = _Composer("")
+
+#: a plain scalar that the loader reads as a decimal int or float (no sign ``+``, no
+#: ``_``, no leading zero, digits on both sides of a point): :func:`plain_numbers`
+#: gives its value
+PLAIN_NUMBER = r"-?(?:0|[1-9][0-9]*)(?:\.[0-9]+)?(?:[eE][-+]?[0-9]+)?"
+
+
+def plain_numbers(texts: Iterable[str]) -> list[float] | None:
+    """The values that :meth:`YamlDoc.number` reads from plain scalars.
+
+    Parameters
+    ----------
+    texts : iterable of str
+        Plain scalars that match :data:`PLAIN_NUMBER` (not checked).
+
+    Returns
+    -------
+    list of float or None
+        ``float(text)`` of each, or None when one is not finite or is ``-0`` (the
+        int 0, read as ``0.0``, where ``float("-0")`` is ``-0.0``): left to :class:`YamlDoc`.
+    """
+    texts = list(texts)
+    if "-0" in texts:
+        return None
+    values = list(map(float, texts))
+    if not all(map(math.isfinite, values)):
+        return None
+    return values
+
+
+def plain_tag(text: str) -> str:
+    """The type the loader gives a plain (unquoted) scalar: ``str``, ``int``, ``bool``, ...
+
+    Parameters
+    ----------
+    text : str
+        The scalar as written, a single line without indicators (``#``, ``:``, ``,``...).
+
+    Returns
+    -------
+    str
+        The last part of its resolved tag, e.g. ``"str"`` for ``S1``, ``"bool"`` for ``on``.
+    """
+    return str(_resolver.resolve(yaml.ScalarNode, text, (True, False))).rpartition(":")[2]
+
+
+def read_text(path: str | os.PathLike[str]) -> str:
+    """The text of a YAML file; InputError when it is missing, unreadable or not UTF-8."""
+    path = os.fspath(path)
+    try:
+        return Path(path).read_bytes().decode("utf-8-sig")
+    except FileNotFoundError:
+        raise InputError("file not found", path=path) from None
+    except IsADirectoryError:
+        raise InputError("is a directory, expected a file", path=path) from None
+    except UnicodeDecodeError as exc:
+        raise InputError(f"not UTF-8 text ({exc.reason} at byte {exc.start})",
+                         path=path) from None
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", path=path) from None
+
+
 def field_name(keys: Sequence[Key]) -> str:
     """Dotted field name: ``("legs", "segments", 1, "cte")`` -> ``legs.segments[1].cte``."""
     out = ""
@@ -82,18 +154,7 @@ class YamlDoc:
     def load(cls, path: str | os.PathLike[str]) -> YamlDoc:
         """Read a YAML file; InputError when it is missing, unreadable or not a mapping."""
         path = os.fspath(path)
-        try:
-            text = Path(path).read_bytes().decode("utf-8-sig")
-        except FileNotFoundError:
-            raise InputError("file not found", path=path) from None
-        except IsADirectoryError:
-            raise InputError("is a directory, expected a file", path=path) from None
-        except UnicodeDecodeError as exc:
-            raise InputError(f"not UTF-8 text ({exc.reason} at byte {exc.start})",
-                             path=path) from None
-        except OSError as exc:
-            raise InputError(f"cannot read: {exc.strerror}", path=path) from None
-        return cls.from_text(text, path)
+        return cls.from_text(read_text(path), path)
 
     @classmethod
     def from_text(cls, text: str, path: str) -> YamlDoc:
