@@ -26,7 +26,7 @@ from __future__ import annotations
 import base64
 import html
 import io
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -542,7 +542,8 @@ def report_html(result: ProcessResult, uncertainty: PoseUncertainty | None = Non
 
 
 def build_report(result: ProcessResult, mc: int = 0, seed: int = 0,
-                 thresholds: QualityThresholds | None = None) -> str:
+                 thresholds: QualityThresholds | None = None,
+                 progress: Callable[[int, int], None] | None = None) -> str:
     """The report page of ``result`` with its pose uncertainty and quality checks.
 
     Parameters
@@ -554,9 +555,12 @@ def build_report(result: ProcessResult, mc: int = 0, seed: int = 0,
         Seed of the Monte Carlo draws.
     thresholds : QualityThresholds, optional
         Limits of the quality checks (default: :class:`QualityThresholds`'s).
+    progress : callable, optional
+        ``progress(draws_done, draws)`` during Monte Carlo draws.
     """
     from hexatherm.quality import quality_checks
     from hexatherm.uncertainty import pose_uncertainty
 
-    return report_html(result, uncertainty=pose_uncertainty(result, mc=mc, seed=seed),
+    return report_html(result, uncertainty=pose_uncertainty(result, mc=mc, seed=seed,
+                                                           progress=progress),
                        quality=quality_checks(result, thresholds))

@@ -52,8 +52,10 @@ def test_report_refuses_to_overwrite_unless_asked(session, tmp_path, monkeypatch
     # that the options reach the report
     calls = []
 
-    def fake_report(result, mc, seed, thresholds):
+    def fake_report(result, mc, seed, thresholds, progress=None):
         calls.append((result.interpolation, mc, seed, thresholds.registration_rms_um))
+        if progress is not None:
+            progress(10, mc)
         return "<html>new</html>\n"
 
     monkeypatch.setattr(hexatherm.report, "build_report", fake_report)
@@ -61,6 +63,7 @@ def test_report_refuses_to_overwrite_unless_asked(session, tmp_path, monkeypatch
                    "--mc", 50, "--seed", 3, "--quality-threshold", "registration_rms_um=1.5")
     assert replaced.exit_code == 0, replaced.output
     assert calls == [("before", 50, 3, 1.5)]
+    assert "Monte Carlo draws" in replaced.output  # the draws' progress bar
     assert out.read_text() == "<html>new</html>\n"
     assert [p.name for p in out.parent.iterdir()] == ["r.html"]
 

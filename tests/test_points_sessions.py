@@ -185,3 +185,15 @@ def test_inspect_csv_and_errors(tmp_path):
                    "FA(S1_B1_1)=FEAT/POINT,CART,1,2,abc\n")
     result = run("inspect", bad)
     assert result.exit_code == 1 and "bad.dmo:4" in result.output
+
+
+def test_fit_spheres_shows_a_progress_bar_on_the_general_dmis_reader(tmp_path):
+    make_session(tmp_path / "s", output="dmis", n_targets=1, point_noise_mm=1e-3)
+    dmo = tmp_path / "s" / "points.dmo"
+    fast = run("fit-spheres", dmo, "-o", tmp_path / "fast.csv")
+    assert fast.exit_code == 0 and "reading points.dmo" not in fast.output
+    lines = dmo.read_text().splitlines(keepends=True)
+    dmo.write_text("".join(lines[:2] + ["$$ a comment: the general reader\n"] + lines[2:]))
+    slow = run("fit-spheres", dmo, "-o", tmp_path / "slow.csv")
+    assert slow.exit_code == 0 and "reading points.dmo" in slow.stderr
+    assert (tmp_path / "slow.csv").read_text() == (tmp_path / "fast.csv").read_text()

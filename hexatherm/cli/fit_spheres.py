@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import functools
 import sys
 from pathlib import Path
 
 import click
 
-from hexatherm.cli.options import clean_errors, echo_err, overwrite_option
+from hexatherm.cli.options import ProgressBars, clean_errors, echo_err, overwrite_option
 
 
 @click.command("fit-spheres")
@@ -35,7 +36,10 @@ def command(points: tuple[Path, ...], out: Path | None, fixed_diameter: float | 
         refuse_existing(out, overwrite)
     fitted: list[Records] = []
     for path in points:
-        found = [r for r in read_measurements(path) if r.kind == "points"]
+        with ProgressBars() as bars:
+            records = read_measurements(path, progress=functools.partial(bars.reading,
+                                                                         str(path)))
+        found = [r for r in records if r.kind == "points"]
         if not found:
             echo_err(f"{path}: no probed points, skipped")
         fitted.extend(fit_points(r, fixed_diameter_mm=fixed_diameter) for r in found)

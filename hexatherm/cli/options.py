@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import os
 import sys
 from collections.abc import Callable
 from typing import Any, TypeVar
@@ -80,6 +81,16 @@ class ProgressBars:
             self.bar.__enter__()
         if self.bar is not None:
             self.bar.update(max(0, min(done, total) - self.bar.pos))
+
+    def reading(self, path: str, done: int, total: int) -> None:
+        """Progress of reading a measurement file (lines), as
+        :func:`hexatherm.pipeline.read_measured` reports it."""
+        self.update(f"reading {os.path.basename(path)}", done, total)
+
+    def draws(self, done: int, total: int) -> None:
+        """Progress of Monte Carlo draws, as :func:`hexatherm.uncertainty.pose_uncertainty`
+        reports it."""
+        self.update("Monte Carlo draws", done, total)
 
     def close(self) -> None:
         """Close the open bar, if any."""

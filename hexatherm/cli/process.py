@@ -88,10 +88,8 @@ def command(session: Path, out: str | None, overwrite: bool, interpolation: str,
     refuse_existing(out_dir, overwrite)
     checks = Checks(distance_tolerance_um, registration_tolerance_um, strict_registration)
     with ProgressBars() as bars:
-        result = process_session(
-            session, interpolation, 0.0 if fixed_diameter else None,  # type: ignore[arg-type]
-            checks, lambda path, done, total: bars.update(f"reading {Path(path).name}", done,
-                                                          total))
+        result = process_session(session, interpolation,  # type: ignore[arg-type]
+                                 0.0 if fixed_diameter else None, checks, bars.reading)
     for warning in result.warnings:
         echo_err(f"warning: {warning}")
     twin = None
@@ -110,9 +108,7 @@ def command(session: Path, out: str | None, overwrite: bool, interpolation: str,
         raise click.BadParameter("--hexapod is the twin's model: use it with --method twin",
                                  param_hint="'--hexapod'")
     with ProgressBars() as bars:
-        uncertainty = pose_uncertainty(
-            result, mc=mc, seed=seed,
-            progress=lambda done, total: bars.update("Monte Carlo draws", done, total))
+        uncertainty = pose_uncertainty(result, mc=mc, seed=seed, progress=bars.draws)
     quality = quality_checks(result, thresholds)
     written = write_results(result, out_dir, overwrite=overwrite, uncertainty=uncertainty,
                             quality=quality, twin=twin)

@@ -6,7 +6,13 @@ from pathlib import Path
 
 import click
 
-from hexatherm.cli.options import clean_errors, echo_err, interpolation_option, overwrite_option
+from hexatherm.cli.options import (
+    ProgressBars,
+    clean_errors,
+    echo_err,
+    interpolation_option,
+    overwrite_option,
+)
 
 
 @click.command("report")
@@ -45,9 +51,12 @@ def command(session: Path, out: Path | None, overwrite: bool, interpolation: str
     folder = session if session.is_dir() else session.parent
     out_file = out if out is not None else folder / "report.html"
     refuse_existing(out_file, overwrite)
-    result = process_session(session, interpolation,  # type: ignore[arg-type]
-                             0.0 if fixed_diameter else None)
+    with ProgressBars() as bars:
+        result = process_session(session, interpolation,  # type: ignore[arg-type]
+                                 0.0 if fixed_diameter else None, progress=bars.reading)
     for warning in result.warnings:
         echo_err(f"warning: {warning}")
-    atomic_write_text(out_file, build_report(result, mc, seed, thresholds))
+    with ProgressBars() as bars:
+        page = build_report(result, mc, seed, thresholds, progress=bars.draws)
+    atomic_write_text(out_file, page)
     echo_err(f"wrote {out_file}")
