@@ -78,7 +78,7 @@ def read_for_diagnosis(path: str | Path, hexapod_path: str | Path | None = None)
                          field="temperatures")
     hexapod = session.hexapod if hexapod_path is None else read_hexapod(hexapod_path)
     current = model_effects(hexapod, str(hexapod_path or session.path))
-    _, centres, temperatures = read_measured(session)
+    _, _, centres, temperatures = read_measured(session)
     assert temperatures is not None  # the session names them (checked above)
     log = thermocouple_log(temperatures)
     u_um = centres.u_um

@@ -57,7 +57,13 @@ class StepCentres:
 
 @dataclass(frozen=True)
 class ProcessResult:
-    """Everything ``hexatherm process`` computed for a session."""
+    """Everything ``hexatherm process`` computed for a session.
+
+    ``records`` are the centres of every measurement file (fitted to the probed
+    points where the file holds points); ``points`` gives, for each of them, the
+    probed points they were fitted to (None for a centres file), and
+    ``fixed_diameter_mm`` the fits' setting (see :func:`fit_points`).
+    """
 
     session: Session
     centres: StepCentres
@@ -68,6 +74,8 @@ class ProcessResult:
     interpolation: Interpolation
     records: tuple[Records, ...] = ()
     warnings: tuple[str, ...] = ()
+    points: tuple[Records | None, ...] = ()
+    fixed_diameter_mm: float | None = None
 
 
 @dataclass(frozen=True)
@@ -96,34 +104,50 @@ def nominal_fit_diameter_mm(balls: Balls) -> FloatArray:
                      for d in balls.diameters_mm])
 
 
+def point_groups(records: Records) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
+    """The ``(label, ball)`` group of every point record, numbered in file order, and the
+    first record of each group: the spheres of :func:`fit_points`, in its order."""
+    keys = np.char.add(np.char.add(records.label.astype(str), "\x1f"), records.ball.astype(str))
+    _, first, groups = np.unique(keys, return_index=True, return_inverse=True)
+    order = np.argsort(first)  # groups in file order
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    return rank[groups.reshape(-1)], first[order]
+
+
+def fit_radii(records: Records, first: npt.NDArray[np.intp], balls: Balls | None,
+              fixed_diameter_mm: float | None) -> float | FloatArray | None:
+    """The fixed radius of each sphere of :func:`fit_points` (None: free radii).
+
+    ``first`` is the first record of each sphere (see :func:`point_groups`).
+    """
+    if fixed_diameter_mm is None:
+        return None
+    if fixed_diameter_mm > 0:
+        return fixed_diameter_mm / 2
+    if balls is None:
+        return None
+    nominal = dict(zip(balls.names, nominal_fit_diameter_mm(balls) / 2, strict=True))
+    missing = [b for b in records.ball[first] if b not in nominal]
+    if missing:
+        row = int(first[[b in missing for b in records.ball[first]]][0])
+        raise InputError(f"ball {str(records.ball[row])!r} is not in the balls file",
+                         path=records.path, line=int(records.line[row]), field="ball")
+    return np.array([nominal[b] for b in records.ball[first]])
+
+
 def fit_points(records: Records, balls: Balls | None = None, fixed_diameter_mm: float | None = None
                ) -> Records:
     """Fit a sphere to every ``(label, ball)`` group of a points file; return centres.
 
     The centres' ``extra`` holds per-row ``n``, ``form_um``, ``rms_um``, ``cap_deg``,
-    ``u_um`` and ``cov_centre_mm2`` (3x3 covariance of the centre from the residuals).
+    ``u_um``, ``cov_centre_mm2`` (3x3 covariance of the centre from the residuals) and
+    ``sigma_um`` (the residuals' standard deviation, ``sqrt(SSR / (n - p))``).
     With ``fixed_diameter_mm`` (or, when it is 0 and ``balls`` is given, the nominal
     fit diameter of each ball) the radius is fixed.
     """
-    keys = np.char.add(np.char.add(records.label.astype(str), "\x1f"), records.ball.astype(str))
-    unique, first, groups = np.unique(keys, return_index=True, return_inverse=True)
-    order = np.argsort(first)  # groups in file order
-    rank = np.empty_like(order)
-    rank[order] = np.arange(order.size)
-    groups = rank[groups]
-    first = first[order]
-    radius = None
-    if fixed_diameter_mm is not None:
-        if fixed_diameter_mm > 0:
-            radius = fixed_diameter_mm / 2
-        elif balls is not None:
-            nominal = dict(zip(balls.names, nominal_fit_diameter_mm(balls) / 2, strict=True))
-            missing = [b for b in records.ball[first] if b not in nominal]
-            if missing:
-                row = int(first[[b in missing for b in records.ball[first]]][0])
-                raise InputError(f"ball {str(records.ball[row])!r} is not in the balls file",
-                                 path=records.path, line=int(records.line[row]), field="ball")
-            radius = np.array([nominal[b] for b in records.ball[first]])
+    groups, first = point_groups(records)
+    radius = fit_radii(records, first, balls, fixed_diameter_mm)
     try:
         fits = fit_spheres(records.xyz_mm, groups, radius_mm=radius)
     except FitError as exc:
@@ -134,9 +158,12 @@ def fit_points(records: Records, balls: Balls | None = None, fixed_diameter_mm: 
     counts = np.bincount(groups)
     times = np.bincount(groups, weights=records.time_s) / counts
     u_um = np.sqrt(np.trace(fits.cov_centre_mm2, axis1=1, axis2=2) / 3) * 1e3
+    dof = fits.n - (3 if fits.fixed_radius else 4)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sigma_um = np.where(dof > 0, fits.rms_um * np.sqrt(fits.n / np.maximum(dof, 1)), np.nan)
     extra = {"n": fits.n, "form_um": fits.form_um, "rms_um": fits.rms_um,
              "cap_deg": fits.cap_half_angle_deg, "u_um": u_um,
-             "cov_centre_mm2": fits.cov_centre_mm2}
+             "cov_centre_mm2": fits.cov_centre_mm2, "sigma_um": sigma_um}
     return Records(path=records.path, kind="centres", label=records.label[first],
                    ball=records.ball[first], xyz_mm=fits.centre_mm, time_s=times,
                    time_kind=records.time_kind, line=records.line[first],
@@ -222,22 +249,26 @@ def registration_weights(u_um: FloatArray, floor_um: float = 1e-3) -> FloatArray
 
 def read_measured(session: Session, fixed_diameter_mm: float | None = None,
                   progress: FileProgress | None = None
-                  ) -> tuple[list[Records], StepCentres, Temperatures | None]:
+                  ) -> tuple[list[Records], list[Records | None], StepCentres,
+                             Temperatures | None]:
     """Every measurement file of ``session`` (points fitted) and its thermocouple log.
 
     ``progress(path, lines_done, lines_total)``, when given, is called now and then
     while a measurement file is read (see :func:`~hexatherm.io.csvfile.read_measurements`).
 
-    Returns the records (centres), the centres of every step and the temperatures
-    (None when the session has none); InputError when the temperatures and the
+    Returns the records (centres), the probed points each was fitted to (None for
+    centres read as such), the centres of every step and the temperatures (None
+    when the session has none); InputError when the temperatures and the
     measurements use different kinds of time.
     """
     records: list[Records] = []
+    points: list[Records | None] = []
     for file in session.measurements:
         report = None if progress is None else functools.partial(progress, str(file))
         for rec in read_measurements(file, progress=report):
             records.append(rec if rec.kind == "centres" else fit_points(
                 rec, session.balls, fixed_diameter_mm))
+            points.append(None if rec.kind == "centres" else rec)
     centres = assemble_centres(records, session)
     temperatures = None
     if session.temperatures is not None:
@@ -246,7 +277,7 @@ def read_measured(session: Session, fixed_diameter_mm: float | None = None,
             raise InputError(f"times are {temperatures.time_kind} here but "
                              f"{centres.time_kind} in the measurements: use one kind",
                              path=temperatures.path, line=2, field="time")
-    return records, centres, temperatures
+    return records, points, centres, temperatures
 
 
 def process_session(
@@ -259,7 +290,7 @@ def process_session(
     ``progress`` reports the reading of the measurement files (see :func:`read_measured`).
     """
     session = read_session(path)
-    records, centres, temperatures = read_measured(session, fixed_diameter_mm, progress)
+    records, points, centres, temperatures = read_measured(session, fixed_diameter_mm, progress)
     checks = checks or Checks()
     plan, balls = session.plan, session.balls
     distances = check_distances(centres.centres_mm, balls.centres_mm, balls.names,
@@ -288,4 +319,5 @@ def process_session(
     steps, correction = correct(session.hexapod, session.plan, centres.times_s,
                                 registration.platform2cmm, interpolation)
     return ProcessResult(session, centres, registration, steps, correction, temperatures,
-                         interpolation, tuple(records), tuple(warnings))
+                         interpolation, tuple(records), tuple(warnings), tuple(points),
+                         fixed_diameter_mm)

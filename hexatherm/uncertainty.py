@@ -14,7 +14,10 @@ from, in this order of preference:
    (``3k - 6`` degrees of freedom per step).
 
 It is then propagated through registration, IGM, correction and FGM, by the
-linear law (GUM) or by Monte Carlo (GUM Supplement 1).
+linear law (GUM) or by Monte Carlo (GUM Supplement 1). Monte Carlo draws the
+probed points themselves where the centres were fitted to them, and refits the
+spheres (:func:`point_sampler`): it checks the fits' covariances as well as the
+rest of the chain.
 """
 
 from __future__ import annotations
@@ -26,14 +29,17 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
+from hexatherm.core.spherefit import fit_spheres
 from hexatherm.core.uncertainty import (
+    CentreSampler,
     PoseChain,
     cap_centre_covariance,
+    covariance_root,
     linear_covariance,
     monte_carlo_covariance,
     pooled_registration_variance,
 )
-from hexatherm.pipeline import ProcessResult, registration_weights
+from hexatherm.pipeline import ProcessResult, fit_radii, point_groups, registration_weights
 
 FloatArray = npt.NDArray[np.float64]
 Method = Literal["linear", "monte-carlo"]
@@ -84,6 +90,10 @@ class PoseUncertainty:
         Seed of the Monte Carlo generator.
     centres : CentreCovariance
         The input covariances.
+    drawn : {"", "points", "centres"}
+        What the Monte Carlo draws: the probed points, refitted
+        (:func:`point_sampler`), or the centres from their covariance (a session
+        without probed points); empty for linear propagation.
     """
 
     conventional_u: FloatArray
@@ -94,6 +104,7 @@ class PoseUncertainty:
     draws: int
     seed: int | None
     centres: CentreCovariance
+    drawn: str = ""
 
     def ratio_to_linear(self) -> FloatArray:
         """Reported over linear standard uncertainty, (M, 12) (1 for the linear method)."""
@@ -141,6 +152,61 @@ def centre_covariance(result: ProcessResult) -> CentreCovariance:
     return CentreCovariance(cov, source.astype(str), "; ".join(parts))
 
 
+#: probed points refitted at once in a Monte Carlo batch (memory)
+POINTS_PER_REFIT = 2_000_000
+
+
+def point_sampler(result: ProcessResult, cov_mm2: FloatArray) -> CentreSampler | None:
+    """Monte Carlo draws of the centres through the sphere fits (GUM Supplement 1 on the points).
+
+    Every probed point is moved along its direction from its sphere's fitted
+    centre by a draw of ``N(0, s^2)``, ``s`` the residual standard deviation of
+    that fit (the noise the fit's covariance assumes); the spheres are refitted
+    as ``process`` fits them (same free or fixed radii). Centres read as such,
+    and those whose fit has no redundancy, are drawn from their covariance
+    ``cov_mm2`` (N, k, 3, 3). None when no centre comes from probed points.
+    """
+    sources = [(fitted, raw) for fitted, raw in zip(result.records, result.points, strict=False)
+               if raw is not None]
+    if not sources:
+        return None
+    step_index = {label: i for i, label in enumerate(result.session.plan.labels)}
+    ball_index = {name: j for j, name in enumerate(result.session.balls.names)}
+    fits = []
+    for fitted, raw in sources:
+        groups, first = point_groups(raw)
+        offset = raw.xyz_mm - fitted.xyz_mm[groups]
+        normal = offset / np.linalg.norm(offset, axis=1)[:, None]
+        sigma_mm = np.asarray(fitted.extra["sigma_um"], dtype=float) * 1e-3
+        ok = np.isfinite(sigma_mm)
+        step = np.array([step_index[s] for s in fitted.label])
+        ball = np.array([ball_index[b] for b in fitted.ball])
+        radius = fit_radii(raw, first, result.session.balls, result.fixed_diameter_mm)
+        fits.append((raw.xyz_mm, normal * np.where(ok, sigma_mm, 0.0)[groups, None], groups,
+                     radius, step[ok], ball[ok], ok))
+    centres = result.centres.centres_mm
+    root = covariance_root(cov_mm2)
+
+    def sample(rng: np.random.Generator, size: int) -> FloatArray:
+        z = rng.standard_normal((size,) + centres.shape)
+        drawn = centres + np.einsum("nkij,dnkj->dnki", root, z)
+        for xyz, step_mm, groups, radius, step, ball, ok in fits:
+            chunk = max(1, POINTS_PER_REFIT // len(xyz))
+            n_spheres = int(groups.max()) + 1
+            for start in range(0, size, chunk):
+                d = min(chunk, size - start)
+                moved = xyz + step_mm * rng.standard_normal((d, len(xyz)))[..., None]
+                all_groups = (groups + n_spheres * np.arange(d)[:, None]).reshape(-1)
+                radii = None if radius is None else np.broadcast_to(
+                    radius, (d, n_spheres)).reshape(-1)
+                refit = fit_spheres(moved.reshape(-1, 3), all_groups, radius_mm=radii)
+                drawn[start:start + d, step, ball] = refit.centre_mm.reshape(
+                    d, n_spheres, 3)[:, ok]
+        return drawn
+
+    return sample
+
+
 def pose_chain(result: ProcessResult) -> PoseChain:
     """The registration + correction chain of ``result`` as a function of the centres."""
     corr = result.correction
@@ -175,13 +241,16 @@ def pose_uncertainty(result: ProcessResult, mc: int = 0, seed: int = 0,
     centres = centre_covariance(result)
     chain = pose_chain(result)
     linear = linear_covariance(chain, result.centres.centres_mm, centres.cov_mm2)
-    covariance, method, draws = linear, "linear", 0
+    covariance, method, draws, drawn = linear, "linear", 0, ""
     if mc:
+        sampler = point_sampler(result, centres.cov_mm2)
         covariance, _ = monte_carlo_covariance(chain, result.centres.centres_mm,
                                                centres.cov_mm2, mc, np.random.default_rng(seed),
-                                               progress=progress)
+                                               progress=progress, sample=sampler)
         method, draws = "monte-carlo", int(mc)
+        drawn = "centres" if sampler is None else "points"
     u = np.sqrt(np.clip(np.diagonal(covariance, axis1=1, axis2=2), 0.0, None))
     return PoseUncertainty(conventional_u=u[:, :6], corrected_u=u[:, 6:], covariance=covariance,
                            linear_covariance=linear, method=method,  # type: ignore[arg-type]
-                           draws=draws, seed=seed if mc else None, centres=centres)
+                           draws=draws, seed=seed if mc else None, centres=centres,
+                           drawn=drawn)

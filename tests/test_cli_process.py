@@ -204,6 +204,7 @@ def test_process_monte_carlo_option(tmp_path):
     result = run("process", tmp_path / "s", "-o", tmp_path / "mc", "--mc", 400, "--seed", 3)
     assert result.exit_code == 0, result.output
     assert "Monte Carlo (400 draws, seed 3) over linear propagation" in result.output
+    assert "(centres drawn from their covariance)" in result.output  # a centres session
     assert "Monte Carlo draws" in result.output  # the progress bar (its label off a terminal)
     assert "Monte Carlo draws" not in run("process", tmp_path / "s", "-o", tmp_path / "l2").output
     lin = pd.read_csv(tmp_path / "lin" / "poses.csv")[U_COLUMNS].to_numpy()

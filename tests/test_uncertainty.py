@@ -19,7 +19,12 @@ from hexatherm.errors import InputError
 from hexatherm.io.config import read_session
 from hexatherm.pipeline import process_session
 from hexatherm.twinsession import Heating, TwinSessionSpec, simulate_session, write_files
-from hexatherm.uncertainty import centre_covariance, pose_chain, pose_uncertainty
+from hexatherm.uncertainty import (
+    centre_covariance,
+    point_sampler,
+    pose_chain,
+    pose_uncertainty,
+)
 from tests.sessions import BALLS, ROOT, make_session, small_plan
 
 HEXAPOD_TEXT = (ROOT / "configs" / "symetrie-like.yaml").read_text()
@@ -87,11 +92,11 @@ def test_chain_rule_jacobian_equals_the_brute_force_one(tmp_path, interpolation)
 
 def test_monte_carlo_agrees_with_linear_propagation_within_10_percent(noisy):
     u = pose_uncertainty(noisy, mc=2000, seed=7)
-    assert u.method == "monte-carlo" and u.draws == 2000
+    assert u.method == "monte-carlo" and u.draws == 2000 and u.drawn == "points"
     ratio = u.ratio_to_linear()
     assert np.all(np.abs(ratio - 1) < 0.10), ratio
-    again = pose_uncertainty(noisy, mc=2000, seed=7)
-    np.testing.assert_array_equal(again.corrected_u, u.corrected_u)  # seeded
+    first, again = (pose_uncertainty(noisy, mc=50, seed=7) for _ in range(2))
+    np.testing.assert_array_equal(again.corrected_u, first.corrected_u)  # seeded
 
 
 def test_monte_carlo_mean_is_the_measured_value(noisy):
@@ -166,3 +171,28 @@ def test_bad_cmm_mapping_names_file_line_and_field(tmp_path, case):
         f.write(text + "\n")
     with pytest.raises(InputError, match=r"session\.yaml" + pattern):
         read_session(tmp_path / "s")
+
+
+def test_point_draws_scatter_the_centres_as_the_fit_covariance_says(noisy):
+    # GUM S1 on the points: refits of drawn points vs the fits' s^2 (J^T J)^-1
+    cov = centre_covariance(noisy).cov_mm2
+    draws = point_sampler(noisy, cov)(np.random.default_rng(5), 2000)
+    dev = draws - noisy.centres.centres_mm
+    assert np.abs(dev.mean(axis=0)).max() < 5 * np.sqrt(cov.diagonal(0, 2, 3).max() / 2000)
+    empirical = np.einsum("dnki,dnkj->nkij", dev, dev) / 2000
+    ratio = np.sqrt(np.einsum("nkii->nki", empirical) / np.einsum("nkii->nki", cov))
+    assert np.abs(ratio - 1).max() < 0.10 and abs(ratio.mean() - 1) < 0.02, ratio
+    # the off-diagonal terms (the cap's tilt couples x, y with z) too
+    corr = empirical / np.sqrt(np.einsum("nkii->nki", empirical)[..., :, None]
+                               * np.einsum("nkii->nki", empirical)[..., None, :])
+    expected = cov / np.sqrt(np.einsum("nkii->nki", cov)[..., :, None]
+                             * np.einsum("nkii->nki", cov)[..., None, :])
+    assert np.abs(corr - expected).max() < 0.1
+
+
+def test_centres_sessions_draw_the_centres(tmp_path):
+    make_session(tmp_path / "s", noise_mm=1e-3)
+    result = process_session(tmp_path / "s")
+    assert point_sampler(result, centre_covariance(result).cov_mm2) is None
+    u = pose_uncertainty(result, mc=50, seed=1)
+    assert u.drawn == "centres" and np.isfinite(u.corrected_u).all()

@@ -146,7 +146,9 @@ def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
     if uncertainty.method == "monte-carlo":
         ratio = uncertainty.ratio_to_linear()
         if np.isfinite(ratio).any():
+            drawn = ("probed points drawn, spheres refitted" if uncertainty.drawn == "points"
+                     else "centres drawn from their covariance")
             lines.append(f"  Monte Carlo ({uncertainty.draws} draws, seed {uncertainty.seed}) "
                          f"over linear propagation: {np.nanmin(ratio):.3f} to "
-                         f"{np.nanmax(ratio):.3f}")
+                         f"{np.nanmax(ratio):.3f} ({drawn})")
     return lines

@@ -52,6 +52,8 @@ OUTPUTS_PER_TARGET = 12
 DEFAULT_STEP_MM = 1e-3
 #: Monte Carlo draws evaluated at once
 DEFAULT_BATCH = 256
+#: ``sample(rng, size)``: Monte Carlo draws of all the centres, (size, N, k, 3)
+CentreSampler = Callable[[np.random.Generator, int], FloatArray]
 
 
 @dataclass(frozen=True)
@@ -270,14 +272,16 @@ def monte_carlo_covariance(
     rng: np.random.Generator,
     batch: int = DEFAULT_BATCH,
     progress: Callable[[int, int], None] | None = None,
+    sample: CentreSampler | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """Covariance (M, 12, 12) and mean (M, 12) of the outputs over Monte Carlo draws.
 
-    Every centre is drawn from the normal distribution with its covariance;
-    the outputs' deviations from the chain's value at the measured centres
-    (angles wrapped) give the sample covariance (``draws - 1`` degrees of freedom).
-    The draws are evaluated ``batch`` at a time; ``progress(done, draws)``, when
-    given, is called after each batch.
+    Every centre is drawn from the normal distribution with its covariance, or
+    by ``sample(rng, size)`` when given (centres (size, N, k, 3), e.g. refitted to
+    drawn probed points); the outputs' deviations from the chain's value at the
+    measured centres (angles wrapped) give the sample covariance (``draws - 1``
+    degrees of freedom). The draws are evaluated ``batch`` at a time;
+    ``progress(done, draws)``, when given, is called after each batch.
     """
     if draws < 2:
         raise ValueError(f"Monte Carlo needs at least 2 draws, got {draws}")
@@ -289,9 +293,12 @@ def monte_carlo_covariance(
     done = 0
     while done < draws:
         size = min(batch, draws - done)
-        z = rng.standard_normal((size,) + c.shape)
-        sample = c + np.einsum("nkij,dnkj->dnki", root, z)
-        d = output_difference(chain(sample), nominal)  # (size, M, 12)
+        if sample is None:
+            z = rng.standard_normal((size,) + c.shape)
+            drawn = c + np.einsum("nkij,dnkj->dnki", root, z)
+        else:
+            drawn = sample(rng, size)
+        d = output_difference(chain(drawn), nominal)  # (size, M, 12)
         total += d.sum(axis=0)
         outer += np.einsum("dmy,dmz->myz", d, d)
         done += size
