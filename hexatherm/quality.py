@@ -27,6 +27,7 @@ conditioning    ``jacobian_rcond``         reciprocal condition number of the Ja
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,6 +37,7 @@ import pandas as pd
 from hexatherm.core.planning import DEFAULT_MIN_RCOND
 from hexatherm.core.registration import check_distances
 from hexatherm.errors import HexathermError
+from hexatherm.io.config import Session
 from hexatherm.pipeline import ProcessResult, nominal_fit_diameter_mm
 
 FloatArray = npt.NDArray[np.float64]
@@ -216,10 +218,20 @@ def _leg_temperatures(result: ProcessResult) -> FloatArray | None:
     return np.column_stack([np.interp(t, temps.time_s, temps.legs_C[:, i]) for i in range(6)])
 
 
+def session_thresholds(session: Session, overrides: Mapping[str, float] | None = None
+                       ) -> QualityThresholds:
+    """The limits for ``session``: the defaults, changed by the session file's
+    ``quality:`` mapping, then by ``overrides`` (``--quality-threshold``)."""
+    return QualityThresholds(**{**session.quality, **(overrides or {})})
+
+
 def quality_checks(result: ProcessResult,
                    thresholds: QualityThresholds | None = None) -> QualityReport:
-    """Run every check of :data:`CHECKS` on every step of ``result``."""
-    thresholds = thresholds or QualityThresholds()
+    """Run every check of :data:`CHECKS` on every step of ``result``.
+
+    ``thresholds`` defaults to the session's (:func:`session_thresholds`).
+    """
+    thresholds = thresholds or session_thresholds(result.session)
     session = result.session
     plan, balls, corr = session.plan, session.balls, result.correction
     n = len(plan.labels)

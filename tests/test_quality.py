@@ -7,9 +7,16 @@ import pandas as pd
 import pytest
 
 from hexatherm.core.plan import Plan
-from hexatherm.errors import HexathermError
+from hexatherm.errors import HexathermError, InputError
+from hexatherm.io.config import read_session
 from hexatherm.pipeline import process_session
-from hexatherm.quality import CHECKS, QualityThresholds, parse_threshold, quality_checks
+from hexatherm.quality import (
+    CHECKS,
+    QualityThresholds,
+    parse_threshold,
+    quality_checks,
+    session_thresholds,
+)
 from hexatherm.twinsession import Heating, TwinSessionSpec, simulate_session, write_files
 from tests.sessions import BALLS, REFERENCE, ROOT, small_plan
 
@@ -128,3 +135,37 @@ def test_thresholds_parse_and_refuse():
             parse_threshold(bad)
     with pytest.raises(ValueError, match="form_um"):
         QualityThresholds(form_um=float("nan"))
+
+
+def test_session_file_limits_apply_and_the_command_line_overrides_them(tmp_path):
+    s = session(tmp_path / "s", gain=(30.0, 7.0, 2.0, 3.0, 9.0, 3.5))  # leg 1 heats fast
+    assert set(failing(s)) == {"temperature"}
+    with (s / "session.yaml").open("a") as f:
+        f.write("quality: {temperature_change_C: .inf, form_um: 0.001}\n")
+    assert set(failing(s)) == {"form"}  # the session's limits, by default
+    result = process_session(s)
+    assert result.session.quality == {"temperature_change_C": np.inf, "form_um": 0.001}
+    limits = session_thresholds(result.session, {"form_um": 50.0})
+    assert (limits.form_um, limits.temperature_change_C, limits.time_gap_s) == (50.0, np.inf,
+                                                                                600.0)
+    assert not failing(s, thresholds=limits)
+
+
+BAD_QUALITY = {
+    "unknown": ("quality: {form: 5}", r":8: field 'quality.form': unknown key; expected one of: "
+                "form_um, "),
+    "negative": ("quality: {time_gap_s: -1}", r":8: field 'quality.time_gap_s': expected a "
+                 r"number >= 0 \(.inf turns the check off\), got -1"),
+    "text": ("quality:\n  form_um: five", r":9: field 'quality.form_um': expected a number"),
+    "list": ("quality: [form_um]", r":8: field 'quality': expected a mapping"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_QUALITY))
+def test_bad_quality_mapping_names_file_line_and_field(tmp_path, case):
+    s = session(tmp_path / "s", noise_mm=0.0)
+    text, pattern = BAD_QUALITY[case]
+    with (s / "session.yaml").open("a") as f:
+        f.write(text + "\n")
+    with pytest.raises(InputError, match=r"session\.yaml" + pattern):
+        read_session(s)

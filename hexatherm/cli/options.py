@@ -28,6 +28,12 @@ interpolation_option = click.option(
     help="With references on both sides of a target: interpolate their growth linearly in "
     "time, or use one neighbour as in the paper.",
 )
+quality_threshold_option = click.option(
+    "--quality-threshold", "quality_thresholds", multiple=True, metavar="NAME=VALUE",
+    help="Change a quality check's limit (repeatable; over the session file's quality: "
+    "mapping): form_um, radius_dev_um, distance_dev_um, registration_rms_um, time_gap_s, "
+    "temperature_change_C, min_rcond; inf (0 for min_rcond) disables a check.",
+)
 max_gap_option = click.option(
     "--max-gap",
     type=click.FloatRange(min=0),

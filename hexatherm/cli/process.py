@@ -15,6 +15,7 @@ from hexatherm.cli.options import (
     interpolation_option,
     output_dir_option,
     overwrite_option,
+    quality_threshold_option,
 )
 
 if TYPE_CHECKING:
@@ -43,10 +44,7 @@ QUALITY_EXIT = 3
               "checked against the linear propagation; 0: linear propagation only.")
 @click.option("--seed", type=int, default=0, show_default=True,
               help="Seed of the Monte Carlo draws.")
-@click.option("--quality-threshold", "quality_threshold", multiple=True, metavar="NAME=VALUE",
-              help="Override a quality check's limit (repeatable): form_um, radius_dev_um, "
-              "distance_dev_um, registration_rms_um, time_gap_s, temperature_change_C, "
-              "min_rcond; inf (0 for min_rcond) disables a check.")
+@quality_threshold_option
 @click.option("--method", "methods", type=click.Choice(["references", "twin"]), multiple=True,
               default=("references",), show_default=True,
               help="Corrections to report; 'twin' adds the poses corrected by the twin from "
@@ -62,7 +60,7 @@ QUALITY_EXIT = 3
 def command(session: Path, out: str | None, overwrite: bool, interpolation: str,
             fixed_diameter: bool, distance_tolerance_um: float,
             registration_tolerance_um: float, strict_registration: bool, mc: int, seed: int,
-            quality_threshold: tuple[str, ...], methods: tuple[str, ...],
+            quality_thresholds: tuple[str, ...], methods: tuple[str, ...],
             hexapod_path: Path | None, strict: bool) -> None:
     """Process SESSION (a folder with session.yaml, or the file itself).
 
@@ -77,12 +75,12 @@ def command(session: Path, out: str | None, overwrite: bool, interpolation: str,
     from hexatherm.io.atomic import refuse_existing
     from hexatherm.io.results import deviation_table, write_results
     from hexatherm.pipeline import Checks, process_session
-    from hexatherm.quality import QualityThresholds, parse_threshold, quality_checks
+    from hexatherm.quality import parse_threshold, quality_checks, session_thresholds
     from hexatherm.uncertainty import pose_uncertainty
 
     if mc == 1:
         raise click.BadParameter("Monte Carlo needs at least 2 draws", param_hint="'--mc'")
-    thresholds = QualityThresholds(**dict(parse_threshold(t) for t in quality_threshold))
+    overrides = dict(parse_threshold(t) for t in quality_thresholds)
     folder = session if session.is_dir() else session.parent
     out_dir = Path(out) if out is not None else folder / "results"
     refuse_existing(out_dir, overwrite)
@@ -109,7 +107,7 @@ def command(session: Path, out: str | None, overwrite: bool, interpolation: str,
                                  param_hint="'--hexapod'")
     with ProgressBars() as bars:
         uncertainty = pose_uncertainty(result, mc=mc, seed=seed, progress=bars.draws)
-    quality = quality_checks(result, thresholds)
+    quality = quality_checks(result, session_thresholds(result.session, overrides))
     written = write_results(result, out_dir, overwrite=overwrite, uncertainty=uncertainty,
                             quality=quality, twin=twin)
     n = len(result.correction.target_index)

@@ -12,6 +12,7 @@ from hexatherm.cli.options import (
     echo_err,
     interpolation_option,
     overwrite_option,
+    quality_threshold_option,
 )
 
 
@@ -28,8 +29,7 @@ from hexatherm.cli.options import (
               help="Monte Carlo draws for the pose uncertainty (0: linear propagation).")
 @click.option("--seed", type=int, default=0, show_default=True,
               help="Seed of the Monte Carlo draws.")
-@click.option("--quality-threshold", "quality_thresholds", multiple=True, metavar="NAME=VALUE",
-              help="Change a quality check's limit, e.g. form_um=5 (repeatable).")
+@quality_threshold_option
 @clean_errors
 def command(session: Path, out: Path | None, overwrite: bool, interpolation: str,
             fixed_diameter: bool, mc: int, seed: int,
@@ -44,10 +44,10 @@ def command(session: Path, out: Path | None, overwrite: bool, interpolation: str
     """
     from hexatherm.io.atomic import atomic_write_text, refuse_existing
     from hexatherm.pipeline import process_session
-    from hexatherm.quality import QualityThresholds, parse_threshold
+    from hexatherm.quality import parse_threshold, session_thresholds
     from hexatherm.report import build_report
 
-    thresholds = QualityThresholds(**dict(parse_threshold(t) for t in quality_thresholds))
+    overrides = dict(parse_threshold(t) for t in quality_thresholds)
     folder = session if session.is_dir() else session.parent
     out_file = out if out is not None else folder / "report.html"
     refuse_existing(out_file, overwrite)
@@ -57,6 +57,7 @@ def command(session: Path, out: Path | None, overwrite: bool, interpolation: str
     for warning in result.warnings:
         echo_err(f"warning: {warning}")
     with ProgressBars() as bars:
-        page = build_report(result, mc, seed, thresholds, progress=bars.draws)
+        page = build_report(result, mc, seed, session_thresholds(result.session, overrides),
+                            progress=bars.draws)
     atomic_write_text(out_file, page)
     echo_err(f"wrote {out_file}")

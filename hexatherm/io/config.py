@@ -7,6 +7,7 @@ field, and returns the core's typed objects.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import re
 from dataclasses import dataclass
@@ -440,6 +441,9 @@ class Session:
     cmm : CmmNoise or None
         The optional ``cmm:`` mapping (``point_noise_um`` or ``mpe_um``,
         ``points_per_ball``, ``cap_angle_deg``).
+    quality : dict of str to float
+        The optional ``quality:`` mapping: limits of the quality checks kept with
+        the session (names of :class:`hexatherm.quality.QualityThresholds`).
     """
 
     path: Path
@@ -450,6 +454,7 @@ class Session:
     measurements: tuple[Path, ...]
     temperatures: Path | None
     cmm: CmmNoise | None = None
+    quality: dict[str, float] = dataclasses.field(default_factory=dict)
 
 
 def read_session(path: str | os.PathLike[str]) -> Session:
@@ -460,7 +465,7 @@ def read_session(path: str | os.PathLike[str]) -> Session:
     doc = YamlDoc.load(path)
     doc.check_format(SESSION_FORMAT)
     doc.check_keys(["format", "name", "hexapod", "balls", "plan", "measurements",
-                    "temperatures", "cmm"])
+                    "temperatures", "cmm", "quality"])
     name = doc.string("name", default=path.parent.name)
 
     def existing(*keys: Any) -> Path:
@@ -483,7 +488,25 @@ def read_session(path: str | os.PathLike[str]) -> Session:
     if doc.get("temperatures", default=None) is not None:
         temperatures = existing("temperatures")
     return Session(path, name, hexapod, balls, plan, measurements, temperatures,
-                   _read_cmm(doc))
+                   _read_cmm(doc), _read_quality(doc))
+
+
+def _read_quality(doc: YamlDoc) -> dict[str, float]:
+    """The optional ``quality:`` mapping of a session file: check name -> limit (>= 0;
+    ``.inf`` turns a check off, as does 0 for ``min_rcond``)."""
+    from hexatherm.quality import QualityThresholds  # the names; no import cycle at load
+
+    if doc.get("quality", default=None) is None:
+        return {}
+    doc.check_keys([f.name for f in dataclasses.fields(QualityThresholds)], "quality")
+    limits = {}
+    for name in doc.get("quality"):
+        value = doc.get("quality", name)
+        if isinstance(value, bool) or not isinstance(value, int | float) or not value >= 0:
+            raise doc.error(f"expected a number >= 0 (.inf turns the check off), got {value!r}",
+                            "quality", name)
+        limits[name] = float(value)
+    return limits
 
 
 def _read_cmm(doc: YamlDoc) -> CmmNoise | None:
