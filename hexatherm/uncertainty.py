@@ -35,6 +35,7 @@ from hexatherm.core.uncertainty import (
     PoseChain,
     cap_centre_covariance,
     covariance_root,
+    draw_centres,
     linear_covariance,
     monte_carlo_covariance,
     pooled_registration_variance,
@@ -188,14 +189,13 @@ def point_sampler(result: ProcessResult, cov_mm2: FloatArray) -> CentreSampler |
     root = covariance_root(cov_mm2)
 
     def sample(rng: np.random.Generator, size: int) -> FloatArray:
-        z = rng.standard_normal((size,) + centres.shape)
-        drawn = centres + np.einsum("nkij,dnkj->dnki", root, z)
-        for xyz, step_mm, groups, radius, step, ball, ok in fits:
+        drawn = draw_centres(centres, root, rng, size)
+        for xyz, noise_mm, groups, radius, step, ball, ok in fits:
             chunk = max(1, POINTS_PER_REFIT // len(xyz))
             n_spheres = int(groups.max()) + 1
             for start in range(0, size, chunk):
                 d = min(chunk, size - start)
-                moved = xyz + step_mm * rng.standard_normal((d, len(xyz)))[..., None]
+                moved = xyz + noise_mm * rng.standard_normal((d, len(xyz)))[..., None]
                 all_groups = (groups + n_spheres * np.arange(d)[:, None]).reshape(-1)
                 radii = None if radius is None else np.broadcast_to(
                     radius, (d, n_spheres)).reshape(-1)

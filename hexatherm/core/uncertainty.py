@@ -18,8 +18,9 @@ own 3x3 covariance.
   derivatives of the correction, and the FGM as the inverse of the IGM's
   Jacobian at the corrected pose.
 * **Monte Carlo** (GUM Supplement 1): the centres are drawn from
-  ``N(c, U_c)`` with a seeded generator, the chain is run on every draw and
-  the covariance of the outputs is the estimate (:func:`monte_carlo_covariance`).
+  ``N(c, U_c)`` with a seeded generator (or by a given sampler, e.g. refits of
+  drawn probed points), the chain is run on every draw and the covariance of the
+  outputs is the estimate (:func:`monte_carlo_covariance`).
 
 >>> import numpy as np
 >>> cov = cap_centre_covariance(25, 70.0, 1e-3)
@@ -293,11 +294,7 @@ def monte_carlo_covariance(
     done = 0
     while done < draws:
         size = min(batch, draws - done)
-        if sample is None:
-            z = rng.standard_normal((size,) + c.shape)
-            drawn = c + np.einsum("nkij,dnkj->dnki", root, z)
-        else:
-            drawn = sample(rng, size)
+        drawn = draw_centres(c, root, rng, size) if sample is None else sample(rng, size)
         d = output_difference(chain(drawn), nominal)  # (size, M, 12)
         total += d.sum(axis=0)
         outer += np.einsum("dmy,dmz->myz", d, d)
@@ -307,6 +304,14 @@ def monte_carlo_covariance(
     mean = total / draws
     covariance = (outer - draws * np.einsum("my,mz->myz", mean, mean)) / (draws - 1)
     return covariance, nominal + mean
+
+
+def draw_centres(centres_mm: FloatArray, root: FloatArray, rng: np.random.Generator,
+                 size: int) -> FloatArray:
+    """``size`` draws (size, N, k, 3) of normal centres: mean ``centres_mm`` (N, k, 3),
+    covariance ``root root^T`` (``root`` from :func:`covariance_root`)."""
+    z = rng.standard_normal((size,) + centres_mm.shape)
+    return centres_mm + np.einsum("nkij,dnkj->dnki", root, z)
 
 
 def covariance_root(cov_mm2: npt.ArrayLike) -> FloatArray:
