@@ -33,13 +33,15 @@ from hexatherm.diagnosing import read_for_diagnosis, run_diagnosis
 from hexatherm.twinsession import write_twin_session
 
 
-def run(names: tuple[str, ...], size: float, noise_um: float, seed: int, tmp: Path,
-        n_targets: int = 16) -> tuple[Diagnosis, dict[str, dict[str, float]]]:
+def run(
+    names: tuple[str, ...], size: float, noise_um: float, seed: int, tmp: Path, n_targets: int = 16
+) -> tuple[Diagnosis, dict[str, dict[str, float]]]:
     truth = {n: {p: v * size for p, v in NOMINAL_HIDDEN[n].items()} for n in names}
     hidden = tuple(make_effect(n, truth[n]) for n in names)
     folder = tmp / f"{'-'.join(names) or 'null'}-{size}-{noise_um}-{seed}"
-    write_twin_session(diagnosis_campaign(hidden, seed, n_targets=n_targets,
-                                          point_noise_um=noise_um), folder)
+    write_twin_session(
+        diagnosis_campaign(hidden, seed, n_targets=n_targets, point_noise_um=noise_um), folder
+    )
     return run_diagnosis(read_for_diagnosis(folder)).diagnosis, truth
 
 
@@ -49,12 +51,12 @@ def recovered(d: Diagnosis, name: str, truth: dict[str, float]) -> bool:
         return False
     i, effect = fitted[name]
     if len(truth) == 1:
-        (p, value), = truth.items()
+        ((p, value),) = truth.items()
         return abs(effect.values[p] - value) <= 0.25 * abs(value)
     start = sum(len(e.parameters) for e in d.final.effects[:i])
     k = len(truth)
     diff = effect.vector() - np.array([truth[p] for p in effect.parameters])
-    cov = d.final.covariance[start:start + k, start:start + k]
+    cov = d.final.covariance[start : start + k, start : start + k]
     return float(diff @ np.linalg.solve(cov, diff)) <= chi2.ppf(chi2.cdf(4.0, 1), k)
 
 
@@ -72,19 +74,24 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
         print("Recovery of one hidden effect (rates over seeds)\n")
-        print("| effect | size | noise (um/point) | named first | parameters | held-out halved "
-              "| held-out RMS before -> after (um) |")
+        print(
+            "| effect | size | noise (um/point) | named first | parameters | held-out halved "
+            "| held-out RMS before -> after (um) |"
+        )
         print("|---|---|---|---|---|---|---|")
         for name in NOMINAL_HIDDEN:
             for size in sizes:
                 for noise in noises:
                     if size != 1.0 and noise != 1.0:
                         continue  # a cross, not a grid: size at 1 um, noise at nominal size
-                    scaled = make_effect(name, {p: v * size
-                                                for p, v in NOMINAL_HIDDEN[name].items()})
+                    scaled = make_effect(
+                        name, {p: v * size for p, v in NOMINAL_HIDDEN[name].items()}
+                    )
                     if scaled.out_of_range():
-                        print(f"| {name} | {size:g} | {noise:g} | outside the effect's range: "
-                              f"{'; '.join(scaled.out_of_range().values())} ||||")
+                        print(
+                            f"| {name} | {size:g} | {noise:g} | outside the effect's range: "
+                            f"{'; '.join(scaled.out_of_range().values())} ||||"
+                        )
                         continue
                     first = params = halved = 0
                     before, after = [], []
@@ -96,14 +103,18 @@ def main() -> None:
                         first += top == name
                         params += recovered(d, name, truth[name])
                         if d.added:
-                            halved += (d.added[0].heldout_rms_after_um
-                                       <= 0.5 * d.added[0].heldout_rms_before_um)
+                            halved += (
+                                d.added[0].heldout_rms_after_um
+                                <= 0.5 * d.added[0].heldout_rms_before_um
+                            )
                         before.append(d.baseline_heldout_rms_um)
                         after.append(d.final_heldout_rms_um)
                     n = args.seeds
-                    print(f"| {name} | {size:g} | {noise:g} | {first}/{n} | {params}/{n} | "
-                          f"{halved}/{n} | {np.mean(before):.2f} -> {np.mean(after):.2f} |",
-                          flush=True)
+                    print(
+                        f"| {name} | {size:g} | {noise:g} | {first}/{n} | {params}/{n} | "
+                        f"{halved}/{n} | {np.mean(before):.2f} -> {np.mean(after):.2f} |",
+                        flush=True,
+                    )
         print("\nConfusion at the nominal size, 1 um per point: hidden (rows) -> first added\n")
         columns = [*NOMINAL_HIDDEN, "nothing"]
         print("| hidden | " + " | ".join(columns) + " |")
@@ -117,8 +128,10 @@ def main() -> None:
             d, _ = run((), 1.0, 1.0, 5000 + seed, tmp)
             sessions_with += bool(d.added)
             false_added.update(a.effect.name for a in d.added)
-        print(f"\nNothing hidden, 1 um per point: {sessions_with}/{args.null_seeds} campaigns "
-              f"with a false addition ({dict(false_added) or 'none'})")
+        print(
+            f"\nNothing hidden, 1 um per point: {sessions_with}/{args.null_seeds} campaigns "
+            f"with a false addition ({dict(false_added) or 'none'})"
+        )
     print(f"\n({time.perf_counter() - started:.0f} s)")
 
 

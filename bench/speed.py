@@ -68,12 +68,14 @@ def scenario_text(n_targets: int, output: str) -> str:
     rng = np.random.default_rng(20240607)
     targets = np.round(rng.uniform(-1, 1, (n_targets, 6)) * HALF_RANGE, 3)
     rows = "\n".join(f"    - [{', '.join(f'{v:g}' for v in t)}]" for t in targets)
-    mats = "\n".join(f"    - {{gain_C: {g}, tau_s: 2400, power: [[600, 12600]]}}"
-                     for g in (3.0, 7.0, 2.0, 3.0, 9.0, 3.5))
+    mats = "\n".join(
+        f"    - {{gain_C: {g}, tau_s: 2400, power: [[600, 12600]]}}"
+        for g in (3.0, 7.0, 2.0, 3.0, 9.0, 3.5)
+    )
     return f"""format: hexatherm-scenario/1
 name: speed-{n_targets}-{output}
-hexapod: {ROOT / 'configs' / 'symetrie-like.yaml'}
-balls: {ROOT / 'configs' / 'balls-3.yaml'}
+hexapod: {ROOT / "configs" / "symetrie-like.yaml"}
+balls: {ROOT / "configs" / "balls-3.yaml"}
 plan:
   reference_pose: [0, 0, -40, 0, 0, 0]
   references: both
@@ -125,16 +127,23 @@ def best(fn: Callable[[], Any], repeat: int) -> float:
 
 
 def run(*command: str | Path) -> None:
-    done = subprocess.run([str(c) for c in command], stdout=subprocess.DEVNULL,
-                          stderr=subprocess.PIPE, text=True, check=False)
+    done = subprocess.run(
+        [str(c) for c in command],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        check=False,
+    )
     if done.returncode != 0:
         raise SystemExit(f"{' '.join(map(str, command))} failed:\n{done.stderr}")
 
 
 def import_time(repeat: int) -> float:
     """Interpreter start and the imports of ``hexatherm process`` (a subprocess)."""
-    code = ("import hexatherm.cli.process, hexatherm.pipeline, hexatherm.io.results, "
-            "hexatherm.uncertainty, hexatherm.quality")
+    code = (
+        "import hexatherm.cli.process, hexatherm.pipeline, hexatherm.io.results, "
+        "hexatherm.uncertainty, hexatherm.quality"
+    )
     return best(lambda: run(sys.executable, "-c", code), repeat)
 
 
@@ -147,8 +156,9 @@ def computation(records: list[Any], sess: Any) -> Any:
     """The computation of ``process_session`` on records already read (no uncertainty)."""
     from hexatherm.core.method import correct
 
-    centres = assemble_centres([fit_points(r, sess.balls) if r.kind == "points" else r
-                                for r in records], sess)
+    centres = assemble_centres(
+        [fit_points(r, sess.balls) if r.kind == "points" else r for r in records], sess
+    )
     reg = register(centres.centres_mm, sess.balls.centres_mm, registration_weights(centres.u_um))
     return correct(sess.hexapod, sess.plan, centres.times_s, reg.platform2cmm)
 
@@ -168,14 +178,16 @@ def phase_times(folder: Path, repeat: int) -> dict[str, float]:
         state["records"] = [r for f in sess.measurements for r in csvfile.read_measurements(f)]
 
     def fits() -> None:
-        state["centres"] = assemble_centres([fit_points(r, sess.balls) if r.kind == "points"
-                                             else r for r in state["records"]], sess)
+        state["centres"] = assemble_centres(
+            [fit_points(r, sess.balls) if r.kind == "points" else r for r in state["records"]], sess
+        )
 
     def method() -> None:
         centres = state["centres"]
         check_distances(centres.centres_mm, sess.balls.centres_mm, sess.balls.names)
-        reg = register(centres.centres_mm, sess.balls.centres_mm,
-                       registration_weights(centres.u_um))
+        reg = register(
+            centres.centres_mm, sess.balls.centres_mm, registration_weights(centres.u_um)
+        )
         sess.hexapod.igm(sess.plan.poses)
         correct(sess.hexapod, sess.plan, centres.times_s, reg.platform2cmm)
 
@@ -187,29 +199,36 @@ def phase_times(folder: Path, repeat: int) -> dict[str, float]:
         "session, hexapod, balls, plan (YAML)": best(lambda: read_session(folder), repeat),
         "measurements": best(measurements, repeat),
         "temperatures": best(lambda: csvfile.read_temperatures(sess.temperatures), repeat)
-        if sess.temperatures is not None else 0.0,
+        if sess.temperatures is not None
+        else 0.0,
         "sphere fits and centres": best(fits, repeat),
         "registration, poses, correction (FGM)": best(method, repeat),
         "uncertainty propagation": best(lambda: pose_uncertainty(result), repeat),
         "quality checks": best(lambda: quality_checks(result, QualityThresholds()), repeat),
-        "writing the results": best(lambda: write_results(result, out, overwrite=True,
-                                                          uncertainty=uncertainty,
-                                                          quality=quality), repeat),
+        "writing the results": best(
+            lambda: write_results(
+                result, out, overwrite=True, uncertainty=uncertainty, quality=quality
+            ),
+            repeat,
+        ),
     }
 
 
 def general(reader: str) -> Callable[[Path], Any]:
     """The measurement reader with its fast path switched off."""
+
     def read(path: Path) -> Any:
         if reader == "dmis":
-            return dmis.records_from_features(dmis.features_from_text(dmis._read_text(path),
-                                                                      path), path)
+            return dmis.records_from_features(
+                dmis.features_from_text(dmis._read_text(path), path), path
+            )
         fast = csvfile._fast_measurement_csv
         csvfile._fast_measurement_csv = lambda *args: None
         try:
             return csvfile.read_measurement_csv(path)
         finally:
             csvfile._fast_measurement_csv = fast
+
     return read
 
 
@@ -217,12 +236,19 @@ def general(reader: str) -> Callable[[Path], Any]:
 def table(title: str, header: list[str], rows: list[list[str]]) -> None:
     widths = [max(len(r[i]) for r in [header, *rows]) for i in range(len(header))]
     print(f"\n{title}")
-    line = "  ".join(h.ljust(w) if i == 0 else h.rjust(w) for i, (h, w) in
-                     enumerate(zip(header, widths, strict=True)))
+    line = "  ".join(
+        h.ljust(w) if i == 0 else h.rjust(w)
+        for i, (h, w) in enumerate(zip(header, widths, strict=True))
+    )
     print("  " + line)
     for row in rows:
-        print("  " + "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in
-                               enumerate(zip(row, widths, strict=True))))
+        print(
+            "  "
+            + "  ".join(
+                c.ljust(w) if i == 0 else c.rjust(w)
+                for i, (c, w) in enumerate(zip(row, widths, strict=True))
+            )
+        )
 
 
 def seconds(t: float) -> str:
@@ -233,17 +259,23 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--targets", type=int, default=1000)
     parser.add_argument("--repeat", type=int, default=3, help="runs per timing (best of)")
-    parser.add_argument("--slow-repeat", type=int, default=2,
-                        help="runs per timing of the straightforward way and general readers")
+    parser.add_argument(
+        "--slow-repeat",
+        type=int,
+        default=2,
+        help="runs per timing of the straightforward way and general readers",
+    )
     args = parser.parse_args()
     rep, slow = args.repeat, args.slow_repeat
     import numpy
     import pandas
 
-    print(f"hexatherm speed benchmark: {args.targets} targets; {os.cpu_count()} cores, load "
-          f"{os.getloadavg()[0]:.2f}; Python {sys.version.split()[0]}, numpy "
-          f"{numpy.__version__}, pandas {pandas.__version__}; best of {rep} "
-          f"(straightforward: best of {slow})")
+    print(
+        f"hexatherm speed benchmark: {args.targets} targets; {os.cpu_count()} cores, load "
+        f"{os.getloadavg()[0]:.2f}; Python {sys.version.split()[0]}, numpy "
+        f"{numpy.__version__}, pandas {pandas.__version__}; best of {rep} "
+        f"(straightforward: best of {slow})"
+    )
     sessions = {"CSV": session(args.targets, "points"), "DMIS": session(args.targets, "dmis")}
     work = CACHE / "out"
     hexatherm = hexatherm_script()
@@ -254,11 +286,16 @@ def main() -> None:
         sess = read_session(folder)
         n_steps, n_points = len(sess.plan.labels), 0
         note(f"{name}: hexatherm process ...")
-        t_ours = best(lambda f=folder: run(*hexatherm, "process", f, "-o", work / "ours",
-                                           "--overwrite"), rep)
+        t_ours = best(
+            lambda f=folder: run(*hexatherm, "process", f, "-o", work / "ours", "--overwrite"), rep
+        )
         note(f"{name}: straightforward.py ...")
-        t_plain = best(lambda f=folder: run(sys.executable, ROOT / "bench" / "straightforward.py",
-                                            f, "-o", work / "plain"), slow)
+        t_plain = best(
+            lambda f=folder: run(
+                sys.executable, ROOT / "bench" / "straightforward.py", f, "-o", work / "plain"
+            ),
+            slow,
+        )
         note(f"{name}: in process ...")
         result = process_session(folder)
         t_ours_in = best(lambda f=folder: process_session(f), rep)
@@ -269,19 +306,30 @@ def main() -> None:
         t_unc = best(lambda r=result: pose_uncertainty(r), rep)
         records = [r for file in sess.measurements for r in csvfile.read_measurements(file)]
         n_points = sum(len(r) for r in records)
-        end_to_end.append([name, f"{n_steps} steps, {n_points:,} points", seconds(t_ours),
-                           seconds(t_ours - t_unc), seconds(t_plain), f"{t_plain / t_ours:.1f}x",
-                           f"{t_plain / (t_ours - t_unc):.1f}x"])
-        in_process.append([name, seconds(t_ours_in), seconds(t_plain_in),
-                           f"{t_plain_in / t_ours_in:.1f}x"])
+        end_to_end.append(
+            [
+                name,
+                f"{n_steps} steps, {n_points:,} points",
+                seconds(t_ours),
+                seconds(t_ours - t_unc),
+                seconds(t_plain),
+                f"{t_plain / t_ours:.1f}x",
+                f"{t_plain / (t_ours - t_unc):.1f}x",
+            ]
+        )
+        in_process.append(
+            [name, seconds(t_ours_in), seconds(t_plain_in), f"{t_plain_in / t_ours_in:.1f}x"]
+        )
         corr = result.correction
-        agree.append([
-            name,
-            f"{np.abs(plain['centres_mm'] - result.centres.centres_mm).max():.1e}",
-            f"{np.abs(plain['conventional'][:, :3] - corr.conventional[:, :3]).max():.1e}",
-            f"{np.abs(plain['corrected'][:, :3] - corr.corrected[:, :3]).max():.1e}",
-            f"{np.abs(plain['corrected'][:, 3:] - corr.corrected[:, 3:]).max():.1e}",
-        ])
+        agree.append(
+            [
+                name,
+                f"{np.abs(plain['centres_mm'] - result.centres.centres_mm).max():.1e}",
+                f"{np.abs(plain['conventional'][:, :3] - corr.conventional[:, :3]).max():.1e}",
+                f"{np.abs(plain['corrected'][:, :3] - corr.corrected[:, :3]).max():.1e}",
+                f"{np.abs(plain['corrected'][:, 3:] - corr.corrected[:, 3:]).max():.1e}",
+            ]
+        )
         if first is None:
             first, read_first = folder, (sess, records)
     # where the time of process goes, in process, for both sessions
@@ -293,8 +341,14 @@ def main() -> None:
     groups = straightforward.read(first)[1]
     t_comp = best(lambda: computation(records, sess), rep)
     t_comp_plain = best(lambda: straightforward.compute(sess, groups), slow)
-    compute_rows.append(["fits, registration, correction", seconds(t_comp),
-                         seconds(t_comp_plain), f"{t_comp_plain / t_comp:.0f}x"])
+    compute_rows.append(
+        [
+            "fits, registration, correction",
+            seconds(t_comp),
+            seconds(t_comp_plain),
+            f"{t_comp_plain / t_comp:.0f}x",
+        ]
+    )
 
     # rates
     note("rates ...")
@@ -312,57 +366,111 @@ def main() -> None:
     near = poses + rng.normal(scale=[0.01] * 3 + [0.001] * 3, size=poses.shape)
     t_fgm0 = best(lambda: hexapod.fgm(q), rep)
     t_fgm1 = best(lambda: hexapod.fgm(q, initial_poses=near), rep)
-    t_fgm_plain = best(lambda: [straightforward.fgm_pose(hexapod, q[i], near[i])
-                                for i in range(300)], slow) / 300
+    t_fgm_plain = (
+        best(lambda: [straightforward.fgm_pose(hexapod, q[i], near[i]) for i in range(300)], slow)
+        / 300
+    )
     centres = result.centres.centres_mm
     many = np.repeat(centres, 50, axis=0)  # ~100k steps
     w = np.ones(many.shape[:2])
     t_reg = best(lambda: register(many, sess.balls.centres_mm, w), rep)
-    t_reg_plain = best(lambda: [straightforward.register_step(c, sess.balls.centres_mm, np.ones(3))
-                                for c in centres[:500]], slow) / 500
+    t_reg_plain = (
+        best(
+            lambda: [
+                straightforward.register_step(c, sess.balls.centres_mm, np.ones(3))
+                for c in centres[:500]
+            ],
+            slow,
+        )
+        / 500
+    )
     rates = [
-        ["sphere fits (free radius, 25 points)", f"{n_spheres / t_fit:,.0f}",
-         f"{1 / t_fit_plain:,.0f}", f"{t_fit_plain * n_spheres / t_fit:.0f}x"],
-        ["registrations (3 balls)", f"{len(many) / t_reg:,.0f}", f"{1 / t_reg_plain:,.0f}",
-         f"{t_reg_plain * len(many) / t_reg:.0f}x"],
+        [
+            "sphere fits (free radius, 25 points)",
+            f"{n_spheres / t_fit:,.0f}",
+            f"{1 / t_fit_plain:,.0f}",
+            f"{t_fit_plain * n_spheres / t_fit:.0f}x",
+        ],
+        [
+            "registrations (3 balls)",
+            f"{len(many) / t_reg:,.0f}",
+            f"{1 / t_reg_plain:,.0f}",
+            f"{t_reg_plain * len(many) / t_reg:.0f}x",
+        ],
         ["FGM poses, from the zero pose", f"{len(q) / t_fgm0:,.0f}", "", ""],
-        ["FGM poses, from 10 um / 1 mdeg away", f"{len(q) / t_fgm1:,.0f}",
-         f"{1 / t_fgm_plain:,.0f}", f"{t_fgm_plain * len(q) / t_fgm1:.0f}x"],
+        [
+            "FGM poses, from 10 um / 1 mdeg away",
+            f"{len(q) / t_fgm1:,.0f}",
+            f"{1 / t_fgm_plain:,.0f}",
+            f"{t_fgm_plain * len(q) / t_fgm1:.0f}x",
+        ],
     ]
 
     # readers: fast path against the general one
     note("readers ...")
     readers = []
-    for name, folder, kind in (("points CSV", sessions["CSV"], "csv"),
-                               ("DMIS", sessions["DMIS"], "dmis")):
+    for name, folder, kind in (
+        ("points CSV", sessions["CSV"], "csv"),
+        ("DMIS", sessions["DMIS"], "dmis"),
+    ):
         file = read_session(folder).measurements[0]
         t_fast = best(lambda f=file: csvfile.read_measurements(f), rep)
         t_general = best(lambda f=file, k=kind: general(k)(f), slow)
-        readers.append([f"{name} ({file.stat().st_size / 1e6:.0f} MB)", seconds(t_fast),
-                        seconds(t_general), f"{t_general / t_fast:.0f}x"])
+        readers.append(
+            [
+                f"{name} ({file.stat().st_size / 1e6:.0f} MB)",
+                seconds(t_fast),
+                seconds(t_general),
+                f"{t_general / t_fast:.0f}x",
+            ]
+        )
 
     note("hexatherm --help ...")
     t_help = best(lambda: run(*hexatherm, "--help"), 5)
     shutil.rmtree(work, ignore_errors=True)
 
-    table("1. End to end, subprocess wall time (imports included)",
-          ["session", "size", "process", "w/o uncertainty", "straightforward", "ratio",
-           "ratio w/o unc."], end_to_end)
-    print("   'w/o uncertainty': minus the time of the uncertainty propagation, measured in "
-          "process\n   (the straightforward script does not propagate uncertainties).")
+    table(
+        "1. End to end, subprocess wall time (imports included)",
+        [
+            "session",
+            "size",
+            "process",
+            "w/o uncertainty",
+            "straightforward",
+            "ratio",
+            "ratio w/o unc.",
+        ],
+        end_to_end,
+    )
+    print(
+        "   'w/o uncertainty': minus the time of the uncertainty propagation, measured in "
+        "process\n   (the straightforward script does not propagate uncertainties)."
+    )
     names = list(phases["CSV"])
     imports = import_time(rep)
     rows = [["interpreter start and imports", seconds(imports), seconds(imports)]]
     rows += [[part, *(seconds(phases[s][part]) for s in ("CSV", "DMIS"))] for part in names]
     rows.append(["sum", *(seconds(imports + sum(phases[s].values())) for s in ("CSV", "DMIS"))])
-    table("   Where the time of hexatherm process goes (in process, best of each part)",
-          ["part", "CSV", "DMIS"], rows)
-    table("2. In process, imports excluded (reading + computation, no uncertainty)",
-          ["session", "process_session", "straightforward", "ratio"], in_process)
-    table("3. The computation alone (points in memory)",
-          ["work", "vectorized", "straightforward", "ratio"], compute_rows)
-    table("4. Agreement, max |ours - straightforward|",
-          ["session", "centres mm", "conv. T mm", "corr. T mm", "corr. R deg"], agree)
+    table(
+        "   Where the time of hexatherm process goes (in process, best of each part)",
+        ["part", "CSV", "DMIS"],
+        rows,
+    )
+    table(
+        "2. In process, imports excluded (reading + computation, no uncertainty)",
+        ["session", "process_session", "straightforward", "ratio"],
+        in_process,
+    )
+    table(
+        "3. The computation alone (points in memory)",
+        ["work", "vectorized", "straightforward", "ratio"],
+        compute_rows,
+    )
+    table(
+        "4. Agreement, max |ours - straightforward|",
+        ["session", "centres mm", "conv. T mm", "corr. T mm", "corr. R deg"],
+        agree,
+    )
     table("5. Rates per second", ["what", "vectorized", "one at a time", "ratio"], rates)
     table("   Measurement readers", ["file", "fast path", "general path", "ratio"], readers)
     print(f"\n6. hexatherm --help: {seconds(t_help)} (best of 5)")

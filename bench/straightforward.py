@@ -151,8 +151,9 @@ def leg_lengths(pose: np.ndarray, hexapod: Hexapod) -> np.ndarray:
 
 def fgm_pose(hexapod: Hexapod, q: np.ndarray, start: np.ndarray) -> np.ndarray:
     """FGM of one set of leg lengths: one :func:`scipy.optimize.root` with the Jacobian."""
-    sol = root(lambda x: hexapod.igm(x)[0] - q, start, jac=lambda x: hexapod.jacobian(x)[0],
-               method="hybr")
+    sol = root(
+        lambda x: hexapod.igm(x)[0] - q, start, jac=lambda x: hexapod.jacobian(x)[0], method="hybr"
+    )
     if not sol.success and np.abs(hexapod.igm(sol.x)[0] - q).max() > 1e-9:
         raise RuntimeError(f"FGM did not converge: {sol.message}")
     return sol.x
@@ -203,8 +204,7 @@ def compute(session: Session, groups: Groups) -> dict[str, np.ndarray]:
     q_r0 = q[plan.reference_indices[0]]
     targets = plan.target_indices
     corrected = np.zeros((len(targets), 6))
-    for m, (s, (before, after)) in enumerate(zip(targets, plan.adjacent_references(),
-                                                 strict=True)):
+    for m, (s, (before, after)) in enumerate(zip(targets, plan.adjacent_references(), strict=True)):
         if before >= 0 and after >= 0:
             w_after = (times[s] - times[before]) / (times[after] - times[before])
             growth_r = (1 - w_after) * (q[before] - q_r0) + w_after * (q[after] - q_r0)
@@ -213,9 +213,17 @@ def compute(session: Session, groups: Groups) -> dict[str, np.ndarray]:
         growth_s = legs.scale_growth(growth_r, q_r0, q[s])
         growth_s = legs.scale_growth(growth_r, q_r0, q[s] - growth_s)
         corrected[m] = fgm_pose(hexapod, q[s] - growth_s, poses[s])
-    return {"centres_mm": centres, "u_um": u_um, "times_s": times, "platform2cmm": frames,
-            "poses": poses, "q_mm": q, "conventional": poses[targets], "corrected": corrected,
-            "target_labels": np.array([plan.labels[s] for s in targets])}
+    return {
+        "centres_mm": centres,
+        "u_um": u_um,
+        "times_s": times,
+        "platform2cmm": frames,
+        "poses": poses,
+        "q_mm": q,
+        "conventional": poses[targets],
+        "corrected": corrected,
+        "target_labels": np.array([plan.labels[s] for s in targets]),
+    }
 
 
 def main(argv: list[str]) -> None:
@@ -226,8 +234,9 @@ def main(argv: list[str]) -> None:
     out.mkdir(parents=True, exist_ok=True)
     with open(out / "poses.csv", "w", newline="") as handle:
         writer = csv.writer(handle)
-        names = [f"{a}_{tag}" for tag in ("conv", "corr") for a in
-                 ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")]
+        names = [
+            f"{a}_{tag}" for tag in ("conv", "corr") for a in ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
+        ]
         writer.writerow(["label", *names])
         for m, label in enumerate(result["target_labels"]):
             writer.writerow([label, *result["conventional"][m], *result["corrected"][m]])

@@ -31,9 +31,13 @@ ROOT = Path(__file__).resolve().parent.parent
 WORKSPACE = (20.0, 20.0, 15.0, 4.0, 4.0, 8.0)
 REFERENCE_POSE = (0.0, 0.0, -40.0, 0.0, 0.0, 0.0)
 #: the balls of ``configs/balls-3.yaml``
-BALLS = Balls(("B1", "B2", "B3"),
-              np.array([[0.0, 90.0, 30.0], [-73.6, -42.5, 30.0], [82.3, -47.5, 30.0]]),
-              np.full(3, 25.4), True, 2.0)
+BALLS = Balls(
+    ("B1", "B2", "B3"),
+    np.array([[0.0, 90.0, 30.0], [-73.6, -42.5, 30.0], [82.3, -47.5, 30.0]]),
+    np.full(3, 25.4),
+    True,
+    2.0,
+)
 
 
 def hexapod_text() -> str:
@@ -86,9 +90,11 @@ def diagnosis_campaign(
     duration = n_steps * (3 * 60.0 + 20.0)
     gains = rng.uniform(2.0, 9.0, 6)
     periods = ((600.0, 4800.0), (8400.0, float("inf")))
-    heating = MatHeating(tuple(Mat(float(g), 1200.0, periods) for g in gains),
-                         (0.0, 2 * duration / 3, duration),
-                         (20.0, 20.0 + air_rise_C, 20.0 + air_rise_C / 2))
+    heating = MatHeating(
+        tuple(Mat(float(g), 1200.0, periods) for g in gains),
+        (0.0, 2 * duration / 3, duration),
+        (20.0, 20.0 + air_rise_C, 20.0 + air_rise_C / 2),
+    )
     return TwinSessionSpec(
         name=name,
         hexapod_text=hexapod_text(),
@@ -115,10 +121,22 @@ def diagnosis_campaign(
 NOMINAL_HIDDEN: dict[str, dict[str, float]] = {
     "leg_thermal_lag": {"tau_s": 1500.0},
     "steel_overheat": {"ratio": 1.0},
-    "leg_cte_error": {"leg1": 0.2, "leg2": -0.15, "leg3": 0.1, "leg4": -0.2, "leg5": 0.15,
-                      "leg6": 0.25},
+    "leg_cte_error": {
+        "leg1": 0.2,
+        "leg2": -0.15,
+        "leg3": 0.1,
+        "leg4": -0.2,
+        "leg5": 0.15,
+        "leg6": 0.25,
+    },
     "base_expansion": {"alpha_per_K": 25e-6},
     "cmm_drift": {"vx_um_per_h": 3.0, "vy_um_per_h": -2.0, "vz_um_per_h": 4.0},
-    "leg_offset": {"leg1": 0.05, "leg2": -0.04, "leg3": 0.03, "leg4": -0.05, "leg5": 0.04,
-                   "leg6": -0.03},
+    "leg_offset": {
+        "leg1": 0.05,
+        "leg2": -0.04,
+        "leg3": 0.03,
+        "leg4": -0.05,
+        "leg5": 0.04,
+        "leg6": -0.03,
+    },
 }

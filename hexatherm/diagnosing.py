@@ -72,10 +72,13 @@ def read_for_diagnosis(path: str | Path, hexapod_path: str | Path | None = None)
     """Read a session (and optionally another hexapod file) for the diagnosis."""
     session = read_session(path)
     if session.temperatures is None:
-        raise InputError("the diagnosis compares the measurements with the twin, which needs "
-                         "the thermocouple log: add 'temperatures: temperatures.csv' "
-                         "(time,leg1..leg6[,air]) to the session", path=str(session.path),
-                         field="temperatures")
+        raise InputError(
+            "the diagnosis compares the measurements with the twin, which needs "
+            "the thermocouple log: add 'temperatures: temperatures.csv' "
+            "(time,leg1..leg6[,air]) to the session",
+            path=str(session.path),
+            field="temperatures",
+        )
     hexapod = session.hexapod if hexapod_path is None else read_hexapod(hexapod_path)
     current = model_effects(hexapod, str(hexapod_path or session.path))
     _, _, centres, temperatures = read_measured(session)
@@ -89,14 +92,16 @@ def read_for_diagnosis(path: str | Path, hexapod_path: str | Path | None = None)
         median = float(np.nanmedian(u_um))
         u_mm = np.maximum(np.where(np.isnan(u_um), median, u_um), 1e-3) * 1e-3
         source = f"sphere fits (median {median:.2f} um)"
-    obs = Observations(session.plan, centres.times_s, centres.centres_mm,
-                       session.balls.centres_mm, log, u_mm)
+    obs = Observations(
+        session.plan, centres.times_s, centres.centres_mm, session.balls.centres_mm, log, u_mm
+    )
     source_hexapod = "the session's" if hexapod_path is None else str(hexapod_path)
     return SessionData(session, hexapod, source_hexapod, current, obs, temperatures, source)
 
 
-def run_diagnosis(data: SessionData,
-                  progress: Callable[[int, int, int], None] | None = None) -> DiagnosisResult:
+def run_diagnosis(
+    data: SessionData, progress: Callable[[int, int, int], None] | None = None
+) -> DiagnosisResult:
     """Diagnose a session read by :func:`read_for_diagnosis` (``progress``: see ``diagnose``)."""
     diagnosis = diagnose(data.hexapod, data.observations, data.current, progress=progress)
     before = pose_residuals(data.hexapod, data.observations, diagnosis.baseline)

@@ -23,8 +23,8 @@ from hexatherm.errors import FitError, InputError, PlanError
 from hexatherm.io.config import Balls, Session, read_session
 from hexatherm.io.csvfile import Temperatures, read_measurements, read_temperatures
 from hexatherm.io.records import Records, TimeKind
+from hexatherm.typing import FloatArray
 
-FloatArray = npt.NDArray[np.float64]
 #: ``progress(path, lines_done, lines_total)`` while a measurement file is read
 FileProgress = Callable[[str, int, int], None]
 
@@ -100,8 +100,12 @@ class Checks:
 
 def nominal_fit_diameter_mm(balls: Balls) -> FloatArray:
     """Diameter a sphere fit should find for each ball (probe tip added if uncompensated)."""
-    return np.array([2 * probe_radius_mm(d, balls.tip_diameter_mm, balls.probe_compensated)
-                     for d in balls.diameters_mm])
+    return np.array(
+        [
+            2 * probe_radius_mm(d, balls.tip_diameter_mm, balls.probe_compensated)
+            for d in balls.diameters_mm
+        ]
+    )
 
 
 def point_groups(records: Records) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
@@ -115,8 +119,12 @@ def point_groups(records: Records) -> tuple[npt.NDArray[np.intp], npt.NDArray[np
     return rank[groups.reshape(-1)], first[order]
 
 
-def fit_radii(records: Records, first: npt.NDArray[np.intp], balls: Balls | None,
-              fixed_diameter_mm: float | None) -> float | FloatArray | None:
+def fit_radii(
+    records: Records,
+    first: npt.NDArray[np.intp],
+    balls: Balls | None,
+    fixed_diameter_mm: float | None,
+) -> float | FloatArray | None:
     """The fixed radius of each sphere of :func:`fit_points` (None: free radii).
 
     ``first`` is the first record of each sphere (see :func:`point_groups`).
@@ -131,13 +139,18 @@ def fit_radii(records: Records, first: npt.NDArray[np.intp], balls: Balls | None
     missing = [b for b in records.ball[first] if b not in nominal]
     if missing:
         row = int(first[[b in missing for b in records.ball[first]]][0])
-        raise InputError(f"ball {str(records.ball[row])!r} is not in the balls file",
-                         path=records.path, line=int(records.line[row]), field="ball")
+        raise InputError(
+            f"ball {str(records.ball[row])!r} is not in the balls file",
+            path=records.path,
+            line=int(records.line[row]),
+            field="ball",
+        )
     return np.array([nominal[b] for b in records.ball[first]])
 
 
-def fit_points(records: Records, balls: Balls | None = None, fixed_diameter_mm: float | None = None
-               ) -> Records:
+def fit_points(
+    records: Records, balls: Balls | None = None, fixed_diameter_mm: float | None = None
+) -> Records:
     """Fit a sphere to every ``(label, ball)`` group of a points file; return centres.
 
     The centres' ``extra`` holds per-row ``n``, ``form_um``, ``rms_um``, ``cap_deg``,
@@ -153,21 +166,38 @@ def fit_points(records: Records, balls: Balls | None = None, fixed_diameter_mm: 
     except FitError as exc:
         row = None if exc.index is None else int(first[exc.index])
         where = "" if row is None else (f"step {records.label[row]} ball {records.ball[row]}: ")
-        raise InputError(f"{where}sphere fit: {exc}", path=records.path,
-                         line=None if row is None else int(records.line[row])) from None
+        raise InputError(
+            f"{where}sphere fit: {exc}",
+            path=records.path,
+            line=None if row is None else int(records.line[row]),
+        ) from None
     counts = np.bincount(groups)
     times = np.bincount(groups, weights=records.time_s) / counts
     u_um = np.sqrt(np.trace(fits.cov_centre_mm2, axis1=1, axis2=2) / 3) * 1e3
     dof = fits.n - (3 if fits.fixed_radius else 4)
     with np.errstate(invalid="ignore", divide="ignore"):
         sigma_um = np.where(dof > 0, fits.rms_um * np.sqrt(fits.n / np.maximum(dof, 1)), np.nan)
-    extra = {"n": fits.n, "form_um": fits.form_um, "rms_um": fits.rms_um,
-             "cap_deg": fits.cap_half_angle_deg, "u_um": u_um,
-             "cov_centre_mm2": fits.cov_centre_mm2, "sigma_um": sigma_um}
-    return Records(path=records.path, kind="centres", label=records.label[first],
-                   ball=records.ball[first], xyz_mm=fits.centre_mm, time_s=times,
-                   time_kind=records.time_kind, line=records.line[first],
-                   diameter_mm=2 * fits.radius_mm, extra=extra)
+    extra = {
+        "n": fits.n,
+        "form_um": fits.form_um,
+        "rms_um": fits.rms_um,
+        "cap_deg": fits.cap_half_angle_deg,
+        "u_um": u_um,
+        "cov_centre_mm2": fits.cov_centre_mm2,
+        "sigma_um": sigma_um,
+    }
+    return Records(
+        path=records.path,
+        kind="centres",
+        label=records.label[first],
+        ball=records.ball[first],
+        xyz_mm=fits.centre_mm,
+        time_s=times,
+        time_kind=records.time_kind,
+        line=records.line[first],
+        diameter_mm=2 * fits.radius_mm,
+        extra=extra,
+    )
 
 
 def assemble_centres(records: list[Records], session: Session) -> StepCentres:
@@ -190,9 +220,13 @@ def assemble_centres(records: list[Records], session: Session) -> StepCentres:
     if len(kinds) > 1:
         iso = next(r for r in records if r.time_kind == "iso")
         sec = next(r for r in records if r.time_kind == "seconds")
-        raise InputError(f"times are ISO 8601 here but seconds in {sec.path}: all the files "
-                         "of a session must use one kind", path=iso.path, line=int(iso.line[0]),
-                         field="time")
+        raise InputError(
+            f"times are ISO 8601 here but seconds in {sec.path}: all the files "
+            "of a session must use one kind",
+            path=iso.path,
+            line=int(iso.line[0]),
+            field="time",
+        )
     for rec in records:
         if rec.kind != "centres":
             raise ValueError("fit points records before assembling centres")
@@ -200,19 +234,30 @@ def assemble_centres(records: list[Records], session: Session) -> StepCentres:
         bi = np.array([ball_index.get(b, -1) for b in rec.ball])
         if np.any(si < 0):
             row = int(np.argmax(si < 0))
-            raise InputError(f"step {str(rec.label[row])!r} is not in the plan", path=rec.path,
-                             line=int(rec.line[row]), field="label")
+            raise InputError(
+                f"step {str(rec.label[row])!r} is not in the plan",
+                path=rec.path,
+                line=int(rec.line[row]),
+                field="label",
+            )
         if np.any(bi < 0):
             row = int(np.argmax(bi < 0))
-            raise InputError(f"ball {str(rec.ball[row])!r} is not in the balls file "
-                             f"({', '.join(balls.names)})", path=rec.path,
-                             line=int(rec.line[row]), field="ball")
+            raise InputError(
+                f"ball {str(rec.ball[row])!r} is not in the balls file ({', '.join(balls.names)})",
+                path=rec.path,
+                line=int(rec.line[row]),
+                field="ball",
+            )
         dup = counts[si, bi] > 0
         if np.any(dup):
             row = int(np.argmax(dup))
-            raise InputError(f"step {rec.label[row]} ball {rec.ball[row]} is measured again "
-                             "(already in an earlier file)", path=rec.path,
-                             line=int(rec.line[row]), field="label")
+            raise InputError(
+                f"step {rec.label[row]} ball {rec.ball[row]} is measured again "
+                "(already in an earlier file)",
+                path=rec.path,
+                line=int(rec.line[row]),
+                field="label",
+            )
         sums[si, bi] = rec.xyz_mm
         counts[si, bi] = 1
         ball_time[si, bi] = rec.time_s
@@ -223,14 +268,15 @@ def assemble_centres(records: list[Records], session: Session) -> StepCentres:
     missing_step = counts.sum(axis=1) == 0
     if np.any(missing_step):
         i = int(np.argmax(missing_step))
-        raise PlanError(f"step {plan.labels[i]}: not measured (no record in "
-                        f"{', '.join(str(p.name) for p in session.measurements)})")
+        raise PlanError(
+            f"step {plan.labels[i]}: not measured (no record in "
+            f"{', '.join(str(p.name) for p in session.measurements)})"
+        )
     missing_ball = counts == 0
     if np.any(missing_ball):
         i, j = np.argwhere(missing_ball)[0]
         raise PlanError(f"step {plan.labels[i]}: ball {balls.names[j]} not measured")
-    return StepCentres(sums, ball_time.mean(axis=1), kinds.pop() if kinds else "seconds", u_um,
-                       cov)
+    return StepCentres(sums, ball_time.mean(axis=1), kinds.pop() if kinds else "seconds", u_um, cov)
 
 
 def registration_weights(u_um: FloatArray, floor_um: float = 1e-3) -> FloatArray | None:
@@ -247,10 +293,9 @@ def registration_weights(u_um: FloatArray, floor_um: float = 1e-3) -> FloatArray
     return weights
 
 
-def read_measured(session: Session, fixed_diameter_mm: float | None = None,
-                  progress: FileProgress | None = None
-                  ) -> tuple[list[Records], list[Records | None], StepCentres,
-                             Temperatures | None]:
+def read_measured(
+    session: Session, fixed_diameter_mm: float | None = None, progress: FileProgress | None = None
+) -> tuple[list[Records], list[Records | None], StepCentres, Temperatures | None]:
     """Every measurement file of ``session`` (points fitted) and its thermocouple log.
 
     ``progress(path, lines_done, lines_total)``, when given, is called now and then
@@ -266,23 +311,30 @@ def read_measured(session: Session, fixed_diameter_mm: float | None = None,
     for file in session.measurements:
         report = None if progress is None else functools.partial(progress, str(file))
         for rec in read_measurements(file, progress=report):
-            records.append(rec if rec.kind == "centres" else fit_points(
-                rec, session.balls, fixed_diameter_mm))
+            records.append(
+                rec if rec.kind == "centres" else fit_points(rec, session.balls, fixed_diameter_mm)
+            )
             points.append(None if rec.kind == "centres" else rec)
     centres = assemble_centres(records, session)
     temperatures = None
     if session.temperatures is not None:
         temperatures = read_temperatures(session.temperatures)
         if temperatures.time_kind != centres.time_kind:
-            raise InputError(f"times are {temperatures.time_kind} here but "
-                             f"{centres.time_kind} in the measurements: use one kind",
-                             path=temperatures.path, line=2, field="time")
+            raise InputError(
+                f"times are {temperatures.time_kind} here but "
+                f"{centres.time_kind} in the measurements: use one kind",
+                path=temperatures.path,
+                line=2,
+                field="time",
+            )
     return records, points, centres, temperatures
 
 
 def process_session(
-    path: str | Path, interpolation: Interpolation = "linear",
-    fixed_diameter_mm: float | None = None, checks: Checks | None = None,
+    path: str | Path,
+    interpolation: Interpolation = "linear",
+    fixed_diameter_mm: float | None = None,
+    checks: Checks | None = None,
     progress: FileProgress | None = None,
 ) -> ProcessResult:
     """Read a session and compute conventional and corrected poses of every target.
@@ -293,31 +345,48 @@ def process_session(
     records, points, centres, temperatures = read_measured(session, fixed_diameter_mm, progress)
     checks = checks or Checks()
     plan, balls = session.plan, session.balls
-    distances = check_distances(centres.centres_mm, balls.centres_mm, balls.names,
-                                checks.distance_tolerance_um * 1e-3)
+    distances = check_distances(
+        centres.centres_mm, balls.centres_mm, balls.names, checks.distance_tolerance_um * 1e-3
+    )
     bad = [i for i, text in enumerate(distances.diagnosis) if text]
     if bad:
         more = f" ({len(bad) - 1} more step(s) too)" if len(bad) > 1 else ""
         raise PlanError(f"step {plan.labels[bad[0]]}: {distances.diagnosis[bad[0]]}{more}")
-    registration = register(centres.centres_mm, balls.centres_mm,
-                            registration_weights(centres.u_um))
+    registration = register(
+        centres.centres_mm, balls.centres_mm, registration_weights(centres.u_um)
+    )
     warnings = []
     over = np.flatnonzero(registration.rms_um > checks.registration_tolerance_um)
     if over.size:
-        message = (f"step {plan.labels[over[0]]}: registration residual "
-                   f"{registration.rms_um[over[0]]:.2f} um RMS exceeds "
-                   f"{checks.registration_tolerance_um:g} um"
-                   + (f" ({over.size - 1} more step(s) too)" if over.size > 1 else ""))
+        message = (
+            f"step {plan.labels[over[0]]}: registration residual "
+            f"{registration.rms_um[over[0]]:.2f} um RMS exceeds "
+            f"{checks.registration_tolerance_um:g} um"
+            + (f" ({over.size - 1} more step(s) too)" if over.size > 1 else "")
+        )
         if checks.registration_fails:
             raise PlanError(message)
         warnings.append(message)
     q_steps = session.hexapod.igm(plan.poses)
     outside = np.flatnonzero(session.hexapod.check_stroke(q_steps).any(axis=1))
     if outside.size:
-        warnings.append(f"step {plan.labels[outside[0]]}: commanded pose is outside the stroke "
-                        f"{session.hexapod.stroke_mm.tolist()} mm")
-    steps, correction = correct(session.hexapod, session.plan, centres.times_s,
-                                registration.platform2cmm, interpolation)
-    return ProcessResult(session, centres, registration, steps, correction, temperatures,
-                         interpolation, tuple(records), tuple(warnings), tuple(points),
-                         fixed_diameter_mm)
+        warnings.append(
+            f"step {plan.labels[outside[0]]}: commanded pose is outside the stroke "
+            f"{session.hexapod.stroke_mm.tolist()} mm"
+        )
+    steps, correction = correct(
+        session.hexapod, session.plan, centres.times_s, registration.platform2cmm, interpolation
+    )
+    return ProcessResult(
+        session,
+        centres,
+        registration,
+        steps,
+        correction,
+        temperatures,
+        interpolation,
+        tuple(records),
+        tuple(warnings),
+        tuple(points),
+        fixed_diameter_mm,
+    )

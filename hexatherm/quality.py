@@ -31,7 +31,6 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 import pandas as pd
 
 from hexatherm.core.planning import DEFAULT_MIN_RCOND
@@ -39,11 +38,9 @@ from hexatherm.core.registration import check_distances
 from hexatherm.errors import HexathermError
 from hexatherm.io.config import Session
 from hexatherm.pipeline import ProcessResult, nominal_fit_diameter_mm
+from hexatherm.typing import FloatArray
 
-FloatArray = npt.NDArray[np.float64]
-
-__all__ = ["CHECKS", "QualityReport", "QualityThresholds", "parse_threshold",
-           "quality_checks"]
+__all__ = ["CHECKS", "QualityReport", "QualityThresholds", "parse_threshold", "quality_checks"]
 
 
 @dataclass(frozen=True)
@@ -85,8 +82,7 @@ class QualityThresholds:
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
             if not (isinstance(value, int | float) and value >= 0 and not np.isnan(value)):
-                raise ValueError(f"quality threshold {f.name} must be a number >= 0, "
-                                 f"got {value!r}")
+                raise ValueError(f"quality threshold {f.name} must be a number >= 0, got {value!r}")
 
 
 #: check name -> (value column, threshold field, value must be at least the threshold)
@@ -139,12 +135,20 @@ class QualityReport:
                 worst = np.nanmin(shown) if at_least else np.nanmax(shown)
                 worst_text = f"{worst:.4g}"
             failing = self.frame.loc[~self.frame[f"ok_{check}"], "label"].tolist()
-            status = "ok" if not failing else (
-                f"FAILED at {len(failing)} step(s): " + ", ".join(failing[:5])
-                + (" ..." if len(failing) > 5 else ""))
+            status = (
+                "ok"
+                if not failing
+                else (
+                    f"FAILED at {len(failing)} step(s): "
+                    + ", ".join(failing[:5])
+                    + (" ..." if len(failing) > 5 else "")
+                )
+            )
             sign = ">=" if at_least else "<="
-            lines.append(f"  {check:<13} {column:<22} worst {worst_text:>9}  "
-                         f"(limit {sign} {limit:g})  {status}")
+            lines.append(
+                f"  {check:<13} {column:<22} worst {worst_text:>9}  "
+                f"(limit {sign} {limit:g})  {status}"
+            )
         return lines
 
 
@@ -162,19 +166,24 @@ def parse_threshold(text: str) -> tuple[str, float]:
     name, sep, value = text.partition("=")
     name = name.strip()
     if not sep:
-        raise HexathermError(f"--quality-threshold {text!r}: expected NAME=VALUE, NAME one of "
-                             f"{', '.join(names)}")
+        raise HexathermError(
+            f"--quality-threshold {text!r}: expected NAME=VALUE, NAME one of {', '.join(names)}"
+        )
     if name not in names:
-        raise HexathermError(f"--quality-threshold {text!r}: unknown name {name!r}; expected one "
-                             f"of {', '.join(names)}")
+        raise HexathermError(
+            f"--quality-threshold {text!r}: unknown name {name!r}; expected one "
+            f"of {', '.join(names)}"
+        )
     try:
         number = float(value)
     except ValueError:
-        raise HexathermError(f"--quality-threshold {text!r}: {value.strip()!r} is not a "
-                             "number") from None
+        raise HexathermError(
+            f"--quality-threshold {text!r}: {value.strip()!r} is not a number"
+        ) from None
     if not number >= 0:
-        raise HexathermError(f"--quality-threshold {text!r}: must be a number >= 0 "
-                             "(inf disables a limit)")
+        raise HexathermError(
+            f"--quality-threshold {text!r}: must be a number >= 0 (inf disables a limit)"
+        )
     return name, number
 
 
@@ -218,15 +227,17 @@ def _leg_temperatures(result: ProcessResult) -> FloatArray | None:
     return np.column_stack([np.interp(t, temps.time_s, temps.legs_C[:, i]) for i in range(6)])
 
 
-def session_thresholds(session: Session, overrides: Mapping[str, float] | None = None
-                       ) -> QualityThresholds:
+def session_thresholds(
+    session: Session, overrides: Mapping[str, float] | None = None
+) -> QualityThresholds:
     """The limits for ``session``: the defaults, changed by the session file's
     ``quality:`` mapping, then by ``overrides`` (``--quality-threshold``)."""
     return QualityThresholds(**{**session.quality, **(overrides or {})})
 
 
-def quality_checks(result: ProcessResult,
-                   thresholds: QualityThresholds | None = None) -> QualityReport:
+def quality_checks(
+    result: ProcessResult, thresholds: QualityThresholds | None = None
+) -> QualityReport:
     """Run every check of :data:`CHECKS` on every step of ``result``.
 
     ``thresholds`` defaults to the session's (:func:`session_thresholds`).

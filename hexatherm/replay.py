@@ -45,18 +45,25 @@ def tolerance_for(column: str, tolerances: dict[str, float]) -> tuple[str, float
     return "rel", 1e-9
 
 
-def compare_tables(name: str, expected: pd.DataFrame, got: pd.DataFrame,
-                   tolerances: dict[str, float], result: Comparison) -> None:
+def compare_tables(
+    name: str,
+    expected: pd.DataFrame,
+    got: pd.DataFrame,
+    tolerances: dict[str, float],
+    result: Comparison,
+) -> None:
     """Compare two tables cell by cell, recording mismatches that name row and column."""
     if list(expected.columns) != list(got.columns):
         missing = [c for c in expected.columns if c not in got.columns]
         extra = [c for c in got.columns if c not in expected.columns]
-        result.mismatches.append(f"{result.session}/{name}: columns differ (missing {missing}, "
-                                 f"new {extra})")
+        result.mismatches.append(
+            f"{result.session}/{name}: columns differ (missing {missing}, new {extra})"
+        )
         return
     if len(expected) != len(got):
-        result.mismatches.append(f"{result.session}/{name}: {len(got)} rows, expected "
-                                 f"{len(expected)}")
+        result.mismatches.append(
+            f"{result.session}/{name}: {len(got)} rows, expected {len(expected)}"
+        )
         return
     key = expected["label"].astype(str).tolist() if "label" in expected else None
     for column in expected.columns:
@@ -76,7 +83,8 @@ def compare_tables(name: str, expected: pd.DataFrame, got: pd.DataFrame,
                 i = int(np.argmax(bad))
                 result.mismatches.append(
                     f"{result.session}/{name}: {row_name(i)}, column {column}: "
-                    f"expected {x[i]!r}, got {y[i]!r} (|diff| {diff[i]:.3g} > {tol:g})")
+                    f"expected {x[i]!r}, got {y[i]!r} (|diff| {diff[i]:.3g} > {tol:g})"
+                )
         else:
             sa, sb = a.fillna("").astype(str), b.fillna("").astype(str)
             bad = (sa != sb).to_numpy()
@@ -84,11 +92,13 @@ def compare_tables(name: str, expected: pd.DataFrame, got: pd.DataFrame,
                 i = int(np.argmax(bad))
                 result.mismatches.append(
                     f"{result.session}/{name}: {row_name(i)}, column {column}: "
-                    f"expected {sa.iloc[i]!r}, got {sb.iloc[i]!r}")
+                    f"expected {sa.iloc[i]!r}, got {sb.iloc[i]!r}"
+                )
 
 
-def replay_session(folder: Path, tolerances: dict[str, float] | None = None,
-                   update: bool = False) -> Comparison:
+def replay_session(
+    folder: Path, tolerances: dict[str, float] | None = None, update: bool = False
+) -> Comparison:
     """Process ``folder`` and compare with (or, with ``update``, rewrite) ``expected/``."""
     tolerances = tolerances or DEFAULT_TOLERANCES
     result = Comparison(folder.name)
@@ -121,12 +131,14 @@ def replay_session(folder: Path, tolerances: dict[str, float] | None = None,
 
 def find_sessions(root: Path) -> list[Path]:
     """Session folders under ``root`` (or ``root`` itself) that have an ``expected/``."""
-    candidates = [root] if (root / "session.yaml").exists() else sorted(
-        p for p in root.iterdir() if p.is_dir())
+    candidates = (
+        [root]
+        if (root / "session.yaml").exists()
+        else sorted(p for p in root.iterdir() if p.is_dir())
+    )
     return [p for p in candidates if (p / "expected").is_dir() and (p / "session.yaml").exists()]
 
 
 def format_worst(worst: dict[str, float]) -> str:
     """``mm 1.2e-12, deg 3e-13`` style summary."""
     return ", ".join(f"{unit} {value:.1e}" for unit, value in sorted(worst.items())) or "-"
-

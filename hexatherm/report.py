@@ -44,7 +44,7 @@ if TYPE_CHECKING:
     from hexatherm.quality import QualityReport, QualityThresholds
     from hexatherm.uncertainty import PoseUncertainty
 
-FloatArray = npt.NDArray[np.float64]
+from hexatherm.typing import FloatArray
 
 POSE_NAMES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
 #: units of a deviation from the commanded pose, per pose parameter
@@ -54,8 +54,11 @@ POSE_UNITS = ("mm", "mm", "mm", "deg", "deg", "deg")
 LEG_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b")
 CONVENTIONAL_COLOUR = "#d62728"
 CORRECTED_COLOUR = "#1f77b4"
-KIND_STYLES = {"origin": ("#000000", "D"), "reference": ("#7f7f7f", "s"),
-               "target": ("#1f77b4", "o")}
+KIND_STYLES = {
+    "origin": ("#000000", "D"),
+    "reference": ("#7f7f7f", "s"),
+    "target": ("#1f77b4", "o"),
+}
 #: horizontal offset of the conventional / corrected markers around a trial's position
 TRIAL_OFFSET = 0.12
 FIGURE_DPI = 100
@@ -168,9 +171,18 @@ def pose_figure(result: ProcessResult, uncertainty: PoseUncertainty | None = Non
             (conventional, bars[0], "conventional", CONVENTIONAL_COLOUR, "o", -TRIAL_OFFSET),
             (corrected, bars[1], "corrected", CORRECTED_COLOUR, "s", TRIAL_OFFSET),
         ):
-            ax.errorbar(trials + dx, values[:, j], yerr=None if u is None else u[:, j],
-                        fmt=f"{marker}-", color=colour, label=name, markersize=4,
-                        linewidth=0.8, elinewidth=0.8, capsize=2)
+            ax.errorbar(
+                trials + dx,
+                values[:, j],
+                yerr=None if u is None else u[:, j],
+                fmt=f"{marker}-",
+                color=colour,
+                label=name,
+                markersize=4,
+                linewidth=0.8,
+                elinewidth=0.8,
+                capsize=2,
+            )
         ax.axhline(0.0, color="#999999", linewidth=0.6, zorder=0)
         ax.set_title(POSE_NAMES[j], fontsize=10)
         ax.set_ylabel(f"{POSE_NAMES[j]} - commanded ({DEVIATION_UNITS[j]})", fontsize=9)
@@ -180,10 +192,14 @@ def pose_figure(result: ProcessResult, uncertainty: PoseUncertainty | None = Non
             ax.set_xlabel("trial (target step)", fontsize=9)
     handles, names = axes.flat[0].get_legend_handles_labels()
     fig.legend(handles, names, loc="lower center", ncols=2, fontsize=9)
-    bar_text = ("error bars: standard uncertainty (k = 1)" if uncertainty is not None
-                else "uncertainty not available: no error bars")
-    fig.suptitle(f"Measured pose parameters, deviation from the commanded pose\n{bar_text}",
-                 fontsize=11)
+    bar_text = (
+        "error bars: standard uncertainty (k = 1)"
+        if uncertainty is not None
+        else "uncertainty not available: no error bars"
+    )
+    fig.suptitle(
+        f"Measured pose parameters, deviation from the commanded pose\n{bar_text}", fontsize=11
+    )
     return fig
 
 
@@ -200,11 +216,22 @@ def temperature_figure(result: ProcessResult) -> Figure | None:
     fig = _new_figure(9.0, 4.5)
     ax = fig.subplots()
     for leg in range(6):
-        ax.plot(hours, temps.legs_C[:, leg], color=LEG_COLOURS[leg], linewidth=1.0,
-                label=f"leg {leg + 1}")
+        ax.plot(
+            hours,
+            temps.legs_C[:, leg],
+            color=LEG_COLOURS[leg],
+            linewidth=1.0,
+            label=f"leg {leg + 1}",
+        )
     for k, (name, values) in enumerate(temps.others_C.items()):
-        ax.plot(hours, values, color="#000000" if k == 0 else "#7f7f7f", linewidth=1.0,
-                linestyle=("--", ":", "-.")[k % 3], label=name)
+        ax.plot(
+            hours,
+            values,
+            color="#000000" if k == 0 else "#7f7f7f",
+            linewidth=1.0,
+            linestyle=("--", ":", "-.")[k % 3],
+            label=name,
+        )
     _mark_targets(ax, result)
     ax.set_xlabel("time since start (h)")
     ax.set_ylabel("temperature (degC)")
@@ -217,9 +244,17 @@ def temperature_figure(result: ProcessResult) -> Figure | None:
 def _mark_targets(ax: Axes, result: ProcessResult) -> None:
     """Ticks at the bottom of ``ax`` at the targets' times (no legend entry)."""
     hours = hours_since_start(result, result.centres.times_s[result.correction.target_index])
-    ax.plot(hours, np.zeros_like(hours), linestyle="none", marker="|", markersize=8,
-            color="#555555", transform=ax.get_xaxis_transform(), gid="targets",
-            label="_targets")
+    ax.plot(
+        hours,
+        np.zeros_like(hours),
+        linestyle="none",
+        marker="|",
+        markersize=8,
+        color="#555555",
+        transform=ax.get_xaxis_transform(),
+        gid="targets",
+        label="_targets",
+    )
 
 
 def growth_figure(result: ProcessResult) -> Figure:
@@ -233,16 +268,22 @@ def growth_figure(result: ProcessResult) -> Figure:
     fig = _new_figure(9.0, 4.5)
     ax = fig.subplots()
     for leg in range(6):
-        ax.plot(hours, growth[:, leg], marker="o", markersize=3, linewidth=1.0,
-                color=LEG_COLOURS[leg], label=f"leg {leg + 1}")
+        ax.plot(
+            hours,
+            growth[:, leg],
+            marker="o",
+            markersize=3,
+            linewidth=1.0,
+            color=LEG_COLOURS[leg],
+            label=f"leg {leg + 1}",
+        )
     ax.axhline(0.0, color="#999999", linewidth=0.6, zorder=0)
     _mark_targets(ax, result)
     ax.set_xlabel("time since start (h)")
     ax.set_ylabel("growth since R0 (um)")
     ax.grid(True, linewidth=0.3)
     ax.legend(fontsize=8, ncols=2)
-    ax.set_title("Leg growth measured at the references (IGM of the measured pose)",
-                 fontsize=11)
+    ax.set_title("Leg growth measured at the references (IGM of the measured pose)", fontsize=11)
     return fig
 
 
@@ -259,8 +300,15 @@ def registration_figure(result: ProcessResult) -> Figure:
     for kind, (colour, marker) in KIND_STYLES.items():
         mask = kinds == kind
         if np.any(mask):
-            ax.plot(hours[mask], rms[mask], linestyle="none", marker=marker, markersize=4,
-                    color=colour, label=kind)
+            ax.plot(
+                hours[mask],
+                rms[mask],
+                linestyle="none",
+                marker=marker,
+                markersize=4,
+                color=colour,
+                label=kind,
+            )
     ax.set_ylim(bottom=0.0)
     ax.set_xlabel("time since start (h)")
     ax.set_ylabel("registration RMS (um)")
@@ -302,8 +350,12 @@ def _num(value: float, fmt: str = ".3f") -> str:
     return "" if not np.isfinite(value) else format(value, fmt)
 
 
-def html_table(header_rows: Sequence[Sequence[tuple[str, int]]], rows: Iterable[Sequence[str]],
-               numeric_from: int = 1, row_classes: Sequence[str] | None = None) -> str:
+def html_table(
+    header_rows: Sequence[Sequence[tuple[str, int]]],
+    rows: Iterable[Sequence[str]],
+    numeric_from: int = 1,
+    row_classes: Sequence[str] | None = None,
+) -> str:
     """An escaped HTML table.
 
     Parameters
@@ -318,14 +370,18 @@ def html_table(header_rows: Sequence[Sequence[tuple[str, int]]], rows: Iterable[
     """
     out = ["<table>", "<thead>"]
     for header in header_rows:
-        cells = "".join(f'<th colspan="{span}">{_e(text)}</th>' if span > 1
-                        else f"<th>{_e(text)}</th>" for text, span in header)
+        cells = "".join(
+            f'<th colspan="{span}">{_e(text)}</th>' if span > 1 else f"<th>{_e(text)}</th>"
+            for text, span in header
+        )
         out.append(f"<tr>{cells}</tr>")
     out.append("</thead><tbody>")
     for i, row in enumerate(rows):
         cls = row_classes[i] if row_classes is not None else ""
-        cells = "".join(f'<td class="num">{_e(c)}</td>' if k >= numeric_from
-                        else f"<td>{_e(c)}</td>" for k, c in enumerate(row))
+        cells = "".join(
+            f'<td class="num">{_e(c)}</td>' if k >= numeric_from else f"<td>{_e(c)}</td>"
+            for k, c in enumerate(row)
+        )
         out.append(f'<tr class="{_e(cls)}">{cells}</tr>' if cls else f"<tr>{cells}</tr>")
     out.append("</tbody></table>")
     return "\n".join(out)
@@ -335,8 +391,10 @@ def _figure_html(fig: Figure | None, alt: str, caption: str) -> str:
     if fig is None:
         return ""
     data = base64.b64encode(figure_png(fig)).decode("ascii")
-    return (f'<figure><img src="data:image/png;base64,{data}" alt="{_e(alt)}">'
-            f"<figcaption>{_e(caption)}</figcaption></figure>")
+    return (
+        f'<figure><img src="data:image/png;base64,{data}" alt="{_e(alt)}">'
+        f"<figcaption>{_e(caption)}</figcaption></figure>"
+    )
 
 
 def _session_files(result: ProcessResult) -> dict[str, str]:
@@ -372,11 +430,17 @@ def metadata_rows(result: ProcessResult) -> list[tuple[str, str]]:
         ("temperature columns", columns),
         ("hexapod", f"{session.hexapod.name} (convention {session.hexapod.convention})"),
         ("balls", f"{len(session.balls.names)}: {', '.join(session.balls.names)}"),
-        ("steps", f"{len(plan.labels)}: 1 origin, {n_refs} references, "
-                  f"{len(result.correction.target_index)} targets"),
+        (
+            "steps",
+            f"{len(plan.labels)}: 1 origin, {n_refs} references, "
+            f"{len(result.correction.target_index)} targets",
+        ),
         ("reference pose (mm, deg)", ", ".join(f"{v:g}" for v in plan.reference_pose)),
-        ("time span", f"{_time_text(result, start)} to {_time_text(result, end)} "
-                      f"({(end - start) / 3600:.2f} h)"),
+        (
+            "time span",
+            f"{_time_text(result, start)} to {_time_text(result, end)} "
+            f"({(end - start) / 3600:.2f} h)",
+        ),
         ("interpolation", result.interpolation),
         ("hexatherm", __version__),
     ]
@@ -400,19 +464,33 @@ def poses_table_html(result: ProcessResult, uncertainty: PoseUncertainty | None)
 
     rows = []
     for i, label in enumerate(target_labels(result)):
-        rows.append([label, _time_text(result, float(result.centres.times_s[idx[i]])),
-                     _num(hours[i]), *(_num(v, ".4g") for v in commanded[i]),
-                     *cells(conventional[i], None if u_conv is None else u_conv[i]),
-                     *cells(corrected[i], None if u_corr is None else u_corr[i])])
+        rows.append(
+            [
+                label,
+                _time_text(result, float(result.centres.times_s[idx[i]])),
+                _num(hours[i]),
+                *(_num(v, ".4g") for v in commanded[i]),
+                *cells(conventional[i], None if u_conv is None else u_conv[i]),
+                *cells(corrected[i], None if u_corr is None else u_corr[i]),
+            ]
+        )
     if len(rows) > 1:
-        rows.append(["spread (max - min)", "", "", *[""] * 6,
-                     *(_num(v) for v in np.ptp(conventional, axis=0)),
-                     *(_num(v) for v in np.ptp(corrected, axis=0))])
+        rows.append(
+            [
+                "spread (max - min)",
+                "",
+                "",
+                *[""] * 6,
+                *(_num(v) for v in np.ptp(conventional, axis=0)),
+                *(_num(v) for v in np.ptp(corrected, axis=0)),
+            ]
+        )
     units = [f"{n} ({u})" for n, u in zip(POSE_NAMES, POSE_UNITS, strict=True)]
     devs = [f"{n} ({u})" for n, u in zip(POSE_NAMES, DEVIATION_UNITS, strict=True)]
-    header = [[("", 3), ("commanded", 6), ("conventional - commanded", 6),
-               ("corrected - commanded", 6)],
-              [("step", 1), ("time", 1), ("t (h)", 1), *[(c, 1) for c in units + devs + devs]]]
+    header = [
+        [("", 3), ("commanded", 6), ("conventional - commanded", 6), ("corrected - commanded", 6)],
+        [("step", 1), ("time", 1), ("t (h)", 1), *[(c, 1) for c in units + devs + devs]],
+    ]
     return html_table(header, rows, numeric_from=2)
 
 
@@ -420,8 +498,10 @@ def growth_table_html(result: ProcessResult) -> str:
     """Every reference step: its time and the growth of each leg since R0 (um)."""
     refs, growth = reference_growth_um(result)
     hours = hours_since_start(result, result.centres.times_s[refs])
-    rows = [[result.session.plan.labels[r], _num(h), *(_num(g) for g in growth[k])]
-            for k, (r, h) in enumerate(zip(refs, hours, strict=True))]
+    rows = [
+        [result.session.plan.labels[r], _num(h), *(_num(g) for g in growth[k])]
+        for k, (r, h) in enumerate(zip(refs, hours, strict=True))
+    ]
     header = [[("reference", 1), ("t (h)", 1), *[(f"leg {i} (um)", 1) for i in range(1, 7)]]]
     return html_table(header, rows)
 
@@ -442,9 +522,12 @@ def quality_table_html(quality: QualityReport) -> str:
     frame = quality.frame
     checks = [(column, f"ok_{check}") for check, (column, _, _) in CHECKS.items()]
     failed = failing_rows(frame)
-    out = ["<table>", "<thead><tr><th>step</th><th>kind</th>"
-           + "".join(f"<th>{_e(column)}</th>" for column, _ in checks)
-           + "<th>failed</th></tr></thead><tbody>"]
+    out = [
+        "<table>",
+        "<thead><tr><th>step</th><th>kind</th>"
+        + "".join(f"<th>{_e(column)}</th>" for column, _ in checks)
+        + "<th>failed</th></tr></thead><tbody>",
+    ]
     for i, row in enumerate(frame.to_dict("records")):
         cells = [f"<td>{_e(row['label'])}</td>", f"<td>{_e(row['kind'])}</td>"]
         for column, ok in checks:
@@ -456,8 +539,11 @@ def quality_table_html(quality: QualityReport) -> str:
     return "\n".join(out)
 
 
-def report_html(result: ProcessResult, uncertainty: PoseUncertainty | None = None,
-                quality: QualityReport | None = None) -> str:
+def report_html(
+    result: ProcessResult,
+    uncertainty: PoseUncertainty | None = None,
+    quality: QualityReport | None = None,
+) -> str:
     """The report page of a processed session (see the module's docstring).
 
     Parameters
@@ -482,58 +568,90 @@ def report_html(result: ProcessResult, uncertainty: PoseUncertainty | None = Non
         f"<style>\n{STYLE}\n</style></head><body>",
         f"<h1>hexatherm report: {_e(name)}</h1>",
         "<h2>Session</h2>",
-        html_table([[("field", 1), ("value", 1)]],
-                   [[k, v] for k, v in metadata_rows(result)], numeric_from=99),
+        html_table(
+            [[("field", 1), ("value", 1)]],
+            [[k, v] for k, v in metadata_rows(result)],
+            numeric_from=99,
+        ),
     ]
     if result.warnings:
-        parts.append("<h2>Warnings</h2><ul>"
-                     + "".join(f"<li>{_e(w)}</li>" for w in result.warnings) + "</ul>")
+        parts.append(
+            "<h2>Warnings</h2><ul>"
+            + "".join(f"<li>{_e(w)}</li>" for w in result.warnings)
+            + "</ul>"
+        )
 
     parts.append("<h2>Pose parameters per trial (the paper's Figure 6)</h2>")
     if uncertainty is None:
-        parts.append('<p class="missing">uncertainty not available: the poses are shown '
-                     "without uncertainty bars.</p>")
+        parts.append(
+            '<p class="missing">uncertainty not available: the poses are shown '
+            "without uncertainty bars.</p>"
+        )
     parts += [
-        _figure_html(pose_figure(result, uncertainty), "pose parameters per trial",
-                     "Deviations of the conventional (measured) and corrected (thermal state "
-                     "of R0) poses from the commanded pose: translations in um, rotations in "
-                     "urad." + (" Error bars and \u00b1 values in the table: standard "
-                                "uncertainty (k = 1)." if uncertainty is not None else "")),
+        _figure_html(
+            pose_figure(result, uncertainty),
+            "pose parameters per trial",
+            "Deviations of the conventional (measured) and corrected (thermal state "
+            "of R0) poses from the commanded pose: translations in um, rotations in "
+            "urad."
+            + (
+                " Error bars and \u00b1 values in the table: standard uncertainty (k = 1)."
+                if uncertainty is not None
+                else ""
+            ),
+        ),
         poses_table_html(result, uncertainty),
     ]
     if uncertainty is not None:
-        method = ("linear propagation (GUM)" if uncertainty.method == "linear" else
-                  f"Monte Carlo, {uncertainty.draws} draws, seed {uncertainty.seed}")
-        parts.append(f'<p class="note">Uncertainty: {_e(method)}; ball centres: '
-                     f"{_e(uncertainty.centres.description)}.</p>")
+        method = (
+            "linear propagation (GUM)"
+            if uncertainty.method == "linear"
+            else f"Monte Carlo, {uncertainty.draws} draws, seed {uncertainty.seed}"
+        )
+        parts.append(
+            f'<p class="note">Uncertainty: {_e(method)}; ball centres: '
+            f"{_e(uncertainty.centres.description)}.</p>"
+        )
 
     parts.append("<h2>Temperatures (the paper's Figure 7)</h2>")
     temperature = temperature_figure(result)
     if temperature is None:
         parts.append('<p class="missing">no temperature log in this session.</p>')
     else:
-        parts.append(_figure_html(temperature, "measured temperatures",
-                                  "Thermocouple temperatures over time; ticks at the bottom: "
-                                  "the targets' times."))
+        parts.append(
+            _figure_html(
+                temperature,
+                "measured temperatures",
+                "Thermocouple temperatures over time; ticks at the bottom: the targets' times.",
+            )
+        )
 
     parts += [
         "<h2>Leg growth at the references</h2>",
-        _figure_html(growth_figure(result), "leg growth at the references",
-                     "Growth of each leg since R0 (um), from the IGM of the measured reference "
-                     "poses; ticks at the bottom: the targets' times."),
+        _figure_html(
+            growth_figure(result),
+            "leg growth at the references",
+            "Growth of each leg since R0 (um), from the IGM of the measured reference "
+            "poses; ticks at the bottom: the targets' times.",
+        ),
         growth_table_html(result),
         "<h2>Registration residuals</h2>",
-        _figure_html(registration_figure(result), "registration residuals",
-                     "RMS distance between the measured ball centres and the registered "
-                     "balls file, per step (um)."),
+        _figure_html(
+            registration_figure(result),
+            "registration residuals",
+            "RMS distance between the measured ball centres and the registered "
+            "balls file, per step (um).",
+        ),
         "<h2>Quality flags</h2>",
     ]
     if quality is None:
         parts.append('<p class="missing">quality checks not available.</p>')
     else:
         failed = sum(failing_rows(quality.frame))
-        parts.append(f'<p class="note">{failed} step(s) failing a check (highlighted, the '
-                     "failing values in bold). Worst value of every check and its limit:</p>")
+        parts.append(
+            f'<p class="note">{failed} step(s) failing a check (highlighted, the '
+            "failing values in bold). Worst value of every check and its limit:</p>"
+        )
         parts.append(f"<pre>{_e(chr(10).join(quality.summary()))}</pre>")
         parts.append(quality_table_html(quality))
     parts.append(f'<p class="note">Made by hexatherm {_e(__version__)}.</p>')
@@ -541,9 +659,13 @@ def report_html(result: ProcessResult, uncertainty: PoseUncertainty | None = Non
     return "\n".join(parts) + "\n"
 
 
-def build_report(result: ProcessResult, mc: int = 0, seed: int = 0,
-                 thresholds: QualityThresholds | None = None,
-                 progress: Callable[[int, int], None] | None = None) -> str:
+def build_report(
+    result: ProcessResult,
+    mc: int = 0,
+    seed: int = 0,
+    thresholds: QualityThresholds | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> str:
     """The report page of ``result`` with its pose uncertainty and quality checks.
 
     Parameters
@@ -561,6 +683,8 @@ def build_report(result: ProcessResult, mc: int = 0, seed: int = 0,
     from hexatherm.quality import quality_checks
     from hexatherm.uncertainty import pose_uncertainty
 
-    return report_html(result, uncertainty=pose_uncertainty(result, mc=mc, seed=seed,
-                                                           progress=progress),
-                       quality=quality_checks(result, thresholds))
+    return report_html(
+        result,
+        uncertainty=pose_uncertainty(result, mc=mc, seed=seed, progress=progress),
+        quality=quality_checks(result, thresholds),
+    )

@@ -21,25 +21,40 @@ from hexatherm.io.csvfile import Temperatures
 from hexatherm.pipeline import ProcessResult
 
 
-def twin_poses(result: ProcessResult, hexapod: Hexapod, source: str = ""
-               ) -> npt.NDArray[np.float64]:
+def twin_poses(
+    result: ProcessResult, hexapod: Hexapod, source: str = ""
+) -> npt.NDArray[np.float64]:
     """Twin-corrected pose (M, 6) of every target of ``result``, mm and deg.
 
     ``source`` names the hexapod file in error messages.
     """
     session = result.session
     if result.temperatures is None:
-        raise InputError("the twin corrects from the thermocouple log: add 'temperatures: "
-                         "temperatures.csv' to the session", path=str(session.path),
-                         field="temperatures")
+        raise InputError(
+            "the twin corrects from the thermocouple log: add 'temperatures: "
+            "temperatures.csv' to the session",
+            path=str(session.path),
+            field="temperatures",
+        )
     effects = model_effects(hexapod, source or None)
     log = thermocouple_log(result.temperatures)
     if log.air_C is None and any(type(e).needs_air for e in effects):
-        raise InputError("the thermal model's effects need the air temperature: the "
-                         "temperatures have no 'air' column", path=result.temperatures.path,
-                         line=1, field="air")
-    poses = twin_corrected(hexapod, session.plan, result.centres.times_s, log,
-                           session.balls.centres_mm, result.registration.platform2cmm, effects)
+        raise InputError(
+            "the thermal model's effects need the air temperature: the "
+            "temperatures have no 'air' column",
+            path=result.temperatures.path,
+            line=1,
+            field="air",
+        )
+    poses = twin_corrected(
+        hexapod,
+        session.plan,
+        result.centres.times_s,
+        log,
+        session.balls.centres_mm,
+        result.registration.platform2cmm,
+        effects,
+    )
     return poses[result.correction.target_index]
 
 
@@ -50,8 +65,9 @@ def model_effects(hexapod: Hexapod, source: str | None) -> tuple[Effect, ...]:
     or an effect is invalid.
     """
     if hexapod.legs is None:
-        raise InputError("the twin needs the hexapod's leg model ('legs:')", path=source,
-                         field="legs")
+        raise InputError(
+            "the twin needs the hexapod's leg model ('legs:')", path=source, field="legs"
+        )
     try:
         return effects_from_dicts(hexapod.effects)
     except ValueError as exc:
@@ -60,5 +76,6 @@ def model_effects(hexapod: Hexapod, source: str | None) -> tuple[Effect, ...]:
 
 def thermocouple_log(temperatures: Temperatures) -> ThermocoupleLog:
     """The twin's thermocouple log of ``temperatures.csv`` (with its ``air`` column if any)."""
-    return ThermocoupleLog(temperatures.time_s, temperatures.legs_C,
-                           temperatures.others_C.get("air"))
+    return ThermocoupleLog(
+        temperatures.time_s, temperatures.legs_C, temperatures.others_C.get("air")
+    )

@@ -63,8 +63,8 @@ from hexatherm.io.config import (
 from hexatherm.io.dmisout import dmis_output
 from hexatherm.io.records import iso_to_seconds, seconds_to_iso
 from hexatherm.io.results import pose_columns, to_csv_text
+from hexatherm.typing import FloatArray
 
-FloatArray = npt.NDArray[np.float64]
 OUTPUTS = ("centres", "points", "dmis", "serial")
 
 __all__ = [
@@ -442,10 +442,16 @@ def _serial_capture(xyz: FloatArray, times_s: FloatArray) -> str:
     from hexatherm.acquisition import LOG_MAGIC, entry
 
     start = seconds_to_iso(float(times_s[0]) - 1.0)
-    lines = [f"{LOG_MAGIC}\n", entry("config", "-", "units=mm", start).format(),
-             entry("mode", "-", "auto", start).format(),
-             entry("open", "probe", "twin", start).format()]
+    lines = [
+        f"{LOG_MAGIC}\n",
+        entry("config", "-", "units=mm", start).format(),
+        entry("mode", "-", "auto", start).format(),
+        entry("open", "probe", "twin", start).format(),
+    ]
     for (x, y, z), t in zip(xyz, times_s, strict=True):
-        lines.append(entry("rx", "probe", f"X{x:+.6f} Y{y:+.6f} Z{z:+.6f}\r\n",
-                           seconds_to_iso(float(t))).format())
+        lines.append(
+            entry(
+                "rx", "probe", f"X{x:+.6f} Y{y:+.6f} Z{z:+.6f}\r\n", seconds_to_iso(float(t))
+            ).format()
+        )
     return "".join(lines)

@@ -41,12 +41,17 @@ from hexatherm.core.uncertainty import (
     pooled_registration_variance,
 )
 from hexatherm.pipeline import ProcessResult, fit_radii, point_groups, registration_weights
+from hexatherm.typing import FloatArray
 
-FloatArray = npt.NDArray[np.float64]
 Method = Literal["linear", "monte-carlo"]
 
-__all__ = ["CentreCovariance", "PoseUncertainty", "centre_covariance", "pose_chain",
-           "pose_uncertainty"]
+__all__ = [
+    "CentreCovariance",
+    "PoseUncertainty",
+    "centre_covariance",
+    "pose_chain",
+    "pose_uncertainty",
+]
 
 
 @dataclass(frozen=True)
@@ -128,8 +133,10 @@ def centre_covariance(result: ProcessResult) -> CentreCovariance:
         source[fit] = "fit"
         if fit.any():
             u = np.sqrt(np.trace(cov[fit], axis1=-2, axis2=-1) / 3) * 1e3
-            parts.append(f"sphere fits of the probed points ({int(fit.sum())} centres, "
-                         f"u {np.median(u):.3g} um median per coordinate)")
+            parts.append(
+                f"sphere fits of the probed points ({int(fit.sum())} centres, "
+                f"u {np.median(u):.3g} um median per coordinate)"
+            )
     file = (source == "") & np.isfinite(centres.u_um)
     if file.any():
         cov[file] = (centres.u_um[file] * 1e-3)[:, None, None] ** 2 * np.eye(3)
@@ -141,15 +148,19 @@ def centre_covariance(result: ProcessResult) -> CentreCovariance:
         points = cmm.points_per_ball or result.session.plan.points_per_ball
         cov[rest] = cap_centre_covariance(points, cmm.cap_angle_deg, cmm.point_noise_um * 1e-3)
         source[rest] = "cmm"
-        parts.append(f"session cmm: point noise {cmm.point_noise_um:g} um, {points} points "
-                     f"over a {cmm.cap_angle_deg:g} deg cap ({int(rest.sum())} centres)")
+        parts.append(
+            f"session cmm: point noise {cmm.point_noise_um:g} um, {points} points "
+            f"over a {cmm.cap_angle_deg:g} deg cap ({int(rest.sum())} centres)"
+        )
     elif rest.any():
         var = pooled_registration_variance(result.registration.residuals_mm)
         cov[rest] = var * np.eye(3)
         source[rest] = "registration"
-        parts.append(f"registration residuals: {np.sqrt(var) * 1e3:.3g} um per coordinate, "
-                     f"pooled over {n} steps ({int(rest.sum())} centres; give cmm: in "
-                     "session.yaml for a stated CMM noise)")
+        parts.append(
+            f"registration residuals: {np.sqrt(var) * 1e3:.3g} um per coordinate, "
+            f"pooled over {n} steps ({int(rest.sum())} centres; give cmm: in "
+            "session.yaml for a stated CMM noise)"
+        )
     return CentreCovariance(cov, source.astype(str), "; ".join(parts))
 
 
@@ -167,8 +178,11 @@ def point_sampler(result: ProcessResult, cov_mm2: FloatArray) -> CentreSampler |
     and those whose fit has no redundancy, are drawn from their covariance
     ``cov_mm2`` (N, k, 3, 3). None when no centre comes from probed points.
     """
-    sources = [(fitted, raw) for fitted, raw in zip(result.records, result.points, strict=False)
-               if raw is not None]
+    sources = [
+        (fitted, raw)
+        for fitted, raw in zip(result.records, result.points, strict=False)
+        if raw is not None
+    ]
     if not sources:
         return None
     step_index = {label: i for i, label in enumerate(result.session.plan.labels)}
@@ -183,8 +197,17 @@ def point_sampler(result: ProcessResult, cov_mm2: FloatArray) -> CentreSampler |
         step = np.array([step_index[s] for s in fitted.label])
         ball = np.array([ball_index[b] for b in fitted.ball])
         radius = fit_radii(raw, first, result.session.balls, result.fixed_diameter_mm)
-        fits.append((raw.xyz_mm, normal * np.where(ok, sigma_mm, 0.0)[groups, None], groups,
-                     radius, step[ok], ball[ok], ok))
+        fits.append(
+            (
+                raw.xyz_mm,
+                normal * np.where(ok, sigma_mm, 0.0)[groups, None],
+                groups,
+                radius,
+                step[ok],
+                ball[ok],
+                ok,
+            )
+        )
     centres = result.centres.centres_mm
     root = covariance_root(cov_mm2)
 
@@ -197,11 +220,13 @@ def point_sampler(result: ProcessResult, cov_mm2: FloatArray) -> CentreSampler |
                 d = min(chunk, size - start)
                 moved = xyz + noise_mm * rng.standard_normal((d, len(xyz)))[..., None]
                 all_groups = (groups + n_spheres * np.arange(d)[:, None]).reshape(-1)
-                radii = None if radius is None else np.broadcast_to(
-                    radius, (d, n_spheres)).reshape(-1)
+                radii = (
+                    None if radius is None else np.broadcast_to(radius, (d, n_spheres)).reshape(-1)
+                )
                 refit = fit_spheres(moved.reshape(-1, 3), all_groups, radius_mm=radii)
-                drawn[start:start + d, step, ball] = refit.centre_mm.reshape(
-                    d, n_spheres, 3)[:, ok]
+                drawn[start : start + d, step, ball] = refit.centre_mm.reshape(d, n_spheres, 3)[
+                    :, ok
+                ]
         return drawn
 
     return sample
@@ -211,15 +236,23 @@ def pose_chain(result: ProcessResult) -> PoseChain:
     """The registration + correction chain of ``result`` as a function of the centres."""
     corr = result.correction
     return PoseChain(
-        hexapod=result.session.hexapod, plan=result.session.plan,
-        balls_mm=result.session.balls.centres_mm, before_index=corr.before_index,
-        after_index=corr.after_index, weight_after=corr.weight_after,
-        weights=registration_weights(result.centres.u_um), initial_poses=corr.corrected,
+        hexapod=result.session.hexapod,
+        plan=result.session.plan,
+        balls_mm=result.session.balls.centres_mm,
+        before_index=corr.before_index,
+        after_index=corr.after_index,
+        weight_after=corr.weight_after,
+        weights=registration_weights(result.centres.u_um),
+        initial_poses=corr.corrected,
     )
 
 
-def pose_uncertainty(result: ProcessResult, mc: int = 0, seed: int = 0,
-                     progress: Callable[[int, int], None] | None = None) -> PoseUncertainty:
+def pose_uncertainty(
+    result: ProcessResult,
+    mc: int = 0,
+    seed: int = 0,
+    progress: Callable[[int, int], None] | None = None,
+) -> PoseUncertainty:
     """Standard uncertainties of the conventional and corrected poses of every target.
 
     Parameters
@@ -244,13 +277,26 @@ def pose_uncertainty(result: ProcessResult, mc: int = 0, seed: int = 0,
     covariance, method, draws, drawn = linear, "linear", 0, ""
     if mc:
         sampler = point_sampler(result, centres.cov_mm2)
-        covariance, _ = monte_carlo_covariance(chain, result.centres.centres_mm,
-                                               centres.cov_mm2, mc, np.random.default_rng(seed),
-                                               progress=progress, sample=sampler)
+        covariance, _ = monte_carlo_covariance(
+            chain,
+            result.centres.centres_mm,
+            centres.cov_mm2,
+            mc,
+            np.random.default_rng(seed),
+            progress=progress,
+            sample=sampler,
+        )
         method, draws = "monte-carlo", int(mc)
         drawn = "centres" if sampler is None else "points"
     u = np.sqrt(np.clip(np.diagonal(covariance, axis1=1, axis2=2), 0.0, None))
-    return PoseUncertainty(conventional_u=u[:, :6], corrected_u=u[:, 6:], covariance=covariance,
-                           linear_covariance=linear, method=method,  # type: ignore[arg-type]
-                           draws=draws, seed=seed if mc else None, centres=centres,
-                           drawn=drawn)
+    return PoseUncertainty(
+        conventional_u=u[:, :6],
+        corrected_u=u[:, 6:],
+        covariance=covariance,
+        linear_covariance=linear,
+        method=method,  # type: ignore[arg-type]
+        draws=draws,
+        seed=seed if mc else None,
+        centres=centres,
+        drawn=drawn,
+    )

@@ -60,9 +60,18 @@ def main() -> None:
         shutil.rmtree(TARGET)
     with tempfile.TemporaryDirectory() as tmp:
         sim = Path(tmp) / "sim"
-        subprocess.run([sys.executable, "-m", "hexatherm", "simulate",
-                        str(ROOT / "configs" / "scenarios" / "serial-capture.yaml"),
-                        "-o", str(sim)], check=True)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "hexatherm",
+                "simulate",
+                str(ROOT / "configs" / "scenarios" / "serial-capture.yaml"),
+                "-o",
+                str(sim),
+            ],
+            check=True,
+        )
         points = pd.read_csv(sim / "points.csv")
         master, slave = os.openpty()
         tty.setraw(slave)
@@ -78,18 +87,38 @@ def main() -> None:
 
         thread = threading.Thread(target=probe, daemon=True)
         thread.start()
-        subprocess.run([sys.executable, "-m", "hexatherm", "acquire", str(sim / "plan.yaml"),
-                        "--hexapod", str(sim / "hexapod.yaml"), "--balls",
-                        str(sim / "balls.yaml"), "--port", port, "--session", str(TARGET),
-                        "--auto", "--idle-timeout", "10", "--read-timeout", "0.05"],
-                       check=True, stdout=subprocess.DEVNULL)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "hexatherm",
+                "acquire",
+                str(sim / "plan.yaml"),
+                "--hexapod",
+                str(sim / "hexapod.yaml"),
+                "--balls",
+                str(sim / "balls.yaml"),
+                "--port",
+                port,
+                "--session",
+                str(TARGET),
+                "--auto",
+                "--idle-timeout",
+                "10",
+                "--read-timeout",
+                "0.05",
+            ],
+            check=True,
+            stdout=subprocess.DEVNULL,
+        )
         thread.join(5)
         os.close(master)
         os.close(slave)
     (TARGET / "README.md").write_text(README)
     (TARGET / "expected").mkdir()
-    subprocess.run([sys.executable, "-m", "hexatherm", "replay", str(TARGET), "--update"],
-                   check=True)
+    subprocess.run(
+        [sys.executable, "-m", "hexatherm", "replay", str(TARGET), "--update"], check=True
+    )
 
 
 if __name__ == "__main__":

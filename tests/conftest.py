@@ -17,9 +17,14 @@ def make_hexapod(convention: str = "symetrie") -> Hexapod:
         [("body", "aluminium", 23.1e-6, 148.0), ("screw", "steel", 11.5e-6, None)]
     )
     return Hexapod.symmetric(
-        base_radius_mm=150.0, platform_radius_mm=100.0, base_half_angle_deg=10.0,
-        platform_half_angle_deg=10.0, height_mm=220.0, rotation_deg=-120.0,
-        legs=legs, convention=convention,  # type: ignore[arg-type]
+        base_radius_mm=150.0,
+        platform_radius_mm=100.0,
+        base_half_angle_deg=10.0,
+        platform_half_angle_deg=10.0,
+        height_mm=220.0,
+        rotation_deg=-120.0,
+        legs=legs,
+        convention=convention,  # type: ignore[arg-type]
     )
 
 

@@ -12,9 +12,13 @@ from hexatherm.twinsession import Heating, TwinSessionSpec, write_twin_session
 
 ROOT = Path(__file__).resolve().parent.parent
 REFERENCE = [0.0, 0.0, -40.0, 0.0, 0.0, 0.0]
-BALLS = Balls(("B1", "B2", "B3"),
-              np.array([[0.0, 90.0, 30.0], [-73.6, -42.5, 30.0], [82.3, -47.5, 30.0]]),
-              np.full(3, 25.4), True, 2.0)
+BALLS = Balls(
+    ("B1", "B2", "B3"),
+    np.array([[0.0, 90.0, 30.0], [-73.6, -42.5, 30.0], [82.3, -47.5, 30.0]]),
+    np.full(3, 25.4),
+    True,
+    2.0,
+)
 
 
 def small_plan(n_targets: int = 3, seed: int = 1) -> Plan:
@@ -26,15 +30,28 @@ def small_plan(n_targets: int = 3, seed: int = 1) -> Plan:
     return Plan.from_steps(steps, reference_pose=REFERENCE)
 
 
-def make_session(folder: Path, *, n_targets: int = 3, noise_mm: float = 0.0,
-                 gain=(3.0, 7.0, 2.0, 3.0, 9.0, 3.5), tau_s: float = 2400.0, seed: int = 1,
-                 output: str = "centres", point_noise_mm: float = 0.0, balls: Balls = BALLS):
+def make_session(
+    folder: Path,
+    *,
+    n_targets: int = 3,
+    noise_mm: float = 0.0,
+    gain=(3.0, 7.0, 2.0, 3.0, 9.0, 3.5),
+    tau_s: float = 2400.0,
+    seed: int = 1,
+    output: str = "centres",
+    point_noise_mm: float = 0.0,
+    balls: Balls = BALLS,
+):
     """Write a twin session to ``folder`` and return the twin's truth."""
     spec = TwinSessionSpec(
         name=folder.name,
         hexapod_text=(ROOT / "configs" / "symetrie-like.yaml").read_text(),
-        balls=balls, plan=small_plan(n_targets, seed),
+        balls=balls,
+        plan=small_plan(n_targets, seed),
         heating=Heating(on_s=0.0, tau_s=tau_s, gain_C=gain),
-        centre_noise_mm=noise_mm, seed=seed, output=output, point_noise_mm=point_noise_mm,
+        centre_noise_mm=noise_mm,
+        seed=seed,
+        output=output,
+        point_noise_mm=point_noise_mm,
     )
     return write_twin_session(spec, folder)

@@ -36,8 +36,14 @@ def test_diagnose_writes_the_files_and_tells_the_story(diagnosed) -> None:
     result, out = diagnosed
     assert result.exit_code == 0, result.output
     assert sorted(p.name for p in out.iterdir()) == [
-        "diagnosis.json", "hexapod.yaml", "report.md", "residuals_legs_time.png",
-        "residuals_steps.png", "residuals_temperature.png", "residuals_time.png"]
+        "diagnosis.json",
+        "hexapod.yaml",
+        "report.md",
+        "residuals_legs_time.png",
+        "residuals_steps.png",
+        "residuals_temperature.png",
+        "residuals_time.png",
+    ]
     doc = json.loads((out / "diagnosis.json").read_text())
     assert [a["effect"] for a in doc["added"]] == ["leg_thermal_lag"]
     tau = doc["added"][0]["parameters"]["tau_s"]
@@ -61,12 +67,14 @@ def test_the_written_model_is_a_hexapod_file_with_the_effect(diagnosed, lagging:
     assert effect.name == "leg_thermal_lag"
 
 
-def test_diagnosing_again_with_the_written_model_adds_nothing(diagnosed, lagging: Path,
-                                                               tmp_path: Path) -> None:
+def test_diagnosing_again_with_the_written_model_adds_nothing(
+    diagnosed, lagging: Path, tmp_path: Path
+) -> None:
     _, out = diagnosed
     again = tmp_path / "again"
-    result = CliRunner().invoke(main, ["diagnose", str(lagging), "-o", str(again),
-                                       "--hexapod", str(out / "hexapod.yaml")])
+    result = CliRunner().invoke(
+        main, ["diagnose", str(lagging), "-o", str(again), "--hexapod", str(out / "hexapod.yaml")]
+    )
     assert result.exit_code == 0, result.output
     doc = json.loads((again / "diagnosis.json").read_text())
     assert doc["added"] == []
@@ -87,8 +95,13 @@ def test_diagnose_without_thermocouples_says_so(lagging: Path, tmp_path: Path) -
     folder = tmp_path / "notemps"
     shutil.copytree(lagging, folder)
     session = folder / "session.yaml"
-    session.write_text("".join(line for line in session.read_text().splitlines(keepends=True)
-                               if not line.startswith("temperatures")))
+    session.write_text(
+        "".join(
+            line
+            for line in session.read_text().splitlines(keepends=True)
+            if not line.startswith("temperatures")
+        )
+    )
     out = tmp_path / "out"
     result = CliRunner().invoke(main, ["diagnose", str(folder), "-o", str(out)])
     assert result.exit_code == 1

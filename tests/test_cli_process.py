@@ -23,10 +23,18 @@ def run(*args):
 
 def pose_errors(poses, truth, tag):
     truth = truth.set_index("label").loc[poses["label"]]
-    t = np.column_stack([poses[f"{c}_{tag}_mm"].to_numpy() - truth[f"{c}_truecorr_mm"].to_numpy()
-                         for c in ("Tx", "Ty", "Tz")])
-    r = np.column_stack([poses[f"{c}_{tag}_deg"].to_numpy()
-                         - truth[f"{c}_truecorr_deg"].to_numpy() for c in ("Rx", "Ry", "Rz")])
+    t = np.column_stack(
+        [
+            poses[f"{c}_{tag}_mm"].to_numpy() - truth[f"{c}_truecorr_mm"].to_numpy()
+            for c in ("Tx", "Ty", "Tz")
+        ]
+    )
+    r = np.column_stack(
+        [
+            poses[f"{c}_{tag}_deg"].to_numpy() - truth[f"{c}_truecorr_deg"].to_numpy()
+            for c in ("Rx", "Ry", "Rz")
+        ]
+    )
     return np.abs(t).max() * UM, np.abs(r).max() * URAD
 
 
@@ -63,8 +71,12 @@ def test_process_refuses_to_overwrite(tmp_path):
 def test_interpolation_option_changes_the_result(tmp_path):
     make_session(tmp_path / "s", n_targets=3, tau_s=1200.0)
     assert run("process", tmp_path / "s", "-o", tmp_path / "lin").exit_code == 0
-    assert run("process", tmp_path / "s", "-o", tmp_path / "one",
-               "--interpolation", "before").exit_code == 0
+    assert (
+        run(
+            "process", tmp_path / "s", "-o", tmp_path / "one", "--interpolation", "before"
+        ).exit_code
+        == 0
+    )
     lin = pd.read_csv(tmp_path / "lin" / "poses.csv")
     one = pd.read_csv(tmp_path / "one" / "poses.csv")
     assert one["ref_after"].isna().all() and lin["ref_after"].notna().all()
@@ -83,8 +95,9 @@ def drop_line(path, startswith):
 
 
 def line_of(path, startswith):
-    return next(i for i, ln in enumerate(path.read_text().splitlines(), 1)
-                if ln.startswith(startswith))
+    return next(
+        i for i, ln in enumerate(path.read_text().splitlines(), 1) if ln.startswith(startswith)
+    )
 
 
 def set_field(path, startswith, column, value):
@@ -116,28 +129,47 @@ def collinear(session):
 
 
 BAD_INPUTS = {
-    "missing file": (lambda s: (s / "balls.yaml").unlink(),
-                     r"session.yaml:4: field 'balls': file not found"),
-    "wrong format": (lambda s: replace_in(s / "plan.yaml", "hexatherm-plan/1", "hexatherm-plan/9"),
-                     r"plan.yaml:1: field 'format': expected format 'hexatherm-plan/1'"),
-    "step missing a ball": (lambda s: drop_line(s / "centres.csv", "S2,B3,"),
-                            r"step S2: ball B3 not measured"),
-    "non-numeric coordinate": (lambda s: set_field(s / "centres.csv", "R1,B2,", 2, "12.x"),
-                               r"centres.csv:{line}: field 'x': not a finite number: '12.x'"),
-    "duplicate label": (lambda s: duplicate_row(s / "centres.csv", "S1,B1,"),
-                        r"centres.csv:{line}: field 'label': duplicate centre for step S1 ball "
-                        r"B1 \(also on line 8\)"),
-    "fewer than 3 balls": (drop_ball_b3,
-                           r"balls.yaml:3: field 'balls': at least three balls are needed"),
+    "missing file": (
+        lambda s: (s / "balls.yaml").unlink(),
+        r"session.yaml:4: field 'balls': file not found",
+    ),
+    "wrong format": (
+        lambda s: replace_in(s / "plan.yaml", "hexatherm-plan/1", "hexatherm-plan/9"),
+        r"plan.yaml:1: field 'format': expected format 'hexatherm-plan/1'",
+    ),
+    "step missing a ball": (
+        lambda s: drop_line(s / "centres.csv", "S2,B3,"),
+        r"step S2: ball B3 not measured",
+    ),
+    "non-numeric coordinate": (
+        lambda s: set_field(s / "centres.csv", "R1,B2,", 2, "12.x"),
+        r"centres.csv:{line}: field 'x': not a finite number: '12.x'",
+    ),
+    "duplicate label": (
+        lambda s: duplicate_row(s / "centres.csv", "S1,B1,"),
+        r"centres.csv:{line}: field 'label': duplicate centre for step S1 ball "
+        r"B1 \(also on line 8\)",
+    ),
+    "fewer than 3 balls": (
+        drop_ball_b3,
+        r"balls.yaml:3: field 'balls': at least three balls are needed",
+    ),
     "collinear balls": (collinear, r"balls.yaml:3: field 'balls': the balls are collinear"),
     "no adjacent reference": (
-        lambda s: (drop_line(s / "plan.yaml", "  - {label: R1,"),
-                   drop_line(s / "plan.yaml", "  - {label: R2,")),
-        r"plan.yaml:8: field 'steps\[3\]': step S2: target has no reference step adjacent"),
-    "wrong number of fields": (lambda s: set_field(s / "centres.csv", "S3,B1,", 2, "1,2"),
-                               r"centres.csv:{line}: expected 6 comma-separated fields, found 7"),
-    "bad cmm noise": (lambda s: append(s / "session.yaml", "cmm: {mpe_um: zero}\n"),
-                      r"session.yaml:{line}: field 'cmm.mpe_um': expected a number"),
+        lambda s: (
+            drop_line(s / "plan.yaml", "  - {label: R1,"),
+            drop_line(s / "plan.yaml", "  - {label: R2,"),
+        ),
+        r"plan.yaml:8: field 'steps\[3\]': step S2: target has no reference step adjacent",
+    ),
+    "wrong number of fields": (
+        lambda s: set_field(s / "centres.csv", "S3,B1,", 2, "1,2"),
+        r"centres.csv:{line}: expected 6 comma-separated fields, found 7",
+    ),
+    "bad cmm noise": (
+        lambda s: append(s / "session.yaml", "cmm: {mpe_um: zero}\n"),
+        r"session.yaml:{line}: field 'cmm.mpe_um': expected a number",
+    ),
 }
 
 
@@ -173,8 +205,9 @@ def test_commanded_pose_outside_the_stroke_is_reported(tmp_path):
     replace_in(tmp_path / "s" / "hexapod.yaml", "stroke: [220.0, 310.0]", "stroke: [250.0, 310.0]")
     result = run("process", tmp_path / "s")
     assert result.exit_code == 0
-    assert "warning: step R0: commanded pose is outside the stroke [250.0, 310.0] mm" \
-        in result.output
+    assert (
+        "warning: step R0: commanded pose is outside the stroke [250.0, 310.0] mm" in result.output
+    )
 
 
 U_COLUMNS = [f"u_{c}" for c in pose_columns("conv") + pose_columns("corr")]
@@ -219,23 +252,35 @@ def test_failed_quality_check_warns_or_exits_3_with_strict(tmp_path):
     result = run("process", tmp_path / "s")
     assert result.exit_code == 0, result.output
     assert "warning: quality checks failed at 3 step(s) (S1, S2, S3)" in result.output
-    assert re.search(r"temperature +temperature_change_C +worst +[\d.]+ +\(limit <= 1\) +"
-                     r"FAILED at 3 step\(s\): S1, S2, S3", result.output), result.output
+    assert re.search(
+        r"temperature +temperature_change_C +worst +[\d.]+ +\(limit <= 1\) +"
+        r"FAILED at 3 step\(s\): S1, S2, S3",
+        result.output,
+    ), result.output
     strict = run("process", tmp_path / "s", "--overwrite", "--strict")
     assert strict.exit_code == 3
     assert "exit status 3 (--strict)" in strict.output
     quality = pd.read_csv(tmp_path / "s" / "results" / "quality.csv")  # still written
     assert quality.loc[quality["kind"] == "target", "failed"].eq("temperature").all()
-    relaxed = run("process", tmp_path / "s", "--overwrite", "--strict",
-                  "--quality-threshold", "temperature_change_C=inf")
+    relaxed = run(
+        "process",
+        tmp_path / "s",
+        "--overwrite",
+        "--strict",
+        "--quality-threshold",
+        "temperature_change_C=inf",
+    )
     assert relaxed.exit_code == 0, relaxed.output
 
 
-@pytest.mark.parametrize("value, message", [
-    ("form=3", "unknown name 'form'; expected one of form_um"),
-    ("form_um", "expected NAME=VALUE"),
-    ("time_gap_s=soon", "'soon' is not a number"),
-])
+@pytest.mark.parametrize(
+    "value, message",
+    [
+        ("form=3", "unknown name 'form'; expected one of form_um"),
+        ("form_um", "expected NAME=VALUE"),
+        ("time_gap_s=soon", "'soon' is not a number"),
+    ],
+)
 def test_bad_quality_threshold_is_refused_before_anything_is_written(tmp_path, value, message):
     make_session(tmp_path / "s")
     result = run("process", tmp_path / "s", "--quality-threshold", value)
@@ -245,8 +290,11 @@ def test_bad_quality_threshold_is_refused_before_anything_is_written(tmp_path, v
 
 
 def test_slow_dmis_read_shows_a_progress_bar_and_gives_the_same_poses(tmp_path):
-    shutil.copytree(ROOT / "sessions" / "paper-zero-pose-dmis", tmp_path / "s",
-                    ignore=shutil.ignore_patterns("expected", "results"))
+    shutil.copytree(
+        ROOT / "sessions" / "paper-zero-pose-dmis",
+        tmp_path / "s",
+        ignore=shutil.ignore_patterns("expected", "results"),
+    )
     fast = run("process", tmp_path / "s", "-o", tmp_path / "fast")
     assert fast.exit_code == 0, fast.output
     assert "reading points.dmo" not in fast.output  # the fast path: done at once, no bar
@@ -256,5 +304,6 @@ def test_slow_dmis_read_shows_a_progress_bar_and_gives_the_same_poses(tmp_path):
     slow = run("process", tmp_path / "s", "-o", tmp_path / "slow")
     assert slow.exit_code == 0, slow.output
     assert "reading points.dmo" in slow.output
-    pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "slow" / "poses.csv"),
-                                  pd.read_csv(tmp_path / "fast" / "poses.csv"))
+    pd.testing.assert_frame_equal(
+        pd.read_csv(tmp_path / "slow" / "poses.csv"), pd.read_csv(tmp_path / "fast" / "poses.csv")
+    )

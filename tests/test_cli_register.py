@@ -33,16 +33,19 @@ def datum_measurement(platform2cmm, compensated=True, noise_mm=0.0, seed=3):
     ang = np.linspace(0, 2 * np.pi, 8, endpoint=False)
     rows = [("TOP", face)]
     for name, centre in (("BORE1", BORE1), ("BORE2", BORE2)):
-        ring = np.column_stack([(4.0 - tip) * np.cos(ang), (4.0 - tip) * np.sin(ang),
-                                np.zeros(8)])
+        ring = np.column_stack([(4.0 - tip) * np.cos(ang), (4.0 - tip) * np.sin(ang), np.zeros(8)])
         wall = np.vstack([ring + centre + [0, 0, -2.0], ring + centre + [0, 0, -5.0]])
         rows.append((name, wall))
     cmm_rows = [(n, apply_transform(platform2cmm, p)) for n, p in rows]
     centres = apply_transform(platform2cmm, BALLS.centres_mm)
     points, _ = probe_points(centres, 12.7 + tip, 25, 75.0, noise_mm, rng)
     cmm_rows += [(name, points[i]) for i, name in enumerate(BALLS.names)]
-    frames = [pd.DataFrame({"label": "REG", "ball": n, "x": p[:, 0], "y": p[:, 1],
-                            "z": p[:, 2], "time": 0.0}) for n, p in cmm_rows]
+    frames = [
+        pd.DataFrame(
+            {"label": "REG", "ball": n, "x": p[:, 0], "y": p[:, 1], "z": p[:, 2], "time": 0.0}
+        )
+        for n, p in cmm_rows
+    ]
     return pd.concat(frames, ignore_index=True)
 
 
@@ -55,8 +58,14 @@ def test_register_recovers_ball_positions(tmp_path, compensated):
     platform2cmm = transform_from_pose([410.0, 290.0, 150.0, 1.5, -2.0, 33.0])
     datum_measurement(platform2cmm, compensated).to_csv(tmp_path / "datums.csv", index=False)
     (tmp_path / "datums.yaml").write_text(DATUMS.replace("COMP", str(compensated).lower()))
-    result = run("register", tmp_path / "datums.csv", "--datums", tmp_path / "datums.yaml",
-                 "-o", tmp_path / "balls.yaml")
+    result = run(
+        "register",
+        tmp_path / "datums.csv",
+        "--datums",
+        tmp_path / "datums.yaml",
+        "-o",
+        tmp_path / "balls.yaml",
+    )
     assert result.exit_code == 0, result.output
     balls = read_balls(tmp_path / "balls.yaml")
     assert balls.names == BALLS.names and balls.probe_compensated == compensated
@@ -67,8 +76,18 @@ def test_register_with_noise_is_close(tmp_path):
     platform2cmm = transform_from_pose([10.0, 20.0, 30.0, 0.0, 0.0, -70.0])
     datum_measurement(platform2cmm, noise_mm=1e-3).to_csv(tmp_path / "d.csv", index=False)
     (tmp_path / "datums.yaml").write_text(DATUMS.replace("COMP", "true"))
-    assert run("register", tmp_path / "d.csv", "--datums", tmp_path / "datums.yaml",
-               "-o", tmp_path / "balls.yaml", "--fixed-diameter").exit_code == 0
+    assert (
+        run(
+            "register",
+            tmp_path / "d.csv",
+            "--datums",
+            tmp_path / "datums.yaml",
+            "-o",
+            tmp_path / "balls.yaml",
+            "--fixed-diameter",
+        ).exit_code
+        == 0
+    )
     balls = read_balls(tmp_path / "balls.yaml")
     assert np.abs(balls.centres_mm - BALLS.centres_mm).max() < 0.01
 
@@ -78,11 +97,23 @@ def test_register_errors(tmp_path):
     frame = datum_measurement(platform2cmm)
     frame[frame.ball != "BORE2"].to_csv(tmp_path / "d.csv", index=False)
     (tmp_path / "datums.yaml").write_text(DATUMS.replace("COMP", "true"))
-    result = run("register", tmp_path / "d.csv", "--datums", tmp_path / "datums.yaml",
-                 "-o", tmp_path / "balls.yaml")
+    result = run(
+        "register",
+        tmp_path / "d.csv",
+        "--datums",
+        tmp_path / "datums.yaml",
+        "-o",
+        tmp_path / "balls.yaml",
+    )
     assert result.exit_code == 1 and "no points of feature 'BORE2'" in result.output
     assert not (tmp_path / "balls.yaml").exists()
     (tmp_path / "datums.yaml").write_text(DATUMS.replace("COMP", "maybe"))
-    result = run("register", tmp_path / "d.csv", "--datums", tmp_path / "datums.yaml",
-                 "-o", tmp_path / "balls.yaml")
+    result = run(
+        "register",
+        tmp_path / "d.csv",
+        "--datums",
+        tmp_path / "datums.yaml",
+        "-o",
+        tmp_path / "balls.yaml",
+    )
     assert result.exit_code == 1 and "datums.yaml:6: field 'probe.compensated'" in result.output

@@ -16,8 +16,9 @@ def run(*args):
 
 def copy_paper_session(tmp_path):
     target = tmp_path / "sessions" / "paper-zero-pose"
-    shutil.copytree(ROOT / "sessions" / "paper-zero-pose", target,
-                    ignore=shutil.ignore_patterns("results"))
+    shutil.copytree(
+        ROOT / "sessions" / "paper-zero-pose", target, ignore=shutil.ignore_patterns("results")
+    )
     return target
 
 
@@ -39,8 +40,9 @@ def test_a_changed_number_names_session_row_and_column(tmp_path):
     poses.write_text("".join(lines))
     result = run("replay", tmp_path / "sessions")
     assert result.exit_code == 1
-    assert ("paper-zero-pose/poses.csv: row 4 (S3), column Tz_corr_mm" in result.output), \
+    assert "paper-zero-pose/poses.csv: row 4 (S3), column Tz_corr_mm" in result.output, (
         result.output
+    )
     # a change below the tolerance passes
     fields[column] = repr(float(fields[column]) - 2e-7 + 5e-8)
     lines[3] = ",".join(fields) + "\n"
@@ -67,8 +69,13 @@ def test_no_sessions_is_an_error(tmp_path):
 
 def test_serial_capture_replays_to_the_same_points_byte_for_byte(tmp_path):
     folder = ROOT / "sessions" / "serial-capture"
-    result = run("acquire", folder / "plan.yaml", "--replay", folder / "serial.log",
-                 "--session", tmp_path / "again")
+    result = run(
+        "acquire",
+        folder / "plan.yaml",
+        "--replay",
+        folder / "serial.log",
+        "--session",
+        tmp_path / "again",
+    )
     assert result.exit_code == 0, result.output
-    assert (tmp_path / "again" / "points.csv").read_bytes() == \
-        (folder / "points.csv").read_bytes()
+    assert (tmp_path / "again" / "points.csv").read_bytes() == (folder / "points.csv").read_bytes()

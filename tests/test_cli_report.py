@@ -59,8 +59,21 @@ def test_report_refuses_to_overwrite_unless_asked(session, tmp_path, monkeypatch
         return "<html>new</html>\n"
 
     monkeypatch.setattr(hexatherm.report, "build_report", fake_report)
-    replaced = run("report", session, "-o", out, "--overwrite", "--interpolation", "before",
-                   "--mc", 50, "--seed", 3, "--quality-threshold", "registration_rms_um=1.5")
+    replaced = run(
+        "report",
+        session,
+        "-o",
+        out,
+        "--overwrite",
+        "--interpolation",
+        "before",
+        "--mc",
+        50,
+        "--seed",
+        3,
+        "--quality-threshold",
+        "registration_rms_um=1.5",
+    )
     assert replaced.exit_code == 0, replaced.output
     assert calls == [("before", 50, 3, 1.5)]
     assert "Monte Carlo draws" in replaced.output  # the draws' progress bar
@@ -70,8 +83,9 @@ def test_report_refuses_to_overwrite_unless_asked(session, tmp_path, monkeypatch
 
 def test_report_of_a_bad_session_fails_cleanly_and_writes_nothing(session):
     lines = (session / "centres.csv").read_text().splitlines(keepends=True)
-    (session / "centres.csv").write_text("".join(line for line in lines
-                                                 if not line.startswith("S3,")))
+    (session / "centres.csv").write_text(
+        "".join(line for line in lines if not line.startswith("S3,"))
+    )
     result = run("report", session)
     assert result.exit_code == 1
     assert "step S3: not measured" in result.output and "Traceback" not in result.output

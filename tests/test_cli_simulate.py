@@ -132,8 +132,16 @@ def test_noise_free_session_processes_to_the_truth(tmp_path, output):
 def test_serial_capture_replays_into_a_session_that_processes_to_the_truth(tmp_path):
     capture = simulate(tmp_path, scenario_text(output="serial"), "cap")
     assert (capture / "serial.log").exists() and not (capture / "session.yaml").exists()
-    result = run("acquire", capture / "plan.yaml", "--replay", capture / "serial.log",
-                 "--session", tmp_path / "sess", "--temperatures", capture / "temperatures.csv")
+    result = run(
+        "acquire",
+        capture / "plan.yaml",
+        "--replay",
+        capture / "serial.log",
+        "--session",
+        tmp_path / "sess",
+        "--temperatures",
+        capture / "temperatures.csv",
+    )
     assert result.exit_code == 0, result.output
     session = tmp_path / "sess"
     (session / "truth").mkdir()

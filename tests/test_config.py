@@ -59,15 +59,27 @@ def edit(path, old, new):
 @pytest.mark.parametrize(
     ("old", "new", "pattern"),
     [
-        ("format: hexatherm-hexapod/1", "format: hexatherm-hexapod/2",
-         r"hexapod.yaml:\d+: field 'format': expected format 'hexatherm-hexapod/1'"),
-        ("convention: symetrie", "convention: zyx",
-         r"hexapod.yaml:8: field 'convention': expected one of symetrie, pi"),
-        ("length: variable}", "length: 20.0}",
-         r"field 'legs.segments': exactly one segment must have 'length: variable', found 0"),
+        (
+            "format: hexatherm-hexapod/1",
+            "format: hexatherm-hexapod/2",
+            r"hexapod.yaml:\d+: field 'format': expected format 'hexatherm-hexapod/1'",
+        ),
+        (
+            "convention: symetrie",
+            "convention: zyx",
+            r"hexapod.yaml:8: field 'convention': expected one of symetrie, pi",
+        ),
+        (
+            "length: variable}",
+            "length: 20.0}",
+            r"field 'legs.segments': exactly one segment must have 'length: variable', found 0",
+        ),
         ("cte: 2.31e-05", "cte: lots", r"field 'legs.segments\[0\].cte': expected a number"),
-        ("- [-115.70177, -137.888, -240.0]", "- [-115.70177, -137.888]",
-         r"hexapod.yaml:10: field 'base_joints\[0\]': expected a list of 3 numbers"),
+        (
+            "- [-115.70177, -137.888, -240.0]",
+            "- [-115.70177, -137.888]",
+            r"hexapod.yaml:10: field 'base_joints\[0\]': expected a list of 3 numbers",
+        ),
         ("stroke: [220.0, 310.0]", "stroke: [220.0, 250.0]", "outside the stroke"),
         ("name: symetrie-like", "name: a\nname: b", r"hexapod.yaml:8: field 'name': duplicate"),
         ("stroke:", "strok:", r"field 'strok': unknown key"),
@@ -84,13 +96,20 @@ def test_hexapod_errors(tmp_path, old, new, pattern):
 @pytest.mark.parametrize(
     ("mutate", "pattern"),
     [
-        (lambda t: t.replace("  B3:\n    centre: [82.3, -47.5, 30.0]\n    diameter: 25.4\n", ""),
-         r"balls.yaml:\d+: field 'balls': at least three balls are needed, got 2"),
-        (lambda t: t.replace("[-73.6, -42.5, 30.0]", "[0.0, 45.0, 30.0]")
-         .replace("[82.3, -47.5, 30.0]", "[0.0, -10.0, 30.0]"),
-         r"field 'balls': the balls are collinear"),
-        (lambda t: t.replace("diameter: 25.4", "diameter: -1", 1),
-         r"field 'balls.B1.diameter': must be positive"),
+        (
+            lambda t: t.replace("  B3:\n    centre: [82.3, -47.5, 30.0]\n    diameter: 25.4\n", ""),
+            r"balls.yaml:\d+: field 'balls': at least three balls are needed, got 2",
+        ),
+        (
+            lambda t: t.replace("[-73.6, -42.5, 30.0]", "[0.0, 45.0, 30.0]").replace(
+                "[82.3, -47.5, 30.0]", "[0.0, -10.0, 30.0]"
+            ),
+            r"field 'balls': the balls are collinear",
+        ),
+        (
+            lambda t: t.replace("diameter: 25.4", "diameter: -1", 1),
+            r"field 'balls.B1.diameter': must be positive",
+        ),
         (lambda t: t.replace("B2:", "B_2:"), r"field 'balls.B_2': ball name must match"),
     ],
 )
@@ -108,8 +127,11 @@ def test_plan_errors_point_at_the_step_line(tmp_path):
     kept = [ln for ln in lines if "label: R1," not in ln and "label: R2," not in ln]
     (tmp_path / "plan.yaml").write_text("\n".join(kept) + "\n")
     s2_line = next(i for i, ln in enumerate(kept, 1) if "label: S2," in ln)
-    with pytest.raises(InputError, match=rf"plan.yaml:{s2_line}: field 'steps\[3\]': step S2: "
-                                         "target has no reference step adjacent"):
+    with pytest.raises(
+        InputError,
+        match=rf"plan.yaml:{s2_line}: field 'steps\[3\]': step S2: "
+        "target has no reference step adjacent",
+    ):
         read_plan(tmp_path / "plan.yaml")
 
 
@@ -125,8 +147,11 @@ def test_session_reads_and_names_missing_files(tmp_path):
     session = read_session(tmp_path / "s")
     assert session.plan.labels[:3] == ("O", "R0", "S1")
     edit(tmp_path / "s" / "session.yaml", "centres.csv", "nothere.csv")
-    with pytest.raises(InputError, match=r"session.yaml:\d+: field 'measurements\[0\]': file "
-                                         "not found: .*nothere.csv"):
+    with pytest.raises(
+        InputError,
+        match=r"session.yaml:\d+: field 'measurements\[0\]': file "
+        "not found: .*nothere.csv",
+    ):
         read_session(tmp_path / "s")
     with pytest.raises(InputError, match="missing: file not found"):
         read_session(tmp_path / "missing")
@@ -146,8 +171,11 @@ def test_plan_file_errors(tmp_path):
         read_plan(tmp_path)
     path = tmp_path / "plan.yaml"
     path.write_bytes(plan_to_yaml(small_plan(2)).encode() + b"# \xff\n")
-    with pytest.raises(InputError, match=r"plan.yaml: not UTF-8 text \(invalid start byte at "
-                                         r"byte \d+\)$"):
+    with pytest.raises(
+        InputError,
+        match=r"plan.yaml: not UTF-8 text \(invalid start byte at "
+        r"byte \d+\)$",
+    ):
         read_plan(path)
     path.write_text("\ufeff" + plan_to_yaml(small_plan(2)))  # a BOM is read past
     assert read_plan(path).labels[-1] == "R2"
@@ -158,10 +186,14 @@ def test_per_leg_segments_and_effects(tmp_path):
     per_leg = "  per_leg:\n" + "".join(
         f"  - - {{name: body, material: aluminium, cte: 2.31e-05, length: {150 + i}.0}}\n"
         "    - {name: screw, material: steel, cte: 1.15e-05, length: variable}\n"
-        for i in range(6))
+        for i in range(6)
+    )
     start = text.index("  segments:")
-    text = text[:start] + per_leg + ("thermal_model:\n  effects:\n"
-                                     "  - {name: leg_thermal_lag, parameters: {tau_s: 1800.0}}\n")
+    text = (
+        text[:start]
+        + per_leg
+        + ("thermal_model:\n  effects:\n  - {name: leg_thermal_lag, parameters: {tau_s: 1800.0}}\n")
+    )
     path = tmp_path / "h.yaml"
     path.write_text(text)
     hexapod = read_hexapod(path)
@@ -171,8 +203,11 @@ def test_per_leg_segments_and_effects(tmp_path):
     again.write_text(hexapod_to_yaml(hexapod))
     assert read_hexapod(again).effects == hexapod.effects
     path.write_text(text.replace("tau_s: 1800.0", "tau: 1800.0"))
-    with pytest.raises(InputError, match=r"field 'thermal_model.effects\[0\].parameters.tau': "
-                                         "unknown key; expected one of: tau_s"):
+    with pytest.raises(
+        InputError,
+        match=r"field 'thermal_model.effects\[0\].parameters.tau': "
+        "unknown key; expected one of: tau_s",
+    ):
         read_hexapod(path)
     path.write_text(text.replace("leg_thermal_lag", "leg_lag"))
     with pytest.raises(InputError, match=r"effects\[0\].name': expected one of leg_thermal_lag"):

@@ -30,7 +30,8 @@ def test_centres_and_times(tmp_path):
     np.testing.assert_array_equal(rec.xyz_mm, [[1.5, 2, 3], [4, 5, 6]])
     np.testing.assert_array_equal(rec.line, [2, 3])
     iso = CENTRES.replace(",0\n", ",2020-01-01T00:00:00\n").replace(
-        ",1.5\n", ",2020-01-01T01:00:01+01:00\n")
+        ",1.5\n", ",2020-01-01T01:00:01+01:00\n"
+    )
     rec = read_measurement_csv(write(tmp_path, "c2.csv", iso))
     assert rec.time_kind == "iso" and rec.time_s[1] - rec.time_s[0] == 1.0
 
@@ -38,17 +39,25 @@ def test_centres_and_times(tmp_path):
 def test_kind_by_columns_name_and_content(tmp_path):
     pts = "label,ball,x,y,z,time\n" + "".join(f"O,B1,{i},0,0,{i}\n" for i in range(4))
     assert read_measurement_csv(write(tmp_path, "m.csv", pts)).kind == "points"
-    assert read_measurement_csv(write(tmp_path, "centres-x.csv", pts.splitlines()[0] + "\n"
-                                      + pts.splitlines()[1] + "\n")).kind == "centres"
-    rec = read_measurement_csv(write(tmp_path, "a.csv", "label,ball,x,y,z,time,i,j,k\n"
-                                     "O,B1,0,0,0,0,0,0,-1\n"))
+    assert (
+        read_measurement_csv(
+            write(
+                tmp_path, "centres-x.csv", pts.splitlines()[0] + "\n" + pts.splitlines()[1] + "\n"
+            )
+        ).kind
+        == "centres"
+    )
+    rec = read_measurement_csv(
+        write(tmp_path, "a.csv", "label,ball,x,y,z,time,i,j,k\nO,B1,0,0,0,0,0,0,-1\n")
+    )
     assert rec.kind == "points" and rec.ijk.tolist() == [[0.0, 0.0, -1.0]]
 
 
 def test_centres_round_trip_with_extension_columns(tmp_path):
     rec = read_measurement_csv(write(tmp_path, "c.csv", CENTRES))
-    rec.extra.update({"form_um": np.array([1.0, 2.0]), "n": np.array([25, 25]),
-                      "u_um": np.array([0.1, 0.2])})
+    rec.extra.update(
+        {"form_um": np.array([1.0, 2.0]), "n": np.array([25, 25]), "u_um": np.array([0.1, 0.2])}
+    )
     text = centres_to_csv(rec.__class__(**{**rec.__dict__, "diameter_mm": np.array([25.4] * 2)}))
     again = read_measurement_csv(write(tmp_path, "again.csv", text))
     np.testing.assert_array_equal(again.xyz_mm, rec.xyz_mm)
@@ -59,8 +68,11 @@ def test_centres_round_trip_with_extension_columns(tmp_path):
     ("text", "pattern"),
     [
         ("label,ball,x,y,time\n", r"c.csv:1: header must start with label,ball,x,y,z,time"),
-        (CENTRES + "O,B3,1,2,3,2020-01-01\n", r"c.csv:4: field 'time': time '2020-01-01'"
-         "|c.csv:2: field 'time'"),
+        (
+            CENTRES + "O,B3,1,2,3,2020-01-01\n",
+            r"c.csv:4: field 'time': time '2020-01-01'"
+            "|c.csv:2: field 'time'",
+        ),
         (CENTRES + "O,B1,1,2,3,4\n", r"c.csv:4: field 'label': duplicate centre"),
         (CENTRES + "O,B 3,1,2,3,4\n", r"c.csv:4: field 'ball': 'B 3' must match"),
         (CENTRES + "O,B3,1,2,nan,4\n", r"c.csv:4: field 'z': not a finite number: 'nan'"),
@@ -76,8 +88,10 @@ def test_errors_name_file_line_field(tmp_path, text, pattern):
 
 
 def test_temperatures(tmp_path):
-    text = ("time,leg1,leg2,leg3,leg4,leg5,leg6,air\n0,20,20,20,20,20,20,19.5\n"
-            "30,21,21,21,21,21,21,19.6\n")
+    text = (
+        "time,leg1,leg2,leg3,leg4,leg5,leg6,air\n0,20,20,20,20,20,20,19.5\n"
+        "30,21,21,21,21,21,21,19.6\n"
+    )
     temps = read_temperatures(write(tmp_path, "t.csv", text))
     assert temps.legs_C.shape == (2, 6) and temps.others_C["air"].tolist() == [19.5, 19.6]
     with pytest.raises(InputError, match=r"t2.csv:3: field 'time': time goes backwards"):
@@ -85,23 +99,39 @@ def test_temperatures(tmp_path):
 
 
 def test_reader_chosen_by_content(tmp_path):
-    path = write(tmp_path, "noext", "DMISMN/'x',04.0\nDATE=2020/01/01\nTIME=10:00:00\n"
-                 "FA(S1_B1)=FEAT/SPHERE,OUTER,CART,1,2,3,25.4\n")
+    path = write(
+        tmp_path,
+        "noext",
+        "DMISMN/'x',04.0\nDATE=2020/01/01\nTIME=10:00:00\n"
+        "FA(S1_B1)=FEAT/SPHERE,OUTER,CART,1,2,3,25.4\n",
+    )
     [rec] = read_measurements(path)
     assert rec.kind == "centres" and rec.diameter_mm.tolist() == [25.4]
 
 
-LINES = [CENTRES.splitlines()[0], "O,B1,1,2,3,0", "label,ball,x,y,z,time,i,j,k",
-         "S1,B2,1e3,-2.5,3,2020-01-01T00:00:00", "S1,B2,,,,", '"a",b,1,2,3,4', ",,,", "x"]
+LINES = [
+    CENTRES.splitlines()[0],
+    "O,B1,1,2,3,0",
+    "label,ball,x,y,z,time,i,j,k",
+    "S1,B2,1e3,-2.5,3,2020-01-01T00:00:00",
+    "S1,B2,,,,",
+    '"a",b,1,2,3,4',
+    ",,,",
+    "x",
+]
 
 
-@settings(max_examples=200, deadline=None,
-          suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(st.one_of(
-    st.binary(max_size=300),
-    st.lists(st.one_of(st.sampled_from(LINES), st.text(max_size=30)), max_size=8).map(
-        lambda rows: "\n".join(rows).encode("utf-8", "surrogatepass")),
-))
+@settings(
+    max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    st.one_of(
+        st.binary(max_size=300),
+        st.lists(st.one_of(st.sampled_from(LINES), st.text(max_size=30)), max_size=8).map(
+            lambda rows: "\n".join(rows).encode("utf-8", "surrogatepass")
+        ),
+    )
+)
 def test_fuzz_readers_raise_only_input_error(tmp_path, data):
     path = tmp_path / "fuzz.csv"
     try:

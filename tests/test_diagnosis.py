@@ -49,7 +49,7 @@ def test_each_hidden_effect_is_named_first_and_sized(tmp_path: Path, name: str) 
     fitted, errors = d.final.effects[0], d.final.std_errors[0]
     assert fitted.name == name
     if len(truth) == 1:
-        (p, value), = truth.items()
+        ((p, value),) = truth.items()
         assert fitted.values[p] == pytest.approx(value, rel=0.25)
     else:
         # "within 2 standard errors" for k parameters at once: inside the ellipsoid of
@@ -96,8 +96,9 @@ def test_null_campaigns_add_at_most_one_false_effect_over_20_seeds(tmp_path: Pat
 @pytest.fixture(scope="module")
 def null_session(tmp_path_factory: pytest.TempPathFactory) -> Path:
     folder = tmp_path_factory.mktemp("diag") / "null"
-    write_twin_session(diagnosis_campaign((), 5, n_targets=6, point_noise_um=0.0,
-                                          repeatability_um=0.0), folder)
+    write_twin_session(
+        diagnosis_campaign((), 5, n_targets=6, point_noise_um=0.0, repeatability_um=0.0), folder
+    )
     return folder
 
 
@@ -113,8 +114,7 @@ def test_the_twin_reproduces_a_noise_free_session(null_session: Path) -> None:
     assert rms_um(fit.residual_mm) < 0.1
 
 
-def test_an_error_of_the_origin_measurement_is_a_nuisance_not_an_effect(null_session: Path
-                                                                         ) -> None:
+def test_an_error_of_the_origin_measurement_is_a_nuisance_not_an_effect(null_session: Path) -> None:
     data = read_for_diagnosis(null_session)
     obs = data.observations
     centres = obs.centres_mm.copy()
@@ -124,13 +124,12 @@ def test_an_error_of_the_origin_measurement_is_a_nuisance_not_an_effect(null_ses
     d = diagnose(data.hexapod, shifted, candidates=["leg_offset", "cmm_drift"])
     assert d.added == ()
     # frame O is fitted to all steps: the bad O measurement stands out alone
-    step_rms = np.sqrt(np.mean(d.baseline.residual_mm ** 2, axis=(1, 2))) * 1e3
+    step_rms = np.sqrt(np.mean(d.baseline.residual_mm**2, axis=(1, 2))) * 1e3
     assert np.argmax(step_rms) == origin
     assert np.delete(step_rms, origin).max() < 0.5
 
 
-def test_candidates_needing_air_are_skipped_without_it(null_session: Path, tmp_path: Path
-                                                       ) -> None:
+def test_candidates_needing_air_are_skipped_without_it(null_session: Path, tmp_path: Path) -> None:
     import shutil
 
     folder = tmp_path / "noair"
@@ -144,15 +143,21 @@ def test_candidates_needing_air_are_skipped_without_it(null_session: Path, tmp_p
     assert [c.name for c in d.rounds[0]] == ["cmm_drift"]
 
 
-def test_a_session_without_thermocouples_is_refused_clearly(null_session: Path, tmp_path: Path
-                                                            ) -> None:
+def test_a_session_without_thermocouples_is_refused_clearly(
+    null_session: Path, tmp_path: Path
+) -> None:
     import shutil
 
     folder = tmp_path / "notemps"
     shutil.copytree(null_session, folder)
     session = folder / "session.yaml"
-    session.write_text("".join(line for line in session.read_text().splitlines(keepends=True)
-                               if not line.startswith("temperatures")))
+    session.write_text(
+        "".join(
+            line
+            for line in session.read_text().splitlines(keepends=True)
+            if not line.startswith("temperatures")
+        )
+    )
     with pytest.raises(InputError, match="thermocouple log") as info:
         read_for_diagnosis(folder)
     assert "session.yaml" in str(info.value)
@@ -182,8 +187,16 @@ def test_the_json_document_has_the_spec_keys(tmp_path: Path) -> None:
     doc = json.loads(json.dumps(diagnosis_document(result)))
     assert list(doc)[:3] == ["baseline_rms_um", "added", "final_rms_um"]
     entry = doc["added"][0]
-    for key in ("effect", "parameters", "std_errors", "delta_bic", "rms_before_um",
-                "rms_after_um", "heldout_rms_before_um", "heldout_rms_after_um"):
+    for key in (
+        "effect",
+        "parameters",
+        "std_errors",
+        "delta_bic",
+        "rms_before_um",
+        "rms_after_um",
+        "heldout_rms_before_um",
+        "heldout_rms_after_um",
+    ):
         assert key in entry
     assert entry["effect"] == "cmm_drift"
     assert set(entry["parameters"]) == set(EFFECTS["cmm_drift"].parameters)

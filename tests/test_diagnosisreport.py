@@ -27,8 +27,9 @@ def result(tmp_path_factory: pytest.TempPathFactory) -> DiagnosisResult:
     from hexatherm.twinsession import write_twin_session
 
     folder = tmp_path_factory.mktemp("diag") / "session"
-    spec = diagnosis_campaign([make_effect("leg_thermal_lag", {"tau_s": 1500.0})], seed=1,
-                              n_targets=6)
+    spec = diagnosis_campaign(
+        [make_effect("leg_thermal_lag", {"tau_s": 1500.0})], seed=1, n_targets=6
+    )
     write_twin_session(spec, folder)
     return run_diagnosis(read_for_diagnosis(folder))
 
@@ -64,15 +65,20 @@ def test_report_tells_the_story(result: DiagnosisResult, written: list[Path]) ->
     assert f"{tau:.0f} ± {se:.0f} s" in text
     assert f"{added[0].delta_bic:.1f}" in text
     d = result.diagnosis
-    for value in (d.baseline_rms_um, d.final_rms_um, d.baseline_heldout_rms_um,
-                  d.final_heldout_rms_um):
+    for value in (
+        d.baseline_rms_um,
+        d.final_rms_um,
+        d.baseline_heldout_rms_um,
+        d.final_heldout_rms_um,
+    ):
         assert f"{value:.2f}" in text
     headline = text.split("## Session")[0]
     assert "leg_thermal_lag" in headline and f"{tau:.0f}" in headline
 
 
-def test_report_lists_every_candidate_of_every_round(result: DiagnosisResult,
-                                                     written: list[Path]) -> None:
+def test_report_lists_every_candidate_of_every_round(
+    result: DiagnosisResult, written: list[Path]
+) -> None:
     text = written[0].read_text(encoding="utf-8")
     section = text.split("## Candidates")[1].split("## Where")[0]
     rounds = section.split("### Round ")[1:]
@@ -108,8 +114,10 @@ def test_report_links_pngs_that_exist(written: list[Path]) -> None:
 # -------------------------------------------------------------------- figures
 def test_pose_and_leg_figures_hold_the_residuals(result: DiagnosisResult) -> None:
     order, hours = _hours(result)
-    for fig, attr in ((dr.pose_time_figure(result), "pose_um"),
-                      (dr.legs_time_figure(result), "legs_um")):
+    for fig, attr in (
+        (dr.pose_time_figure(result), "pose_um"),
+        (dr.legs_time_figure(result), "legs_um"),
+    ):
         axes = np.array(fig.axes).reshape(6, 2)
         for c, (state, res) in enumerate((("before", result.before), ("after", result.after))):
             values = getattr(res, attr)
@@ -129,8 +137,12 @@ def test_centre_and_temperature_figures(result: DiagnosisResult) -> None:
         step_rms = np.sqrt(np.mean(fit.residual_mm**2, axis=(1, 2))) * 1e3
         np.testing.assert_allclose(line.get_ydata(), step_rms[order])
         np.testing.assert_allclose(line.get_xdata(), hours)
-    mean_temp = np.array([np.mean([np.interp(t, obs.log.times_s, obs.log.legs_C[:, i])
-                                   for i in range(6)]) for t in obs.times_s[order]])
+    mean_temp = np.array(
+        [
+            np.mean([np.interp(t, obs.log.times_s, obs.log.legs_C[:, i]) for i in range(6)])
+            for t in obs.times_s[order]
+        ]
+    )
     np.testing.assert_allclose(_line(temp_ax, "mean leg temperature").get_ydata(), mean_temp)
 
     fig = dr.temperature_figure(result)
@@ -160,8 +172,10 @@ def test_terminal_tables_before_and_after(result: DiagnosisResult) -> None:
         before = np.sqrt(np.mean(result.before.legs_um[:, j] ** 2))
         assert legs[f"leg{j + 1}"][0] == f"{before:.2f}"
     kinds = _rows(text, "Centre residuals by step kind")
-    assert kinds["all"][1:] == [f"{result.diagnosis.baseline_rms_um:.2f}",
-                                f"{result.diagnosis.final_rms_um:.2f}"]
+    assert kinds["all"][1:] == [
+        f"{result.diagnosis.baseline_rms_um:.2f}",
+        f"{result.diagnosis.final_rms_um:.2f}",
+    ]
     plan_kinds = np.array(result.data.observations.plan.kinds)
     assert kinds["reference"][0] == str(int(np.sum(plan_kinds == "reference")))
     worst = _rows(text, "Worst steps before")
@@ -185,14 +199,22 @@ def test_the_lag_is_what_made_the_residuals_structured(result: DiagnosisResult) 
 def test_nothing_added(result: DiagnosisResult, tmp_path: Path) -> None:
     d = result.diagnosis
     nothing = dataclasses.replace(
-        result, after=result.before,
-        diagnosis=dataclasses.replace(d, final=d.baseline, added=(), rounds=d.rounds[:1],
-                                      final_heldout_rms_um=d.baseline_heldout_rms_um))
+        result,
+        after=result.before,
+        diagnosis=dataclasses.replace(
+            d,
+            final=d.baseline,
+            added=(),
+            rounds=d.rounds[:1],
+            final_heldout_rms_um=d.baseline_heldout_rms_um,
+        ),
+    )
     text = dr.report_markdown(nothing, {"pose_time": "p.png"})
     assert "Nothing added" in text and "RMS after" not in text
     assert re.findall(r"\]\(([^)]+)\)", text) == ["p.png"]
     fig = dr.pose_time_figure(nothing)
     assert len(fig.axes) == 6
-    np.testing.assert_allclose(_line(fig.axes[2], "before").get_ydata(),
-                               result.before.pose_um[_hours(result)[0], 2])
+    np.testing.assert_allclose(
+        _line(fig.axes[2], "before").get_ydata(), result.before.pose_um[_hours(result)[0], 2]
+    )
     assert "after" not in dr.terminal_tables(nothing, tests=False)

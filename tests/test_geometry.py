@@ -21,8 +21,12 @@ def test_rotation_matches_scipy(convention, seq, rng):
 @pytest.mark.parametrize("convention", ["symetrie", "pi"])
 def test_pose_round_trip(convention, rng):
     poses = np.column_stack(
-        [rng.uniform(-500, 500, (300, 3)), rng.uniform(-179, 179, 300),
-         rng.uniform(-89, 89, 300), rng.uniform(-179, 179, 300)]
+        [
+            rng.uniform(-500, 500, (300, 3)),
+            rng.uniform(-179, 179, 300),
+            rng.uniform(-89, 89, 300),
+            rng.uniform(-179, 179, 300),
+        ]
     )
     back = g.pose_from_transform(g.transform_from_pose(poses, convention), convention)
     np.testing.assert_allclose(back, poses, atol=1e-9)
@@ -45,8 +49,10 @@ def test_rotation_derivatives_match_finite_differences(convention, rng):
     for k in range(3):
         step = np.zeros(3)
         step[k] = h
-        numeric = (g.rotation_from_angles(angles + step, convention)
-                   - g.rotation_from_angles(angles - step, convention)) / (2 * h)
+        numeric = (
+            g.rotation_from_angles(angles + step, convention)
+            - g.rotation_from_angles(angles - step, convention)
+        ) / (2 * h)
         np.testing.assert_allclose(analytic[k], numeric, atol=1e-9)
 
 
@@ -58,7 +64,8 @@ def test_compose_and_invert(rng):
     np.testing.assert_allclose(g.invert_transform(a2c) @ a2c, np.eye(4), atol=1e-12)
     pts = rng.normal(size=(5, 3))
     np.testing.assert_allclose(
-        g.apply_transform(a2c, pts), g.apply_transform(b2c, g.apply_transform(a2b, pts)),
+        g.apply_transform(a2c, pts),
+        g.apply_transform(b2c, g.apply_transform(a2b, pts)),
         atol=1e-12,
     )
 

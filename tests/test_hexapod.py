@@ -24,10 +24,15 @@ def test_igm_fgm_round_trip(convention, rng):
 def test_igm_by_hand():
     hexapod = make_hexapod()
     pose = np.array([1.0, -2.0, 3.0, 0.5, -0.4, 0.3])
-    rot = __import__("scipy").spatial.transform.Rotation.from_euler(
-        "xyz", pose[3:], degrees=True).as_matrix()
-    expected = [np.linalg.norm(pose[:3] + rot @ p - b)
-                for p, b in zip(hexapod.platform_joints_mm, hexapod.base_joints_mm, strict=True)]
+    rot = (
+        __import__("scipy")
+        .spatial.transform.Rotation.from_euler("xyz", pose[3:], degrees=True)
+        .as_matrix()
+    )
+    expected = [
+        np.linalg.norm(pose[:3] + rot @ p - b)
+        for p, b in zip(hexapod.platform_joints_mm, hexapod.base_joints_mm, strict=True)
+    ]
     np.testing.assert_allclose(hexapod.igm(pose)[0], expected, atol=1e-12)
 
 
@@ -71,17 +76,23 @@ def test_fgm_detects_singular_jacobian():
     base[:, 2] = -200.0
     plat = base.copy()
     plat[:, 2] = 0.0
-    hexapod = Hexapod(name="degenerate", convention="symetrie", base_joints_mm=base,
-                      platform_joints_mm=plat)
+    hexapod = Hexapod(
+        name="degenerate", convention="symetrie", base_joints_mm=base, platform_joints_mm=plat
+    )
     q = hexapod.igm(np.zeros(6))
     with pytest.raises(SingularityError, match="singular Jacobian at pose index 0"):
         hexapod.fgm(q, initial_poses=np.zeros(6))
 
 
 def test_stroke_check():
-    hexapod = Hexapod.symmetric(base_radius_mm=150, platform_radius_mm=100,
-                                base_half_angle_deg=10, platform_half_angle_deg=10,
-                                height_mm=220, stroke_mm=(230.0, 250.0))
+    hexapod = Hexapod.symmetric(
+        base_radius_mm=150,
+        platform_radius_mm=100,
+        base_half_angle_deg=10,
+        platform_half_angle_deg=10,
+        height_mm=220,
+        stroke_mm=(230.0, 250.0),
+    )
     q = hexapod.igm([[0, 0, 0, 0, 0, 0], [0, 0, 30, 0, 0, 0]])
     mask = hexapod.check_stroke(q)
     assert not mask[0].any() and mask[1].all()
@@ -89,5 +100,9 @@ def test_stroke_check():
 
 def test_bad_geometry_rejected():
     with pytest.raises(ValueError, match="base_joints_mm must be six finite"):
-        Hexapod(name="x", convention="symetrie", base_joints_mm=np.zeros((5, 3)),
-                platform_joints_mm=np.zeros((6, 3)))
+        Hexapod(
+            name="x",
+            convention="symetrie",
+            base_joints_mm=np.zeros((5, 3)),
+            platform_joints_mm=np.zeros((6, 3)),
+        )

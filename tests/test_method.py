@@ -55,7 +55,8 @@ def test_noise_free_twin_is_corrected_exactly(convention, rng):
     assert c_err > 5.0
     # the growth subtracted is the true change of the legs since R0
     true_growth = twin.growth_mm[corr.target_index] - hexapod.legs.growth_mm(
-        twin.q_cmd_mm[corr.target_index], temps[refs[0]])
+        twin.q_cmd_mm[corr.target_index], temps[refs[0]]
+    )
     np.testing.assert_allclose(corr.growth_mm, true_growth, atol=1e-6)  # 1 nm
 
 
@@ -74,11 +75,15 @@ def test_interpolation_beats_one_neighbour_on_nonlinear_heating(rng):
 
 
 def test_one_sided_references_are_used_as_they_come():
-    plan = Plan.from_steps([
-        ("O", "origin", [0] * 6), ("R0", "reference", REFERENCE_POSE),
-        ("S1", "target", [0] * 6), ("R1", "reference", REFERENCE_POSE),
-        ("S2", "target", [1, 0, 0, 0, 0, 0]),
-    ])
+    plan = Plan.from_steps(
+        [
+            ("O", "origin", [0] * 6),
+            ("R0", "reference", REFERENCE_POSE),
+            ("S1", "target", [0] * 6),
+            ("R1", "reference", REFERENCE_POSE),
+            ("S2", "target", [1, 0, 0, 0, 0, 0]),
+        ]
+    )
     before, after, w = choose_references(plan, np.arange(5.0) * 10, "linear")
     np.testing.assert_array_equal(before, [1, 3])
     np.testing.assert_array_equal(after, [3, -1])
@@ -86,9 +91,14 @@ def test_one_sided_references_are_used_as_they_come():
 
 
 def test_target_without_adjacent_reference_names_the_step():
-    steps = [("O", "origin", [0] * 6), ("R0", "reference", REFERENCE_POSE),
-             ("S1", "target", [1, 0, 0, 0, 0, 0]), ("S2", "target", [2, 0, 0, 0, 0, 0]),
-             ("S3", "target", [3, 0, 0, 0, 0, 0]), ("R1", "reference", REFERENCE_POSE)]
+    steps = [
+        ("O", "origin", [0] * 6),
+        ("R0", "reference", REFERENCE_POSE),
+        ("S1", "target", [1, 0, 0, 0, 0, 0]),
+        ("S2", "target", [2, 0, 0, 0, 0, 0]),
+        ("S3", "target", [3, 0, 0, 0, 0, 0]),
+        ("R1", "reference", REFERENCE_POSE),
+    ]
     with pytest.raises(StepError, match="step S2: target has no reference step adjacent"):
         Plan.from_steps(steps)
 
@@ -98,12 +108,26 @@ def test_target_without_adjacent_reference_names_the_step():
     [
         ([("R0", "reference", REFERENCE_POSE)], "step R0: the first step must be the origin"),
         ([("O", "origin", [0] * 6), ("O", "reference", REFERENCE_POSE)], "step O: duplicate"),
-        ([("O", "origin", [0] * 6), ("R_0", "reference", REFERENCE_POSE)],
-         r"step R_0: label must match"),
-        ([("O", "origin", [0] * 6), ("R0", "reference", REFERENCE_POSE),
-          ("R1", "reference", [0, 0, -30, 0, 0, 0])], "step R1: reference pose differs"),
-        ([("O", "origin", [0] * 6), ("S1", "target", [0] * 6),
-          ("R0", "reference", REFERENCE_POSE)], "step S1: target comes before the first"),
+        (
+            [("O", "origin", [0] * 6), ("R_0", "reference", REFERENCE_POSE)],
+            r"step R_0: label must match",
+        ),
+        (
+            [
+                ("O", "origin", [0] * 6),
+                ("R0", "reference", REFERENCE_POSE),
+                ("R1", "reference", [0, 0, -30, 0, 0, 0]),
+            ],
+            "step R1: reference pose differs",
+        ),
+        (
+            [
+                ("O", "origin", [0] * 6),
+                ("S1", "target", [0] * 6),
+                ("R0", "reference", REFERENCE_POSE),
+            ],
+            "step S1: target comes before the first",
+        ),
         ([("O", "origin", [0] * 6), ("O2", "origin", [0] * 6)], "only one origin"),
         ([("O", "origin", [0] * 6), ("X", "tagret", [0] * 6)], "unknown kind 'tagret'"),
     ],

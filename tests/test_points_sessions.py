@@ -64,8 +64,7 @@ def test_noise_free_points_fit_exactly_and_report_quality(tmp_path):
     np.testing.assert_allclose(fits["cap_deg"], 70.0, atol=2.0)  # spiral covers ~the cap
     truth = pd.read_csv(tmp_path / "s" / "truth" / "steps.csv").set_index("label")
     got = poses(tmp_path / "s" / "results")
-    np.testing.assert_allclose(got["Tx_conv_mm"], truth.loc[got["label"], "Tx_true_mm"],
-                               atol=1e-9)
+    np.testing.assert_allclose(got["Tx_conv_mm"], truth.loc[got["label"], "Tx_true_mm"], atol=1e-9)
 
 
 def test_uncompensated_points_fit_ball_plus_tip(tmp_path):
@@ -83,8 +82,18 @@ def test_fit_spheres_fixed_diameter_and_stdout(tmp_path):
     result = run("fit-spheres", tmp_path / "s" / "points.csv", "--fixed-diameter", "25.4")
     assert result.exit_code == 0
     table = pd.read_csv(__import__("io").StringIO(result.stdout))
-    assert list(table.columns) == ["label", "ball", "x", "y", "z", "time", "diameter",
-                                   "form_um", "n", "u_um"]
+    assert list(table.columns) == [
+        "label",
+        "ball",
+        "x",
+        "y",
+        "z",
+        "time",
+        "diameter",
+        "form_um",
+        "n",
+        "u_um",
+    ]
     assert (table["diameter"] == 25.4).all() and len(table) == 4 * 3
 
 
@@ -101,8 +110,9 @@ def test_too_few_points_names_step_ball_file_and_line(tmp_path):
     make_session(tmp_path / "s", output="points", n_targets=1)
     path = tmp_path / "s" / "points.csv"
     lines = path.read_text().splitlines(keepends=True)
-    kept = [ln for ln in lines if not ln.startswith("R1,B2,")] + \
-        [ln for ln in lines if ln.startswith("R1,B2,")][:3]
+    kept = [ln for ln in lines if not ln.startswith("R1,B2,")] + [
+        ln for ln in lines if ln.startswith("R1,B2,")
+    ][:3]
     path.write_text("".join(kept))
     result = run("process", tmp_path / "s")
     assert result.exit_code == 1
@@ -113,8 +123,12 @@ def test_too_few_points_names_step_ball_file_and_line(tmp_path):
 
 
 def swap_labels(path, step, a, b):
-    text = path.read_text().replace(f"\n{step},{a},", "\nTMP,").replace(
-        f"\n{step},{b},", f"\n{step},{a},").replace("\nTMP,", f"\n{step},{b},")
+    text = (
+        path.read_text()
+        .replace(f"\n{step},{a},", "\nTMP,")
+        .replace(f"\n{step},{b},", f"\n{step},{a},")
+        .replace("\nTMP,", f"\n{step},{b},")
+    )
     path.write_text(text)
 
 
@@ -163,17 +177,21 @@ def test_registration_residual_warns_or_fails(tmp_path):
 def test_inspect_lists_the_real_dmis_samples():
     from tests.test_dmis import SAMPLES
 
-    for name, count in (("Example1.dmo", 6), ("Example2.dmo", 9),
-                        ("impeller-part-1.dmo", 162)):
+    for name, count in (("Example1.dmo", 6), ("Example2.dmo", 9), ("impeller-part-1.dmo", 162)):
         result = run("inspect", SAMPLES / name, "--csv")
         assert result.exit_code == 0, result.output
         table = pd.read_csv(__import__("io").StringIO(result.stdout))
         assert len(table) == count
-    table = pd.read_csv(__import__("io").StringIO(
-        run("inspect", SAMPLES / "Example1.dmo", "--csv").stdout))
+    table = pd.read_csv(
+        __import__("io").StringIO(run("inspect", SAMPLES / "Example1.dmo", "--csv").stdout)
+    )
     sphere = table[table.type == "SPHERE"].iloc[0]
     assert (sphere.x_mm, sphere.y_mm, sphere.z_mm, sphere.size_mm) == (
-        74.8580, 58.0652, 3.7478, 27.8511)
+        74.8580,
+        58.0652,
+        3.7478,
+        27.8511,
+    )
 
 
 def test_inspect_csv_and_errors(tmp_path):
@@ -181,8 +199,9 @@ def test_inspect_csv_and_errors(tmp_path):
     result = run("inspect", tmp_path / "s" / "centres.csv")
     assert result.exit_code == 0 and "R1_B3" in result.stdout and "SPHERE" in result.stdout
     bad = tmp_path / "bad.dmo"
-    bad.write_text("DMISMN/'x',04.0\nDATE=2020/01/01\nTIME=10:00:00\n"
-                   "FA(S1_B1_1)=FEAT/POINT,CART,1,2,abc\n")
+    bad.write_text(
+        "DMISMN/'x',04.0\nDATE=2020/01/01\nTIME=10:00:00\nFA(S1_B1_1)=FEAT/POINT,CART,1,2,abc\n"
+    )
     result = run("inspect", bad)
     assert result.exit_code == 1 and "bad.dmo:4" in result.output
 

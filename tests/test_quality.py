@@ -25,10 +25,17 @@ GAIN = (3.0, 7.0, 2.0, 3.0, 9.0, 3.5)
 
 
 def session(folder, *, plan=None, gain=GAIN, output="points", noise_mm=0.5e-3, **kw):
-    spec = TwinSessionSpec(name=folder.name, hexapod_text=HEXAPOD_TEXT, balls=BALLS,
-                           plan=plan or small_plan(3, 1),
-                           heating=Heating(on_s=0.0, tau_s=2400.0, gain_C=gain), seed=2,
-                           output=output, point_noise_mm=noise_mm, **kw)
+    spec = TwinSessionSpec(
+        name=folder.name,
+        hexapod_text=HEXAPOD_TEXT,
+        balls=BALLS,
+        plan=plan or small_plan(3, 1),
+        heating=Heating(on_s=0.0, tau_s=2400.0, gain_C=gain),
+        seed=2,
+        output=output,
+        point_noise_mm=noise_mm,
+        **kw,
+    )
     write_files(simulate_session(spec).files, folder)
     return folder
 
@@ -36,8 +43,11 @@ def session(folder, *, plan=None, gain=GAIN, output="points", noise_mm=0.5e-3, *
 def failing(folder, **kw):
     """{check: labels of the steps where it failed}."""
     frame = quality_checks(process_session(folder), **kw).frame
-    return {check: frame.loc[~frame[f"ok_{check}"], "label"].tolist() for check in CHECKS
-            if not frame[f"ok_{check}"].all()}
+    return {
+        check: frame.loc[~frame[f"ok_{check}"], "label"].tolist()
+        for check in CHECKS
+        if not frame[f"ok_{check}"].all()
+    }
 
 
 def edit_points(folder, label, ball, dx=0.0, dz=0.0, first_only=False):
@@ -64,10 +74,18 @@ def test_good_session_passes_every_check(tmp_path):
     assert (frame["failed"] == "").all()
     # every value is there: points (form, radius), temperatures, targets
     targets = frame["kind"] == "target"
-    assert frame[["form_um", "radius_dev_um", "distance_dev_um",
-                  "registration_rms_um"]].notna().all().all()
-    assert frame.loc[targets, ["time_gap_s", "temperature_change_C",
-                               "jacobian_rcond"]].notna().all().all()
+    assert (
+        frame[["form_um", "radius_dev_um", "distance_dev_um", "registration_rms_um"]]
+        .notna()
+        .all()
+        .all()
+    )
+    assert (
+        frame.loc[targets, ["time_gap_s", "temperature_change_C", "jacobian_rcond"]]
+        .notna()
+        .all()
+        .all()
+    )
     assert frame.loc[~targets, "time_gap_s"].isna().all()
     assert all("ok" in line for line in report.summary())
 
@@ -89,9 +107,9 @@ def test_inter_ball_distance_and_registration(tmp_path):
     edit_points(s, "R2", "B3", dx=0.025)  # ball B3 of R2 25 um off: distances and residual
     assert failing(s) == {"distance": ["R2"], "registration": ["R2"]}
     # a registration residual beyond a tighter limit, with distances within theirs
-    assert failing(session(tmp_path / "t"),
-                   thresholds=QualityThresholds(registration_rms_um=0.05)) == {
-        "registration": ["O", "R0", "S1", "R1", "S2", "R2", "S3", "R3"]}
+    assert failing(
+        session(tmp_path / "t"), thresholds=QualityThresholds(registration_rms_um=0.05)
+    ) == {"registration": ["O", "R0", "S1", "R1", "S2", "R2", "S3", "R3"]}
 
 
 def test_time_gap(tmp_path):
@@ -111,11 +129,17 @@ def test_temperature_change(tmp_path):
 
 def test_fgm_conditioning(tmp_path):
     # a target at Rz = 89.5 deg, next to the hexapod's singularity at 90 deg
-    plan = Plan.from_steps([("O", "origin", [0.0] * 6), ("R0", "reference", REFERENCE),
-                            ("S1", "target", [1.0, 2.0, 0.0, 0.1, 0.2, 3.0]),
-                            ("R1", "reference", REFERENCE),
-                            ("S2", "target", [0.0, 0.0, 0.0, 0.0, 0.0, 89.5]),
-                            ("R2", "reference", REFERENCE)], reference_pose=REFERENCE)
+    plan = Plan.from_steps(
+        [
+            ("O", "origin", [0.0] * 6),
+            ("R0", "reference", REFERENCE),
+            ("S1", "target", [1.0, 2.0, 0.0, 0.1, 0.2, 3.0]),
+            ("R1", "reference", REFERENCE),
+            ("S2", "target", [0.0, 0.0, 0.0, 0.0, 0.0, 89.5]),
+            ("R2", "reference", REFERENCE),
+        ],
+        reference_pose=REFERENCE,
+    )
     s = session(tmp_path / "s", plan=plan, output="centres", noise_mm=0.0)
     assert failing(s) == {"conditioning": ["S2"]}
 
@@ -129,8 +153,12 @@ def test_centres_session_skips_the_sphere_checks(tmp_path):
 def test_thresholds_parse_and_refuse():
     assert parse_threshold("time_gap_s=900") == ("time_gap_s", 900.0)
     assert parse_threshold(" form_um = inf") == ("form_um", float("inf"))
-    for bad, message in (("form_um", "expected NAME=VALUE"), ("form=5", "unknown name 'form'"),
-                         ("form_um=abc", "'abc' is not a number"), ("form_um=-1", ">= 0")):
+    for bad, message in (
+        ("form_um", "expected NAME=VALUE"),
+        ("form=5", "unknown name 'form'"),
+        ("form_um=abc", "'abc' is not a number"),
+        ("form_um=-1", ">= 0"),
+    ):
         with pytest.raises(HexathermError, match=message):
             parse_threshold(bad)
     with pytest.raises(ValueError, match="form_um"):
@@ -146,16 +174,21 @@ def test_session_file_limits_apply_and_the_command_line_overrides_them(tmp_path)
     result = process_session(s)
     assert result.session.quality == {"temperature_change_C": np.inf, "form_um": 0.001}
     limits = session_thresholds(result.session, {"form_um": 50.0})
-    assert (limits.form_um, limits.temperature_change_C, limits.time_gap_s) == (50.0, np.inf,
-                                                                                600.0)
+    assert (limits.form_um, limits.temperature_change_C, limits.time_gap_s) == (50.0, np.inf, 600.0)
     assert not failing(s, thresholds=limits)
 
 
 BAD_QUALITY = {
-    "unknown": ("quality: {form: 5}", r":8: field 'quality.form': unknown key; expected one of: "
-                "form_um, "),
-    "negative": ("quality: {time_gap_s: -1}", r":8: field 'quality.time_gap_s': expected a "
-                 r"number >= 0 \(.inf turns the check off\), got -1"),
+    "unknown": (
+        "quality: {form: 5}",
+        r":8: field 'quality.form': unknown key; expected one of: "
+        "form_um, ",
+    ),
+    "negative": (
+        "quality: {time_gap_s: -1}",
+        r":8: field 'quality.time_gap_s': expected a "
+        r"number >= 0 \(.inf turns the check off\), got -1",
+    ),
     "text": ("quality:\n  form_um: five", r":9: field 'quality.form_um': expected a number"),
     "list": ("quality: [form_um]", r":8: field 'quality': expected a mapping"),
 }

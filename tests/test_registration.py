@@ -12,8 +12,14 @@ from tests.conftest import BALLS
 
 
 def random_transforms(rng, n):
-    poses = np.column_stack([rng.uniform(-800, 800, (n, 3)), rng.uniform(-180, 180, (n, 1)),
-                             rng.uniform(-89, 89, (n, 1)), rng.uniform(-180, 180, (n, 1))])
+    poses = np.column_stack(
+        [
+            rng.uniform(-800, 800, (n, 3)),
+            rng.uniform(-180, 180, (n, 1)),
+            rng.uniform(-89, 89, (n, 1)),
+            rng.uniform(-180, 180, (n, 1)),
+        ]
+    )
     return transform_from_pose(poses)
 
 

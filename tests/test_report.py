@@ -76,9 +76,16 @@ def test_report_embeds_every_figure_as_a_png(hidden):
     assert not re.search(r'(src|href)="(?!data:)', page)
     assert page.startswith("<!DOCTYPE html>") and page.rstrip().endswith("</html>")
     # metadata
-    for text in ("with-hidden-effect", "centres.csv", "temperatures.csv", "symetrie-like",
-                 "82: 1 origin, 41 references, 40 targets", "linear", __version__,
-                 "leg1, leg2, leg3, leg4, leg5, leg6, air"):
+    for text in (
+        "with-hidden-effect",
+        "centres.csv",
+        "temperatures.csv",
+        "symetrie-like",
+        "82: 1 origin, 41 references, 40 targets",
+        "linear",
+        __version__,
+        "leg1, leg2, leg3, leg4, leg5, leg6, air",
+    ):
         assert text in page, text
     # every target in the poses table, with its uncertainty; the quality table
     for label in ("S1", "S20", "S40"):
@@ -176,11 +183,13 @@ def test_report_escapes_text_says_what_is_missing_and_flags_failures(paper):
     limit_um = 0.5
     failing = legs.loc[legs["registration_rms_um"] > limit_um, "label"].tolist()
     assert 0 < len(failing) < len(legs)
-    quality = quality_checks(paper, QualityThresholds(registration_rms_um=limit_um,
-                                                      temperature_change_C=np.inf))
+    quality = quality_checks(
+        paper, QualityThresholds(registration_rms_um=limit_um, temperature_change_C=np.inf)
+    )
     session = dataclasses.replace(paper.session, name='<script>alert("x")</script>&')
-    result = dataclasses.replace(paper, session=session, temperatures=None,
-                                 warnings=("step <S1>: too far",))
+    result = dataclasses.replace(
+        paper, session=session, temperatures=None, warnings=("step <S1>: too far",)
+    )
     assert temperature_figure(result) is None
     page = report_html(result, quality=quality)
     assert len(IMG.findall(page)) == 3

@@ -79,8 +79,7 @@ def test_known_linear_trend_is_recovered() -> None:
 
 def test_no_trend_in_white_noise_and_degenerate_times() -> None:
     rng = np.random.default_rng(3)
-    p = [linear_trend(np.arange(50) * 60.0, rng.standard_normal(50)).p_value
-         for _ in range(200)]
+    p = [linear_trend(np.arange(50) * 60.0, rng.standard_normal(50)).p_value for _ in range(200)]
     assert 0.02 <= np.mean(np.array(p) < 0.05) <= 0.09
     assert np.isnan(linear_trend(np.full(5, 7.0), np.arange(5.0)).slope_per_h)
 
@@ -123,18 +122,32 @@ def test_summary_values() -> None:
         assert s.leg_rms_um[j] == pytest.approx(np.linalg.norm(legs[:, j]) / np.sqrt(n))
     assert s.kind_count == {"origin": 1, "reference": 20, "target": 19}
     target = [i for i in range(n) if kinds[i] == "target"]
-    assert s.kind_rms_um["target"] == pytest.approx(np.linalg.norm(step_rms[target])
-                                                    / np.sqrt(len(target)))
+    assert s.kind_rms_um["target"] == pytest.approx(
+        np.linalg.norm(step_rms[target]) / np.sqrt(len(target))
+    )
     assert s.kind_rms_um["origin"] == pytest.approx(step_rms[0])
     assert s.centre_rms_um == pytest.approx(np.linalg.norm(step_rms) / np.sqrt(n))
     assert [w.label for w in s.worst] == ["S17", "S3", labels[int(np.argsort(step_rms)[-3])]]
     assert s.worst[0].time_s == times[17] and s.worst[0].kind == kinds[17]
     # quarters of 10 steps each
     np.testing.assert_allclose(
-        s.part_rms_um, [np.sqrt(np.mean(step_rms[10 * b:10 * b + 10] ** 2)) for b in range(4)])
+        s.part_rms_um, [np.sqrt(np.mean(step_rms[10 * b : 10 * b + 10] ** 2)) for b in range(4)]
+    )
     np.testing.assert_allclose(s.part_span_s[:, 0], times[[0, 10, 20, 30]])
-    assert [t.name for t in s.tests] == ["Tx", "Ty", "Tz", "Rx", "Ry", "Rz",
-                                         "leg1", "leg2", "leg3", "leg4", "leg5", "leg6"]
+    assert [t.name for t in s.tests] == [
+        "Tx",
+        "Ty",
+        "Tz",
+        "Rx",
+        "Ry",
+        "Rz",
+        "leg1",
+        "leg2",
+        "leg3",
+        "leg4",
+        "leg5",
+        "leg6",
+    ]
     assert [t.unit for t in s.pose_tests] == ["um"] * 3 + ["urad"] * 3
     assert len(s.leg_tests) == 6
 
@@ -150,8 +163,13 @@ def test_summary_tests_follow_time_and_temperature() -> None:
     pose[:, 2] = temps.mean(axis=1) ** 3  # monotone in the mean temperature
     legs = 0.01 * rng.standard_normal((n, 6))
     legs[:, 4] = np.exp(temps[:, 4])  # monotone in its own leg's temperature
-    s = summarize(_residuals(pose, legs, np.ones(n)), [f"S{i}" for i in range(n)],
-                  ["target"] * n, times, temps)
+    s = summarize(
+        _residuals(pose, legs, np.ones(n)),
+        [f"S{i}" for i in range(n)],
+        ["target"] * n,
+        times,
+        temps,
+    )
     tx, ty, tz = s.tests[0], s.tests[1], s.tests[2]
     assert tx.trend.slope_per_h == pytest.approx(2.0)
     assert tx.vs_time.rho == pytest.approx(1.0)
@@ -162,8 +180,13 @@ def test_summary_tests_follow_time_and_temperature() -> None:
     assert s.tests[6 + 4].vs_temperature.rho == pytest.approx(1.0)
     assert s.tests[6 + 3].vs_temperature.rho < 0.9
     # 1-D temperatures: legs are compared with the mean
-    s1 = summarize(_residuals(pose, legs, np.ones(n)), [f"S{i}" for i in range(n)],
-                   ["target"] * n, times, temps.mean(axis=1))
+    s1 = summarize(
+        _residuals(pose, legs, np.ones(n)),
+        [f"S{i}" for i in range(n)],
+        ["target"] * n,
+        times,
+        temps.mean(axis=1),
+    )
     assert s1.tests[2].vs_temperature.rho == pytest.approx(1.0)
 
 
@@ -174,5 +197,10 @@ def test_summary_rejects_bad_shapes() -> None:
     with pytest.raises(ValueError, match="temperatures"):
         summarize(res, ["a"] * 5, ["target"] * 5, np.arange(5.0), np.zeros((5, 3)))
     with pytest.raises(ValueError, match="shape"):
-        summarize(_residuals(np.zeros((5, 3)), np.zeros((5, 6)), np.zeros(5)), ["a"] * 5,
-                  ["target"] * 5, np.arange(5.0), np.zeros(5))
+        summarize(
+            _residuals(np.zeros((5, 3)), np.zeros((5, 6)), np.zeros(5)),
+            ["a"] * 5,
+            ["target"] * 5,
+            np.arange(5.0),
+            np.zeros(5),
+        )

@@ -31,8 +31,9 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def _straightforward():
-    spec = importlib.util.spec_from_file_location("straightforward",
-                                                  ROOT / "bench" / "straightforward.py")
+    spec = importlib.util.spec_from_file_location(
+        "straightforward", ROOT / "bench" / "straightforward.py"
+    )
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     sys.modules["straightforward"] = module
@@ -85,8 +86,9 @@ def check_dmis(path: Path, fast: bool | None = None) -> None:
         assert (dmis._fast_records(path.read_bytes(), path) is not None) == fast
 
 
-def points_dmo(n_steps: int = 3, balls: int = 2, points: int = 5, ijk: bool = True,
-               seed: int = 0) -> str:
+def points_dmo(
+    n_steps: int = 3, balls: int = 2, points: int = 5, ijk: bool = True, seed: int = 0
+) -> str:
     rng = np.random.default_rng(seed)
     lines = ["DMISMN/'hexatherm twin output',04.0", "UNITS/MM,ANGDEC", "FILNAM/'x'"]
     second = 0
@@ -98,8 +100,10 @@ def points_dmo(n_steps: int = 3, balls: int = 2, points: int = 5, ijk: bool = Tr
                 xyz = ",".join(repr(float(v)) for v in rng.normal(100, 50, 3))
                 tail = "," + ",".join(repr(float(v)) for v in rng.normal(size=3)) if ijk else ""
                 label = "O" if step == 0 else f"S{step}"
-                lines += [f"FA({label}_B{ball}_{k})=FEAT/POINT,CART,{xyz}{tail}",
-                          f"OUTPUT/FA({label}_B{ball}_{k})"]
+                lines += [
+                    f"FA({label}_B{ball}_{k})=FEAT/POINT,CART,{xyz}{tail}",
+                    f"OUTPUT/FA({label}_B{ball}_{k})",
+                ]
     return "\r\n".join(lines + ["ENDFIL"]) + "\r\n"
 
 
@@ -129,14 +133,19 @@ CANONICAL = points_dmo(n_steps=2, balls=2, points=4)
         # read in place, one by one or as arrays: same records
         ("UNITS/MM,ANGDEC", "UNITS/INCH,ANGDEC"),
         ("FA(O_B1_2)", "DATE=2024/03/06\r\nUNITS/CM\r\nFA(O_B1_2)"),
-        ("FA(O_B1_1)",
-         "F(O_B1_1)=FEAT/POINT,CART,0,0,0\r\nT(X)=TOL/CORTOL,XAXIS,-1,1\r\nFA(O_B1_1)"),
+        (
+            "FA(O_B1_1)",
+            "F(O_B1_1)=FEAT/POINT,CART,0,0,0\r\nT(X)=TOL/CORTOL,XAXIS,-1,1\r\nFA(O_B1_1)",
+        ),
         ("FA(O_B1_1)", "FA(CIRC)=FEAT/CIRCLE,INNER,CART,1,2,3,0,0,1,15\r\nFA(O_B1_1)"),
         ("FA(O_B1_1)", "FA(O_B1)=FEAT/SPHERE,OUTER,CART,1,2,3,25.4\r\nFA(O_B1_1)"),
         ("FA(O_B1_1)", "FA(O_B1)=FEAT/SPHERE,CART,1,2,3,25.4\r\nFA(O_B1_1)"),
         ("FA(O_B1_1)", "  FA(O_B1_1)"),
-        ("FA(O_B1_1)", "FA(O_B2)=FEAT/SPHERE,CART,1,2,3,25.4\r\n FA(O_B1)=FEAT/SPHERE,CART,"
-         "4,5,6,25.4\r\nFA(O_B3)=FEAT/SPHERE,CART,7,8,9,25.4\r\nFA(O_B1_1)"),
+        (
+            "FA(O_B1_1)",
+            "FA(O_B2)=FEAT/SPHERE,CART,1,2,3,25.4\r\n FA(O_B1)=FEAT/SPHERE,CART,"
+            "4,5,6,25.4\r\nFA(O_B3)=FEAT/SPHERE,CART,7,8,9,25.4\r\nFA(O_B1_1)",
+        ),
         ("FA(O_B1_1)", "fa(O_B1_1)"),
         ("FA(O_B1_1)=FEAT/POINT", "FA( O_B1_1 ) = FEAT / point"),
         ("FA(O_B1_2)=FEAT/POINT,CART,", "FA(O_B1_2)=FEAT/POINT,POL,"),
@@ -153,8 +162,11 @@ CANONICAL = points_dmo(n_steps=2, balls=2, points=4)
         ("TIME=07:00:04", "TIME=24:00:04"),
         ("TIME=07:00:04", "TIME=07:60:04"),
         ("DATE=2024/03/05\r\nTIME=07:00:06", "DATE=2024/02/30\r\nTIME=07:00:06"),
-        ("DMISMN/'hexatherm twin output',04.0\r\nUNITS/MM,ANGDEC\r\nFILNAM/'x'\r\n"
-         "DATE=2024/03/05\r\nTIME=07:00:02\r\n", ""),
+        (
+            "DMISMN/'hexatherm twin output',04.0\r\nUNITS/MM,ANGDEC\r\nFILNAM/'x'\r\n"
+            "DATE=2024/03/05\r\nTIME=07:00:02\r\n",
+            "",
+        ),
         ("FA(O_B1_1)", "FA(O_B1)"),
         ("FA(O_B1_1)", "FA(O__B1_1)"),
         ("FA(O_B1_1)", "FA(O_B1_1_)"),
@@ -170,7 +182,7 @@ CANONICAL = points_dmo(n_steps=2, balls=2, points=4)
         ("FA(O_B1_1)", "FA(O_B1_1)=FEAT/POINT,CART,1,2,3,nan,nan,nan\r\nFA(X_Y_1)"),
         ("FA(O_B1_1)", "FA(O_B1_1)=FEAT/POINT,CART,1,2,inf\r\nFA(X_Y_1)"),
         ("FA(O_B1_1)", "FA(O_B1_1)=FEAT/POINT,CART,1,2,1e999\r\nFA(X_Y_1)"),
-        ("FA(O_B1_1)", "FA(O_B1_1)=FEAT/POINT,CART,1,2,\"3\"\r\nFA(X_Y_1)"),
+        ("FA(O_B1_1)", 'FA(O_B1_1)=FEAT/POINT,CART,1,2,"3"\r\nFA(X_Y_1)'),
         ("FA(O_B1_1)", "FA(O_B1_1)=FEAT/POINT,CART,1,2,3 4\r\nFA(X_Y_1)"),
         ("FA(O_B1_1)", "FA(O_B1_1)=FEAT/POINT,CART,1,2,1e\r\nFA(X_Y_1)"),
         ("FA(O_B1_1)", "FA(O_B1_1)=FEAT/POINT,CART,1,2,+\r\nFA(X_Y_1)"),
@@ -196,22 +208,58 @@ def test_dmis_empty_and_blank_files(tmp_path):
         check_dmis(write(tmp_path, text))
 
 
-_TOKENS = [b"$", b"$$", b",", b"\r\n", b"\n", b"\r", b" ", b"\t", b"'", b"\"", b"(", b")",
-           b"_", b"-", b"e", b"E", b"+", b".", b"0", b"9", b"FA(", b"FA(S9_B9_9)=FEAT/POINT,CART,",
-           b"=FEAT/POINT,CART,", b"=FEAT/SPHERE,CART,", b"POL,", b"UNITS/INCH\n",
-           b"DATE=2024/02/29\n", b"TIME=12:00:00\n", b"TIME=", b"DATE=", b"1e999", b"nan",
-           b"\xc3\xa9", b"\xe2\x80\xa8", b"\x0b", b"\x1c"]
+_TOKENS = [
+    b"$",
+    b"$$",
+    b",",
+    b"\r\n",
+    b"\n",
+    b"\r",
+    b" ",
+    b"\t",
+    b"'",
+    b'"',
+    b"(",
+    b")",
+    b"_",
+    b"-",
+    b"e",
+    b"E",
+    b"+",
+    b".",
+    b"0",
+    b"9",
+    b"FA(",
+    b"FA(S9_B9_9)=FEAT/POINT,CART,",
+    b"=FEAT/POINT,CART,",
+    b"=FEAT/SPHERE,CART,",
+    b"POL,",
+    b"UNITS/INCH\n",
+    b"DATE=2024/02/29\n",
+    b"TIME=12:00:00\n",
+    b"TIME=",
+    b"DATE=",
+    b"1e999",
+    b"nan",
+    b"\xc3\xa9",
+    b"\xe2\x80\xa8",
+    b"\x0b",
+    b"\x1c",
+]
 
 
 @st.composite
 def mutated_dmis(draw: st.DrawFn) -> bytes:
-    data = bytearray(points_dmo(n_steps=2, balls=2, points=3, ijk=draw(st.booleans()),
-                                seed=draw(st.integers(0, 3))).encode())
+    data = bytearray(
+        points_dmo(
+            n_steps=2, balls=2, points=3, ijk=draw(st.booleans()), seed=draw(st.integers(0, 3))
+        ).encode()
+    )
     for _ in range(draw(st.integers(min_value=1, max_value=5))):
         at = draw(st.integers(min_value=0, max_value=len(data)))
         operation = draw(st.sampled_from(["delete", "insert", "token", "replace", "copy"]))
         if operation == "delete":
-            del data[at:at + draw(st.integers(min_value=1, max_value=30))]
+            del data[at : at + draw(st.integers(min_value=1, max_value=30))]
         elif operation == "insert":
             data[at:at] = draw(st.binary(min_size=1, max_size=8))
         elif operation == "token":
@@ -220,7 +268,7 @@ def mutated_dmis(draw: st.DrawFn) -> bytes:
             data[at] = draw(st.integers(min_value=0, max_value=127))
         elif operation == "copy":
             size = draw(st.integers(min_value=1, max_value=120))
-            data[at:at] = data[max(0, at - size):at]
+            data[at:at] = data[max(0, at - size) : at]
     return bytes(data)
 
 
@@ -266,8 +314,9 @@ def test_registration_agrees_with_align_vectors():
     weights = rng.uniform(0.5, 2.0, (5, 4))
     fit = register(centres, balls, weights)
     for i in range(5):
-        np.testing.assert_allclose(sf.register_step(centres[i], balls, weights[i]),
-                                   fit.platform2cmm[i], atol=1e-10, rtol=0)
+        np.testing.assert_allclose(
+            sf.register_step(centres[i], balls, weights[i]), fit.platform2cmm[i], atol=1e-10, rtol=0
+        )
 
 
 def test_registration_rotations_agree_with_the_svd():
@@ -304,8 +353,7 @@ def test_fgm_agrees_with_one_root_per_pose(convention):
     starts = poses + rng.normal(0, 0.05, poses.shape)
     got = hexapod.fgm(q, initial_poses=starts)
     for i in range(len(poses)):
-        np.testing.assert_allclose(sf.fgm_pose(hexapod, q[i], starts[i]), got[i], atol=1e-9,
-                                   rtol=0)
+        np.testing.assert_allclose(sf.fgm_pose(hexapod, q[i], starts[i]), got[i], atol=1e-9, rtol=0)
     np.testing.assert_allclose(got, poses, atol=1e-9, rtol=0)
     # and its IGM agrees with the one-pose IGM of scipy's rotations
     for i in range(len(poses)):
@@ -318,12 +366,14 @@ def test_jacobian_agrees_with_the_rotation_derivatives(convention):
     poses = random_poses(np.random.default_rng(6), 50, scale=4.0)
     legs = hexapod.leg_vectors(poses)
     units = legs / np.linalg.norm(legs, axis=-1, keepdims=True)
-    d_plat = np.einsum("nkij,lj->nlki", rotation_derivatives(poses[:, 3:], convention),
-                       hexapod.platform_joints_mm)
+    d_plat = np.einsum(
+        "nkij,lj->nlki", rotation_derivatives(poses[:, 3:], convention), hexapod.platform_joints_mm
+    )
     jac = hexapod.jacobian(poses)
     np.testing.assert_allclose(jac[:, :, :3], units, atol=1e-15, rtol=0)
-    np.testing.assert_allclose(jac[:, :, 3:], np.einsum("nli,nlki->nlk", units, d_plat),
-                               atol=1e-13, rtol=0)
+    np.testing.assert_allclose(
+        jac[:, :, 3:], np.einsum("nli,nlki->nlk", units, d_plat), atol=1e-13, rtol=0
+    )
 
 
 def test_fgm_conditioning_bound_matches_the_svd():
@@ -354,10 +404,12 @@ def test_process_agrees_with_the_straightforward_way(tmp_path, output):
     plain = sf.process(tmp_path / "s")
     np.testing.assert_allclose(plain["centres_mm"], ours.centres.centres_mm, atol=1e-9, rtol=0)
     np.testing.assert_allclose(plain["times_s"], ours.centres.times_s, atol=1e-6, rtol=0)
-    np.testing.assert_allclose(plain["platform2cmm"], ours.registration.platform2cmm, atol=1e-9,
-                               rtol=0)
-    np.testing.assert_allclose(plain["conventional"], ours.correction.conventional, atol=1e-9,
-                               rtol=0)
+    np.testing.assert_allclose(
+        plain["platform2cmm"], ours.registration.platform2cmm, atol=1e-9, rtol=0
+    )
+    np.testing.assert_allclose(
+        plain["conventional"], ours.correction.conventional, atol=1e-9, rtol=0
+    )
     np.testing.assert_allclose(plain["corrected"], ours.correction.corrected, atol=1e-9, rtol=0)
 
 
@@ -372,8 +424,10 @@ def general_csv(path: Path, kind=None) -> list[Records]:
 
 
 def check_csv(path: Path, fast: bool | None = None, kind=None) -> None:
-    assert_same_outcome(outcome(lambda p: [csvfile.read_measurement_csv(p, kind)], path),
-                        outcome(general_csv, path, kind))
+    assert_same_outcome(
+        outcome(lambda p: [csvfile.read_measurement_csv(p, kind)], path),
+        outcome(general_csv, path, kind),
+    )
     if fast is not None:
         used = csvfile._fast_measurement_csv(csvfile.read_text(path), str(path), kind)
         assert (used is not None) == fast
@@ -394,18 +448,21 @@ def points_csv(seconds: bool = False, ijk: bool = True, seed: int = 0) -> str:
 
 
 def centres_csv() -> str:
-    return ("label,ball,x,y,z,time,diameter,form_um,n,u_um\n"
-            "O,B1,1.5,2.5,3.5,2024-03-05T07:30:00,25.4,1.2,25,0.3\n"
-            "O,B2,4.5,5.5,6.5,2024-03-05T07:30:10,25.4,1.1,25,0.2\n"
-            "R0,B1,7.5,8.5,9.5,2024-03-05T07:31:00,25.4,1.0,25,0.25\n")
+    return (
+        "label,ball,x,y,z,time,diameter,form_um,n,u_um\n"
+        "O,B1,1.5,2.5,3.5,2024-03-05T07:30:00,25.4,1.2,25,0.3\n"
+        "O,B2,4.5,5.5,6.5,2024-03-05T07:30:10,25.4,1.1,25,0.2\n"
+        "R0,B1,7.5,8.5,9.5,2024-03-05T07:31:00,25.4,1.0,25,0.25\n"
+    )
 
 
 @pytest.mark.parametrize("seconds", [False, True])
 @pytest.mark.parametrize("ijk", [True, False])
 def test_csv_clean_files_take_the_fast_path(tmp_path, seconds, ijk):
     check_csv(write(tmp_path, points_csv(seconds, ijk), "points.csv"), fast=True)
-    check_csv(write(tmp_path, points_csv(seconds, ijk).replace("\n", "\r\n"), "points.csv"),
-              fast=True)
+    check_csv(
+        write(tmp_path, points_csv(seconds, ijk).replace("\n", "\r\n"), "points.csv"), fast=True
+    )
     check_csv(write(tmp_path, centres_csv(), "centres.csv"), fast=True)
     check_csv(write(tmp_path, centres_csv(), "centres.csv"), fast=True, kind="centres")
 
@@ -421,7 +478,7 @@ CLEAN = points_csv()
         (",i,j,k\n", ", i ,j,k\n"),
         ("\nO,B1,", "\n\nO,B1,"),
         ("\nS1,B2,", "\n,,,,,,,,\nS1,B2,"),
-        ("\nO,B1,", "\n\"O\",B1,"),
+        ("\nO,B1,", '\n"O",B1,'),
         ("2024-03-05T07:30:03", "2024-03-05T07:30:03 "),
         ("2024-03-05T07:30:03", "12.5"),
         ("2024-03-05T07:30:03", ""),
@@ -470,26 +527,51 @@ def test_csv_small_files_read_as_the_general_reader(tmp_path, text, name):
     check_csv(write(tmp_path, text, name))
 
 
-_CSV_TOKENS = [b",", b"\n", b"\r\n", b"\r", b" ", b"\t", b"\"", b"'", b"nan", b"inf", b"1e999",
-               b"-", b"+", b".", b"e", b"_", b"T", b":", b"0", b"label", b",i,j,k", b"\xc2\xa0"]
+_CSV_TOKENS = [
+    b",",
+    b"\n",
+    b"\r\n",
+    b"\r",
+    b" ",
+    b"\t",
+    b'"',
+    b"'",
+    b"nan",
+    b"inf",
+    b"1e999",
+    b"-",
+    b"+",
+    b".",
+    b"e",
+    b"_",
+    b"T",
+    b":",
+    b"0",
+    b"label",
+    b",i,j,k",
+    b"\xc2\xa0",
+]
 
 
 @st.composite
 def mutated_csv(draw: st.DrawFn) -> bytes:
-    data = bytearray(points_csv(seconds=draw(st.booleans()), ijk=draw(st.booleans()),
-                                seed=draw(st.integers(0, 3))).encode())
+    data = bytearray(
+        points_csv(
+            seconds=draw(st.booleans()), ijk=draw(st.booleans()), seed=draw(st.integers(0, 3))
+        ).encode()
+    )
     for _ in range(draw(st.integers(min_value=1, max_value=4))):
         at = draw(st.integers(min_value=0, max_value=len(data)))
         operation = draw(st.sampled_from(["delete", "token", "replace", "copy"]))
         if operation == "delete":
-            del data[at:at + draw(st.integers(min_value=1, max_value=20))]
+            del data[at : at + draw(st.integers(min_value=1, max_value=20))]
         elif operation == "token":
             data[at:at] = draw(st.sampled_from(_CSV_TOKENS))
         elif operation == "replace" and at < len(data):
             data[at] = draw(st.integers(min_value=32, max_value=126))
         elif operation == "copy":
             size = draw(st.integers(min_value=1, max_value=80))
-            data[at:at] = data[max(0, at - size):at]
+            data[at:at] = data[max(0, at - size) : at]
     return bytes(data)
 
 

@@ -31,13 +31,15 @@ def test_scaling_is_exact_for_uniform_heating():
     q_r, q_s = np.full(6, 230.0), np.linspace(240, 270, 6)
     d_t = np.array([0.5, 1.0, 1.5, 2.0, 2.5, 3.0])
     growth_r = model.growth_mm(q_r, 20.0 + d_t)
-    np.testing.assert_allclose(model.scale_growth(growth_r, q_r, q_s),
-                               model.growth_mm(q_s, 20.0 + d_t), rtol=1e-13)
+    np.testing.assert_allclose(
+        model.scale_growth(growth_r, q_r, q_s), model.growth_mm(q_s, 20.0 + d_t), rtol=1e-13
+    )
 
 
 def test_legs_may_differ_and_pad():
-    per_leg = [SEGMENTS] * 5 + [[("a", "al", 23e-6, 50.0), ("b", "al", 23e-6, 90.0),
-                                 ("c", "st", 12e-6, None)]]
+    per_leg = [SEGMENTS] * 5 + [
+        [("a", "al", 23e-6, 50.0), ("b", "al", 23e-6, 90.0), ("c", "st", 12e-6, None)]
+    ]
     model = LegThermalModel.from_segments(per_leg)
     assert model.cte_per_K.shape == (6, 3)
     np.testing.assert_allclose(model.total_fixed_length_mm, [148.0] * 5 + [140.0])

@@ -26,20 +26,34 @@ def errors_um(folder: Path, effects: tuple) -> tuple[np.ndarray, np.ndarray]:
     assert temps is not None
     log = ThermocoupleLog(temps.time_s, temps.legs_C, temps.others_C.get("air"))
     session = result.session
-    twin = twin_corrected(session.hexapod, session.plan, result.centres.times_s, log,
-                          session.balls.centres_mm, result.registration.platform2cmm, effects)
+    twin = twin_corrected(
+        session.hexapod,
+        session.plan,
+        result.centres.times_s,
+        log,
+        session.balls.centres_mm,
+        result.registration.platform2cmm,
+        effects,
+    )
     truth = pd.read_csv(folder / "truth" / "steps.csv")
     true_corr = truth[[c for c in truth.columns if "_truecorr_" in c]].to_numpy()
     idx = result.correction.target_index
-    return ((twin[idx] - true_corr[idx])[:, :3] * 1e3,
-            (result.correction.corrected - true_corr[idx])[:, :3] * 1e3)
+    return (
+        (twin[idx] - true_corr[idx])[:, :3] * 1e3,
+        (result.correction.corrected - true_corr[idx])[:, :3] * 1e3,
+    )
 
 
 @pytest.mark.parametrize("hidden", [(LAG,), (LAG, DRIFT)], ids=["lag", "lag+drift"])
-def test_a_twin_with_the_true_effects_gives_the_true_corrected_poses(tmp_path: Path, hidden: tuple
-                                                                     ) -> None:
-    spec = dataclasses.replace(diagnosis_campaign(hidden, 2, n_targets=5), point_noise_mm=0.0,
-                               repeatability_mm=0.0, thermocouple_noise_C=0.0)
+def test_a_twin_with_the_true_effects_gives_the_true_corrected_poses(
+    tmp_path: Path, hidden: tuple
+) -> None:
+    spec = dataclasses.replace(
+        diagnosis_campaign(hidden, 2, n_targets=5),
+        point_noise_mm=0.0,
+        repeatability_mm=0.0,
+        thermocouple_noise_C=0.0,
+    )
     write_twin_session(spec, tmp_path / "s")
     twin, _ = errors_um(tmp_path / "s", hidden)
     # what is left: temperatures logged to 1 mK every 30 s, joined by straight lines
@@ -71,8 +85,19 @@ def test_process_method_twin_adds_the_twin_columns(tmp_path: Path) -> None:
     (tmp_path / "lag.yaml").write_text(yaml.safe_dump(model))
     runner = CliRunner()
     out = tmp_path / "out"
-    result = runner.invoke(main, ["process", str(tmp_path / "s"), "-o", str(out), "--method",
-                                  "twin", "--hexapod", str(tmp_path / "lag.yaml")])
+    result = runner.invoke(
+        main,
+        [
+            "process",
+            str(tmp_path / "s"),
+            "-o",
+            str(out),
+            "--method",
+            "twin",
+            "--hexapod",
+            str(tmp_path / "lag.yaml"),
+        ],
+    )
     assert result.exit_code == 0, result.output
     poses = pd.read_csv(out / "poses.csv")
     assert list(poses.columns[:14]) == CONTRACT_COLUMNS
@@ -84,14 +109,25 @@ def test_process_method_twin_adds_the_twin_columns(tmp_path: Path) -> None:
     conv_err = poses[pose_columns("conv")[:3]].to_numpy() - true_corr
     assert np.sqrt(np.mean(twin_err**2)) < 0.2 * np.sqrt(np.mean(conv_err**2))
     # the session's own hexapod (no lag) is the default model: a worse twin
-    plain = runner.invoke(main, ["process", str(tmp_path / "s"), "-o", str(tmp_path / "p"),
-                                 "--method", "twin"])
+    plain = runner.invoke(
+        main, ["process", str(tmp_path / "s"), "-o", str(tmp_path / "p"), "--method", "twin"]
+    )
     assert plain.exit_code == 0, plain.output
-    plain_err = (pd.read_csv(tmp_path / "p" / "poses.csv")[pose_columns("twin")[:3]].to_numpy()
-                 - true_corr)
+    plain_err = (
+        pd.read_csv(tmp_path / "p" / "poses.csv")[pose_columns("twin")[:3]].to_numpy() - true_corr
+    )
     assert np.sqrt(np.mean(twin_err**2)) < 0.5 * np.sqrt(np.mean(plain_err**2))
     # --hexapod alone is a mistake, not silently ignored
-    alone = runner.invoke(main, ["process", str(tmp_path / "s"), "-o", str(tmp_path / "q"),
-                                 "--hexapod", str(tmp_path / "lag.yaml")])
+    alone = runner.invoke(
+        main,
+        [
+            "process",
+            str(tmp_path / "s"),
+            "-o",
+            str(tmp_path / "q"),
+            "--hexapod",
+            str(tmp_path / "lag.yaml"),
+        ],
+    )
     assert alone.exit_code == 2 and "--method twin" in alone.output
     assert not (tmp_path / "q").exists()

@@ -32,10 +32,17 @@ GAIN = (3.0, 7.0, 2.0, 3.0, 9.0, 3.5)
 
 
 def points_session(folder, seed=0, n_targets=3, noise_mm=1e-3, **kw):
-    spec = TwinSessionSpec(name=folder.name, hexapod_text=HEXAPOD_TEXT, balls=BALLS,
-                           plan=small_plan(n_targets, 1),
-                           heating=Heating(on_s=0.0, tau_s=2400.0, gain_C=GAIN), seed=seed,
-                           output="points", point_noise_mm=noise_mm, **kw)
+    spec = TwinSessionSpec(
+        name=folder.name,
+        hexapod_text=HEXAPOD_TEXT,
+        balls=BALLS,
+        plan=small_plan(n_targets, 1),
+        heating=Heating(on_s=0.0, tau_s=2400.0, gain_C=GAIN),
+        seed=seed,
+        output="points",
+        point_noise_mm=noise_mm,
+        **kw,
+    )
     write_files(simulate_session(spec).files, folder)
     return folder
 
@@ -65,10 +72,10 @@ def brute_force_covariance(chain, centres, cov, step_mm=1e-3):
     jac = jac.reshape(n * k * 3, -1).T  # (M*12, n*k*3)
     big = np.zeros((n * k * 3, n * k * 3))
     for i in range(n * k):
-        big[3 * i:3 * i + 3, 3 * i:3 * i + 3] = cov.reshape(-1, 3, 3)[i]
+        big[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] = cov.reshape(-1, 3, 3)[i]
     full = jac @ big @ jac.T
     m = full.shape[0] // 12
-    return np.array([full[12 * i:12 * i + 12, 12 * i:12 * i + 12] for i in range(m)])
+    return np.array([full[12 * i : 12 * i + 12, 12 * i : 12 * i + 12] for i in range(m)])
 
 
 @pytest.mark.parametrize("interpolation", ["linear", "before", "after", "nearest"])
@@ -77,9 +84,13 @@ def test_chain_rule_jacobian_equals_the_brute_force_one(tmp_path, interpolation)
     session = points_session(tmp_path / "s", n_targets=4)
     plan_text = (session / "plan.yaml").read_text()
     (session / "plan.yaml").write_text(re.sub(r"  - \{label: R[13],.*\n", "", plan_text))
-    (session / "points.csv").write_text("".join(
-        ln for ln in (session / "points.csv").read_text().splitlines(keepends=True)
-        if not ln.startswith(("R1,", "R3,"))))
+    (session / "points.csv").write_text(
+        "".join(
+            ln
+            for ln in (session / "points.csv").read_text().splitlines(keepends=True)
+            if not ln.startswith(("R1,", "R3,"))
+        )
+    )
     result = process_session(session, interpolation=interpolation)
     chain = pose_chain(result)
     cov = centre_covariance(result).cov_mm2
@@ -102,8 +113,9 @@ def test_monte_carlo_agrees_with_linear_propagation_within_10_percent(noisy):
 def test_monte_carlo_mean_is_the_measured_value(noisy):
     chain = pose_chain(noisy)
     cov = centre_covariance(noisy).cov_mm2
-    _, mean = monte_carlo_covariance(chain, noisy.centres.centres_mm, cov, 500,
-                                     np.random.default_rng(1))
+    _, mean = monte_carlo_covariance(
+        chain, noisy.centres.centres_mm, cov, 500, np.random.default_rng(1)
+    )
     u = pose_uncertainty(noisy)
     measured = np.concatenate([noisy.correction.conventional, noisy.correction.corrected], 1)
     both_u = np.concatenate([u.conventional_u, u.corrected_u], 1)
@@ -116,8 +128,9 @@ def test_spread_of_repeated_sessions_matches_the_reported_uncertainty(tmp_path):
     for seed in range(40):
         result = process_session(points_session(tmp_path / f"s{seed}", seed=seed, n_targets=4))
         u = pose_uncertainty(result)
-        poses.append(np.concatenate([result.correction.conventional,
-                                     result.correction.corrected], 1))
+        poses.append(
+            np.concatenate([result.correction.conventional, result.correction.corrected], 1)
+        )
         u2.append(np.concatenate([u.conventional_u, u.corrected_u], 1) ** 2)
     spread_var = np.var(poses, axis=0, ddof=1)  # (M, 12)
     ratio = np.sqrt(spread_var.mean(axis=0) / np.mean(u2, axis=(0, 1)))
@@ -131,8 +144,7 @@ def test_cap_covariance_matches_the_scatter_of_sphere_fits():
     fits = fit_spheres(points.reshape(-1, 3), np.repeat(np.arange(4000), 25))
     empirical = np.cov(fits.centre_mm.T)
     formula = cap_centre_covariance(25, 70.0, 1e-3)
-    np.testing.assert_allclose(np.sqrt(np.diag(empirical)), np.sqrt(np.diag(formula)),
-                               rtol=0.05)
+    np.testing.assert_allclose(np.sqrt(np.diag(empirical)), np.sqrt(np.diag(formula)), rtol=0.05)
 
 
 def test_centre_covariance_sources(tmp_path, noisy):
@@ -153,8 +165,10 @@ def test_centre_covariance_sources(tmp_path, noisy):
 
 
 BAD_CMM = {
-    "both": ("cmm: {mpe_um: 2.0, point_noise_um: 1.0}",
-             r":8: field 'cmm.mpe_um': give point_noise_um or mpe_um"),
+    "both": (
+        "cmm: {mpe_um: 2.0, point_noise_um: 1.0}",
+        r":8: field 'cmm.mpe_um': give point_noise_um or mpe_um",
+    ),
     "none": ("cmm: {cap_angle_deg: 60}", r":8: field 'cmm': give point_noise_um or mpe_um"),
     "negative": ("cmm: {mpe_um: -1}", r":8: field 'cmm.mpe_um': must be positive"),
     "unknown": ("cmm: {sigma: 1}", r":8: field 'cmm.sigma': unknown key"),
@@ -183,10 +197,13 @@ def test_point_draws_scatter_the_centres_as_the_fit_covariance_says(noisy):
     ratio = np.sqrt(np.einsum("nkii->nki", empirical) / np.einsum("nkii->nki", cov))
     assert np.abs(ratio - 1).max() < 0.10 and abs(ratio.mean() - 1) < 0.02, ratio
     # the off-diagonal terms (the cap's tilt couples x, y with z) too
-    corr = empirical / np.sqrt(np.einsum("nkii->nki", empirical)[..., :, None]
-                               * np.einsum("nkii->nki", empirical)[..., None, :])
-    expected = cov / np.sqrt(np.einsum("nkii->nki", cov)[..., :, None]
-                             * np.einsum("nkii->nki", cov)[..., None, :])
+    corr = empirical / np.sqrt(
+        np.einsum("nkii->nki", empirical)[..., :, None]
+        * np.einsum("nkii->nki", empirical)[..., None, :]
+    )
+    expected = cov / np.sqrt(
+        np.einsum("nkii->nki", cov)[..., :, None] * np.einsum("nkii->nki", cov)[..., None, :]
+    )
     assert np.abs(corr - expected).max() < 0.1
 
 

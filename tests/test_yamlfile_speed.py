@@ -43,9 +43,17 @@ def outcome(read, text: str) -> tuple[str, ...]:
         plan = read(text)
     except InputError as exc:
         return ("error", str(exc))
-    return ("plan", repr(plan.labels), repr(plan.kinds), plan.poses.dtype.str,
-            repr(plan.poses.shape), plan.poses.tobytes().hex(), plan.reference_pose.dtype.str,
-            plan.reference_pose.tobytes().hex(), repr(plan.points_per_ball))
+    return (
+        "plan",
+        repr(plan.labels),
+        repr(plan.kinds),
+        plan.poses.dtype.str,
+        repr(plan.poses.shape),
+        plan.poses.tobytes().hex(),
+        plan.reference_pose.dtype.str,
+        plan.reference_pose.tobytes().hex(),
+        repr(plan.points_per_ball),
+    )
 
 
 def read_plan_text(text: str) -> Plan:
@@ -88,8 +96,9 @@ def test_read_plan_takes_the_fast_reader(tmp_path, monkeypatch):
         lambda t: t,
         lambda t: t.replace("\n", "\r\n"),
         lambda t: t.replace("\n  - ", "\n- "),
-        lambda t: t.replace("points_per_ball: 25                      # optional, default 25\n",
-                            ""),
+        lambda t: t.replace(
+            "points_per_ball: 25                      # optional, default 25\n", ""
+        ),
         lambda t: t.replace("points_per_ball: 25", "points_per_ball: 4"),
         lambda t: t.replace("format: hexatherm-plan/1\n", "") + "format: hexatherm-plan/1\n",
         lambda t: "# a plan\n\n" + t.replace("\n  - {label: R0", "\n\n    # R0\n  - {label: R0"),
@@ -105,13 +114,13 @@ def test_fast_reader_layouts(mutate):
 @pytest.mark.parametrize(
     ("old", "new"),
     [
-        ("label: S1", "label: 'S1'"),        # quoted
-        ("label: S1", "label: 010"),         # YAML 1.1 octal: label 8
-        ("label: S1", "label: 0x1F"),        # hex: label 31
+        ("label: S1", "label: 'S1'"),  # quoted
+        ("label: S1", "label: 010"),  # YAML 1.1 octal: label 8
+        ("label: S1", "label: 0x1F"),  # hex: label 31
         ("1.5,", "+1.5,"),
         ("1.5,", "1_5.0,"),
         ("1.5,", ".5,"),
-        ("1.5,", "-0,"),                     # the int 0
+        ("1.5,", "-0,"),  # the int 0
         ("1.5,", "1.5\t,"),
         ("# optional", "# optional, 25 °C"),
         ("{label: S1, kind: target,    pose:", "{kind: target, label: S1, pose:"),
@@ -137,40 +146,81 @@ def test_octal_label_reads_as_yaml_says(tmp_path):
 @pytest.mark.parametrize(
     ("old", "new", "message"),
     [
-        ("pose: [1.5, -2.25e-3, 3E+2, 0.0, -0.0, 7e5]", "pose: [1.5, 2, 3, 4, 5]",
-         "plan.yaml:7: field 'steps[2].pose': expected a list of 6 numbers, got [1.5, 2, 3, 4, 5]"),
-        ("7e5]", "7e999]",
-         "plan.yaml:7: field 'steps[2].pose[5]': expected a finite number, got inf"),
-        ("label: R1, kind: reference, pose: [0, 0, -40",
-         "label: R1, kind: reference, pose: [0, 0, -41",
-         "plan.yaml:8: field 'steps[3].pose': reference step pose [0.0, 0.0, -41.0, 0.0, 0.0, "
-         "0.0] differs from reference_pose [0.0, 0.0, -40.0, 0.0, 0.0, 0.0]"),
-        ("label: R1", "label: S1",
-         "plan.yaml:8: field 'steps[3]': step S1: duplicate label (also step 3)"),
-        ("label: S1", "label: yes",
-         "plan.yaml:7: field 'steps[2].label': expected a label, got True"),
-        ("label: S1", "label: 2024-01-01",
-         "plan.yaml:7: field 'steps[2].label': expected a label, got datetime.date(2024, 1, 1)"),
-        ("kind: target", "kind: targte",
-         "plan.yaml:7: field 'steps[2].kind': expected one of origin, reference, target, "
-         "got 'targte'"),
-        ("label: R0, kind: reference", "label: R0, kind: origin",
-         "plan.yaml:6: field 'steps[1]': step R0: only one origin step is allowed"),
-        ("points_per_ball: 25", "points_per_ball: 0",
-         "plan.yaml:3: field 'points_per_ball': must be positive, got 0.0"),
-        ("points_per_ball: 25", "points_per_ball: 25\nnote: x",
-         "plan.yaml:4: field 'note': unknown key; expected one of: format, reference_pose, "
-         "points_per_ball, steps"),
-        ("points_per_ball: 25", "points_per_ball: 25\npoints_per_ball: 25",
-         "plan.yaml:4: field 'points_per_ball': duplicate key"),
-        ("format: hexatherm-plan/1", "format: hexatherm-plan/2",
-         "plan.yaml:1: field 'format': expected format 'hexatherm-plan/1', got "
-         "'hexatherm-plan/2'"),
-        ("  - {label: O,  kind: origin,    pose: [0, 0, 0, 0, 0, 0]}\n", "",
-         "plan.yaml:5: field 'steps[0]': step R0: the first step must be the origin "
-         "(kind: origin)"),
-        ("  - {label: R1", "    - {label: R1",
-         "plan.yaml:8: invalid YAML: did not find expected '-' indicator"),
+        (
+            "pose: [1.5, -2.25e-3, 3E+2, 0.0, -0.0, 7e5]",
+            "pose: [1.5, 2, 3, 4, 5]",
+            "plan.yaml:7: field 'steps[2].pose': expected a list of 6 numbers, got [1.5, 2, 3, 4, 5]",  # noqa: E501
+        ),
+        (
+            "7e5]",
+            "7e999]",
+            "plan.yaml:7: field 'steps[2].pose[5]': expected a finite number, got inf",
+        ),
+        (
+            "label: R1, kind: reference, pose: [0, 0, -40",
+            "label: R1, kind: reference, pose: [0, 0, -41",
+            "plan.yaml:8: field 'steps[3].pose': reference step pose [0.0, 0.0, -41.0, 0.0, 0.0, "
+            "0.0] differs from reference_pose [0.0, 0.0, -40.0, 0.0, 0.0, 0.0]",
+        ),
+        (
+            "label: R1",
+            "label: S1",
+            "plan.yaml:8: field 'steps[3]': step S1: duplicate label (also step 3)",
+        ),
+        (
+            "label: S1",
+            "label: yes",
+            "plan.yaml:7: field 'steps[2].label': expected a label, got True",
+        ),
+        (
+            "label: S1",
+            "label: 2024-01-01",
+            "plan.yaml:7: field 'steps[2].label': expected a label, got datetime.date(2024, 1, 1)",
+        ),
+        (
+            "kind: target",
+            "kind: targte",
+            "plan.yaml:7: field 'steps[2].kind': expected one of origin, reference, target, "
+            "got 'targte'",
+        ),
+        (
+            "label: R0, kind: reference",
+            "label: R0, kind: origin",
+            "plan.yaml:6: field 'steps[1]': step R0: only one origin step is allowed",
+        ),
+        (
+            "points_per_ball: 25",
+            "points_per_ball: 0",
+            "plan.yaml:3: field 'points_per_ball': must be positive, got 0.0",
+        ),
+        (
+            "points_per_ball: 25",
+            "points_per_ball: 25\nnote: x",
+            "plan.yaml:4: field 'note': unknown key; expected one of: format, reference_pose, "
+            "points_per_ball, steps",
+        ),
+        (
+            "points_per_ball: 25",
+            "points_per_ball: 25\npoints_per_ball: 25",
+            "plan.yaml:4: field 'points_per_ball': duplicate key",
+        ),
+        (
+            "format: hexatherm-plan/1",
+            "format: hexatherm-plan/2",
+            "plan.yaml:1: field 'format': expected format 'hexatherm-plan/1', got "
+            "'hexatherm-plan/2'",
+        ),
+        (
+            "  - {label: O,  kind: origin,    pose: [0, 0, 0, 0, 0, 0]}\n",
+            "",
+            "plan.yaml:5: field 'steps[0]': step R0: the first step must be the origin "
+            "(kind: origin)",
+        ),
+        (
+            "  - {label: R1",
+            "    - {label: R1",
+            "plan.yaml:8: invalid YAML: did not find expected '-' indicator",
+        ),
     ],
 )
 def test_errors_are_the_general_readers(tmp_path, old, new, message):
@@ -203,8 +253,17 @@ def test_plain_numbers_are_yaml_numbers(text):
 
 @pytest.mark.parametrize(
     ("text", "tag"),
-    [("S1", "str"), ("on", "bool"), ("No", "bool"), ("null", "null"), ("12", "int"),
-     ("1e5", "float"), ("2024-01-01", "timestamp"), ("y", "str"), ("a-1", "str")],
+    [
+        ("S1", "str"),
+        ("on", "bool"),
+        ("No", "bool"),
+        ("null", "null"),
+        ("12", "int"),
+        ("1e5", "float"),
+        ("2024-01-01", "timestamp"),
+        ("y", "str"),
+        ("a-1", "str"),
+    ],
 )
 def test_plain_tag(text, tag):
     assert plain_tag(text) == tag
@@ -214,10 +273,39 @@ def test_plain_tag(text, tag):
 
 # ----------------------------------------------------------------------------- fuzzing
 EDITS = st.lists(
-    st.tuples(st.integers(0, 10_000), st.integers(0, 3),
-              st.sampled_from([" ", "\n", "-", "0", "1", "e", ".", ",", ":", "#", "[", "]",
-                               "{", "}", "'", "\t", "\r", "+", "_", "y", "O", "-0", "  - "])),
-    min_size=1, max_size=3,
+    st.tuples(
+        st.integers(0, 10_000),
+        st.integers(0, 3),
+        st.sampled_from(
+            [
+                " ",
+                "\n",
+                "-",
+                "0",
+                "1",
+                "e",
+                ".",
+                ",",
+                ":",
+                "#",
+                "[",
+                "]",
+                "{",
+                "}",
+                "'",
+                "\t",
+                "\r",
+                "+",
+                "_",
+                "y",
+                "O",
+                "-0",
+                "  - ",
+            ]
+        ),
+    ),
+    min_size=1,
+    max_size=3,
 )
 
 
@@ -227,5 +315,5 @@ def test_fuzzed_plans_read_as_yaml_says(edits):
     text = SPEC_PLAN
     for position, cut, insert in edits:
         position %= len(text) + 1
-        text = text[:position] + insert + text[position + cut:]
+        text = text[:position] + insert + text[position + cut :]
     assert outcome(read_plan_text, text) == outcome(general, text)

@@ -11,13 +11,23 @@ from hexatherm.cli.options import ProgressBars, clean_errors, echo_err, overwrit
 
 @click.command("diagnose")
 @click.argument("session", type=click.Path(exists=True, path_type=Path))
-@click.option("-o", "--out", "out", type=click.Path(file_okay=False), default=None,
-              help="Output folder [default: SESSION/diagnosis].")
+@click.option(
+    "-o",
+    "--out",
+    "out",
+    type=click.Path(file_okay=False),
+    default=None,
+    help="Output folder [default: SESSION/diagnosis].",
+)
 @overwrite_option
-@click.option("--hexapod", "hexapod_path", type=click.Path(exists=True, dir_okay=False,
-              path_type=Path), default=None,
-              help="The model to diagnose (a hexapod file, e.g. an earlier diagnosis' "
-              "hexapod.yaml) instead of the session's; its thermal_model effects are kept.")
+@click.option(
+    "--hexapod",
+    "hexapod_path",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    default=None,
+    help="The model to diagnose (a hexapod file, e.g. an earlier diagnosis' "
+    "hexapod.yaml) instead of the session's; its thermal_model effects are kept.",
+)
 @clean_errors
 def command(session: Path, out: str | None, overwrite: bool, hexapod_path: Path | None) -> None:
     """Compare SESSION's measurements with the twin and find the missing effects.
@@ -44,10 +54,13 @@ def command(session: Path, out: str | None, overwrite: bool, hexapod_path: Path 
     echo_err(f"diagnosing {data.session.name}: {data.observations.n_steps} steps")
     with ProgressBars() as bars:
         result = run_diagnosis(
-            data, lambda round_, done, total: bars.update(f"round {round_}: candidates",
-                                                          done, total))
-    files = {"diagnosis.json": diagnosis_json(result),
-             "hexapod.yaml": diagnosed_hexapod_yaml(result)}
+            data,
+            lambda round_, done, total: bars.update(f"round {round_}: candidates", done, total),
+        )
+    files = {
+        "diagnosis.json": diagnosis_json(result),
+        "hexapod.yaml": diagnosed_hexapod_yaml(result),
+    }
     written: list[Path] = []
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
         for name, text in files.items():

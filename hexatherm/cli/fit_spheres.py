@@ -13,14 +13,24 @@ from hexatherm.cli.options import ProgressBars, clean_errors, echo_err, overwrit
 
 @click.command("fit-spheres")
 @click.argument("points", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("-o", "--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Centres CSV to write [default: standard output].")
-@click.option("--fixed-diameter", type=click.FloatRange(min=0, min_open=True), default=None,
-              help="Fix the sphere diameter (mm) instead of fitting it: better on small caps.")
+@click.option(
+    "-o",
+    "--out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Centres CSV to write [default: standard output].",
+)
+@click.option(
+    "--fixed-diameter",
+    type=click.FloatRange(min=0, min_open=True),
+    default=None,
+    help="Fix the sphere diameter (mm) instead of fitting it: better on small caps.",
+)
 @overwrite_option
 @clean_errors
-def command(points: tuple[Path, ...], out: Path | None, fixed_diameter: float | None,
-            overwrite: bool) -> None:
+def command(
+    points: tuple[Path, ...], out: Path | None, fixed_diameter: float | None, overwrite: bool
+) -> None:
     """Fit a sphere to every (label, ball) group of the POINTS files.
 
     Writes a centres file: label,ball,x,y,z,time (time: mean of the points),
@@ -37,8 +47,7 @@ def command(points: tuple[Path, ...], out: Path | None, fixed_diameter: float | 
     fitted: list[Records] = []
     for path in points:
         with ProgressBars() as bars:
-            records = read_measurements(path, progress=functools.partial(bars.reading,
-                                                                         str(path)))
+            records = read_measurements(path, progress=functools.partial(bars.reading, str(path)))
         found = [r for r in records if r.kind == "points"]
         if not found:
             echo_err(f"{path}: no probed points, skipped")
@@ -57,4 +66,3 @@ def command(points: tuple[Path, ...], out: Path | None, fixed_diameter: float | 
     for rec in fitted:
         form = rec.extra["form_um"]
         echo_err(f"{rec.path}: {len(rec)} spheres, form error up to {max(form):.2f} um")
-

@@ -27,8 +27,14 @@ def command(file: Path, as_csv: bool) -> None:
     if as_csv:
         table.to_csv(sys.stdout, index=False, lineterminator="\n")
     else:
-        click.echo(table.to_string(index=False, na_rep="", float_format=lambda v: f"{v:.4f}")
-                   if len(table) else "(no features)")
+        click.echo(
+            table.to_string(index=False, na_rep="", float_format=lambda v: f"{v:.4f}")
+            if len(table)
+            else "(no features)"
+        )
     counts = table["type"].value_counts()
-    echo_err(f"{file}: {len(table)} features ("
-             + ", ".join(f"{n} {kind}" for kind, n in counts.items()) + ")")
+    echo_err(
+        f"{file}: {len(table)} features ("
+        + ", ".join(f"{n} {kind}" for kind, n in counts.items())
+        + ")"
+    )

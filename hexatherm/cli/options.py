@@ -18,18 +18,26 @@ overwrite_option = click.option(
     "--overwrite", is_flag=True, help="Replace the output if it exists (never by default)."
 )
 output_dir_option = click.option(
-    "-o", "--out", "out", type=click.Path(file_okay=False), default=None,
+    "-o",
+    "--out",
+    "out",
+    type=click.Path(file_okay=False),
+    default=None,
     help="Output folder [default: SESSION/results].",
 )
 interpolation_option = click.option(
     "--interpolation",
     type=click.Choice(["linear", "before", "after", "nearest"]),
-    default="linear", show_default=True,
+    default="linear",
+    show_default=True,
     help="With references on both sides of a target: interpolate their growth linearly in "
     "time, or use one neighbour as in the paper.",
 )
 quality_threshold_option = click.option(
-    "--quality-threshold", "quality_thresholds", multiple=True, metavar="NAME=VALUE",
+    "--quality-threshold",
+    "quality_thresholds",
+    multiple=True,
+    metavar="NAME=VALUE",
     help="Change a quality check's limit (repeatable; over the session file's quality: "
     "mapping): form_um, radius_dev_um, distance_dev_um, registration_rms_um, time_gap_s, "
     "temperature_change_C, min_rcond; inf (0 for min_rcond) disables a check.",

@@ -30,38 +30,87 @@ QUALITY_EXIT = 3
 @output_dir_option
 @overwrite_option
 @interpolation_option
-@click.option("--fixed-diameter", "fixed_diameter", is_flag=True,
-              help="Fit spheres to probed points with the radius fixed to the balls file's "
-              "(plus the probe tip's when points are not compensated); default: free radius.")
-@click.option("--distance-tolerance-um", type=click.FloatRange(min=0), default=50.0,
-              show_default=True, help="Refuse a step whose inter-ball distances deviate more.")
-@click.option("--registration-tolerance-um", type=click.FloatRange(min=0), default=10.0,
-              show_default=True, help="Warn about a step whose registration RMS is larger.")
-@click.option("--strict-registration", is_flag=True,
-              help="Fail instead of warning when a registration exceeds its tolerance.")
-@click.option("--mc", "mc", type=click.IntRange(min=0), default=0, show_default=True,
-              metavar="N", help="Monte Carlo uncertainty with N draws (GUM Supplement 1), "
-              "checked against the linear propagation; 0: linear propagation only.")
-@click.option("--seed", type=int, default=0, show_default=True,
-              help="Seed of the Monte Carlo draws.")
+@click.option(
+    "--fixed-diameter",
+    "fixed_diameter",
+    is_flag=True,
+    help="Fit spheres to probed points with the radius fixed to the balls file's "
+    "(plus the probe tip's when points are not compensated); default: free radius.",
+)
+@click.option(
+    "--distance-tolerance-um",
+    type=click.FloatRange(min=0),
+    default=50.0,
+    show_default=True,
+    help="Refuse a step whose inter-ball distances deviate more.",
+)
+@click.option(
+    "--registration-tolerance-um",
+    type=click.FloatRange(min=0),
+    default=10.0,
+    show_default=True,
+    help="Warn about a step whose registration RMS is larger.",
+)
+@click.option(
+    "--strict-registration",
+    is_flag=True,
+    help="Fail instead of warning when a registration exceeds its tolerance.",
+)
+@click.option(
+    "--mc",
+    "mc",
+    type=click.IntRange(min=0),
+    default=0,
+    show_default=True,
+    metavar="N",
+    help="Monte Carlo uncertainty with N draws (GUM Supplement 1), "
+    "checked against the linear propagation; 0: linear propagation only.",
+)
+@click.option(
+    "--seed", type=int, default=0, show_default=True, help="Seed of the Monte Carlo draws."
+)
 @quality_threshold_option
-@click.option("--method", "methods", type=click.Choice(["references", "twin"]), multiple=True,
-              default=("references",), show_default=True,
-              help="Corrections to report; 'twin' adds the poses corrected by the twin from "
-              "the thermocouples alone (Tx_twin_mm ...), no reference needed.")
-@click.option("--hexapod", "hexapod_path", type=click.Path(exists=True, dir_okay=False,
-              path_type=Path), default=None,
-              help="The twin's model for --method twin (e.g. the hexapod.yaml of hexatherm "
-              "diagnose); default: the session's hexapod file.")
-@click.option("--strict", is_flag=True,
-              help=f"Exit with status {QUALITY_EXIT} when a quality check fails (the results "
-              "are still written); without it a failed check is a warning.")
+@click.option(
+    "--method",
+    "methods",
+    type=click.Choice(["references", "twin"]),
+    multiple=True,
+    default=("references",),
+    show_default=True,
+    help="Corrections to report; 'twin' adds the poses corrected by the twin from "
+    "the thermocouples alone (Tx_twin_mm ...), no reference needed.",
+)
+@click.option(
+    "--hexapod",
+    "hexapod_path",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    default=None,
+    help="The twin's model for --method twin (e.g. the hexapod.yaml of hexatherm "
+    "diagnose); default: the session's hexapod file.",
+)
+@click.option(
+    "--strict",
+    is_flag=True,
+    help=f"Exit with status {QUALITY_EXIT} when a quality check fails (the results "
+    "are still written); without it a failed check is a warning.",
+)
 @clean_errors
-def command(session: Path, out: str | None, overwrite: bool, interpolation: str,
-            fixed_diameter: bool, distance_tolerance_um: float,
-            registration_tolerance_um: float, strict_registration: bool, mc: int, seed: int,
-            quality_thresholds: tuple[str, ...], methods: tuple[str, ...],
-            hexapod_path: Path | None, strict: bool) -> None:
+def command(
+    session: Path,
+    out: str | None,
+    overwrite: bool,
+    interpolation: str,
+    fixed_diameter: bool,
+    distance_tolerance_um: float,
+    registration_tolerance_um: float,
+    strict_registration: bool,
+    mc: int,
+    seed: int,
+    quality_thresholds: tuple[str, ...],
+    methods: tuple[str, ...],
+    hexapod_path: Path | None,
+    strict: bool,
+) -> None:
     """Process SESSION (a folder with session.yaml, or the file itself).
 
     Measurement files may hold ball centres or probed points (CSV or DMIS);
@@ -86,8 +135,13 @@ def command(session: Path, out: str | None, overwrite: bool, interpolation: str,
     refuse_existing(out_dir, overwrite)
     checks = Checks(distance_tolerance_um, registration_tolerance_um, strict_registration)
     with ProgressBars() as bars:
-        result = process_session(session, interpolation,  # type: ignore[arg-type]
-                                 0.0 if fixed_diameter else None, checks, bars.reading)
+        result = process_session(
+            session,
+            interpolation,  # type: ignore[arg-type]
+            0.0 if fixed_diameter else None,
+            checks,
+            bars.reading,
+        )
     for warning in result.warnings:
         echo_err(f"warning: {warning}")
     twin = None
@@ -99,20 +153,26 @@ def command(session: Path, out: str | None, overwrite: bool, interpolation: str,
         twin = twin_poses(result, model, str(hexapod_path or ""))
         gap = (twin - result.correction.corrected)[:, :3] * 1e3
         effects = ", ".join(e["name"] for e in model.effects) or "none"
-        echo_err(f"twin ({hexapod_path or 'the session hexapod'}; effects: {effects}): "
-                 f"twin-corrected minus corrected by the references, RMS "
-                 f"{np.sqrt(np.mean(gap**2)):.3f} um over the targets' translations")
+        echo_err(
+            f"twin ({hexapod_path or 'the session hexapod'}; effects: {effects}): "
+            f"twin-corrected minus corrected by the references, RMS "
+            f"{np.sqrt(np.mean(gap**2)):.3f} um over the targets' translations"
+        )
     elif hexapod_path is not None:
-        raise click.BadParameter("--hexapod is the twin's model: use it with --method twin",
-                                 param_hint="'--hexapod'")
+        raise click.BadParameter(
+            "--hexapod is the twin's model: use it with --method twin", param_hint="'--hexapod'"
+        )
     with ProgressBars() as bars:
         uncertainty = pose_uncertainty(result, mc=mc, seed=seed, progress=bars.draws)
     quality = quality_checks(result, session_thresholds(result.session, overrides))
-    written = write_results(result, out_dir, overwrite=overwrite, uncertainty=uncertainty,
-                            quality=quality, twin=twin)
+    written = write_results(
+        result, out_dir, overwrite=overwrite, uncertainty=uncertainty, quality=quality, twin=twin
+    )
     n = len(result.correction.target_index)
-    echo_err(f"session {result.session.name}: {len(result.session.plan.labels)} steps, "
-             f"{n} targets, interpolation {interpolation}")
+    echo_err(
+        f"session {result.session.name}: {len(result.session.plan.labels)} steps, "
+        f"{n} targets, interpolation {interpolation}"
+    )
     click.echo(deviation_table(result, twin))
     for line in uncertainty_summary(uncertainty):
         echo_err(line)
@@ -123,8 +183,11 @@ def command(session: Path, out: str | None, overwrite: bool, interpolation: str,
         echo_err(f"wrote {path}")
     if quality.any_failed:
         steps = quality.failed_steps
-        what = (f"quality checks failed at {len(steps)} step(s) ({', '.join(steps[:5])}"
-                + (" ..." if len(steps) > 5 else "") + ")")
+        what = (
+            f"quality checks failed at {len(steps)} step(s) ({', '.join(steps[:5])}"
+            + (" ..." if len(steps) > 5 else "")
+            + ")"
+        )
         if strict:
             echo_err(f"error: {what}; exit status {QUALITY_EXIT} (--strict)")
             raise SystemExit(QUALITY_EXIT)
@@ -134,19 +197,28 @@ def command(session: Path, out: str | None, overwrite: bool, interpolation: str,
 def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
     """Screen lines: where the centre uncertainties came from, and the largest pose ones."""
     lines = [f"uncertainty: centres from {uncertainty.centres.description}"]
-    for name, u in (("conventional", uncertainty.conventional_u),
-                    ("corrected", uncertainty.corrected_u)):
+    for name, u in (
+        ("conventional", uncertainty.conventional_u),
+        ("corrected", uncertainty.corrected_u),
+    ):
         if u.size == 0:
             continue
         t_um, r_urad = u[:, :3].max() * 1e3, np.deg2rad(u[:, 3:]).max() * 1e6
-        lines.append(f"  u ({uncertainty.method}, k=1) of the {name} poses: up to "
-                     f"{t_um:.3f} um, {r_urad:.2f} urad")
+        lines.append(
+            f"  u ({uncertainty.method}, k=1) of the {name} poses: up to "
+            f"{t_um:.3f} um, {r_urad:.2f} urad"
+        )
     if uncertainty.method == "monte-carlo":
         ratio = uncertainty.ratio_to_linear()
         if np.isfinite(ratio).any():
-            drawn = ("probed points drawn, spheres refitted" if uncertainty.drawn == "points"
-                     else "centres drawn from their covariance")
-            lines.append(f"  Monte Carlo ({uncertainty.draws} draws, seed {uncertainty.seed}) "
-                         f"over linear propagation: {np.nanmin(ratio):.3f} to "
-                         f"{np.nanmax(ratio):.3f} ({drawn})")
+            drawn = (
+                "probed points drawn, spheres refitted"
+                if uncertainty.drawn == "points"
+                else "centres drawn from their covariance"
+            )
+            lines.append(
+                f"  Monte Carlo ({uncertainty.draws} draws, seed {uncertainty.seed}) "
+                f"over linear propagation: {np.nanmin(ratio):.3f} to "
+                f"{np.nanmax(ratio):.3f} ({drawn})"
+            )
     return lines

@@ -10,15 +10,23 @@ from hexatherm.cli.options import clean_errors, echo_err
 
 
 @click.command("replay")
-@click.argument("sessions_dir", required=False, default="sessions",
-                type=click.Path(exists=True, file_okay=False, path_type=Path))
-@click.option("--update", is_flag=True,
-              help="Rewrite expected/ with the new results (after a deliberate change) and "
-              "say what changed.")
-@click.option("--tol-mm", type=float, default=1e-7, show_default=True,
-              help="Tolerance of columns in mm.")
-@click.option("--tol-deg", type=float, default=1e-6, show_default=True,
-              help="Tolerance of columns in deg.")
+@click.argument(
+    "sessions_dir",
+    required=False,
+    default="sessions",
+    type=click.Path(exists=True, file_okay=False, path_type=Path),
+)
+@click.option(
+    "--update",
+    is_flag=True,
+    help="Rewrite expected/ with the new results (after a deliberate change) and say what changed.",
+)
+@click.option(
+    "--tol-mm", type=float, default=1e-7, show_default=True, help="Tolerance of columns in mm."
+)
+@click.option(
+    "--tol-deg", type=float, default=1e-6, show_default=True, help="Tolerance of columns in deg."
+)
 @clean_errors
 def command(sessions_dir: Path, update: bool, tol_mm: float, tol_deg: float) -> None:
     """Re-process every session of SESSIONS_DIR that has an expected/ folder.

@@ -18,22 +18,45 @@ from hexatherm.cli.options import (
 
 @click.command("report")
 @click.argument("session", type=click.Path(exists=True, path_type=Path))
-@click.option("-o", "--out", "out", type=click.Path(dir_okay=False, path_type=Path),
-              default=None, help="Output HTML file [default: SESSION/report.html].")
+@click.option(
+    "-o",
+    "--out",
+    "out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Output HTML file [default: SESSION/report.html].",
+)
 @overwrite_option
 @interpolation_option
-@click.option("--fixed-diameter", "fixed_diameter", is_flag=True,
-              help="Fit spheres to probed points with the radius fixed to the balls file's "
-              "(as in process); default: free radius.")
-@click.option("--mc", type=click.IntRange(min=0), default=0, show_default=True,
-              help="Monte Carlo draws for the pose uncertainty (0: linear propagation).")
-@click.option("--seed", type=int, default=0, show_default=True,
-              help="Seed of the Monte Carlo draws.")
+@click.option(
+    "--fixed-diameter",
+    "fixed_diameter",
+    is_flag=True,
+    help="Fit spheres to probed points with the radius fixed to the balls file's "
+    "(as in process); default: free radius.",
+)
+@click.option(
+    "--mc",
+    type=click.IntRange(min=0),
+    default=0,
+    show_default=True,
+    help="Monte Carlo draws for the pose uncertainty (0: linear propagation).",
+)
+@click.option(
+    "--seed", type=int, default=0, show_default=True, help="Seed of the Monte Carlo draws."
+)
 @quality_threshold_option
 @clean_errors
-def command(session: Path, out: Path | None, overwrite: bool, interpolation: str,
-            fixed_diameter: bool, mc: int, seed: int,
-            quality_thresholds: tuple[str, ...]) -> None:
+def command(
+    session: Path,
+    out: Path | None,
+    overwrite: bool,
+    interpolation: str,
+    fixed_diameter: bool,
+    mc: int,
+    seed: int,
+    quality_thresholds: tuple[str, ...],
+) -> None:
     """Process SESSION (a folder with session.yaml, or the file itself) and write its report.
 
     One HTML file, figures embedded: the pose parameters of every target,
@@ -52,12 +75,17 @@ def command(session: Path, out: Path | None, overwrite: bool, interpolation: str
     out_file = out if out is not None else folder / "report.html"
     refuse_existing(out_file, overwrite)
     with ProgressBars() as bars:
-        result = process_session(session, interpolation,  # type: ignore[arg-type]
-                                 0.0 if fixed_diameter else None, progress=bars.reading)
+        result = process_session(
+            session,
+            interpolation,  # type: ignore[arg-type]
+            0.0 if fixed_diameter else None,
+            progress=bars.reading,
+        )
     for warning in result.warnings:
         echo_err(f"warning: {warning}")
     with ProgressBars() as bars:
-        page = build_report(result, mc, seed, session_thresholds(result.session, overrides),
-                            progress=bars.draws)
+        page = build_report(
+            result, mc, seed, session_thresholds(result.session, overrides), progress=bars.draws
+        )
     atomic_write_text(out_file, page)
     echo_err(f"wrote {out_file}")

@@ -35,8 +35,7 @@ import numpy.typing as npt
 
 from hexatherm.core.planefit import CircleFit, PlaneFit, fit_circle_3d, fit_plane
 from hexatherm.errors import FitError
-
-FloatArray = npt.NDArray[np.float64]
+from hexatherm.typing import FloatArray
 
 #: smallest accepted distance between the two bore centres, mm
 MIN_BORE_DISTANCE_MM = 1.0
@@ -91,14 +90,26 @@ def datum_frame(
         except FitError as exc:
             raise FitError(f"{name}: {exc}") from None
         centre = circle.centre_mm - np.dot(circle.centre_mm - face_point, z) * z
-        bores.append(CircleFit(centre, circle.radius_mm, circle.normal, circle.rms_um,
-                               circle.form_um, circle.n, circle.residuals_mm,
-                               circle.arc_half_angle_deg, circle.iterations))
+        bores.append(
+            CircleFit(
+                centre,
+                circle.radius_mm,
+                circle.normal,
+                circle.rms_um,
+                circle.form_um,
+                circle.n,
+                circle.residuals_mm,
+                circle.arc_half_angle_deg,
+                circle.iterations,
+            )
+        )
     x = bores[1].centre_mm - bores[0].centre_mm
     distance = float(np.linalg.norm(x))
     if distance < MIN_BORE_DISTANCE_MM:
-        raise FitError(f"the two bore centres are {distance:.3f} mm apart: they cannot give "
-                       f"the X direction (need at least {MIN_BORE_DISTANCE_MM} mm)")
+        raise FitError(
+            f"the two bore centres are {distance:.3f} mm apart: they cannot give "
+            f"the X direction (need at least {MIN_BORE_DISTANCE_MM} mm)"
+        )
     x = x / distance
     y = np.cross(z, x)
     frame = np.eye(4)

@@ -50,8 +50,8 @@ from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
 from hexatherm.core.registration import register
 from hexatherm.core.twin import cmm_readings, predict
+from hexatherm.typing import FloatArray
 
-FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 
 #: ΔBIC a candidate must exceed to be added
@@ -243,12 +243,18 @@ def rms_um(residual_mm: npt.ArrayLike) -> float:
     return float(np.sqrt(np.mean(r**2)) * 1e3) if r.size else float("nan")
 
 
-def twin_centres(
-    hexapod: Hexapod, obs: Observations, effects: Sequence[Effect]
-) -> FloatArray:
+def twin_centres(hexapod: Hexapod, obs: Observations, effects: Sequence[Effect]) -> FloatArray:
     """The twin's ball centres (N, k, 3) of every step in the nominal frame O."""
-    steps = predict(hexapod, obs.plan, obs.times_s, obs.log, obs.balls_mm, np.eye(4),
-                    effects, reference_state=False)
+    steps = predict(
+        hexapod,
+        obs.plan,
+        obs.times_s,
+        obs.log,
+        obs.balls_mm,
+        np.eye(4),
+        effects,
+        reference_state=False,
+    )
     return steps.centres_cmm_mm
 
 
@@ -289,8 +295,13 @@ class _Problem:
     all steps and the fits on the held-out folds alike.
     """
 
-    def __init__(self, hexapod: Hexapod, obs: Observations, fixed: Sequence[Effect],
-                 free: Sequence[type[Effect]]) -> None:
+    def __init__(
+        self,
+        hexapod: Hexapod,
+        obs: Observations,
+        fixed: Sequence[Effect],
+        free: Sequence[type[Effect]],
+    ) -> None:
         self.hexapod, self.obs = hexapod, obs
         self.fixed, self.free = tuple(fixed), tuple(free)
         self.sizes = [len(cls.parameters) for cls in self.free]
@@ -307,7 +318,7 @@ class _Problem:
     def effects(self, theta: FloatArray) -> tuple[Effect, ...]:
         out, i = [], 0
         for cls, size in zip(self.free, self.sizes, strict=True):
-            out.append(cls.from_vector(theta[i:i + size]))
+            out.append(cls.from_vector(theta[i : i + size]))
             i += size
         return self.fixed + tuple(out)
 
@@ -317,8 +328,9 @@ class _Problem:
             self._cache[key] = twin_centres(self.hexapod, self.obs, self.effects(theta))
         return self._cache[key]
 
-    def evaluate(self, theta: FloatArray, mask: BoolArray
-                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    def evaluate(
+        self, theta: FloatArray, mask: BoolArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Placement of O, predicted centres and residuals (all steps) fitted on ``mask``."""
         origin2cmm, predicted = place(self.centres(theta), self.obs, self.effects(theta), mask)
         return origin2cmm, predicted, self.obs.centres_mm - predicted
@@ -341,8 +353,10 @@ class _Problem:
 
     def start(self, starts: Sequence[FloatArray | None], mask: BoolArray) -> FloatArray:
         """The best combination of start values (given ones, or each effect's own)."""
-        options = [[s] if s is not None else cls.start_values()
-                   for cls, s in zip(self.free, starts, strict=True)]
+        options = [
+            [s] if s is not None else cls.start_values()
+            for cls, s in zip(self.free, starts, strict=True)
+        ]
         combos = [np.zeros(0)]
         for opts in options:
             combos = [np.concatenate([c, o]) for c in combos for o in opts]
@@ -364,10 +378,17 @@ class _Problem:
             return theta0 + (z - 1) * self.scale
 
         solution = least_squares(
-            lambda z: self.weighted(theta_of(z), mask), z0,
+            lambda z: self.weighted(theta_of(z), mask),
+            z0,
             jac=lambda z: self.jacobian(theta_of(z), mask),
-            bounds=(z_lo, z_hi), method="trf", x_scale=1.0, max_nfev=30,
-            xtol=1e-8, ftol=1e-8, gtol=None)
+            bounds=(z_lo, z_hi),
+            method="trf",
+            x_scale=1.0,
+            max_nfev=30,
+            xtol=1e-8,
+            ftol=1e-8,
+            gtol=None,
+        )
         return np.clip(theta_of(solution.x), self.lo, self.hi)
 
     def refit(self, theta_hat: FloatArray, mask: BoolArray, iterations: int = 3) -> FloatArray:
@@ -399,11 +420,21 @@ class _Problem:
             se = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
             i = 0
             for cls, size in zip(self.free, self.sizes, strict=True):
-                errors.append(dict(zip(cls.parameters, (float(v) for v in se[i:i + size]),
-                                       strict=True)))
+                errors.append(
+                    dict(zip(cls.parameters, (float(v) for v in se[i : i + size]), strict=True))
+                )
                 i += size
-        return Fit(self.effects(theta)[len(self.fixed):], tuple(errors), origin2cmm, residual,
-                   predicted, rss, n, p, covariance)
+        return Fit(
+            self.effects(theta)[len(self.fixed) :],
+            tuple(errors),
+            origin2cmm,
+            residual,
+            predicted,
+            rss,
+            n,
+            p,
+            covariance,
+        )
 
     def covariance(self, theta: FloatArray, mask: BoolArray) -> FloatArray:
         """Covariance of the fitted parameters: the sandwich, clustered by step.
@@ -472,8 +503,7 @@ def time_blocks(times_s: npt.ArrayLike, n_blocks: int = 6) -> npt.NDArray[np.int
     return blocks
 
 
-def heldout_rms_um(problem: _Problem, theta_hat: FloatArray, blocks: npt.NDArray[np.intp]
-                   ) -> float:
+def heldout_rms_um(problem: _Problem, theta_hat: FloatArray, blocks: npt.NDArray[np.intp]) -> float:
     """RMS (um) of the residuals of steps the model was not fitted to.
 
     Two folds: fitted on the even blocks of time, evaluated on the odd ones, and
@@ -490,9 +520,14 @@ def heldout_rms_um(problem: _Problem, theta_hat: FloatArray, blocks: npt.NDArray
     return float(np.sqrt(squares / count) * 1e3)
 
 
-def _fit_and_hold_out(hexapod: Hexapod, obs: Observations, fixed: Sequence[Effect],
-                      free: Sequence[type[Effect]], start: Sequence[FloatArray | None],
-                      blocks: npt.NDArray[np.intp]) -> tuple[Fit, float]:
+def _fit_and_hold_out(
+    hexapod: Hexapod,
+    obs: Observations,
+    fixed: Sequence[Effect],
+    free: Sequence[type[Effect]],
+    start: Sequence[FloatArray | None],
+    blocks: npt.NDArray[np.intp],
+) -> tuple[Fit, float]:
     problem = _Problem(hexapod, obs, fixed, free)
     everything = np.ones(obs.n_steps, dtype=bool)
     starts = list(start) + [None] * (len(problem.free) - len(start))
@@ -566,8 +601,17 @@ def diagnose(
             fit, held = _fit_and_hold_out(hexapod, obs, current, free, starts, blocks)
             delta = model.bic - fit.bic
             note = _bound_note(fit.effects[-1])
-            tried.append(Candidate(name, fit, delta, rms_um(fit.residual_mm), held,
-                                   bool(delta > DELTA_BIC_THRESHOLD and held < heldout), note))
+            tried.append(
+                Candidate(
+                    name,
+                    fit,
+                    delta,
+                    rms_um(fit.residual_mm),
+                    held,
+                    bool(delta > DELTA_BIC_THRESHOLD and held < heldout),
+                    note,
+                )
+            )
             if progress is not None:
                 progress(len(rounds) + 1, len(tried), len(names))
         rounds.append(tuple(tried))
@@ -583,16 +627,25 @@ def diagnose(
             cos = _cosine(direction, _change(model, other.fit, obs))
             if abs(cos) > SIMILARITY_THRESHOLD:
                 alternatives.append((other.name, other.delta_bic, cos))
-        added.append(Addition(
-            best.fit.effects[-1], best.fit.std_errors[-1], best.delta_bic,
-            rms_um(model.residual_mm), best.rms_um, heldout, best.heldout_rms_um,
-            tuple(alternatives)))
+        added.append(
+            Addition(
+                best.fit.effects[-1],
+                best.fit.std_errors[-1],
+                best.delta_bic,
+                rms_um(model.residual_mm),
+                best.rms_um,
+                heldout,
+                best.heldout_rms_um,
+                tuple(alternatives),
+            )
+        )
         added_classes.append(EFFECTS[best.name])
         names.remove(best.name)
         model, heldout = best.fit, best.heldout_rms_um
         # the joint refit of everything added so far is ``best.fit`` itself
-    return Diagnosis(baseline, model, tuple(added), tuple(rounds), baseline_heldout, heldout,
-                     skipped)
+    return Diagnosis(
+        baseline, model, tuple(added), tuple(rounds), baseline_heldout, heldout, skipped
+    )
 
 
 def _bound_note(effect: Effect) -> str:

@@ -44,8 +44,7 @@ import numpy as np
 import numpy.typing as npt
 
 from hexatherm.errors import InputError
-
-FloatArray = npt.NDArray[np.float64]
+from hexatherm.typing import FloatArray
 
 #: seconds per hour
 _HOUR_S = 3600.0

@@ -32,10 +32,10 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
+from hexatherm.typing import FloatArray
+
 Convention = Literal["symetrie", "pi"]
 CONVENTIONS: tuple[Convention, ...] = ("symetrie", "pi")
-
-FloatArray = npt.NDArray[np.float64]
 
 
 def check_convention(convention: str) -> Convention:

@@ -24,7 +24,7 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
-FloatArray = npt.NDArray[np.float64]
+from hexatherm.typing import FloatArray
 
 
 class HeatingModel(Protocol):

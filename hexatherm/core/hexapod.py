@@ -31,8 +31,7 @@ from hexatherm.core.geometry import (
 )
 from hexatherm.core.thermal import LegThermalModel
 from hexatherm.errors import ConvergenceError, SingularityError
-
-FloatArray = npt.NDArray[np.float64]
+from hexatherm.typing import FloatArray
 
 #: FGM convergence tolerance on the leg lengths, mm
 FGM_TOLERANCE_MM = 1e-10
@@ -116,16 +115,27 @@ class Hexapod:
             + rotation_deg
         )
         base = np.column_stack(
-            [base_radius_mm * np.cos(base_ang), base_radius_mm * np.sin(base_ang),
-             np.full(6, -float(height_mm))]
+            [
+                base_radius_mm * np.cos(base_ang),
+                base_radius_mm * np.sin(base_ang),
+                np.full(6, -float(height_mm)),
+            ]
         )
         plat = np.column_stack(
-            [platform_radius_mm * np.cos(plat_ang), platform_radius_mm * np.sin(plat_ang),
-             np.zeros(6)]
+            [
+                platform_radius_mm * np.cos(plat_ang),
+                platform_radius_mm * np.sin(plat_ang),
+                np.zeros(6),
+            ]
         )
-        return cls(name=name, convention=convention, base_joints_mm=base,
-                   platform_joints_mm=plat, stroke_mm=None if stroke_mm is None
-                   else np.asarray(stroke_mm, float), legs=legs)
+        return cls(
+            name=name,
+            convention=convention,
+            base_joints_mm=base,
+            platform_joints_mm=plat,
+            stroke_mm=None if stroke_mm is None else np.asarray(stroke_mm, float),
+            legs=legs,
+        )
 
     # ------------------------------------------------------------------ IGM
     def base_joints_for(self, base_joints_mm: npt.ArrayLike | None, n_poses: int) -> FloatArray:
@@ -147,14 +157,16 @@ class Hexapod:
             return self.base_joints_mm
         base = np.asarray(base_joints_mm, dtype=float)
         if base.shape not in ((6, 3), (n_poses, 6, 3)):
-            raise ValueError(f"base joints must have shape (6, 3) or ({n_poses}, 6, 3), got "
-                             f"{base.shape}")
+            raise ValueError(
+                f"base joints must have shape (6, 3) or ({n_poses}, 6, 3), got {base.shape}"
+            )
         if not np.all(np.isfinite(base)):
             raise ValueError("base joints have a non-finite value")
         return base
 
-    def leg_vectors(self, poses: npt.ArrayLike,
-                    base_joints_mm: npt.ArrayLike | None = None) -> FloatArray:
+    def leg_vectors(
+        self, poses: npt.ArrayLike, base_joints_mm: npt.ArrayLike | None = None
+    ) -> FloatArray:
         """Leg vectors ``t + R p_i - b_i`` in frame O, shape (N, 6, 3).
 
         ``base_joints_mm`` overrides the base joints (see :meth:`base_joints_for`).
@@ -162,8 +174,9 @@ class Hexapod:
         x = np.atleast_2d(check_poses(poses))
         return self._legs(x, self.base_joints_for(base_joints_mm, x.shape[0]))[0]
 
-    def _legs(self, x: FloatArray, base: FloatArray
-              ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    def _legs(
+        self, x: FloatArray, base: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         """Leg vectors (N, 6, 3) of checked poses (N, 6), the rotated platform joints
         ``R p_i`` (N, 6, 3), and the cosines and sines of the angles (N, 3) each.
 
@@ -204,8 +217,7 @@ class Hexapod:
         """Lengths (N, 6) of leg vectors (N, 6, 3)."""
         return np.sqrt(np.einsum("nij,nij->ni", legs, legs))
 
-    def igm(self, poses: npt.ArrayLike, base_joints_mm: npt.ArrayLike | None = None
-            ) -> FloatArray:
+    def igm(self, poses: npt.ArrayLike, base_joints_mm: npt.ArrayLike | None = None) -> FloatArray:
         """Leg lengths (N, 6) of platform poses (N, 6) relative to frame O (mm, deg).
 
         ``base_joints_mm`` overrides the base joints, for all poses (6, 3) or per
@@ -213,8 +225,9 @@ class Hexapod:
         """
         return self._lengths(self.leg_vectors(poses, base_joints_mm))
 
-    def jacobian(self, poses: npt.ArrayLike, base_joints_mm: npt.ArrayLike | None = None
-                 ) -> FloatArray:
+    def jacobian(
+        self, poses: npt.ArrayLike, base_joints_mm: npt.ArrayLike | None = None
+    ) -> FloatArray:
         """Analytic Jacobian ``dq/dX`` (N, 6, 6): mm per mm and mm per degree.
 
         ``base_joints_mm`` overrides the base joints as in :meth:`igm`.
@@ -223,8 +236,14 @@ class Hexapod:
         legs, plat, cos, sin = self._legs(x, self.base_joints_for(base_joints_mm, x.shape[0]))
         return self._jacobian(legs, self._lengths(legs), plat, cos, sin)
 
-    def _jacobian(self, legs: FloatArray, lengths: FloatArray, plat: FloatArray,
-                  cos: FloatArray, sin: FloatArray) -> FloatArray:
+    def _jacobian(
+        self,
+        legs: FloatArray,
+        lengths: FloatArray,
+        plat: FloatArray,
+        cos: FloatArray,
+        sin: FloatArray,
+    ) -> FloatArray:
         """Jacobian (N, 6, 6) from what :meth:`_legs` returns and the leg lengths.
 
         With ``u_i`` the unit leg vectors, ``dq_i/dt = u_i`` and, since
@@ -298,8 +317,9 @@ class Hexapod:
             raise ValueError("leg lengths have a non-finite value")
         base = None
         if base_joints_mm is not None:
-            base = np.broadcast_to(self.base_joints_for(base_joints_mm, q.shape[0]),
-                                   (q.shape[0], 6, 3))
+            base = np.broadcast_to(
+                self.base_joints_for(base_joints_mm, q.shape[0]), (q.shape[0], 6, 3)
+            )
         if initial_poses is None:
             x = np.zeros((q.shape[0], 6))
         else:
@@ -328,8 +348,13 @@ class Hexapod:
                 rcond[active[done]] = rcond_a[done]
                 x[active[done]] = x_a[done]
                 keep = ~done
-                active, x_a, q_a, err, worst = active[keep], x_a[keep], q_a[keep], err[keep], \
-                    worst[keep]
+                active, x_a, q_a, err, worst = (
+                    active[keep],
+                    x_a[keep],
+                    q_a[keep],
+                    err[keep],
+                    worst[keep],
+                )
                 jac, rcond_a, sigma_low = jac[keep], rcond_a[keep], sigma_low[keep]
                 if inverse is not None:
                     inverse = inverse[keep]
@@ -355,8 +380,9 @@ class Hexapod:
     #: lower bound on the reciprocal condition above which a Jacobian needs no SVD
     _SURELY_REGULAR = 1e-6
 
-    def _conditioning(self, jac: FloatArray, last_jac: FloatArray | None,
-                      sigma_low: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+    def _conditioning(
+        self, jac: FloatArray, last_jac: FloatArray | None, sigma_low: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray | None]:
         """Reciprocal condition numbers of Jacobians (N, 6, 6), where they could be small.
 
         An SVD per pose and iteration would cost more than the rest of the FGM. Instead

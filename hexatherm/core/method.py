@@ -38,8 +38,8 @@ from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
 from hexatherm.core.thermal import LegThermalModel
 from hexatherm.errors import PlanError
+from hexatherm.typing import FloatArray
 
-FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
 Interpolation = Literal["linear", "before", "after", "nearest"]
 INTERPOLATIONS: tuple[Interpolation, ...] = ("linear", "before", "after", "nearest")
@@ -222,8 +222,13 @@ def correct(
     return steps, correction
 
 
-def interpolated_growth(q_mm: npt.ArrayLike, q_r0_mm: npt.ArrayLike, before_index: npt.ArrayLike,
-                        after_index: npt.ArrayLike, weight_after: npt.ArrayLike) -> FloatArray:
+def interpolated_growth(
+    q_mm: npt.ArrayLike,
+    q_r0_mm: npt.ArrayLike,
+    before_index: npt.ArrayLike,
+    after_index: npt.ArrayLike,
+    weight_after: npt.ArrayLike,
+) -> FloatArray:
     """Growth since R0 at the references, interpolated to each target (steps 2 and 3).
 
     Parameters
@@ -251,8 +256,12 @@ def interpolated_growth(q_mm: npt.ArrayLike, q_r0_mm: npt.ArrayLike, before_inde
     return (1.0 - w_after)[:, None] * g_before + w_after[:, None] * g_after
 
 
-def target_growth(legs: LegThermalModel, reference_growth_mm: npt.ArrayLike,
-                  q_r0_mm: npt.ArrayLike, q_s_mm: npt.ArrayLike) -> FloatArray:
+def target_growth(
+    legs: LegThermalModel,
+    reference_growth_mm: npt.ArrayLike,
+    q_r0_mm: npt.ArrayLike,
+    q_s_mm: npt.ArrayLike,
+) -> FloatArray:
     """Growth of the targets' legs (step 4): the growth at the references scaled by the
     leg model from R0's leg lengths to the target's less its growth (one fixed-point
     pass from the measured ones).

@@ -74,8 +74,13 @@ class Plan:
         if reference_pose is None:
             refs = [p for p, k in zip(poses, kinds, strict=True) if k == "reference"]
             reference_pose = refs[0] if refs else np.zeros(6)
-        plan = cls(labels, kinds, poses, np.asarray(reference_pose, float),  # type: ignore[arg-type]
-                   int(points_per_ball))
+        plan = cls(
+            labels,
+            kinds,
+            poses,
+            np.asarray(reference_pose, float),  # type: ignore[arg-type]
+            int(points_per_ball),
+        )
         plan.validate()
         return plan
 
@@ -88,21 +93,27 @@ class Plan:
             if not NAME_PATTERN.fullmatch(label):
                 raise StepError("label must match [A-Za-z0-9-]+", step=label, index=i)
             if label in seen:
-                raise StepError(f"duplicate label (also step {seen[label] + 1})", step=label,
-                                index=i)
+                raise StepError(
+                    f"duplicate label (also step {seen[label] + 1})", step=label, index=i
+                )
             seen[label] = i
             if kind not in STEP_KINDS:
-                raise StepError(f"unknown kind {kind!r}; expected origin, reference or target",
-                                step=label, index=i)
+                raise StepError(
+                    f"unknown kind {kind!r}; expected origin, reference or target",
+                    step=label,
+                    index=i,
+                )
             if not np.all(np.isfinite(self.poses[i])):
                 raise StepError("pose has a non-finite value", step=label, index=i)
         if self.kinds[0] != "origin":
-            raise StepError("the first step must be the origin (kind: origin)",
-                            step=self.labels[0], index=0)
+            raise StepError(
+                "the first step must be the origin (kind: origin)", step=self.labels[0], index=0
+            )
         extra = [i for i, k in enumerate(self.kinds) if k == "origin"][1:]
         if extra:
-            raise StepError("only one origin step is allowed", step=self.labels[extra[0]],
-                            index=extra[0])
+            raise StepError(
+                "only one origin step is allowed", step=self.labels[extra[0]], index=extra[0]
+            )
         refs = self.reference_indices
         if self.target_indices.size and not refs.size:
             raise StepError("the plan has targets but no reference step")
@@ -111,20 +122,23 @@ class Plan:
                 raise StepError(
                     f"reference pose differs from the first reference {self.labels[refs[0]]}; "
                     "all reference steps must command the same pose",
-                    step=self.labels[i], index=int(i),
+                    step=self.labels[i],
+                    index=int(i),
                 )
         for i in self.target_indices:
             if refs.size and i < refs[0]:
                 raise StepError(
                     f"target comes before the first reference {self.labels[refs[0]]}, which "
-                    "fixes the thermal state of the corrected poses", step=self.labels[i],
-                    index=int(i))
-        for i, (before, after) in zip(self.target_indices, self.adjacent_references(),
-                                      strict=True):
+                    "fixes the thermal state of the corrected poses",
+                    step=self.labels[i],
+                    index=int(i),
+                )
+        for i, (before, after) in zip(self.target_indices, self.adjacent_references(), strict=True):
             if before < 0 and after < 0:
                 raise StepError(
                     "target has no reference step adjacent to it (right before or after)",
-                    step=self.labels[i], index=int(i),
+                    step=self.labels[i],
+                    index=int(i),
                 )
 
     @property

@@ -33,8 +33,8 @@ from hexatherm.core.geometry import apply_transform, transform_from_pose
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
 from hexatherm.errors import InputError, PlanError
+from hexatherm.typing import FloatArray
 
-FloatArray = npt.NDArray[np.float64]
 ReferenceEvery = Literal["both", "before", "after"]
 REFERENCE_EVERY: tuple[ReferenceEvery, ...] = ("both", "before", "after")
 

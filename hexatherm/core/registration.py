@@ -28,8 +28,7 @@ import numpy as np
 import numpy.typing as npt
 
 from hexatherm.errors import RegistrationError
-
-FloatArray = npt.NDArray[np.float64]
+from hexatherm.typing import FloatArray
 
 #: smallest/largest singular value ratio of the centred ball layout below which
 #: the balls are called collinear
@@ -115,8 +114,10 @@ def register(
     if not np.all(np.isfinite(centres)):
         step = int(np.argwhere(~np.isfinite(centres))[0][0])
         raise RegistrationError(f"measured centres of step index {step} have a non-finite value")
-    w = np.ones(centres.shape[:2]) if weights is None else np.broadcast_to(
-        np.asarray(weights, dtype=float), centres.shape[:2]
+    w = (
+        np.ones(centres.shape[:2])
+        if weights is None
+        else np.broadcast_to(np.asarray(weights, dtype=float), centres.shape[:2])
     )
     if np.any(w < 0) or not np.all(np.isfinite(w)) or np.any(w.sum(axis=1) <= 0):
         raise RegistrationError("registration weights must be finite, non-negative, not all 0")
@@ -126,8 +127,9 @@ def register(
     b = balls[None] - balls_mean[:, None]
     c = centres - centres_mean[:, None]
     cov = np.swapaxes(c * w_norm[..., None], 1, 2) @ b  # sum_k w_k c_k b_k^T
-    scale = 0.5 * (np.einsum("nk,nki,nki->n", w_norm, b, b)
-                   + np.einsum("nk,nki,nki->n", w_norm, c, c))
+    scale = 0.5 * (
+        np.einsum("nk,nki,nki->n", w_norm, b, b) + np.einsum("nk,nki,nki->n", w_norm, c, c)
+    )
     rot = _rotations(cov, scale)
     transforms = np.zeros((centres.shape[0], 4, 4))
     transforms[:, :3, :3] = rot
@@ -153,8 +155,17 @@ def _kabsch(cov: FloatArray) -> FloatArray:
 _SEPARATION = 0.05
 
 
-def _det3(a: FloatArray, b: FloatArray, c: FloatArray, d: FloatArray, e: FloatArray,
-          f: FloatArray, g: FloatArray, h: FloatArray, i: FloatArray) -> FloatArray:
+def _det3(
+    a: FloatArray,
+    b: FloatArray,
+    c: FloatArray,
+    d: FloatArray,
+    e: FloatArray,
+    f: FloatArray,
+    g: FloatArray,
+    h: FloatArray,
+    i: FloatArray,
+) -> FloatArray:
     return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
 
 
@@ -175,15 +186,22 @@ def _rotations(cov: FloatArray, scale: FloatArray) -> FloatArray:
     # s[i, j] = sum_k w_k b_i c_j (the source b onto c), as contiguous arrays
     sxx, syx, szx, sxy, syy, szy, sxz, syz, szz = np.ascontiguousarray(cov.reshape(-1, 9).T)
     diagonal = [sxx + syy + szz, sxx - syy - szz, -sxx + syy - szz, -sxx - syy + szz]
-    upper = {(0, 1): syz - szy, (0, 2): szx - sxz, (0, 3): sxy - syx,
-             (1, 2): sxy + syx, (1, 3): szx + sxz, (2, 3): syz + szy}
+    upper = {
+        (0, 1): syz - szy,
+        (0, 2): szx - sxz,
+        (0, 3): sxy - syx,
+        (1, 2): sxy + syx,
+        (1, 3): szx + sxz,
+        (2, 3): syz + szy,
+    }
     k = np.empty((cov.shape[0], 4, 4))
     for i in range(4):
         k[:, i, i] = diagonal[i]
     for (i, j), value in upper.items():
         k[:, i, j] = k[:, j, i] = value
-    m = [[diagonal[i] if i == j else upper[min(i, j), max(i, j)] for j in range(4)]
-         for i in range(4)]
+    m = [
+        [diagonal[i] if i == j else upper[min(i, j), max(i, j)] for j in range(4)] for i in range(4)
+    ]
     c2 = -2.0 * np.einsum("nij,nij->n", cov, cov)
     c1 = -8.0 * _det3(sxx, sxy, sxz, syx, syy, syz, szx, szy, szz)
 
@@ -192,14 +210,19 @@ def _rotations(cov: FloatArray, scale: FloatArray) -> FloatArray:
         cols = [c for c in range(4) if c != j]
         return _det3(*(m[r][c] for r in rows for c in cols))
 
-    c0 = m[0][0] * minor(0, 0) - m[0][1] * minor(0, 1) + m[0][2] * minor(0, 2) \
+    c0 = (
+        m[0][0] * minor(0, 0)
+        - m[0][1] * minor(0, 1)
+        + m[0][2] * minor(0, 2)
         - m[0][3] * minor(0, 3)
+    )
     lam = scale.astype(float, copy=True)
     with np.errstate(divide="ignore", invalid="ignore"):
         converged = np.zeros(lam.size, dtype=bool)
         for _ in range(60):
-            step = (((lam * lam + c2) * lam + c1) * lam + c0) / \
-                ((4.0 * lam * lam + 2.0 * c2) * lam + c1)
+            step = (((lam * lam + c2) * lam + c1) * lam + c0) / (
+                (4.0 * lam * lam + 2.0 * c2) * lam + c1
+            )
             lam = np.where(converged, lam, lam - step)
             converged |= np.abs(step) <= 4 * np.finfo(float).eps * np.abs(lam)
             if converged.all():
@@ -300,8 +323,9 @@ def check_distances(
     worst = np.abs(deviation).max(axis=1)
     text = [""] * centres.shape[0]
     for step in np.flatnonzero(worst > tolerance_mm):
-        text[step] = _diagnose(measured[step], nominal, centres[step], pairs, list(names),
-                               tolerance_mm)
+        text[step] = _diagnose(
+            measured[step], nominal, centres[step], pairs, list(names), tolerance_mm
+        )
     return DistanceCheck(deviation, pairs, worst, text)
 
 
@@ -313,11 +337,15 @@ def _diagnose(
     names: list[str],
     tolerance_mm: float,
 ) -> str:
-    for factor, what in ((1.0 / MM_PER_INCH, "millimetre values read as inches"),
-                         (MM_PER_INCH, "inch values read as millimetres")):
+    for factor, what in (
+        (1.0 / MM_PER_INCH, "millimetre values read as inches"),
+        (MM_PER_INCH, "inch values read as millimetres"),
+    ):
         if np.abs(measured * factor - nominal).max() <= tolerance_mm * max(factor, 1.0):
-            return (f"inter-ball distances are {1 / factor:g} times the balls file: "
-                    f"{what}? (check UNITS of the measurement file)")
+            return (
+                f"inter-ball distances are {1 / factor:g} times the balls file: "
+                f"{what}? (check UNITS of the measurement file)"
+            )
     k = len(names)
     if k <= 6:
         for perm in permutations(range(k)):
@@ -328,8 +356,10 @@ def _diagnose(
             if np.abs(relabelled - nominal).max() <= tolerance_mm:
                 moved = [a for a in range(k) if perm[a] != a]
                 if len(moved) == 2:
-                    return (f"balls {names[moved[0]]} and {names[moved[1]]} look swapped "
-                            "(their distances match the balls file when exchanged)")
+                    return (
+                        f"balls {names[moved[0]]} and {names[moved[1]]} look swapped "
+                        "(their distances match the balls file when exchanged)"
+                    )
                 mapping = ", ".join(f"{names[perm[a]]} is {names[a]}" for a in moved)
                 return f"balls look mislabelled ({mapping} would match the balls file)"
     per_ball = np.zeros(k)
@@ -338,6 +368,8 @@ def _diagnose(
         per_ball[b] += dev
     worst = int(np.argmax(per_ball))
     off = np.abs(measured - nominal).max()
-    return (f"inter-ball distances deviate by up to {off * 1e3:.1f} um from the balls file; "
-            f"ball {names[worst]} is the likeliest culprit (wrong ball probed, bad fit, or "
-            "a balls file that does not match this platform)")
+    return (
+        f"inter-ball distances deviate by up to {off * 1e3:.1f} um from the balls file; "
+        f"ball {names[worst]} is the likeliest culprit (wrong ball probed, bad fit, or "
+        "a balls file that does not match this platform)"
+    )

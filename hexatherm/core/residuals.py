@@ -36,8 +36,7 @@ import numpy.typing as npt
 from scipy import stats
 
 from hexatherm.core.diagnosis import PoseResiduals, time_blocks
-
-FloatArray = npt.NDArray[np.float64]
+from hexatherm.typing import FloatArray
 
 #: names and units of the six pose components (residuals in um and urad)
 POSE_COMPONENTS = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
@@ -191,8 +190,9 @@ def linear_trend(times_s: npt.ArrayLike, y: npt.ArrayLike) -> Trend:
     s2 = float(np.sum((y - fitted) ** 2)) / (n - 2)
     se = float(np.sqrt(s2 / sxx))
     if se == 0.0:
-        return Trend(slope, 0.0, float("inf") if slope else float("nan"),
-                     0.0 if slope else float("nan"))
+        return Trend(
+            slope, 0.0, float("inf") if slope else float("nan"), 0.0 if slope else float("nan")
+        )
     t_value = slope / se
     return Trend(slope, se, t_value, float(2 * stats.t.sf(abs(t_value), n - 2)))
 
@@ -366,17 +366,27 @@ def summarize(
             part_rms[b] = _rms(step_rms[sel])
             part_span[b] = times[sel].min(), times[sel].max()
 
-    order_worst = np.argsort(-step_rms, kind="stable")[:max(0, n_worst)]
-    worst = tuple(WorstStep(int(i), str(labels[i]), str(kinds[i]), float(times[i]),
-                            float(step_rms[i])) for i in order_worst)
+    order_worst = np.argsort(-step_rms, kind="stable")[: max(0, n_worst)]
+    worst = tuple(
+        WorstStep(int(i), str(labels[i]), str(kinds[i]), float(times[i]), float(step_rms[i]))
+        for i in order_worst
+    )
 
     order = np.argsort(times, kind="stable")
     tests = []
     series = [(POSE_COMPONENTS[j], POSE_UNITS[j], pose[:, j], mean_temp) for j in range(6)]
     series += [(LEG_NAMES[j], "um", legs[:, j], leg_temp[:, j]) for j in range(6)]
     for name, unit, y, temperature in series:
-        tests.append(SeriesTests(name, unit, ljung_box(y[order]), linear_trend(times, y),
-                                 spearman(times, y), spearman(temperature, y)))
+        tests.append(
+            SeriesTests(
+                name,
+                unit,
+                ljung_box(y[order]),
+                linear_trend(times, y),
+                spearman(times, y),
+                spearman(temperature, y),
+            )
+        )
 
     return ResidualSummary(
         n_steps=n,

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-FloatArray = npt.NDArray[np.float64]
+from hexatherm.typing import FloatArray
 
 #: (name, material, cte per K, length in mm or None for the variable segment)
 SegmentSpec = tuple[str, str, float, float | None]

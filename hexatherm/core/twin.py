@@ -45,8 +45,7 @@ from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
 from hexatherm.core.registration import register
 from hexatherm.core.thermal import LegThermalModel
-
-FloatArray = npt.NDArray[np.float64]
+from hexatherm.typing import FloatArray
 
 
 @dataclass(frozen=True)
@@ -128,8 +127,9 @@ def predict_steps(
     legs = _leg_model(hexapod)
     temps = np.asarray(leg_temperature_C, dtype=float)
     segments = np.broadcast_to(temps[..., None], temps.shape + (legs.variable.shape[1],))
-    return _solve(hexapod, plan, temps, segments, None, (), balls_mm, origin2cmm, None, None, None,
-                  True)
+    return _solve(
+        hexapod, plan, temps, segments, None, (), balls_mm, origin2cmm, None, None, None, True
+    )
 
 
 def predict(
@@ -418,8 +418,9 @@ def twin_corrected(
     """
     frames = np.asarray(platform2cmm, dtype=float)
     origin = plan.origin_index
-    steps = predict(hexapod, plan, times_s, log, balls_mm, frames[origin], effects,
-                    ball_times_s=ball_times_s)
+    steps = predict(
+        hexapod, plan, times_s, log, balls_mm, frames[origin], effects, ball_times_s=ball_times_s
+    )
     predicted = register(steps.measured_centres_cmm_mm, balls_mm).platform2cmm
     seen = invert_transform(predicted[origin]) @ predicted
     measured = invert_transform(frames[origin]) @ frames

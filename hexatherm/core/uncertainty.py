@@ -43,8 +43,8 @@ from hexatherm.core.method import interpolated_growth, target_growth
 from hexatherm.core.plan import Plan
 from hexatherm.core.registration import register
 from hexatherm.core.twin import cap_directions
+from hexatherm.typing import FloatArray
 
-FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
 
 #: outputs per target: conventional pose then corrected pose
@@ -98,8 +98,10 @@ class PoseChain:
         lead, (n, k) = c.shape[:-3], c.shape[-3:-1]
         flat = c.reshape(-1, n, k, 3)
         frames = self.frames(flat)
-        pose = pose_from_transform(invert_transform(frames[:, self.plan.origin_index])[:, None]
-                                   @ frames, self.hexapod.convention)  # (b, n, 6)
+        pose = pose_from_transform(
+            invert_transform(frames[:, self.plan.origin_index])[:, None] @ frames,
+            self.hexapod.convention,
+        )  # (b, n, 6)
         out = self.outputs_from_poses(pose)
         return out.reshape(lead + out.shape[1:])
 
@@ -107,10 +109,12 @@ class PoseChain:
         """Platform frames in the CMM (..., N, 4, 4) of centres (..., N, k, 3)."""
         n, k = centres_mm.shape[-3:-1]
         flat = centres_mm.reshape(-1, k, 3)
-        w = None if self.weights is None else np.broadcast_to(
-            self.weights, centres_mm.shape[:-1]).reshape(-1, k)
-        return register(flat, self.balls_mm, w).platform2cmm.reshape(
-            centres_mm.shape[:-2] + (4, 4))
+        w = (
+            None
+            if self.weights is None
+            else np.broadcast_to(self.weights, centres_mm.shape[:-1]).reshape(-1, k)
+        )
+        return register(flat, self.balls_mm, w).platform2cmm.reshape(centres_mm.shape[:-2] + (4, 4))
 
     def outputs_from_poses(self, pose: FloatArray) -> FloatArray:
         """Outputs (b, M, 12) from the poses (b, N, 6) of every step relative to O."""
@@ -124,14 +128,19 @@ class PoseChain:
         if legs is None:
             raise ValueError("the hexapod has no leg model")
         q_r0 = q[:, self.plan.reference_indices[0]]
-        reference_growth = interpolated_growth(q, q_r0, self.before_index, self.after_index,
-                                               self.weight_after)
+        reference_growth = interpolated_growth(
+            q, q_r0, self.before_index, self.after_index, self.weight_after
+        )
         q_s = q[:, targets]
         corrected_q = q_s - target_growth(legs, reference_growth, q_r0[:, None], q_s)
-        start = pose[:, targets] if self.initial_poses is None else np.broadcast_to(
-            self.initial_poses, (b, m, 6))
-        corrected = self.hexapod.fgm(corrected_q.reshape(-1, 6),
-                                     initial_poses=start.reshape(-1, 6)).reshape(b, m, 6)
+        start = (
+            pose[:, targets]
+            if self.initial_poses is None
+            else np.broadcast_to(self.initial_poses, (b, m, 6))
+        )
+        corrected = self.hexapod.fgm(
+            corrected_q.reshape(-1, 6), initial_poses=start.reshape(-1, 6)
+        ).reshape(b, m, 6)
         return np.concatenate([pose[:, targets], corrected], axis=-1)
 
 
@@ -139,7 +148,7 @@ def output_difference(a: npt.ArrayLike, b: npt.ArrayLike) -> FloatArray:
     """``a - b`` for outputs (..., 12), angles wrapped into [-180, 180) deg."""
     d = np.asarray(a, dtype=float) - np.asarray(b, dtype=float)
     for start in (3, 9):
-        d[..., start:start + 3] = (d[..., start:start + 3] + 180.0) % 360.0 - 180.0
+        d[..., start : start + 3] = (d[..., start : start + 3] + 180.0) % 360.0 - 180.0
     return d
 
 
@@ -207,8 +216,9 @@ def linear_covariance(
             moved[ball, axis, 1, :, ball, axis] -= step_mm
     moved_frames = chain.frames(moved).reshape(3 * k, 2, n, 4, 4)
     own = pose_from_transform(o2cmm_inv @ moved_frames, hexapod.convention)
-    by_origin = pose_from_transform(invert_transform(moved_frames[:, :, origin])[:, :, None]
-                                    @ frames, hexapod.convention)
+    by_origin = pose_from_transform(
+        invert_transform(moved_frames[:, :, origin])[:, :, None] @ frames, hexapod.convention
+    )
 
     def derivative(plus_minus: FloatArray) -> FloatArray:  # (3k, 2, N, 6) -> (N, 6, 3k)
         d = plus_minus[:, 0] - plus_minus[:, 1]
@@ -238,16 +248,24 @@ def linear_covariance(
     w_before = np.where(before >= 0, 1.0 - w_after, 0.0)[:, None]
     w_after_used = np.where(after >= 0, w_after, 0.0)[:, None]
     # coefficient of dq of each part: O (none: through the others), R0, S, before, after
-    coef = np.stack([np.zeros_like(d_s), d_r0 - d_growth * (w_before + w_after_used), d_s,
-                     d_growth * w_before, d_growth * w_after_used], axis=1)  # (M, 5, 6)
-    steps = np.column_stack([np.full(m, origin), np.full(m, r0), targets,
-                             before, after]).astype(np.intp)  # (M, 5)
+    coef = np.stack(
+        [
+            np.zeros_like(d_s),
+            d_r0 - d_growth * (w_before + w_after_used),
+            d_s,
+            d_growth * w_before,
+            d_growth * w_after_used,
+        ],
+        axis=1,
+    )  # (M, 5, 6)
+    steps = np.column_stack([np.full(m, origin), np.full(m, r0), targets, before, after]).astype(
+        np.intp
+    )  # (M, 5)
     used = (steps >= 0) & (np.arange(5) != 0)
     at = np.maximum(steps, 0)
     # 4. dq_corr and the outputs by each part's centres: (M, 5, 12, 3k)
     dq_corr = np.where(used[..., None, None], coef[..., None] * dq_own[at], 0.0)
-    dq_corr[:, 0] = np.einsum("mpl,mplj->mlj", np.where(used[..., None], coef, 0.0),
-                              dq_origin[at])
+    dq_corr[:, 0] = np.einsum("mpl,mplj->mlj", np.where(used[..., None], coef, 0.0), dq_origin[at])
     jac_fgm_inv = np.linalg.inv(hexapod.jacobian(chain.outputs_from_poses(pose[None])[0, :, 6:]))
     jac = np.zeros((m, 5, OUTPUTS_PER_TARGET, 3 * k))
     jac[:, 0, :6] = dpose_origin[targets]
@@ -306,8 +324,9 @@ def monte_carlo_covariance(
     return covariance, nominal + mean
 
 
-def draw_centres(centres_mm: FloatArray, root: FloatArray, rng: np.random.Generator,
-                 size: int) -> FloatArray:
+def draw_centres(
+    centres_mm: FloatArray, root: FloatArray, rng: np.random.Generator, size: int
+) -> FloatArray:
     """``size`` draws (size, N, k, 3) of normal centres: mean ``centres_mm`` (N, k, 3),
     covariance ``root root^T`` (``root`` from :func:`covariance_root`)."""
     z = rng.standard_normal((size,) + centres_mm.shape)
@@ -321,8 +340,9 @@ def covariance_root(cov_mm2: npt.ArrayLike) -> FloatArray:
     return vectors * np.sqrt(np.clip(values, 0.0, None))[..., None, :]
 
 
-def cap_centre_covariance(n_points: int, cap_angle_deg: float, sigma_mm: float,
-                          free_radius: bool = True) -> FloatArray:
+def cap_centre_covariance(
+    n_points: int, cap_angle_deg: float, sigma_mm: float, free_radius: bool = True
+) -> FloatArray:
     """Covariance (3, 3) of a sphere fit's centre for points spread over an upper cap.
 
     The points are ``n_points`` directions over the cap around +Z (the

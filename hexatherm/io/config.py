@@ -53,8 +53,18 @@ def read_hexapod_text(text: str, path: str) -> Hexapod:
 
 def _hexapod_from_doc(doc: YamlDoc) -> Hexapod:
     doc.check_format(HEXAPOD_FORMAT)
-    doc.check_keys(["format", "name", "convention", "base_joints", "platform_joints", "stroke",
-                    "legs", "thermal_model"])
+    doc.check_keys(
+        [
+            "format",
+            "name",
+            "convention",
+            "base_joints",
+            "platform_joints",
+            "stroke",
+            "legs",
+            "thermal_model",
+        ]
+    )
     name = doc.string("name", default=Path(doc.path).stem)
     convention = doc.string("convention", default="symetrie", choices=CONVENTIONS)
     joints = {}
@@ -70,20 +80,28 @@ def _hexapod_from_doc(doc: YamlDoc) -> Hexapod:
             raise doc.error(f"expected [min, max] with min < max, got {stroke.tolist()}", "stroke")
     legs = _read_legs(doc)
     effects = _read_effects(doc)
-    hexapod = Hexapod(name=name, convention=convention,  # type: ignore[arg-type]
-                      base_joints_mm=joints["base_joints"],
-                      platform_joints_mm=joints["platform_joints"], stroke_mm=stroke,
-                      legs=legs, effects=effects)
+    hexapod = Hexapod(
+        name=name,
+        convention=convention,  # type: ignore[arg-type]
+        base_joints_mm=joints["base_joints"],
+        platform_joints_mm=joints["platform_joints"],
+        stroke_mm=stroke,
+        legs=legs,
+        effects=effects,
+    )
     q0 = hexapod.zero_pose_leg_length_mm()
     variable = q0 - legs.total_fixed_length_mm
     if np.any(variable <= 0):
         leg = int(np.argmax(variable <= 0))
         raise doc.error(
             f"leg {leg + 1}: the fixed segments ({legs.total_fixed_length_mm[leg]:.3f} mm) are "
-            f"longer than the leg in the zero pose ({q0[leg]:.3f} mm)", "legs")
+            f"longer than the leg in the zero pose ({q0[leg]:.3f} mm)",
+            "legs",
+        )
     if stroke is not None and np.any(hexapod.check_stroke(q0)):
-        raise doc.error(f"the zero pose leg lengths {q0.round(3).tolist()} are outside the stroke",
-                        "stroke")
+        raise doc.error(
+            f"the zero pose leg lengths {q0.round(3).tolist()} are outside the stroke", "stroke"
+        )
     return hexapod
 
 
@@ -98,8 +116,9 @@ def _read_segments(doc: YamlDoc, *keys: Any) -> list[SegmentSpec]:
         material = doc.string(*keys, j, "material", default="")
         cte = doc.number(*keys, j, "cte")
         length_value = doc.get(*keys, j, "length")
-        length = None if length_value == "variable" else doc.number(*keys, j, "length",
-                                                                    positive=True)
+        length = (
+            None if length_value == "variable" else doc.number(*keys, j, "length", positive=True)
+        )
         segments.append((name, material, cte, length))
     n_var = sum(1 for s in segments if s[3] is None)
     if n_var != 1:
@@ -120,7 +139,8 @@ def _read_legs(doc: YamlDoc) -> LegThermalModel:
     if not isinstance(per_leg, list) or len(per_leg) != 6:
         raise doc.error("expected six segment lists (legs 1..6)", "legs", "per_leg")
     return LegThermalModel.from_segments(
-        [_read_segments(doc, "legs", "per_leg", i) for i in range(6)], t_ref)
+        [_read_segments(doc, "legs", "per_leg", i) for i in range(6)], t_ref
+    )
 
 
 def _read_effects(doc: YamlDoc) -> tuple[dict[str, Any], ...]:
@@ -159,10 +179,17 @@ def hexapod_to_yaml(hexapod: Hexapod) -> str:
         for i in range(6):
             segs = []
             for j, name in enumerate(legs.names[i]):
-                length: Any = "variable" if legs.variable[i, j] else float(
-                    legs.fixed_length_mm[i, j])
-                segs.append({"name": name, "material": legs.materials[i][j],
-                             "cte": float(legs.cte_per_K[i, j]), "length": length})
+                length: Any = (
+                    "variable" if legs.variable[i, j] else float(legs.fixed_length_mm[i, j])
+                )
+                segs.append(
+                    {
+                        "name": name,
+                        "material": legs.materials[i][j],
+                        "cte": float(legs.cte_per_K[i, j]),
+                        "length": length,
+                    }
+                )
             per_leg.append(segs)
         leg_doc: dict[str, Any] = {"reference_temperature": legs.reference_temperature_C}
         if all(p == per_leg[0] for p in per_leg):
@@ -225,8 +252,7 @@ def read_balls(path: str | os.PathLike[str]) -> Balls:
         doc.check_keys(["compensated", "tip_diameter"], "probe")
         compensated = doc.get("probe", "compensated", default=True)
         if not isinstance(compensated, bool):
-            raise doc.error(f"expected true or false, got {compensated!r}", "probe",
-                            "compensated")
+            raise doc.error(f"expected true or false, got {compensated!r}", "probe", "compensated")
         tip = doc.number("probe", "tip_diameter", default=0.0)
         if tip < 0:
             raise doc.error("must not be negative", "probe", "tip_diameter")
@@ -237,11 +263,14 @@ def balls_to_yaml(balls: Balls) -> str:
     """The balls file text of ``balls``."""
     doc = {
         "format": BALLS_FORMAT,
-        "balls": {n: {"centre": c.tolist(), "diameter": float(d)}
-                  for n, c, d in zip(balls.names, balls.centres_mm, balls.diameters_mm,
-                                     strict=True)},
-        "probe": {"compensated": balls.probe_compensated,
-                  "tip_diameter": float(balls.tip_diameter_mm)},
+        "balls": {
+            n: {"centre": c.tolist(), "diameter": float(d)}
+            for n, c, d in zip(balls.names, balls.centres_mm, balls.diameters_mm, strict=True)
+        },
+        "probe": {
+            "compensated": balls.probe_compensated,
+            "tip_diameter": float(balls.tip_diameter_mm),
+        },
     }
     return _dump(doc)
 
@@ -286,15 +315,20 @@ def _plan_from_doc(doc: YamlDoc) -> Plan:
         kind = doc.string("steps", i, "kind", choices=STEP_KINDS)
         pose = doc.vector("steps", i, "pose", size=6)
         if kind == "reference" and np.abs(np.subtract(pose, reference)).max() > 1e-9:
-            raise doc.error(f"reference step pose {pose} differs from reference_pose {reference}",
-                            "steps", i, "pose")
+            raise doc.error(
+                f"reference step pose {pose} differs from reference_pose {reference}",
+                "steps",
+                i,
+                "pose",
+            )
         steps.append((str(label), kind, pose))
     try:
         return Plan.from_steps(steps, reference_pose=reference, points_per_ball=int(ppb))
     except StepError as exc:
         index = exc.index
-        raise doc.error(str(exc), *(("steps", index) if index is not None else ("steps",))) \
-            from None
+        raise doc.error(
+            str(exc), *(("steps", index) if index is not None else ("steps",))
+        ) from None
 
 
 #: the plan layout that :func:`_read_plan_fast` reads: lines of a top-level key each
@@ -310,7 +344,8 @@ _PLAN_KEY_LINES = {
 }
 _PLAN_STEP_LINE = re.compile(
     rf"( *)- +\{{ *label: +([A-Za-z0-9][A-Za-z0-9-]*) *, *kind: +(origin|reference|target) *,"
-    rf" *pose: +{_POSE} *\}}{_END}")
+    rf" *pose: +{_POSE} *\}}{_END}"
+)
 _BLANK_LINE = re.compile(r" *(?:#.*)?")
 #: characters that the fast reader leaves to YAML (tabs, controls, CR of old Macs)
 _IRREGULAR = re.compile(r"[^\n\x20-\x7e]")
@@ -377,11 +412,13 @@ def _read_plan_fast(text: str) -> Plan | None:
     is_reference = np.array(kinds) == "reference"
     if np.any(np.abs(poses[is_reference] - reference).max(axis=1) > 1e-9):
         return None
-    ppb = (int(found["points_per_ball"][1]) if "points_per_ball" in found
-           else DEFAULT_POINTS_PER_BALL)
+    ppb = (
+        int(found["points_per_ball"][1]) if "points_per_ball" in found else DEFAULT_POINTS_PER_BALL
+    )
     try:
-        return Plan.from_steps(zip(labels, kinds, poses, strict=True),
-                               reference_pose=reference, points_per_ball=ppb)
+        return Plan.from_steps(
+            zip(labels, kinds, poses, strict=True), reference_pose=reference, points_per_ball=ppb
+        )
     except StepError:
         return None
 
@@ -464,8 +501,19 @@ def read_session(path: str | os.PathLike[str]) -> Session:
         path = path / "session.yaml"
     doc = YamlDoc.load(path)
     doc.check_format(SESSION_FORMAT)
-    doc.check_keys(["format", "name", "hexapod", "balls", "plan", "measurements",
-                    "temperatures", "cmm", "quality"])
+    doc.check_keys(
+        [
+            "format",
+            "name",
+            "hexapod",
+            "balls",
+            "plan",
+            "measurements",
+            "temperatures",
+            "cmm",
+            "quality",
+        ]
+    )
     name = doc.string("name", default=path.parent.name)
 
     def existing(*keys: Any) -> Path:
@@ -487,8 +535,17 @@ def read_session(path: str | os.PathLike[str]) -> Session:
     temperatures = None
     if doc.get("temperatures", default=None) is not None:
         temperatures = existing("temperatures")
-    return Session(path, name, hexapod, balls, plan, measurements, temperatures,
-                   _read_cmm(doc), _read_quality(doc))
+    return Session(
+        path,
+        name,
+        hexapod,
+        balls,
+        plan,
+        measurements,
+        temperatures,
+        _read_cmm(doc),
+        _read_quality(doc),
+    )
 
 
 def _read_quality(doc: YamlDoc) -> dict[str, float]:
@@ -503,8 +560,9 @@ def _read_quality(doc: YamlDoc) -> dict[str, float]:
     for name in doc.get("quality"):
         value = doc.get("quality", name)
         if isinstance(value, bool) or not isinstance(value, int | float) or not value >= 0:
-            raise doc.error(f"expected a number >= 0 (.inf turns the check off), got {value!r}",
-                            "quality", name)
+            raise doc.error(
+                f"expected a number >= 0 (.inf turns the check off), got {value!r}", "quality", name
+            )
         limits[name] = float(value)
     return limits
 
@@ -516,14 +574,16 @@ def _read_cmm(doc: YamlDoc) -> CmmNoise | None:
     doc.check_keys(["point_noise_um", "mpe_um", "points_per_ball", "cap_angle_deg"], "cmm")
     given = [k for k in ("point_noise_um", "mpe_um") if doc.get("cmm", k, default=None) is not None]
     if len(given) != 1:
-        raise doc.error("give point_noise_um or mpe_um (sigma = MPE/2), exactly one", "cmm",
-                        *given[1:])
+        raise doc.error(
+            "give point_noise_um or mpe_um (sigma = MPE/2), exactly one", "cmm", *given[1:]
+        )
     sigma = doc.number("cmm", given[0], positive=True)
     if given[0] == "mpe_um":
         sigma /= 2.0
     points = doc.get("cmm", "points_per_ball", default=None)
-    if points is not None and (isinstance(points, bool) or not isinstance(points, int)
-                               or points < 4):
+    if points is not None and (
+        isinstance(points, bool) or not isinstance(points, int) or points < 4
+    ):
         raise doc.error(f"expected a whole number >= 4, got {points!r}", "cmm", "points_per_ball")
     cap = doc.number("cmm", "cap_angle_deg", default=70.0, positive=True)
     if cap > 180.0:
@@ -531,15 +591,27 @@ def _read_cmm(doc: YamlDoc) -> CmmNoise | None:
     return CmmNoise(sigma, points, cap)
 
 
-def session_to_yaml(name: str, hexapod: str, balls: str, plan: str, measurements: list[str],
-                    temperatures: str | None = None, cmm: dict[str, float] | None = None
-                    ) -> str:
+def session_to_yaml(
+    name: str,
+    hexapod: str,
+    balls: str,
+    plan: str,
+    measurements: list[str],
+    temperatures: str | None = None,
+    cmm: dict[str, float] | None = None,
+) -> str:
     """The session file text (paths relative to the session file).
 
     ``cmm`` is the optional ``cmm:`` mapping, e.g. ``{"mpe_um": 1.0}``.
     """
-    doc: dict[str, Any] = {"format": SESSION_FORMAT, "name": name, "hexapod": hexapod,
-                           "balls": balls, "plan": plan, "measurements": list(measurements)}
+    doc: dict[str, Any] = {
+        "format": SESSION_FORMAT,
+        "name": name,
+        "hexapod": hexapod,
+        "balls": balls,
+        "plan": plan,
+        "measurements": list(measurements),
+    }
     if temperatures is not None:
         doc["temperatures"] = temperatures
     if cmm:
@@ -573,8 +645,18 @@ def write_text(path: str | os.PathLike[str], text: str) -> None:
 
 
 __all__ = [
-    "Balls", "CmmNoise", "Session", "read_hexapod", "read_balls", "read_plan", "read_session",
-    "hexapod_to_yaml", "balls_to_yaml", "plan_to_yaml", "session_to_yaml", "InputError",
+    "Balls",
+    "CmmNoise",
+    "Session",
+    "read_hexapod",
+    "read_balls",
+    "read_plan",
+    "read_session",
+    "hexapod_to_yaml",
+    "balls_to_yaml",
+    "plan_to_yaml",
+    "session_to_yaml",
+    "InputError",
 ]
 
 
@@ -641,5 +723,12 @@ def read_datums(path: str | os.PathLike[str]) -> Datums:
         if not isinstance(compensated, bool):
             raise doc.error("expected true or false", "probe", "compensated")
         tip = doc.number("probe", "tip_diameter", default=0.0)
-    return Datums(step, names["plane"], (names["bore 1"], names["bore 2"]), offset, diameters,
-                  compensated, tip)
+    return Datums(
+        step,
+        names["plane"],
+        (names["bore 1"], names["bore 2"]),
+        offset,
+        diameters,
+        compensated,
+        tip,
+    )

@@ -60,15 +60,21 @@ def _frame(text: str, path: str) -> pd.DataFrame:
     if not text.strip():
         raise InputError("empty file: expected a header line", path=path, line=1)
     try:
-        frame = pd.read_csv(io.StringIO(text), dtype=str, keep_default_na=False,
-                            skip_blank_lines=False, skipinitialspace=True,
-                            engine="c")
+        frame = pd.read_csv(
+            io.StringIO(text),
+            dtype=str,
+            keep_default_na=False,
+            skip_blank_lines=False,
+            skipinitialspace=True,
+            engine="c",
+        )
     except pd.errors.ParserError as exc:
         found = re.search(r"Expected (\d+) fields in line (\d+), saw (\d+)", str(exc))
         if found:
             expected, line, saw = (int(g) for g in found.groups())
-            raise InputError(f"expected {expected} comma-separated fields, found {saw}",
-                             path=path, line=line) from None
+            raise InputError(
+                f"expected {expected} comma-separated fields, found {saw}", path=path, line=line
+            ) from None
         raise InputError(f"malformed CSV: {exc}", path=path) from None
     except (ValueError, pd.errors.EmptyDataError) as exc:
         raise InputError(f"malformed CSV: {exc}", path=path, line=1) from None
@@ -83,8 +89,9 @@ def _drop_blank(frame: pd.DataFrame) -> pd.DataFrame:
     return frame[~blank.to_numpy()]
 
 
-def _numbers(frame: pd.DataFrame, column: str, path: str, allow_empty: bool = False
-             ) -> npt.NDArray[np.float64]:
+def _numbers(
+    frame: pd.DataFrame, column: str, path: str, allow_empty: bool = False
+) -> npt.NDArray[np.float64]:
     text = frame[column]
     values = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
     bad = ~np.isfinite(values)
@@ -92,8 +99,12 @@ def _numbers(frame: pd.DataFrame, column: str, path: str, allow_empty: bool = Fa
         bad &= (text != "").to_numpy()
     if np.any(bad):
         row = int(np.argmax(bad))
-        raise InputError(f"not a finite number: {text.iloc[row]!r}", path=path,
-                         line=int(frame.index[row]), field=column)
+        raise InputError(
+            f"not a finite number: {text.iloc[row]!r}",
+            path=path,
+            line=int(frame.index[row]),
+            field=column,
+        )
     return values
 
 
@@ -112,16 +123,23 @@ def _times(frame: pd.DataFrame, path: str) -> tuple[npt.NDArray[np.float64], Tim
             return numeric, "seconds"
     if np.any(is_number):
         row = int(np.argmax(is_number))
-        raise InputError(f"time {text.iloc[row]!r} is a number of seconds but other rows are "
-                         "ISO 8601 timestamps: use one kind in a file", path=path,
-                         line=int(frame.index[row]), field="time")
+        raise InputError(
+            f"time {text.iloc[row]!r} is a number of seconds but other rows are "
+            "ISO 8601 timestamps: use one kind in a file",
+            path=path,
+            line=int(frame.index[row]),
+            field="time",
+        )
     stamps = pd.to_datetime(text, errors="coerce", utc=True, format="ISO8601")
     bad = stamps.isna().to_numpy()
     if np.any(bad):
         row = int(np.argmax(bad))
-        raise InputError(f"not an ISO 8601 timestamp or a number of seconds: "
-                         f"{text.iloc[row]!r}", path=path, line=int(frame.index[row]),
-                         field="time")
+        raise InputError(
+            f"not an ISO 8601 timestamp or a number of seconds: {text.iloc[row]!r}",
+            path=path,
+            line=int(frame.index[row]),
+            field="time",
+        )
     seconds = (stamps - pd.Timestamp(0, tz="UTC")).dt.total_seconds().to_numpy(dtype=float)
     return seconds, "iso"
 
@@ -129,12 +147,19 @@ def _times(frame: pd.DataFrame, path: str) -> tuple[npt.NDArray[np.float64], Tim
 def _check_header(frame: pd.DataFrame, path: str, extras: tuple[str, ...]) -> None:
     columns = list(frame.columns)
     if tuple(columns[:6]) != BASE_COLUMNS:
-        raise InputError(f"header must start with {','.join(BASE_COLUMNS)}, got "
-                         f"{','.join(columns)}", path=path, line=1)
+        raise InputError(
+            f"header must start with {','.join(BASE_COLUMNS)}, got {','.join(columns)}",
+            path=path,
+            line=1,
+        )
     for column in columns[6:]:
         if column not in extras:
-            raise InputError(f"unknown column {column!r}; allowed after the first six: "
-                             f"{', '.join(extras)}", path=path, line=1, field=column)
+            raise InputError(
+                f"unknown column {column!r}; allowed after the first six: {', '.join(extras)}",
+                path=path,
+                line=1,
+                field=column,
+            )
     if len(set(columns)) != len(columns):
         raise InputError("duplicate column in header", path=path, line=1)
 
@@ -144,8 +169,12 @@ def _names(frame: pd.DataFrame, column: str, path: str) -> npt.NDArray[np.str_]:
     ok = np.array([bool(NAME_PATTERN.fullmatch(v)) for v in values], dtype=bool)
     if not np.all(ok):
         row = int(np.argmax(~ok))
-        raise InputError(f"{str(values[row])!r} must match [A-Za-z0-9-]+", path=path,
-                         line=int(frame.index[row]), field=column)
+        raise InputError(
+            f"{str(values[row])!r} must match [A-Za-z0-9-]+",
+            path=path,
+            line=int(frame.index[row]),
+            field=column,
+        )
     return values
 
 
@@ -180,8 +209,12 @@ def read_measurement_csv(path: str | os.PathLike[str], kind: RecordKind | None =
     extras = CENTRE_EXTRA if kind == "centres" else POINT_EXTRA
     misplaced = [c for c in frame.columns[6:] if c not in extras]
     if misplaced:
-        raise InputError(f"column {misplaced[0]!r} does not belong in a {kind} file",
-                         path=path, line=1, field=misplaced[0])
+        raise InputError(
+            f"column {misplaced[0]!r} does not belong in a {kind} file",
+            path=path,
+            line=1,
+            field=misplaced[0],
+        )
     label, ball = _names(frame, "label", path), _names(frame, "ball", path)
     xyz = np.column_stack([_numbers(frame, c, path) for c in ("x", "y", "z")])
     time, time_kind = _times(frame, path)
@@ -194,9 +227,13 @@ def read_measurement_csv(path: str | os.PathLike[str], kind: RecordKind | None =
         if np.any(dup):
             row = int(np.argmax(dup))
             first = int(np.argmax((keys == keys.iloc[row]).to_numpy()))
-            raise InputError(f"duplicate centre for step {label[row]} ball {ball[row]} "
-                             f"(also on line {lines[first]})", path=path, line=int(lines[row]),
-                             field="label")
+            raise InputError(
+                f"duplicate centre for step {label[row]} ball {ball[row]} "
+                f"(also on line {lines[first]})",
+                path=path,
+                line=int(lines[row]),
+                field="label",
+            )
         if "diameter" in frame.columns:
             diameter = _numbers(frame, "diameter", path, allow_empty=True)
         for column in ("form_um", "n", "u_um"):
@@ -206,8 +243,19 @@ def read_measurement_csv(path: str | os.PathLike[str], kind: RecordKind | None =
         ijk = np.column_stack([_numbers(frame, c, path, allow_empty=True) for c in POINT_EXTRA])
     elif any(c in frame.columns for c in POINT_EXTRA):
         raise InputError("give all of i, j, k or none", path=path, line=1)
-    return Records(path=path, kind=kind, label=label, ball=ball, xyz_mm=xyz, time_s=time,
-                   time_kind=time_kind, line=lines, diameter_mm=diameter, ijk=ijk, extra=extra)
+    return Records(
+        path=path,
+        kind=kind,
+        label=label,
+        ball=ball,
+        xyz_mm=xyz,
+        time_s=time,
+        time_kind=time_kind,
+        line=lines,
+        diameter_mm=diameter,
+        ijk=ijk,
+        extra=extra,
+    )
 
 
 def _fast_measurement_csv(text: str, path: str, kind: RecordKind | None) -> Records | None:
@@ -227,16 +275,28 @@ def _fast_measurement_csv(text: str, path: str, kind: RecordKind | None) -> Reco
         text = text.replace("\r\n", "\n").replace("\r", "\n")
     columns = text.partition("\n")[0].split(",")
     known = set(BASE_COLUMNS + CENTRE_EXTRA + POINT_EXTRA)
-    if (tuple(columns[:6]) != BASE_COLUMNS or not set(columns) <= known
-            or len(set(columns)) != len(columns)):
+    if (
+        tuple(columns[:6]) != BASE_COLUMNS
+        or not set(columns) <= known
+        or len(set(columns)) != len(columns)
+    ):
         return None
     numeric = [c for c in columns if c not in ("label", "ball", "time")]
     try:
-        frame = pd.read_csv(io.StringIO(text), dtype={"label": object, "ball": object,
-                                                     "time": object,
-                                                     **dict.fromkeys(numeric, float)},
-                            keep_default_na=False, na_values=dict.fromkeys(numeric, [""]),
-                            skipinitialspace=True, skip_blank_lines=False, engine="c")
+        frame = pd.read_csv(
+            io.StringIO(text),
+            dtype={
+                "label": object,
+                "ball": object,
+                "time": object,
+                **dict.fromkeys(numeric, float),
+            },
+            keep_default_na=False,
+            na_values=dict.fromkeys(numeric, [""]),
+            skipinitialspace=True,
+            skip_blank_lines=False,
+            engine="c",
+        )
     except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError):
         return None
     if frame.empty or list(frame.columns) != columns:
@@ -274,8 +334,19 @@ def _fast_measurement_csv(text: str, path: str, kind: RecordKind | None) -> Reco
     elif any(c in values for c in POINT_EXTRA):
         return None
     xyz = np.column_stack([values[c] for c in ("x", "y", "z")])
-    return Records(path=path, kind=kind, label=label, ball=ball, xyz_mm=xyz, time_s=time,
-                   time_kind=time_kind, line=lines, diameter_mm=diameter, ijk=ijk, extra=extra)
+    return Records(
+        path=path,
+        kind=kind,
+        label=label,
+        ball=ball,
+        xyz_mm=xyz,
+        time_s=time,
+        time_kind=time_kind,
+        line=lines,
+        diameter_mm=diameter,
+        ijk=ijk,
+        extra=extra,
+    )
 
 
 def centres_to_csv(records: Records) -> str:
@@ -285,9 +356,14 @@ def centres_to_csv(records: Records) -> str:
         times: object = [seconds_to_iso(t) for t in records.time_s]
     else:
         times = records.time_s
-    data: dict[str, object] = {"label": records.label, "ball": records.ball,
-                               "x": records.xyz_mm[:, 0], "y": records.xyz_mm[:, 1],
-                               "z": records.xyz_mm[:, 2], "time": times}
+    data: dict[str, object] = {
+        "label": records.label,
+        "ball": records.ball,
+        "x": records.xyz_mm[:, 0],
+        "y": records.xyz_mm[:, 1],
+        "z": records.xyz_mm[:, 2],
+        "time": times,
+    }
     if records.diameter_mm is not None:
         data["diameter"] = records.diameter_mm
     for column in ("form_um", "n", "u_um"):
@@ -328,8 +404,11 @@ def read_temperatures(path: str | os.PathLike[str]) -> Temperatures:
     columns = list(frame.columns)
     expected = ("time",) + LEG_COLUMNS
     if tuple(columns[:7]) != expected:
-        raise InputError(f"header must start with {','.join(expected)}, got {','.join(columns)}",
-                         path=path, line=1)
+        raise InputError(
+            f"header must start with {','.join(expected)}, got {','.join(columns)}",
+            path=path,
+            line=1,
+        )
     if len(set(columns)) != len(columns) or any(not c for c in columns):
         raise InputError("duplicate or empty column name in header", path=path, line=1)
     frame = _drop_blank(frame)
@@ -339,8 +418,7 @@ def read_temperatures(path: str | os.PathLike[str]) -> Temperatures:
     decreasing = np.diff(time) < 0
     if np.any(decreasing):
         row = int(np.argmax(decreasing)) + 1
-        raise InputError("time goes backwards", path=path, line=int(frame.index[row]),
-                         field="time")
+        raise InputError("time goes backwards", path=path, line=int(frame.index[row]), field="time")
     legs = np.column_stack([_numbers(frame, c, path) for c in LEG_COLUMNS])
     others = {c: _numbers(frame, c, path) for c in columns[7:]}
     return Temperatures(path, time, kind, legs, others)

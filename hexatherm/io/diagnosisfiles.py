@@ -35,9 +35,11 @@ from hexatherm.core.diagnosis import Candidate
 from hexatherm.diagnosing import DiagnosisResult
 from hexatherm.io.config import hexapod_to_yaml
 
-RMS_DEFINITION = ("root mean square over all steps, balls and axes of the measured minus the "
-                  "predicted ball centre, um; frame O fitted to all steps (held out: fitted on "
-                  "every other block of time, evaluated on the others)")
+RMS_DEFINITION = (
+    "root mean square over all steps, balls and axes of the measured minus the "
+    "predicted ball centre, um; frame O fitted to all steps (held out: fitted on "
+    "every other block of time, evaluated on the others)"
+)
 
 
 def _number(value: float) -> float | None:
@@ -53,9 +55,15 @@ def _candidate(candidate: Candidate) -> dict[str, Any]:
     if candidate.fit is not None and candidate.fit.effects:
         entry["parameters"] = _values(candidate.fit.effects[-1].values)
         entry["std_errors"] = _values(candidate.fit.std_errors[-1])
-    entry.update({"delta_bic": _number(candidate.delta_bic), "rms_um": _number(candidate.rms_um),
-                  "heldout_rms_um": _number(candidate.heldout_rms_um),
-                  "passes": candidate.passes, "note": candidate.note})
+    entry.update(
+        {
+            "delta_bic": _number(candidate.delta_bic),
+            "rms_um": _number(candidate.rms_um),
+            "heldout_rms_um": _number(candidate.heldout_rms_um),
+            "passes": candidate.passes,
+            "note": candidate.note,
+        }
+    )
     return entry
 
 
@@ -64,24 +72,28 @@ def diagnosis_document(result: DiagnosisResult) -> dict[str, Any]:
     diagnosis = result.diagnosis
     added = []
     final = zip(diagnosis.final.effects, diagnosis.final.std_errors, strict=True)
-    for round_, addition, (effect, errors) in zip(diagnosis.rounds, diagnosis.added, final,
-                                                  strict=False):
+    for round_, addition, (effect, errors) in zip(
+        diagnosis.rounds, diagnosis.added, final, strict=False
+    ):
         chosen = next(c for c in round_ if c.name == addition.effect.name)
-        added.append({
-            "effect": addition.effect.name,
-            "parameters": _values(effect.values),
-            "std_errors": _values(errors),
-            "delta_bic": _number(addition.delta_bic),
-            "rms_before_um": _number(addition.rms_before_um),
-            "rms_after_um": _number(addition.rms_after_um),
-            "heldout_rms_before_um": _number(addition.heldout_rms_before_um),
-            "heldout_rms_after_um": _number(addition.heldout_rms_after_um),
-            "alternatives": [{"effect": name, "delta_bic": _number(delta),
-                              "similarity": _number(cos)}
-                             for name, delta, cos in addition.alternatives],
-            "note": chosen.note,
-            "parameters_when_added": _values(addition.effect.values),
-        })
+        added.append(
+            {
+                "effect": addition.effect.name,
+                "parameters": _values(effect.values),
+                "std_errors": _values(errors),
+                "delta_bic": _number(addition.delta_bic),
+                "rms_before_um": _number(addition.rms_before_um),
+                "rms_after_um": _number(addition.rms_after_um),
+                "heldout_rms_before_um": _number(addition.heldout_rms_before_um),
+                "heldout_rms_after_um": _number(addition.heldout_rms_after_um),
+                "alternatives": [
+                    {"effect": name, "delta_bic": _number(delta), "similarity": _number(cos)}
+                    for name, delta, cos in addition.alternatives
+                ],
+                "note": chosen.note,
+                "parameters_when_added": _values(addition.effect.values),
+            }
+        )
     data = result.data
     return {
         "baseline_rms_um": _number(diagnosis.baseline_rms_um),
@@ -113,8 +125,9 @@ def diagnosed_hexapod_yaml(result: DiagnosisResult) -> str:
     return hexapod_to_yaml(dataclasses.replace(hexapod, effects=effects))
 
 
-def _format_effect(effect_values: dict[str, float], errors: dict[str, float],
-                   units: tuple[str, ...]) -> str:
+def _format_effect(
+    effect_values: dict[str, float], errors: dict[str, float], units: tuple[str, ...]
+) -> str:
     parts = []
     for (name, value), unit in zip(effect_values.items(), units, strict=True):
         parts.append(f"{name} = {value:.4g} ± {errors.get(name, float('nan')):.2g} {unit}")
@@ -125,8 +138,10 @@ def candidates_table(round_: tuple[Candidate, ...]) -> str:
     """One round's candidates as a fixed-width table."""
     lines = [f"  {'effect':<16} {'dBIC':>9} {'RMS_um':>8} {'heldout_um':>10}  passes  note"]
     for c in sorted(round_, key=lambda c: -c.delta_bic if math.isfinite(c.delta_bic) else 0):
-        lines.append(f"  {c.name:<16} {c.delta_bic:9.1f} {c.rms_um:8.3f} "
-                     f"{c.heldout_rms_um:10.3f}  {'yes' if c.passes else 'no ':<6}  {c.note}")
+        lines.append(
+            f"  {c.name:<16} {c.delta_bic:9.1f} {c.rms_um:8.3f} "
+            f"{c.heldout_rms_um:10.3f}  {'yes' if c.passes else 'no ':<6}  {c.note}"
+        )
     return "\n".join(lines)
 
 
@@ -148,8 +163,10 @@ def story(result: DiagnosisResult) -> str:
     for name, why in d.skipped.items():
         lines.append(f"not tried: {name}: {why}")
     for i, round_ in enumerate(d.rounds):
-        lines.append(f"round {i + 1}: each candidate fitted with the model "
-                     f"(ΔBIC > 10 and a lower held-out RMS to pass)")
+        lines.append(
+            f"round {i + 1}: each candidate fitted with the model "
+            f"(ΔBIC > 10 and a lower held-out RMS to pass)"
+        )
         lines.append(candidates_table(round_))
         if i < len(d.added):
             a = d.added[i]
@@ -158,20 +175,25 @@ def story(result: DiagnosisResult) -> str:
                 f"-> added {a.effect.name} ({type(a.effect).summary}): "
                 f"{_format_effect(a.effect.values, a.std_errors, units)}; ΔBIC {a.delta_bic:.1f}; "
                 f"RMS {a.rms_before_um:.3f} -> {a.rms_after_um:.3f} um, held out "
-                f"{a.heldout_rms_before_um:.3f} -> {a.heldout_rms_after_um:.3f} um")
+                f"{a.heldout_rms_before_um:.3f} -> {a.heldout_rms_after_um:.3f} um"
+            )
             for name, delta, cos in a.alternatives:
-                lines.append(f"   note: {name} explains much the same residual (ΔBIC {delta:.1f}, "
-                             f"similarity {cos:.2f}); {a.effect.name} fits better")
+                lines.append(
+                    f"   note: {name} explains much the same residual (ΔBIC {delta:.1f}, "
+                    f"similarity {cos:.2f}); {a.effect.name} fits better"
+                )
         else:
             lines.append("-> nothing passes: the model is kept as it is")
     if len(d.added) > 1:
         lines.append("all added effects refitted together:")
         for effect, errors in zip(d.final.effects, d.final.std_errors, strict=True):
-            lines.append(f"   {effect.name}: "
-                         f"{_format_effect(effect.values, errors, type(effect).units)}")
+            lines.append(
+                f"   {effect.name}: {_format_effect(effect.values, errors, type(effect).units)}"
+            )
     names = ", ".join(a.effect.name for a in d.added) or "nothing"
-    lines.append(f"result: added {names}; gap {d.baseline_rms_um:.3f} -> {d.final_rms_um:.3f} um "
-                 f"RMS, held out {d.baseline_heldout_rms_um:.3f} -> "
-                 f"{d.final_heldout_rms_um:.3f} um")
+    lines.append(
+        f"result: added {names}; gap {d.baseline_rms_um:.3f} -> {d.final_rms_um:.3f} um "
+        f"RMS, held out {d.baseline_heldout_rms_um:.3f} -> "
+        f"{d.final_heldout_rms_um:.3f} um"
+    )
     return "\n".join(lines)
-

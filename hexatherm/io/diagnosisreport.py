@@ -50,7 +50,7 @@ if TYPE_CHECKING:
 
     from hexatherm.diagnosing import DiagnosisResult
 
-FloatArray = npt.NDArray[np.float64]
+from hexatherm.typing import FloatArray
 
 BEFORE_COLOUR = "#d62728"
 AFTER_COLOUR = "#1f77b4"
@@ -85,8 +85,7 @@ def start_time_s(result: DiagnosisResult) -> float:
     return float(min(obs.log.t0_s, float(np.min(obs.times_s))))
 
 
-def summaries(result: DiagnosisResult, n_worst: int = 5
-              ) -> tuple[ResidualSummary, ResidualSummary]:
+def summaries(result: DiagnosisResult, n_worst: int = 5) -> tuple[ResidualSummary, ResidualSummary]:
     """Summaries of the residuals before and after the diagnosis (equal when nothing added)."""
     obs = result.data.observations
     temperature = obs.log.legs_at(obs.times_s)
@@ -128,12 +127,13 @@ def render_text(table: Table) -> str:
     -  ----------
     x         1.0
     """
-    widths = [max([len(h)] + [len(r[i]) for r in table.rows])
-              for i, h in enumerate(table.headers)]
+    widths = [max([len(h)] + [len(r[i]) for r in table.rows]) for i, h in enumerate(table.headers)]
 
     def line(cells: Sequence[str]) -> str:
-        return "  ".join(c.rjust(w) if a == "r" else c.ljust(w)
-                         for c, w, a in zip(cells, widths, table.align, strict=True)).rstrip()
+        return "  ".join(
+            c.rjust(w) if a == "r" else c.ljust(w)
+            for c, w, a in zip(cells, widths, table.align, strict=True)
+        ).rstrip()
 
     out = [table.title, line(table.headers), "  ".join("-" * w for w in widths)]
     out += [line(r) for r in table.rows]
@@ -225,51 +225,90 @@ def summary_tables(
 
     comp_rows = []
     for j, name in enumerate(POSE_COMPONENTS):
-        comp_rows.append((name, POSE_UNITS[j], *[_num(s.component_rms[j]) for s in pair],
-                          *[_num(s.component_mean[j]) for s in pair]))
-    comp = Table("Pose residuals by component (measured - twin; um and urad)",
-                 ("component", "unit", *[_h("RMS", s) for s in states],
-                  *[_h("mean", s) for s in states]), tuple(comp_rows), "ll" + "r" * 2 * len(pair))
+        comp_rows.append(
+            (
+                name,
+                POSE_UNITS[j],
+                *[_num(s.component_rms[j]) for s in pair],
+                *[_num(s.component_mean[j]) for s in pair],
+            )
+        )
+    comp = Table(
+        "Pose residuals by component (measured - twin; um and urad)",
+        ("component", "unit", *[_h("RMS", s) for s in states], *[_h("mean", s) for s in states]),
+        tuple(comp_rows),
+        "ll" + "r" * 2 * len(pair),
+    )
 
-    leg_rows = tuple((name, *[_num(s.leg_rms_um[j]) for s in pair],
-                      *[_num(s.leg_mean_um[j]) for s in pair]) for j, name in enumerate(LEG_NAMES))
-    legs = Table("Leg-space residuals (IGM of the measured pose - IGM of the twin's)",
-                 ("leg", *[_h("RMS (um)", s) for s in states],
-                  *[_h("mean (um)", s) for s in states]), leg_rows, "l" + "r" * 2 * len(pair))
+    leg_rows = tuple(
+        (name, *[_num(s.leg_rms_um[j]) for s in pair], *[_num(s.leg_mean_um[j]) for s in pair])
+        for j, name in enumerate(LEG_NAMES)
+    )
+    legs = Table(
+        "Leg-space residuals (IGM of the measured pose - IGM of the twin's)",
+        ("leg", *[_h("RMS (um)", s) for s in states], *[_h("mean (um)", s) for s in states]),
+        leg_rows,
+        "l" + "r" * 2 * len(pair),
+    )
 
-    kind_rows = [(kind, str(count), *[_num(s.kind_rms_um[kind]) for s in pair])
-                 for kind, count in before.kind_count.items()]
+    kind_rows = [
+        (kind, str(count), *[_num(s.kind_rms_um[kind]) for s in pair])
+        for kind, count in before.kind_count.items()
+    ]
     kind_rows.append(("all", str(before.n_steps), *[_num(s.centre_rms_um) for s in pair]))
-    kinds = Table("Centre residuals by step kind", ("kind", "steps",
-                  *[_h("centre RMS (um)", s) for s in states]), tuple(kind_rows),
-                  "lr" + "r" * len(pair))
+    kinds = Table(
+        "Centre residuals by step kind",
+        ("kind", "steps", *[_h("centre RMS (um)", s) for s in states]),
+        tuple(kind_rows),
+        "lr" + "r" * len(pair),
+    )
 
     part_rows = []
     for b in range(TIME_PARTS):
         lo, hi = (before.part_span_s[b] - t0_s) / _HOUR_S
-        part_rows.append((f"{b + 1}/{TIME_PARTS}", _num(lo), _num(hi),
-                          *[_num(s.part_rms_um[b]) for s in pair]))
-    parts = Table("Centre residuals over time (steps in time order, in quarters)",
-                  ("part", "from (h)", "to (h)", *[_h("centre RMS (um)", s) for s in states]),
-                  tuple(part_rows), "lrr" + "r" * len(pair))
+        part_rows.append(
+            (f"{b + 1}/{TIME_PARTS}", _num(lo), _num(hi), *[_num(s.part_rms_um[b]) for s in pair])
+        )
+    parts = Table(
+        "Centre residuals over time (steps in time order, in quarters)",
+        ("part", "from (h)", "to (h)", *[_h("centre RMS (um)", s) for s in states]),
+        tuple(part_rows),
+        "lrr" + "r" * len(pair),
+    )
 
     tables = [comp, legs, kinds, parts]
     for state, s in zip(states, pair, strict=True):
-        tables.append(worst_table(s.worst, f"Worst steps{' ' + state if state else ''}",
-                                  t0_s=t0_s, iso=iso))
+        tables.append(
+            worst_table(s.worst, f"Worst steps{' ' + state if state else ''}", t0_s=t0_s, iso=iso)
+        )
     return tables
 
 
-def worst_table(worst: Sequence[WorstStep], title: str = "Worst steps", *,
-                t0_s: float = 0.0, iso: bool = False) -> Table:
+def worst_table(
+    worst: Sequence[WorstStep], title: str = "Worst steps", *, t0_s: float = 0.0, iso: bool = False
+) -> Table:
     """The worst steps, largest centre RMS first."""
     rows = []
     for rank, w in enumerate(worst, start=1):
         clock = (seconds_to_iso(w.time_s)[:19],) if iso else ()
-        rows.append((str(rank), w.label, w.kind, _num((w.time_s - t0_s) / _HOUR_S),
-                     *clock, _num(w.centre_rms_um)))
-    headers = ("rank", "step", "kind", "time (h)", *(("time (UTC)",) if iso else ()),
-               "centre RMS (um)")
+        rows.append(
+            (
+                str(rank),
+                w.label,
+                w.kind,
+                _num((w.time_s - t0_s) / _HOUR_S),
+                *clock,
+                _num(w.centre_rms_um),
+            )
+        )
+    headers = (
+        "rank",
+        "step",
+        "kind",
+        "time (h)",
+        *(("time (UTC)",) if iso else ()),
+        "centre RMS (um)",
+    )
     return Table(title, headers, tuple(rows), "rllr" + ("l" if iso else "") + "r")
 
 
@@ -279,22 +318,51 @@ def structure_table(tests: Sequence[SeriesTests], title: str = "Whiteness and tr
     for s in tests:
         lb, tr = s.whiteness, s.trend
         white = "-" if not np.isfinite(lb.p_value) else ("yes" if lb.white() else "NO")
-        rows.append((s.name, s.unit, _num(lb.q, 1), str(lb.lags), _p(lb.p_value), white,
-                     _num(tr.slope_per_h, 3), _num(tr.std_error_per_h, 3), _num(tr.t, 1),
-                     _p(tr.p_value), _num(s.vs_time.rho), _p(s.vs_time.p_value),
-                     _num(s.vs_temperature.rho), _p(s.vs_temperature.p_value)))
-    headers = ("series", "unit", "LB Q", "lags", "p(LB)", f"white ({ALPHA:.0%})",
-               "slope (unit/h)", "se (unit/h)", "t", "p(t)", "rho(time)", "p", "rho(temp)", "p")
+        rows.append(
+            (
+                s.name,
+                s.unit,
+                _num(lb.q, 1),
+                str(lb.lags),
+                _p(lb.p_value),
+                white,
+                _num(tr.slope_per_h, 3),
+                _num(tr.std_error_per_h, 3),
+                _num(tr.t, 1),
+                _p(tr.p_value),
+                _num(s.vs_time.rho),
+                _p(s.vs_time.p_value),
+                _num(s.vs_temperature.rho),
+                _p(s.vs_temperature.p_value),
+            )
+        )
+    headers = (
+        "series",
+        "unit",
+        "LB Q",
+        "lags",
+        "p(LB)",
+        f"white ({ALPHA:.0%})",
+        "slope (unit/h)",
+        "se (unit/h)",
+        "t",
+        "p(t)",
+        "rho(time)",
+        "p",
+        "rho(temp)",
+        "p",
+    )
     return Table(title, headers, tuple(rows), "ll" + "r" * 12)
 
 
-def structure_tables(before: ResidualSummary, after: ResidualSummary | None = None
-                     ) -> list[Table]:
+def structure_tables(before: ResidualSummary, after: ResidualSummary | None = None) -> list[Table]:
     """The tests' tables: one per model (before, after)."""
     if after is None:
         return [structure_table(before.tests)]
-    return [structure_table(before.tests, "Whiteness and trend before"),
-            structure_table(after.tests, "Whiteness and trend after")]
+    return [
+        structure_table(before.tests, "Whiteness and trend before"),
+        structure_table(after.tests, "Whiteness and trend after"),
+    ]
 
 
 def candidate_tables(diagnosis: Diagnosis) -> list[Table]:
@@ -308,16 +376,34 @@ def candidate_tables(diagnosis: Diagnosis) -> list[Table]:
             params = ""
             if c.fit is not None and c.fit.effects:
                 effect = c.fit.effects[-1]
-                params = ", ".join(f"{p} = {format_value(effect.values[p], None, u)}"
-                                   for p, u in zip(effect.parameters, effect.units, strict=True))
+                params = ", ".join(
+                    f"{p} = {format_value(effect.values[p], None, u)}"
+                    for p, u in zip(effect.parameters, effect.units, strict=True)
+                )
             passes = ("yes, added" if c.name == chosen else "yes") if c.passes else "no"
-            rows.append((c.name, params, _num(c.delta_bic, 1), _num(c.rms_um),
-                         _num(c.heldout_rms_um), passes, c.note))
-        title = (f"Round {r + 1} (current model: RMS {current_rms:.2f} um, "
-                 f"held-out {current_held:.2f} um)")
-        tables.append(Table(title, ("candidate", "fitted", "ΔBIC", "RMS (um)",
-                                    "held-out RMS (um)", "passes", "note"),
-                            tuple(rows), "llrrrll"))
+            rows.append(
+                (
+                    c.name,
+                    params,
+                    _num(c.delta_bic, 1),
+                    _num(c.rms_um),
+                    _num(c.heldout_rms_um),
+                    passes,
+                    c.note,
+                )
+            )
+        title = (
+            f"Round {r + 1} (current model: RMS {current_rms:.2f} um, "
+            f"held-out {current_held:.2f} um)"
+        )
+        tables.append(
+            Table(
+                title,
+                ("candidate", "fitted", "ΔBIC", "RMS (um)", "held-out RMS (um)", "passes", "note"),
+                tuple(rows),
+                "llrrrll",
+            )
+        )
         if chosen is not None:
             current_rms = diagnosis.added[r].rms_after_um
             current_held = diagnosis.added[r].heldout_rms_after_um
@@ -346,8 +432,7 @@ def _new_figure(width_in: float, height_in: float, **margins: float) -> Figure:
 
     fig = Figure(figsize=(width_in, height_in))
     FigureCanvasAgg(fig)
-    fig.subplots_adjust(**{"left": 0.08, "right": 0.98, "bottom": 0.08, "top": 0.92,
-                           **margins})
+    fig.subplots_adjust(**{"left": 0.08, "right": 0.98, "bottom": 0.08, "top": 0.92, **margins})
     return fig
 
 
@@ -374,19 +459,34 @@ def _model_title(result: DiagnosisResult, state: str) -> str:
     return f"after: + {names}, RMS {d.final_rms_um:.2f} um"
 
 
-def _series_time_figure(result: DiagnosisResult, attribute: str, names: Sequence[str],
-                        units: Sequence[str], title: str) -> Figure:
+def _series_time_figure(
+    result: DiagnosisResult, attribute: str, names: Sequence[str], units: Sequence[str], title: str
+) -> Figure:
     order, hours = _time_order(result)
     models = _models(result)
-    fig = _new_figure(5.5 * len(models) + 0.5, 11.0, left=0.1 if len(models) == 1 else 0.075,
-                      hspace=0.15, wspace=0.22, top=0.93, bottom=0.06)
+    fig = _new_figure(
+        5.5 * len(models) + 0.5,
+        11.0,
+        left=0.1 if len(models) == 1 else 0.075,
+        hspace=0.15,
+        wspace=0.22,
+        top=0.93,
+        bottom=0.06,
+    )
     axes = fig.subplots(6, len(models), sharex=True, squeeze=False)
     for c, (state, res, colour) in enumerate(models):
         values = getattr(res, attribute)
         for j in range(6):
             ax = axes[j, c]
-            ax.plot(hours, values[order, j], "o-", color=colour, markersize=3, linewidth=0.8,
-                    label=state)
+            ax.plot(
+                hours,
+                values[order, j],
+                "o-",
+                color=colour,
+                markersize=3,
+                linewidth=0.8,
+                label=state,
+            )
             ax.axhline(0.0, color="#999999", linewidth=0.6, zorder=0)
             ax.grid(True, linewidth=0.3)
             ax.tick_params(labelsize=8)
@@ -405,15 +505,21 @@ def pose_time_figure(result: DiagnosisResult) -> Figure:
     with its own scale; one column when nothing was added. Axes ``[j, c]`` hold
     one line, labelled ``"before"`` or ``"after"``, in time order.
     """
-    return _series_time_figure(result, "pose_um", POSE_COMPONENTS, POSE_UNITS,
-                               "Pose residuals, measured - twin (um, urad)")
+    return _series_time_figure(
+        result, "pose_um", POSE_COMPONENTS, POSE_UNITS, "Pose residuals, measured - twin (um, urad)"
+    )
 
 
 def legs_time_figure(result: DiagnosisResult) -> Figure:
     """Leg-space residuals (IGM of the measured minus the twin's pose) vs time, like
     :func:`pose_time_figure`."""
-    return _series_time_figure(result, "legs_um", LEG_NAMES, ("um",) * 6,
-                               "Leg-space residuals, IGM(measured) - IGM(twin) (um)")
+    return _series_time_figure(
+        result,
+        "legs_um",
+        LEG_NAMES,
+        ("um",) * 6,
+        "Leg-space residuals, IGM(measured) - IGM(twin) (um)",
+    )
 
 
 def centre_rms_figure(result: DiagnosisResult) -> Figure:
@@ -431,27 +537,49 @@ def centre_rms_figure(result: DiagnosisResult) -> Figure:
     ax = fig.subplots()
     for state, res, colour in _models(result):
         y = res.centre_rms_um[order]
-        ax.plot(hours, y, "o-", color=colour, markersize=3, linewidth=0.8,
-                label=f"{state}: {_model_title(result, state).split(', ')[-1]}")
+        ax.plot(
+            hours,
+            y,
+            "o-",
+            color=colour,
+            markersize=3,
+            linewidth=0.8,
+            label=f"{state}: {_model_title(result, state).split(', ')[-1]}",
+        )
         for kind, marker in (("reference", "s"), ("origin", "D")):
             sel = kinds == kind
             if sel.any():
-                ax.plot(hours[sel], y[sel], marker, markerfacecolor="none", color=colour,
-                        markersize=6, linestyle="none", label=f"_{kind} {state}")
+                ax.plot(
+                    hours[sel],
+                    y[sel],
+                    marker,
+                    markerfacecolor="none",
+                    color=colour,
+                    markersize=6,
+                    linestyle="none",
+                    label=f"_{kind} {state}",
+                )
     ax.set_xlabel("time since start (h)", fontsize=9)
     ax.set_ylabel("centre RMS of the step (um)", fontsize=9)
     ax.set_ylim(bottom=0.0)
     ax.grid(True, linewidth=0.3)
     temp_ax = ax.twinx()
     temperature = obs.log.legs_at(obs.times_s).mean(axis=1)[order]
-    temp_ax.plot(hours, temperature, "--", color=TEMPERATURE_COLOUR, linewidth=1.0,
-                 label="mean leg temperature")
+    temp_ax.plot(
+        hours,
+        temperature,
+        "--",
+        color=TEMPERATURE_COLOUR,
+        linewidth=1.0,
+        label="mean leg temperature",
+    )
     temp_ax.set_ylabel("mean leg temperature (degC)", fontsize=9, color=TEMPERATURE_COLOUR)
     handles, labels = ax.get_legend_handles_labels()
     more, more_labels = temp_ax.get_legend_handles_labels()
     ax.legend(handles + more, labels + more_labels, fontsize=8, loc="upper left")
-    fig.suptitle("Centre residual of every step (squares: references, diamond: origin)",
-                 fontsize=11)
+    fig.suptitle(
+        "Centre residual of every step (squares: references, diamond: origin)", fontsize=11
+    )
     return fig
 
 
@@ -468,8 +596,15 @@ def temperature_figure(result: DiagnosisResult) -> Figure:
     axes = fig.subplots(2, 3, sharex=True)
     for j, ax in enumerate(axes.flat):
         for state, res, colour in _models(result):
-            ax.plot(temperature, res.pose_um[order, j], "o-", color=colour, markersize=3,
-                    linewidth=0.5, label=state)
+            ax.plot(
+                temperature,
+                res.pose_um[order, j],
+                "o-",
+                color=colour,
+                markersize=3,
+                linewidth=0.5,
+                label=state,
+            )
         ax.axhline(0.0, color="#999999", linewidth=0.6, zorder=0)
         ax.grid(True, linewidth=0.3)
         ax.tick_params(labelsize=8)
@@ -489,8 +624,12 @@ def _legend_below(fig: Figure, ax: Axes) -> None:
 
 def report_figures(result: DiagnosisResult) -> dict[str, Figure]:
     """Every figure of the report, by key of :data:`FIGURE_FILES`."""
-    return {"pose_time": pose_time_figure(result), "legs_time": legs_time_figure(result),
-            "centre_rms": centre_rms_figure(result), "temperature": temperature_figure(result)}
+    return {
+        "pose_time": pose_time_figure(result),
+        "legs_time": legs_time_figure(result),
+        "centre_rms": centre_rms_figure(result),
+        "temperature": temperature_figure(result),
+    }
 
 
 # ------------------------------------------------------------------ report.md
@@ -499,29 +638,39 @@ def _effects_text(effects: Sequence[object]) -> str:
         return "no effect (thermocouple temperatures as they are, nominal CTEs)"
     return ", ".join(
         f"{e.name} ({', '.join(f'{p} = {v:g}' for p, v in e.values.items())})"  # type: ignore[attr-defined]
-        for e in effects)
+        for e in effects
+    )
 
 
 def headline(result: DiagnosisResult) -> str:
     """The story in a few lines of Markdown: baseline, what was added, before/after."""
     d = result.diagnosis
     current = ", ".join(e.name for e in result.data.current) or "no effect"
-    out = [f"**Current model** ({current}): RMS "
-           f"{d.baseline_rms_um:.2f} um, held-out {d.baseline_heldout_rms_um:.2f} um."]
+    out = [
+        f"**Current model** ({current}): RMS "
+        f"{d.baseline_rms_um:.2f} um, held-out {d.baseline_heldout_rms_um:.2f} um."
+    ]
     if not d.added:
-        out.append("**Nothing added**: no candidate lowers the BIC by more than 10 *and* the "
-                   "held-out RMS; the residuals below are those of the current model.")
+        out.append(
+            "**Nothing added**: no candidate lowers the BIC by more than 10 *and* the "
+            "held-out RMS; the residuals below are those of the current model."
+        )
         return "\n\n".join(out)
     for a in d.added:
         params = ", ".join(
             f"{p} = {format_value(a.effect.values[p], a.std_errors.get(p), u)}"
-            for p, u in zip(a.effect.parameters, a.effect.units, strict=True))
-        out.append(f"**Added {a.effect.name}**: {params} (ΔBIC {a.delta_bic:.1f}); RMS "
-                   f"{a.rms_before_um:.2f} → {a.rms_after_um:.2f} um, held-out "
-                   f"{a.heldout_rms_before_um:.2f} → {a.heldout_rms_after_um:.2f} um.")
+            for p, u in zip(a.effect.parameters, a.effect.units, strict=True)
+        )
+        out.append(
+            f"**Added {a.effect.name}**: {params} (ΔBIC {a.delta_bic:.1f}); RMS "
+            f"{a.rms_before_um:.2f} → {a.rms_after_um:.2f} um, held-out "
+            f"{a.heldout_rms_before_um:.2f} → {a.heldout_rms_after_um:.2f} um."
+        )
     if len(d.added) > 1:
-        out.append(f"**After**: RMS {d.baseline_rms_um:.2f} → {d.final_rms_um:.2f} um, held-out "
-                   f"{d.baseline_heldout_rms_um:.2f} → {d.final_heldout_rms_um:.2f} um.")
+        out.append(
+            f"**After**: RMS {d.baseline_rms_um:.2f} → {d.final_rms_um:.2f} um, held-out "
+            f"{d.baseline_heldout_rms_um:.2f} → {d.final_heldout_rms_um:.2f} um."
+        )
     return "\n\n".join(out)
 
 
@@ -529,14 +678,18 @@ def _alternatives_text(diagnosis: Diagnosis) -> str:
     lines = []
     for a in diagnosis.added:
         if a.alternatives:
-            others = "; ".join(f"{name} (ΔBIC {dbic:.1f}, cosine {cos:.3f})"
-                               for name, dbic, cos in a.alternatives)
-            lines.append(f"- **{a.effect.name}** explains the same residual as: {others}. "
-                         "The choice is the larger ΔBIC (smaller BIC); the data may not "
-                         "tell them apart.")
+            others = "; ".join(
+                f"{name} (ΔBIC {dbic:.1f}, cosine {cos:.3f})" for name, dbic, cos in a.alternatives
+            )
+            lines.append(
+                f"- **{a.effect.name}** explains the same residual as: {others}. "
+                "The choice is the larger ΔBIC (smaller BIC); the data may not "
+                "tell them apart."
+            )
         else:
-            lines.append(f"- **{a.effect.name}**: no other passing candidate explains the "
-                         "same residual.")
+            lines.append(
+                f"- **{a.effect.name}**: no other passing candidate explains the same residual."
+            )
     return "\n".join(lines) if lines else "None (nothing was added)."
 
 
@@ -546,8 +699,7 @@ def _figure_link(key: str, figure_names: Mapping[str, str]) -> str:
     return f"![{FIGURE_CAPTIONS.get(key, key)}]({figure_names[key]})\n\n"
 
 
-def report_markdown(result: DiagnosisResult,
-                    figure_names: Mapping[str, str] | None = None) -> str:
+def report_markdown(result: DiagnosisResult, figure_names: Mapping[str, str] | None = None) -> str:
     """The text of ``report.md``.
 
     Parameters
@@ -567,12 +719,16 @@ def report_markdown(result: DiagnosisResult,
     counts = ", ".join(f"{n} {k}" for k, n in before.kind_count.items())
 
     md = [f"# Diagnosis of {data.session.name}", "", headline(result), ""]
-    md += ["## Session", "",
-           f"- session: `{data.session.path}`",
-           f"- hexapod: {data.hexapod_source} (`{data.hexapod.name}`)",
-           f"- steps: {obs.n_steps} ({counts}), over {span_h:.2f} h",
-           f"- centres' uncertainties: {data.uncertainty_source}",
-           f"- current model: {_effects_text(data.current)}", ""]
+    md += [
+        "## Session",
+        "",
+        f"- session: `{data.session.path}`",
+        f"- hexapod: {data.hexapod_source} (`{data.hexapod.name}`)",
+        f"- steps: {obs.n_steps} ({counts}), over {span_h:.2f} h",
+        f"- centres' uncertainties: {data.uncertainty_source}",
+        f"- current model: {_effects_text(data.current)}",
+        "",
+    ]
 
     md += ["## What was added", ""]
     if d.added:
@@ -580,22 +736,55 @@ def report_markdown(result: DiagnosisResult,
         for i, a in enumerate(d.added, start=1):
             params = ", ".join(
                 f"{p} = {format_value(a.effect.values[p], a.std_errors.get(p), u)}"
-                for p, u in zip(a.effect.parameters, a.effect.units, strict=True))
-            rows.append((str(i), a.effect.name, params, _num(a.delta_bic, 1),
-                         f"{a.rms_before_um:.2f} → {a.rms_after_um:.2f}",
-                         f"{a.heldout_rms_before_um:.2f} → {a.heldout_rms_after_um:.2f}"))
-        md += [render_markdown(Table("", ("#", "effect", "parameters (± standard error)", "ΔBIC",
-                                          "RMS (um)", "held-out RMS (um)"), tuple(rows),
-                                     "rllrrr"), heading=""), ""]
+                for p, u in zip(a.effect.parameters, a.effect.units, strict=True)
+            )
+            rows.append(
+                (
+                    str(i),
+                    a.effect.name,
+                    params,
+                    _num(a.delta_bic, 1),
+                    f"{a.rms_before_um:.2f} → {a.rms_after_um:.2f}",
+                    f"{a.heldout_rms_before_um:.2f} → {a.heldout_rms_after_um:.2f}",
+                )
+            )
+        md += [
+            render_markdown(
+                Table(
+                    "",
+                    (
+                        "#",
+                        "effect",
+                        "parameters (± standard error)",
+                        "ΔBIC",
+                        "RMS (um)",
+                        "held-out RMS (um)",
+                    ),
+                    tuple(rows),
+                    "rllrrr",
+                ),
+                heading="",
+            ),
+            "",
+        ]
     else:
         md += ["Nothing: no candidate passed (ΔBIC > 10 and a lower held-out RMS).", ""]
-    md += ["Flagged alternatives (other passing candidates whose fitted change of the "
-           "residuals is nearly parallel, |cosine| > 0.9):", "", _alternatives_text(d), ""]
+    md += [
+        "Flagged alternatives (other passing candidates whose fitted change of the "
+        "residuals is nearly parallel, |cosine| > 0.9):",
+        "",
+        _alternatives_text(d),
+        "",
+    ]
 
-    md += ["## Candidates", "",
-           "Each round fits every remaining candidate jointly with the effects already "
-           "added. A candidate passes when ΔBIC > 10 and its held-out RMS is lower than the "
-           "current model's; the best passing one is added.", ""]
+    md += [
+        "## Candidates",
+        "",
+        "Each round fits every remaining candidate jointly with the effects already "
+        "added. A candidate passes when ΔBIC > 10 and its held-out RMS is lower than the "
+        "current model's; the best passing one is added.",
+        "",
+    ]
     for table in candidate_tables(d):
         md += [render_markdown(table), ""]
     if d.skipped:
@@ -605,34 +794,50 @@ def report_markdown(result: DiagnosisResult,
 
     tables = summary_tables(before, pair_after, t0_s=t0, iso=iso)
     comp, legs, kinds, parts, *worst = tables
-    what = ("before (the current model) and after (with the added effects)" if pair_after
-            else "of the current model")
-    md += ["## Where the twin and the measurements disagree", "",
-           f"Residuals of every step (origin, references, targets), measured minus the "
-           f"twin's prediction, {what}. Pose components in um (Tx, Ty, Tz) and urad "
-           "(Rx, Ry, Rz); leg space through the IGM.", ""]
+    what = (
+        "before (the current model) and after (with the added effects)"
+        if pair_after
+        else "of the current model"
+    )
+    md += [
+        "## Where the twin and the measurements disagree",
+        "",
+        f"Residuals of every step (origin, references, targets), measured minus the "
+        f"twin's prediction, {what}. Pose components in um (Tx, Ty, Tz) and urad "
+        "(Rx, Ry, Rz); leg space through the IGM.",
+        "",
+    ]
     md += [_figure_link("pose_time", names) + render_markdown(comp), ""]
     md += [_figure_link("legs_time", names) + render_markdown(legs), ""]
-    md += [_figure_link("centre_rms", names) + render_markdown(kinds), "",
-           render_markdown(parts), ""]
+    md += [
+        _figure_link("centre_rms", names) + render_markdown(kinds),
+        "",
+        render_markdown(parts),
+        "",
+    ]
     md += [_figure_link("temperature", names).rstrip("\n"), ""] if "temperature" in names else []
     md += ["## Worst steps", ""]
     for table in worst:
         md += [render_markdown(table), ""]
 
-    md += ["## Whiteness and trend", "",
-           "For each series in time order: Ljung-Box Q over the first lags (p small: "
-           "autocorrelated, not white), the least-squares slope against time with its standard "
-           "error and t, and Spearman's correlation with time and with temperature (mean leg "
-           "temperature for pose components, the leg's own for legs). p-values are per test "
-           "and assume independent residuals.", ""]
+    md += [
+        "## Whiteness and trend",
+        "",
+        "For each series in time order: Ljung-Box Q over the first lags (p small: "
+        "autocorrelated, not white), the least-squares slope against time with its standard "
+        "error and t, and Spearman's correlation with time and with temperature (mean leg "
+        "temperature for pose components, the leg's own for legs). p-values are per test "
+        "and assume independent residuals.",
+        "",
+    ]
     for table in structure_tables(before, pair_after):
         md += [render_markdown(table), ""]
     return "\n".join(md).rstrip("\n") + "\n"
 
 
-def write_report_files(result: DiagnosisResult, out_dir: Path, *,
-                       dpi: int = FIGURE_DPI) -> list[Path]:
+def write_report_files(
+    result: DiagnosisResult, out_dir: Path, *, dpi: int = FIGURE_DPI
+) -> list[Path]:
     """Write ``report.md`` and its PNG figures (:data:`FIGURE_FILES`) into the folder ``out_dir``.
 
     The folder must exist; files of the same names are replaced. Returns the

@@ -260,9 +260,7 @@ def read_dmis_features(
     return features_from_text(_read_text(path), path, progress=progress)
 
 
-def read_dmis(
-    path: str | os.PathLike[str], *, progress: Progress | None = None
-) -> list[Records]:
+def read_dmis(path: str | os.PathLike[str], *, progress: Progress | None = None) -> list[Records]:
     """Read the hexatherm measurements of a DMIS output file.
 
     Sphere actuals ``FA(<label>_<ball>)=FEAT/SPHERE,...`` give ball centres,
@@ -861,8 +859,9 @@ def _fast_lane(data: bytes, where: str) -> list[Records]:
     lengths = ends - starts
     padded = np.concatenate((arr, np.zeros(8, dtype=np.uint8)))
     nonempty = lengths > 0
-    regular = (nonempty & _REGULAR_FIRST[padded[starts]]
-               & _REGULAR_LAST[padded[np.maximum(ends - 1, 0)]])
+    regular = (
+        nonempty & _REGULAR_FIRST[padded[starts]] & _REGULAR_LAST[padded[np.maximum(ends - 1, 0)]]
+    )
     line_no = np.arange(1, starts.size + 1)
 
     is_point = regular & _prefixed(padded, starts, b"FA(")
@@ -872,8 +871,11 @@ def _fast_lane(data: bytes, where: str) -> list[Records]:
         at = starts[is_time][:, None] + np.arange(5, 13)
         chars = padded[at]
         digits = chars[:, [0, 1, 3, 4, 6, 7]]
-        strict = (np.all((digits >= 48) & (digits <= 57), axis=1)
-                  & (chars[:, 2] == 58) & (chars[:, 5] == 58))
+        strict = (
+            np.all((digits >= 48) & (digits <= 57), axis=1)
+            & (chars[:, 2] == 58)
+            & (chars[:, 5] == 58)
+        )
         is_time[np.flatnonzero(is_time)[~strict]] = False
     # Lines read one by one: irregular ones, and regular ones that may be relevant.
     special = nonempty & ~regular
@@ -883,7 +885,7 @@ def _fast_lane(data: bytes, where: str) -> list[Records]:
     times: list[tuple[int, time]] = []
     actuals: list[tuple[int, str]] = []
     for index in np.flatnonzero(special).tolist():
-        statement = data[starts[index]:ends[index]].decode("utf-8").strip()
+        statement = data[starts[index] : ends[index]].decode("utf-8").strip()
         if not statement:
             continue
         if statement.startswith(","):
@@ -905,13 +907,17 @@ def _fast_lane(data: bytes, where: str) -> list[Records]:
     if is_time.any():
         chars = padded[starts[is_time][:, None] + np.array([5, 6, 8, 9, 11, 12])].astype(np.int64)
         chars -= 48
-        hour, minute, second = (chars[:, 0] * 10 + chars[:, 1], chars[:, 2] * 10 + chars[:, 3],
-                                chars[:, 4] * 10 + chars[:, 5])
+        hour, minute, second = (
+            chars[:, 0] * 10 + chars[:, 1],
+            chars[:, 2] * 10 + chars[:, 3],
+            chars[:, 4] * 10 + chars[:, 5],
+        )
         if np.any(hour > 23) or np.any(minute > 59) or np.any(second > 59):
             raise _GiveUp  # time() refuses them: the general reader says so
-        time_us[:hour.size] = (hour * 3600 + minute * 60 + second) * 1_000_000
-    time_us[time_us.size - len(times):] = [
-        ((c.hour * 60 + c.minute) * 60 + c.second) * 1_000_000 + c.microsecond for _, c in times]
+        time_us[: hour.size] = (hour * 3600 + minute * 60 + second) * 1_000_000
+    time_us[time_us.size - len(times) :] = [
+        ((c.hour * 60 + c.minute) * 60 + c.second) * 1_000_000 + c.microsecond for _, c in times
+    ]
     order = np.argsort(time_lines, kind="stable")
     time_lines, time_us = time_lines[order], time_us[order]
     unit_lines = np.array([u[0] for u in units], dtype=np.int64)
@@ -940,7 +946,7 @@ def _fast_lane(data: bytes, where: str) -> list[Records]:
         canonical, steps, balls, numbers, values = _canonical_points(blob)
         if not canonical.all():  # FA( lines that are not canonical points: one by one
             for line in point_lines[~canonical].tolist():
-                actuals.append((line, data[starts[line - 1]:ends[line - 1]].decode("utf-8")))
+                actuals.append((line, data[starts[line - 1] : ends[line - 1]].decode("utf-8")))
             point_lines = point_lines[canonical]
     u, stamp, known = context(point_lines)
     if not known.all():
@@ -965,14 +971,16 @@ def _fast_lane(data: bytes, where: str) -> list[Records]:
         actuals.sort()  # in file order
         lines = np.array([line for line, _ in actuals], dtype=np.int64)
         u_other, stamp_other, known_other = context(lines)
-        for (line, statement), ui, us, ok in zip(actuals, u_other.tolist(), stamp_other.tolist(),
-                                                 known_other.tolist(), strict=True):
+        for (line, statement), ui, us, ok in zip(
+            actuals, u_other.tolist(), stamp_other.tolist(), known_other.tolist(), strict=True
+        ):
             scale_here, angle = (1.0, "ANGDEC") if ui < 0 else units[ui][1:]
             when = None
             if ok:
                 when = datetime(1970, 1, 1) + timedelta(microseconds=us)
-            row = _feature_row(_parse_actual(statement, line, where, scale_here, angle, when),
-                               where)
+            row = _feature_row(
+                _parse_actual(statement, line, where, scale_here, angle, when), where
+            )
             if row is not None:
                 (centre_rows if row[0] == "centres" else point_rows).append(row[1])
 
@@ -985,22 +993,41 @@ def _fast_lane(data: bytes, where: str) -> list[Records]:
             lines = np.concatenate((lines, [r.line for r in point_rows]))
             steps, balls, numbers = (
                 np.concatenate((column, np.array(more, dtype=np.str_)))
-                for column, more in ((steps, [r.step for r in point_rows]),
-                                     (balls, [r.ball for r in point_rows]),
-                                     (numbers, [r.n for r in point_rows])))
+                for column, more in (
+                    (steps, [r.step for r in point_rows]),
+                    (balls, [r.ball for r in point_rows]),
+                    (numbers, [r.n for r in point_rows]),
+                )
+            )
             xyz = np.concatenate((xyz, [r.xyz for r in point_rows]))
             ijk = np.concatenate((ijk, [r.ijk for r in point_rows]))
             seconds = np.concatenate((seconds, [r.seconds for r in point_rows]))
         order = np.argsort(lines, kind="stable")
-        records.append(Records(path=where, kind="points", label=steps[order], ball=balls[order],
-                               xyz_mm=xyz[order], time_s=seconds[order], time_kind="iso",
-                               line=lines[order].astype(np.int64), ijk=ijk[order],
-                               extra={"n": numbers[order]}))
+        records.append(
+            Records(
+                path=where,
+                kind="points",
+                label=steps[order],
+                ball=balls[order],
+                xyz_mm=xyz[order],
+                time_s=seconds[order],
+                time_kind="iso",
+                line=lines[order].astype(np.int64),
+                ijk=ijk[order],
+                extra={"n": numbers[order]},
+            )
+        )
     return records
 
 
-def _fast_dates(data: bytes, starts: np.ndarray, line_no: np.ndarray, is_date: np.ndarray,
-                dates: list[tuple[int, date]], where: str) -> tuple[np.ndarray, np.ndarray]:
+def _fast_dates(
+    data: bytes,
+    starts: np.ndarray,
+    line_no: np.ndarray,
+    is_date: np.ndarray,
+    dates: list[tuple[int, date]],
+    where: str,
+) -> tuple[np.ndarray, np.ndarray]:
     """Lines of the DATE= statements, in order, and their days since 1970-01-01."""
     lines = line_no[is_date]
     days = np.empty(lines.size, dtype=np.int64)
@@ -1010,9 +1037,13 @@ def _fast_dates(data: bytes, starts: np.ndarray, line_no: np.ndarray, is_date: n
         unique, inverse = np.unique(values.view("S10")[:, 0], return_inverse=True)
         first = np.zeros(unique.size, dtype=np.int64)
         first[inverse[::-1]] = np.arange(lines.size)[::-1]
-        ordinals = np.array([
-            _parse_date(text.decode("utf-8"), int(lines[k]), where).toordinal()
-            for text, k in zip(unique.tolist(), first.tolist(), strict=True)], dtype=np.int64)
+        ordinals = np.array(
+            [
+                _parse_date(text.decode("utf-8"), int(lines[k]), where).toordinal()
+                for text, k in zip(unique.tolist(), first.tolist(), strict=True)
+            ],
+            dtype=np.int64,
+        )
         days = ordinals[inverse.ravel()] - _EPOCH_ORDINAL
     all_lines = np.concatenate((lines, [line for line, _ in dates])).astype(np.int64)
     all_days = np.concatenate((days, [d.toordinal() - _EPOCH_ORDINAL for _, d in dates]))
@@ -1030,6 +1061,7 @@ _BAD_IN[list(b"0123456789-")] = 0
 _BAD_IN[list(b"eE")] = 0
 _BAD_IN[list(b"+. ,")] = 1
 _BAD_IN_TABLE = _BAD_IN.tobytes()
+
 
 def _canonical_points(
     blob: np.ndarray,
@@ -1057,8 +1089,10 @@ def _canonical_points(
     parens = np.flatnonzero(blob == 41)
     paren = np.append(parens, size)[np.searchsorted(parens, first + 3)]  # first ')' (or none)
     ok = paren + _POINT_TOKEN.size <= last
-    ok &= np.all(padded[np.minimum(paren, size)[:, None] + np.arange(_POINT_TOKEN.size)]
-                 == _POINT_TOKEN, axis=1)
+    ok &= np.all(
+        padded[np.minimum(paren, size)[:, None] + np.arange(_POINT_TOKEN.size)] == _POINT_TOKEN,
+        axis=1,
+    )
     # Per byte of the lines still ok: 1 in the label, 2 in the numbers (with the comma
     # before them), 0 elsewhere.
     label_start, number_start = first + 3, paren + _POINT_TOKEN.size - 1
@@ -1067,7 +1101,7 @@ def _canonical_points(
         edges = np.column_stack((label_start, paren, number_start, last))[ok].ravel()
         lengths = np.diff(np.concatenate(([0], edges, [size])))
         codes = np.tile(np.array([0, 1, 0, 2], dtype=np.uint8), edges.size // 4 + 1)
-        return np.repeat(codes[:lengths.size], lengths)
+        return np.repeat(codes[: lengths.size], lengths)
 
     def line_of(positions: np.ndarray) -> np.ndarray:
         return np.searchsorted(first, positions, side="right") - 1
@@ -1091,9 +1125,15 @@ def _canonical_points(
     keep[newlines[ok[:-1]]] = True
     text = blob[keep].tobytes().replace(b"_", b",")
     labels, numbers = ["step", "ball", "n"], ["x", "y", "z", "i", "j", "k"]
-    frame = pd.read_csv(io.BytesIO(text), header=None, names=labels + numbers, engine="c",
-                        dtype={**dict.fromkeys(labels, object), **dict.fromkeys(numbers, float)},
-                        keep_default_na=False, na_values=dict.fromkeys(numbers, [""]))
+    frame = pd.read_csv(
+        io.BytesIO(text),
+        header=None,
+        names=labels + numbers,
+        engine="c",
+        dtype={**dict.fromkeys(labels, object), **dict.fromkeys(numbers, float)},
+        keep_default_na=False,
+        na_values=dict.fromkeys(numbers, [""]),
+    )
     if len(frame) != int(ok.sum()):
         raise _GiveUp
     step, ball, n = (frame[name].to_numpy().astype(np.str_) for name in labels)

@@ -24,17 +24,28 @@ def feature_table(path: str | os.PathLike[str]) -> pd.DataFrame:
         rows = []
         for feat in read_dmis_features(path):
             xyz = feat.xyz_mm if feat.xyz_mm is not None else (np.nan,) * 3
-            rows.append([feat.line, feat.label, feat.type, *xyz,
-                         np.nan if feat.size_mm is None else feat.size_mm,
-                         "" if feat.time is None else feat.time.isoformat()])
+            rows.append(
+                [
+                    feat.line,
+                    feat.label,
+                    feat.type,
+                    *xyz,
+                    np.nan if feat.size_mm is None else feat.size_mm,
+                    "" if feat.time is None else feat.time.isoformat(),
+                ]
+            )
         return pd.DataFrame(rows, columns=COLUMNS)
     rec = read_measurement_csv(path)
-    times = ([seconds_to_iso(t) for t in rec.time_s] if rec.time_kind == "iso"
-             else rec.time_s)
-    return pd.DataFrame({
-        "line": rec.line, "label": np.char.add(np.char.add(rec.label, "_"), rec.ball),
-        "type": "SPHERE" if rec.kind == "centres" else "POINT",
-        "x_mm": rec.xyz_mm[:, 0], "y_mm": rec.xyz_mm[:, 1], "z_mm": rec.xyz_mm[:, 2],
-        "size_mm": rec.diameter_mm if rec.diameter_mm is not None else np.nan,
-        "time": times,
-    })[COLUMNS]
+    times = [seconds_to_iso(t) for t in rec.time_s] if rec.time_kind == "iso" else rec.time_s
+    return pd.DataFrame(
+        {
+            "line": rec.line,
+            "label": np.char.add(np.char.add(rec.label, "_"), rec.ball),
+            "type": "SPHERE" if rec.kind == "centres" else "POINT",
+            "x_mm": rec.xyz_mm[:, 0],
+            "y_mm": rec.xyz_mm[:, 1],
+            "z_mm": rec.xyz_mm[:, 2],
+            "size_mm": rec.diameter_mm if rec.diameter_mm is not None else np.nan,
+            "time": times,
+        }
+    )[COLUMNS]

@@ -98,12 +98,18 @@ def concat_records(records: list[Records]) -> Records:
 
     keys = set.intersection(*(set(r.extra) for r in records))
     extra: dict[str, object] = {
-        key: np.concatenate([np.asarray(r.extra[key]) for r in records]) for key in keys}
-    return Records(path=first.path, kind=first.kind,
-                   label=np.concatenate([r.label for r in records]),
-                   ball=np.concatenate([r.ball for r in records]),
-                   xyz_mm=np.concatenate([r.xyz_mm for r in records]),
-                   time_s=np.concatenate([r.time_s for r in records]),
-                   time_kind=first.time_kind,
-                   line=np.concatenate([r.line for r in records]),
-                   diameter_mm=join("diameter_mm"), ijk=join("ijk"), extra=extra)
+        key: np.concatenate([np.asarray(r.extra[key]) for r in records]) for key in keys
+    }
+    return Records(
+        path=first.path,
+        kind=first.kind,
+        label=np.concatenate([r.label for r in records]),
+        ball=np.concatenate([r.ball for r in records]),
+        xyz_mm=np.concatenate([r.xyz_mm for r in records]),
+        time_s=np.concatenate([r.time_s for r in records]),
+        time_kind=first.time_kind,
+        line=np.concatenate([r.line for r in records]),
+        diameter_mm=join("diameter_mm"),
+        ijk=join("ijk"),
+        extra=extra,
+    )

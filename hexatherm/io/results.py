@@ -58,8 +58,11 @@ def _times(result: ProcessResult, seconds: np.ndarray) -> list[str] | np.ndarray
     return seconds
 
 
-def poses_frame(result: ProcessResult, uncertainty: PoseUncertainty | None = None,
-                twin: np.ndarray | None = None) -> pd.DataFrame:
+def poses_frame(
+    result: ProcessResult,
+    uncertainty: PoseUncertainty | None = None,
+    twin: np.ndarray | None = None,
+) -> pd.DataFrame:
     """The ``poses.csv`` table, one row per target.
 
     ``u_*`` columns with ``uncertainty``; ``*_twin_*`` columns (after the contract
@@ -88,8 +91,10 @@ def poses_frame(result: ProcessResult, uncertainty: PoseUncertainty | None = Non
     data["dt_after_s"] = corr.dt_after_s
     data["weight_after"] = corr.weight_after
     if uncertainty is not None:
-        for tag, values in (("conv", uncertainty.conventional_u),
-                            ("corr", uncertainty.corrected_u)):
+        for tag, values in (
+            ("conv", uncertainty.conventional_u),
+            ("corr", uncertainty.corrected_u),
+        ):
             for j, col in enumerate(pose_columns(tag)):
                 data[f"u_{col}"] = values[:, j]
     return pd.DataFrame(data)
@@ -133,18 +138,23 @@ def fits_frame(result: ProcessResult) -> pd.DataFrame:
         nan = np.full(n, np.nan)
         diameter = rec.diameter_mm if rec.diameter_mm is not None else nan
         fitted = "n" in rec.extra
-        frames.append(pd.DataFrame({
-            "label": rec.label, "ball": rec.ball,
-            "source": "points" if fitted else "centres",
-            "file": Path(rec.path).name,
-            "n": rec.extra.get("n", np.full(n, 1)),
-            "diameter_mm": diameter,
-            "diameter_dev_um": (diameter - np.array([nominal[b] for b in rec.ball])) * 1e3,
-            "form_um": rec.extra.get("form_um", nan),
-            "rms_um": rec.extra.get("rms_um", nan),
-            "cap_deg": rec.extra.get("cap_deg", nan),
-            "u_centre_um": rec.extra.get("u_um", nan),
-        }))
+        frames.append(
+            pd.DataFrame(
+                {
+                    "label": rec.label,
+                    "ball": rec.ball,
+                    "source": "points" if fitted else "centres",
+                    "file": Path(rec.path).name,
+                    "n": rec.extra.get("n", np.full(n, 1)),
+                    "diameter_mm": diameter,
+                    "diameter_dev_um": (diameter - np.array([nominal[b] for b in rec.ball])) * 1e3,
+                    "form_um": rec.extra.get("form_um", nan),
+                    "rms_um": rec.extra.get("rms_um", nan),
+                    "cap_deg": rec.extra.get("cap_deg", nan),
+                    "u_centre_um": rec.extra.get("u_um", nan),
+                }
+            )
+        )
     return pd.concat(frames, ignore_index=True)
 
 
@@ -155,10 +165,14 @@ def to_csv_text(frame: pd.DataFrame) -> str:
     return buffer.getvalue()
 
 
-def write_results(result: ProcessResult, out: str | Path, overwrite: bool = False,
-                  uncertainty: PoseUncertainty | None = None,
-                  quality: QualityReport | None = None, twin: np.ndarray | None = None
-                  ) -> list[Path]:
+def write_results(
+    result: ProcessResult,
+    out: str | Path,
+    overwrite: bool = False,
+    uncertainty: PoseUncertainty | None = None,
+    quality: QualityReport | None = None,
+    twin: np.ndarray | None = None,
+) -> list[Path]:
     """Write ``poses.csv``, ``legs.csv``, ``fits.csv`` (and ``quality.csv``) into ``out``.
 
     The folder is replaced atomically. ``uncertainty`` defaults to linear
@@ -170,8 +184,11 @@ def write_results(result: ProcessResult, out: str | Path, overwrite: bool = Fals
         from hexatherm.uncertainty import pose_uncertainty
 
         uncertainty = pose_uncertainty(result)
-    tables = {"poses.csv": poses_frame(result, uncertainty, twin), "legs.csv": legs_frame(result),
-              "fits.csv": fits_frame(result)}
+    tables = {
+        "poses.csv": poses_frame(result, uncertainty, twin),
+        "legs.csv": legs_frame(result),
+        "fits.csv": fits_frame(result),
+    }
     if quality is not None:
         tables["quality.csv"] = quality.frame
     texts = {name: to_csv_text(frame) for name, frame in tables.items()}
@@ -211,9 +228,13 @@ def deviation_table(result: ProcessResult, twin: np.ndarray | None = None) -> st
         f"{'':{width}}  " + "  |  ".join(units for _ in titles),
     ]
     for i, label in enumerate(labels):
-        lines.append(f"{label:{width}}  " + "  |  ".join(
-            " ".join(f"{v:8.3f}" for v in table[i]) for table in tables))
+        lines.append(
+            f"{label:{width}}  "
+            + "  |  ".join(" ".join(f"{v:8.3f}" for v in table[i]) for table in tables)
+        )
     if len(labels) > 1:
-        lines.append(f"{'spread':{width}}  " + "  |  ".join(
-            " ".join(f"{v:8.3f}" for v in np.ptp(table, axis=0)) for table in tables))
+        lines.append(
+            f"{'spread':{width}}  "
+            + "  |  ".join(" ".join(f"{v:8.3f}" for v in np.ptp(table, axis=0)) for table in tables)
+        )
     return "\n".join(lines)

@@ -118,8 +118,7 @@ def read_text(path: str | os.PathLike[str]) -> str:
     except IsADirectoryError:
         raise InputError("is a directory, expected a file", path=path) from None
     except UnicodeDecodeError as exc:
-        raise InputError(f"not UTF-8 text ({exc.reason} at byte {exc.start})",
-                         path=path) from None
+        raise InputError(f"not UTF-8 text ({exc.reason} at byte {exc.start})", path=path) from None
     except OSError as exc:
         raise InputError(f"cannot read: {exc.strerror}", path=path) from None
 
@@ -168,8 +167,11 @@ class YamlDoc:
         except yaml.YAMLError as exc:
             raise InputError(f"invalid YAML: {exc}", path=path) from None
         if node is None or not isinstance(node, yaml.MappingNode):
-            raise InputError("expected a YAML mapping (key: value lines) at the top level",
-                             path=path, line=1 if node is None else node.start_mark.line + 1)
+            raise InputError(
+                "expected a YAML mapping (key: value lines) at the top level",
+                path=path,
+                line=1 if node is None else node.start_mark.line + 1,
+            )
         doc = cls(data={}, path=path)
         constructor = _Loader("")
         doc.data = doc._build(node, (), constructor)
@@ -183,26 +185,38 @@ class YamlDoc:
                 try:
                     key = constructor.construct_object(key_node, deep=True)
                 except yaml.YAMLError as exc:
-                    raise InputError(f"invalid key: {exc}", path=self.path,
-                                     line=key_node.start_mark.line + 1) from None
+                    raise InputError(
+                        f"invalid key: {exc}", path=self.path, line=key_node.start_mark.line + 1
+                    ) from None
                 if not isinstance(key, str | int | float | bool) or key is None:
-                    raise InputError("keys must be plain names", path=self.path,
-                                     line=key_node.start_mark.line + 1)
+                    raise InputError(
+                        "keys must be plain names",
+                        path=self.path,
+                        line=key_node.start_mark.line + 1,
+                    )
                 key = str(key)
                 if key in out:
-                    raise InputError("duplicate key", path=self.path,
-                                     line=key_node.start_mark.line + 1,
-                                     field=field_name(keys + (key,)))
+                    raise InputError(
+                        "duplicate key",
+                        path=self.path,
+                        line=key_node.start_mark.line + 1,
+                        field=field_name(keys + (key,)),
+                    )
                 out[key] = self._build(value_node, keys + (key,), constructor)
             return out
         if isinstance(node, yaml.SequenceNode):
-            return [self._build(item, keys + (i,), constructor)
-                    for i, item in enumerate(node.value)]
+            return [
+                self._build(item, keys + (i,), constructor) for i, item in enumerate(node.value)
+            ]
         try:
             return constructor.construct_object(node, deep=True)
         except (yaml.YAMLError, ValueError, TypeError) as exc:
-            raise InputError(f"invalid value: {exc}", path=self.path,
-                             line=node.start_mark.line + 1, field=field_name(keys)) from None
+            raise InputError(
+                f"invalid value: {exc}",
+                path=self.path,
+                line=node.start_mark.line + 1,
+                field=field_name(keys),
+            ) from None
 
     # ---------------------------------------------------------------- access
     def line(self, *keys: Key) -> int | None:
@@ -214,15 +228,17 @@ class YamlDoc:
 
     def error(self, message: str, *keys: Key) -> InputError:
         """An InputError located at the value ``keys``."""
-        return InputError(message, path=self.path, line=self.line(*keys),
-                          field=field_name(keys) if keys else None)
+        return InputError(
+            message, path=self.path, line=self.line(*keys), field=field_name(keys) if keys else None
+        )
 
     def get(self, *keys: Key, default: Any = ..., where: Any = None) -> Any:
         """The value at ``keys``; InputError if missing and no default is given."""
         node: Any = self.data
         for i, key in enumerate(keys):
-            container_ok = isinstance(node, dict) if isinstance(key, str) else isinstance(
-                node, list)
+            container_ok = (
+                isinstance(node, dict) if isinstance(key, str) else isinstance(node, list)
+            )
             if not container_ok:
                 expected = "expected a mapping" if isinstance(key, str) else "expected a list"
                 raise self.error(expected, *keys[:i])
@@ -242,8 +258,7 @@ class YamlDoc:
             raise self.error("expected a mapping", *keys)
         for key in mapping:
             if key not in allowed:
-                raise self.error(f"unknown key; expected one of: {', '.join(allowed)}",
-                                 *keys, key)
+                raise self.error(f"unknown key; expected one of: {', '.join(allowed)}", *keys, key)
 
     def number(self, *keys: Key, default: Any = ..., positive: bool = False) -> float:
         """A finite number at ``keys``."""
