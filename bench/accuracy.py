@@ -42,8 +42,8 @@ from hexatherm.core.heating import Mat, MatHeating
 from hexatherm.core.plan import Plan
 from hexatherm.io.config import read_balls
 from hexatherm.io.scenario import sequence_steps
-from hexatherm.pipeline import process_session
-from hexatherm.twinsession import TwinSessionSpec, simulate_session, write_files
+from hexatherm.workflows.process.pipeline import process_session
+from hexatherm.workflows.simulate.twinsession import TwinSessionSpec, simulate_session, write_files
 
 ROOT = Path(__file__).resolve().parent.parent
 REFERENCE = [0.0, 0.0, -40.0, 0.0, 0.0, 0.0]

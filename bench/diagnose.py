@@ -1,9 +1,9 @@
 """How well ``hexatherm diagnose`` finds hidden effects: recovery, confusion, false additions.
 
-Simulated campaigns (:func:`hexatherm.campaigns.diagnosis_campaign`: 16 targets,
+Simulated campaigns (:func:`hexatherm.workflows.simulate.campaigns.diagnosis_campaign`: 16 targets,
 2 cycles, 66 steps over 3.7 h, heating mats switched on/off/on, the air warming
 by 4 K and cooling again) with one effect hidden at a time, at several sizes
-(the nominal parameters of :data:`hexatherm.campaigns.NOMINAL_HIDDEN` scaled) and
+(the nominal parameters of :data:`hexatherm.workflows.simulate.campaigns.NOMINAL_HIDDEN` scaled) and
 CMM noise levels (standard deviation per probed point; centres are sphere fits
 of 25 points). For each: how often the effect is named first, how often its
 parameters are recovered (single parameter: within 25 %; several: inside the
@@ -26,11 +26,11 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import chi2
 
-from hexatherm.campaigns import NOMINAL_HIDDEN, diagnosis_campaign
 from hexatherm.core.diagnosis import Diagnosis
 from hexatherm.core.effects import make_effect
-from hexatherm.diagnosing import read_for_diagnosis, run_diagnosis
-from hexatherm.twinsession import write_twin_session
+from hexatherm.workflows.diagnose.run import read_for_diagnosis, run_diagnosis
+from hexatherm.workflows.simulate.campaigns import NOMINAL_HIDDEN, diagnosis_campaign
+from hexatherm.workflows.simulate.twinsession import write_twin_session
 
 
 def run(

@@ -14,7 +14,7 @@ followed by a reference: 2N + 2 steps; 3 balls, 25 points per ball on a 70 deg c
    files read line by line). ``process`` also propagates the centres' uncertainties
    to the poses and runs the quality checks, which the straightforward script does
    not: both figures are shown, with and without that work;
-2. in process, imports excluded: :func:`hexatherm.pipeline.process_session`
+2. in process, imports excluded: :func:`hexatherm.workflows.process.pipeline.process_session`
    against ``straightforward.process`` (reading and computation);
 3. the computation alone, the points in memory: sphere fits, centres, registration
    and correction against ``straightforward.compute``;
@@ -52,7 +52,7 @@ from hexatherm.core.registration import register  # noqa: E402
 from hexatherm.core.spherefit import fit_spheres  # noqa: E402
 from hexatherm.io import csvfile, dmis  # noqa: E402
 from hexatherm.io.config import read_hexapod, read_session  # noqa: E402
-from hexatherm.pipeline import (  # noqa: E402
+from hexatherm.workflows.process.pipeline import (  # noqa: E402
     assemble_centres,
     fit_points,
     process_session,
@@ -99,7 +99,7 @@ output: {output}
 
 def session(n_targets: int, output: str) -> Path:
     """The simulated session folder (made once, then taken from the cache)."""
-    from hexatherm.simulation import simulate_file
+    from hexatherm.workflows.simulate.run import simulate_file
 
     text = scenario_text(n_targets, output)
     key = hashlib.sha256(text.encode()).hexdigest()[:12]
@@ -141,8 +141,9 @@ def run(*command: str | Path) -> None:
 def import_time(repeat: int) -> float:
     """Interpreter start and the imports of ``hexatherm process`` (a subprocess)."""
     code = (
-        "import hexatherm.cli.process, hexatherm.pipeline, hexatherm.io.results, "
-        "hexatherm.uncertainty, hexatherm.quality"
+        "import hexatherm.cli.process, hexatherm.workflows.process.pipeline, "
+        "hexatherm.workflows.process.outputs, "
+        "hexatherm.workflows.process.uncertainty, hexatherm.workflows.process.quality"
     )
     return best(lambda: run(sys.executable, "-c", code), repeat)
 
@@ -154,7 +155,7 @@ def hexatherm_script() -> list[str]:
 
 def computation(records: list[Any], sess: Any) -> Any:
     """The computation of ``process_session`` on records already read (no uncertainty)."""
-    from hexatherm.core.method import correct
+    from hexatherm.core.correction import correct
 
     centres = assemble_centres(
         [fit_points(r, sess.balls) if r.kind == "points" else r for r in records], sess
@@ -165,11 +166,12 @@ def computation(records: list[Any], sess: Any) -> Any:
 
 def phase_times(folder: Path, repeat: int) -> dict[str, float]:
     """Best times of the parts of ``hexatherm process`` (in process, imports excluded)."""
-    from hexatherm.core.method import correct
+    from hexatherm.core.correction import correct
     from hexatherm.core.registration import check_distances
-    from hexatherm.io.results import write_results
-    from hexatherm.quality import QualityThresholds, quality_checks
-    from hexatherm.uncertainty import pose_uncertainty
+    from hexatherm.session import QualityLimits
+    from hexatherm.workflows.process.outputs import write_results
+    from hexatherm.workflows.process.quality import quality_checks
+    from hexatherm.workflows.process.uncertainty import pose_uncertainty
 
     sess = read_session(folder)
     state: dict[str, Any] = {}
@@ -194,7 +196,7 @@ def phase_times(folder: Path, repeat: int) -> dict[str, float]:
     result = process_session(folder)
     out = CACHE / "out" / "phases"
     uncertainty = pose_uncertainty(result)
-    quality = quality_checks(result, QualityThresholds())
+    quality = quality_checks(result, QualityLimits())
     return {
         "session, hexapod, balls, plan (YAML)": best(lambda: read_session(folder), repeat),
         "measurements": best(measurements, repeat),
@@ -204,7 +206,7 @@ def phase_times(folder: Path, repeat: int) -> dict[str, float]:
         "sphere fits and centres": best(fits, repeat),
         "registration, poses, correction (FGM)": best(method, repeat),
         "uncertainty propagation": best(lambda: pose_uncertainty(result), repeat),
-        "quality checks": best(lambda: quality_checks(result, QualityThresholds()), repeat),
+        "quality checks": best(lambda: quality_checks(result, QualityLimits()), repeat),
         "writing the results": best(
             lambda: write_results(
                 result, out, overwrite=True, uncertainty=uncertainty, quality=quality
@@ -301,7 +303,7 @@ def main() -> None:
         t_ours_in = best(lambda f=folder: process_session(f), rep)
         plain: dict[str, Any] = {}
         t_plain_in = best(lambda f=folder, p=plain: p.update(straightforward.process(f)), slow)
-        from hexatherm.uncertainty import pose_uncertainty
+        from hexatherm.workflows.process.uncertainty import pose_uncertainty
 
         t_unc = best(lambda r=result: pose_uncertainty(r), rep)
         records = [r for file in sess.measurements for r in csvfile.read_measurements(file)]

@@ -34,9 +34,10 @@ from scipy.optimize import least_squares, root
 from scipy.spatial.transform import Rotation
 
 from hexatherm.core.hexapod import Hexapod
-from hexatherm.io.config import Session, read_session
+from hexatherm.io.config import read_session
+from hexatherm.session import Session
 
-#: as in hexatherm.pipeline.registration_weights
+#: as in hexatherm.workflows.process.pipeline.registration_weights
 U_FLOOR_UM = 1e-3
 
 Groups = dict[tuple[str, str], tuple[list[list[float]], list[float]]]

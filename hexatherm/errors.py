@@ -72,3 +72,11 @@ class FitError(HexathermError):
 
 class RegistrationError(HexathermError):
     """Ball centres that cannot be registered to the balls file."""
+
+
+class AcquisitionError(HexathermError):
+    """The acquisition cannot go on (a port that does not open, a session in the way, ...)."""
+
+
+class IncompleteSession(AcquisitionError):
+    """The acquisition stopped before the end of the plan; ``--resume`` continues it."""

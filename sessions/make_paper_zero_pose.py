@@ -15,7 +15,7 @@ from pathlib import Path
 
 from hexatherm.core.plan import Plan
 from hexatherm.io.config import read_balls
-from hexatherm.twinsession import Heating, TwinSessionSpec, write_twin_session
+from hexatherm.workflows.simulate.twinsession import Heating, TwinSessionSpec, write_twin_session
 
 ROOT = Path(__file__).resolve().parent.parent
 REFERENCE = [0.0, 0.0, -40.0, 0.0, 0.0, 0.0]

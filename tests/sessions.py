@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 
 from hexatherm.core.plan import Plan
-from hexatherm.io.config import Balls
-from hexatherm.twinsession import Heating, TwinSessionSpec, write_twin_session
+from hexatherm.session import Balls
+from hexatherm.workflows.simulate.twinsession import Heating, TwinSessionSpec, write_twin_session
 
 ROOT = Path(__file__).resolve().parent.parent
 REFERENCE = [0.0, 0.0, -40.0, 0.0, 0.0, 0.0]

@@ -30,16 +30,6 @@ import pytest
 import serial
 from click.testing import CliRunner
 
-from hexatherm import pipeline
-from hexatherm.acquisition import (
-    POINTS_HEADER,
-    FitChecks,
-    MemorySink,
-    Recorder,
-    entry,
-    escape_bytes,
-    parse_log,
-)
 from hexatherm.cli import main
 from hexatherm.core.geometry import (
     apply_transform,
@@ -52,6 +42,9 @@ from hexatherm.core.registration import register
 from hexatherm.core.spherefit import fit_spheres
 from hexatherm.io.config import plan_to_yaml, read_balls, read_session
 from hexatherm.io.csvfile import read_measurement_csv
+from hexatherm.io.seriallog import POINTS_HEADER, MemorySink, entry, escape_bytes, parse_log
+from hexatherm.workflows.acquire.recorder import FitChecks, Recorder
+from hexatherm.workflows.process import pipeline
 
 ROOT = Path(__file__).resolve().parent.parent
 HEXAPOD = ROOT / "configs" / "symetrie-like.yaml"

@@ -9,11 +9,11 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from hexatherm.campaigns import NOMINAL_HIDDEN, diagnosis_campaign
 from hexatherm.cli import main
 from hexatherm.core.effects import effects_from_dicts, make_effect
 from hexatherm.io.config import read_hexapod
-from hexatherm.twinsession import write_twin_session
+from hexatherm.workflows.simulate.campaigns import NOMINAL_HIDDEN, diagnosis_campaign
+from hexatherm.workflows.simulate.twinsession import write_twin_session
 
 LAG = make_effect("leg_thermal_lag", NOMINAL_HIDDEN["leg_thermal_lag"])
 

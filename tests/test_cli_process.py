@@ -11,7 +11,7 @@ import pytest
 from click.testing import CliRunner
 
 from hexatherm.cli import main
-from hexatherm.io.results import CONTRACT_COLUMNS, pose_columns
+from hexatherm.workflows.process.outputs import CONTRACT_COLUMNS, pose_columns
 from tests.sessions import ROOT, make_session
 
 UM, URAD = 1e3, np.pi / 180 * 1e6

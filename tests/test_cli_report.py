@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-import hexatherm.report
+import hexatherm.workflows.report
 from hexatherm.cli import main
 
 SESSION = Path(__file__).resolve().parent.parent / "sessions" / "paper-zero-pose"
@@ -58,7 +58,7 @@ def test_report_refuses_to_overwrite_unless_asked(session, tmp_path, monkeypatch
             progress(10, mc)
         return "<html>new</html>\n"
 
-    monkeypatch.setattr(hexatherm.report, "build_report", fake_report)
+    monkeypatch.setattr(hexatherm.workflows.report, "build_report", fake_report)
     replaced = run(
         "report",
         session,

@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from hexatherm.campaigns import NOMINAL_HIDDEN, diagnosis_campaign
 from hexatherm.core.diagnosis import (
     DELTA_BIC_THRESHOLD,
     Observations,
@@ -24,11 +23,12 @@ from hexatherm.core.diagnosis import (
     time_blocks,
 )
 from hexatherm.core.effects import EFFECTS, make_effect
-from hexatherm.diagnosing import DiagnosisResult, read_for_diagnosis, run_diagnosis
 from hexatherm.errors import InputError
 from hexatherm.io.config import read_hexapod_text
-from hexatherm.io.diagnosisfiles import diagnosed_hexapod_yaml, diagnosis_document
-from hexatherm.twinsession import write_twin_session
+from hexatherm.workflows.diagnose.outputs import diagnosed_hexapod_yaml, diagnosis_document
+from hexatherm.workflows.diagnose.run import DiagnosisResult, read_for_diagnosis, run_diagnosis
+from hexatherm.workflows.simulate.campaigns import NOMINAL_HIDDEN, diagnosis_campaign
+from hexatherm.workflows.simulate.twinsession import write_twin_session
 
 
 def campaign(folder: Path, names: tuple[str, ...], seed: int, **kwargs: object) -> DiagnosisResult:

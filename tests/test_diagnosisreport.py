@@ -1,4 +1,6 @@
-"""report.md, the tables and the figures of ``hexatherm diagnose`` (hexatherm.io.diagnosisreport).
+"""report.md, the tables and the figures of ``hexatherm diagnose``.
+
+(hexatherm.workflows.diagnose.report)
 
 One small simulated campaign with a hidden leg thermal lag is diagnosed once for
 the module; the figures' data are compared with the residual arrays and the
@@ -14,17 +16,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hexatherm.campaigns import diagnosis_campaign
 from hexatherm.core.effects import make_effect
-from hexatherm.diagnosing import DiagnosisResult, read_for_diagnosis, run_diagnosis
-from hexatherm.io import diagnosisreport as dr
+from hexatherm.workflows.diagnose import report as dr
+from hexatherm.workflows.diagnose.run import DiagnosisResult, read_for_diagnosis, run_diagnosis
+from hexatherm.workflows.simulate.campaigns import diagnosis_campaign
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
 @pytest.fixture(scope="module")
 def result(tmp_path_factory: pytest.TempPathFactory) -> DiagnosisResult:
-    from hexatherm.twinsession import write_twin_session
+    from hexatherm.workflows.simulate.twinsession import write_twin_session
 
     folder = tmp_path_factory.mktemp("diag") / "session"
     spec = diagnosis_campaign(

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hexatherm.core.correction import choose_references, correct
 from hexatherm.core.geometry import transform_from_pose
-from hexatherm.core.method import choose_references, correct
 from hexatherm.core.plan import Plan, StepError
 from hexatherm.core.registration import register
 from hexatherm.core.twin import leg_temperatures_at, predict_steps

@@ -11,7 +11,7 @@ from click.testing import CliRunner
 
 from hexatherm.cli import main
 from hexatherm.core.registration import check_distances
-from hexatherm.io.config import Balls
+from hexatherm.session import Balls
 from tests.sessions import BALLS, make_session
 
 

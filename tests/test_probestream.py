@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hexatherm.io.probestream import (
+from hexatherm.devices.probestream import (
     MAX_LINE,
     LineSplitter,
     format_number,

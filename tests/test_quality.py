@@ -9,15 +9,20 @@ import pytest
 from hexatherm.core.plan import Plan
 from hexatherm.errors import HexathermError, InputError
 from hexatherm.io.config import read_session
-from hexatherm.pipeline import process_session
-from hexatherm.quality import (
+from hexatherm.session import QualityLimits
+from hexatherm.workflows.process.pipeline import process_session
+from hexatherm.workflows.process.quality import (
     CHECKS,
-    QualityThresholds,
     parse_threshold,
     quality_checks,
     session_thresholds,
 )
-from hexatherm.twinsession import Heating, TwinSessionSpec, simulate_session, write_files
+from hexatherm.workflows.simulate.twinsession import (
+    Heating,
+    TwinSessionSpec,
+    simulate_session,
+    write_files,
+)
 from tests.sessions import BALLS, REFERENCE, ROOT, small_plan
 
 HEXAPOD_TEXT = (ROOT / "configs" / "symetrie-like.yaml").read_text()
@@ -107,9 +112,9 @@ def test_inter_ball_distance_and_registration(tmp_path):
     edit_points(s, "R2", "B3", dx=0.025)  # ball B3 of R2 25 um off: distances and residual
     assert failing(s) == {"distance": ["R2"], "registration": ["R2"]}
     # a registration residual beyond a tighter limit, with distances within theirs
-    assert failing(
-        session(tmp_path / "t"), thresholds=QualityThresholds(registration_rms_um=0.05)
-    ) == {"registration": ["O", "R0", "S1", "R1", "S2", "R2", "S3", "R3"]}
+    assert failing(session(tmp_path / "t"), thresholds=QualityLimits(registration_rms_um=0.05)) == {
+        "registration": ["O", "R0", "S1", "R1", "S2", "R2", "S3", "R3"]
+    }
 
 
 def test_time_gap(tmp_path):
@@ -162,7 +167,7 @@ def test_thresholds_parse_and_refuse():
         with pytest.raises(HexathermError, match=message):
             parse_threshold(bad)
     with pytest.raises(ValueError, match="form_um"):
-        QualityThresholds(form_um=float("nan"))
+        QualityLimits(form_um=float("nan"))
 
 
 def test_session_file_limits_apply_and_the_command_line_overrides_them(tmp_path):

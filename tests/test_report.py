@@ -16,9 +16,11 @@ import pandas as pd
 import pytest
 
 from hexatherm import __version__
-from hexatherm.pipeline import process_session
-from hexatherm.quality import QualityThresholds, quality_checks
-from hexatherm.report import (
+from hexatherm.session import QualityLimits
+from hexatherm.workflows.process.pipeline import process_session
+from hexatherm.workflows.process.quality import quality_checks
+from hexatherm.workflows.process.uncertainty import pose_uncertainty
+from hexatherm.workflows.report import (
     build_report,
     growth_figure,
     pose_figure,
@@ -26,7 +28,6 @@ from hexatherm.report import (
     report_html,
     temperature_figure,
 )
-from hexatherm.uncertainty import pose_uncertainty
 
 ROOT = Path(__file__).resolve().parent.parent
 SESSIONS = ROOT / "sessions"
@@ -184,7 +185,7 @@ def test_report_escapes_text_says_what_is_missing_and_flags_failures(paper):
     failing = legs.loc[legs["registration_rms_um"] > limit_um, "label"].tolist()
     assert 0 < len(failing) < len(legs)
     quality = quality_checks(
-        paper, QualityThresholds(registration_rms_um=limit_um, temperature_change_C=np.inf)
+        paper, QualityLimits(registration_rms_um=limit_um, temperature_change_C=np.inf)
     )
     session = dataclasses.replace(paper.session, name='<script>alert("x")</script>&')
     result = dataclasses.replace(

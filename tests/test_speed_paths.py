@@ -395,7 +395,7 @@ def test_fgm_conditioning_bound_matches_the_svd():
 # ----------------------------------------------------------------------------- whole process
 @pytest.mark.parametrize("output", ["points", "dmis"])
 def test_process_agrees_with_the_straightforward_way(tmp_path, output):
-    from hexatherm.pipeline import process_session
+    from hexatherm.workflows.process.pipeline import process_session
     from tests.sessions import make_session
 
     sf = _straightforward()

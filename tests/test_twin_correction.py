@@ -9,11 +9,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from hexatherm.campaigns import NOMINAL_HIDDEN, diagnosis_campaign
 from hexatherm.core.effects import ThermocoupleLog, make_effect
 from hexatherm.core.twin import twin_corrected
-from hexatherm.pipeline import process_session
-from hexatherm.twinsession import write_twin_session
+from hexatherm.workflows.process.pipeline import process_session
+from hexatherm.workflows.simulate.campaigns import NOMINAL_HIDDEN, diagnosis_campaign
+from hexatherm.workflows.simulate.twinsession import write_twin_session
 
 LAG = make_effect("leg_thermal_lag", NOMINAL_HIDDEN["leg_thermal_lag"])
 DRIFT = make_effect("cmm_drift", NOMINAL_HIDDEN["cmm_drift"])
@@ -77,7 +77,7 @@ def test_process_method_twin_adds_the_twin_columns(tmp_path: Path) -> None:
     from click.testing import CliRunner
 
     from hexatherm.cli import main
-    from hexatherm.io.results import CONTRACT_COLUMNS, pose_columns
+    from hexatherm.workflows.process.outputs import CONTRACT_COLUMNS, pose_columns
 
     write_twin_session(diagnosis_campaign((LAG,), 6, n_targets=4), tmp_path / "s")
     model = yaml.safe_load((tmp_path / "s" / "hexapod.yaml").read_text())

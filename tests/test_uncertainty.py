@@ -7,23 +7,28 @@ import re
 import numpy as np
 import pytest
 
-from hexatherm.core.spherefit import fit_spheres
-from hexatherm.core.twin import probe_points
-from hexatherm.core.uncertainty import (
+from hexatherm.core.propagation import (
     cap_centre_covariance,
     linear_covariance,
     monte_carlo_covariance,
     output_difference,
 )
+from hexatherm.core.spherefit import fit_spheres
+from hexatherm.core.twin import probe_points
 from hexatherm.errors import InputError
 from hexatherm.io.config import read_session
-from hexatherm.pipeline import process_session
-from hexatherm.twinsession import Heating, TwinSessionSpec, simulate_session, write_files
-from hexatherm.uncertainty import (
+from hexatherm.workflows.process.pipeline import process_session
+from hexatherm.workflows.process.uncertainty import (
     centre_covariance,
     point_sampler,
     pose_chain,
     pose_uncertainty,
+)
+from hexatherm.workflows.simulate.twinsession import (
+    Heating,
+    TwinSessionSpec,
+    simulate_session,
+    write_files,
 )
 from tests.sessions import BALLS, ROOT, make_session, small_plan
 

@@ -12,7 +12,7 @@ import click
 from hexatherm.cli.options import clean_errors, echo_err, max_gap_option
 
 if TYPE_CHECKING:
-    from hexatherm.acquisition import BallFit
+    from hexatherm.workflows.acquire.recorder import BallFit
 
 
 def _fits_table(fits: Sequence[BallFit]) -> str:
@@ -183,16 +183,11 @@ def command(
     ``hexatherm process``. Interactive commands (standard input): Enter or
     'next', 'redo', 'quit'. The fits go to standard output as CSV.
     """
-    from hexatherm.acquisition import (
-        AcquireOptions,
-        FitChecks,
-        PortSettings,
-        load_files,
-        replay,
-    )
-    from hexatherm.acquisition import (
-        acquire as run_acquisition,
-    )
+    from hexatherm.devices.serialport import PortSettings
+    from hexatherm.workflows.acquire.files import load_files
+    from hexatherm.workflows.acquire.recorder import FitChecks
+    from hexatherm.workflows.acquire.run import AcquireOptions, replay
+    from hexatherm.workflows.acquire.run import acquire as run_acquisition
 
     if replay_log is not None:
         if port is not None or resume or temperature_port is not None:

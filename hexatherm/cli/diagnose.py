@@ -42,10 +42,10 @@ def command(session: Path, out: str | None, overwrite: bool, hexapod_path: Path 
     effects in its thermal_model, for simulate and process --method twin) and
     OUT/report.md with its figures; prints the story to standard output.
     """
-    from hexatherm.diagnosing import read_for_diagnosis, run_diagnosis
     from hexatherm.io.atomic import atomic_output_dir, refuse_existing
-    from hexatherm.io.diagnosisfiles import diagnosed_hexapod_yaml, diagnosis_json, story
-    from hexatherm.io.diagnosisreport import terminal_tables, write_report_files
+    from hexatherm.workflows.diagnose.outputs import diagnosed_hexapod_yaml, diagnosis_json, story
+    from hexatherm.workflows.diagnose.report import terminal_tables, write_report_files
+    from hexatherm.workflows.diagnose.run import read_for_diagnosis, run_diagnosis
 
     folder = session if session.is_dir() else session.parent
     out_dir = Path(out) if out is not None else folder / "diagnosis"

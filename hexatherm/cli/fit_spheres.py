@@ -40,7 +40,7 @@ def command(
     from hexatherm.io.atomic import atomic_write_text, refuse_existing
     from hexatherm.io.csvfile import centres_to_csv, read_measurements
     from hexatherm.io.records import Records, concat_records
-    from hexatherm.pipeline import fit_points
+    from hexatherm.workflows.process.pipeline import fit_points
 
     if out is not None:
         refuse_existing(out, overwrite)

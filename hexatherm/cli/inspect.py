@@ -21,7 +21,7 @@ def command(file: Path, as_csv: bool) -> None:
     and time. For DMIS files every actual feature FA(...) is listed, whatever its
     label; for CSV files every row is a feature (SPHERE centres or POINTs).
     """
-    from hexatherm.io.inspection import feature_table
+    from hexatherm.workflows.inspect import feature_table
 
     table = feature_table(file)
     if as_csv:

@@ -98,12 +98,11 @@ class ProgressBars:
 
     def reading(self, path: str, done: int, total: int) -> None:
         """Progress of reading a measurement file (lines), as
-        :func:`hexatherm.pipeline.read_measured` reports it."""
+        :func:`hexatherm.workflows.process.pipeline.read_measured` reports it."""
         self.update(f"reading {os.path.basename(path)}", done, total)
 
     def draws(self, done: int, total: int) -> None:
-        """Progress of Monte Carlo draws, as :func:`hexatherm.uncertainty.pose_uncertainty`
-        reports it."""
+        """Progress of Monte Carlo draws, as the process workflow reports them."""
         self.update("Monte Carlo draws", done, total)
 
     def close(self) -> None:

@@ -19,7 +19,7 @@ from hexatherm.cli.options import (
 )
 
 if TYPE_CHECKING:
-    from hexatherm.uncertainty import PoseUncertainty
+    from hexatherm.workflows.process.uncertainty import PoseUncertainty
 
 #: exit status of ``process --strict`` when a quality check fails
 QUALITY_EXIT = 3
@@ -122,10 +122,14 @@ def command(
     um and urad.
     """
     from hexatherm.io.atomic import refuse_existing
-    from hexatherm.io.results import deviation_table, write_results
-    from hexatherm.pipeline import Checks, process_session
-    from hexatherm.quality import parse_threshold, quality_checks, session_thresholds
-    from hexatherm.uncertainty import pose_uncertainty
+    from hexatherm.workflows.process.outputs import deviation_table, write_results
+    from hexatherm.workflows.process.pipeline import Checks, process_session
+    from hexatherm.workflows.process.quality import (
+        parse_threshold,
+        quality_checks,
+        session_thresholds,
+    )
+    from hexatherm.workflows.process.uncertainty import pose_uncertainty
 
     if mc == 1:
         raise click.BadParameter("Monte Carlo needs at least 2 draws", param_hint="'--mc'")
@@ -147,7 +151,7 @@ def command(
     twin = None
     if "twin" in methods:
         from hexatherm.io.config import read_hexapod
-        from hexatherm.twinmethod import twin_poses
+        from hexatherm.workflows.process.twin import twin_poses
 
         model = result.session.hexapod if hexapod_path is None else read_hexapod(hexapod_path)
         twin = twin_poses(result, model, str(hexapod_path or ""))

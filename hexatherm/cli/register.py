@@ -46,7 +46,7 @@ def command(
     """
     from hexatherm.io.atomic import atomic_write_text, refuse_existing
     from hexatherm.io.config import balls_to_yaml, read_datums
-    from hexatherm.registering import register_balls
+    from hexatherm.workflows.register import register_balls
 
     refuse_existing(out, overwrite)
     datums = read_datums(datums_path)

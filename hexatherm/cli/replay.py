@@ -36,7 +36,12 @@ def command(sessions_dir: Path, update: bool, tol_mm: float, tol_deg: float) -> 
     worst deviation per unit; exits 1 on any mismatch, naming session, file, row
     and column.
     """
-    from hexatherm.replay import DEFAULT_TOLERANCES, find_sessions, format_worst, replay_session
+    from hexatherm.workflows.replay import (
+        DEFAULT_TOLERANCES,
+        find_sessions,
+        format_worst,
+        replay_session,
+    )
 
     tolerances = {**DEFAULT_TOLERANCES, "mm": tol_mm, "deg": tol_deg}
     sessions = find_sessions(sessions_dir)

@@ -66,9 +66,9 @@ def command(
     session's metadata. Nothing is written when processing fails.
     """
     from hexatherm.io.atomic import atomic_write_text, refuse_existing
-    from hexatherm.pipeline import process_session
-    from hexatherm.quality import parse_threshold, session_thresholds
-    from hexatherm.report import build_report
+    from hexatherm.workflows.process.pipeline import process_session
+    from hexatherm.workflows.process.quality import parse_threshold, session_thresholds
+    from hexatherm.workflows.report import build_report
 
     overrides = dict(parse_threshold(t) for t in quality_thresholds)
     folder = session if session.is_dir() else session.parent

@@ -41,7 +41,7 @@ def command(scenario: Path, out: Path, seed: int | None, overwrite: bool) -> Non
     import numpy as np
 
     from hexatherm.io.atomic import refuse_existing
-    from hexatherm.simulation import simulate_file
+    from hexatherm.workflows.simulate.run import simulate_file
 
     refuse_existing(out, overwrite)
     read, simulated, written = simulate_file(scenario, out, seed, overwrite)

@@ -10,12 +10,10 @@ from __future__ import annotations
 import dataclasses
 import os
 import re
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 import yaml
 
 from hexatherm.core.effects import EFFECTS
@@ -27,6 +25,7 @@ from hexatherm.core.thermal import LegThermalModel, SegmentSpec
 from hexatherm.errors import InputError, RegistrationError
 from hexatherm.io.atomic import atomic_write_text
 from hexatherm.io.yamlfile import PLAIN_NUMBER, YamlDoc, plain_numbers, plain_tag, read_text
+from hexatherm.session import Balls, CmmNoise, Datums, QualityLimits, Session
 
 HEXAPOD_FORMAT = "hexatherm-hexapod/1"
 BALLS_FORMAT = "hexatherm-balls/1"
@@ -203,26 +202,6 @@ def hexapod_to_yaml(hexapod: Hexapod) -> str:
 
 
 # ----------------------------------------------------------------------- balls
-@dataclass(frozen=True)
-class Balls:
-    """The precision balls on the platform (balls file).
-
-    Attributes
-    ----------
-    names : tuple of str
-    centres_mm : ndarray, shape (k, 3)
-        Centres in the platform frame.
-    diameters_mm : ndarray, shape (k,)
-    probe_compensated : bool
-        True when probed points are surface points (probe radius compensated).
-    tip_diameter_mm : float
-    """
-
-    names: tuple[str, ...]
-    centres_mm: npt.NDArray[np.float64]
-    diameters_mm: npt.NDArray[np.float64]
-    probe_compensated: bool = True
-    tip_diameter_mm: float = 0.0
 
 
 def read_balls(path: str | os.PathLike[str]) -> Balls:
@@ -437,61 +416,6 @@ def plan_to_yaml(plan: Plan) -> str:
 
 
 # --------------------------------------------------------------------- session
-@dataclass(frozen=True)
-class CmmNoise:
-    """The CMM's probing noise, from the session's optional ``cmm:`` mapping (an extension).
-
-    Used for the uncertainty of ball centres that come without fit residuals
-    (centres files): the centre covariance of a free-radius sphere fit to
-    ``points_per_ball`` points spread over a cap of ``cap_angle_deg``.
-
-    Attributes
-    ----------
-    point_noise_um : float
-        Standard deviation of a probed point along the surface normal
-        (``point_noise_um``, or ``mpe_um / 2`` as for an ISO 10360 MPE).
-    points_per_ball : int or None
-        Points probed per ball (None: the plan's ``points_per_ball``).
-    cap_angle_deg : float
-        Half-angle of the probed cap (default 70).
-    """
-
-    point_noise_um: float
-    points_per_ball: int | None = None
-    cap_angle_deg: float = 70.0
-
-
-@dataclass(frozen=True)
-class Session:
-    """A session folder as described by its ``session.yaml``.
-
-    Attributes
-    ----------
-    path : Path
-        The session file.
-    name : str
-    hexapod : Hexapod
-    balls : Balls
-    plan : Plan
-    measurements : tuple of Path
-    temperatures : Path or None
-    cmm : CmmNoise or None
-        The optional ``cmm:`` mapping (``point_noise_um`` or ``mpe_um``,
-        ``points_per_ball``, ``cap_angle_deg``).
-    quality : dict of str to float
-        The optional ``quality:`` mapping: limits of the quality checks kept with
-        the session (names of :class:`hexatherm.quality.QualityThresholds`).
-    """
-
-    path: Path
-    name: str
-    hexapod: Hexapod
-    balls: Balls
-    plan: Plan
-    measurements: tuple[Path, ...]
-    temperatures: Path | None
-    cmm: CmmNoise | None = None
-    quality: dict[str, float] = dataclasses.field(default_factory=dict)
 
 
 def read_session(path: str | os.PathLike[str]) -> Session:
@@ -551,11 +475,9 @@ def read_session(path: str | os.PathLike[str]) -> Session:
 def _read_quality(doc: YamlDoc) -> dict[str, float]:
     """The optional ``quality:`` mapping of a session file: check name -> limit (>= 0;
     ``.inf`` turns a check off, as does 0 for ``min_rcond``)."""
-    from hexatherm.quality import QualityThresholds  # the names; no import cycle at load
-
     if doc.get("quality", default=None) is None:
         return {}
-    doc.check_keys([f.name for f in dataclasses.fields(QualityThresholds)], "quality")
+    doc.check_keys([f.name for f in dataclasses.fields(QualityLimits)], "quality")
     limits = {}
     for name in doc.get("quality"):
         value = doc.get("quality", name)
@@ -662,35 +584,6 @@ __all__ = [
 
 # ---------------------------------------------------------------------- datums
 DATUMS_FORMAT = "hexatherm-datums/1"
-
-
-@dataclass(frozen=True)
-class Datums:
-    """How ``hexatherm register`` finds the platform frame (an extension file).
-
-    Attributes
-    ----------
-    step : str or None
-        Label of the records to use (None: the file's only label).
-    plane : str
-        Feature name of the points on the top face.
-    bores : (str, str)
-        Feature names of the points in the two bores (origin, X direction).
-    origin_offset_mm : ndarray, shape (3,)
-        The platform origin in the datum frame.
-    balls : dict of str to float
-        Ball names and diameters, mm.
-    probe_compensated : bool
-    tip_diameter_mm : float
-    """
-
-    step: str | None
-    plane: str
-    bores: tuple[str, str]
-    origin_offset_mm: npt.NDArray[np.float64]
-    balls: dict[str, float]
-    probe_compensated: bool
-    tip_diameter_mm: float
 
 
 def read_datums(path: str | os.PathLike[str]) -> Datums:

@@ -15,7 +15,7 @@ to a clearance height above the step's highest ball (``GOTO/CART``).
 
 >>> import numpy as np
 >>> from hexatherm.core.planning import build_plan, touch_points
->>> from hexatherm.io.config import Balls
+>>> from hexatherm.session import Balls
 >>> balls = Balls(("B1", "B2", "B3"), np.array([[10.0, 0, 30], [0, 10, 30], [-10, 0, 30]]),
 ...               np.full(3, 20.0))
 >>> plan = build_plan([[0, 0, 5, 0, 0, 0]], points_per_ball=4)
@@ -42,7 +42,7 @@ import numpy as np
 
 from hexatherm.core.plan import Plan
 from hexatherm.core.planning import StepTiming, TouchPoints, format_pose
-from hexatherm.io.config import Balls
+from hexatherm.session import Balls
 
 #: DMIS version written in the ``DMISMN`` statement
 DMIS_VERSION = "05.2"

@@ -57,9 +57,10 @@ from hexatherm.core.heating import Mat, MatHeating
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan, StepError
 from hexatherm.errors import InputError
-from hexatherm.io.config import Balls, read_balls, read_hexapod_text, read_plan
+from hexatherm.io.config import read_balls, read_hexapod_text, read_plan
 from hexatherm.io.records import iso_to_seconds
 from hexatherm.io.yamlfile import YamlDoc
+from hexatherm.session import Balls
 
 SCENARIO_FORMAT = "hexatherm-scenario/1"
 #: what ``output:`` may say; ``serial`` writes the ``serial.log`` of an ``acquire --auto``

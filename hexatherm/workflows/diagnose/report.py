@@ -1,6 +1,6 @@
 """Tables, figures and ``report.md`` of ``hexatherm diagnose``: where twin and data disagree.
 
-From a :class:`~hexatherm.diagnosing.DiagnosisResult`:
+From a :class:`~hexatherm.workflows.diagnose.run.DiagnosisResult`:
 
 * :func:`summaries` sums up the residuals before (the current model) and after
   (with the added effects) with :func:`hexatherm.core.residuals.summarize`;
@@ -48,7 +48,7 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-    from hexatherm.diagnosing import DiagnosisResult
+    from hexatherm.workflows.diagnose.run import DiagnosisResult
 
 from hexatherm.typing import FloatArray
 

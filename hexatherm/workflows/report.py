@@ -1,10 +1,10 @@
 """The HTML report of a processed session: figures and tables in one self-contained page.
 
-:func:`build_report` turns a :class:`~hexatherm.pipeline.ProcessResult` into one
+:func:`build_report` turns a :class:`~hexatherm.workflows.process.pipeline.ProcessResult` into one
 HTML file (no external resource: the figures are PNGs embedded as base64 data
 URIs, the style sheet is inline, every text is escaped), with the poses'
-uncertainty of :func:`hexatherm.uncertainty.pose_uncertainty` and the checks of
-:func:`hexatherm.quality.quality_checks`; :func:`report_html` takes them as
+uncertainty of :func:`hexatherm.workflows.process.uncertainty.pose_uncertainty` and the checks of
+:func:`hexatherm.workflows.process.quality.quality_checks`; :func:`report_html` takes them as
 given (either may be left out, and the page says so). It holds:
 
 * the session's metadata (files, hexapod, steps, time span, interpolation, version);
@@ -34,15 +34,16 @@ import numpy.typing as npt
 
 from hexatherm import __version__
 from hexatherm.io.records import seconds_to_iso
-from hexatherm.pipeline import ProcessResult
+from hexatherm.workflows.process.pipeline import ProcessResult
 
 if TYPE_CHECKING:
     import pandas as pd
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-    from hexatherm.quality import QualityReport, QualityThresholds
-    from hexatherm.uncertainty import PoseUncertainty
+    from hexatherm.session import QualityLimits
+    from hexatherm.workflows.process.quality import QualityReport
+    from hexatherm.workflows.process.uncertainty import PoseUncertainty
 
 from hexatherm.typing import FloatArray
 
@@ -517,7 +518,7 @@ def quality_table_html(quality: QualityReport) -> str:
     Columns: ``label``, ``kind``, the value of every check (units in the name; empty
     when it does not apply) and ``failed`` (the failed checks).
     """
-    from hexatherm.quality import CHECKS
+    from hexatherm.workflows.process.quality import CHECKS
 
     frame = quality.frame
     checks = [(column, f"ok_{check}") for check, (column, _, _) in CHECKS.items()]
@@ -663,7 +664,7 @@ def build_report(
     result: ProcessResult,
     mc: int = 0,
     seed: int = 0,
-    thresholds: QualityThresholds | None = None,
+    thresholds: QualityLimits | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> str:
     """The report page of ``result`` with its pose uncertainty and quality checks.
@@ -675,13 +676,13 @@ def build_report(
         0: linear propagation of the uncertainty; else Monte Carlo draws.
     seed : int
         Seed of the Monte Carlo draws.
-    thresholds : QualityThresholds, optional
-        Limits of the quality checks (default: :class:`QualityThresholds`'s).
+    thresholds : QualityLimits, optional
+        Limits of the quality checks (default: :class:`QualityLimits`'s).
     progress : callable, optional
         ``progress(draws_done, draws)`` during Monte Carlo draws.
     """
-    from hexatherm.quality import quality_checks
-    from hexatherm.uncertainty import pose_uncertainty
+    from hexatherm.workflows.process.quality import quality_checks
+    from hexatherm.workflows.process.uncertainty import pose_uncertainty
 
     return report_html(
         result,

@@ -3,7 +3,7 @@
 The glue of ``hexatherm diagnose``: it reads the session like ``process`` does
 (fitting spheres to probed points), builds the thermocouple log, takes the
 current model from the hexapod file (the session's, or ``--hexapod``) and runs
-the diagnosis. Writing is :mod:`hexatherm.io.diagnosisfiles`' job.
+the diagnosis. Writing is :mod:`hexatherm.workflows.diagnose.outputs`' job.
 """
 
 from __future__ import annotations
@@ -24,10 +24,11 @@ from hexatherm.core.diagnosis import (
 from hexatherm.core.effects import Effect
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.errors import InputError
-from hexatherm.io.config import Session, read_hexapod, read_session
+from hexatherm.io.config import read_hexapod, read_session
 from hexatherm.io.csvfile import Temperatures
-from hexatherm.pipeline import read_measured
-from hexatherm.twinmethod import model_effects, thermocouple_log
+from hexatherm.session import Session
+from hexatherm.workflows.process.pipeline import read_measured
+from hexatherm.workflows.process.twin import model_effects, thermocouple_log
 
 
 @dataclass(frozen=True)

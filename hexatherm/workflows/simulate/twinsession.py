@@ -53,17 +53,12 @@ from hexatherm.core.twin import (
     probe_points,
 )
 from hexatherm.io.atomic import atomic_output_dir
-from hexatherm.io.config import (
-    Balls,
-    balls_to_yaml,
-    plan_to_yaml,
-    read_hexapod_text,
-    session_to_yaml,
-)
+from hexatherm.io.config import balls_to_yaml, plan_to_yaml, read_hexapod_text, session_to_yaml
 from hexatherm.io.dmisout import dmis_output
 from hexatherm.io.records import iso_to_seconds, seconds_to_iso
-from hexatherm.io.results import pose_columns, to_csv_text
+from hexatherm.session import Balls
 from hexatherm.typing import FloatArray
+from hexatherm.workflows.process.outputs import pose_columns, to_csv_text
 
 OUTPUTS = ("centres", "points", "dmis", "serial")
 
@@ -439,7 +434,7 @@ def _serial_capture(xyz: FloatArray, times_s: FloatArray) -> str:
     One ``rx`` entry per point, at the point's time, as the line
     ``X+427.451688 Y+408.847293 Z+252.532346`` (1 nm resolution) with CRLF.
     """
-    from hexatherm.acquisition import LOG_MAGIC, entry
+    from hexatherm.io.seriallog import LOG_MAGIC, entry
 
     start = seconds_to_iso(float(times_s[0]) - 1.0)
     lines = [

@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from hexatherm.io.results import write_results
-from hexatherm.pipeline import process_session
-from hexatherm.quality import quality_checks
+from hexatherm.workflows.process.outputs import write_results
+from hexatherm.workflows.process.pipeline import process_session
+from hexatherm.workflows.process.quality import quality_checks
 
 DEFAULT_TOLERANCES = {"mm": 1e-7, "deg": 1e-6, "um": 1e-4, "urad": 1e-4, "s": 1e-6}
 

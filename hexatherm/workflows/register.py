@@ -12,9 +12,9 @@ from hexatherm.core.datum import DatumFrame, datum_frame
 from hexatherm.core.geometry import apply_transform, invert_transform
 from hexatherm.core.spherefit import fit_spheres, probe_radius_mm
 from hexatherm.errors import FitError, InputError
-from hexatherm.io.config import Balls, Datums
 from hexatherm.io.csvfile import read_measurements
 from hexatherm.io.records import Records
+from hexatherm.session import Balls, Datums
 
 
 @dataclass(frozen=True)

@@ -1,8 +1,8 @@
 """``hexatherm simulate``: a scenario file -> a session folder and its truth.
 
 Glue between the scenario reader (:mod:`hexatherm.io.scenario`) and the twin
-session writer (:mod:`hexatherm.twinsession`): the scenario's timing, heating,
-noise and effects become a :class:`~hexatherm.twinsession.TwinSessionSpec`.
+session writer (:mod:`hexatherm.workflows.simulate.twinsession`): the scenario's timing, heating,
+noise and effects become a :class:`~hexatherm.workflows.simulate.twinsession.TwinSessionSpec`.
 
 Choices the scenario does not spell out:
 
@@ -27,7 +27,12 @@ import os
 from pathlib import Path
 
 from hexatherm.io.scenario import Scenario, read_scenario
-from hexatherm.twinsession import SimulatedSession, TwinSessionSpec, simulate_session, write_files
+from hexatherm.workflows.simulate.twinsession import (
+    SimulatedSession,
+    TwinSessionSpec,
+    simulate_session,
+    write_files,
+)
 
 
 def scenario_spec(scenario: Scenario, seed: int | None = None) -> TwinSessionSpec:

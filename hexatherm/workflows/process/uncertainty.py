@@ -1,7 +1,7 @@
 """Standard uncertainties of the conventional and corrected poses of a processed session.
 
-Glue between :class:`~hexatherm.pipeline.ProcessResult` and the pure math of
-:mod:`hexatherm.core.uncertainty`. The covariance of every ball centre comes
+Glue between :class:`~hexatherm.workflows.process.pipeline.ProcessResult` and the pure math of
+:mod:`hexatherm.core.propagation`. The covariance of every ball centre comes
 from, in this order of preference:
 
 1. the sphere fit of its probed points (``s^2 (J^T J)^-1``, the full 3x3
@@ -29,8 +29,7 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
-from hexatherm.core.spherefit import fit_spheres
-from hexatherm.core.uncertainty import (
+from hexatherm.core.propagation import (
     CentreSampler,
     PoseChain,
     cap_centre_covariance,
@@ -40,8 +39,14 @@ from hexatherm.core.uncertainty import (
     monte_carlo_covariance,
     pooled_registration_variance,
 )
-from hexatherm.pipeline import ProcessResult, fit_radii, point_groups, registration_weights
+from hexatherm.core.spherefit import fit_spheres
 from hexatherm.typing import FloatArray
+from hexatherm.workflows.process.pipeline import (
+    ProcessResult,
+    fit_radii,
+    point_groups,
+    registration_weights,
+)
 
 Method = Literal["linear", "monte-carlo"]
 

@@ -33,56 +33,13 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from hexatherm.core.planning import DEFAULT_MIN_RCOND
 from hexatherm.core.registration import check_distances
 from hexatherm.errors import HexathermError
-from hexatherm.io.config import Session
-from hexatherm.pipeline import ProcessResult, nominal_fit_diameter_mm
+from hexatherm.session import QualityLimits, Session
 from hexatherm.typing import FloatArray
+from hexatherm.workflows.process.pipeline import ProcessResult, nominal_fit_diameter_mm
 
-__all__ = ["CHECKS", "QualityReport", "QualityThresholds", "parse_threshold", "quality_checks"]
-
-
-@dataclass(frozen=True)
-class QualityThresholds:
-    """Limits of the quality checks (``--quality-threshold NAME=VALUE`` overrides one).
-
-    Attributes
-    ----------
-    form_um : float
-        Largest sphere form error (max - min residual) of a ball: about 4 sigma of
-        the probing noise for 25 points, so 10 um holds CMMs of up to 2.5 um noise.
-    radius_dev_um : float
-        Largest deviation of a fitted radius from the nominal one (a wrong ball,
-        a missed probe compensation, a bad fit).
-    distance_dev_um : float
-        Largest deviation of an inter-ball distance from the balls file (``process``
-        refuses a step beyond ``--distance-tolerance-um``, 50 um; this flags less).
-    registration_rms_um : float
-        Largest registration RMS residual of a step.
-    time_gap_s : float
-        Largest time between a target and a reference it uses (the plan's ``--max-gap``).
-    temperature_change_C : float
-        Largest leg temperature change between a target and a reference it uses
-        (1 K is about 4.5 um of growth per leg for the Symetrie-like legs, left to
-        the correction's model and interpolation to carry over).
-    min_rcond : float
-        Smallest reciprocal condition number of the Jacobian at a target (as ``plan``).
-    """
-
-    form_um: float = 10.0
-    radius_dev_um: float = 10.0
-    distance_dev_um: float = 10.0
-    registration_rms_um: float = 5.0
-    time_gap_s: float = 600.0
-    temperature_change_C: float = 1.0
-    min_rcond: float = DEFAULT_MIN_RCOND
-
-    def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if not (isinstance(value, int | float) and value >= 0 and not np.isnan(value)):
-                raise ValueError(f"quality threshold {f.name} must be a number >= 0, got {value!r}")
+__all__ = ["CHECKS", "QualityReport", "parse_threshold", "quality_checks"]
 
 
 #: check name -> (value column, threshold field, value must be at least the threshold)
@@ -106,11 +63,11 @@ class QualityReport:
     frame : pandas.DataFrame
         One row per step: ``label``, ``kind``, the values of :data:`CHECKS`,
         ``ok_<check>`` for each check, ``failed`` (the failed checks, ``;``-separated).
-    thresholds : QualityThresholds
+    thresholds : QualityLimits
     """
 
     frame: pd.DataFrame
-    thresholds: QualityThresholds
+    thresholds: QualityLimits
 
     @property
     def failed_steps(self) -> list[str]:
@@ -153,7 +110,7 @@ class QualityReport:
 
 
 def parse_threshold(text: str) -> tuple[str, float]:
-    """``NAME=VALUE`` -> ``(name, value)``, checked against :class:`QualityThresholds`.
+    """``NAME=VALUE`` -> ``(name, value)``, checked against :class:`QualityLimits`.
 
     >>> parse_threshold("form_um=5")
     ('form_um', 5.0)
@@ -162,7 +119,7 @@ def parse_threshold(text: str) -> tuple[str, float]:
     ...
     hexatherm.errors.HexathermError: --quality-threshold 'form=5': unknown name 'form'; ...
     """
-    names = [f.name for f in dataclasses.fields(QualityThresholds)]
+    names = [f.name for f in dataclasses.fields(QualityLimits)]
     name, sep, value = text.partition("=")
     name = name.strip()
     if not sep:
@@ -229,15 +186,13 @@ def _leg_temperatures(result: ProcessResult) -> FloatArray | None:
 
 def session_thresholds(
     session: Session, overrides: Mapping[str, float] | None = None
-) -> QualityThresholds:
+) -> QualityLimits:
     """The limits for ``session``: the defaults, changed by the session file's
     ``quality:`` mapping, then by ``overrides`` (``--quality-threshold``)."""
-    return QualityThresholds(**{**session.quality, **(overrides or {})})
+    return QualityLimits(**{**session.quality, **(overrides or {})})
 
 
-def quality_checks(
-    result: ProcessResult, thresholds: QualityThresholds | None = None
-) -> QualityReport:
+def quality_checks(result: ProcessResult, thresholds: QualityLimits | None = None) -> QualityReport:
     """Run every check of :data:`CHECKS` on every step of ``result``.
 
     ``thresholds`` defaults to the session's (:func:`session_thresholds`).

@@ -11,10 +11,10 @@ process"), then these extensions, documented in the README:
 * ``weight_after``: weight of the later reference in the time interpolation;
 * ``u_Tx_conv_mm`` .. ``u_Rz_conv_deg``, ``u_Tx_corr_mm`` .. ``u_Rz_corr_deg``:
   standard uncertainties (k = 1) of the conventional and corrected poses
-  (:mod:`hexatherm.uncertainty`).
+  (:mod:`hexatherm.workflows.process.uncertainty`).
 
 ``quality.csv`` has one row per step with the quality checks of
-:mod:`hexatherm.quality`.
+:mod:`hexatherm.workflows.process.quality`.
 
 ``legs.csv`` has one row per step: ``label,kind,time``, the step's measured pose
 relative to O (``Tx_mm`` ...), its IGM leg lengths ``q_leg1_mm`` .. and, for
@@ -32,11 +32,11 @@ import pandas as pd
 
 from hexatherm.io.atomic import atomic_output_dir
 from hexatherm.io.records import seconds_to_iso
-from hexatherm.pipeline import ProcessResult, nominal_fit_diameter_mm
+from hexatherm.workflows.process.pipeline import ProcessResult, nominal_fit_diameter_mm
 
 if TYPE_CHECKING:
-    from hexatherm.quality import QualityReport
-    from hexatherm.uncertainty import PoseUncertainty
+    from hexatherm.workflows.process.quality import QualityReport
+    from hexatherm.workflows.process.uncertainty import PoseUncertainty
 
 POSE_NAMES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
 POSE_UNITS = ("mm", "mm", "mm", "deg", "deg", "deg")
@@ -176,12 +176,12 @@ def write_results(
     """Write ``poses.csv``, ``legs.csv``, ``fits.csv`` (and ``quality.csv``) into ``out``.
 
     The folder is replaced atomically. ``uncertainty`` defaults to linear
-    propagation (:func:`hexatherm.uncertainty.pose_uncertainty`); ``quality.csv``
+    propagation (:func:`hexatherm.workflows.process.uncertainty.pose_uncertainty`); ``quality.csv``
     is written when ``quality`` is given (``hexatherm process`` always gives it);
     ``twin`` (M, 6) adds the twin-corrected poses (``process --method twin``).
     """
     if uncertainty is None:
-        from hexatherm.uncertainty import pose_uncertainty
+        from hexatherm.workflows.process.uncertainty import pose_uncertainty
 
         uncertainty = pose_uncertainty(result)
     tables = {

@@ -5,7 +5,7 @@ pose]`` (mm, deg). It is a function of the measured ball centres of every
 step, ``y = f(c)`` with ``c`` of shape (N, k, 3): each step's frame by the
 rigid registration, its pose relative to O, the IGM, the growth at the
 references, its scaling to S_i and the FGM (:class:`PoseChain`, the chain of
-:func:`hexatherm.core.method.correct` vectorized over many sets of centres).
+:func:`hexatherm.core.correction.correct` vectorized over many sets of centres).
 The times, the registration weights and the hexapod model are taken as exact;
 the centres are independent from ball to ball and step to step, each with its
 own 3x3 covariance.
@@ -37,9 +37,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from hexatherm.core.correction import interpolated_growth, target_growth
 from hexatherm.core.geometry import invert_transform, pose_from_transform
 from hexatherm.core.hexapod import Hexapod
-from hexatherm.core.method import interpolated_growth, target_growth
 from hexatherm.core.plan import Plan
 from hexatherm.core.registration import register
 from hexatherm.core.twin import cap_directions
@@ -75,7 +75,7 @@ class PoseChain:
         Ball centres in the platform frame.
     before_index, after_index : ndarray of int, shape (M,)
         References used by each target (-1: none), as in
-        :class:`~hexatherm.core.method.Correction`.
+        :class:`~hexatherm.core.correction.Correction`.
     weight_after : ndarray, shape (M,)
     weights : ndarray, shape (N, k), optional
         Registration weights.

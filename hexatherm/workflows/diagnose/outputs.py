@@ -32,8 +32,8 @@ from typing import Any
 
 from hexatherm import __version__
 from hexatherm.core.diagnosis import Candidate
-from hexatherm.diagnosing import DiagnosisResult
 from hexatherm.io.config import hexapod_to_yaml
+from hexatherm.workflows.diagnose.run import DiagnosisResult
 
 RMS_DEFINITION = (
     "root mean square over all steps, balls and axes of the measured minus the "

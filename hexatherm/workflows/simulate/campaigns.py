@@ -16,17 +16,16 @@ as a scenario.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from pathlib import Path
+from importlib import resources
 
 import numpy as np
 
 from hexatherm.core.effects import Effect
 from hexatherm.core.heating import Mat, MatHeating
 from hexatherm.core.planning import build_plan
-from hexatherm.io.config import Balls
-from hexatherm.twinsession import TwinSessionSpec
+from hexatherm.session import Balls
+from hexatherm.workflows.simulate.twinsession import TwinSessionSpec
 
-ROOT = Path(__file__).resolve().parent.parent
 #: half-widths of the box the targets are drawn from: mm and deg
 WORKSPACE = (20.0, 20.0, 15.0, 4.0, 4.0, 8.0)
 REFERENCE_POSE = (0.0, 0.0, -40.0, 0.0, 0.0, 0.0)
@@ -41,8 +40,10 @@ BALLS = Balls(
 
 
 def hexapod_text() -> str:
-    """The hexapod file of the campaigns (``configs/symetrie-like.yaml``)."""
-    return (ROOT / "configs" / "symetrie-like.yaml").read_text(encoding="utf-8")
+    """The hexapod file of the campaigns: ``configs/symetrie-like.yaml``, as shipped inside
+    the package (``hexatherm/data``, read with :mod:`importlib.resources`, so that it works
+    from an installed wheel; a test keeps the two copies identical)."""
+    return resources.files("hexatherm.data").joinpath("symetrie-like.yaml").read_text("utf-8")
 
 
 def diagnosis_campaign(

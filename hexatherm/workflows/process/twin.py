@@ -18,7 +18,7 @@ from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.twin import twin_corrected
 from hexatherm.errors import InputError
 from hexatherm.io.csvfile import Temperatures
-from hexatherm.pipeline import ProcessResult
+from hexatherm.workflows.process.pipeline import ProcessResult
 
 
 def twin_poses(

@@ -3,7 +3,7 @@
 This is the glue between the I/O layer and the core. It reads the session's
 files, gathers every step's ball centres (fitting spheres where the files hold
 probed points), registers each step's frame, and runs the thermal method. It
-writes nothing: :mod:`hexatherm.io.results` does.
+writes nothing: :mod:`hexatherm.workflows.process.outputs` does.
 """
 
 from __future__ import annotations
@@ -16,13 +16,14 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from hexatherm.core.method import Correction, Interpolation, StepPoses, correct
+from hexatherm.core.correction import Correction, Interpolation, StepPoses, correct
 from hexatherm.core.registration import Registration, check_distances, register
 from hexatherm.core.spherefit import fit_spheres, probe_radius_mm
 from hexatherm.errors import FitError, InputError, PlanError
-from hexatherm.io.config import Balls, Session, read_session
+from hexatherm.io.config import read_session
 from hexatherm.io.csvfile import Temperatures, read_measurements, read_temperatures
 from hexatherm.io.records import Records, TimeKind
+from hexatherm.session import Balls, Session
 from hexatherm.typing import FloatArray
 
 #: ``progress(path, lines_done, lines_total)`` while a measurement file is read

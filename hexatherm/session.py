@@ -1,0 +1,177 @@
+"""Session-level types: what a session is made of, below the files that describe it.
+
+``io`` turns bytes into these types and back; the workflows and the ``core`` maths use
+them. No file access here.
+
+- :class:`Balls`: the precision balls on the platform (balls file).
+- :class:`CmmNoise`: the CMM's probing noise (the session's optional ``cmm:`` mapping).
+- :class:`QualityLimits`: limits of the quality checks (the session's ``quality:``
+  mapping, ``--quality-threshold NAME=VALUE``).
+- :class:`Session`: a session folder as its ``session.yaml`` describes it.
+- :class:`Datums`: how ``hexatherm register`` finds the platform frame.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from hexatherm.core.hexapod import Hexapod
+from hexatherm.core.plan import Plan
+from hexatherm.core.planning import DEFAULT_MIN_RCOND
+
+__all__ = ["Balls", "CmmNoise", "Datums", "QualityLimits", "Session"]
+
+
+@dataclass(frozen=True)
+class Balls:
+    """The precision balls on the platform (balls file).
+
+    Attributes
+    ----------
+    names : tuple of str
+    centres_mm : ndarray, shape (k, 3)
+        Centres in the platform frame.
+    diameters_mm : ndarray, shape (k,)
+    probe_compensated : bool
+        True when probed points are surface points (probe radius compensated).
+    tip_diameter_mm : float
+    """
+
+    names: tuple[str, ...]
+    centres_mm: npt.NDArray[np.float64]
+    diameters_mm: npt.NDArray[np.float64]
+    probe_compensated: bool = True
+    tip_diameter_mm: float = 0.0
+
+
+@dataclass(frozen=True)
+class CmmNoise:
+    """The CMM's probing noise, from the session's optional ``cmm:`` mapping (an extension).
+
+    Used for the uncertainty of ball centres that come without fit residuals
+    (centres files): the centre covariance of a free-radius sphere fit to
+    ``points_per_ball`` points spread over a cap of ``cap_angle_deg``.
+
+    Attributes
+    ----------
+    point_noise_um : float
+        Standard deviation of a probed point along the surface normal
+        (``point_noise_um``, or ``mpe_um / 2`` as for an ISO 10360 MPE).
+    points_per_ball : int or None
+        Points probed per ball (None: the plan's ``points_per_ball``).
+    cap_angle_deg : float
+        Half-angle of the probed cap (default 70).
+    """
+
+    point_noise_um: float
+    points_per_ball: int | None = None
+    cap_angle_deg: float = 70.0
+
+
+@dataclass(frozen=True)
+class QualityLimits:
+    """Limits of the quality checks (``--quality-threshold NAME=VALUE`` overrides one).
+
+    Attributes
+    ----------
+    form_um : float
+        Largest sphere form error (max - min residual) of a ball: about 4 sigma of
+        the probing noise for 25 points, so 10 um holds CMMs of up to 2.5 um noise.
+    radius_dev_um : float
+        Largest deviation of a fitted radius from the nominal one (a wrong ball,
+        a missed probe compensation, a bad fit).
+    distance_dev_um : float
+        Largest deviation of an inter-ball distance from the balls file (``process``
+        refuses a step beyond ``--distance-tolerance-um``, 50 um; this flags less).
+    registration_rms_um : float
+        Largest registration RMS residual of a step.
+    time_gap_s : float
+        Largest time between a target and a reference it uses (the plan's ``--max-gap``).
+    temperature_change_C : float
+        Largest leg temperature change between a target and a reference it uses
+        (1 K is about 4.5 um of growth per leg for the Symetrie-like legs, left to
+        the correction's model and interpolation to carry over).
+    min_rcond : float
+        Smallest reciprocal condition number of the Jacobian at a target (as ``plan``).
+    """
+
+    form_um: float = 10.0
+    radius_dev_um: float = 10.0
+    distance_dev_um: float = 10.0
+    registration_rms_um: float = 5.0
+    time_gap_s: float = 600.0
+    temperature_change_C: float = 1.0
+    min_rcond: float = DEFAULT_MIN_RCOND
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if not (isinstance(value, int | float) and value >= 0 and not np.isnan(value)):
+                raise ValueError(f"quality threshold {f.name} must be a number >= 0, got {value!r}")
+
+
+@dataclass(frozen=True)
+class Session:
+    """A session folder as described by its ``session.yaml``.
+
+    Attributes
+    ----------
+    path : Path
+        The session file.
+    name : str
+    hexapod : Hexapod
+    balls : Balls
+    plan : Plan
+    measurements : tuple of Path
+    temperatures : Path or None
+    cmm : CmmNoise or None
+        The optional ``cmm:`` mapping (``point_noise_um`` or ``mpe_um``,
+        ``points_per_ball``, ``cap_angle_deg``).
+    quality : dict of str to float
+        The optional ``quality:`` mapping: limits of the quality checks kept with
+        the session (names of :class:`hexatherm.workflows.process.quality.QualityLimits`).
+    """
+
+    path: Path
+    name: str
+    hexapod: Hexapod
+    balls: Balls
+    plan: Plan
+    measurements: tuple[Path, ...]
+    temperatures: Path | None
+    cmm: CmmNoise | None = None
+    quality: dict[str, float] = dataclasses.field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Datums:
+    """How ``hexatherm register`` finds the platform frame (an extension file).
+
+    Attributes
+    ----------
+    step : str or None
+        Label of the records to use (None: the file's only label).
+    plane : str
+        Feature name of the points on the top face.
+    bores : (str, str)
+        Feature names of the points in the two bores (origin, X direction).
+    origin_offset_mm : ndarray, shape (3,)
+        The platform origin in the datum frame.
+    balls : dict of str to float
+        Ball names and diameters, mm.
+    probe_compensated : bool
+    tip_diameter_mm : float
+    """
+
+    step: str | None
+    plane: str
+    bores: tuple[str, str]
+    origin_offset_mm: npt.NDArray[np.float64]
+    balls: dict[str, float]
+    probe_compensated: bool
+    tip_diameter_mm: float
