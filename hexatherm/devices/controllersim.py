@@ -1,0 +1,557 @@
+"""Simulated hexapod controllers: TCP servers speaking the Symétrie and PI dialects.
+
+Both servers run on 127.0.0.1 (port 0: a free port, see ``.port`` and ``.url``), one
+thread per connection, and speak exactly what :mod:`hexatherm.devices.symetrie` and
+:mod:`hexatherm.devices.pi` expect. They are backed by one kinematic model,
+:class:`SimulatedHexapod`, built on :class:`~hexatherm.core.hexapod.Hexapod`:
+
+* a move runs in a straight line in pose space at ``speed_mm_s`` / ``speed_deg_s``
+  (the slower governs), on the injected clock; the in-position flag rises
+  ``settle_s`` after the motion ends;
+* validation: every leg (the IGM) within the hexapod's stroke at 21 points along the
+  path, plus an optional extra rule (``Faults.refuse``, a "user limit");
+* read-back: the true pose plus optional Gaussian noise (seeded); actuator lengths: the
+  IGM of the true pose; temperatures: a callable of the clock's time (none if not
+  given: the query is then unknown to the controller);
+* faults (:class:`Faults`, changeable while running): a late in-position flag, a
+  dropped connection at the first status query during a move, replies written in
+  chunks of 1 to 3 bytes, injected error codes for the next command of a name, and the
+  extra refusal rule.
+
+A :class:`ManualClock` shared with a driver's ``clock`` and ``sleep`` makes the whole
+exchange run on simulated time: a test waits for nothing.
+
+>>> clock = ManualClock()
+>>> clock.sleep(1.5); clock()
+1.5
+"""
+
+from __future__ import annotations
+
+import re
+import socket
+import socketserver
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from hexatherm.core.geometry import Convention
+from hexatherm.core.hexapod import Hexapod
+from hexatherm.devices.controller import LineBuffer, convert_pose, stroke_violations
+from hexatherm.devices.pi import AXES
+from hexatherm.devices.symetrie import pose_from_wire, pose_to_wire
+from hexatherm.typing import FloatArray
+
+#: points along a move's path where the stroke is checked
+PATH_SAMPLES = 21
+
+
+class ManualClock:
+    """A clock that moves only when told: ``clock()`` reads it, ``sleep`` advances it.
+
+    Thread-safe, so a driver (sleeping) and a simulator (reading) can share it.
+    """
+
+    def __init__(self, start_s: float = 0.0) -> None:
+        self._t = float(start_s)
+        self._lock = threading.Lock()
+
+    def __call__(self) -> float:
+        with self._lock:
+            return self._t
+
+    def sleep(self, seconds: float) -> None:
+        """Advance the clock by ``seconds`` (>= 0)."""
+        if not seconds >= 0:
+            raise ValueError(f"cannot sleep {seconds!r} s")
+        with self._lock:
+            self._t += float(seconds)
+
+    advance = sleep
+
+
+@dataclass
+class Faults:
+    """Faults a simulated controller injects (change them at any time).
+
+    Attributes
+    ----------
+    late_in_position_s : float
+        Extra delay of the in-position flag after the settle, s.
+    drop_mid_move : bool
+        Close the connection at the next status query while a move runs (once; the
+        flag clears itself).
+    split_writes : bool
+        Write replies in chunks of 1 to 3 bytes.
+    refuse : callable, optional
+        ``refuse(pose)`` true for poses (mm, deg, the hexapod's convention) the
+        controller refuses besides the stroke (a user limit).
+    errors : dict of str to list of int
+        Error codes to answer to the next commands of a name (``"MOVE#ABS"``, ``"MOV"``),
+        one code per command, consumed in order; the command is not executed.
+    """
+
+    late_in_position_s: float = 0.0
+    drop_mid_move: bool = False
+    split_writes: bool = False
+    refuse: Callable[[FloatArray], bool] | None = None
+    errors: dict[str, list[int]] = field(default_factory=dict)
+
+    def take_error(self, name: str) -> int | None:
+        """The next injected code for command ``name`` (None if none)."""
+        codes = self.errors.get(name)
+        if codes:
+            return codes.pop(0)
+        return None
+
+
+class SimulatedHexapod:
+    """The kinematic model behind the simulated controllers.
+
+    Poses are mm and deg in the hexapod's convention (``hexapod.convention``); the
+    servers convert to their dialect's convention and units.
+
+    Parameters
+    ----------
+    hexapod : Hexapod
+        Geometry and stroke (a stroke is required: it is what validation checks).
+    clock : callable
+        Time source, s.
+    speed_mm_s, speed_deg_s : float
+        Speeds of a move (> 0).
+    settle_s : float
+        Delay of the in-position flag after the motion ends, s.
+    noise_um, noise_urad : float
+        Standard deviation of the read-back pose's noise per component.
+    seed : int
+        Seed of the noise.
+    temperatures_C : callable, optional
+        ``temperatures_C(t_s)`` -> the controller's temperature channels, deg C.
+    report_actuators : bool
+        Whether the controller reports actuator lengths.
+    faults : Faults, optional
+    """
+
+    def __init__(
+        self,
+        hexapod: Hexapod,
+        *,
+        clock: Callable[[], float] = time.monotonic,
+        speed_mm_s: float = 1.0,
+        speed_deg_s: float = 1.0,
+        settle_s: float = 0.5,
+        noise_um: float = 0.0,
+        noise_urad: float = 0.0,
+        seed: int = 0,
+        temperatures_C: Callable[[float], Sequence[float]] | None = None,
+        report_actuators: bool = True,
+        faults: Faults | None = None,
+    ) -> None:
+        if hexapod.stroke_mm is None:
+            raise ValueError("the simulated hexapod needs a stroke (stroke_mm) to validate")
+        if not (speed_mm_s > 0 and speed_deg_s > 0):
+            raise ValueError("speeds must be > 0")
+        if not (settle_s >= 0 and noise_um >= 0 and noise_urad >= 0):
+            raise ValueError("settle_s, noise_um and noise_urad must be >= 0")
+        self.hexapod = hexapod
+        self.convention: Convention = hexapod.convention
+        self.clock = clock
+        self.speed_mm_s, self.speed_deg_s = float(speed_mm_s), float(speed_deg_s)
+        self.settle_s = float(settle_s)
+        self.noise_um, self.noise_urad = float(noise_um), float(noise_urad)
+        self.temperatures_C = temperatures_C
+        self.report_actuators = report_actuators
+        self.faults = Faults() if faults is None else faults
+        self.moves = 0
+        self._rng = np.random.default_rng(seed)
+        self._lock = threading.RLock()
+        now = clock()
+        self._start = np.zeros(6)
+        self._target = np.zeros(6)
+        self._t0 = self._t1 = now - self.settle_s  # at rest, in position
+        self._late = 0.0
+
+    # ----------------------------------------------------------------- state
+    def true_pose(self) -> FloatArray:
+        """The platform's pose now (no noise), mm and deg."""
+        with self._lock:
+            t = self.clock()
+            if t >= self._t1 or self._t1 <= self._t0:
+                return self._target.copy()
+            f = (t - self._t0) / (self._t1 - self._t0)
+            return self._start + f * (self._target - self._start)
+
+    @property
+    def target(self) -> FloatArray:
+        """The pose of the last accepted move."""
+        with self._lock:
+            return self._target.copy()
+
+    def moving(self) -> bool:
+        """A motion is under way."""
+        with self._lock:
+            return self.clock() < self._t1
+
+    def in_position(self) -> bool:
+        """The in-position flag: the motion ended ``settle_s`` (+ a late delay) ago."""
+        with self._lock:
+            return self.clock() >= self._t1 + self.settle_s + self._late
+
+    def read_pose(self) -> FloatArray:
+        """The read-back: the true pose plus noise."""
+        with self._lock:
+            pose = self.true_pose()
+            pose[:3] += self._rng.normal(0.0, self.noise_um * 1e-3, 3)
+            pose[3:] += self._rng.normal(0.0, np.rad2deg(self.noise_urad * 1e-6), 3)
+            return pose
+
+    def actuators_mm(self) -> FloatArray:
+        """Actuator lengths of the true pose (the IGM), mm."""
+        return self.hexapod.igm(self.true_pose())[0]
+
+    def temperatures(self) -> FloatArray | None:
+        """The temperature channels now, or None when the controller has none."""
+        if self.temperatures_C is None:
+            return None
+        return np.asarray(self.temperatures_C(self.clock()), dtype=float).ravel()
+
+    # ----------------------------------------------------------------- moves
+    def check(self, pose_mm_deg: npt.ArrayLike) -> tuple[bool, bool]:
+        """``(stroke_ok, rule_ok)`` of a move from the current pose to ``pose_mm_deg``."""
+        pose = np.asarray(pose_mm_deg, dtype=float)
+        start = self.true_pose()
+        path = start + np.linspace(0.0, 1.0, PATH_SAMPLES)[:, None] * (pose - start)
+        stroke_ok = not self.hexapod.check_stroke(self.hexapod.igm(path)).any()
+        stroke_ok = stroke_ok and not stroke_violations(self.hexapod, pose)
+        refuse = self.faults.refuse
+        rule_ok = refuse is None or not refuse(pose)
+        return stroke_ok, rule_ok
+
+    def start_move(self, pose_mm_deg: npt.ArrayLike) -> None:
+        """Start a move (the caller has checked it)."""
+        pose = np.asarray(pose_mm_deg, dtype=float)
+        with self._lock:
+            start = self.true_pose()
+            d = np.abs(pose - start)
+            duration = max(d[:3].max() / self.speed_mm_s, d[3:].max() / self.speed_deg_s)
+            self._start, self._target = start, pose.copy()
+            self._t0 = self.clock()
+            self._t1 = self._t0 + duration
+            self._late = self.faults.late_in_position_s
+            self.moves += 1
+
+    def stop(self) -> None:
+        """Stop where the platform is now."""
+        with self._lock:
+            here = self.true_pose()
+            self._start = self._target = here
+            self._t0 = self._t1 = self.clock()
+            self._late = 0.0
+
+
+class _Drop(Exception):
+    """Raised by a dialect to close the connection (fault injection)."""
+
+
+class _Server(socketserver.ThreadingTCPServer):
+    daemon_threads = True
+    allow_reuse_address = True
+
+
+class SimulatedController:
+    """A threaded TCP server of one dialect around a :class:`SimulatedHexapod`.
+
+    Use as a context manager, or call :meth:`close`. ``received`` lists every command
+    line received, in order (from every connection).
+    """
+
+    scheme = ""
+    native_convention: Convention = "symetrie"
+    line_end = "\n"
+
+    def __init__(self, model: SimulatedHexapod, host: str = "127.0.0.1", port: int = 0) -> None:
+        self.model = model
+        self.received: list[str] = []
+        self.connections = 0
+        self._lock = threading.Lock()
+        self._chunks = np.random.default_rng(12345)
+        outer = self
+
+        class Handler(socketserver.BaseRequestHandler):
+            def handle(self) -> None:
+                outer._serve(self.request)
+
+        self._server = _Server((host, port), Handler)
+        self._thread = threading.Thread(
+            target=self._server.serve_forever, kwargs={"poll_interval": 0.02}, daemon=True
+        )
+        self._thread.start()
+
+    @property
+    def faults(self) -> Faults:
+        """The model's faults."""
+        return self.model.faults
+
+    @property
+    def port(self) -> int:
+        """The TCP port the server listens on."""
+        return int(self._server.server_address[1])
+
+    @property
+    def url(self) -> str:
+        """``SCHEME://HOST:PORT``, for :func:`~hexatherm.devices.controller.controller_from_url`."""
+        return f"{self.scheme}://{self.host}:{self.port}"
+
+    @property
+    def host(self) -> str:
+        """The address the server listens on."""
+        return str(self._server.server_address[0])
+
+    def close(self) -> None:
+        """Stop serving and close the listening socket."""
+        self._server.shutdown()
+        self._server.server_close()
+        self._thread.join(timeout=10)
+
+    def __enter__(self) -> SimulatedController:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -------------------------------------------------------------- plumbing
+    def _wire_pose(self) -> FloatArray:
+        """The read-back pose in the dialect's convention."""
+        return convert_pose(self.model.read_pose(), self.model.convention, self.native_convention)
+
+    def _model_pose(self, native: FloatArray) -> FloatArray:
+        return convert_pose(native, self.native_convention, self.model.convention)
+
+    def _write(self, sock: socket.socket, lines: list[str]) -> None:
+        data = "".join(line + self.line_end for line in lines).encode("ascii")
+        if not self.faults.split_writes:
+            sock.sendall(data)
+            return
+        i = 0
+        while i < len(data):
+            n = int(self._chunks.integers(1, 4))
+            sock.sendall(data[i : i + n])
+            i += n
+            time.sleep(0.0002)  # pacing only, so that the chunks travel apart
+
+    def _serve(self, sock: socket.socket) -> None:
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        with self._lock:
+            self.connections += 1
+        buffer = LineBuffer()
+        try:
+            self._write(sock, self.greeting())
+            while True:
+                data = sock.recv(4096)
+                if not data:
+                    return
+                for line in buffer.feed(data):
+                    line = line.strip()
+                    if not line:
+                        continue
+                    with self._lock:
+                        self.received.append(line)
+                    self._write(sock, self.respond(line))
+        except (_Drop, OSError):
+            return
+        finally:
+            try:
+                sock.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+            sock.close()
+
+    def _drop_if_moving(self) -> None:
+        if self.faults.drop_mid_move and self.model.moving():
+            self.faults.drop_mid_move = False
+            raise _Drop
+
+    def greeting(self) -> list[str]:  # pragma: no cover - overridden
+        return []
+
+    def respond(self, line: str) -> list[str]:  # pragma: no cover - overridden
+        raise NotImplementedError
+
+
+def _floats(text: str, n: int) -> FloatArray | None:
+    try:
+        values = np.array([float(v) for v in text.split(",")], dtype=float)
+    except ValueError:
+        return None
+    if values.size != n or not np.all(np.isfinite(values)):
+        return None
+    return values
+
+
+class SymetrieSimulator(SimulatedController):
+    """A simulated Symétrie controller (API v2 as in :mod:`hexatherm.devices.symetrie`).
+
+    Examples
+    --------
+    >>> hexapod = Hexapod.symmetric(base_radius_mm=150, platform_radius_mm=100,
+    ...     base_half_angle_deg=10, platform_half_angle_deg=10, height_mm=200,
+    ...     stroke_mm=(150, 300))
+    >>> with SymetrieSimulator(SimulatedHexapod(hexapod)) as sim:
+    ...     sim.url.startswith("symetrie://127.0.0.1:")
+    True
+    """
+
+    scheme = "symetrie"
+    native_convention: Convention = "symetrie"
+    line_end = "\r\n"
+    _COMMAND = re.compile(r"^(?P<name>[A-Z#]+\??)(?P<args>.*)$")
+
+    def greeting(self) -> list[str]:
+        return [
+            "SYMETRIE controller",
+            "API version: 2.0 (hexatherm simulator)",
+            "Project: hexatherm simulated hexapod",
+            "Waiting for commands...",
+        ]
+
+    def _status_word(self) -> int:
+        m = self.model
+        bits = {1, 3, 6, 8, 9}  # ready, safety, control on, phasing and homing done
+        if m.in_position():
+            bits.add(4)
+        if m.moving():
+            bits.add(5)
+        return sum(1 << b for b in bits)
+
+    def respond(self, line: str) -> list[str]:
+        match = self._COMMAND.match(line)
+        if match is None:
+            return [f"{line.split(':')[0][:20]}:-6"]
+        name, args = match["name"], match["args"].strip()
+        short = name.rstrip("?")
+        code = self.faults.take_error(short)
+        if code is not None:
+            return [f"{short}:{code}"]
+        m = self.model
+        if name == "STA#HEXAPOD?":
+            self._drop_if_moving()
+            pose = pose_to_wire(self._wire_pose())
+            data = [float(self._status_word()), *pose, *pose]
+            return [f"{short}:2," + ",".join(repr(float(v)) for v in data)]
+        if name == "STA#AXES?":
+            if not m.report_actuators:
+                return [f"{short}:-6"]
+            lengths = m.actuators_mm() * 1e-3
+            data = ["6"] + ["0"] * 6 + [repr(float(v)) for v in lengths]
+            return [f"{short}:2," + ",".join(data)]
+        if name == "STA#TEMP?":
+            temps = m.temperatures()
+            if temps is None:
+                return [f"{short}:-6"]
+            return [f"{short}:2,{temps.size}" + "".join(f",{v!r}" for v in temps.tolist())]
+        if name == "CFG#CS?":
+            return [f"{short}:1", f"{short}:2," + ",".join(["0"] * 12)]
+        if name in ("VALID#PTP?", "MOVE#ABS"):
+            wire = _floats(args, 6)
+            if wire is None:
+                return [f"{short}:-9"]
+            pose = self._model_pose(pose_from_wire(wire))
+            stroke_ok, rule_ok = m.check(pose)
+            if name == "VALID#PTP?":
+                bits = (0 if stroke_ok else 4) | (0 if rule_ok else 2)
+                return [f"{short}:1", f"{short}:2,{bits}"]
+            if not stroke_ok:
+                return [f"{short}:-126"]
+            if not rule_ok:
+                return [f"{short}:-104"]
+            m.start_move(pose)
+            return [f"{short}:1", f"{short}:2"]
+        if name == "STOP":
+            m.stop()
+            return [f"{short}:1", f"{short}:2"]
+        return [f"{short}:-6"]
+
+
+class PISimulator(SimulatedController):
+    """A simulated PI GCS hexapod controller (as in :mod:`hexatherm.devices.pi`)."""
+
+    scheme = "pi"
+    native_convention: Convention = "pi"
+    line_end = "\n"
+
+    def __init__(self, model: SimulatedHexapod, host: str = "127.0.0.1", port: int = 0) -> None:
+        self.error_code = 0
+        super().__init__(model, host, port)
+
+    @staticmethod
+    def _answer(pairs: list[tuple[str, str]]) -> list[str]:
+        lines = [f"{k}={v}" for k, v in pairs]
+        return [line + " " for line in lines[:-1]] + lines[-1:]
+
+    def _set_error(self, code: int) -> list[str]:
+        if self.error_code == 0:  # GCS keeps the first error until ERR? reads it
+            self.error_code = code
+        return []
+
+    def _axes_pose(self, tokens: list[str]) -> FloatArray | None:
+        """The pose of ``AXIS value`` pairs (missing axes: the current target)."""
+        if len(tokens) % 2:
+            return None
+        native = convert_pose(self.model.target, self.model.convention, "pi")
+        for axis, value in zip(tokens[::2], tokens[1::2], strict=True):
+            if axis.upper() not in AXES:
+                return None
+            try:
+                native[AXES.index(axis.upper())] = float(value)
+            except ValueError:
+                return None
+        return native if np.all(np.isfinite(native)) else None
+
+    def respond(self, line: str) -> list[str]:
+        tokens = line.split()
+        cmd = tokens[0].upper()
+        if cmd == "ERR?":
+            code, self.error_code = self.error_code, 0
+            return [str(code)]
+        injected = self.faults.take_error(cmd)
+        if injected is not None:
+            return self._set_error(injected)
+        m = self.model
+        if cmd == "*IDN?":
+            return ["hexatherm simulated PI GCS hexapod controller (C-887 dialect)"]
+        if cmd == "ONT?":
+            self._drop_if_moving()
+            flag = "1" if m.in_position() else "0"
+            return self._answer([(a, flag) for a in AXES])
+        if cmd == "POS?":
+            pose = self._wire_pose()
+            return self._answer([(a, repr(float(v))) for a, v in zip(AXES, pose, strict=True)])
+        if cmd == "STR?":
+            if not m.report_actuators:
+                return self._set_error(2)
+            q = m.actuators_mm()
+            return self._answer([(str(i + 1), repr(float(v))) for i, v in enumerate(q)])
+        if cmd == "TEM?":
+            temps = m.temperatures()
+            if temps is None:
+                return self._set_error(2)
+            return self._answer([(str(i + 1), repr(float(v))) for i, v in enumerate(temps)])
+        if cmd in ("MOV", "VMO?"):
+            native = self._axes_pose(tokens[1:])
+            if native is None:
+                return self._set_error(1)
+            stroke_ok, rule_ok = m.check(self._model_pose(native))
+            if cmd == "VMO?":
+                return ["1" if stroke_ok and rule_ok else "0"]
+            if not (stroke_ok and rule_ok):
+                return self._set_error(7)
+            m.start_move(self._model_pose(native))
+            return []
+        if cmd == "STP":
+            m.stop()
+            return self._set_error(10)
+        return self._set_error(2)
