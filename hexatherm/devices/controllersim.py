@@ -277,6 +277,7 @@ class SimulatedController:
         self.model = model
         self.received: list[str] = []
         self.connections = 0
+        self._live: set[socket.socket] = set()
         self._lock = threading.Lock()
         self._chunks = np.random.default_rng(12345)
         outer = self
@@ -312,9 +313,16 @@ class SimulatedController:
         return str(self._server.server_address[0])
 
     def close(self) -> None:
-        """Stop serving and close the listening socket."""
+        """Stop serving and drop every connection (as a controller that goes away)."""
         self._server.shutdown()
         self._server.server_close()
+        with self._lock:
+            live = list(self._live)
+        for sock in live:
+            try:
+                sock.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
         self._thread.join(timeout=10)
 
     def __enter__(self) -> SimulatedController:
@@ -347,6 +355,7 @@ class SimulatedController:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         with self._lock:
             self.connections += 1
+            self._live.add(sock)
         buffer = LineBuffer()
         try:
             self._write(sock, self.greeting())
@@ -364,6 +373,8 @@ class SimulatedController:
         except (_Drop, OSError):
             return
         finally:
+            with self._lock:
+                self._live.discard(sock)
             try:
                 sock.shutdown(socket.SHUT_RDWR)
             except OSError:

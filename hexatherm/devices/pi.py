@@ -302,6 +302,15 @@ class PIController(SocketController):
         return keyed_floats(answer, keys, "TEM?")
 
     def _stop_wire(self) -> None:
-        code = self._command("STP")
-        if code not in (0, STOPPED_BY_COMMAND):
-            self.info["error_at_stop"] = describe_error(code)
+        self._send("STP")
+        self._send("ERR?")
+        # Answers of a transaction cut short (Ctrl-C) may still arrive before ERR?'s:
+        # skip KEY=VALUE answers up to the bare integer.
+        for _ in range(64):
+            answer = self._answer("ERR? after STP")
+            if _is_integer(answer):
+                code = parse_error(answer)
+                if code not in (0, STOPPED_BY_COMMAND):
+                    self.info["error_at_stop"] = describe_error(code)
+                return
+        raise ControllerError("no ERR? answer after STP among 64 answers")

@@ -391,6 +391,31 @@ def test_stop_is_safe_at_any_time(rig_factory: Callable[..., Rig], dialect: str)
         rig.driver.connect()
 
 
+@pytest.mark.parametrize("dialect", ["symetrie", "pi"])
+def test_stop_after_an_interrupted_transaction(
+    rig_factory: Callable[..., Rig], dialect: str
+) -> None:
+    """Ctrl-C between a query and its reply: the stop skips the stale reply."""
+    rig = rig_factory(dialect)
+    rig.driver.move_absolute(POSE)
+    rig.clock.sleep(1.0)
+    rig.driver._send("STA#HEXAPOD?" if dialect == "symetrie" else "POS?")  # never read
+    rig.driver.stop()
+    assert not rig.model.moving()
+    np.testing.assert_allclose(rig.driver.read_pose(), POSE / 3, atol=2e-4)  # in step
+
+
+@pytest.mark.parametrize("dialect", ["symetrie", "pi"])
+def test_simulator_going_away_drops_the_connection(
+    rig_factory: Callable[..., Rig], dialect: str
+) -> None:
+    rig = rig_factory(dialect)
+    rig.sim.close()
+    with pytest.raises(ControllerConnectionError):
+        rig.driver.read_pose()
+    assert not rig.driver.connected
+
+
 # ----------------------------------------------------- hand-written replies
 class ScriptedServer:
     """One connection to a server that answers every line by ``script(line)``."""
