@@ -17,7 +17,7 @@ references) one item at a time, the way one would write it first:
 
 It writes ``OUT/poses.csv`` (label, conventional and corrected pose). Only the
 formats and options ``bench/speed.py`` simulates are supported. The functions
-are the reference that ``tests/test_speed_paths.py`` checks the vectorized code
+are the reference that ``tests/io/test_speed_paths.py`` checks the vectorized code
 against.
 """
 

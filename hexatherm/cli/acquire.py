@@ -186,7 +186,7 @@ def command(
     from hexatherm.devices.serialport import PortSettings
     from hexatherm.workflows.acquire.files import load_files
     from hexatherm.workflows.acquire.recorder import FitChecks
-    from hexatherm.workflows.acquire.run import AcquireOptions, replay
+    from hexatherm.workflows.acquire.run import AcquireOptions, session_from_log
     from hexatherm.workflows.acquire.run import acquire as run_acquisition
 
     if replay_log is not None:
@@ -216,7 +216,7 @@ def command(
         echo_err(("warning: " if level == "warn" else "") + message)
 
     if replay_log is not None:
-        result = replay(files, replay_log, session, notify, temperatures_file)
+        result = session_from_log(files, replay_log, session, notify, temperatures_file)
     else:
         assert port is not None
         probe = PortSettings(

@@ -37,6 +37,8 @@ def command(
     then diameter, form_um (max-min residual), n and u_um (standard uncertainty
     of the centre from the residuals).
     """
+    import numpy as np
+
     from hexatherm.io.atomic import atomic_write_text, refuse_existing
     from hexatherm.io.csvfile import centres_to_csv, read_measurements
     from hexatherm.io.records import Records, concat_records
@@ -64,5 +66,5 @@ def command(
         atomic_write_text(out, text)
         echo_err(f"wrote {out}")
     for rec in fitted:
-        form = rec.extra["form_um"]
-        echo_err(f"{rec.path}: {len(rec)} spheres, form error up to {max(form):.2f} um")
+        form_um = float(np.max(np.asarray(rec.extra["form_um"], dtype=float)))
+        echo_err(f"{rec.path}: {len(rec)} spheres, form error up to {form_um:.2f} um")

@@ -226,26 +226,8 @@ def command(
     OUT (or standard output); --dmis and --checklist add the CMM program and the
     operator's sheet.
     """
-    import numpy as np
-    import numpy.typing as npt
-
-    from hexatherm.core.planning import (
-        DEFAULT_MIN_RCOND,
-        build_plan,
-        check_plan_poses,
-        estimate_timing,
-        grid_targets,
-        parse_targets,
-        pose_problems,
-        random_targets,
-        reference_gaps,
-        touch_points,
-    )
     from hexatherm.io.atomic import atomic_write_text, refuse_existing
-    from hexatherm.io.checklist import checklist_markdown
-    from hexatherm.io.config import plan_to_yaml, read_balls, read_hexapod
-    from hexatherm.io.csvfile import read_text
-    from hexatherm.io.dmisprog import dmis_program
+    from hexatherm.workflows.plan import PlanRequest, make_plan
 
     sources_given = sum(x is not None for x in (targets_path, grid, n_random))
     if sources_given != 1:
@@ -261,110 +243,57 @@ def command(
             "--dmis needs --origin-on-cmm: where frame O nominally is on "
             "the CMM (the probe would otherwise go to made-up positions)"
         )
-    reference_pose = parse_pose(reference, "--reference")
-    origin_pose = None if origin_on_cmm is None else parse_pose(origin_on_cmm, "--origin-on-cmm")
     outputs = [p for p in (out, dmis_path, checklist_path) if p is not None]
     if len({os.path.realpath(p) for p in outputs}) != len(outputs):
         raise click.UsageError("-o, --dmis and --checklist must be different files")
+    lower, upper = parse_box(box) if box else (None, None)
+    origin = None if origin_on_cmm is None else parse_pose(origin_on_cmm, "--origin-on-cmm")
+    request = PlanRequest(
+        hexapod_path=hexapod_path,
+        balls_path=balls_path,
+        reference_pose=parse_pose(reference, "--reference"),
+        targets_path=targets_path,
+        grid_levels=None if grid is None else parse_levels(grid),
+        n_random=n_random,
+        seed=seed,
+        box_lower=lower,
+        box_upper=upper,
+        cycles=cycles,
+        reference_every=reference_every,
+        points_per_ball=points_per_ball,
+        seconds_per_point=seconds_per_point,
+        seconds_per_move=seconds_per_move,
+        max_gap_s=max_gap,
+        min_rcond=min_rcond,
+        origin_on_cmm=origin,
+        cap_angle_deg=cap_angle,
+        clearance_mm=clearance,
+        dmis_name=None if dmis_path is None else Path(dmis_path).stem,
+        checklist=checklist_path is not None,
+    )
     for path in outputs:
         refuse_existing(path, overwrite)
-    rcond = DEFAULT_MIN_RCOND if min_rcond is None else min_rcond
-
-    hexapod = read_hexapod(hexapod_path)
-    balls = read_balls(balls_path)
-    if targets_path is not None:
-        targets, lines = parse_targets(read_text(targets_path), os.fspath(targets_path))
-        target_sources = [f"{targets_path}:{line}" for line in lines]
-    elif grid is not None:
-        lower, upper = parse_box(box)
-        targets = grid_targets(lower, upper, parse_levels(grid))
-        target_sources = [f"grid point {k + 1} of {len(targets)}" for k in range(len(targets))]
-    else:
-        assert n_random is not None
-        lower, upper = parse_box(box)
-
-        def feasible(poses: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
-            return np.array([p is None for p in pose_problems(hexapod, poses, rcond)])
-
-        targets, rejected = random_targets(lower, upper, n_random, seed, feasible)
-        if rejected:
-            echo_err(f"drew {rejected} random pose(s) again: out of the stroke or near-singular")
-        target_sources = [f"random pose {k + 1}" for k in range(len(targets))]
-
-    plan = build_plan(
-        targets,
-        reference_pose,
-        cycles=cycles,
-        reference_every=reference_every,  # type: ignore[arg-type]
-        points_per_ball=points_per_ball,
-    )
-    sources: list[str | None] = []
-    n_targets = 0
-    for kind in plan.kinds:
-        if kind == "target":
-            sources.append(target_sources[n_targets % len(target_sources)])
-            n_targets += 1
-        else:
-            sources.append("origin" if kind == "origin" else "--reference")
-    check_plan_poses(hexapod, plan, rcond, sources)
-
-    timing = estimate_timing(plan, len(balls.names), seconds_per_point, seconds_per_move)
-    gaps = [g for g in reference_gaps(plan, timing.time_s) if g.gap_s > max_gap]
-    for gap in gaps:
+    made = make_plan(request)
+    if made.redrawn:
+        echo_err(f"drew {made.redrawn} random pose(s) again: out of the stroke or near-singular")
+    for gap in made.gaps:
         echo_err(
             f"warning: {gap.target} and its reference {gap.reference} are expected "
             f"{gap.gap_s / 60:.1f} min apart (--max-gap {max_gap / 60:.1f} min): fewer "
             "points per ball or a faster CMM program keep the thermal state comparable"
         )
-
-    texts: list[tuple[Path | None, str]] = [(out, plan_to_yaml(plan))]
-    if dmis_path is not None:
-        assert origin_pose is not None
-        touch = touch_points(
-            plan,
-            balls.centres_mm,
-            balls.diameters_mm,
-            origin_pose,
-            hexapod.convention,
-            cap_half_angle_deg=cap_angle,
-        )
-        texts.append(
-            (
-                dmis_path,
-                dmis_program(
-                    plan,
-                    balls,
-                    touch,
-                    origin_on_cmm=origin_pose,
-                    name=Path(dmis_path).stem,
-                    clearance_mm=clearance,
-                    timing=timing,
-                ),
-            )
-        )
-    if checklist_path is not None:
-        texts.append(
-            (
-                checklist_path,
-                checklist_markdown(
-                    plan,
-                    balls.names,
-                    timing,
-                    gaps=gaps,
-                    max_gap_s=max_gap,
-                    hexapod_name=hexapod.name,
-                ),
-            )
-        )
-
+    texts = [(out, made.plan_yaml), (dmis_path, made.dmis), (checklist_path, made.checklist)]
     for target, text in texts:
+        if text is None:
+            continue
         if target is None:
             click.echo(text, nl=False)
         else:
             atomic_write_text(target, text)
             echo_err(f"wrote {target}")
+    plan = made.plan
     echo_err(
         f"plan: {len(plan.labels)} steps ({len(plan.target_indices)} targets x "
-        f"{len(balls.names)} balls x {points_per_ball} points), estimated "
-        f"{timing.total_s / 3600:.2f} h"
+        f"{len(made.ball_names)} balls x {points_per_ball} points), estimated "
+        f"{made.timing.total_s / 3600:.2f} h"
     )

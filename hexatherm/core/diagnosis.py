@@ -111,6 +111,13 @@ class Observations:
         object.__setattr__(self, "ball_times_s", np.array(bt))
 
     @property
+    def times_per_ball_s(self) -> FloatArray:
+        """The time of every ball of every step (N, k), s: ``ball_times_s``, or the step's time."""
+        if self.ball_times_s is None:  # never after __post_init__; kept for the type checker
+            return np.broadcast_to(self.times_s[:, None], self.centres_mm.shape[:2]).copy()
+        return self.ball_times_s
+
+    @property
     def n_steps(self) -> int:
         return len(self.plan.labels)
 
@@ -270,7 +277,7 @@ def place(
     w = (1.0 / obs.u_mm**2)[mask].reshape(1, -1)
     y_fit = y_mm[mask].reshape(1, -1, 3)[0]
     x_fit = obs.centres_mm[mask].reshape(1, -1, 3)
-    t = obs.ball_times_s
+    t = obs.times_per_ball_s
     origin2cmm = register(x_fit, y_fit, w).platform2cmm[0]
     cmm_side = [e for e in effects if type(e).cmm_coordinates_mm is not Effect.cmm_coordinates_mm]
     if cmm_side:
@@ -318,7 +325,7 @@ class _Problem:
     def effects(self, theta: FloatArray) -> tuple[Effect, ...]:
         out, i = [], 0
         for cls, size in zip(self.free, self.sizes, strict=True):
-            out.append(cls.from_vector(theta[i : i + size]))
+            out.append(cls.from_vector(theta[i : i + size].tolist()))
             i += size
         return self.fixed + tuple(out)
 

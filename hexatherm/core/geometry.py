@@ -48,7 +48,7 @@ def check_convention(convention: str) -> Convention:
         raise ValueError(
             f"unknown rotation convention {convention!r}; expected one of {', '.join(CONVENTIONS)}"
         )
-    return convention  # type: ignore[return-value]
+    return convention
 
 
 def check_poses(poses: npt.ArrayLike, name: str = "pose") -> FloatArray:

@@ -16,7 +16,7 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -69,16 +69,18 @@ class Plan:
         """Build and validate a plan from ``(label, kind, pose)`` triples."""
         steps = list(steps)
         labels = tuple(str(s[0]) for s in steps)
-        kinds = tuple(s[1] for s in steps)
+        kinds = tuple(cast(StepKind, s[1]) for s in steps)
         poses = np.array([np.asarray(s[2], dtype=float) for s in steps]).reshape(-1, 6)
         if reference_pose is None:
             refs = [p for p, k in zip(poses, kinds, strict=True) if k == "reference"]
-            reference_pose = refs[0] if refs else np.zeros(6)
+            reference = refs[0] if refs else np.zeros(6)
+        else:
+            reference = np.asarray(reference_pose, dtype=float)
         plan = cls(
             labels,
             kinds,
             poses,
-            np.asarray(reference_pose, float),  # type: ignore[arg-type]
+            np.asarray(reference, float),
             int(points_per_ball),
         )
         plan.validate()

@@ -261,7 +261,7 @@ def _newton_term(
 
 
 def _solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    return np.linalg.solve(a, b[..., None])[..., 0]
+    return np.asarray(np.linalg.solve(a, b[..., None])[..., 0], dtype=np.float64)
 
 
 def _condition(a: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -623,7 +623,7 @@ def fit_spheres(
     m = int(g.max()) + 1 if n_points else 1
     counts = np.bincount(g, minlength=m).astype(np.int64)
 
-    bad_rows = ~np.isfinite(pts).all(axis=1)
+    bad_rows = np.asarray(~np.isfinite(pts).all(axis=1), dtype=bool)
     if bad_rows.any():
         first_row = np.flatnonzero(bad_rows)
         by_group = np.zeros(m, dtype=bool)

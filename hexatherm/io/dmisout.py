@@ -44,6 +44,8 @@ def dmis_output(
         Diameters of the spheres.
     """
     xyz = np.asarray(xyz_mm, dtype=float)
+    directions = None if ijk is None else np.asarray(ijk, dtype=float)
+    diameters = None if diameters_mm is None else np.asarray(diameters_mm, dtype=float)
     times = np.asarray(times_s, dtype=float)
     lines = ["DMISMN/'hexatherm twin output',04.0", "UNITS/MM,ANGDEC", f"FILNAM/'{name}'"]
     last = None
@@ -54,10 +56,12 @@ def dmis_output(
             last = stamp
         coords = ",".join(repr(float(v)) for v in xyz[i])
         if kind == "POINT":
-            tail = "" if ijk is None else "," + ",".join(repr(float(v)) for v in ijk[i])
+            tail = (
+                "" if directions is None else "," + ",".join(repr(float(v)) for v in directions[i])
+            )
             lines.append(f"FA({label})=FEAT/POINT,CART,{coords}{tail}")
         elif kind == "SPHERE":
-            diameter = "" if diameters_mm is None else f",{float(diameters_mm[i])!r}"
+            diameter = "" if diameters is None else f",{float(diameters[i])!r}"
             lines.append(f"FA({label})=FEAT/SPHERE,OUTER,CART,{coords}{diameter}")
         else:
             raise ValueError(f"kind must be POINT or SPHERE, got {kind!r}")

@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from hexatherm.devices import PointSource
 from hexatherm.devices.serialport import PortReader, PortSettings
 from hexatherm.errors import (
     AcquisitionError,
@@ -275,7 +276,9 @@ def _run(
 
     stop = threading.Event()
     items: queue.Queue[Any] = queue.Queue()
-    readers = [PortReader(PROBE, options.probe, probe_port, items, stop, options.reopen_interval_s)]
+    readers: list[PointSource] = [
+        PortReader(PROBE, options.probe, probe_port, items, stop, options.reopen_interval_s)
+    ]
     if temperature_port is not None:
         assert options.temperature_port is not None
         readers.append(
@@ -374,7 +377,7 @@ def _loop(
 
 
 # ------------------------------------------------------------------------- replay
-def replay(
+def session_from_log(
     files: SessionFiles,
     log_file: Path,
     session: Path,

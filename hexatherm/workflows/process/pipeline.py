@@ -370,7 +370,7 @@ def process_session(
         warnings.append(message)
     q_steps = session.hexapod.igm(plan.poses)
     outside = np.flatnonzero(session.hexapod.check_stroke(q_steps).any(axis=1))
-    if outside.size:
+    if outside.size and session.hexapod.stroke_mm is not None:
         warnings.append(
             f"step {plan.labels[outside[0]]}: commanded pose is outside the stroke "
             f"{session.hexapod.stroke_mm.tolist()} mm"

@@ -175,7 +175,7 @@ def test_registration_residual_warns_or_fails(tmp_path):
 
 
 def test_inspect_lists_the_real_dmis_samples():
-    from tests.test_dmis import SAMPLES
+    from tests.io.test_dmis import SAMPLES
 
     for name, count in (("Example1.dmo", 6), ("Example2.dmo", 9), ("impeller-part-1.dmo", 162)):
         result = run("inspect", SAMPLES / name, "--csv")

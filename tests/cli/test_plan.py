@@ -16,7 +16,7 @@ from hexatherm.core.spherefit import fit_spheres
 from hexatherm.io.config import read_balls, read_plan
 from hexatherm.io.dmis import read_dmis
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 HEXAPOD = ROOT / "configs" / "symetrie-like.yaml"
 BALLS = ROOT / "configs" / "balls-3.yaml"
 TARGETS = "Tx,Ty,Tz,Rx,Ry,Rz\n5,-3,2,0.5,-0.4,3\n-8,6,-4,-0.6,0.3,-5\n0,0,10,0,0,0\n"

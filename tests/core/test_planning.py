@@ -26,7 +26,7 @@ from hexatherm.core.planning import (
 from hexatherm.errors import InputError, PlanError
 from hexatherm.io.config import read_hexapod
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 REF = [0.0, 0.0, -40.0, 0.0, 0.0, 0.0]
 
 

@@ -13,7 +13,7 @@ from click.testing import CliRunner
 import hexatherm.workflows.report
 from hexatherm.cli import main
 
-SESSION = Path(__file__).resolve().parent.parent / "sessions" / "paper-zero-pose"
+SESSION = Path(__file__).resolve().parents[2] / "sessions" / "paper-zero-pose"
 IMG = re.compile(r'<img src="data:image/png;base64,([A-Za-z0-9+/=]+)"')
 
 

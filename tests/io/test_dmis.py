@@ -22,7 +22,7 @@ from hexatherm.io.dmis import (
 )
 from hexatherm.io.records import iso_to_seconds
 
-SAMPLES = Path(__file__).resolve().parent / "data" / "dmis-samples"  # copied from shared/
+SAMPLES = Path(__file__).resolve().parents[1] / "data" / "dmis-samples"  # copied from shared/
 EXAMPLE1 = SAMPLES / "Example1.dmo"
 EXAMPLE2 = SAMPLES / "Example2.dmo"
 IMPELLER = SAMPLES / "impeller-part-1.dmo"

@@ -46,7 +46,7 @@ from hexatherm.io.seriallog import POINTS_HEADER, MemorySink, entry, escape_byte
 from hexatherm.workflows.acquire.recorder import FitChecks, Recorder
 from hexatherm.workflows.process import pipeline
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 HEXAPOD = ROOT / "configs" / "symetrie-like.yaml"
 BALLS_FILE = ROOT / "configs" / "balls-3.yaml"
 BALLS = read_balls(BALLS_FILE)

@@ -27,7 +27,7 @@ from hexatherm.io import csvfile, dmis
 from hexatherm.io.records import Records
 from tests.conftest import make_hexapod, random_poses
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _straightforward():

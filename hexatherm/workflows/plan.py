@@ -1,0 +1,187 @@
+"""``hexatherm plan``: a measuring plan in the paper's order, its DMIS program and checklist.
+
+The workflow takes the parsed options (:class:`PlanRequest`), reads the hexapod and balls
+files and the targets, builds the plan (O, R0, then every S_i with a reference around it),
+checks every commanded pose against the legs' stroke and for a near-singular Jacobian
+(nothing is returned when one fails), estimates the timing and returns the texts to write
+(:class:`PlanTexts`). No click and no printing: the command line writes and tells.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from hexatherm.core.plan import Plan
+from hexatherm.core.planning import (
+    DEFAULT_MIN_RCOND,
+    ReferenceGap,
+    StepTiming,
+    build_plan,
+    check_plan_poses,
+    estimate_timing,
+    grid_targets,
+    parse_targets,
+    pose_problems,
+    random_targets,
+    reference_gaps,
+    touch_points,
+)
+from hexatherm.io.checklist import checklist_markdown
+from hexatherm.io.config import plan_to_yaml, read_balls, read_hexapod
+from hexatherm.io.csvfile import read_text
+from hexatherm.io.dmisprog import dmis_program
+
+
+@dataclass(frozen=True)
+class PlanRequest:
+    """What ``hexatherm plan`` was asked for (the command line's options, parsed).
+
+    Exactly one target source: ``targets_path`` (a CSV file), ``grid_levels`` or
+    ``n_random`` (both over the box ``box_lower``..``box_upper``, mm and deg).
+    ``origin_on_cmm`` (where frame O nominally is on the CMM) is needed for a DMIS program.
+    """
+
+    hexapod_path: Path
+    balls_path: Path
+    reference_pose: Sequence[float]
+    targets_path: Path | None = None
+    grid_levels: Sequence[int] | None = None
+    n_random: int | None = None
+    seed: int | None = None
+    box_lower: Sequence[float] | None = None
+    box_upper: Sequence[float] | None = None
+    cycles: int = 1
+    reference_every: str = "both"
+    points_per_ball: int = 25
+    seconds_per_point: float = 3.0
+    seconds_per_move: float = 30.0
+    max_gap_s: float = 600.0
+    min_rcond: float | None = None
+    origin_on_cmm: Sequence[float] | None = None
+    cap_angle_deg: float = 70.0
+    clearance_mm: float = 10.0
+    dmis_name: str | None = None
+    checklist: bool = False
+
+
+@dataclass(frozen=True)
+class PlanTexts:
+    """The plan and what goes with it.
+
+    Attributes
+    ----------
+    plan : Plan
+    ball_names : tuple of str
+    timing : StepTiming
+        The estimated time of every step.
+    gaps : list of ReferenceGap
+        The target-reference gaps expected above ``max_gap_s``.
+    redrawn : int
+        Random poses drawn again (out of the stroke or near-singular).
+    plan_yaml : str
+    dmis : str or None
+    checklist : str or None
+    """
+
+    plan: Plan
+    ball_names: tuple[str, ...]
+    timing: StepTiming
+    gaps: list[ReferenceGap]
+    redrawn: int
+    plan_yaml: str
+    dmis: str | None
+    checklist: str | None
+
+
+def make_plan(request: PlanRequest) -> PlanTexts:
+    """Build, check and write out (as texts) the plan of ``request``."""
+    sources = [request.targets_path, request.grid_levels, request.n_random]
+    if sum(s is not None for s in sources) != 1:
+        raise ValueError("give exactly one of targets_path, grid_levels and n_random")
+    if request.dmis_name is not None and request.origin_on_cmm is None:
+        raise ValueError("a DMIS program needs origin_on_cmm")
+    rcond = DEFAULT_MIN_RCOND if request.min_rcond is None else request.min_rcond
+    hexapod = read_hexapod(request.hexapod_path)
+    balls = read_balls(request.balls_path)
+    redrawn = 0
+    if request.targets_path is not None:
+        path = request.targets_path
+        targets, lines = parse_targets(read_text(path), os.fspath(path))
+        target_sources = [f"{path}:{line}" for line in lines]
+    else:
+        if request.box_lower is None or request.box_upper is None:
+            raise ValueError("a grid or random targets need the box")
+        lower, upper = list(request.box_lower), list(request.box_upper)
+        if request.grid_levels is not None:
+            targets = grid_targets(lower, upper, list(request.grid_levels))
+            n = len(targets)
+            target_sources = [f"grid point {k + 1} of {n}" for k in range(n)]
+        else:
+            assert request.n_random is not None
+
+            def feasible(poses: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
+                return np.array([p is None for p in pose_problems(hexapod, poses, rcond)])
+
+            targets, redrawn = random_targets(
+                lower, upper, request.n_random, request.seed, feasible
+            )
+            target_sources = [f"random pose {k + 1}" for k in range(len(targets))]
+
+    plan = build_plan(
+        targets,
+        request.reference_pose,
+        cycles=request.cycles,
+        reference_every=request.reference_every,  # type: ignore[arg-type]
+        points_per_ball=request.points_per_ball,
+    )
+    step_sources: list[str | None] = []
+    n_targets = 0
+    for kind in plan.kinds:
+        if kind == "target":
+            step_sources.append(target_sources[n_targets % len(target_sources)])
+            n_targets += 1
+        else:
+            step_sources.append("origin" if kind == "origin" else "--reference")
+    check_plan_poses(hexapod, plan, rcond, step_sources)
+
+    timing = estimate_timing(
+        plan, len(balls.names), request.seconds_per_point, request.seconds_per_move
+    )
+    gaps = [g for g in reference_gaps(plan, timing.time_s) if g.gap_s > request.max_gap_s]
+    dmis = None
+    if request.dmis_name is not None:
+        assert request.origin_on_cmm is not None
+        touch = touch_points(
+            plan,
+            balls.centres_mm,
+            balls.diameters_mm,
+            request.origin_on_cmm,
+            hexapod.convention,
+            cap_half_angle_deg=request.cap_angle_deg,
+        )
+        dmis = dmis_program(
+            plan,
+            balls,
+            touch,
+            origin_on_cmm=request.origin_on_cmm,
+            name=request.dmis_name,
+            clearance_mm=request.clearance_mm,
+            timing=timing,
+        )
+    checklist = None
+    if request.checklist:
+        checklist = checklist_markdown(
+            plan,
+            balls.names,
+            timing,
+            gaps=gaps,
+            max_gap_s=request.max_gap_s,
+            hexapod_name=hexapod.name,
+        )
+    return PlanTexts(plan, balls.names, timing, gaps, redrawn, plan_to_yaml(plan), dmis, checklist)
