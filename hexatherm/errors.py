@@ -80,3 +80,31 @@ class AcquisitionError(HexathermError):
 
 class IncompleteSession(AcquisitionError):
     """The acquisition stopped before the end of the plan; ``--resume`` continues it."""
+
+
+class ControllerError(HexathermError):
+    """A hexapod controller could not do what was asked (base of the errors below)."""
+
+
+class ControllerConnectionError(ControllerError):
+    """The controller cannot be reached, or the connection dropped."""
+
+
+class ControllerTimeoutError(ControllerError):
+    """The controller did not answer, or the hexapod did not get in position, in time."""
+
+
+class PoseRefusedError(ControllerError):
+    """A pose failed validation (stroke, workspace, controller check): nothing moved."""
+
+
+class ControllerReplyError(ControllerError):
+    """The controller answered a command with an error code.
+
+    ``code`` is the controller's number, ``command`` the command it answered.
+    """
+
+    def __init__(self, message: str, *, code: int, command: str) -> None:
+        self.code = code
+        self.command = command
+        super().__init__(message)

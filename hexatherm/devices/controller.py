@@ -40,7 +40,6 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
-from urllib.parse import urlsplit
 
 import numpy as np
 import numpy.typing as npt
@@ -53,7 +52,12 @@ from hexatherm.core.geometry import (
     transform_from_pose,
 )
 from hexatherm.core.hexapod import Hexapod
-from hexatherm.errors import HexathermError
+from hexatherm.errors import (
+    ControllerConnectionError,
+    ControllerError,
+    ControllerTimeoutError,
+    PoseRefusedError,
+)
 from hexatherm.typing import FloatArray
 
 #: micrometres per millimetre and microradians per degree
@@ -64,34 +68,6 @@ MAX_LINE = 65536
 
 
 # ------------------------------------------------------------------------- errors
-class ControllerError(HexathermError):
-    """A hexapod controller could not do what was asked (base of the errors below)."""
-
-
-class ControllerConnectionError(ControllerError):
-    """The controller cannot be reached, or the connection dropped."""
-
-
-class ControllerTimeoutError(ControllerError):
-    """The controller did not answer, or the hexapod did not get in position, in time."""
-
-
-class PoseRefusedError(ControllerError):
-    """A pose failed validation (stroke, workspace, controller check): nothing moved."""
-
-
-class ControllerReplyError(ControllerError):
-    """The controller answered a command with an error code.
-
-    ``code`` is the controller's number, ``command`` the command it answered.
-    """
-
-    def __init__(self, message: str, *, code: int, command: str) -> None:
-        self.code = code
-        self.command = command
-        super().__init__(message)
-
-
 # ------------------------------------------------------------------- data types
 @dataclass(frozen=True)
 class ControllerState:
@@ -820,59 +796,3 @@ def parse_numbers(text: str, what: str, count: int | None = None) -> FloatArray:
 
 
 # ------------------------------------------------------------------------ URL
-def controller_from_url(
-    url: str,
-    *,
-    hexapod: Hexapod | None = None,
-    convention: str | None = None,
-    reply_timeout_s: float = 5.0,
-    clock: Callable[[], float] = time.monotonic,
-    sleep: Callable[[float], None] = time.sleep,
-    log: LogCallback | None = None,
-) -> SocketController:
-    """A driver (not yet connected) for ``symetrie://HOST[:PORT]`` or ``pi://HOST[:PORT]``.
-
-    The port defaults to the dialect's (Symétrie API v2: 61559, PI GCS: 50000). Keyword
-    arguments go to the driver (see :class:`SocketController`).
-
-    >>> controller_from_url("pi://192.168.0.10").url
-    'pi://192.168.0.10:50000'
-    >>> controller_from_url("symetrie://hexa:61559").dialect
-    'Symetrie API v2'
-    >>> controller_from_url("modbus://hexa")  # doctest: +ELLIPSIS
-    Traceback (most recent call last):
-    ...
-    hexatherm.devices.controller.ControllerError: unknown controller URL scheme 'modbus' ...
-    """
-    from hexatherm.devices.pi import PIController
-    from hexatherm.devices.symetrie import SymetrieController
-
-    drivers: dict[str, type[SocketController]] = {
-        SymetrieController.scheme: SymetrieController,
-        PIController.scheme: PIController,
-    }
-    parts = urlsplit(url)
-    scheme = parts.scheme.lower()
-    if scheme not in drivers:
-        raise ControllerError(
-            f"unknown controller URL scheme {parts.scheme!r} in {url!r}; expected "
-            "symetrie://HOST:61559 or pi://HOST:50000"
-        )
-    if parts.path not in ("", "/") or parts.query or parts.fragment or parts.username:
-        raise ControllerError(f"controller URL {url!r} must be SCHEME://HOST[:PORT], no more")
-    try:
-        port = parts.port
-    except ValueError as exc:
-        raise ControllerError(f"bad port in controller URL {url!r}: {exc}") from exc
-    if not parts.hostname:
-        raise ControllerError(f"no host in controller URL {url!r}")
-    return drivers[scheme](
-        parts.hostname,
-        port,
-        hexapod=hexapod,
-        convention=convention,
-        reply_timeout_s=reply_timeout_s,
-        clock=clock,
-        sleep=sleep,
-        log=log,
-    )

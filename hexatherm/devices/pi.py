@@ -38,12 +38,14 @@ import numpy as np
 
 from hexatherm.core.geometry import Convention
 from hexatherm.devices.controller import (
-    ControllerError,
-    ControllerReplyError,
     ControllerState,
-    PoseRefusedError,
     SocketController,
     format_pose,
+)
+from hexatherm.errors import (
+    ControllerError,
+    ControllerReplyError,
+    PoseRefusedError,
 )
 from hexatherm.typing import FloatArray
 

@@ -53,13 +53,15 @@ import numpy.typing as npt
 
 from hexatherm.core.geometry import Convention
 from hexatherm.devices.controller import (
-    ControllerError,
-    ControllerReplyError,
     ControllerState,
-    PoseRefusedError,
     SocketController,
     format_pose,
     parse_numbers,
+)
+from hexatherm.errors import (
+    ControllerError,
+    ControllerReplyError,
+    PoseRefusedError,
 )
 from hexatherm.typing import FloatArray
 

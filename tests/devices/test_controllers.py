@@ -21,16 +21,10 @@ from scipy.spatial.transform import Rotation
 
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.devices.controller import (
-    ControllerConnectionError,
-    ControllerError,
-    ControllerReplyError,
-    ControllerTimeoutError,
     HexapodController,
     InPositionCriteria,
     LineBuffer,
-    PoseRefusedError,
     SocketController,
-    controller_from_url,
     pose_deviation_um_urad,
 )
 from hexatherm.devices.controllersim import (
@@ -48,6 +42,14 @@ from hexatherm.devices.symetrie import (
     parse_reply,
     pose_from_wire,
     pose_to_wire,
+)
+from hexatherm.devices.urls import controller_from_url
+from hexatherm.errors import (
+    ControllerConnectionError,
+    ControllerError,
+    ControllerReplyError,
+    ControllerTimeoutError,
+    PoseRefusedError,
 )
 
 CONFIG = Path(__file__).resolve().parents[2] / "configs" / "symetrie-like.yaml"
