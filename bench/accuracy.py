@@ -40,8 +40,8 @@ import numpy as np
 
 from hexatherm.core.heating import Mat, MatHeating
 from hexatherm.core.plan import Plan
+from hexatherm.core.planning import sequence_steps
 from hexatherm.io.config import read_balls
-from hexatherm.io.scenario import sequence_steps
 from hexatherm.workflows.process.pipeline import process_session
 from hexatherm.workflows.simulate.twinsession import TwinSessionSpec, simulate_session, write_files
 
@@ -71,7 +71,7 @@ HEATING = {
     ),
 }
 NOISE_UM = (0.0, 0.5, 1.0, 2.0)
-LAYOUTS = {"both": "both", "one": "one-side"}
+LAYOUTS = {"both": "both", "one": "alternate"}
 N_SEEDS = 8
 URAD_PER_DEG = np.pi / 180 * 1e6
 
@@ -79,7 +79,8 @@ URAD_PER_DEG = np.pi / 180 * 1e6
 def run(heating: str, layout: str, noise_um: float, seed: int, work: Path) -> np.ndarray:
     """Squared errors (targets, 3 methods, 2: |dT|^2 um^2, |dR|^2 urad^2) of one session."""
     plan = Plan.from_steps(
-        sequence_steps(TARGETS, REFERENCE, LAYOUTS[layout]), reference_pose=REFERENCE
+        sequence_steps(TARGETS, REFERENCE, reference_every=LAYOUTS[layout]),
+        reference_pose=REFERENCE,
     )
     noisy = noise_um > 0
     spec = TwinSessionSpec(

@@ -35,8 +35,8 @@ from hexatherm.core.plan import Plan
 from hexatherm.errors import InputError, PlanError
 from hexatherm.typing import FloatArray
 
-ReferenceEvery = Literal["both", "before", "after"]
-REFERENCE_EVERY: tuple[ReferenceEvery, ...] = ("both", "before", "after")
+ReferenceEvery = Literal["both", "before", "after", "alternate"]
+REFERENCE_EVERY: tuple[ReferenceEvery, ...] = ("both", "before", "after", "alternate")
 
 #: names of the six pose components, in pose-vector order
 AXES: tuple[str, ...] = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
@@ -316,7 +316,10 @@ def sequence_steps(
     ends with the last target (every target has one right before it). Because
     the first reference must precede every target (it fixes the thermal state
     the corrected poses refer to), ``after`` gives the same order as ``both``.
-    Reference ``R_i`` follows target ``S_i``.
+    ``alternate`` puts a reference after every second target (and after the last
+    one): every target has one reference right next to it, on one side only (the
+    scenarios' ``references: one-side``). References are numbered in the order they
+    are measured; with ``both``, ``before`` and ``after``, ``R_i`` follows ``S_i``.
 
     Parameters
     ----------
@@ -324,11 +327,15 @@ def sequence_steps(
     reference_pose : sequence of 6 floats
     cycles : int
         How many times the targets are measured.
-    reference_every : {"both", "before", "after"}
+    reference_every : {"both", "before", "after", "alternate"}
 
     Returns
     -------
     list of (str, str, list of float)
+
+    >>> [s[0] for s in sequence_steps(np.zeros((3, 6)), [0, 0, -40, 0, 0, 0],
+    ...                               reference_every="alternate")]
+    ['O', 'R0', 'S1', 'S2', 'R1', 'S3', 'R2']
     """
     poses = np.asarray(targets, dtype=float).reshape(-1, 6)
     if cycles < 1:
@@ -345,10 +352,17 @@ def sequence_steps(
         ("R0", "reference", reference),
     ]
     all_targets = np.tile(poses, (cycles, 1))
+    n = len(all_targets)
+    n_refs = 0
     for i, pose in enumerate(all_targets, start=1):
         steps.append((f"S{i}", "target", pose.tolist()))
-        if reference_every != "before" or i < len(all_targets):
-            steps.append((f"R{i}", "reference", list(reference)))
+        if reference_every == "alternate":
+            follows = i % 2 == 0 or i == n
+        else:
+            follows = reference_every != "before" or i < n
+        if follows:
+            n_refs += 1
+            steps.append((f"R{n_refs}", "reference", list(reference)))
     return steps
 
 

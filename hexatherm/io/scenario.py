@@ -55,8 +55,9 @@ import numpy as np
 from hexatherm.core.effects import EFFECTS, Effect, effects_from_dicts
 from hexatherm.core.heating import Mat, MatHeating
 from hexatherm.core.hexapod import Hexapod
-from hexatherm.core.plan import Plan, StepError
-from hexatherm.errors import InputError
+from hexatherm.core.plan import Plan
+from hexatherm.core.planning import ReferenceEvery, sequence_steps
+from hexatherm.errors import InputError, PlanError
 from hexatherm.io.config import read_balls, read_hexapod_text, read_plan
 from hexatherm.io.records import iso_to_seconds
 from hexatherm.io.yamlfile import YamlDoc
@@ -66,7 +67,8 @@ SCENARIO_FORMAT = "hexatherm-scenario/1"
 #: what ``output:`` may say; ``serial`` writes the ``serial.log`` of an ``acquire --auto``
 #: capture (and no session.yaml): ``hexatherm acquire PLAN --replay`` makes it a session
 OUTPUT_FORMATS = ("centres", "points", "dmis", "serial")
-REFERENCE_LAYOUTS = ("both", "one-side")
+#: the scenario's ``references:`` -> the plan's reference layout (``core.planning``)
+REFERENCE_LAYOUTS: dict[str, ReferenceEvery] = {"both": "both", "one-side": "alternate"}
 DEFAULT_REFERENCE = (0.0, 0.0, -40.0, 0.0, 0.0, 0.0)
 
 
@@ -308,38 +310,18 @@ def _plan(doc: YamlDoc) -> Plan:
     targets = [doc.vector("plan", "targets", i, size=6) for i in range(len(items))]
     reference = doc.vector("plan", "reference_pose", size=6, default=list(DEFAULT_REFERENCE))
     cycles = _whole(doc, "plan", "cycles", default=1, minimum=1)
-    layout = doc.string("plan", "references", default="both", choices=REFERENCE_LAYOUTS)
+    layout = doc.string("plan", "references", default="both", choices=tuple(REFERENCE_LAYOUTS))
     ppb = _whole(doc, "plan", "points_per_ball", default=25, minimum=4)
     try:
         return Plan.from_steps(
-            sequence_steps(targets * cycles, reference, layout),
+            sequence_steps(
+                targets, reference, cycles=cycles, reference_every=REFERENCE_LAYOUTS[layout]
+            ),
             reference_pose=reference,
             points_per_ball=ppb,
         )
-    except StepError as exc:
+    except PlanError as exc:
         raise doc.error(str(exc), "plan") from None
-
-
-def sequence_steps(
-    targets: list[list[float]], reference: list[float], layout: str = "both"
-) -> list[tuple[str, str, list[float]]]:
-    """O, R0, then the targets with references between them (see the module's text).
-
-    >>> [s[0] for s in sequence_steps([[0.0] * 6] * 3, [0, 0, -40, 0, 0, 0], "one-side")]
-    ['O', 'R0', 'S1', 'S2', 'R1', 'S3', 'R2']
-    """
-    steps: list[tuple[str, str, list[float]]] = [
-        ("O", "origin", [0.0] * 6),
-        ("R0", "reference", list(reference)),
-    ]
-    every = 1 if layout == "both" else 2
-    n_refs = 0
-    for i, pose in enumerate(targets, start=1):
-        steps.append((f"S{i}", "target", list(pose)))
-        if i % every == 0 or i == len(targets):
-            n_refs += 1
-            steps.append((f"R{n_refs}", "reference", list(reference)))
-    return steps
 
 
 def _check_stroke(doc: YamlDoc, hexapod: Hexapod, plan: Plan) -> None:

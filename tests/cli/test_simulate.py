@@ -12,8 +12,8 @@ from click.testing import CliRunner
 
 from hexatherm.cli import main
 from hexatherm.core.plan import Plan
+from hexatherm.core.planning import sequence_steps
 from hexatherm.io.config import plan_to_yaml, read_session
-from hexatherm.io.scenario import sequence_steps
 from tests.sessions import ROOT
 
 UM, URAD = 1e3, np.pi / 180 * 1e6
@@ -217,7 +217,8 @@ def test_a_hidden_overheat_biases_the_correction(tmp_path):
 def test_plan_file_and_the_hexapod_files_thermal_model(tmp_path):
     """A plan file is used as is; the hexapod file's effects are part of the truth."""
     plan = Plan.from_steps(
-        sequence_steps(TARGETS[:2], [0, 0, -40, 0, 0, 0], "one-side"), points_per_ball=9
+        sequence_steps(TARGETS[:2], [0, 0, -40, 0, 0, 0], reference_every="alternate"),
+        points_per_ball=9,
     )
     (tmp_path / "plan.yaml").write_text(plan_to_yaml(plan))
     hexapod = (ROOT / "configs" / "symetrie-like.yaml").read_text() + (
