@@ -1038,7 +1038,8 @@ class IppClient:
         :class:`TranscriptFile`).
     on_event : callable, optional
         Called (from the reader thread) with every :class:`IppEvent`; without it the events
-        go to the queue :attr:`events`.
+        go to the queue :attr:`events`. If it raises, the next command raises instead of
+        being sent.
     policy : RecoveryPolicy, optional
         What to do about errors of severity >= 2 (default :class:`ClearAndRetry`).
     clock : callable, optional
@@ -1081,6 +1082,7 @@ class IppClient:
         self._next_tag = 1
         self._next_etag = 1
         self._closing = False
+        self.callback_error: Exception | None = None
         try:
             self._sock = socket.create_connection((host, port), timeout=connect_timeout_s)
         except OSError as exc:
@@ -1152,7 +1154,10 @@ class IppClient:
         with self._lock:
             if self.recorder.lost is not None:
                 return
-            stamp = self._log("*", f"lost {reason}")
+            try:
+                stamp = self._log("*", f"lost {reason}")
+            except Exception:  # noqa: BLE001 - the transcript itself may be what failed
+                stamp = self._clock()
             dropped = self.recorder.note(stamp, f"lost {reason}")
             self._fail(dropped, reason)
 
@@ -1177,21 +1182,30 @@ class IppClient:
                 self._lose(f"protocol error: {exc}")
                 return
             for raw in lines:
-                self._on_line(raw.decode("latin-1"))
+                try:
+                    self._on_line(raw.decode("latin-1"))
+                except Exception as exc:  # noqa: BLE001 - e.g. the transcript cannot be written
+                    self._lose(f"{type(exc).__name__} while recording a line: {exc}")
+                    return
 
     def _on_line(self, line: str) -> None:
         with self._lock:
             stamp = self._log("<", line)
             result, event = self.recorder.received(stamp, line)
             waiter = self._waiters.pop(result.tag, None) if result is not None else None
-        if waiter is not None:
-            waiter.result = result
-            waiter.done.set()
+            if waiter is not None:
+                waiter.result = result
+                waiter.done.set()
         if event is not None:
-            if self._on_event is not None:
-                self._on_event(event)
-            else:
+            if self._on_event is None:
                 self.events.put(event)
+                return
+            try:
+                self._on_event(event)
+            except Exception as exc:  # noqa: BLE001 - handed to the caller, see transact()
+                with self._lock:
+                    if self.callback_error is None:
+                        self.callback_error = exc
 
     def _new_tag(self, event: bool) -> str:
         for _ in range(100000):
@@ -1201,7 +1215,7 @@ class IppClient:
             else:
                 tag = f"{self._next_tag:05d}"
                 self._next_tag = self._next_tag % 99999 + 1
-            if tag not in self.recorder.open:
+            if tag not in self.recorder.open and tag not in self.recorder.abandoned:
                 return tag
         raise IppDmeError("no free tag")  # pragma: no cover - 99999 open transactions
 
@@ -1230,7 +1244,11 @@ class IppClient:
         IppTimeout
             No ``%`` in time: the tag is abandoned (its late lines are logged and ignored).
         IppConnectionLost
-            The connection was or got lost; the message names the pending command.
+            The connection was or got lost; the message names the pending command. A line
+            that cannot be recorded (the transcript sink raised) also ends the connection:
+            nothing is acted on that is not in the transcript.
+        IppDmeError
+            The event callback raised since the last command (chained).
         """
         limit = self.timeout_s if timeout_s is None else float(timeout_s)
         if not limit > 0:
@@ -1245,9 +1263,12 @@ class IppClient:
                 )
             tag = self._new_tag(event)
             line = f"{tag} {command}"
+            if self.callback_error is not None:
+                exc, self.callback_error = self.callback_error, None
+                raise IppDmeError(f"the event callback raised {type(exc).__name__}: {exc}") from exc
+            stamp = self._log(">", line)
             waiter = _Waiter(tag, command)
             self._waiters[tag] = waiter
-            stamp = self._log(">", line)
             self.recorder.sent(stamp, line)
             try:
                 self._sock.sendall(line.encode("ascii") + b"\r\n")

@@ -694,3 +694,35 @@ def test_concurrent_events_do_not_disturb_a_waiting_command():
             _prepare(cmm)
             assert cmm.is_homed()
     assert seen.is_set()
+
+
+def test_a_raising_callback_or_transcript_is_not_swallowed():
+    def callback(event):
+        raise RuntimeError("operator display down")
+
+    with _server(faults=[Fault("event", nth=2)]) as server:
+        with IppClient("127.0.0.1", server.port, timeout_s=30, on_event=callback) as cmm:
+            cmm.start_session()
+            cmm.home()  # its answer carries the events: the callback raises on the reader
+            sent = len(server.commands)
+            with pytest.raises(IppDmeError, match="callback raised RuntimeError") as info:
+                cmm.is_homed()
+            assert isinstance(info.value.__cause__, RuntimeError)
+            assert len(server.commands) == sent
+            assert cmm.is_homed()  # reported once, then the client goes on
+
+    lines: list[str] = []
+
+    def sink(line):
+        if len(lines) == 6:
+            raise OSError("disk full")
+        lines.append(line)
+
+    with _server() as server:
+        with IppClient("127.0.0.1", server.port, timeout_s=60, transcript=sink) as cmm:
+            cmm.start_session()  # connect, >, <, < : 4 lines
+            with pytest.raises(
+                IppConnectionLost, match=r"OSError while recording a line: disk full"
+            ):
+                cmm.home()  # >, < (the ack), then the '%' cannot be recorded
+    assert len(lines) == 6 and lines[-1].endswith('< "00002 &"\n')
