@@ -706,6 +706,8 @@ class TransactionResult:
         requested fields); such a result gives no point.
     point : ProbedPoint or None
         For a successful ``PtMeas``.
+    report : tuple of str
+        The ``OnPtMeasReport`` fields in force when the command was sent.
     """
 
     tag: str
@@ -819,6 +821,12 @@ class Recorder:
         The error of severity >= 2 the server is stuck on until ``ClearAllErrors()``.
     report : tuple of str
         ``OnPtMeasReport`` fields in force.
+    open : dict of str to TransactionResult
+        Transactions sent and not complete, by tag.
+    abandoned : set of str
+        Tags given up (timeout): their late lines are ignored.
+    lost : str or None
+        Why the connection ended, once it did.
     """
 
     def __init__(self) -> None:
