@@ -356,17 +356,77 @@ def cap_centre_covariance(
     return sigma_mm**2 * inv[:3, :3]
 
 
-def pooled_registration_variance(residuals_mm: npt.ArrayLike) -> float:
-    """Variance (mm^2) per coordinate of a centre from unweighted registration residuals.
+def rigid_residual_projector(centres_mm: npt.ArrayLike) -> FloatArray:
+    """Projector (N, 3k, 3k) onto what an unweighted rigid registration leaves as residual.
 
-    Each step of k balls leaves ``3k - 6`` degrees of freedom after the rigid
-    fit: ``s^2 = sum |r|^2 / (N (3k - 6))``.
+    For a step whose k ball centres sit at ``c_j`` (mm), the rigid motions move them
+    along the columns of ``A`` (3k, 6): ``[I, -[c_j - c_mean]x]`` for ball j. The
+    residuals of a least-squares rigid fit are ``P e`` with ``P = I - A A^+``, ``e`` the
+    centres' errors; so ``E|r|^2 = tr(P Sigma)`` for errors of covariance ``Sigma``.
+    Three balls leave ``3k - 6 = 3`` residual freedoms, all in the balls' plane: no
+    residual sees an error normal to that plane.
 
     >>> import numpy as np
-    >>> pooled_registration_variance(np.full((2, 3, 3), 0.001))
-    3e-06
+    >>> P = rigid_residual_projector([[[0, 90, 30], [-73.6, -42.5, 30], [82.3, -47.5, 30]]])
+    >>> round(float(np.trace(P[0])), 9), bool(np.allclose(P[0] @ P[0], P[0]))
+    (3.0, True)
+    >>> z = np.kron(np.eye(3), np.diag([0.0, 0.0, 1.0]))   # errors along z only
+    >>> abs(float(np.trace(P[0] @ z))) < 1e-12
+    True
+    """
+    c = np.asarray(centres_mm, dtype=float)
+    if c.ndim != 3 or c.shape[-1] != 3 or c.shape[1] < 3:
+        raise ValueError(f"need centres of shape (N, k >= 3, 3), got {c.shape}")
+    n, k = c.shape[:2]
+    d = c - c.mean(axis=1, keepdims=True)
+    a = np.zeros((n, k, 3, 6))
+    a[..., :3] = np.eye(3)
+    # -[d]x: the derivative of a small rotation w applied to d is w x d = -[d]x w
+    a[..., 0, 4], a[..., 0, 5] = d[..., 2], -d[..., 1]
+    a[..., 1, 3], a[..., 1, 5] = -d[..., 2], d[..., 0]
+    a[..., 2, 3], a[..., 2, 4] = d[..., 1], -d[..., 0]
+    a = a.reshape(n, 3 * k, 6)
+    return np.eye(3 * k) - a @ np.linalg.pinv(a)
+
+
+def residual_scale(
+    residuals_mm: npt.ArrayLike, centres_mm: npt.ArrayLike, shape_cov: npt.ArrayLike
+) -> tuple[float, float]:
+    """The scale ``c`` of centre covariances ``c * shape_cov`` that the residuals show.
+
+    The unweighted registration residuals of N steps hold ``E sum |r|^2 =
+    c * sum_steps tr(P_step Sigma_step)`` (:func:`rigid_residual_projector`,
+    ``Sigma_step`` block-diagonal of ``shape_cov``); solved for ``c``. Also returned,
+    ``seen``: how much of the shape the residuals see, ``sum tr(P Sigma)`` over what
+    isotropic errors of the same total variance would give (``(3k - 6)/(3k) tr Sigma``):
+    1 for isotropic errors, well below 1 when the shape's largest variance lies where no
+    residual looks (the normal of three coplanar balls). Then the scale of that part
+    rests on the assumed shape alone.
+
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> c = np.tile([[[0, 90, 30], [-73.6, -42.5, 30], [82.3, -47.5, 30]]], (4000, 1, 1))
+    >>> P = rigid_residual_projector(c)
+    >>> e = rng.normal(size=(4000, 9)) * np.tile([1e-3, 1e-3, 3e-3], 3)
+    >>> r = np.einsum("nij,nj->ni", P, e).reshape(4000, 3, 3)
+    >>> scale, seen = residual_scale(r, c, np.diag([1.0, 1.0, 9.0]) * 1e-6)
+    >>> abs(scale - 1.0) < 0.03, round(seen, 2)
+    (True, 0.27)
     """
     r = np.asarray(residuals_mm, dtype=float)
-    n, k = r.shape[:2]
-    dof = n * (3 * k - 6)
-    return float((r**2).sum() / dof) if dof > 0 else float("nan")
+    c = np.asarray(centres_mm, dtype=float)
+    shape = np.asarray(shape_cov, dtype=float)
+    if r.shape != c.shape:
+        raise ValueError(f"residuals {r.shape} and centres {c.shape} differ in shape")
+    n, k = c.shape[:2]
+    block = np.broadcast_to(shape, (n, k, 3, 3))
+    sigma = np.zeros((n, 3 * k, 3 * k))
+    for j in range(k):
+        sigma[:, 3 * j : 3 * j + 3, 3 * j : 3 * j + 3] = block[:, j]
+    proj = rigid_residual_projector(c)
+    expected = float(np.einsum("nij,nji->", proj, sigma))
+    if not expected > 0:
+        return float("nan"), 0.0
+    scale = float((r**2).sum()) / expected
+    isotropic = (3 * k - 6) / (3 * k) * float(np.trace(sigma, axis1=1, axis2=2).sum())
+    return scale, expected / isotropic

@@ -10,8 +10,13 @@ from, in this order of preference:
 3. the session's ``cmm:`` mapping (point noise, or MPE / 2): the covariance of
    a free-radius fit to ``points_per_ball`` points over a cap of
    ``cap_angle_deg`` around the CMM's +Z;
-4. the registration residuals: ``s^2 I`` with ``s^2`` pooled over all steps
-   (``3k - 6`` degrees of freedom per step).
+4. the registration residuals, pooled over all steps, with the shape of a cap fit:
+   ``c * C_cap``, ``C_cap`` the covariance of a free-radius fit to the plan's points per
+   ball over a 70 deg cap (unit noise), ``c`` such that the expected residuals
+   ``c * sum tr(P C)`` (``P`` the projector off the rigid motions) equal the observed
+   ones. Three coplanar balls leave residuals in their plane only, so a centre's error
+   along the normal (the cap fit's largest, into Tz, Rx, Ry) is not seen by them: it
+   rests on the assumed shape, and the description says so.
 
 It is then propagated through registration, IGM, correction and FGM, by the
 linear law (GUM) or by Monte Carlo (GUM Supplement 1). Monte Carlo draws the
@@ -37,7 +42,7 @@ from hexatherm.core.propagation import (
     draw_centres,
     linear_covariance,
     monte_carlo_covariance,
-    pooled_registration_variance,
+    residual_scale,
 )
 from hexatherm.core.spherefit import fit_spheres
 from hexatherm.typing import FloatArray
@@ -49,6 +54,9 @@ from hexatherm.workflows.process.pipeline import (
 )
 
 Method = Literal["linear", "monte-carlo"]
+
+#: cap half-angle assumed for centres given without an uncertainty (as ``cmm:``'s default)
+DEFAULT_CAP_ANGLE_DEG = 70.0
 
 __all__ = [
     "CentreCovariance",
@@ -158,14 +166,28 @@ def centre_covariance(result: ProcessResult) -> CentreCovariance:
             f"over a {cmm.cap_angle_deg:g} deg cap ({int(rest.sum())} centres)"
         )
     elif rest.any():
-        var = pooled_registration_variance(result.registration.residuals_mm)
-        cov[rest] = var * np.eye(3)
+        # the residuals see only part of a centre's error (three coplanar balls: nothing
+        # along the plane's normal), and a cap fit's error is largest along the cap's
+        # axis: keep the shape of a cap fit's covariance and scale it to the residuals
+        points = result.session.plan.points_per_ball
+        shape = cap_centre_covariance(points, DEFAULT_CAP_ANGLE_DEG, 1.0)
+        scale, seen = residual_scale(result.registration.residuals_mm, centres.centres_mm, shape)
+        cov[rest] = scale * shape
         source[rest] = "registration"
+        u_xyz = np.sqrt(np.diag(scale * shape)) * 1e3
         parts.append(
-            f"registration residuals: {np.sqrt(var) * 1e3:.3g} um per coordinate, "
-            f"pooled over {n} steps ({int(rest.sum())} centres; give cmm: in "
-            "session.yaml for a stated CMM noise)"
+            "registration residuals pooled over "
+            f"{n} steps ({int(rest.sum())} centres), with the covariance shape of a "
+            f"free-radius fit to {points} points over a {DEFAULT_CAP_ANGLE_DEG:g} deg cap: "
+            f"u {u_xyz[0]:.3g}, {u_xyz[1]:.3g}, {u_xyz[2]:.3g} um in x, y, z"
         )
+        if seen < 0.9:
+            parts.append(
+                f"warning: the residuals see {seen:.0%} of that shape (none of a centre's "
+                "error normal to the balls' plane): the uncertainty of Tz, Rx, Ry rests on "
+                "the assumed cap; give cmm: in session.yaml or u_um in the centres file to "
+                "state the CMM's noise"
+            )
     return CentreCovariance(cov, source.astype(str), "; ".join(parts))
 
 
