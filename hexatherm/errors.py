@@ -7,6 +7,7 @@ the command line turns them into a one-line message and a non-zero exit.
 from __future__ import annotations
 
 import os
+from typing import Any
 
 
 class HexathermError(Exception):
@@ -108,3 +109,41 @@ class ControllerReplyError(ControllerError):
         self.code = code
         self.command = command
         super().__init__(message)
+
+
+# I++ DME (hexatherm.devices.ipp)
+class IppDmeError(HexathermError):
+    """Base of the errors of the I++ DME client."""
+
+
+class IppProtocolError(IppDmeError):
+    """A line that breaks the protocol (syntax, tag, data that do not match the request)."""
+
+
+class IppCommandError(IppDmeError):
+    """The server answered a command with an error of severity >= 2 (after recovery).
+
+    ``error`` is the :class:`hexatherm.devices.ipp.ErrorReport`, ``result`` the
+    :class:`hexatherm.devices.ipp.TransactionResult` of the command.
+    """
+
+    def __init__(self, message: str, *, error: Any, result: Any) -> None:
+        self.error = error
+        self.result = result
+        super().__init__(message)
+
+
+class IppErrorState(IppDmeError):
+    """The server is in an error state and the recovery policy does not clear it."""
+
+    def __init__(self, message: str, *, error: Any) -> None:
+        self.error = error
+        super().__init__(message)
+
+
+class IppTimeout(IppDmeError):
+    """A transaction was not complete within its timeout."""
+
+
+class IppConnectionLost(IppDmeError):
+    """The connection to the server is closed or broken."""

@@ -385,8 +385,8 @@ def rigid_residual_projector(centres_mm: npt.ArrayLike) -> FloatArray:
     a[..., 0, 4], a[..., 0, 5] = d[..., 2], -d[..., 1]
     a[..., 1, 3], a[..., 1, 5] = -d[..., 2], d[..., 0]
     a[..., 2, 3], a[..., 2, 4] = d[..., 1], -d[..., 0]
-    a = a.reshape(n, 3 * k, 6)
-    return np.eye(3 * k) - a @ np.linalg.pinv(a)
+    motions = a.reshape(n, 3 * k, 6)
+    return np.eye(3 * k) - motions @ np.linalg.pinv(motions)
 
 
 def residual_scale(

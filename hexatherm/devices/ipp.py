@@ -79,7 +79,14 @@ import numpy as np
 import numpy.typing as npt
 
 from hexatherm.core.twin import cap_directions
-from hexatherm.errors import HexathermError
+from hexatherm.errors import (
+    IppCommandError,
+    IppConnectionLost,
+    IppDmeError,
+    IppErrorState,
+    IppProtocolError,
+    IppTimeout,
+)
 from hexatherm.typing import FloatArray
 
 DEFAULT_PORT = 1294
@@ -100,40 +107,6 @@ session clears the errors, 6.3.1.1)."""
 
 Direction = Literal[">", "<", "*"]
 Decision = Literal["retry", "raise"]
-
-
-# ---------------------------------------------------------------------------- errors
-class IppDmeError(HexathermError):
-    """Base of the errors of the I++ DME client."""
-
-
-class IppProtocolError(IppDmeError):
-    """A line that breaks the protocol (syntax, tag, data that do not match the request)."""
-
-
-class IppCommandError(IppDmeError):
-    """The server answered a command with an error of severity >= 2 (after recovery)."""
-
-    def __init__(self, message: str, *, error: ErrorReport, result: TransactionResult) -> None:
-        self.error = error
-        self.result = result
-        super().__init__(message)
-
-
-class IppErrorState(IppDmeError):
-    """The server is in an error state and the recovery policy does not clear it."""
-
-    def __init__(self, message: str, *, error: ErrorReport) -> None:
-        self.error = error
-        super().__init__(message)
-
-
-class IppTimeout(IppDmeError):
-    """A transaction was not complete within its timeout."""
-
-
-class IppConnectionLost(IppDmeError):
-    """The connection to the server is closed or broken."""
 
 
 # ---------------------------------------------------------------------------- terms

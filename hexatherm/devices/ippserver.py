@@ -69,14 +69,16 @@ from hexatherm.devices.ipp import (
     REPORT_ARITY,
     Call,
     ErrorReport,
-    IppDmeError,
-    IppProtocolError,
     LineBuffer,
     Value,
     Word,
     fields,
     format_number,
     parse_command,
+)
+from hexatherm.errors import (
+    IppDmeError,
+    IppProtocolError,
 )
 from hexatherm.typing import FloatArray
 

@@ -168,7 +168,7 @@ def parse_reply(line: str) -> tuple[str, int, str | None]:
     >>> parse_reply("hello")  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    hexatherm.devices.controller.ControllerError: malformed reply ... 'hello'
+    hexatherm.errors.ControllerError: malformed reply ... 'hello'
     """
     match = _REPLY.match(line.strip())
     if match is None:

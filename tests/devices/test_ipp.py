@@ -19,13 +19,7 @@ from hexatherm.devices.ipp import (
     ClearAndRetry,
     ErrorReport,
     IppClient,
-    IppCommandError,
-    IppConnectionLost,
-    IppDmeError,
-    IppErrorState,
     IppEvent,
-    IppProtocolError,
-    IppTimeout,
     LineBuffer,
     Recorder,
     TranscriptEntry,
@@ -44,6 +38,14 @@ from hexatherm.devices.ipp import (
     replay_transcript,
 )
 from hexatherm.devices.ippserver import Fault, IppSimServer, StaticBalls, segment_hits
+from hexatherm.errors import (
+    IppCommandError,
+    IppConnectionLost,
+    IppDmeError,
+    IppErrorState,
+    IppProtocolError,
+    IppTimeout,
+)
 
 BALL_DIAMETER_MM = 25.4
 TIP_DIAMETER_MM = 2.0

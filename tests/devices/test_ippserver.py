@@ -11,7 +11,6 @@ import pytest
 
 from hexatherm.devices.ipp import (
     IppClient,
-    IppDmeError,
     LineBuffer,
     fields,
     parse_response,
@@ -22,6 +21,9 @@ from hexatherm.devices.ippserver import (
     StaticBalls,
     first_contact,
     segment_hits,
+)
+from hexatherm.errors import (
+    IppDmeError,
 )
 
 R_MM = 12.7
