@@ -13,6 +13,7 @@ largest along the cap axis (Tz, Rx, Ry).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -34,8 +35,12 @@ GAIN = (3.0, 7.0, 2.0, 3.0, 9.0, 3.5)
 REPLICAS = 60
 
 
-def replicas(tmp_path: Path, **spec: object) -> tuple[np.ndarray, np.ndarray, str]:
-    """Poses (R, M, 12) and claimed u (R, M, 12) of noise replicas, and the source line."""
+def replicas(
+    tmp_path: Path, edit: Callable[[Path], None] | None = None, **spec: object
+) -> tuple[np.ndarray, np.ndarray, str]:
+    """Poses (R, M, 12) and claimed u (R, M, 12) of noise replicas, and the source line.
+
+    ``edit(folder)`` changes each written session before it is processed."""
     poses, claimed = [], []
     description = ""
     for seed in range(REPLICAS):
@@ -47,12 +52,16 @@ def replicas(tmp_path: Path, **spec: object) -> tuple[np.ndarray, np.ndarray, st
             plan=small_plan(4, 1),
             heating=Heating(on_s=0.0, tau_s=2400.0, gain_C=GAIN),
             seed=seed,
-            point_noise_mm=1e-3,
-            points_per_ball=25,
-            cap_half_angle_deg=70.0,
-            **spec,  # type: ignore[arg-type]
+            **{
+                "point_noise_mm": 1e-3,
+                "points_per_ball": 25,
+                "cap_half_angle_deg": 70.0,
+                **spec,
+            },  # type: ignore[arg-type]
         )
         write_files(simulate_session(session).files, folder)
+        if edit is not None:
+            edit(folder)
         result = process_session(folder)
         u = pose_uncertainty(result)
         description = u.centres.description
@@ -118,3 +127,38 @@ def test_fitted_points_are_honest_in_every_component(tmp_path: Path, output: str
     assert np.all((ratio > 0.85) & (ratio < 1.15)), ratio.round(3)
     assert 0.92 <= coverage <= 0.98, coverage
     assert "sphere fits of the probed points" in description
+
+
+def test_the_cmm_mapping_is_honest_when_it_states_the_probing(tmp_path: Path) -> None:
+    """Centres fitted by the CMM, session.yaml stating its noise and touch pattern."""
+
+    def state_the_cmm(folder: Path) -> None:
+        session = folder / "session.yaml"
+        text = session.read_text()
+        session.write_text(text + "cmm: {point_noise_um: 1.0, points_per_ball: 25}\n")
+
+    poses, claimed, description = replicas(
+        tmp_path, state_the_cmm, output="centres", fit_centres=True
+    )
+    ratio, coverage = claimed_over_observed(poses, claimed)
+    assert np.all((ratio > 0.85) & (ratio < 1.15)), ratio.round(3)
+    assert 0.92 <= coverage <= 0.98, coverage
+    assert description.startswith("session cmm: point noise 1 um, 25 points over a 70 deg cap")
+
+
+def test_centres_with_u_are_honest_when_u_is(tmp_path: Path) -> None:
+    """Centres with isotropic noise of 0.8 um, the file's u_um saying so."""
+
+    def add_u(folder: Path) -> None:
+        centres = folder / "centres.csv"
+        lines = centres.read_text().splitlines()
+        rows = [lines[0] + ",diameter,u_um"] + [line + ",25.4,0.8" for line in lines[1:]]
+        centres.write_text("\n".join(rows) + "\n")
+
+    poses, claimed, description = replicas(
+        tmp_path, add_u, output="centres", centre_noise_mm=0.8e-3, point_noise_mm=0.0
+    )
+    ratio, coverage = claimed_over_observed(poses, claimed)
+    assert np.all((ratio > 0.85) & (ratio < 1.15)), ratio.round(3)
+    assert 0.92 <= coverage <= 0.98, coverage
+    assert description.startswith("u_um of the centres file")
