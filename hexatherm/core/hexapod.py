@@ -4,7 +4,9 @@ Frame O is the platform frame with the hexapod in its zero pose. Leg i runs from
 base joint ``b_i`` (in O) to platform joint ``p_i`` (in the platform frame); for
 a platform pose ``X`` relative to O with transform ``platform2origin = (R, t)``
 its length is ``q_i = |t + R p_i - b_i|`` (IGM). The FGM inverts this by
-Newton-Raphson with the analytic Jacobian ``dq/dX``. IGM, Jacobian and FGM take
+Newton-Raphson with the analytic Jacobian ``dq/dX``, following the legs from a
+start pose with every step certified (Kantorovich), so that it never returns a
+pose of another assembly mode (:meth:`Hexapod.fgm`). IGM, Jacobian and FGM take
 an optional ``base_joints_mm`` override, one set (6, 3) or one per pose (N, 6,
 3), for a base whose joints move (the twin's base expansion).
 
@@ -19,7 +21,7 @@ True
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -37,6 +39,14 @@ from hexatherm.typing import FloatArray
 FGM_TOLERANCE_MM = 1e-10
 #: reciprocal condition number of the Jacobian below which a pose is called singular
 SINGULAR_RCOND = 1e-9
+#: most Newton steps per pose of the FGM (path steps and final iterations)
+FGM_MAX_ITER = 100
+#: how far (mm) the FGM accepts leg lengths beyond the stroke
+STROKE_TOLERANCE_MM = 0.1
+#: Kantorovich's h = beta L eta allowed per FGM step (the theorem needs h <= 1/2)
+_KANTOROVICH_H = 0.45
+#: the certified ball changes no leg by more than this fraction of the shortest
+_BALL_FRACTION = 0.1
 
 
 @dataclass(frozen=True)
@@ -299,108 +309,340 @@ class Hexapod:
         initial_poses: npt.ArrayLike | None = None,
         *,
         tol_mm: float = FGM_TOLERANCE_MM,
-        max_iter: int = 30,
+        max_iter: int = FGM_MAX_ITER,
         base_joints_mm: npt.ArrayLike | None = None,
+        stroke_check: bool | None = None,
+        stroke_tolerance_mm: float = STROKE_TOLERANCE_MM,
     ) -> FloatArray:
-        """Platform poses (N, 6) from leg lengths (N, 6) by Newton-Raphson.
+        """Platform poses (N, 6) from leg lengths (N, 6): the pose reached from the start.
 
-        Every pose is iterated until ``max|IGM(X) - q| <= tol_mm``. Raises
-        :class:`SingularityError` when a Jacobian is singular (naming the pose)
-        and :class:`ConvergenceError` when a pose does not converge (naming it
-        and how far off it is): never a silent wrong answer. ``base_joints_mm``
-        overrides the base joints, for all poses (6, 3) or per pose (N, 6, 3).
+        Leg lengths alone do not determine a pose: a hexapod has several assembly
+        modes, poses with the same leg lengths. The pose returned is the one the
+        platform reaches from its start pose ``X0`` (``initial_poses``, default the
+        zero pose) when its legs move from ``q0 = IGM(X0)`` to ``q`` along the
+        straight line ``q(s) = q0 + s (q - q0)``, ``0 <= s <= 1``, without meeting a
+        singularity on the way, and it is certified to be that one: never a pose
+        of another assembly mode.
+
+        The iteration is Newton-Raphson on that path (the analytic Jacobian), with
+        every step certified by Kantorovich's theorem: at an iterate ``x`` with
+        ``beta >= |J(x)^-1|`` and ``L`` a Lipschitz constant of ``J`` near ``x``
+        (bounded from the geometry, :meth:`_curvature_bound`), a step aimed at
+        ``q(s')`` of length ``eta`` with ``h = beta L eta <= 0.45`` has exactly one
+        solution within ``1 / (beta L)`` of ``x`` for every ``q(s)`` it spans, on
+        a path free of singularities; the step to ``s'`` is the longest that keeps
+        ``h <= 0.45``. From a start close to the answer (``process``'s case) the
+        first step reaches ``s = 1`` and this is plain Newton; from far away it
+        takes as many steps as the path needs. Every pose is iterated until
+        ``max|IGM(X) - q| <= tol_mm``; lengths and angles are in the units of
+        :meth:`igm` (mm, deg).
+
+        Parameters
+        ----------
+        q_mm : array_like, shape (6,) or (N, 6)
+            Leg lengths, mm.
+        initial_poses : array_like, shape (6,) or (N, 6), optional
+            Start poses ``X0`` (mm, deg); default the zero pose.
+        tol_mm : float
+            Tolerance on the leg lengths, mm.
+        max_iter : int
+            Most Newton steps per pose (path steps and final iterations).
+        base_joints_mm : array_like, shape (6, 3) or (N, 6, 3), optional
+            Base joints override, for all poses or per pose (see :meth:`igm`).
+        stroke_check : bool, optional
+            Refuse leg lengths beyond the hexapod's stroke by more than
+            ``stroke_tolerance_mm`` (:class:`AssemblyModeError`): the hexapod cannot
+            be there, and which assembly mode is meant cannot be told. By default
+            (None) checked when no start pose is given, where the FGM picks the
+            assembly mode itself; a caller that gives start poses (a simulation of
+            commanded poses, the correction of measured ones) vouches for the
+            branch, and the path from its start is certified either way. A hexapod
+            without a stroke is never checked.
+        stroke_tolerance_mm : float
+            mm beyond the stroke still accepted (thermal growth, say).
+
+        Returns
+        -------
+        ndarray, shape (N, 6)
+            Platform poses relative to frame O, mm and deg.
+
+        Raises
+        ------
+        AssemblyModeError
+            Legs out of the stroke, or a path step that cannot be certified (the
+            pose named by its index).
+        SingularityError
+            A Jacobian on the way is singular (naming the pose).
+        ConvergenceError
+            A pose not reached within ``max_iter`` steps (naming it and how far
+            off it is): never a silent wrong answer.
+
+        Examples
+        --------
+        Leg lengths beyond the stroke are refused, naming the pose:
+
+        >>> hexapod = Hexapod.symmetric(base_radius_mm=150, platform_radius_mm=100,
+        ...     base_half_angle_deg=10, platform_half_angle_deg=10, height_mm=200,
+        ...     stroke_mm=(200.0, 260.0))
+        >>> q = hexapod.igm([[0.0, 0.0, 5.0, 0, 0, 0], [0.0, 0.0, 80.0, 0, 0, 0]])
+        >>> try:
+        ...     hexapod.fgm(q)
+        ... except AssemblyModeError as error:
+        ...     print(error.index, str(error)[:34])
+        1 FGM: pose index 1 has leg 1 at 296
         """
         q = np.atleast_2d(np.asarray(q_mm, dtype=float))
         if q.ndim != 2 or q.shape[1] != 6:
             raise ValueError(f"leg lengths must have shape (N, 6), got {q.shape}")
         if not np.all(np.isfinite(q)):
             raise ValueError("leg lengths have a non-finite value")
+        if not (np.isfinite(tol_mm) and tol_mm > 0):
+            raise ValueError(f"tol_mm must be positive, got {tol_mm}")
+        if max_iter < 0:
+            raise ValueError(f"max_iter must be >= 0, got {max_iter}")
+        if stroke_check or (stroke_check is None and initial_poses is None):
+            self._check_fgm_stroke(q, stroke_tolerance_mm)
+        n = q.shape[0]
         base = None
         if base_joints_mm is not None:
-            base = np.broadcast_to(
-                self.base_joints_for(base_joints_mm, q.shape[0]), (q.shape[0], 6, 3)
-            )
+            base = np.broadcast_to(self.base_joints_for(base_joints_mm, n), (n, 6, 3))
         if initial_poses is None:
-            x = np.zeros((q.shape[0], 6))
+            x = np.zeros((n, 6))
         else:
             x = np.array(np.broadcast_to(check_poses(initial_poses), q.shape), dtype=float)
-        n = q.shape[0]
-        rcond = np.full(n, np.inf)  # at each pose's final Jacobian, where computed
-        # The poses still iterating, in index order, and what goes with them: leg
-        # lengths, base joints, and for the conditioning check their last Jacobian and
-        # a lower bound on its smallest singular value (NaN: none yet).
+        bound = self._curvature_bound()
+        # The poses still iterating, in index order, and what goes with them: final
+        # leg lengths, base joints, the leg change of the whole path and how far along
+        # it they are (s = 1: on the final stretch, plain Newton), a bound on their
+        # distance to the exact path point (scaled mm) and, on the final stretch, a
+        # lower bound on sigma_min(J D^-1) there.
         active = np.arange(n)
         x_a, q_a = x.copy(), q
+        dq_a = np.zeros_like(q)
+        s_a = np.zeros(n)
+        e_a = np.zeros(n)
+        floor_a = np.zeros(n)
         base_a = self.base_joints_mm if base is None else base
-        last_jac: FloatArray | None = None
-        sigma_low = np.full(n, np.nan)
         for iteration in range(max_iter + 1):
             legs, plat, cos, sin = self._legs(x_a, base_a)
             lengths = self._lengths(legs)
-            err = lengths - q_a
-            worst = np.abs(err).max(axis=1)
-            done = worst <= tol_mm
-            # Every pose's Jacobian at its current pose: the Newton step of the poses
-            # still iterating, the final conditioning check of the poses that are done.
+            if iteration == 0:
+                dq_a = q_a - lengths  # the path starts at the start pose's legs
             jac = self._jacobian(legs, lengths, plat, cos, sin)
-            rcond_a, sigma_low, inverse = self._conditioning(jac, last_jac, sigma_low)
-            if done.any():
-                rcond[active[done]] = rcond_a[done]
-                x[active[done]] = x_a[done]
-                keep = ~done
-                active, x_a, q_a, err, worst = (
-                    active[keep],
-                    x_a[keep],
-                    q_a[keep],
-                    err[keep],
-                    worst[keep],
+            resid = lengths - q_a
+            worst = np.abs(resid).max(axis=1)
+            on_path = s_a < 1.0
+            to_end = ~on_path
+            rcond = np.full(active.size, np.inf)
+            if to_end.any():  # certified earlier: Newton converges inside the ball
+                rcond[to_end] = self._final_rcond(jac[to_end], floor_a[to_end], bound)
+            if on_path.any():
+                path = self._path_step(
+                    jac[on_path],
+                    lengths[on_path],
+                    sin[on_path, 1],
+                    resid[on_path] + (1.0 - s_a[on_path, None]) * dq_a[on_path],
+                    dq_a[on_path],
+                    s_a[on_path],
+                    e_a[on_path],
+                    bound,
                 )
-                jac, rcond_a, sigma_low = jac[keep], rcond_a[keep], sigma_low[keep]
-                if inverse is not None:
-                    inverse = inverse[keep]
-                if base is not None:
-                    base_a = base_a[keep]
-            if active.size == 0:
-                self._raise_singular(rcond, np.arange(n))
+                rcond[on_path] = path.rcond
+                self._raise_singular(rcond, active)
+                if path.uncertified.any():
+                    raise self._uncertified(active[on_path], s_a[on_path], path)
+                to_end[on_path] = path.to_end
+            else:
+                self._raise_singular(rcond, active)
+            done = to_end & (worst <= tol_mm)
+            if done.all():
+                x[active] = x_a
                 return x
             if iteration == max_iter:
-                raise ConvergenceError(
-                    f"FGM did not converge for {active.size} pose(s) in {max_iter} "
-                    f"iterations; first: pose index {active[0]}, leg length residual "
-                    f"{worst[0]:.3e} mm (tolerance {tol_mm:.0e} mm)"
-                )
-            self._raise_singular(rcond_a, active)
-            if inverse is None:
-                x_a = x_a - np.linalg.solve(jac, err[..., None])[..., 0]
-            else:  # the inverses the conditioning check computed anyway
-                x_a = x_a - (inverse @ err[..., None])[..., 0]
-            last_jac = jac
+                keep = ~done
+                raise self._not_converged(active[keep], worst[keep], s_a[keep], max_iter, tol_mm)
+            x[active[done]] = x_a[done]
+            step = np.zeros_like(x_a)
+            if on_path.any():
+                step[on_path] = np.einsum("nij,nj->ni", path.inverse, path.target)
+                e_a[on_path] = path.error_bound
+                floor_a[on_path] = path.sigma_floor
+                s_a[on_path] = np.where(path.to_end, 1.0, s_a[on_path] + path.d)
+            newton = ~on_path & ~done
+            if newton.any():
+                step[newton] = np.linalg.solve(jac[newton], resid[newton, :, None])[..., 0]
+            keep = ~done
+            active, x_a, q_a, dq_a = active[keep], (x_a - step)[keep], q_a[keep], dq_a[keep]
+            s_a, e_a, floor_a = s_a[keep], e_a[keep], floor_a[keep]
+            if base is not None:
+                base_a = base_a[keep]
         raise AssertionError("unreachable")  # pragma: no cover
+
+    def _check_fgm_stroke(self, q: FloatArray, tolerance_mm: float) -> None:
+        """AssemblyModeError naming the first pose with a leg beyond the stroke."""
+        if self.stroke_mm is None:
+            return
+        if not (np.isfinite(tolerance_mm) and tolerance_mm >= 0):
+            raise ValueError(f"stroke_tolerance_mm must be >= 0, got {tolerance_mm}")
+        low, high = self.stroke_mm
+        outside = (q < low - tolerance_mm) | (q > high + tolerance_mm)
+        if outside.any():
+            pose, leg = np.argwhere(outside)[0]
+            raise AssemblyModeError(
+                f"FGM: pose index {pose} has leg {leg + 1} at {q[pose, leg]:.2f} mm, outside "
+                f"the stroke [{low:g}, {high:g}] mm by more than {tolerance_mm:g} mm: the "
+                "hexapod cannot be there",
+                index=int(pose),
+            )
+
+    def _curvature_bound(self) -> _Curvature:
+        """Constants of the bound on how fast the Jacobian changes (Kantorovich's ``L``).
+
+        Poses are measured in scaled coordinates: mm of translation, and for the
+        angles mm of arc at radius ``rho`` (the largest platform joint radius), so
+        ``D = diag(1, 1, 1, c, c, c)`` with ``c = rho pi / 180`` mm per degree.
+
+        Along a line in pose space with translation rate ``dt`` and Euler-angle
+        rates ``da`` (rad), leg ``i`` (vector ``v``, unit ``u``, length ``q``,
+        platform joint at radius ``P_i``) has ``q'' = (|v'|^2 - (u.v')^2) / q +
+        u.v''``, ``v' = dt + w x Rp_i`` and ``v'' = dw/ds x Rp_i + w x (w x Rp_i)``,
+        ``w`` the angular velocity. For both conventions the Euler axes give
+        ``|w|^2 <= (1 + |sin b|) |da|^2`` (``b`` the second angle) and ``|dw/ds| <=
+        |da|^2``. With ``|da| = |dtheta| / rho`` in scaled coordinates, the Hessian
+        of ``q_i`` is bounded by ``(1 + (1 + sb) P_i^2 / rho^2) / q + (2 + sb)
+        P_i / rho^2`` (``sb`` a bound on ``|sin b|``), the change of the Jacobian
+        by the root sum of squares of the six, and a leg's length changes at most
+        ``sqrt(1 + 2 P_i^2 / rho^2)`` mm per scaled mm.
+        """
+        radii = np.linalg.norm(self.platform_joints_mm, axis=1)
+        rho = float(radii.max()) if radii.max() > 0 else 1.0
+        ratio_sq = (radii / rho) ** 2
+        return _Curvature(
+            scale=np.array([1.0, 1.0, 1.0] + [rho * np.pi / 180.0] * 3),
+            ratio_sq=ratio_sq,
+            ratio_rho=radii / rho**2,
+            rho=rho,
+            gradient=float(np.sqrt(1.0 + 2.0 * ratio_sq.max())),
+        )
+
+    def _path_step(
+        self,
+        jac: FloatArray,
+        lengths: FloatArray,
+        sin_b: FloatArray,
+        err: FloatArray,
+        dq: FloatArray,
+        s: FloatArray,
+        e: FloatArray,
+        bound: _Curvature,
+    ) -> _PathStep:
+        """The certified Newton step along the leg path of poses (M,) (see :meth:`fgm`).
+
+        ``err`` (M, 6) is ``IGM(x) - q(s)``, ``dq`` (M, 6) the leg change of the whole
+        path, ``e`` (M,) the bound on the distance from ``x`` to the exact path point.
+        """
+        rcond, _, inverse = self._conditioning(jac)
+        if inverse is None:  # exactly singular: rcond 0, the caller raises
+            inverse = np.zeros_like(jac)
+        # (a singular J gives infinities here: rcond is 0 and the caller raises)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            scaled_inv = inverse * bound.scale[None, :, None]  # D J^-1
+            beta = self._spectral_bound(scaled_inv)
+            q_min = lengths.min(axis=1)
+            ball_cap = _BALL_FRACTION * q_min / bound.gradient  # every leg > (1 - 0.1) q_min
+            sb = np.minimum(np.abs(sin_b) + ball_cap / bound.rho, 1.0)
+            hess = (1.0 + (1.0 + sb)[:, None] * bound.ratio_sq) / (
+                (1.0 - _BALL_FRACTION) * q_min[:, None]
+            ) + (2.0 + sb)[:, None] * bound.ratio_rho
+            lip = np.maximum(np.sqrt(np.einsum("ni,ni->n", hess, hess)), 1.0 / (beta * ball_cap))
+            radius = 1.0 / (beta * lip)
+            allowed = _KANTOROVICH_H * radius
+            corr = np.einsum("nij,nj->ni", scaled_inv, err)  # Newton step to stay at s
+            tang = np.einsum("nij,nj->ni", scaled_inv, dq)  # per unit of s
+            corr_norm = np.sqrt(np.einsum("ni,ni->n", corr, corr))
+            uncertified = ~((corr_norm <= allowed) & (e < radius))
+            # the longest step d along the path with |corr - d tang| <= allowed
+            tt = np.einsum("ni,ni->n", tang, tang)
+            ct = np.einsum("ni,ni->n", corr, tang)
+            disc = np.maximum(ct**2 - tt * (corr_norm**2 - allowed**2), 0.0)
+            d_max = np.where(tt > 0, (ct + np.sqrt(disc)) / np.where(tt > 0, tt, 1.0), np.inf)
+            to_end = d_max >= 1.0 - s
+            d = np.where(to_end, 1.0 - s, d_max)
+            scaled_step = corr - d[:, None] * tang
+            h = beta * lip * np.sqrt(np.einsum("ni,ni->n", scaled_step, scaled_step))
+            root = np.sqrt(np.maximum(1.0 - 2.0 * h, 0.0))
+            error_bound = 2.0 * h**2 / (1.0 + root) ** 2 / (beta * lip)  # r- minus the step
+        return _PathStep(
+            rcond=rcond,
+            inverse=inverse,
+            target=err - d[:, None] * dq,
+            d=d,
+            to_end=to_end,
+            uncertified=uncertified,
+            error_bound=error_bound,
+            sigma_floor=root / beta,  # sigma_min(J D^-1) in the ball the iterates keep to
+            correction=corr_norm,
+            allowed=allowed,
+            distance=e,
+            radius=radius,
+        )
+
+    def _final_rcond(
+        self, jac: FloatArray, sigma_floor: FloatArray, bound: _Curvature
+    ) -> FloatArray:
+        """Reciprocal conditions (M,) of Jacobians on the certified final stretch.
+
+        ``sigma_min(J) >= sigma_min(J D^-1) min(D)``, with the floor certified by the
+        path step; only where that is not surely regular, an SVD.
+        """
+        norm = np.sqrt(np.einsum("nij,nij->n", jac, jac))
+        low = sigma_floor * min(1.0, float(bound.scale[3])) / norm
+        out = np.full(jac.shape[0], np.inf)
+        unsure = ~(low >= self._SURELY_REGULAR)
+        if unsure.any():
+            values = np.linalg.svd(jac[unsure], compute_uv=False)
+            out[unsure] = values[:, -1] / values[:, 0]
+        return out
+
+    @staticmethod
+    def _spectral_bound(matrices: FloatArray) -> FloatArray:
+        """Upper bounds (N,) on the spectral norms of matrices (N, 6, 6).
+
+        ``|M|_2^2 = lambda_max(G)`` with ``G = M^T M``, and ``lambda_max(G)^2 <=
+        |G^2|_F``: within a few per cent of the exact value when the singular
+        values are spread, never below it, and cheaper than an SVD.
+        """
+        gram = np.matmul(np.swapaxes(matrices, 1, 2), matrices)
+        square = np.matmul(gram, gram)
+        return np.sqrt(np.sqrt(np.sqrt(np.einsum("nij,nij->n", square, square))))
 
     #: lower bound on the reciprocal condition above which a Jacobian needs no SVD
     _SURELY_REGULAR = 1e-6
 
     def _conditioning(
-        self, jac: FloatArray, last_jac: FloatArray | None, sigma_low: FloatArray
+        self,
+        jac: FloatArray,
+        last_jac: FloatArray | None = None,
+        sigma_low: FloatArray | None = None,
     ) -> tuple[FloatArray, FloatArray, FloatArray | None]:
         """Reciprocal condition numbers of Jacobians (N, 6, 6), where they could be small.
 
-        An SVD per pose and iteration would cost more than the rest of the FGM. Instead
-        ``sigma_min(J) >= 1 / |J^-1|_F`` bounds the smallest singular value from below at
-        a pose's first Jacobian, and Weyl's inequality ``sigma_min(J') >= sigma_min(J) -
-        |J' - J|_F`` carries the bound over to its next Jacobian ``J'``; with
-        ``sigma_max(J) <= |J|_F`` this bounds the reciprocal condition from below. Where
-        the bound is not at least ``1e-6`` (a thousand times :data:`SINGULAR_RCOND`, far
-        beyond rounding) a fresh bound is computed, and where even that one is not, the
-        exact value by SVD; elsewhere the result is ``inf`` (surely regular).
+        An SVD per pose would cost more than the rest of the FGM. Instead
+        ``sigma_min(J) >= 1 / |J^-1|_F`` bounds the smallest singular value from below,
+        or, given the previous Jacobians ``last_jac`` and the bounds ``sigma_low`` there
+        (NaN: none), Weyl's inequality ``sigma_min(J') >= sigma_min(J) - |J' - J|_F``
+        carries the bound over; with ``sigma_max(J) <= |J|_F`` this bounds the
+        reciprocal condition from below. Where the bound is not at least ``1e-6`` (a
+        thousand times :data:`SINGULAR_RCOND`, far beyond rounding) a fresh bound is
+        computed, and where even that one is not, the exact value by SVD; elsewhere
+        the result is ``inf`` (surely regular).
 
-        ``last_jac`` (N, 6, 6) holds each pose's previous Jacobian (None: none yet) and
-        ``sigma_low`` (N,) the bound there (NaN: none yet). Returns the reciprocal
-        conditions, the bounds at ``jac``, and the inverses of ``jac`` when every one
-        was computed (else None).
+        Returns the reciprocal conditions, the bounds at ``jac``, and the inverses of
+        ``jac`` when every one was computed (else None; an exactly singular Jacobian
+        has bound 0).
         """
         norm = np.sqrt(np.einsum("nij,nij->n", jac, jac))
-        if last_jac is None:
+        if last_jac is None or sigma_low is None:
             low = np.full(jac.shape[0], np.nan)
         else:
             change = jac - last_jac
@@ -432,3 +674,78 @@ class Hexapod:
                 f"{int(singular.sum())} pose(s) affected): the leg lengths do not "
                 "determine the pose there"
             )
+
+    @staticmethod
+    def _uncertified(
+        index: npt.NDArray[np.intp], s: FloatArray, path: _PathStep
+    ) -> AssemblyModeError:
+        """AssemblyModeError naming the first pose whose path step cannot be certified."""
+        k = int(np.argmax(path.uncertified))
+        return AssemblyModeError(
+            f"FGM: pose index {index[k]} cannot be followed from its start pose "
+            f"({100 * s[k]:.0f} % of the way; correction {path.correction[k]:.2e} mm, "
+            f"allowed {path.allowed[k]:.2e} mm; distance bound {path.distance[k]:.2e} mm, "
+            f"certified radius {path.radius[k]:.2e} mm): near a singularity, which "
+            "assembly mode it reaches is not certain; start closer to the pose",
+            index=int(index[k]),
+        )
+
+    @staticmethod
+    def _not_converged(
+        index: npt.NDArray[np.intp],
+        worst: FloatArray,
+        s: FloatArray,
+        max_iter: int,
+        tol_mm: float,
+    ) -> ConvergenceError:
+        """ConvergenceError naming the first pose not done within ``max_iter`` steps."""
+        message = (
+            f"FGM did not converge for {index.size} pose(s) in {max_iter} iterations; "
+            f"first: pose index {index[0]}, leg length residual {worst[0]:.3e} mm "
+            f"(tolerance {tol_mm:.0e} mm)"
+        )
+        if s[0] < 1.0:
+            message += (
+                f", {100 * s[0]:.0f} % of the way from its start pose (the path nears a "
+                "singularity or is long: raise max_iter or start closer)"
+            )
+        return ConvergenceError(message)
+
+
+class _Curvature(NamedTuple):
+    """Geometry constants of :meth:`Hexapod._curvature_bound`."""
+
+    scale: FloatArray  # (6,) D's diagonal: mm per mm and mm of arc per degree
+    ratio_sq: FloatArray  # (6,) P_i^2 / rho^2
+    ratio_rho: FloatArray  # (6,) P_i / rho^2, 1/mm
+    rho: float  # mm
+    gradient: float  # bound on |dq_i / dx| in scaled coordinates
+
+
+class _PathStep(NamedTuple):
+    """One certified step of :meth:`Hexapod.fgm`'s path, for poses (M,)."""
+
+    rcond: FloatArray  # reciprocal condition of J (inf: surely regular)
+    inverse: FloatArray  # (M, 6, 6) J^-1
+    target: FloatArray  # (M, 6) what the step removes: IGM(x) - q(s + d)
+    d: FloatArray  # the step along the path
+    to_end: npt.NDArray[np.bool_]  # the step reaches s = 1
+    uncertified: npt.NDArray[np.bool_]
+    error_bound: FloatArray  # distance from the new x to the exact path point, scaled mm
+    sigma_floor: FloatArray  # lower bound on sigma_min(J D^-1) where Newton goes on
+    correction: FloatArray  # |D J^-1 (IGM(x) - q(s))|, scaled mm
+    allowed: FloatArray  # largest certified step, scaled mm
+    distance: FloatArray  # bound on the distance from x to the exact path point
+    radius: FloatArray  # radius of the certified ball, scaled mm
+
+
+class AssemblyModeError(ConvergenceError):
+    """The FGM cannot vouch for a pose: it may belong to another assembly mode.
+
+    Raised for leg lengths out of the stroke and for a path from the start pose that
+    cannot be followed with certainty. ``index`` is the pose's index.
+    """
+
+    def __init__(self, message: str, *, index: int | None = None) -> None:
+        self.index = index
+        super().__init__(message)
