@@ -168,10 +168,23 @@ def first_order_lag(
         rise = -np.expm1(-d / tau_s)  # 1 - exp(-d/tau), accurate for d << tau
         return x_j + b * (d - tau_s * rise) + (y_j - x_j) * decay
 
+    # The recursion over the samples is linear, y_{j+1} = a_j y_j + c_j with
+    # a_j = exp(-h_j / tau) and c_j = x_j (1 - a_j) + b_j (h_j - tau (1 - a_j)), so its
+    # prefix compositions
+    # (a, c) o (a', c') = (a a', a c' + c) give every y_j at once: log2(m) passes of
+    # doubling span (a parallel prefix scan), no loop over the samples.
     y_nodes = np.empty_like(x)
     y_nodes[0] = x[0]
-    for j in range(t.size - 1):
-        y_nodes[j + 1] = advance(y_nodes[j], x[j], slope[j], np.array(h[j]))
+    if t.size > 1:
+        gain = np.broadcast_to(np.exp(-h / tau_s)[:, None], x[:-1].shape).copy()
+        rise = -np.expm1(-h / tau_s)[:, None]
+        offset = x[:-1] * rise + slope[:-1] * (h[:, None] - tau_s * rise)
+        span = 1
+        while span < gain.shape[0]:
+            offset[span:] = gain[span:] * offset[:-span] + offset[span:]
+            gain[span:] = gain[span:] * gain[:-span]
+            span *= 2
+        y_nodes[1:] = gain * x[0] + offset
     q = np.asarray(query_s, dtype=float).reshape(-1)
     seg = np.clip(np.searchsorted(t, q, side="right") - 1, 0, t.size - 1)
     d = np.clip(q - t[seg], 0.0, None)[:, None]
