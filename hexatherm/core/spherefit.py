@@ -765,3 +765,111 @@ def probe_radius_mm(ball_diameter_mm: float, tip_diameter_mm: float, compensated
     if not (np.isfinite(tip) and tip >= 0):
         raise FitError(f"tip diameter must be finite and non-negative, got {tip_diameter_mm!r}")
     return ball / 2.0 if compensated else (ball + tip) / 2.0
+
+
+def refine_spheres(
+    points_mm: ArrayLike,
+    centre_mm: ArrayLike,
+    radius_mm: ArrayLike,
+    *,
+    fixed_radius: bool = False,
+    iterations: int = 3,
+    normal_points_mm: ArrayLike | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Gauss-Newton refits of many spheres of equal point counts, from a close start.
+
+    For Monte Carlo draws of probed points around spheres already fitted by
+    :func:`fit_spheres`: every sphere has the same number of points, and the start
+    (the fitted centre and radius) is within micrometres of the answer, so a few
+    undamped Gauss-Newton steps of the same geometric least-squares problem converge
+    without the general fit's preconditions, damping and diagnostics. The normal
+    matrix ``J^T J`` of the first step is kept for the later ones (the gradient
+    ``J^T e`` is recomputed every step, so the answer is the exact least-squares fit;
+    the convergence is linear, with a rate of about the start's error over the radius).
+    Broadcasts over any leading axes (draws, spheres).
+
+    Parameters
+    ----------
+    points_mm : array_like, shape (..., n, 3)
+        The points of each sphere.
+    centre_mm : array_like, shape (..., 3)
+        Start centres (broadcast against the points' leading axes).
+    radius_mm : array_like, shape (...)
+        Start radii; the radius of a fixed-radius fit.
+    fixed_radius : bool
+        Fit the centre only (3 parameters) instead of centre and radius (4).
+    iterations : int
+        Gauss-Newton steps.
+    normal_points_mm : array_like, shape (..., n, 3), optional
+        Points to build ``J^T J`` from, at the start (e.g. the unperturbed points of
+        Monte Carlo draws: one matrix per sphere for all draws). Any points close to
+        the answer give the same fixed point. Default: the points themselves.
+
+    Returns
+    -------
+    centre_mm : ndarray, shape (..., 3)
+    radius_mm : ndarray, shape (...)
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(1)
+    >>> d = rng.normal(size=(25, 3)); d[:, 2] = np.abs(d[:, 2]) + 1.0
+    >>> d /= np.linalg.norm(d, axis=1, keepdims=True)
+    >>> pts = [1.0, 2.0, 3.0] + 12.7 * d + rng.normal(scale=1e-3, size=(25, 3))
+    >>> ref = fit_spheres(pts)
+    >>> c, r = refine_spheres(pts, ref.centre_mm[0] + 2e-3, ref.radius_mm[0] - 1e-3)
+    >>> bool(np.allclose(c, ref.centre_mm[0], atol=1e-11)), bool(abs(r - ref.radius_mm[0]) < 1e-11)
+    (True, True)
+    """
+    pts = np.asarray(points_mm, dtype=float)
+    if pts.ndim < 2 or pts.shape[-1] != 3:
+        raise FitError(f"points must have shape (..., n, 3), got {pts.shape}")
+    n = pts.shape[-2]
+    p = 3 if fixed_radius else 4
+    if n < p:
+        raise FitError(f"need at least {p} points per sphere, got {n}")
+    if int(iterations) != iterations or iterations < 1:
+        raise FitError(f"iterations must be a positive integer, got {iterations!r}")
+    lead = pts.shape[:-2]
+    c = np.array(np.broadcast_to(np.asarray(centre_mm, dtype=float), (*lead, 3)))
+    r = np.array(np.broadcast_to(np.asarray(radius_mm, dtype=float), lead))
+    px, py, pz = (np.ascontiguousarray(pts[..., i]) for i in range(3))  # (..., n) each
+    inverse = None
+    for _ in range(int(iterations)):
+        vx, vy, vz = px - c[..., 0:1], py - c[..., 1:2], pz - c[..., 2:3]
+        dist = np.sqrt(vx * vx + vy * vy + vz * vz)
+        e = dist - r[..., None]  # residuals; J = [-u, -1], u = v / dist
+        w = e / dist
+        parts = [(vx * w).sum(-1), (vy * w).sum(-1), (vz * w).sum(-1)]  # J^T e, centre
+        if not fixed_radius:
+            parts.append(e.sum(-1))
+        gradient = np.stack(parts, axis=-1)
+        if inverse is None:
+            # J^T J of the first step, kept: the fixed point (J^T e = 0 with the current J)
+            # is the exact least-squares fit; only the rate is linear, and tiny this close
+            if normal_points_mm is None:
+                ux, uy, uz = vx / dist, vy / dist, vz / dist
+                at = lead
+            else:
+                q = np.asarray(normal_points_mm, dtype=float)
+                at = q.shape[:-2]
+                start = np.broadcast_to(np.asarray(centre_mm, dtype=float), (*at, 3))
+                qv = q - start[..., None, :]
+                qd = np.sqrt(np.einsum("...i,...i->...", qv, qv))
+                ux, uy, uz = (qv[..., i] / qd for i in range(3))
+            p_ = 3 if fixed_radius else 4
+            a = np.empty((*at, p_, p_))
+            comps = (ux, uy, uz)
+            for i in range(3):
+                for j in range(i, 3):
+                    a[..., i, j] = a[..., j, i] = (comps[i] * comps[j]).sum(-1)
+                if not fixed_radius:
+                    a[..., i, 3] = a[..., 3, i] = comps[i].sum(-1)
+            if not fixed_radius:
+                a[..., 3, 3] = n
+            inverse = np.linalg.inv(a)
+        step = (inverse @ gradient[..., None])[..., 0]
+        c = c + step[..., :3]
+        if not fixed_radius:
+            r = r + step[..., 3]
+    return c, r

@@ -459,3 +459,33 @@ def test_malformed_arguments(kwargs: dict, match: str) -> None:
     args = {"points_mm": CENTRE + RADIUS * np.vstack([np.eye(3), -np.eye(3)])} | kwargs
     with pytest.raises(FitError, match=match):
         fit_spheres(**args)
+
+
+@pytest.mark.parametrize("fixed", [False, True])
+def test_refine_spheres_equals_the_general_fit_on_monte_carlo_draws(fixed: bool) -> None:
+    """The batched refit of Monte Carlo draws gives the general fit's answer (1e-10 mm)."""
+    from hexatherm.core.spherefit import refine_spheres
+    from hexatherm.core.twin import cap_directions
+
+    rng = np.random.default_rng(3)
+    m, n, draws = 7, 25, 40
+    centres = rng.uniform(-100, 100, size=(m, 3))
+    radius = np.full(m, 12.7)
+    base = centres[:, None] + radius[:, None, None] * cap_directions(n, 70.0)
+    base += rng.normal(scale=1e-3, size=base.shape)
+    ref = fit_spheres(base.reshape(-1, 3), np.repeat(np.arange(m), n))
+    moved = base + rng.normal(scale=1e-3, size=(draws, m, n, 3))
+    groups = (np.repeat(np.arange(m), n) + m * np.arange(draws)[:, None]).reshape(-1)
+    truth = fit_spheres(
+        moved.reshape(-1, 3), groups, radius_mm=np.tile(radius, draws) if fixed else None
+    )
+    centre, r = refine_spheres(
+        moved,
+        ref.centre_mm,
+        radius if fixed else ref.radius_mm,
+        fixed_radius=fixed,
+        normal_points_mm=base,
+    )
+    np.testing.assert_allclose(centre.reshape(-1, 3), truth.centre_mm, atol=1e-10, rtol=0)
+    if not fixed:
+        np.testing.assert_allclose(r.reshape(-1), truth.radius_mm, atol=1e-10, rtol=0)

@@ -44,7 +44,7 @@ from hexatherm.core.propagation import (
     monte_carlo_covariance,
     residual_scale,
 )
-from hexatherm.core.spherefit import fit_spheres
+from hexatherm.core.spherefit import fit_spheres, refine_spheres
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.pipeline import (
     ProcessResult,
@@ -233,6 +233,7 @@ def point_sampler(result: ProcessResult, cov_mm2: FloatArray) -> CentreSampler |
                 step[ok],
                 ball[ok],
                 ok,
+                fitted.xyz_mm,
             )
         )
     centres = result.centres.centres_mm
@@ -240,18 +241,38 @@ def point_sampler(result: ProcessResult, cov_mm2: FloatArray) -> CentreSampler |
 
     def sample(rng: np.random.Generator, size: int) -> FloatArray:
         drawn = draw_centres(centres, root, rng, size)
-        for xyz, noise_mm, groups, radius, step, ball, ok in fits:
+        for xyz, noise_mm, groups, radius, step, ball, ok, fitted_mm in fits:
             chunk = max(1, POINTS_PER_REFIT // len(xyz))
             n_spheres = int(groups.max()) + 1
-            for start in range(0, size, chunk):
-                d = min(chunk, size - start)
+            counts = np.bincount(groups, minlength=n_spheres)
+            if np.all(counts == counts[0]):
+                # equal point counts: batched Gauss-Newton from the fitted spheres
+                order = np.argsort(groups, kind="stable")
+                per = (n_spheres, int(counts[0]), 3)
+                xyz_s, noise_s = xyz[order].reshape(per), noise_mm[order].reshape(per)
+                start = np.asarray(fitted_mm, dtype=float)
+                r0 = (
+                    np.linalg.norm(xyz_s - start[:, None], axis=-1).mean(axis=-1)
+                    if radius is None
+                    else np.broadcast_to(radius, (n_spheres,))
+                )
+                for first in range(0, size, chunk):
+                    d = min(chunk, size - first)
+                    moved = xyz_s + noise_s * rng.standard_normal((d, *per[:2]))[..., None]
+                    centre, _ = refine_spheres(
+                        moved, start, r0, fixed_radius=radius is not None, normal_points_mm=xyz_s
+                    )
+                    drawn[first : first + d, step, ball] = centre[:, ok]
+                continue
+            for first in range(0, size, chunk):
+                d = min(chunk, size - first)
                 moved = xyz + noise_mm * rng.standard_normal((d, len(xyz)))[..., None]
                 all_groups = (groups + n_spheres * np.arange(d)[:, None]).reshape(-1)
                 radii = (
                     None if radius is None else np.broadcast_to(radius, (d, n_spheres)).reshape(-1)
                 )
                 refit = fit_spheres(moved.reshape(-1, 3), all_groups, radius_mm=radii)
-                drawn[start : start + d, step, ball] = refit.centre_mm.reshape(d, n_spheres, 3)[
+                drawn[first : first + d, step, ball] = refit.centre_mm.reshape(d, n_spheres, 3)[
                     :, ok
                 ]
         return drawn
