@@ -1,8 +1,10 @@
 """The twin's effects: how a real hexapod departs from the plain thermal leg model.
 
-The spec ("The hexapod twin and its effects") names six effects; each one is a
-small class here, registered under its contract name, with its parameters, their
-units, a physically sensible range and what it changes in the twin's prediction.
+The spec ("The hexapod twin and its effects") names six effects, and four more
+physically common ones follow them (ball-plate expansion, quadratic leg growth,
+CMM scale, backlash); each one is a small class here, registered under its
+contract name, with its parameters, their units, a physically sensible range and
+what it changes in the twin's prediction.
 The simulator applies them to the truth (``hexatherm simulate``, hidden effects)
 and the diagnosis fits them to measurements: one implementation for both.
 
@@ -14,15 +16,20 @@ offsets); effects of the same stage apply in the order they are given:
    log (``leg_thermal_lag``);
 2. ``segment_temperature_C``: the temperature of each segment of each leg
    (``steel_overheat``);
-3. ``growth_mm``: each leg's thermal growth (``leg_cte_error``);
-4. ``leg_length_mm``: the true leg lengths (``leg_offset``);
+3. ``leg_growth_mm``: each leg's thermal growth, knowing the leg temperatures
+   (``leg_cte_error``, ``leg_growth_quadratic``);
+4. ``commanded_leg_length_mm``: the true leg lengths, knowing the commanded ones
+   in the order the steps were moved through (``leg_offset``, ``leg_backlash``);
 5. ``base_joints_mm``: the base joints at each step (``base_expansion``);
+5b. ``ball_positions_mm``: the balls' centres in the platform frame when each
+   was measured (``ball_plate_expansion``);
 6. ``cmm_coordinates_mm``: what the CMM reports for a true coordinate measured at
-   a time (``cmm_drift``).
+   a time (``cmm_drift``, ``cmm_scale``).
 
-Every stage's method is the identity in :class:`Effect`; an effect overrides the
-ones it changes. Adding a seventh effect is one new subclass with a ``name``:
-it registers itself in :data:`EFFECTS`.
+Every stage's method is the identity in :class:`Effect` (stages 3 and 4 call the
+simpler ``growth_mm`` and ``leg_length_mm``, which effects that need nothing else
+override); an effect overrides the ones it changes. Adding an effect is one new
+subclass with a ``name``: it registers itself in :data:`EFFECTS`.
 
 ``t_0`` is the time of the first temperature sample, where the hexapod is taken
 to be in equilibrium.
@@ -30,8 +37,8 @@ to be in equilibrium.
 >>> effect = make_effect("leg_offset", {f"leg{i}": 0.001 * i for i in range(1, 7)})
 >>> effect.leg_length_mm(np.zeros((1, 6))).round(3).tolist()
 [[0.001, 0.002, 0.003, 0.004, 0.005, 0.006]]
->>> sorted(EFFECTS)[:3]
-['base_expansion', 'cmm_drift', 'leg_cte_error']
+>>> sorted(EFFECTS)[:4]
+['ball_plate_expansion', 'base_expansion', 'cmm_drift', 'cmm_scale']
 """
 
 from __future__ import annotations
@@ -267,7 +274,9 @@ class Effect:
         return f"{type(self).__name__}({args})"
 
     def __eq__(self, other: object) -> bool:
-        return type(other) is type(self) and other.values == self.values  # type: ignore[attr-defined]
+        return (
+            isinstance(other, Effect) and type(other) is type(self) and other.values == self.values
+        )
 
     def __hash__(self) -> int:
         return hash((self.name, tuple(self.values.items())))
@@ -345,12 +354,39 @@ class Effect:
         return segment_C
 
     def growth_mm(self, growth_mm: FloatArray) -> FloatArray:
-        """Stage 3: thermal growth (n, 6) of each leg."""
+        """Stage 3: thermal growth (n, 6) of each leg (see :meth:`leg_growth_mm`)."""
         return growth_mm
 
+    def leg_growth_mm(
+        self, growth_mm: FloatArray, leg_C: FloatArray, reference_C: float
+    ) -> FloatArray:
+        """Stage 3: thermal growth (n, 6), given each leg's effective temperature (n, 6).
+
+        ``reference_C`` is the leg model's reference temperature (no growth there).
+        By default :meth:`growth_mm`.
+        """
+        return self.growth_mm(growth_mm)
+
     def leg_length_mm(self, q_mm: FloatArray) -> FloatArray:
-        """Stage 4: true leg lengths (n, 6)."""
+        """Stage 4: true leg lengths (n, 6) (see :meth:`commanded_leg_length_mm`)."""
         return q_mm
+
+    def commanded_leg_length_mm(
+        self, q_mm: FloatArray, q_cmd_mm: FloatArray, order: npt.NDArray[np.intp]
+    ) -> FloatArray:
+        """Stage 4: true leg lengths (n, 6), given the commanded ones (n, 6).
+
+        ``order`` (n,) lists the steps in the order the hexapod moved through them.
+        By default :meth:`leg_length_mm`.
+        """
+        return self.leg_length_mm(q_mm)
+
+    def ball_positions_mm(
+        self, balls_mm: FloatArray, times_s: FloatArray, log: ThermocoupleLog
+    ) -> FloatArray:
+        """Stage 5b: ball centres in the platform frame, (k, 3) or (n, k, 3), when each
+        ball of each step was measured (``times_s``, (n, k))."""
+        return balls_mm
 
     def base_joints_mm(
         self, base_mm: FloatArray, times_s: FloatArray, log: ThermocoupleLog
@@ -482,6 +518,121 @@ class CmmDrift(Effect):
         v_mm_per_s = self.vector() * 1e-3 / _HOUR_S
         dt = np.asarray(times_s, dtype=float) - log.t0_s
         return np.asarray(xyz_mm, dtype=float) + dt[..., None] * v_mm_per_s
+
+
+class BallPlateExpansion(Effect):
+    """The balls' plate expands with the air temperature, about the platform origin.
+
+    A ball measured at time ``t`` sits at ``(1 + alpha (T_air(t) - T_air(t_0))) p``
+    in the platform frame, ``p`` its nominal position (the balls file); the
+    platform joints do not move (a ball plate mounted on the platform, or the
+    platform's top expanding above its joints).
+    """
+
+    name = "ball_plate_expansion"
+    parameters = ("alpha_per_K",)
+    units = ("1/K",)
+    ranges = ((0.0, 30e-6),)
+    needs_air = True
+    summary = "the balls move apart with the air temperature (the plate's expansion)"
+
+    def ball_positions_mm(
+        self, balls_mm: FloatArray, times_s: FloatArray, log: ThermocoupleLog
+    ) -> FloatArray:
+        t = np.asarray(times_s, dtype=float)
+        d_air = log.air_at(t.reshape(-1)).reshape(t.shape) - log.air_at([log.t0_s])[0]
+        scale = 1.0 + self.values["alpha_per_K"] * d_air  # (n, k)
+        return scale[..., None] * np.asarray(balls_mm, dtype=float)
+
+
+class LegGrowthQuadratic(Effect):
+    """Leg i grows by ``leg_i (T_i - T_ref)^2`` (um) on top of its linear growth.
+
+    The expansion coefficient changing with temperature: a quadratic term of the
+    growth in the leg's effective temperature ``T_i`` (after a lag) about the leg
+    model's reference temperature, where the nominal lengths hold.
+    """
+
+    name = "leg_growth_quadratic"
+    parameters = _LEGS
+    units = ("um/K^2",) * 6
+    ranges = ((-0.5, 0.5),) * 6
+    summary = "each leg's growth has a term quadratic in its temperature"
+
+    @classmethod
+    def scales(cls) -> FloatArray:
+        return np.full(6, 0.01)
+
+    def leg_growth_mm(
+        self, growth_mm: FloatArray, leg_C: FloatArray, reference_C: float
+    ) -> FloatArray:
+        return growth_mm + 1e-3 * self.per_leg() * (np.asarray(leg_C) - reference_C) ** 2
+
+
+class CmmScale(Effect):
+    """The CMM reads every coordinate scaled by ``1 + s`` per axis (ppm), about its origin."""
+
+    name = "cmm_scale"
+    parameters = ("sx_ppm", "sy_ppm", "sz_ppm")
+    units = ("ppm",) * 3
+    ranges = ((-200.0, 200.0),) * 3
+    summary = "the CMM's scales are off by a few ppm per axis"
+
+    @classmethod
+    def scales(cls) -> FloatArray:
+        return np.full(3, 10.0)
+
+    def cmm_coordinates_mm(
+        self, xyz_mm: FloatArray, times_s: FloatArray, log: ThermocoupleLog
+    ) -> FloatArray:
+        return np.asarray(xyz_mm, dtype=float) * (1.0 + 1e-6 * self.vector())
+
+
+class LegBacklash(Effect):
+    """Leg i is off by ``+leg_i`` (mm) after it last extended and ``-leg_i`` after it
+    last retracted (approach-direction backlash); a leg not yet moved is not off.
+
+    The direction of a leg's last move is the sign of the change of its commanded
+    length from the previous step, in the order the steps were moved through
+    (steps that leave a leg where it was, to 1e-9 mm, keep its direction). A
+    negative ``leg_i`` is a leg that stops short of its target. The same in the
+    reference thermal state: it is not thermal.
+    """
+
+    name = "leg_backlash"
+    parameters = _LEGS
+    units = ("mm",) * 6
+    ranges = ((-0.05, 0.05),) * 6
+    summary = "each leg is off by a constant whose sign follows the direction of its last move"
+
+    @classmethod
+    def scales(cls) -> FloatArray:
+        return np.full(6, 0.002)
+
+    @staticmethod
+    def directions(q_cmd_mm: FloatArray, order: npt.NDArray[np.intp]) -> FloatArray:
+        """The direction (n, 6) of each leg's last move before each step: +1, -1 or 0.
+
+        >>> q = np.array([[0.0] * 6, [1.0] * 6, [1.0] * 6, [0.5] * 6])
+        >>> LegBacklash.directions(q, np.arange(4))[:, 0].tolist()
+        [0.0, 1.0, 1.0, -1.0]
+        """
+        q = np.asarray(q_cmd_mm, dtype=float)[order]
+        move = np.zeros_like(q)
+        change = np.diff(q, axis=0)
+        move[1:] = np.where(np.abs(change) > 1e-9, np.sign(change), 0.0)
+        # carry the last nonzero move forward: index of the last step that moved
+        step = np.arange(q.shape[0])[:, None]
+        last = np.maximum.accumulate(np.where(move != 0, step, 0), axis=0)
+        sign = np.take_along_axis(move, last, axis=0)
+        out = np.empty_like(sign)
+        out[order] = sign
+        return out
+
+    def commanded_leg_length_mm(
+        self, q_mm: FloatArray, q_cmd_mm: FloatArray, order: npt.NDArray[np.intp]
+    ) -> FloatArray:
+        return q_mm + self.directions(q_cmd_mm, order) * self.per_leg()
 
 
 # ---------------------------------------------------------------------- helpers

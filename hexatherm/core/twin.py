@@ -12,8 +12,9 @@ hexapod twin and its effects"):
 
 Effects (:mod:`hexatherm.core.effects`) change this model stage by stage: the
 leg temperatures (lag), the segment temperatures (overheat), the growth (CTE
-error), the leg lengths (offsets), the base joints of each step (base expansion)
-and the coordinates the CMM reports (drift). A hexapod's positioning error
+error, a quadratic term), the leg lengths (offsets, backlash), the base joints of
+each step (base expansion), the balls on the platform (the plate's expansion) and
+the coordinates the CMM reports (drift, scale). A hexapod's positioning error
 (repeatability) may be added to the leg lengths of each step.
 
 The ball centres in the CMM frame follow from a placement ``origin2cmm`` of the
@@ -66,7 +67,8 @@ class TwinSteps:
         True pose with the legs at the thermal state of the first reference step,
         relative to the measured origin step (equals ``pose`` for that step).
     centres_cmm_mm : ndarray, shape (N, k, 3)
-        True ball centres in the CMM frame.
+        True ball centres in the CMM frame (where the balls are when measured:
+        ball effects included, CMM effects not).
     q_mm : ndarray, shape (N, 6)
         True leg lengths: commanded plus growth, offsets and positioning error.
     leg_temperature_C : ndarray, shape (N, 6)
@@ -128,7 +130,19 @@ def predict_steps(
     temps = np.asarray(leg_temperature_C, dtype=float)
     segments = np.broadcast_to(temps[..., None], temps.shape + (legs.variable.shape[1],))
     return _solve(
-        hexapod, plan, temps, segments, None, (), balls_mm, origin2cmm, None, None, None, True
+        hexapod,
+        plan,
+        temps,
+        segments,
+        None,
+        (),
+        np.asarray(balls_mm, dtype=float),
+        origin2cmm,
+        None,
+        None,
+        None,
+        True,
+        np.arange(len(plan.labels)),
     )
 
 
@@ -191,10 +205,13 @@ def predict(
     for effect in effects:
         base = effect.base_joints_mm(base, t, log)
     step_base = None if base is hexapod.base_joints_mm else np.broadcast_to(base, (t.size, 6, 3))
+    balls = np.asarray(balls_mm, dtype=float)
     if ball_times_s is None:
-        ball_t = np.broadcast_to(t[:, None], (t.size, np.asarray(balls_mm).shape[0]))
+        ball_t = np.broadcast_to(t[:, None], (t.size, balls.shape[0]))
     else:
         ball_t = np.asarray(ball_times_s, dtype=float)
+    for effect in effects:
+        balls = effect.ball_positions_mm(balls, ball_t, log)
     return _solve(
         hexapod,
         plan,
@@ -202,12 +219,13 @@ def predict(
         segments,
         step_base,
         effects,
-        balls_mm,
+        balls,
         origin2cmm,
         positioning_error_mm,
         log,
         ball_t,
         reference_state,
+        np.argsort(t, kind="stable"),
     )
 
 
@@ -253,30 +271,35 @@ def _solve(
     segment_C: FloatArray,
     base: FloatArray | None,
     effects: tuple[Effect, ...],
-    balls_mm: npt.ArrayLike,
+    balls_mm: FloatArray,
     origin2cmm: npt.ArrayLike,
     positioning_error_mm: npt.ArrayLike | None,
     log: ThermocoupleLog | None,
     ball_times_s: FloatArray | None,
     reference_state: bool,
+    order: npt.NDArray[np.intp],
 ) -> TwinSteps:
-    """Leg lengths, poses and centres from the segment temperatures and base joints."""
+    """Leg lengths, poses and centres from the segment temperatures and base joints.
+
+    ``balls_mm`` are the balls in the platform frame, (k, 3) or per step (N, k, 3);
+    ``order`` lists the steps in the order they were moved through.
+    """
     legs = _leg_model(hexapod)
     q_cmd = hexapod.igm(plan.poses)
     error = None if positioning_error_mm is None else np.asarray(positioning_error_mm, float)
 
-    def lengths(segments: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def lengths(segments: FloatArray, leg: FloatArray) -> tuple[FloatArray, FloatArray]:
         growth = legs.growth_mm(q_cmd, segments, per_segment=True)
         for effect in effects:
-            growth = effect.growth_mm(growth)
+            growth = effect.leg_growth_mm(growth, leg, legs.reference_temperature_C)
         q = q_cmd + growth
         for effect in effects:
-            q = effect.leg_length_mm(q)
+            q = effect.commanded_leg_length_mm(q, q_cmd, order)
         if error is not None:
             q = q + error
         return growth, q
 
-    growth, q = lengths(segment_C)
+    growth, q = lengths(segment_C, leg_C)
     absolute = hexapod.fgm(q, initial_poses=plan.poses, base_joints_mm=base)
     platform2origin = transform_from_pose(absolute, hexapod.convention)
     origin = plan.origin_index
@@ -286,7 +309,10 @@ def _solve(
     refs = plan.reference_indices
     r = int(refs[0]) if refs.size else origin
     if reference_state:
-        growth0, q0 = lengths(np.broadcast_to(segment_C[r], segment_C.shape))
+        growth0, q0 = lengths(
+            np.broadcast_to(segment_C[r], segment_C.shape),
+            np.broadcast_to(leg_C[r], leg_C.shape),
+        )
         base0 = None if base is None else np.broadcast_to(base[r], base.shape)
         absolute0 = hexapod.fgm(q0, initial_poses=plan.poses, base_joints_mm=base0)
         corrected = pose_from_transform(
@@ -298,7 +324,7 @@ def _solve(
         corrected = np.full((q.shape[0], 6), np.nan)
 
     frames = np.asarray(origin2cmm, dtype=float) @ platform2origin
-    centres = apply_transform(frames, np.asarray(balls_mm, dtype=float))
+    centres = apply_transform(frames, balls_mm)
     measured_centres = centres
     if log is not None and ball_times_s is not None:
         measured_centres = cmm_readings(centres, ball_times_s, log, effects)
