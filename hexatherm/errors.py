@@ -71,6 +71,18 @@ class FitError(HexathermError):
         super().__init__(message)
 
 
+class AssemblyModeError(ConvergenceError):
+    """The FGM cannot vouch for a pose: it may belong to another assembly mode.
+
+    Raised for leg lengths out of the stroke and for a path from the start pose that
+    cannot be followed with certainty. ``index`` is the pose's index.
+    """
+
+    def __init__(self, message: str, *, index: int | None = None) -> None:
+        self.index = index
+        super().__init__(message)
+
+
 class RegistrationError(HexathermError):
     """Ball centres that cannot be registered to the balls file."""
 

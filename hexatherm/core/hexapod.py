@@ -32,7 +32,7 @@ from hexatherm.core.geometry import (
     check_poses,
 )
 from hexatherm.core.thermal import LegThermalModel
-from hexatherm.errors import ConvergenceError, SingularityError
+from hexatherm.errors import AssemblyModeError, ConvergenceError, SingularityError
 from hexatherm.typing import FloatArray
 
 #: FGM convergence tolerance on the leg lengths, mm
@@ -737,15 +737,3 @@ class _PathStep(NamedTuple):
     allowed: FloatArray  # largest certified step, scaled mm
     distance: FloatArray  # bound on the distance from x to the exact path point
     radius: FloatArray  # radius of the certified ball, scaled mm
-
-
-class AssemblyModeError(ConvergenceError):
-    """The FGM cannot vouch for a pose: it may belong to another assembly mode.
-
-    Raised for leg lengths out of the stroke and for a path from the start pose that
-    cannot be followed with certainty. ``index`` is the pose's index.
-    """
-
-    def __init__(self, message: str, *, index: int | None = None) -> None:
-        self.index = index
-        super().__init__(message)

@@ -44,6 +44,7 @@ from hexatherm.core.geometry import (
 )
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
+from hexatherm.core.planning import cap_directions
 from hexatherm.core.registration import register
 from hexatherm.core.thermal import LegThermalModel
 from hexatherm.typing import FloatArray
@@ -347,24 +348,6 @@ def _solve(
         reference_index=r,
         measured_centres_cmm_mm=measured_centres,
     )
-
-
-def cap_directions(n_points: int, cap_half_angle_deg: float) -> FloatArray:
-    """``n_points`` unit vectors spread evenly over a cap around +Z (a Fibonacci spiral).
-
-    >>> d = cap_directions(25, 60.0)
-    >>> bool(np.allclose(np.linalg.norm(d, axis=1), 1.0)), bool(d[:, 2].min() >= 0.5 - 1e-12)
-    (True, True)
-    """
-    if n_points < 1:
-        raise ValueError("need at least one point")
-    i = np.arange(n_points) + 0.5
-    cos_min = np.cos(np.deg2rad(cap_half_angle_deg))
-    z = 1.0 - (1.0 - cos_min) * i / n_points
-    golden = np.pi * (3.0 - np.sqrt(5.0))
-    phi = golden * i
-    rho = np.sqrt(np.clip(1.0 - z**2, 0.0, None))
-    return np.column_stack([rho * np.cos(phi), rho * np.sin(phi), z])
 
 
 def probe_points(

@@ -290,11 +290,19 @@ SPEC_EFFECTS = {
     "cmm_drift": ("vx_um_per_h", "vy_um_per_h", "vz_um_per_h"),
     "leg_offset": tuple(f"leg{i}" for i in range(1, 7)),
 }
+#: hexatherm's extensions of the registry (docs/formats.md marks them as such)
+EXTENSION_EFFECTS = {
+    "ball_plate_expansion": ("alpha_per_K",),
+    "leg_growth_quadratic": tuple(f"leg{i}" for i in range(1, 7)),
+    "cmm_scale": ("sx_ppm", "sy_ppm", "sz_ppm"),
+    "leg_backlash": tuple(f"leg{i}" for i in range(1, 7)),
+}
 
 
 def test_registry_matches_the_contract():
-    assert {name: tuple(cls.parameters) for name, cls in EFFECTS.items()} == SPEC_EFFECTS
-    assert EFFECT_PARAMETERS == SPEC_EFFECTS
+    registry = {name: tuple(cls.parameters) for name, cls in EFFECTS.items()}
+    assert registry == {**SPEC_EFFECTS, **EXTENSION_EFFECTS}
+    assert EFFECT_PARAMETERS == registry
     for cls in EFFECTS.values():
         assert len(cls.units) == len(cls.ranges) == len(cls.parameters)
         assert all(lo < hi for lo, hi in cls.ranges)

@@ -18,8 +18,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from hexatherm.core.hexapod import AssemblyModeError, Hexapod
-from hexatherm.errors import ConvergenceError, HexathermError
+from hexatherm.core.hexapod import Hexapod
+from hexatherm.errors import AssemblyModeError, ConvergenceError, HexathermError
 from tests.conftest import make_hexapod, random_poses
 
 #: a wide box: most of it out of stroke, some of it past singularities (mm, deg)

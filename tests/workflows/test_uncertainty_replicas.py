@@ -32,7 +32,7 @@ from tests.sessions import BALLS, ROOT, small_plan
 
 HEXAPOD_TEXT = (ROOT / "configs" / "symetrie-like.yaml").read_text()
 GAIN = (3.0, 7.0, 2.0, 3.0, 9.0, 3.5)
-REPLICAS = 60
+REPLICAS = 100
 
 
 def replicas(
