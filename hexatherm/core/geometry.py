@@ -224,3 +224,13 @@ def apply_transform(transforms: npt.ArrayLike, points: npt.ArrayLike) -> FloatAr
     t = np.asarray(transforms, dtype=float)
     p = np.asarray(points, dtype=float)
     return np.einsum("...ij,...kj->...ki", t[..., :3, :3], p) + t[..., None, :3, 3]
+
+
+def to_um_urad(values_mm_deg: npt.ArrayLike) -> FloatArray:
+    """Poses or pose differences ``(..., 6)`` in mm and deg -> um and urad.
+
+    >>> to_um_urad([0.001, 0, 0, 180 / np.pi * 1e-6, 0, 0]).round(9).tolist()
+    [1.0, 0.0, 0.0, 1.0, 0.0, 0.0]
+    """
+    values = np.asarray(values_mm_deg, dtype=float)
+    return np.concatenate([values[..., :3] * 1e3, np.deg2rad(values[..., 3:]) * 1e6], axis=-1)

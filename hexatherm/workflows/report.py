@@ -45,6 +45,7 @@ if TYPE_CHECKING:
     from hexatherm.workflows.process.quality import QualityReport
     from hexatherm.workflows.process.uncertainty import PoseUncertainty
 
+from hexatherm.core.geometry import to_um_urad
 from hexatherm.typing import FloatArray
 
 POSE_NAMES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
@@ -66,16 +67,6 @@ FIGURE_DPI = 100
 
 
 # --------------------------------------------------------------------- numbers
-def to_um_urad(values_mm_deg: npt.ArrayLike) -> FloatArray:
-    """Poses or pose differences ``(..., 6)`` in mm and deg -> um and urad.
-
-    >>> to_um_urad([0.001, 0, 0, 180 / np.pi * 1e-6, 0, 0]).round(9).tolist()
-    [1.0, 0.0, 0.0, 1.0, 0.0, 0.0]
-    """
-    values = np.asarray(values_mm_deg, dtype=float)
-    return np.concatenate([values[..., :3] * 1e3, np.deg2rad(values[..., 3:]) * 1e6], axis=-1)
-
-
 def target_labels(result: ProcessResult) -> list[str]:
     """Labels of the targets, in plan order."""
     return [result.session.plan.labels[i] for i in result.correction.target_index]

@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
+from hexatherm.core.geometry import to_um_urad
 from hexatherm.io.atomic import atomic_output_dir
 from hexatherm.io.records import seconds_to_iso
 from hexatherm.workflows.process.pipeline import ProcessResult, nominal_fit_diameter_mm
@@ -47,6 +48,12 @@ def pose_columns(tag: str) -> list[str]:
     """``Tx_<tag>_mm, ..., Rz_<tag>_deg`` (``tag`` may be empty)."""
     mid = f"_{tag}" if tag else ""
     return [f"{n}{mid}_{u}" for n, u in zip(POSE_NAMES, POSE_UNITS, strict=True)]
+
+
+def deviation_columns(tag: str) -> list[str]:
+    """``dTx_<tag>_um, ..., dRz_<tag>_urad``: pose minus commanded pose, um and urad."""
+    units = ("um", "um", "um", "urad", "urad", "urad")
+    return [f"d{n}_{tag}_{u}" for n, u in zip(POSE_NAMES, units, strict=True)]
 
 
 CONTRACT_COLUMNS = ["label", "time", *pose_columns("conv"), *pose_columns("corr")]
@@ -97,6 +104,26 @@ def poses_frame(
         ):
             for j, col in enumerate(pose_columns(tag)):
                 data[f"u_{col}"] = values[:, j]
+    # the deviations from the commanded pose that the screen and the report show, um and
+    # urad, each beside its standard uncertainty in the same unit
+    commanded = plan.poses[idx]
+    measured = [("conv", corr.conventional), ("corr", corr.corrected)]
+    if twin is not None:
+        measured.append(("twin", np.asarray(twin)))
+    u_of = (
+        {}
+        if uncertainty is None
+        else {
+            "conv": to_um_urad(uncertainty.conventional_u),
+            "corr": to_um_urad(uncertainty.corrected_u),
+        }
+    )
+    for tag, values in measured:
+        dev = to_um_urad(values - commanded)
+        for j, col in enumerate(deviation_columns(tag)):
+            data[col] = dev[:, j]
+            if tag in u_of:
+                data[f"u_{col}"] = u_of[tag][:, j]
     return pd.DataFrame(data)
 
 
@@ -209,8 +236,7 @@ def deviation_table(result: ProcessResult, twin: np.ndarray | None = None) -> st
     cmd = plan.poses[corr.target_index]
 
     def deviations(pose: np.ndarray) -> np.ndarray:
-        dev = pose - cmd
-        return np.column_stack([dev[:, :3] * 1e3, np.deg2rad(dev[:, 3:]) * 1e6])
+        return to_um_urad(pose - cmd)
 
     tables = [deviations(corr.conventional), deviations(corr.corrected)]
     titles = ["conventional - commanded", "corrected - commanded"]
