@@ -140,8 +140,8 @@ def _times(frame: pd.DataFrame, path: str) -> tuple[npt.NDArray[np.float64], Tim
             line=int(frame.index[row]),
             field="time",
         )
-    seconds = (stamps - pd.Timestamp(0, tz="UTC")).dt.total_seconds().to_numpy(dtype=float)
-    return seconds, "iso"
+    seconds = (stamps - pd.Timestamp(0, tz="UTC")).dt.total_seconds().to_numpy(dtype=np.float64)
+    return np.asarray(seconds, dtype=np.float64), "iso"
 
 
 def _check_header(frame: pd.DataFrame, path: str, extras: tuple[str, ...]) -> None:

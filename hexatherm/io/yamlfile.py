@@ -47,12 +47,13 @@ class _Loader(yaml.SafeLoader):
 _Composer: type[Any] = _Loader
 if getattr(yaml, "__with_libyaml__", False):
 
-    class _CLoader(yaml.CSafeLoader):  # type: ignore[misc,name-defined]
+    class _CLoader(yaml.CSafeLoader):
         """libyaml's SafeLoader with the same resolvers (composes; never constructs)."""
 
     _Composer = _CLoader
 
-for _loader in {_Loader, _Composer}:
+_loader: type[Any]
+for _loader in dict.fromkeys((_Loader, _Composer)):  # once each
     _loader.add_implicit_resolver(
         "tag:yaml.org,2002:float",
         re.compile(r"^[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)[eE][-+]?[0-9]+$"),
