@@ -127,7 +127,10 @@ def choose_references(
 
     Returns ``(before_index, after_index, weight_after)`` with -1 for an unused side.
     With ``"linear"`` and references on both sides the weight is
-    ``(t_S - t_b) / (t_a - t_b)``; with one side only, that side is used.
+    ``(t_S - t_b) / (t_a - t_b)``; with one side only, that side is used. References
+    measured at the same time (a burst of data stamped on arrival) get the weight 1/2:
+    the target lies between them in the plan's order, and the times say no more.
+    References in reverse time order are an error.
     """
     if interpolation not in INTERPOLATIONS:
         raise ValueError(f"interpolation must be one of {INTERPOLATIONS}, got {interpolation!r}")
@@ -149,13 +152,19 @@ def choose_references(
     if np.any(both):
         tb, ta, ts = t[before[both]], t[after[both]], t[targets[both]]
         span = ta - tb
-        if np.any(span <= 0):
-            bad = targets[both][np.argmax(span <= 0)]
+        if np.any(span < 0):
+            bad = targets[both][np.argmax(span < 0)]
             raise PlanError(
                 f"step {plan.labels[bad]}: its references are not in time order "
-                "(the reference after it was measured no later than the one before)"
+                "(the reference after it was measured before the one before it)"
             )
-        weight[both] = (ts - tb) / span
+        # equal times (points stamped on arrival, a burst of data in one read): the data
+        # hold no time distances, only the plan's order, in which the target lies between
+        # its references; the symmetric weight is the one the order supports
+        timed = span > 0
+        weight_both = np.full(span.shape, 0.5)
+        weight_both[timed] = (ts[timed] - tb[timed]) / span[timed]
+        weight[both] = weight_both
     return before, after, weight
 
 

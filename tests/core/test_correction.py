@@ -10,6 +10,7 @@ from hexatherm.core.geometry import transform_from_pose
 from hexatherm.core.plan import Plan, StepError
 from hexatherm.core.registration import register
 from hexatherm.core.twin import leg_temperatures_at, predict_steps
+from hexatherm.errors import PlanError
 from tests.conftest import BALLS, REFERENCE_POSE, make_hexapod, make_plan, random_poses
 
 ORIGIN2CMM = transform_from_pose([420.0, 310.0, 180.0, 0.3, -0.2, 35.0])
@@ -148,3 +149,20 @@ def test_choose_references_weights():
     np.testing.assert_array_equal(before, [1, -1])
     np.testing.assert_array_equal(after, [-1, 5])
     np.testing.assert_allclose(w, [0.0, 1.0])
+
+
+def test_references_measured_at_the_same_time_weigh_one_half():
+    """A burst of data stamped on arrival: O, R0, S1 and R1 share one time. The plan's order
+    puts S1 between R0 and R1, and the times say no more: each reference weighs 1/2."""
+    plan = make_plan(np.zeros((2, 6)))  # O R0 S1 R1 S2 R2
+    times = np.array([0.0, 10.0, 10.0, 10.0, 20.0, 30.0])
+    before, after, w = choose_references(plan, times, "linear")
+    np.testing.assert_array_equal(before, [1, 3])
+    np.testing.assert_array_equal(after, [3, 5])
+    np.testing.assert_allclose(w, [0.5, 0.5])
+
+
+def test_references_in_reverse_time_order_are_refused():
+    plan = make_plan(np.zeros((1, 6)))  # O R0 S1 R1
+    with pytest.raises(PlanError, match="step S1: its references are not in time order"):
+        choose_references(plan, np.array([0.0, 20.0, 15.0, 10.0]), "linear")

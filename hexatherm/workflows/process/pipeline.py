@@ -378,6 +378,17 @@ def process_session(
     steps, correction = correct(
         session.hexapod, session.plan, centres.times_s, registration.platform2cmm, interpolation
     )
+    both = (correction.before_index >= 0) & (correction.after_index >= 0)
+    untimed = both & (
+        centres.times_s[correction.after_index] <= centres.times_s[correction.before_index]
+    )
+    if np.any(untimed):
+        first = plan.labels[correction.target_index[np.argmax(untimed)]]
+        warnings.append(
+            f"{int(untimed.sum())} target(s), the first {first}: both references have the same "
+            "time (points stamped on arrival, in one burst?): each reference weighs 1/2, by "
+            "the plan's order; the times carry no distances to interpolate on"
+        )
     return ProcessResult(
         session,
         centres,
