@@ -7,6 +7,7 @@ the command line turns them into a one-line message and a non-zero exit.
 from __future__ import annotations
 
 import os
+from collections.abc import Iterable
 from typing import Any
 
 
@@ -50,6 +51,44 @@ class InputError(HexathermError):
 
 class PlanError(HexathermError):
     """A plan or session whose steps cannot be processed (names the step)."""
+
+
+class StepError(PlanError):
+    """A plan error attached to one step (``step`` is its label, ``index`` its position)."""
+
+    def __init__(self, message: str, *, step: str | None = None, index: int | None = None):
+        self.step = step
+        self.index = index
+        super().__init__(f"step {step}: {message}" if step is not None else message)
+
+
+def _format_pose(pose: tuple[float, ...]) -> str:
+    """``[Tx, Ty, Tz, Rx, Ry, Rz]`` with up to 6 decimals (as ``core.planning.format_pose``)."""
+    texts = (f"{v:.6f}".rstrip("0").rstrip(".") for v in pose)
+    return "[" + ", ".join("0" if x in ("-0", "") else x for x in texts) + "]"
+
+
+class PoseError(PlanError):
+    """A commanded pose the hexapod cannot (or should not) reach, naming its step.
+
+    Attributes
+    ----------
+    step : str
+        Label of the step.
+    pose : tuple of float
+        The commanded pose.
+    source : str or None
+        Where the pose came from (``targets.csv:7``, ``grid point 12``, ...).
+    """
+
+    def __init__(
+        self, message: str, *, step: str, pose: Iterable[float], source: str | None = None
+    ) -> None:
+        self.step = step
+        self.pose = tuple(float(v) for v in pose)
+        self.source = source
+        where = f" ({source})" if source else ""
+        super().__init__(f"step {step}{where}: pose {_format_pose(self.pose)}: {message}")
 
 
 class ConvergenceError(HexathermError):

@@ -21,22 +21,13 @@ from typing import Literal, cast
 import numpy as np
 import numpy.typing as npt
 
-from hexatherm.errors import PlanError
+from hexatherm.errors import StepError
 
 StepKind = Literal["origin", "reference", "target"]
 STEP_KINDS: tuple[StepKind, ...] = ("origin", "reference", "target")
 NAME_PATTERN = re.compile(r"[A-Za-z0-9-]+")
 #: commanded reference poses equal to this tolerance are the same pose (mm, deg)
 SAME_POSE_TOL = 1e-9
-
-
-class StepError(PlanError):
-    """A plan error attached to one step (``step`` is its label, ``index`` its position)."""
-
-    def __init__(self, message: str, *, step: str | None = None, index: int | None = None):
-        self.step = step
-        self.index = index
-        super().__init__(f"step {step}: {message}" if step is not None else message)
 
 
 @dataclass(frozen=True)

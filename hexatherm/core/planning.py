@@ -32,7 +32,7 @@ import numpy.typing as npt
 from hexatherm.core.geometry import apply_transform, transform_from_pose
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
-from hexatherm.errors import InputError, PlanError
+from hexatherm.errors import InputError, PlanError, PoseError
 from hexatherm.typing import FloatArray
 
 ReferenceEvery = Literal["both", "before", "after", "alternate"]
@@ -48,29 +48,6 @@ DEFAULT_MIN_RCOND = 1e-2
 #: default half-angle of the cap of each ball the CMM touches, degrees
 DEFAULT_CAP_HALF_ANGLE_DEG = 75.0
 _GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
-
-
-class PoseError(PlanError):
-    """A commanded pose the hexapod cannot (or should not) reach, naming its step.
-
-    Attributes
-    ----------
-    step : str
-        Label of the step.
-    pose : tuple of float
-        The commanded pose.
-    source : str or None
-        Where the pose came from (``targets.csv:7``, ``grid point 12``, ...).
-    """
-
-    def __init__(
-        self, message: str, *, step: str, pose: Sequence[float], source: str | None = None
-    ) -> None:
-        self.step = step
-        self.pose = tuple(float(v) for v in pose)
-        self.source = source
-        where = f" ({source})" if source else ""
-        super().__init__(f"step {step}{where}: pose {format_pose(self.pose)}: {message}")
 
 
 def format_pose(pose: Sequence[float]) -> str:

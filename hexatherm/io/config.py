@@ -19,10 +19,10 @@ import yaml
 from hexatherm.core.effects import EFFECTS
 from hexatherm.core.geometry import CONVENTIONS
 from hexatherm.core.hexapod import Hexapod
-from hexatherm.core.plan import NAME_PATTERN, STEP_KINDS, Plan, StepError
+from hexatherm.core.plan import NAME_PATTERN, STEP_KINDS, Plan
 from hexatherm.core.registration import check_ball_layout
 from hexatherm.core.thermal import LegThermalModel, SegmentSpec
-from hexatherm.errors import InputError, RegistrationError
+from hexatherm.errors import InputError, RegistrationError, StepError
 from hexatherm.io.atomic import atomic_write_text
 from hexatherm.io.yamlfile import PLAIN_NUMBER, YamlDoc, plain_numbers, plain_tag, read_text
 from hexatherm.session import Balls, CmmNoise, Datums, QualityLimits, Session

@@ -7,10 +7,10 @@ import pytest
 
 from hexatherm.core.correction import choose_references, correct
 from hexatherm.core.geometry import transform_from_pose
-from hexatherm.core.plan import Plan, StepError
+from hexatherm.core.plan import Plan
 from hexatherm.core.registration import register
 from hexatherm.core.twin import leg_temperatures_at, predict_steps
-from hexatherm.errors import PlanError
+from hexatherm.errors import PlanError, StepError
 from tests.conftest import BALLS, REFERENCE_POSE, make_hexapod, make_plan, random_poses
 
 ORIGIN2CMM = transform_from_pose([420.0, 310.0, 180.0, 0.3, -0.2, 35.0])

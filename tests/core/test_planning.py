@@ -10,7 +10,6 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from hexatherm.core.planning import (
-    PoseError,
     build_plan,
     cap_directions,
     check_plan_poses,
@@ -23,7 +22,7 @@ from hexatherm.core.planning import (
     sequence_steps,
     touch_points,
 )
-from hexatherm.errors import InputError, PlanError
+from hexatherm.errors import InputError, PlanError, PoseError
 from hexatherm.io.config import read_hexapod
 
 ROOT = Path(__file__).resolve().parents[2]
