@@ -91,6 +91,10 @@ class PoseError(PlanError):
         super().__init__(f"step {step}{where}: pose {_format_pose(self.pose)}: {message}")
 
 
+class OutputExistsError(HexathermError):
+    """The output exists and overwriting was not asked for."""
+
+
 class ConvergenceError(HexathermError):
     """An iterative solver did not reach its tolerance."""
 

@@ -16,11 +16,7 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-from hexatherm.errors import HexathermError
-
-
-class OutputExistsError(HexathermError):
-    """The output exists and overwriting was not asked for."""
+from hexatherm.errors import OutputExistsError
 
 
 def refuse_existing(path: str | os.PathLike[str], overwrite: bool) -> None:
