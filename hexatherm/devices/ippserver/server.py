@@ -1,68 +1,15 @@
-"""A simulated I++ DME server: a CMM probing balls, for tests and rehearsals.
-
-:class:`IppSimServer` listens on 127.0.0.1 (port 0 picks a free one: :attr:`IppSimServer.port`)
-and speaks the dialect of :mod:`hexatherm.devices.ipp` (I++ DME 1.4.3): ``&`` at once, the
-data, then ``%``; errors as ``Error(severity, number, "method", "text")`` followed by ``%``;
-after an error of severity >= 2 only ``ClearAllErrors()``, the error-status queries and the
-session commands are executed (the others get error 0514) [6.2.5].
-
-What it simulates
------------------
-- The machine: homed or not (moves need ``Home()``), a tool-centre position, a box of
-  travel limits (error 2500), a tool table (``ChangeTool``, ``FindTool``, ``SetTool``,
-  ``EnumTools``) with per-tool properties ``PtMeasPar.{Speed, Accel, Approach, Search,
-  Retract}``, ``GoToPar.{Speed, Accel}``, ``AvrRadius`` (read only) and ``Name``.
-- The balls, from a pluggable :class:`CmmBackend` asked at the time of each move or touch
-  (``time_s``: seconds since the server started, or the caller's clock): every move
-  (``GoTo`` and the moves inside ``PtMeas``) is checked against the balls grown by the tip
-  radius; a crossing is a collision (error 2504, severity 3, the probe stays where it was).
-- ``PtMeas(X(x), Y(y), Z(z), IJK(i, j, k))`` [6.3.2.13]: the tip centre goes to the approach
-  position ``p + (Approach + r) u`` (``u`` the normalized IJK, ``r`` the tip radius) and
-  searches along ``-u`` until ``Search`` mm past the nominal contact (tip centre at
-  ``p + (r - Search) u``). At the first ball it touches it reports the touched surface
-  point ``c + R n`` (``n`` the ball's outward normal there; with ``compensated=False`` the
-  tip centre ``c + (R + r) n``), plus ``N(0, noise)`` along ``n``; ``IJK`` is ``n`` and
-  ``ER`` the tip radius. Touching nothing is error 1006 "Surface not found" (severity 2).
-  Then the tip retracts ``Retract`` mm along ``u`` (to the approach position if negative).
-  Without IJK, ``u`` points from the nominal point to the current position (spec).
-
-Fault injection (:class:`Fault`), deterministic: each fault fires once, on the ``nth``
-command received by the server (all connections), or the ``nth`` of one method:
-
-- ``error``: the command is not executed; ``&``, ``! Error(severity, number, ...)``, ``%``.
-- ``event``: ``E0000`` lines interleaved with the response (after ``&``, between data lines,
-  before ``%``).
-- ``drop``: the connection is closed after ``after_lines`` lines of the response.
-- ``split``: every response line of the command goes out in writes of ``chunk_bytes``.
-- ``delay``: ``delay_s`` between ``&`` and the rest of the response.
-
-Examples
---------
->>> balls = StaticBalls([[0.0, 0.0, 0.0]], [12.7])
->>> with IppSimServer(balls, tools={"Probe1": 2.0}) as server:
-...     from hexatherm.devices.ipp import IppClient
-...     with IppClient("127.0.0.1", server.port, timeout_s=30) as cmm:
-...         cmm.start_session(); cmm.home(); cmm.change_tool("Probe1")
-...         cmm.goto(0, 0, 30)
-...         p = cmm.pt_meas(0, 0, 12.7, 0, 0, 1)
->>> p.point_mm
-(0.0, 0.0, 12.7)
-"""
+"""The simulated I++ DME server: a threaded TCP server on 127.0.0.1 speaking the client's dialect."""
 
 from __future__ import annotations
 
 import math
-import re
 import socket
 import threading
 import time
 from collections import Counter
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
-from typing import Literal, Protocol
 
 import numpy as np
-import numpy.typing as npt
 
 from hexatherm.devices.ipp import (
     DEFAULT_REPORT,
@@ -70,176 +17,27 @@ from hexatherm.devices.ipp import (
     Call,
     ErrorReport,
     LineBuffer,
-    Value,
     Word,
     fields,
     format_number,
     parse_command,
+)
+from hexatherm.devices.ippserver.contact import _calls, first_contact, segment_hits
+from hexatherm.devices.ippserver.model import (
+    _IN_ERROR_OK,
+    _TAG,
+    ERROR_TEXTS,
+    CmmBackend,
+    Fault,
+    _Refusal,
+    _Session,
+    _Tool,
 )
 from hexatherm.errors import (
     IppDmeError,
     IppProtocolError,
 )
 from hexatherm.typing import FloatArray
-
-_TAG = re.compile(r"[0-9]{5}|E[0-9]{4}")
-FaultKind = Literal["error", "event", "drop", "split", "delay"]
-DEFAULT_EVENTS = ('KeyPress("F1")', "GoTo(X(10), Y(-11.5), Z(3.25E+02))")
-"""Bodies of the ``E0000 #`` lines an ``event`` fault sends by default (spec examples)."""
-ERROR_TEXTS = {
-    1: "Illegal tag",
-    2: "No space at pos. 6",
-    6: "Transaction aborted (Use ClearAllErrors To Continue)",
-    8: "Protocol error",
-    500: "Emergency stop",
-    501: "Unsupported command",
-    502: "Incorrect arguments",
-    504: "Argument out of range",
-    508: "Bad context",
-    510: "Bad property",
-    511: "Error processing method",
-    514: "Use ClearAllErrors to continue",
-    1005: "Error during home",
-    1006: "Surface not found",
-    1010: "Vector has no norm",
-    1011: "Unable to move",
-    1502: "Tool not found",
-    1503: "Tool not defined",
-    2500: "Machine limit encountered [Move Out Of Limits]",
-    2504: "Collision",
-}
-"""Texts of the errors the simulator sends (spec section 8.2)."""
-DEFAULT_FAULT_NUMBER = {2: 1011, 3: 2504}
-"""Error number of an ``error`` fault without one, by severity (else 511)."""
-PROPERTY_DEFAULTS = {
-    "PtMeasPar.Speed": 10.0,
-    "PtMeasPar.Accel": 100.0,
-    "PtMeasPar.Approach": 2.0,
-    "PtMeasPar.Search": 5.0,
-    "PtMeasPar.Retract": 2.0,
-    "GoToPar.Speed": 100.0,
-    "GoToPar.Accel": 500.0,
-}
-"""Settable tool properties and their values for a new tool (mm, mm/s, mm/s^2)."""
-_IN_ERROR_OK = frozenset(
-    {"ClearAllErrors", "GetErrStatusE", "GetXtdErrStatus", "StartSession", "EndSession", "AbortE"}
-)
-
-
-class CmmBackend(Protocol):
-    """What the simulated CMM probes: balls that may move with time."""
-
-    def ball_centres_mm(self, t_s: float) -> FloatArray:
-        """(k, 3) ball centres in the CMM frame at time ``t_s`` (s), mm."""
-        ...
-
-    def ball_radii_mm(self, t_s: float) -> FloatArray:
-        """(k,) ball radii at time ``t_s``, mm."""
-        ...
-
-
-class StaticBalls:
-    """Fixed spheres: a :class:`CmmBackend` for tests.
-
-    Parameters
-    ----------
-    centres_mm : array_like, shape (k, 3)
-        Ball centres in the CMM frame, mm.
-    radii_mm : array_like, shape (k,) or scalar
-        Ball radii, mm.
-    """
-
-    def __init__(self, centres_mm: npt.ArrayLike, radii_mm: npt.ArrayLike) -> None:
-        centres = np.array(centres_mm, dtype=float)
-        if centres.ndim != 2 or centres.shape[1] != 3 or centres.shape[0] < 1:
-            raise IppDmeError(f"centres_mm must have shape (k, 3), k >= 1, got {centres.shape}")
-        radii = np.broadcast_to(np.array(radii_mm, dtype=float), centres.shape[:1]).copy()
-        if not (np.all(np.isfinite(centres)) and np.all(np.isfinite(radii)) and np.all(radii > 0)):
-            raise IppDmeError("ball centres must be finite and radii positive")
-        self.centres_mm = centres
-        self.radii_mm = radii
-
-    def ball_centres_mm(self, t_s: float) -> FloatArray:
-        """See :class:`CmmBackend`."""
-        return self.centres_mm.copy()
-
-    def ball_radii_mm(self, t_s: float) -> FloatArray:
-        """See :class:`CmmBackend`."""
-        return self.radii_mm.copy()
-
-
-@dataclass(frozen=True)
-class Fault:
-    """One injected fault (see the module docstring).
-
-    Attributes
-    ----------
-    kind : {"error", "event", "drop", "split", "delay"}
-    nth : int
-        Fires on the ``nth`` (1-based) command received, counting only ``method`` if given.
-    method : str, optional
-        Count only commands of this method (``"PtMeas"``).
-    severity, number, text
-        Of an ``error`` (number by default 1011 "Unable to move" for severity 2, 2504
-        "Collision" for 3).
-    events : tuple of str
-        Bodies of the ``E0000 #`` lines of an ``event`` fault.
-    after_lines : int
-        Lines of the response sent before a ``drop`` closes the connection (1: after ``&``).
-    chunk_bytes : int
-        Size of the writes of a ``split``.
-    delay_s : float
-        Delay of a ``delay``, s.
-    """
-
-    kind: FaultKind
-    nth: int
-    method: str | None = None
-    severity: int = 2
-    number: int | None = None
-    text: str | None = None
-    events: tuple[str, ...] = DEFAULT_EVENTS
-    after_lines: int = 1
-    chunk_bytes: int = 3
-    delay_s: float = 0.0
-
-    def __post_init__(self) -> None:
-        if self.kind not in ("error", "event", "drop", "split", "delay"):
-            raise IppDmeError(f"unknown fault kind {self.kind!r}")
-        if int(self.nth) != self.nth or self.nth < 1:
-            raise IppDmeError(f"nth must be a positive integer, got {self.nth!r}")
-        if not 0 <= self.severity <= 9:
-            raise IppDmeError(f"severity must be 0..9, got {self.severity}")
-        if self.after_lines < 0 or self.chunk_bytes < 1 or not self.delay_s >= 0:
-            raise IppDmeError("after_lines >= 0, chunk_bytes >= 1 and delay_s >= 0 required")
-
-    def error(self, method: str) -> ErrorReport:
-        """The error an ``error`` fault sends for a command of ``method``."""
-        number = (
-            self.number if self.number is not None else DEFAULT_FAULT_NUMBER.get(self.severity, 511)
-        )
-        text = self.text if self.text is not None else ERROR_TEXTS.get(number, "Injected fault")
-        return ErrorReport(self.severity, number, method, text)
-
-
-class _Refusal(Exception):
-    def __init__(self, severity: int, number: int, method: str) -> None:
-        self.report = ErrorReport(severity, number, method, ERROR_TEXTS.get(number, "Error"))
-
-
-@dataclass
-class _Tool:
-    name: str
-    tip_radius_mm: float
-    measures: bool = True
-    props: dict[str, float] = field(default_factory=lambda: dict(PROPERTY_DEFAULTS))
-
-
-@dataclass
-class _Session:
-    active: bool = False
-    error: ErrorReport | None = None
-    report: tuple[str, ...] = DEFAULT_REPORT
 
 
 class IppSimServer:
@@ -681,88 +479,3 @@ class IppSimServer:
             f"{n}({', '.join(self._num(float(v)) for v in values[n])})" for n in session.report
         ]
         return [", ".join(items)]
-
-
-def _calls(args: tuple[Value, ...], arity: int) -> list[Call]:
-    out = []
-    for arg in args:
-        if not isinstance(arg, Call) or len(arg.args) != arity:
-            raise IppProtocolError("bad arguments")
-        if arity and not all(isinstance(a, float) for a in arg.args):
-            raise IppProtocolError("bad arguments")
-        out.append(arg)
-    if not out:
-        raise IppProtocolError("no arguments")
-    return out
-
-
-def segment_hits(
-    start_mm: npt.ArrayLike,
-    end_mm: npt.ArrayLike,
-    centres_mm: npt.ArrayLike,
-    radii_mm: npt.ArrayLike,
-) -> npt.NDArray[np.bool_]:
-    """Which spheres the straight segment from ``start`` to ``end`` enters (mm).
-
-    A segment that only grazes a sphere (distance = radius, within 1 nm) does not enter it.
-
-    >>> segment_hits([-20, 0, 0], [20, 0, 0], [[0, 0, 0], [0, 30, 0]], [12.7, 12.7]).tolist()
-    [True, False]
-    """
-    p0 = np.asarray(start_mm, dtype=float)
-    d = np.asarray(end_mm, dtype=float) - p0
-    c = np.asarray(centres_mm, dtype=float)
-    length2 = float(d @ d)
-    t = np.zeros(len(c)) if length2 == 0 else np.clip((c - p0) @ d / length2, 0.0, 1.0)
-    closest = p0 + t[:, None] * d
-    return np.linalg.norm(c - closest, axis=1) < np.asarray(radii_mm, dtype=float) - 1e-6
-
-
-def first_contact(
-    start_mm: npt.ArrayLike,
-    direction: npt.ArrayLike,
-    length_mm: float,
-    centres_mm: npt.ArrayLike,
-    radii_mm: npt.ArrayLike,
-) -> tuple[float, int]:
-    """Distance along a unit direction at which a point first reaches one of the spheres.
-
-    Parameters
-    ----------
-    start_mm : array_like, shape (3,)
-        Start (outside every sphere), mm.
-    direction : array_like, shape (3,)
-        Unit direction of travel.
-    length_mm : float
-        Length of travel, mm.
-    centres_mm, radii_mm : array_like, shapes (k, 3) and (k,)
-        Spheres (the balls grown by the tip radius), mm.
-
-    Returns
-    -------
-    distance_mm : float
-        Travel to the first contact (inf if none).
-    index : int
-        The sphere touched, -1 if none within ``length_mm``.
-
-    Examples
-    --------
-    >>> s, index = first_contact([0, 0, 20], [0, 0, -1], 10.0, [[0, 0, 0]], [13.7])
-    >>> round(s, 9), index
-    (6.3, 0)
-    """
-    p = np.asarray(start_mm, dtype=float)
-    u = np.asarray(direction, dtype=float)
-    d = p - np.asarray(centres_mm, dtype=float)
-    rho = np.asarray(radii_mm, dtype=float)
-    b = d @ u
-    c = np.einsum("ij,ij->i", d, d) - rho**2
-    disc = b**2 - c
-    with np.errstate(invalid="ignore"):
-        s = -b - np.sqrt(disc)
-    ok = (disc >= 0) & (c > 0) & (s >= 0) & (s <= length_mm)
-    if not ok.any():
-        return math.inf, -1
-    s = np.where(ok, s, np.inf)
-    index = int(np.argmin(s))
-    return float(s[index]), index

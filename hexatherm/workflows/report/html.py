@@ -1,321 +1,42 @@
-"""The HTML report of a processed session: figures and tables in one self-contained page.
-
-:func:`build_report` turns a :class:`~hexatherm.workflows.process.pipeline.ProcessResult` into one
-HTML file (no external resource: the figures are PNGs embedded as base64 data
-URIs, the style sheet is inline, every text is escaped), with the poses'
-uncertainty of :func:`hexatherm.workflows.process.uncertainty.pose_uncertainty` and the checks of
-:func:`hexatherm.workflows.process.quality.quality_checks`; :func:`report_html` takes them as
-given (either may be left out, and the page says so). It holds:
-
-* the session's metadata (files, hexapod, steps, time span, interpolation, version);
-* the paper's Figure 6: the six pose parameters of every target, conventional and
-  corrected, as deviations from the commanded pose (um, urad), with standard
-  uncertainty bars (k = 1) when an uncertainty is given; and their table;
-* the paper's Figure 7: leg (and air, ...) temperatures over time;
-* the legs' thermal growth measured at the references over time, and its table;
-* the registration residual of every step;
-* the quality flags of every step, failing rows highlighted.
-
-The figure functions return :class:`matplotlib.figure.Figure` objects drawn with
-the Agg canvas (no pyplot, no global state), so tests can read their axes' data.
-matplotlib is imported inside them only.
-"""
+"""The report's HTML: tables, embedded figures, the page, and build_report."""
 
 from __future__ import annotations
 
 import base64
 import html
-import io
 from collections.abc import Callable, Iterable, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
-import numpy.typing as npt
 
 from hexatherm import __version__
-from hexatherm.io.records import seconds_to_iso
+from hexatherm.core.geometry import to_um_urad
+from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.pipeline import ProcessResult
+from hexatherm.workflows.report.figures import (
+    DEVIATION_UNITS,
+    POSE_NAMES,
+    POSE_UNITS,
+    _time_text,
+    figure_png,
+    growth_figure,
+    hours_since_start,
+    pose_deviations,
+    pose_figure,
+    reference_growth_um,
+    registration_figure,
+    start_time_s,
+    target_labels,
+    temperature_figure,
+)
 
 if TYPE_CHECKING:
     import pandas as pd
-    from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
     from hexatherm.session import QualityLimits
     from hexatherm.workflows.process.quality import QualityReport
     from hexatherm.workflows.process.uncertainty import PoseUncertainty
-
-from hexatherm.core.geometry import to_um_urad
-from hexatherm.typing import FloatArray
-
-POSE_NAMES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
-#: units of a deviation from the commanded pose, per pose parameter
-DEVIATION_UNITS = ("um", "um", "um", "urad", "urad", "urad")
-#: units of the pose itself, per pose parameter
-POSE_UNITS = ("mm", "mm", "mm", "deg", "deg", "deg")
-LEG_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b")
-CONVENTIONAL_COLOUR = "#d62728"
-CORRECTED_COLOUR = "#1f77b4"
-KIND_STYLES = {
-    "origin": ("#000000", "D"),
-    "reference": ("#7f7f7f", "s"),
-    "target": ("#1f77b4", "o"),
-}
-#: horizontal offset of the conventional / corrected markers around a trial's position
-TRIAL_OFFSET = 0.12
-FIGURE_DPI = 100
-
-
-# --------------------------------------------------------------------- numbers
-def target_labels(result: ProcessResult) -> list[str]:
-    """Labels of the targets, in plan order."""
-    return [result.session.plan.labels[i] for i in result.correction.target_index]
-
-
-def pose_deviations(result: ProcessResult) -> tuple[FloatArray, FloatArray]:
-    """Conventional and corrected poses minus the commanded pose, um and urad, shape (M, 6)."""
-    corr = result.correction
-    commanded = result.session.plan.poses[corr.target_index]
-    return to_um_urad(corr.conventional - commanded), to_um_urad(corr.corrected - commanded)
-
-
-def start_time_s(result: ProcessResult) -> float:
-    """Start of the session: its first temperature sample or its first step, the earlier."""
-    start = float(np.min(result.centres.times_s))
-    if result.temperatures is not None and result.temperatures.time_s.size:
-        start = min(start, float(result.temperatures.time_s[0]))
-    return start
-
-
-def hours_since_start(result: ProcessResult, times_s: npt.ArrayLike) -> FloatArray:
-    """Times in hours since :func:`start_time_s`."""
-    return (np.asarray(times_s, dtype=float) - start_time_s(result)) / 3600.0
-
-
-def reference_growth_um(result: ProcessResult) -> tuple[npt.NDArray[np.intp], FloatArray]:
-    """Thermal growth of every leg at every reference step since R0, um.
-
-    Returns
-    -------
-    step_index : ndarray of int, shape (R,)
-        The reference steps.
-    growth_um : ndarray, shape (R, 6)
-        ``q_R - q_R0`` of their IGM leg lengths.
-    """
-    refs = result.session.plan.reference_indices
-    q = result.steps.q_mm
-    if not refs.size:
-        return refs, np.zeros((0, 6))
-    return refs, (q[refs] - q[refs[0]]) * 1e3
-
-
-def _time_text(result: ProcessResult, seconds: float) -> str:
-    if result.centres.time_kind == "iso":
-        return seconds_to_iso(seconds)[:19]
-    return f"{seconds:g} s"
-
-
-# --------------------------------------------------------------------- figures
-def _new_figure(width_in: float, height_in: float, **margins: float) -> Figure:
-    """A figure on the Agg canvas (no pyplot: nothing global, nothing to close).
-
-    ``margins`` go to ``subplots_adjust`` (fixed margins: a layout engine would
-    take half of the drawing time).
-    """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(width_in, height_in))
-    FigureCanvasAgg(fig)
-    fig.subplots_adjust(**{"left": 0.08, "right": 0.98, "bottom": 0.12, "top": 0.92, **margins})
-    return fig
-
-
-def _trial_ticks(ax: Axes, labels: Sequence[str]) -> None:
-    """Trial positions 1..M labelled with the targets' labels (thinned when many)."""
-    every = max(1, int(np.ceil(len(labels) / 12)))
-    positions = np.arange(1, len(labels) + 1)[::every]
-    shown = [labels[p - 1] for p in positions]
-    ax.set_xticks(positions, shown, rotation=90 if sum(map(len, shown)) > 30 else 0, fontsize=8)
-    ax.set_xlim(0.4, len(labels) + 0.6)
-
-
-def pose_figure(result: ProcessResult, uncertainty: PoseUncertainty | None = None) -> Figure:
-    """The paper's Figure 6: pose parameters per trial, conventional and corrected.
-
-    One panel per pose parameter; each target (trial) is at position 1..M on x,
-    the conventional pose slightly left of it and the corrected one slightly
-    right, as deviations from the commanded pose (um, urad). With
-    ``uncertainty``, each marker has a standard uncertainty bar (k = 1).
-
-    The lines are labelled ``"conventional"`` and ``"corrected"``.
-    """
-    conventional, corrected = pose_deviations(result)
-    labels = target_labels(result)
-    trials = np.arange(1, len(labels) + 1, dtype=float)
-    bars: tuple[FloatArray | None, FloatArray | None] = (None, None)
-    if uncertainty is not None:
-        bars = (to_um_urad(uncertainty.conventional_u), to_um_urad(uncertainty.corrected_u))
-    fig = _new_figure(11.0, 6.5, left=0.065, bottom=0.17, top=0.87, wspace=0.32, hspace=0.22)
-    axes = fig.subplots(2, 3, sharex=True)
-    for j, ax in enumerate(axes.flat):
-        for values, u, name, colour, marker, dx in (
-            (conventional, bars[0], "conventional", CONVENTIONAL_COLOUR, "o", -TRIAL_OFFSET),
-            (corrected, bars[1], "corrected", CORRECTED_COLOUR, "s", TRIAL_OFFSET),
-        ):
-            ax.errorbar(
-                trials + dx,
-                values[:, j],
-                yerr=None if u is None else u[:, j],
-                fmt=f"{marker}-",
-                color=colour,
-                label=name,
-                markersize=4,
-                linewidth=0.8,
-                elinewidth=0.8,
-                capsize=2,
-            )
-        ax.axhline(0.0, color="#999999", linewidth=0.6, zorder=0)
-        ax.set_title(POSE_NAMES[j], fontsize=10)
-        ax.set_ylabel(f"{POSE_NAMES[j]} - commanded ({DEVIATION_UNITS[j]})", fontsize=9)
-        ax.grid(True, linewidth=0.3)
-        _trial_ticks(ax, labels)
-        if j >= 3:
-            ax.set_xlabel("trial (target step)", fontsize=9)
-    handles, names = axes.flat[0].get_legend_handles_labels()
-    fig.legend(handles, names, loc="lower center", ncols=2, fontsize=9)
-    bar_text = (
-        "error bars: standard uncertainty (k = 1)"
-        if uncertainty is not None
-        else "uncertainty not available: no error bars"
-    )
-    fig.suptitle(
-        f"Measured pose parameters, deviation from the commanded pose\n{bar_text}", fontsize=11
-    )
-    return fig
-
-
-def temperature_figure(result: ProcessResult) -> Figure | None:
-    """The paper's Figure 7: leg temperatures (and air, ...) over time; None without a log.
-
-    Lines are labelled ``"leg 1"`` .. ``"leg 6"`` and by the further columns' names
-    (``"air"`` ...), x in hours since the start of the session.
-    """
-    temps = result.temperatures
-    if temps is None:
-        return None
-    hours = hours_since_start(result, temps.time_s)
-    fig = _new_figure(9.0, 4.5)
-    ax = fig.subplots()
-    for leg in range(6):
-        ax.plot(
-            hours,
-            temps.legs_C[:, leg],
-            color=LEG_COLOURS[leg],
-            linewidth=1.0,
-            label=f"leg {leg + 1}",
-        )
-    for k, (name, values) in enumerate(temps.others_C.items()):
-        ax.plot(
-            hours,
-            values,
-            color="#000000" if k == 0 else "#7f7f7f",
-            linewidth=1.0,
-            linestyle=("--", ":", "-.")[k % 3],
-            label=name,
-        )
-    _mark_targets(ax, result)
-    ax.set_xlabel("time since start (h)")
-    ax.set_ylabel("temperature (degC)")
-    ax.grid(True, linewidth=0.3)
-    ax.legend(fontsize=8, ncols=2)
-    ax.set_title("Measured temperatures", fontsize=11)
-    return fig
-
-
-def _mark_targets(ax: Axes, result: ProcessResult) -> None:
-    """Ticks at the bottom of ``ax`` at the targets' times (no legend entry)."""
-    hours = hours_since_start(result, result.centres.times_s[result.correction.target_index])
-    ax.plot(
-        hours,
-        np.zeros_like(hours),
-        linestyle="none",
-        marker="|",
-        markersize=8,
-        color="#555555",
-        transform=ax.get_xaxis_transform(),
-        gid="targets",
-        label="_targets",
-    )
-
-
-def growth_figure(result: ProcessResult) -> Figure:
-    """Thermal growth of every leg measured at the references since R0 (um) over time.
-
-    One line per leg (labelled ``"leg 1"`` ..), one marker per reference step; the
-    straight segments between them are what the linear interpolation uses.
-    """
-    refs, growth = reference_growth_um(result)
-    hours = hours_since_start(result, result.centres.times_s[refs])
-    fig = _new_figure(9.0, 4.5)
-    ax = fig.subplots()
-    for leg in range(6):
-        ax.plot(
-            hours,
-            growth[:, leg],
-            marker="o",
-            markersize=3,
-            linewidth=1.0,
-            color=LEG_COLOURS[leg],
-            label=f"leg {leg + 1}",
-        )
-    ax.axhline(0.0, color="#999999", linewidth=0.6, zorder=0)
-    _mark_targets(ax, result)
-    ax.set_xlabel("time since start (h)")
-    ax.set_ylabel("growth since R0 (um)")
-    ax.grid(True, linewidth=0.3)
-    ax.legend(fontsize=8, ncols=2)
-    ax.set_title("Leg growth measured at the references (IGM of the measured pose)", fontsize=11)
-    return fig
-
-
-def registration_figure(result: ProcessResult) -> Figure:
-    """Registration residual (RMS, um) of every step over time, one marker style per kind.
-
-    Lines are labelled by step kind (``"origin"``, ``"reference"``, ``"target"``).
-    """
-    kinds = np.array(result.session.plan.kinds)
-    hours = hours_since_start(result, result.centres.times_s)
-    rms = result.registration.rms_um
-    fig = _new_figure(9.0, 3.5, bottom=0.14, top=0.9)
-    ax = fig.subplots()
-    for kind, (colour, marker) in KIND_STYLES.items():
-        mask = kinds == kind
-        if np.any(mask):
-            ax.plot(
-                hours[mask],
-                rms[mask],
-                linestyle="none",
-                marker=marker,
-                markersize=4,
-                color=colour,
-                label=kind,
-            )
-    ax.set_ylim(bottom=0.0)
-    ax.set_xlabel("time since start (h)")
-    ax.set_ylabel("registration RMS (um)")
-    ax.grid(True, linewidth=0.3)
-    ax.legend(fontsize=8)
-    ax.set_title("Registration residual of every step", fontsize=11)
-    return fig
-
-
-def figure_png(fig: Figure, dpi: int = FIGURE_DPI) -> bytes:
-    """The figure as PNG bytes."""
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=dpi, metadata={"Software": None})
-    return buffer.getvalue()
-
 
 # --------------------------------------------------------------------- HTML
 STYLE = """
