@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 
 from hexatherm.core.geometry import apply_transform, transform_from_pose
-from hexatherm.core.planning import cap_directions
+from hexatherm.core.touch import cap_directions
 from hexatherm.io.config import balls_to_yaml
 from hexatherm.io.records import seconds_to_iso
 from hexatherm.session import Balls

@@ -41,8 +41,8 @@ from hexatherm.core.correction import interpolated_growth, target_growth
 from hexatherm.core.geometry import invert_transform, pose_from_transform
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
-from hexatherm.core.planning import cap_directions
 from hexatherm.core.registration import register
+from hexatherm.core.touch import cap_directions
 from hexatherm.typing import FloatArray
 
 IntArray = npt.NDArray[np.intp]
@@ -346,7 +346,7 @@ def cap_centre_covariance(
     """Covariance (3, 3) of a sphere fit's centre for points spread over an upper cap.
 
     The points are ``n_points`` directions over the cap around +Z (the
-    pattern of :func:`hexatherm.core.planning.cap_directions`), each with noise
+    pattern of :func:`hexatherm.core.touch.cap_directions`), each with noise
     ``sigma_mm`` along the normal: ``sigma^2 (J^T J)^-1`` of the geometric fit,
     the radius a free parameter (or fixed).
     """

@@ -35,7 +35,6 @@ import numpy as np
 import numpy.typing as npt
 from scipy import stats
 
-from hexatherm.core.diagnosis import PoseResiduals, time_blocks
 from hexatherm.typing import FloatArray
 
 #: names and units of the six pose components (residuals in um and urad)
@@ -50,6 +49,40 @@ MAX_LAGS = 10
 #: parts of the session in time order for the RMS over time
 TIME_PARTS = 4
 _HOUR_S = 3600.0
+
+
+# ------------------------------------------------------------ the residuals
+@dataclass(frozen=True)
+class PoseResiduals:
+    """Measured minus predicted, per step, in pose and leg space.
+
+    Attributes
+    ----------
+    pose_um : ndarray, shape (N, 6)
+        ``Tx, Ty, Tz`` in um and ``Rx, Ry, Rz`` in urad: the measured pose minus the
+        predicted one, both relative to the fitted frame O.
+    legs_um : ndarray, shape (N, 6)
+        IGM leg lengths of the measured pose minus those of the predicted one.
+    centre_rms_um : ndarray, shape (N,)
+        RMS of each step's centre residuals.
+    """
+
+    pose_um: FloatArray
+    legs_um: FloatArray
+    centre_rms_um: FloatArray
+
+
+def time_blocks(times_s: npt.ArrayLike, n_blocks: int = 6) -> npt.NDArray[np.intp]:
+    """Block number (0 .. n_blocks-1) of every step: contiguous runs in time order.
+
+    >>> time_blocks([5.0, 1.0, 2.0, 3.0, 4.0, 0.0], 3).tolist()
+    [2, 0, 1, 1, 2, 0]
+    """
+    t = np.asarray(times_s, dtype=float)
+    order = np.argsort(t, kind="stable")
+    blocks = np.empty(t.size, dtype=np.intp)
+    blocks[order] = np.arange(t.size) * n_blocks // max(t.size, 1)
+    return blocks
 
 
 # ------------------------------------------------------------------ the tests

@@ -44,9 +44,9 @@ from hexatherm.core.geometry import (
 )
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
-from hexatherm.core.planning import cap_directions
 from hexatherm.core.registration import register
 from hexatherm.core.thermal import LegThermalModel
+from hexatherm.core.touch import cap_directions
 from hexatherm.typing import FloatArray
 
 

@@ -14,7 +14,8 @@ the probe approaches along its opposite. Between balls the probe is taken up
 to a clearance height above the step's highest ball (``GOTO/CART``).
 
 >>> import numpy as np
->>> from hexatherm.core.planning import build_plan, touch_points
+>>> from hexatherm.core.planning import build_plan
+>>> from hexatherm.core.touch import touch_points
 >>> from hexatherm.session import Balls
 >>> balls = Balls(("B1", "B2", "B3"), np.array([[10.0, 0, 30], [0, 10, 30], [-10, 0, 30]]),
 ...               np.full(3, 20.0))
@@ -41,7 +42,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from hexatherm.core.plan import Plan
-from hexatherm.core.planning import StepTiming, TouchPoints, format_pose
+from hexatherm.core.planning import StepTiming, format_pose
+from hexatherm.core.touch import TouchPoints
 from hexatherm.session import Balls
 
 #: DMIS version written in the ``DMISMN`` statement

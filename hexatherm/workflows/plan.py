@@ -30,8 +30,8 @@ from hexatherm.core.planning import (
     pose_problems,
     random_targets,
     reference_gaps,
-    touch_points,
 )
+from hexatherm.core.touch import touch_points
 from hexatherm.io.checklist import checklist_markdown
 from hexatherm.io.config import plan_to_yaml, read_balls, read_hexapod
 from hexatherm.io.csvfile import read_text

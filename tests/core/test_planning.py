@@ -11,7 +11,6 @@ from scipy.spatial.transform import Rotation
 
 from hexatherm.core.planning import (
     build_plan,
-    cap_directions,
     check_plan_poses,
     estimate_timing,
     grid_targets,
@@ -20,8 +19,8 @@ from hexatherm.core.planning import (
     random_targets,
     reference_gaps,
     sequence_steps,
-    touch_points,
 )
+from hexatherm.core.touch import cap_directions, touch_points
 from hexatherm.errors import InputError, PlanError, PoseError
 from hexatherm.io.config import read_hexapod
 

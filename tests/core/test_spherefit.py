@@ -464,8 +464,8 @@ def test_malformed_arguments(kwargs: dict, match: str) -> None:
 @pytest.mark.parametrize("fixed", [False, True])
 def test_refine_spheres_equals_the_general_fit_on_monte_carlo_draws(fixed: bool) -> None:
     """The batched refit of Monte Carlo draws gives the general fit's answer (1e-10 mm)."""
-    from hexatherm.core.planning import cap_directions
     from hexatherm.core.spherefit import refine_spheres
+    from hexatherm.core.touch import cap_directions
 
     rng = np.random.default_rng(3)
     m, n, draws = 7, 25, 40

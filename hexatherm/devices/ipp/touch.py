@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from hexatherm.core.planning import cap_directions
+from hexatherm.core.touch import cap_directions
 from hexatherm.devices.ipp.client import IppClient
 from hexatherm.devices.ipp.transcript import ProbedPoint
 from hexatherm.errors import (
@@ -70,7 +70,7 @@ def cap_touch_plan(
     """Touch points on the upper cap (CMM +Z) of balls around their predicted centres.
 
     The points follow a golden-angle spiral of equal areas from near the pole to the cap's
-    rim (:func:`hexatherm.core.planning.cap_directions`). The moves that go with them, for each
+    rim (:func:`hexatherm.core.touch.cap_directions`). The moves that go with them, for each
     point: ``above`` (safe height) -> ``approach`` -> ``PtMeas`` -> ``above``; between points
     the probe travels at the safe height, ``clearance`` above the ball's top, so it never
     crosses the ball: the vertical descent to an approach position at polar angle ``theta``

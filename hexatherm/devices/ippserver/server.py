@@ -1,4 +1,4 @@
-"""The simulated I++ DME server: a threaded TCP server on 127.0.0.1 speaking the client's dialect."""
+"""The simulated I++ DME server: a threaded TCP server on 127.0.0.1 in the client's dialect."""
 
 from __future__ import annotations
 
