@@ -38,7 +38,7 @@ one's (cosine above 0.9), both are named and the choice is the smaller BIC.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -699,6 +699,13 @@ def diagnose(
             cos = _cosine(direction, _change(model, other.fit, obs))
             if abs(cos) > SIMILARITY_THRESHOLD:
                 alternatives.append((other.name, other.delta_bic, cos))
+        others = sorted(
+            (c for c in tried if c is not best and c.fit is not None and np.isfinite(c.delta_bic)),
+            key=lambda c: -c.delta_bic,
+        )
+        runner = (
+            _runner_up(hexapod, obs, current, added_classes, best, others[0]) if others else None
+        )
         added.append(
             Addition(
                 best.fit.effects[-1],
@@ -709,14 +716,55 @@ def diagnose(
                 heldout,
                 best.heldout_rms_um,
                 tuple(alternatives),
+                adequacy(hexapod, obs, best.fit).adequate,
+                (),
+                runner,
             )
         )
         added_classes.append(EFFECTS[best.name])
         names.remove(best.name)
         model, heldout = best.fit, best.heldout_rms_um
         # the joint refit of everything added so far is ``best.fit`` itself
+    # the flags are those of the final joint fit (the values written to hexapod.yaml)
+    added = [
+        replace(a, flags=bound_flags(effect))
+        for a, effect in zip(added, model.effects, strict=True)
+    ]
     return Diagnosis(
-        baseline, model, tuple(added), tuple(rounds), baseline_heldout, heldout, skipped
+        baseline,
+        model,
+        tuple(added),
+        tuple(rounds),
+        baseline_heldout,
+        heldout,
+        skipped,
+        adequacy(hexapod, obs, model),
+    )
+
+
+def _runner_up(
+    hexapod: Hexapod,
+    obs: Observations,
+    current: Sequence[Effect],
+    before: Sequence[type[Effect]],
+    best: Candidate,
+    runner: Candidate,
+) -> RunnerUp:
+    """Refit the round's chosen effect together with its runner-up (see :class:`RunnerUp`)."""
+    assert best.fit is not None and runner.fit is not None
+    chosen = best.fit.effects[-1]
+    free = [*before, type(chosen), EFFECTS[runner.name]]
+    starts: list[FloatArray | None] = [e.vector() for e in best.fit.effects]
+    both = fit_model(hexapod, obs, current, free, [*starts, runner.fit.effects[-1].vector()])
+    return RunnerUp(
+        runner.name,
+        runner.delta_bic,
+        dict(chosen.values),
+        dict(best.fit.std_errors[-1]),
+        dict(both.effects[-2].values),
+        dict(both.std_errors[-2]),
+        dict(both.effects[-1].values),
+        dict(both.std_errors[-1]),
     )
 
 

@@ -20,6 +20,18 @@ these extensions, documented in the README:
 * ``rms``: what the RMS figures are; ``session``, ``hexapod``, ``model``
   (the effects the model had before), ``centre_uncertainty``, ``hexatherm``.
 
+* ``adequate`` (bool), ``noise_floor_um`` and ``unexplained_rms_um`` (issue 14):
+  the verdict on the final model (:func:`hexatherm.core.diagnosis.adequacy`); the
+  floor is the RMS expected from noise alone with the definition of ``rms``
+  (from the centres' uncertainties, or, without them, from consecutive
+  references), the unexplained part ``sqrt(max(0, final_rms^2 - floor^2))``;
+  ``adequacy`` holds the details (chi2/dof with its spread and limit, the
+  reasons, the failed structure tests, where the residual shows);
+* in each ``added`` entry: ``explains`` (``"all"``, or ``"part"`` when the model
+  with it still disagrees), ``flags`` (parameters of the final fit at a bound of
+  their range or outside it) and ``runner_up`` (the round's runner-up fitted
+  with it: the effect's parameters and standard errors without and with it).
+
 Numbers that are not defined are written as ``null``.
 """
 
@@ -31,7 +43,7 @@ import math
 from typing import Any
 
 from hexatherm import __version__
-from hexatherm.core.diagnosis import Candidate
+from hexatherm.core.diagnosis import Adequacy, Candidate, RunnerUp
 from hexatherm.io.config import hexapod_to_yaml
 from hexatherm.workflows.diagnose.run import DiagnosisResult
 
@@ -67,6 +79,45 @@ def _candidate(candidate: Candidate) -> dict[str, Any]:
     return entry
 
 
+def _adequacy(verdict: Adequacy) -> dict[str, Any]:
+    return {
+        "chi2_per_dof": _number(verdict.chi2_per_dof),
+        "chi2_spread": _number(verdict.chi2_spread),
+        "chi2_limit": _number(verdict.chi2_limit),
+        "dof": verdict.dof,
+        "noise_floor_source": verdict.noise_floor_source,
+        "reference_floor_um": _number(verdict.reference_floor_um),
+        "reasons": list(verdict.reasons),
+        "where": verdict.where() if not verdict.adequate else [],
+        "failed_tests": [
+            {
+                "series": f.series,
+                "test": f.test,
+                "statistic": _number(f.statistic),
+                "p_value": _number(f.p_value),
+            }
+            for f in verdict.findings
+        ],
+        "n_tests": verdict.n_tests,
+    }
+
+
+def _runner_up(runner: RunnerUp | None) -> dict[str, Any] | None:
+    if runner is None:
+        return None
+    return {
+        "effect": runner.name,
+        "delta_bic": _number(runner.delta_bic),
+        "parameters_alone": _values(runner.values),
+        "std_errors_alone": _values(runner.std_errors),
+        "parameters_with": _values(runner.values_with),
+        "std_errors_with": _values(runner.std_errors_with),
+        "shift_in_se": _values(runner.shift_in_se()),
+        "runner_up_parameters": _values(runner.runner_values),
+        "runner_up_std_errors": _values(runner.runner_std_errors),
+    }
+
+
 def diagnosis_document(result: DiagnosisResult) -> dict[str, Any]:
     """The content of ``diagnosis.json`` (spec keys first, then the extensions)."""
     diagnosis = result.diagnosis
@@ -92,13 +143,21 @@ def diagnosis_document(result: DiagnosisResult) -> dict[str, Any]:
                 ],
                 "note": chosen.note,
                 "parameters_when_added": _values(addition.effect.values),
+                "explains": addition.explains,
+                "flags": list(addition.flags),
+                "runner_up": _runner_up(addition.runner_up),
             }
         )
     data = result.data
+    verdict = diagnosis.adequacy
     return {
         "baseline_rms_um": _number(diagnosis.baseline_rms_um),
         "added": added,
         "final_rms_um": _number(diagnosis.final_rms_um),
+        "adequate": None if verdict is None else verdict.adequate,
+        "noise_floor_um": None if verdict is None else _number(verdict.noise_floor_um),
+        "unexplained_rms_um": None if verdict is None else _number(verdict.unexplained_rms_um),
+        "adequacy": None if verdict is None else _adequacy(verdict),
         "baseline_heldout_rms_um": _number(diagnosis.baseline_heldout_rms_um),
         "final_heldout_rms_um": _number(diagnosis.final_heldout_rms_um),
         "rounds": [[_candidate(c) for c in round_] for round_ in diagnosis.rounds],
@@ -151,7 +210,8 @@ def story(result: DiagnosisResult) -> str:
     data = result.data
     obs = data.observations
     model = ", ".join(e.name for e in data.current) or "no effect"
-    lines = [
+    lines = [] if d.adequacy is None else [d.adequacy.summary()]
+    lines += [
         f"session {data.session.name}: {obs.n_steps} steps, {obs.balls_mm.shape[0]} balls, "
         f"{obs.log.times_s.size} thermocouple samples"
         f"{' with air' if obs.log.air_C is not None else ' (no air column)'}",
@@ -177,6 +237,21 @@ def story(result: DiagnosisResult) -> str:
                 f"RMS {a.rms_before_um:.3f} -> {a.rms_after_um:.3f} um, held out "
                 f"{a.heldout_rms_before_um:.3f} -> {a.heldout_rms_after_um:.3f} um"
             )
+            if a.explains == "part":
+                lines.append(
+                    f"   {a.effect.name} explains part of the disagreement: the model with it "
+                    "still leaves more than noise"
+                )
+            for flag in a.flags:
+                lines.append(f"   flag: {a.effect.name}: {flag}")
+            if a.runner_up is not None:
+                r = a.runner_up
+                moves = ", ".join(
+                    f"{p} {r.values[p]:.4g} -> {r.values_with[p]:.4g} ({shift:+.1f} SE), "
+                    f"SE {r.std_errors[p]:.2g} -> {r.std_errors_with[p]:.2g}"
+                    for p, shift in r.shift_in_se().items()
+                )
+                lines.append(f"   with the runner-up {r.name} fitted too: {moves}")
             for name, delta, cos in a.alternatives:
                 lines.append(
                     f"   note: {name} explains much the same residual (ΔBIC {delta:.1f}, "
@@ -190,6 +265,11 @@ def story(result: DiagnosisResult) -> str:
             lines.append(
                 f"   {effect.name}: {_format_effect(effect.values, errors, type(effect).units)}"
             )
+    if d.adequacy is not None and not d.adequacy.adequate:
+        lines.append(
+            f"verdict: NOT ADEQUATE: {d.adequacy.unexplained_rms_um:.3f} um RMS unexplained; "
+            "the effects named explain part of it at most"
+        )
     names = ", ".join(a.effect.name for a in d.added) or "nothing"
     lines.append(
         f"result: added {names}; gap {d.baseline_rms_um:.3f} -> {d.final_rms_um:.3f} um "

@@ -94,7 +94,13 @@ def read_for_diagnosis(path: str | Path, hexapod_path: str | Path | None = None)
         u_mm = np.maximum(np.where(np.isnan(u_um), median, u_um), 1e-3) * 1e-3
         source = f"sphere fits (median {median:.2f} um)"
     obs = Observations(
-        session.plan, centres.times_s, centres.centres_mm, session.balls.centres_mm, log, u_mm
+        session.plan,
+        centres.times_s,
+        centres.centres_mm,
+        session.balls.centres_mm,
+        log,
+        u_mm,
+        u_given=not np.all(np.isnan(u_um)),
     )
     source_hexapod = "the session's" if hexapod_path is None else str(hexapod_path)
     return SessionData(session, hexapod, source_hexapod, current, obs, temperatures, source)
