@@ -145,10 +145,10 @@ def test_a_registry_effect_once_added_leaves_an_adequate_model(tmp_path: Path) -
     result = diagnosed(tmp_path / "lag", (hidden,), seed=21)
     d = result.diagnosis
     assert [a.effect.name for a in d.added] == ["leg_thermal_lag"]
-    assert d.adequacy is not None and d.adequacy.adequate, d.adequacy.summary()
+    assert d.adequacy is not None
+    assert d.adequacy.adequate, d.adequacy.summary()
     assert d.added[0].explains == "all"
     assert d.adequacy.unexplained_rms_um < 0.5 * d.adequacy.noise_floor_um
-    # before it was added the same verdict fails
     doc = diagnosis_document(result)
     assert doc["adequate"] is True
     # the runner-up refit: tau with and without it, the shift reported in SE
