@@ -646,7 +646,8 @@ def headline(result: DiagnosisResult) -> str:
     """The story in a few lines of Markdown: baseline, what was added, before/after."""
     d = result.diagnosis
     current = ", ".join(e.name for e in result.data.current) or "no effect"
-    out = [
+    out = [] if d.adequacy is None else [f"**{d.adequacy.summary()}**"]
+    out += [
         f"**Current model** ({current}): RMS "
         f"{d.baseline_rms_um:.2f} um, held-out {d.baseline_heldout_rms_um:.2f} um."
     ]
@@ -665,6 +666,8 @@ def headline(result: DiagnosisResult) -> str:
             f"**Added {a.effect.name}**: {params} (ΔBIC {a.delta_bic:.1f}); RMS "
             f"{a.rms_before_um:.2f} → {a.rms_after_um:.2f} um, held-out "
             f"{a.heldout_rms_before_um:.2f} → {a.heldout_rms_after_um:.2f} um."
+            + (" It explains part of the disagreement only." if a.explains == "part" else "")
+            + "".join(f" Flag: {flag}." for flag in a.flags)
         )
     if len(d.added) > 1:
         out.append(
