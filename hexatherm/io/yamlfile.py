@@ -5,6 +5,18 @@ Python values together with the line of every key and item, so that a
 validation error can say ``hexapod.yaml:12: field 'legs.segments[1].cte': ...``.
 Duplicate keys, which YAML would silently collapse, are errors.
 
+Hostile documents are refused with a one-line :class:`~hexatherm.errors.InputError`
+naming the file, the line and the field, before they are composed: files that are
+not regular or larger than :data:`~hexatherm.io.files.MAX_YAML_BYTES`, nesting
+deeper than :data:`MAX_DEPTH`, aliases that expand to more than
+:data:`MAX_ALIAS_NODES` nodes ("billion laughs") or that refer to a node containing
+them. The parser's events are scanned first (libyaml's when PyYAML has it; no
+recursion, no expansion), then libyaml composes as before.
+
+>>> YamlDoc.from_text("a: " + "[" * 1000 + "]" * 1000, "deep.yaml")
+Traceback (most recent call last):
+hexatherm.errors.InputError: deep.yaml:1: field 'a[0][0][0][0][0]...': nested deeper than 100 levels
+
 >>> doc = YamlDoc.from_text("a: 1\\nb:\\n  - [1, 2]\\n  - x\\n", "demo.yaml")
 >>> doc.data
 {'a': 1, 'b': [[1, 2], 'x']}
@@ -35,6 +47,7 @@ from typing import Any
 import yaml
 
 from hexatherm.errors import InputError
+from hexatherm.io.files import MAX_YAML_BYTES, read_bytes, refuse_utf16
 
 Key = str | int
 
@@ -52,8 +65,8 @@ if getattr(yaml, "__with_libyaml__", False):
 
     _Composer = _CLoader
 
-_loader: type[Any]
-for _loader in dict.fromkeys((_Loader, _Composer)):  # once each
+_loaders: list[type[Any]] = [_Loader, _Composer]
+for _loader in dict.fromkeys(_loaders):  # once each
     _loader.add_implicit_resolver(
         "tag:yaml.org,2002:float",
         re.compile(r"^[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)[eE][-+]?[0-9]+$"),
@@ -110,18 +123,148 @@ def plain_tag(text: str) -> str:
 
 
 def read_text(path: str | os.PathLike[str]) -> str:
-    """The text of a YAML file; InputError when it is missing, unreadable or not UTF-8."""
+    """The text of a YAML file; InputError when it is missing, not a regular file, larger
+    than :data:`~hexatherm.io.files.MAX_YAML_BYTES`, unreadable or not UTF-8."""
     path = os.fspath(path)
+    data = read_bytes(path, limit=MAX_YAML_BYTES)
+    refuse_utf16(data, path)
     try:
-        return Path(path).read_bytes().decode("utf-8-sig")
-    except FileNotFoundError:
-        raise InputError("file not found", path=path) from None
-    except IsADirectoryError:
-        raise InputError("is a directory, expected a file", path=path) from None
+        return data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise InputError(f"not UTF-8 text ({exc.reason} at byte {exc.start})", path=path) from None
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", path=path) from None
+
+
+#: The deepest nesting of mappings and sequences read (a bound well below Python's
+#: recursion limit: deeper documents are refused before they are composed)
+MAX_DEPTH = 100
+#: The most nodes that aliases (``*name``) may add to a document when expanded (a
+#: "billion laughs" document adds 10**9)
+MAX_ALIAS_NODES = 100_000
+
+_COLLECTION_START = (yaml.SequenceStartEvent, yaml.MappingStartEvent)
+_COLLECTION_END = (yaml.SequenceEndEvent, yaml.MappingEndEvent)
+
+
+class _Level:
+    """A mapping or sequence being scanned: its place and what it holds so far."""
+
+    __slots__ = ("mapping", "anchor", "key", "index", "expect_key", "size", "height")
+
+    def __init__(self, mapping: bool, anchor: str | None) -> None:
+        self.mapping = mapping
+        self.anchor = anchor
+        self.key: Key = "?"
+        self.index = -1
+        self.expect_key = True
+        self.size = 1
+        self.height = 1
+
+
+def _keys(stack: list[_Level]) -> tuple[Key, ...]:
+    return tuple(level.key if level.mapping else level.index for level in stack[1:])
+
+
+def _scan(text: str, path: str) -> None:
+    """Refuse a document nested deeper than :data:`MAX_DEPTH` or whose aliases expand to
+    more than :data:`MAX_ALIAS_NODES` nodes, from the parser's events (no recursion, no
+    expansion), before it is composed; the error names the file, line and field."""
+    if "&" not in text and _shallow(text):
+        return  # no anchors, so no aliases: only the depth mattered
+    root = _Level(False, None)
+    stack = [root]
+    anchors: dict[str, tuple[int, int]] = {}
+    added = 0
+    scalar, alias, ends = yaml.ScalarEvent, yaml.AliasEvent, _COLLECTION_END
+    parent = root
+    events: Iterable[Any] = yaml.parse(text, Loader=_Composer)
+    for event in events:
+        kind = event.__class__
+        if kind is scalar:  # the bulk: keep it short
+            if parent.mapping:
+                if parent.expect_key:
+                    parent.key = event.value
+                parent.expect_key = not parent.expect_key
+            else:
+                parent.index += 1
+            parent.size += 1
+            if event.anchor is not None:
+                anchors[event.anchor] = (1, 1)
+            continue
+        if kind in ends:
+            done = stack.pop()
+            if done.anchor is not None:
+                anchors[done.anchor] = (done.size, done.height)
+            parent = stack[-1]
+            parent.size += done.size
+            parent.height = max(parent.height, done.height + 1)
+            continue
+        if kind is not alias and kind not in _COLLECTION_START:
+            continue  # stream and document events
+        if parent.mapping:
+            if parent.expect_key:
+                parent.key = "?"
+            parent.expect_key = not parent.expect_key
+        else:
+            parent.index += 1
+        line = event.start_mark.line + 1
+        if kind is alias:
+            if any(level.anchor == event.anchor for level in stack):
+                raise InputError(
+                    f"alias *{event.anchor} refers to a node that contains it (endless)",
+                    path=path,
+                    line=line,
+                    field=_short_field(_keys(stack)),
+                )
+            size, height = anchors.get(str(event.anchor), (1, 1))
+            added += size
+            if added > MAX_ALIAS_NODES:
+                raise InputError(
+                    f"YAML aliases expand to more than {MAX_ALIAS_NODES:,} nodes "
+                    f"(at alias *{event.anchor}): refused (an alias bomb?)",
+                    path=path,
+                    line=line,
+                    field=_short_field(_keys(stack)),
+                )
+            if len(stack) - 1 + height > MAX_DEPTH:
+                raise InputError(
+                    f"alias *{event.anchor} nests deeper than {MAX_DEPTH} levels",
+                    path=path,
+                    line=line,
+                    field=_short_field(_keys(stack)),
+                )
+            parent.size += size
+            parent.height = max(parent.height, height + 1)
+            continue
+        if len(stack) > MAX_DEPTH:
+            raise InputError(
+                f"nested deeper than {MAX_DEPTH} levels",
+                path=path,
+                line=line,
+                field=_short_field(_keys(stack)),
+            )
+        parent = _Level(kind is yaml.MappingStartEvent, event.anchor)
+        stack.append(parent)
+
+
+def _shallow(text: str) -> bool:
+    """Whether the document nests no deeper than :data:`MAX_DEPTH` (events counted only)."""
+    starts, ends = _COLLECTION_START, _COLLECTION_END
+    depth = 0
+    for event in yaml.parse(text, Loader=_Composer):
+        kind = event.__class__
+        if kind in starts:
+            depth += 1
+            if depth > MAX_DEPTH:
+                return False
+        elif kind in ends:
+            depth -= 1
+    return True
+
+
+def _short_field(keys: Sequence[Key]) -> str | None:
+    if not keys:
+        return None
+    return field_name(keys[:6]) + ("..." if len(keys) > 6 else "")
 
 
 def field_name(keys: Sequence[Key]) -> str:
@@ -160,6 +303,7 @@ class YamlDoc:
     def from_text(cls, text: str, path: str) -> YamlDoc:
         """Parse YAML text; InputError with the line on syntax errors."""
         try:
+            _scan(text, path)
             node = yaml.compose(text, Loader=_Composer)
         except yaml.MarkedYAMLError as exc:
             mark = exc.problem_mark

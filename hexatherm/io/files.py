@@ -1,0 +1,225 @@
+"""Opening input files safely: regular files only, of a bounded size.
+
+Every reader of hexatherm's inputs (YAML, CSV, DMIS) reads a file's bytes through
+:func:`read_bytes`, which
+
+* refuses what is not a regular file (a directory, a named pipe (FIFO), a device
+  such as ``/dev/zero``, a socket) by :func:`os.stat` *before* opening it: opening a
+  FIFO for reading would block until a writer comes;
+* opens without blocking and checks the opened file again (a file swapped for a
+  FIFO between the two checks is refused too, not waited on);
+* refuses a file larger than a bound (:data:`MAX_MEASUREMENT_BYTES` by default,
+  :data:`MAX_YAML_BYTES` for YAML), before reading it and while reading it (a
+  file that grows, or a ``/proc`` file that claims size 0, stops at the bound);
+* raises :class:`~hexatherm.errors.InputError` naming the file for all of these,
+  and for a missing, dangling or unreadable one.
+
+>>> import os, tempfile
+>>> with tempfile.TemporaryDirectory() as folder:
+...     os.mkfifo(os.path.join(folder, "pipe"))
+...     for name in ("pipe", "."):
+...         try:
+...             read_bytes(os.path.join(folder, name))
+...         except InputError as error:
+...             print(error.message)
+is a named pipe (FIFO), expected a regular file
+is a directory, expected a file
+
+Warnings about input that a reader drops on request (the last record of a file
+cut short, an earlier group of records) are :class:`InputWarning`, issued with the
+:mod:`warnings` module so that a command can show them.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import stat
+
+from hexatherm.errors import InputError
+
+__all__ = [
+    "MAX_MEASUREMENT_BYTES",
+    "MAX_YAML_BYTES",
+    "InputWarning",
+    "read_bytes",
+    "refusal",
+    "refuse_utf16",
+]
+
+#: The largest measurement file (CSV, DMIS, serial log) hexatherm reads, bytes: 2 GiB
+#: (a campaign of 1000 targets with probed points is about 30 MB)
+MAX_MEASUREMENT_BYTES = 2 * 1024**3
+#: The largest YAML file hexatherm reads, bytes: 16 MiB (a 2000-step plan is 0.2 MB)
+MAX_YAML_BYTES = 16 * 1024**2
+
+_CHUNK = 1 << 24
+
+
+class InputWarning(UserWarning):
+    """Input that a reader read past or dropped because it was asked to (``allow_truncated``,
+    ``keep_later``); the message names the file and the line."""
+
+
+def _kind_of(mode: int) -> str | None:
+    """What a file that is not regular is, for messages (None: a regular file)."""
+    if stat.S_ISREG(mode):
+        return None
+    if stat.S_ISDIR(mode):
+        return "is a directory, expected a file"
+    if stat.S_ISFIFO(mode):
+        return "is a named pipe (FIFO), expected a regular file"
+    if stat.S_ISCHR(mode):
+        return "is a character device, expected a regular file"
+    if stat.S_ISBLK(mode):
+        return "is a block device, expected a regular file"
+    if stat.S_ISSOCK(mode):
+        return "is a socket, expected a regular file"
+    return "is not a regular file"
+
+
+def _os_error(exc: OSError, path: str) -> InputError:
+    if exc.errno in (errno.ENOENT, errno.ENOTDIR):
+        if os.path.islink(path):
+            return InputError(
+                f"file not found (a dangling symbolic link to {os.readlink(path)!r})", path=path
+            )
+        return InputError("file not found", path=path)
+    return InputError(f"cannot read: {exc.strerror or exc}", path=path)
+
+
+def _too_large(size: int, limit: int, path: str, more: bool = False) -> InputError:
+    what = f"more than {size:,} bytes" if more else f"{size:,} bytes"
+    return InputError(
+        f"the file is {what}, above the limit of {limit:,} bytes for this kind of file",
+        path=path,
+    )
+
+
+def refusal(
+    path: str | os.PathLike[str], *, limit: int = MAX_MEASUREMENT_BYTES
+) -> InputError | None:
+    """Why :func:`read_bytes` would refuse a file before opening it, or None.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file (symbolic links are followed).
+    limit : int, optional
+        The largest size accepted, bytes.
+
+    Returns
+    -------
+    InputError or None
+        The error naming the file: missing, dangling link, not a regular file, too large.
+    """
+    where = os.fspath(path)
+    try:
+        info = os.stat(where)
+    except OSError as exc:
+        return _os_error(exc, where)
+    kind = _kind_of(info.st_mode)
+    if kind is not None:
+        return InputError(kind, path=where)
+    if info.st_size > limit:
+        return _too_large(info.st_size, limit, where)
+    return None
+
+
+def read_bytes(path: str | os.PathLike[str], *, limit: int = MAX_MEASUREMENT_BYTES) -> bytes:
+    """The bytes of a regular file of at most ``limit`` bytes.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file (symbolic links are followed).
+    limit : int, optional
+        The largest size accepted, bytes (:data:`MAX_MEASUREMENT_BYTES` by default;
+        :data:`MAX_YAML_BYTES` for YAML).
+
+    Returns
+    -------
+    bytes
+
+    Raises
+    ------
+    InputError
+        Naming the file: missing (or a dangling link), not a regular file (checked
+        before opening, so a FIFO never blocks, and again on the opened file), larger
+        than ``limit`` (checked before and while reading), or unreadable.
+    """
+    if limit < 0:
+        raise ValueError(f"limit must be >= 0, got {limit}")
+    where = os.fspath(path)
+    refused = refusal(where, limit=limit)
+    if refused is not None:
+        raise refused
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0)
+    flags |= getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_BINARY", 0)
+    try:
+        fd = os.open(where, flags)
+    except OSError as exc:
+        raise _os_error(exc, where) from None
+    try:
+        info = os.fstat(fd)
+        kind = _kind_of(info.st_mode)
+        if kind is not None:  # swapped after the first look
+            raise InputError(kind, path=where)
+        if info.st_size > limit:
+            raise _too_large(info.st_size, limit, where)
+        parts: list[bytes] = []
+        total = 0
+        want = info.st_size + 1  # one read for a file that does not change
+        while True:
+            chunk = os.read(fd, max(1, min(max(want, 65536), _CHUNK, limit + 1 - total)))
+            if not chunk:
+                break
+            parts.append(chunk)
+            total += len(chunk)
+            if total > limit:
+                raise _too_large(limit, limit, where, more=True)
+            want = _CHUNK
+    except OSError as exc:
+        raise _os_error(exc, where) from None
+    finally:
+        os.close(fd)
+    return b"".join(parts)
+
+
+_UTF16_BOMS = {
+    b"\xff\xfe\x00\x00": "UTF-32",
+    b"\x00\x00\xfe\xff": "UTF-32",
+    b"\xff\xfe": "UTF-16",
+    b"\xfe\xff": "UTF-16",
+}
+
+
+def refuse_utf16(data: bytes, path: str | os.PathLike[str]) -> None:
+    """InputError when ``data`` is UTF-16 or UTF-32 text (which the UTF-8 readers would
+    call 'not UTF-8' or, without a byte order mark, 'NUL byte'): says so, and how to fix it.
+
+    >>> try:
+    ...     refuse_utf16("label,ball".encode("utf-16-le"), "c.csv")
+    ... except InputError as error:
+    ...     print(error)
+    c.csv:1: looks like UTF-16 text (every other byte is NUL): save the file as UTF-8
+    >>> refuse_utf16(b"label,ball", "c.csv")
+    """
+    for bom, name in _UTF16_BOMS.items():
+        if data.startswith(bom):
+            raise InputError(
+                f"{name} text (byte order mark {bom.hex(' ')}): save the file as UTF-8",
+                path=path,
+                line=1,
+            )
+    head = data[:64]
+    if len(head) >= 4 and len(head) % 2 == 0:
+        even, odd = head[0::2], head[1::2]
+        if (odd.count(0) == len(odd) and even.count(0) == 0) or (
+            even.count(0) == len(even) and odd.count(0) == 0
+        ):
+            raise InputError(
+                "looks like UTF-16 text (every other byte is NUL): save the file as UTF-8",
+                path=path,
+                line=1,
+            )
