@@ -112,6 +112,19 @@ def test_an_effect_outside_the_registry_is_reported_as_unexplained(
     assert verdict.noise_floor_um == pytest.approx(null.diagnosis.final_rms_um, rel=0.2)
 
 
+def test_a_tilt_below_the_rms_limit_is_caught_by_its_structure(tmp_path: Path) -> None:
+    # 10 urad/K about the platform's x axis: the final RMS stays within 1.3x the floor,
+    # but the residual tilts with the air: Rx (the tilt's own component) is named
+    result = diagnosed(tmp_path / "tilt", (PlatformTiltWithAir(urad_per_K=10.0),), seed=5)
+    verdict = result.diagnosis.adequacy
+    assert verdict is not None
+    assert result.diagnosis.final_rms_um < RMS_RATIO_LIMIT * verdict.noise_floor_um
+    assert not verdict.adequate
+    assert any(f.series == "Rx" for f in verdict.findings), verdict.summary()
+    first = story(result).splitlines()[0]
+    assert first.startswith("NOT ADEQUATE") and "components Rx" in first
+
+
 def test_null_campaigns_are_adequate_over_10_seeds(tmp_path: Path) -> None:
     ratios = []
     for seed in range(10):
