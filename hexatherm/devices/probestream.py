@@ -14,7 +14,8 @@ line. Accepted records (any case, blanks optional):
 Lines end with CR, LF or CRLF; control characters around a line (STX/ETX
 framing, XON/XOFF, NUL padding) are dropped. Anything else is not a record:
 lines without a digit (prompts, ``OK``, echoed commands) are *text*, the others
-*garbage*; both are skipped by the caller and never fatal. A line that grows
+*garbage*; both are skipped by the caller and never fatal. A number that overflows a
+float (``1e400``) makes the line garbage: no record holds a non-finite value. A line that grows
 beyond :data:`MAX_LINE` bytes without an end (a stream of noise) is cut there.
 
 >>> splitter = LineSplitter()
@@ -24,10 +25,13 @@ beyond :data:`MAX_LINE` bytes without an end (a stream of noise) is cut there.
 [(123.4567, -1.2345, 456.789), (25.4, 50.8, 76.19999999999999)]
 >>> parse_record(b"?POS").kind, parse_record(b"\\xff\\xfe12#").kind
 ('text', 'garbage')
+>>> parse_record(b"X=1e400 Y=0 Z=0").reason  # never an infinite point
+'a number overflows (not finite)'
 """
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 from typing import Literal
@@ -199,6 +203,8 @@ def parse_record(line: bytes | str, default_unit: str = "mm") -> Record:
         if scale is None:
             return Record("garbage", text, reason="numbers in different units")
         x, y, z = (_number(match.group(a)) * scale for a in "xyz")
+        if not all(math.isfinite(v) for v in (x, y, z)):
+            return Record("garbage", text, reason="a number overflows (not finite)")
         return Record("point", text, (x + 0.0, y + 0.0, z + 0.0))
     if not any(c.isdigit() for c in text):
         return Record("text", text, reason="no number (a prompt, status or echoed command)")
@@ -211,7 +217,8 @@ def parse_numbers(line: bytes | str, minimum: int = 6) -> tuple[float, ...] | No
     """The numbers of a line of ``minimum`` or more numbers (a thermocouple logger's line).
 
     Numbers are separated by ``,``, ``;``, tabs or blanks and may end in ``C``
-    or ``°C``. Returns None when the line is anything else.
+    or ``°C``. Returns None when the line is anything else (a number that overflows
+    a float, ``1e400``, included).
 
     Examples
     --------
@@ -227,7 +234,10 @@ def parse_numbers(line: bytes | str, minimum: int = 6) -> tuple[float, ...] | No
         match = _NUMBER_TOKEN.fullmatch(token)
         if match is None:
             return None
-        values.append(_number(match.group("v")))
+        value = _number(match.group("v"))
+        if not math.isfinite(value):
+            return None
+        values.append(value)
     return tuple(values) if len(values) >= minimum else None
 
 

@@ -35,6 +35,14 @@ LOG_MAGIC = "# hexatherm serial log 1"
 POINTS_HEADER = "label,ball,x,y,z,time"
 
 
+REJECTED_NAME = "rejected.csv"
+
+
+#: points not assigned: ``label,ball`` the ball the point was taken on or lies on
+#: (empty when none), ``status`` ``rejected`` or ``set-aside``, ``reason`` in words
+REJECTED_HEADER = "label,ball,x,y,z,time,status,reason"
+
+
 PROBE, TEMPERATURE = "probe", "temperature"
 
 
@@ -120,9 +128,21 @@ class LogEntry:
 _ENTRY = re.compile(r'(\S+) (\S+) (\S+) "(.*)"')
 
 
+#: the wall clock read once, with the monotonic clock at the same moment
+_CLOCK_ANCHOR = (time.time(), time.monotonic())
+
+
 def now_iso() -> str:
-    """The current UTC time as the log writes it."""
-    return seconds_to_iso(time.time())
+    """The current UTC time as the log writes it, from a clock that never goes back.
+
+    The wall clock is read once (when the module is imported) and advanced by the
+    monotonic clock: an NTP step or a clock set by hand during an acquisition cannot
+    give a later entry an earlier time (references in reverse time order would make
+    the session unprocessable). Over a working day the two clocks part by
+    milliseconds at most (the monotonic clock is slewed by NTP like the wall clock).
+    """
+    wall, mono = _CLOCK_ANCHOR
+    return seconds_to_iso(wall + (time.monotonic() - mono))
 
 
 def entry(

@@ -30,6 +30,8 @@ class SessionFiles:
     balls : Balls
     plan_text, hexapod_text, balls_text : str
         The files' text, copied into the session folder.
+    convention : {"symetrie", "pi"}
+        Rotation convention of the plan's poses (the hexapod file's).
     """
 
     plan: Plan
@@ -37,6 +39,7 @@ class SessionFiles:
     plan_text: str
     hexapod_text: str
     balls_text: str
+    convention: str = "symetrie"
 
 
 def load_files(plan_path: Path, hexapod_path: Path, balls_path: Path) -> SessionFiles:
@@ -45,10 +48,15 @@ def load_files(plan_path: Path, hexapod_path: Path, balls_path: Path) -> Session
     from hexatherm.io.csvfile import read_text
 
     plan = read_plan(plan_path)
-    read_hexapod(hexapod_path)
+    hexapod = read_hexapod(hexapod_path)
     balls = read_balls(balls_path)
     return SessionFiles(
-        plan, balls, read_text(plan_path), read_text(hexapod_path), read_text(balls_path)
+        plan,
+        balls,
+        read_text(plan_path),
+        read_text(hexapod_path),
+        read_text(balls_path),
+        hexapod.convention,
     )
 
 

@@ -52,6 +52,7 @@ from hexatherm.io.seriallog import (
     POINTS_HEADER,
     POINTS_NAME,
     PROBE,
+    REJECTED_NAME,
     TEMPERATURE,
     TEMPERATURES_NAME,
     FileSink,
@@ -231,18 +232,21 @@ def _run(
 ) -> AcquireResult:
     folder = options.session
     log_path = folder / LOG_NAME
-    points_sink, temperature_sink = (
+    points_sink, temperature_sink, rejected_sink = (
         FileSink(folder / POINTS_NAME),
         FileSink(folder / TEMPERATURES_NAME),
+        FileSink(folder / REJECTED_NAME),
     )
     recorder = Recorder(
         files.plan,
         files.balls,
         points=MemorySink(),
         temperatures=MemorySink(),
+        rejected=MemorySink(),
         notify=quiet,
         checks=options.checks,
         max_gap_s=options.max_gap_s,
+        convention=files.convention,
     )
     if options.resume:
         check_same_files(files, folder)
@@ -261,6 +265,7 @@ def _run(
         _reconcile(
             folder / TEMPERATURES_NAME, recorder.temperatures.lines, notify, TEMPERATURES_NAME
         )
+        _reconcile(folder / REJECTED_NAME, recorder.rejected_lines, notify, REJECTED_NAME)
         notify("info", f"resuming: {recorder.n_points} points recorded, at {recorder.where()}")
         log = SerialLog(log_path, create=False)
     else:
@@ -268,6 +273,7 @@ def _run(
         log = SerialLog(log_path, create=True)
         points_sink.rewrite([POINTS_HEADER])
     recorder.points_sink, recorder.temperature_sink = points_sink, temperature_sink
+    recorder.rejected_sink = rejected_sink
     recorder.stopped = False
 
     def record(item: LogEntry) -> None:
@@ -296,6 +302,8 @@ def _run(
     try:
         if options.resume:
             record(entry("resume"))
+            if recorder.last_set_aside:  # marked in the log for its readers
+                log.append(entry("note", "-", recorder.last_set_aside))
         record(entry("config", "-", f"units={options.unit}"))
         record(entry("mode", "-", "auto" if options.auto else "interactive"))
         record(entry("open", PROBE, options.probe.describe()))
@@ -320,6 +328,7 @@ def _run(
         log.close()
         points_sink.close()
         temperature_sink.close()
+        rejected_sink.close()
     fits = tuple(recorder.fits[k] for k in sorted(recorder.fits))
     if not recorder.done:
         raise IncompleteSession(
@@ -404,9 +413,16 @@ def session_from_log(
         handle.write(raw[:complete])
     points_sink = FileSink(session / POINTS_NAME)
     temperature_sink = FileSink(session / TEMPERATURES_NAME)
+    rejected_sink = FileSink(session / REJECTED_NAME)
     points_sink.rewrite([POINTS_HEADER])
     recorder = Recorder(
-        files.plan, files.balls, points=points_sink, temperatures=temperature_sink, notify=notify
+        files.plan,
+        files.balls,
+        points=points_sink,
+        temperatures=temperature_sink,
+        rejected=rejected_sink,
+        notify=notify,
+        convention=files.convention,
     )
     try:
         for item in entries:
@@ -414,6 +430,7 @@ def session_from_log(
     finally:
         points_sink.close()
         temperature_sink.close()
+        rejected_sink.close()
     fits = tuple(recorder.fits[k] for k in sorted(recorder.fits))
     session_file = None
     if recorder.done:
