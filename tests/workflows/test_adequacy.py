@@ -21,7 +21,11 @@ import pytest
 from hexatherm.core.diagnosis import RMS_RATIO_LIMIT
 from hexatherm.core.effects import EFFECTS, Effect, ThermocoupleLog, make_effect
 from hexatherm.typing import FloatArray
-from hexatherm.workflows.diagnose.outputs import diagnosis_document, story
+from hexatherm.workflows.diagnose.outputs import (
+    RUNNER_UP_SHIFT_SE,
+    diagnosis_document,
+    story,
+)
 from hexatherm.workflows.diagnose.run import DiagnosisResult, read_for_diagnosis, run_diagnosis
 from hexatherm.workflows.simulate.campaigns import NOMINAL_HIDDEN, diagnosis_campaign
 from hexatherm.workflows.simulate.twinsession import write_twin_session
@@ -100,11 +104,18 @@ def test_an_effect_outside_the_registry_is_reported_as_unexplained(
     assert first.startswith("NOT ADEQUATE")
     assert f"{verdict.unexplained_rms_um:.3f} um RMS is left unexplained" in first
     assert "it shows in:" in first
-    # whatever the registry named explains part of it at most
+    # whatever the registry named explains part of it at most; a named effect whose
+    # parameters move by more than 2 SE when the runner-up joins it gets a caution
+    text = story(result)
     for addition in d.added:
         assert addition.explains == "part"
         entry = next(a for a in doc["added"] if a["effect"] == addition.effect.name)
         assert entry["explains"] == "part"
+        assert f"{addition.effect.name} explains part of the disagreement" in text
+        runner = addition.runner_up
+        assert runner is not None
+        moved = max(abs(v) for v in runner.shift_in_se().values()) > RUNNER_UP_SHIFT_SE
+        assert (f"caution: {addition.effect.name}'s parameters move" in text) == moved
     # the floor (from consecutive references) is the noise the simulator added:
     # the same campaign without the hidden effect leaves it alone
     null = diagnosed(tmp_path / "null", (), seed=31)
