@@ -133,6 +133,14 @@ def _fits_table(fits: Sequence[BallFit]) -> str:
     help="Warn when a ball has fewer points.",
 )
 @click.option(
+    "--surface-tol-um",
+    type=click.FloatRange(min=0, min_open=True),
+    default=500.0,
+    show_default=True,
+    help="Once O is measured, a point goes to the ball whose commanded surface it lies "
+    "on within this (hexapod positioning and thermal error); others are rejected.",
+)
+@click.option(
     "--temperatures",
     "temperatures_file",
     type=click.Path(dir_okay=False, path_type=Path),
@@ -169,6 +177,7 @@ def command(
     radius_tol_um: float,
     form_tol_um: float,
     min_points: int,
+    surface_tol_um: float,
     temperatures_file: Path | None,
     temperature_port: str | None,
     temperature_baud: int,
@@ -182,6 +191,12 @@ def command(
     the end SESSION/session.yaml makes the folder a session for
     ``hexatherm process``. Interactive commands (standard input): Enter or
     'next', 'redo', 'quit'. The fits go to standard output as CSV.
+
+    Once O is measured, each point goes to the ball whose surface, at its
+    commanded pose, it lies on (--surface-tol-um): the current ball, or the
+    next one (which moves on); any other point is rejected, told and written
+    to SESSION/rejected.csv. On --resume the interrupted ball's points are
+    set aside there, and you are told what to probe.
     """
     from hexatherm.devices.serialport import PortSettings
     from hexatherm.workflows.acquire.files import load_files
@@ -243,7 +258,10 @@ def command(
             idle_timeout_s=idle_timeout,
             reopen_interval_s=reopen_interval,
             checks=FitChecks(
-                radius_tol_mm=radius_tol_um / 1e3, form_tol_um=form_tol_um, min_points=min_points
+                radius_tol_mm=radius_tol_um / 1e3,
+                form_tol_um=form_tol_um,
+                min_points=min_points,
+                surface_tol_mm=surface_tol_um / 1e3,
             ),
             max_gap_s=max_gap,
         )
