@@ -1,0 +1,301 @@
+"""``hexatherm run``: an unattended campaign over I++ DME and a hexapod controller."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from hexatherm.cli.options import clean_errors, echo_err, max_gap_option
+
+
+def _numbers(text: str | None, n: int, what: str) -> tuple[float, ...] | None:
+    if text is None:
+        return None
+    try:
+        values = tuple(float(c) for c in text.replace(";", ",").split(","))
+    except ValueError:
+        values = ()
+    if len(values) != n or not all(abs(v) < float("inf") for v in values):
+        raise click.BadParameter(f"{text!r}: expected {n} finite numbers", param_hint=what)
+    return values
+
+
+@click.command("run")
+@click.argument("plan", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--cmm", "cmm_url", required=True, help="The CMM's I++ DME server: ipp://HOST:1294.")
+@click.option(
+    "--controller",
+    "controller_url",
+    required=True,
+    help="The hexapod controller: symetrie://HOST:61559 or pi://HOST:50000.",
+)
+@click.option(
+    "--session",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Session folder to record into.",
+)
+@click.option(
+    "--hexapod",
+    "hexapod_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Hexapod file [with --resume: the session's copy].",
+)
+@click.option(
+    "--balls",
+    "balls_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Balls file [with --resume: the session's copy].",
+)
+@click.option(
+    "--origin-on-cmm",
+    metavar="Tx,Ty,Tz,Rx,Ry,Rz",
+    help="Nominal placement of frame O on the CMM, as plan --dmis takes it (the balls are "
+    "predicted from it until O is measured) [with --resume: the session's run.yaml].",
+)
+@click.option(
+    "--dry-run", is_flag=True, help="Check the whole plan on both machines; move nothing."
+)
+@click.option("--resume", is_flag=True, help="Continue an interrupted run at its first open ball.")
+@click.option("--tool", default="Probe1", show_default=True, help="The CMM's tool (ChangeTool).")
+@click.option(
+    "--cap-angle",
+    type=click.FloatRange(min=1, max=90),
+    default=70.0,
+    show_default=True,
+    help="Half-angle of the probed upper cap (deg).",
+)
+@click.option(
+    "--approach",
+    type=click.FloatRange(min=0.01),
+    default=2.0,
+    show_default=True,
+    help="Approach distance off the predicted surface (mm).",
+)
+@click.option(
+    "--clearance",
+    type=click.FloatRange(min=0.01),
+    default=5.0,
+    show_default=True,
+    help="Safe plane above each ball's top (mm).",
+)
+@click.option(
+    "--travel",
+    type=click.FloatRange(min=0),
+    default=30.0,
+    show_default=True,
+    help="Travel height above the plan's highest ball top while the hexapod moves (mm).",
+)
+@click.option(
+    "--cmm-limits",
+    metavar="X0,Y0,Z0,X1,Y1,Z1",
+    help="The CMM's travel box (mm): every probe position of the plan is checked against it.",
+)
+@max_gap_option
+@click.option(
+    "--settle",
+    type=click.FloatRange(min=0),
+    default=2.0,
+    show_default=True,
+    help="Wait after the in-position flag (s).",
+)
+@click.option(
+    "--poll",
+    type=click.FloatRange(min=0.001),
+    default=0.2,
+    show_default=True,
+    help="Interval of the controller's status queries (s).",
+)
+@click.option(
+    "--in-position-timeout",
+    type=click.FloatRange(min=0.001),
+    default=120.0,
+    show_default=True,
+    help="Longest wait for the in-position flag (s).",
+)
+@click.option(
+    "--readback-tol-um",
+    type=click.FloatRange(min=0),
+    default=0.5,
+    show_default=True,
+    help="Largest spread of the stable read-back poses (um; urad x5).",
+)
+@click.option(
+    "--readings",
+    type=click.IntRange(min=1),
+    default=3,
+    show_default=True,
+    help="Consecutive read-backs that must agree.",
+)
+@click.option(
+    "--radius-tol-um",
+    type=click.FloatRange(min=0),
+    default=20.0,
+    show_default=True,
+    help="Probe a ball again when its fitted radius is further off (um).",
+)
+@click.option(
+    "--form-tol-um",
+    type=click.FloatRange(min=0),
+    default=10.0,
+    show_default=True,
+    help="Probe a ball again when its form error is larger (um).",
+)
+@click.option(
+    "--rms-tol-um",
+    type=click.FloatRange(min=0),
+    default=3.0,
+    show_default=True,
+    help="Probe a ball again when its fit RMS is larger (um).",
+)
+@click.option(
+    "--centre-tol-mm",
+    type=click.FloatRange(min=0),
+    default=0.5,
+    show_default=True,
+    help="Probe a ball again around its fit when it is further from the prediction.",
+)
+@click.option(
+    "--temperature-port",
+    help="A thermocouple logger's port (as acquire: lines of six or more numbers).",
+)
+@click.option("--temperature-baud", type=click.IntRange(min=1), default=9600, show_default=True)
+@click.option(
+    "--reconnects",
+    type=click.IntRange(min=0),
+    default=3,
+    show_default=True,
+    help="Reopenings of a dropped connection per ball or move.",
+)
+@click.option(
+    "--ipp-timeout",
+    type=click.FloatRange(min=0.001),
+    default=120.0,
+    show_default=True,
+    help="Longest I++ transaction (s).",
+)
+@click.option(
+    "--fsync/--no-fsync",
+    default=True,
+    show_default=True,
+    help="Make every log line durable (fsync) before acting on it.",
+)
+@clean_errors
+def command(
+    plan: Path,
+    cmm_url: str,
+    controller_url: str,
+    session: Path,
+    hexapod_path: Path | None,
+    balls_path: Path | None,
+    origin_on_cmm: str | None,
+    dry_run: bool,
+    resume: bool,
+    tool: str,
+    cap_angle: float,
+    approach: float,
+    clearance: float,
+    travel: float,
+    cmm_limits: str | None,
+    max_gap: float,
+    settle: float,
+    poll: float,
+    in_position_timeout: float,
+    readback_tol_um: float,
+    readings: int,
+    radius_tol_um: float,
+    form_tol_um: float,
+    rms_tol_um: float,
+    centre_tol_mm: float,
+    temperature_port: str | None,
+    temperature_baud: int,
+    reconnects: int,
+    ipp_timeout: float,
+    fsync: bool,
+) -> None:
+    """Measure PLAN unattended: the hexapod controller moves, the CMM probes over I++ DME.
+
+    Walks the plan (O, R0, then the targets with their references): validates every pose
+    first, then for each step moves the hexapod and waits until it is in position, probes
+    every ball's upper cap around its predicted position, fits it at once (a bad ball is
+    probed again once) and measures a reference again when the plan's --max-gap is broken.
+    SESSION gets the I++ transcript, the controller log, steps.csv and points.csv as it
+    goes, and session.yaml at the end (then: hexatherm process SESSION). Ctrl-C or an
+    error stops the hexapod; --resume continues. The balls' fits go to standard output.
+    """
+    from hexatherm.devices.controller import InPositionCriteria
+    from hexatherm.devices.serialport import PortSettings
+    from hexatherm.io.config import read_hexapod
+    from hexatherm.workflows.acquire.files import load_files
+    from hexatherm.workflows.run.run import BallChecks, ProbeSettings, RunOptions, run_campaign
+    from hexatherm.workflows.run.run import dry_run as check_plan
+
+    if dry_run and resume:
+        raise click.UsageError("--dry-run checks a plan: not with --resume")
+    if (hexapod_path is None or balls_path is None) and not resume:
+        raise click.UsageError("--hexapod and --balls are needed (except with --resume)")
+    if origin_on_cmm is None and not resume:
+        raise click.UsageError("--origin-on-cmm is needed (except with --resume)")
+    hexapod_path = hexapod_path or session / "hexapod.yaml"
+    balls_path = balls_path or session / "balls.yaml"
+    files = load_files(plan, hexapod_path, balls_path)
+    hexapod = read_hexapod(hexapod_path)
+    origin = _numbers(origin_on_cmm, 6, "--origin-on-cmm")
+    limits = _numbers(cmm_limits, 6, "--cmm-limits")
+    options = RunOptions(
+        session=session,
+        cmm_url=cmm_url,
+        controller_url=controller_url,
+        origin_on_cmm=origin,
+        resume=resume,
+        probe=ProbeSettings(tool, cap_angle, approach, max(clearance, approach), travel),
+        checks=BallChecks(radius_tol_um, form_tol_um, rms_tol_um, centre_tol_mm),
+        criteria=InPositionCriteria(
+            settle_s=settle,
+            tolerance_um=readback_tol_um,
+            tolerance_urad=5 * readback_tol_um,
+            n_readings=readings,
+            poll_s=poll,
+            timeout_s=in_position_timeout,
+        ),
+        max_gap_s=max_gap,
+        cmm_limits_mm=None if limits is None else (limits[:3], limits[3:]),  # type: ignore[arg-type]
+        temperature_port=None
+        if temperature_port is None
+        else PortSettings(temperature_port, baudrate=temperature_baud),
+        durable=fsync,
+        reconnects=reconnects,
+        ipp_timeout_s=ipp_timeout,
+    )
+
+    def notify(level: str, message: str) -> None:
+        echo_err(("warning: " if level == "warn" else "") + message)
+
+    if dry_run:
+        check_plan(files, hexapod, options, notify)
+        return
+    try:
+        result = run_campaign(files, hexapod, options, notify)
+    except KeyboardInterrupt:
+        echo_err(
+            f"interrupted: the hexapod was sent STOP; everything measured is in {session}; "
+            "continue with --resume"
+        )
+        sys.exit(130)
+    lines = ["label,ball,n,x,y,z,radius_mm,form_um,rms_um,attempts,problems"]
+    for b in result.balls:
+        lines.append(
+            ",".join(
+                [b.label, b.ball, str(b.n)]
+                + [f"{v:.6f}" for v in b.centre_mm]
+                + [f"{b.radius_mm:.6f}", f"{b.form_um:.3f}", f"{b.rms_um:.3f}", str(b.attempts)]
+                + [str(len(b.problems))]
+            )
+        )
+    click.echo("\n".join(lines))
+    if result.remeasured:
+        echo_err(f"measured again (gap): {', '.join(result.remeasured)}")
+    echo_err(f"{result.n_points} points in {result.session / 'points.csv'}")
+    echo_err(f"wrote {result.session_file}")

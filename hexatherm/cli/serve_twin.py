@@ -1,0 +1,220 @@
+"""``hexatherm serve-twin``: a simulated CMM and hexapod controller, backed by the twin."""
+
+from __future__ import annotations
+
+import signal
+import threading
+from pathlib import Path
+
+import click
+
+from hexatherm.cli.options import clean_errors, echo_err
+
+
+@click.command("serve-twin")
+@click.option(
+    "--hexapod",
+    "hexapod_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Hexapod file (with its leg model) [default: the scenario's].",
+)
+@click.option(
+    "--balls",
+    "balls_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Balls file [default: the scenario's].",
+)
+@click.option(
+    "--scenario",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="A simulate scenario: heating, origin_on_cmm, noise, seed, hidden effects.",
+)
+@click.option(
+    "--dialect",
+    type=click.Choice(["symetrie", "pi"]),
+    default="symetrie",
+    show_default=True,
+    help="The controller's dialect.",
+)
+@click.option(
+    "--time-scale",
+    type=click.FloatRange(min=1e-3),
+    default=60.0,
+    show_default=True,
+    help="Simulated seconds per wall-clock second (thermal drift, moves, settle).",
+)
+@click.option(
+    "--fault",
+    "faults",
+    multiple=True,
+    metavar="KIND[:key=value,...]",
+    help="Inject a fault (repeatable): ipp-error:severity=2,method=PtMeas,nth=3; "
+    "ipp-event:method=PtMeas,nth=2; ipp-drop:method=PtMeas,nth=5; "
+    "ipp-split:method=PtMeas,nth=1; late-in-position:seconds=30; controller-drop; "
+    "controller-split; controller-error:command=MOVE#ABS,code=-104; "
+    "refuse:axis=Tz,max=5.",
+)
+@click.option(
+    "--origin-on-cmm",
+    metavar="Tx,Ty,Tz,Rx,Ry,Rz",
+    help="True placement of frame O on the CMM [default: the scenario's, or 450,320,210,0,0,15].",
+)
+@click.option(
+    "--point-noise-um",
+    type=click.FloatRange(min=0),
+    default=None,
+    help="Probing noise along the normal (um) [default: the scenario's, or 0.5].",
+)
+@click.option("--seed", type=int, default=None, help="Noise seed [default: the scenario's, or 0].")
+@click.option("--tool", default="Probe1", show_default=True, help="Name of the CMM's tool.")
+@click.option(
+    "--cmm-port",
+    type=click.IntRange(0, 65535),
+    default=0,
+    show_default=True,
+    help="I++ port on 127.0.0.1 (0: a free one).",
+)
+@click.option(
+    "--controller-port",
+    type=click.IntRange(0, 65535),
+    default=0,
+    show_default=True,
+    help="Controller port on 127.0.0.1 (0: a free one).",
+)
+@click.option(
+    "--speed-mm-s",
+    type=click.FloatRange(min=1e-3),
+    default=2.0,
+    show_default=True,
+    help="The hexapod's speed (simulated mm/s; deg/s half of it).",
+)
+@click.option(
+    "--settle",
+    type=click.FloatRange(min=0),
+    default=2.0,
+    show_default=True,
+    help="In-position flag after the motion ends (simulated s).",
+)
+@click.option(
+    "--cmm-move-s",
+    type=click.FloatRange(min=0),
+    default=1.0,
+    show_default=True,
+    help="Duration of each CMM motion (simulated s).",
+)
+@clean_errors
+def command(
+    hexapod_path: Path | None,
+    balls_path: Path | None,
+    scenario: Path | None,
+    dialect: str,
+    time_scale: float,
+    faults: tuple[str, ...],
+    origin_on_cmm: str | None,
+    point_noise_um: float | None,
+    seed: int | None,
+    tool: str,
+    cmm_port: int,
+    controller_port: int,
+    speed_mm_s: float,
+    settle: float,
+    cmm_move_s: float,
+) -> None:
+    """Serve a simulated CMM (I++ DME) and hexapod controller on 127.0.0.1, until Ctrl-C.
+
+    Both are backed by the hexapod twin: the balls are where the commanded pose and the
+    legs' thermal growth put them, in accelerated time (--time-scale); the hexapod moves
+    at a finite speed and reports in position after a settle time, with read-back noise,
+    actuator lengths and the legs' temperatures. Prints the two URLs for hexatherm run
+    (standard output), then serves; --fault injects failures. The rehearsal of an
+    overnight campaign.
+    """
+    from hexatherm.cli.run import _numbers
+    from hexatherm.core.effects import Effect
+    from hexatherm.core.heating import HeatingModel
+    from hexatherm.io.config import read_balls, read_hexapod
+    from hexatherm.io.scenario import read_scenario
+    from hexatherm.workflows.serve import (
+        AcceleratedClock,
+        ServeFaults,
+        TwinMachines,
+        TwinWorld,
+        default_heating,
+        parse_fault,
+    )
+
+    heating: HeatingModel = default_heating()
+    origin: tuple[float, ...] = (450.0, 320.0, 210.0, 0.0, 0.0, 15.0)
+    noise, the_seed = 0.5, 0
+    the_effects: tuple[Effect, ...] = ()
+    hexapod = balls = None
+    if scenario is not None:
+        read = read_scenario(scenario)
+        heating, origin, hexapod, balls = read.heating, read.origin_on_cmm, read.hexapod, read.balls
+        noise, the_seed = 1e3 * read.point_noise_mm, read.seed
+        # the truth: the scenario's hexapod model and its hidden effects (another --hexapod
+        # brings its own model: the hidden effects only)
+        the_effects = read.effects if hexapod_path is None else read.hidden_effects
+    if hexapod_path is not None:
+        hexapod = read_hexapod(hexapod_path)
+    if balls_path is not None:
+        balls = read_balls(balls_path)
+    if hexapod is None or balls is None:
+        raise click.UsageError("give --hexapod and --balls (or a --scenario)")
+    origin = _numbers(origin_on_cmm, 6, "--origin-on-cmm") or origin
+    noise = noise if point_noise_um is None else point_noise_um
+    the_seed = the_seed if seed is None else seed
+    injected = ServeFaults()
+    for text in faults:
+        parse_fault(text, injected)
+    clock = AcceleratedClock(time_scale)
+    world = TwinWorld(
+        hexapod,
+        balls,
+        heating=heating,
+        origin_on_cmm=origin,
+        effects=the_effects,
+        clock=clock,
+        sleep=clock.sleep,
+        cmm_move_s=cmm_move_s,
+        speed_mm_s=speed_mm_s,
+        speed_deg_s=speed_mm_s / 2,
+        settle_s=settle,
+        seed=the_seed,
+        faults=injected.controller,
+    )
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    with TwinMachines(
+        world,
+        dialect=dialect,
+        tool=tool,
+        point_noise_um=noise,
+        seed=the_seed,
+        ipp_faults=injected.ipp,
+        cmm_port=cmm_port,
+        controller_port=controller_port,
+    ) as machines:
+        click.echo(f"cmm: {machines.cmm_url}")
+        click.echo(f"controller: {machines.controller_url}", nl=True)
+        sys_stdout_flush()
+        echo_err(
+            f"serving the twin ({dialect}, x{time_scale:g} time, {noise:g} um probing noise, "
+            f"{len(injected.ipp)} I++ fault(s)); Ctrl-C to stop. Rehearse with:\n"
+            f"  hexatherm run PLAN --cmm {machines.cmm_url} --controller "
+            f"{machines.controller_url} --hexapod H --balls B --origin-on-cmm "
+            f"{','.join(f'{v:g}' for v in origin)} --session DIR"
+        )
+        try:
+            while not stop.wait(0.5):
+                pass
+        except KeyboardInterrupt:
+            pass
+    echo_err("stopped")
+
+
+def sys_stdout_flush() -> None:
+    """Flush standard output (the URLs are read by scripts while the servers run)."""
+    import sys
+
+    sys.stdout.flush()
