@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from hexatherm.core.effects import EFFECTS
+from hexatherm.core.effects import EFFECTS, make_effect
 from hexatherm.core.geometry import CONVENTIONS
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import NAME_PATTERN, STEP_KINDS, Plan
@@ -157,6 +157,14 @@ def _read_effects(doc: YamlDoc) -> tuple[dict[str, Any], ...]:
         parameters = tuple(EFFECTS[name].parameters)
         doc.check_keys(parameters, *keys, "parameters")
         params = {p: doc.number(*keys, "parameters", p) for p in parameters}
+        if any(e["name"] == name for e in effects):
+            raise doc.error(f"effect {name} is given twice", *keys, "name")
+        try:
+            effect = make_effect(name, params)
+        except ValueError as exc:
+            raise doc.error(str(exc), *keys, "parameters") from None
+        for parameter, problem in effect.out_of_range().items():
+            raise doc.error(problem, *keys, "parameters", parameter)
         effects.append({"name": name, "parameters": params})
     return tuple(effects)
 

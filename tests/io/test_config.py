@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -211,4 +213,35 @@ def test_per_leg_segments_and_effects(tmp_path):
         read_hexapod(path)
     path.write_text(text.replace("leg_thermal_lag", "leg_lag"))
     with pytest.raises(InputError, match=r"effects\[0\].name': expected one of leg_thermal_lag"):
+        read_hexapod(path)
+
+
+@pytest.mark.parametrize(
+    ("effects", "field", "message"),
+    [
+        (
+            "    - {name: leg_thermal_lag, parameters: {tau_s: -5}}\n",
+            "thermal_model.effects[0].parameters.tau_s",
+            "outside the sensible range",
+        ),
+        (
+            "    - {name: leg_offset, parameters: {leg1: 0, leg2: 0, leg3: 0, leg4: 0, leg5: 0,"
+            " leg6: 3.0}}\n",
+            "thermal_model.effects[0].parameters.leg6",
+            "outside the sensible range",
+        ),
+        (
+            "    - {name: leg_thermal_lag, parameters: {tau_s: 900}}\n"
+            "    - {name: leg_thermal_lag, parameters: {tau_s: 1800}}\n",
+            "thermal_model.effects[1].name",
+            "given twice",
+        ),
+    ],
+)
+def test_a_thermal_model_out_of_range_or_twice_is_refused(tmp_path, effects, field, message):
+    """docs/formats.md D6: these reached diagnose and --method twin and gave tracebacks."""
+    text = (ROOT / "configs" / "symetrie-like.yaml").read_text().rstrip()
+    path = tmp_path / "hexapod.yaml"
+    path.write_text(text + "\nthermal_model:\n  effects:\n" + effects)
+    with pytest.raises(InputError, match=rf"field '{re.escape(field)}': .*{message}"):
         read_hexapod(path)
