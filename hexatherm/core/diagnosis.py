@@ -883,6 +883,9 @@ class Adequacy:
     temperature_rho : float
         Spearman's rho of each step's mean square residual with the mean leg
         temperature.
+    notes : tuple of str
+        What the verdict rests on, when it is weaker than usual (no floor; centre
+        uncertainties smaller than the references' scatter).
     """
 
     adequate: bool
@@ -906,6 +909,7 @@ class Adequacy:
     part_floor_um: FloatArray
     part_span_s: FloatArray
     temperature_rho: float
+    notes: tuple[str, ...] = ()
 
     def where(self) -> list[str]:
         """Where the unexplained part shows, in words: components, step kinds, time,
@@ -953,12 +957,17 @@ class Adequacy:
             f"({self.noise_floor_source}), chi2/dof {self.chi2_per_dof:.2f} "
             f"(1 ± {self.chi2_spread:.2f}, limit {self.chi2_limit:.2f})"
         )
+        notes = "".join(f"; note: {n}" for n in self.notes)
         if self.adequate:
-            return f"ADEQUATE: the residual left is noise: {numbers}"
+            return f"ADEQUATE: the residual left is noise: {numbers}{notes}"
+        size = (
+            f"{self.unexplained_rms_um:.3f} um RMS is left unexplained"
+            if np.isfinite(self.unexplained_rms_um)
+            else "the residual is structured"
+        )
         return (
-            f"NOT ADEQUATE: {self.unexplained_rms_um:.3f} um RMS is left unexplained "
-            f"({numbers}); because {'; '.join(self.reasons)}; it shows in: "
-            f"{'; '.join(self.where())}"
+            f"NOT ADEQUATE: {size} ({numbers}); because {'; '.join(self.reasons)}; "
+            f"it shows in: {'; '.join(self.where())}{notes}"
         )
 
 
@@ -1018,7 +1027,21 @@ def adequacy(hexapod: Hexapod, obs: Observations, fit: Fit) -> Adequacy:
         chi2 = float(np.sum(residual**2) / (floor * 1e-3) ** 2) / dof if m else float("nan")
         spread = float(np.sqrt(2.0 / dof + 2.0 / m)) if m else float("nan")
     limit = max(RMS_RATIO_LIMIT**2, 1.0 + CHI2_SIGMAS * spread)
-    unexplained = float(np.sqrt(max(0.0, final**2 - floor**2))) if np.isfinite(floor) else final
+    unexplained = (
+        float(np.sqrt(max(0.0, final**2 - floor**2))) if np.isfinite(floor) else float("nan")
+    )
+    notes = []
+    if not np.isfinite(floor):
+        notes.append(
+            "the noise floor is unknown (no centre uncertainties and fewer than two "
+            "references): only the structure tests are made"
+        )
+    elif obs.u_given and np.isfinite(ref_floor) and ref_floor > RMS_RATIO_LIMIT * floor:
+        notes.append(
+            f"consecutive references scatter by {ref_floor:.3f} um, more than the centres' "
+            f"uncertainties ({floor:.3f} um): they may leave out noise (the hexapod's "
+            "positioning, form errors), which the verdict then counts as unexplained"
+        )
 
     res = pose_residuals(hexapod, obs, fit)
     kinds = list(obs.plan.kinds)
@@ -1104,6 +1127,7 @@ def adequacy(hexapod: Hexapod, obs: Observations, fit: Fit) -> Adequacy:
         part_floor_um=part_floor,
         part_span_s=summary.part_span_s,
         temperature_rho=vs_temp.rho,
+        notes=tuple(notes),
     )
 
 

@@ -18,8 +18,9 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
-from hexatherm.core.diagnosis import RMS_RATIO_LIMIT
+from hexatherm.core.diagnosis import RMS_RATIO_LIMIT, adequacy, fit_model, rms_um
 from hexatherm.core.effects import EFFECTS, Effect, ThermocoupleLog, make_effect
+from hexatherm.core.plan import StepKind
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.diagnose.outputs import (
     RUNNER_UP_SHIFT_SE,
@@ -185,3 +186,26 @@ def test_a_registry_effect_once_added_leaves_an_adequate_model(tmp_path: Path) -
     # the truth stays inside the joint fit's bars (the runner-up is not in the data)
     assert abs(runner.values_with["tau_s"] - 1500.0) <= 3 * runner.std_errors_with["tau_s"]
     assert doc["added"][0]["runner_up"]["effect"] == runner.name
+
+
+def test_without_uncertainties_or_references_the_floor_is_unknown_not_invented(
+    tmp_path: Path,
+) -> None:
+    write_twin_session(diagnosis_campaign((), 7, n_targets=6), tmp_path / "s")
+    data = read_for_diagnosis(tmp_path / "s")
+    obs = data.observations
+    assert not obs.u_given
+    origin: StepKind = "origin"
+    target: StepKind = "target"
+    kinds = (origin,) + (target,) * (obs.n_steps - 1)
+    no_refs = dataclasses.replace(obs.plan, kinds=kinds)
+    blind = dataclasses.replace(obs, plan=no_refs)
+    fit = fit_model(data.hexapod, blind, (), ())
+    verdict = adequacy(data.hexapod, blind, fit)
+    assert np.isnan(verdict.noise_floor_um) and np.isnan(verdict.unexplained_rms_um)
+    assert np.isnan(verdict.chi2_per_dof)
+    assert verdict.adequate and "noise floor is unknown" in verdict.summary()
+    # with the references back the floor is their scatter: the simulator's noise
+    # (the fitted residual of this null campaign)
+    seen = adequacy(data.hexapod, obs, fit)
+    assert seen.noise_floor_um == pytest.approx(rms_um(fit.residual_mm), rel=0.2)
