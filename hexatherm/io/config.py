@@ -38,6 +38,36 @@ EFFECT_PARAMETERS: dict[str, tuple[str, ...]] = {
     name: tuple(cls.parameters) for name, cls in EFFECTS.items()
 }
 
+#: coefficients of thermal expansion accepted in a leg model, 1/K (invar to plastics; a
+#: value in ppm/K, 23 for 23e-6, is refused)
+CTE_RANGE_PER_K = (-1e-4, 1e-3)
+#: temperatures accepted, degC (a value in kelvin, 293.15 for 20 degC, is refused)
+TEMPERATURE_RANGE_C = (-60.0, 150.0)
+
+
+def _checked_cte(doc: YamlDoc, value: float, *keys: Any) -> float:
+    """``value`` (a CTE, 1/K) if within :data:`CTE_RANGE_PER_K`, else an InputError."""
+    low, high = CTE_RANGE_PER_K
+    if not low <= value <= high:
+        hint = f" (ppm/K? write {value:g}e-6)" if 0.1 <= abs(value) <= 1000 else ""
+        raise doc.error(
+            f"a coefficient of thermal expansion must be within [{low:g}, {high:g}] 1/K, "
+            f"got {value:g}{hint}",
+            *keys,
+        )
+    return value
+
+
+def _checked_temperature(doc: YamlDoc, value: float, *keys: Any) -> float:
+    """``value`` (degC) if within :data:`TEMPERATURE_RANGE_C`, else an InputError."""
+    low, high = TEMPERATURE_RANGE_C
+    if not low <= value <= high:
+        hint = " (looks like kelvin: the file is in degC)" if 200 <= value <= 450 else ""
+        raise doc.error(
+            f"a temperature must be within [{low:g}, {high:g}] degC, got {value:g}{hint}", *keys
+        )
+    return value
+
 
 # --------------------------------------------------------------------- hexapod
 def read_hexapod(path: str | os.PathLike[str]) -> Hexapod:
@@ -113,7 +143,7 @@ def _read_segments(doc: YamlDoc, *keys: Any) -> list[SegmentSpec]:
         doc.check_keys(["name", "material", "cte", "length"], *keys, j)
         name = doc.string(*keys, j, "name")
         material = doc.string(*keys, j, "material", default="")
-        cte = doc.number(*keys, j, "cte")
+        cte = _checked_cte(doc, doc.number(*keys, j, "cte"), *keys, j, "cte")
         length_value = doc.get(*keys, j, "length")
         length = (
             None if length_value == "variable" else doc.number(*keys, j, "length", positive=True)
@@ -127,7 +157,12 @@ def _read_segments(doc: YamlDoc, *keys: Any) -> list[SegmentSpec]:
 
 def _read_legs(doc: YamlDoc) -> LegThermalModel:
     doc.check_keys(["reference_temperature", "segments", "per_leg"], "legs")
-    t_ref = doc.number("legs", "reference_temperature", default=20.0)
+    t_ref = _checked_temperature(
+        doc,
+        doc.number("legs", "reference_temperature", default=20.0),
+        "legs",
+        "reference_temperature",
+    )
     has_segments = doc.get("legs", "segments", default=None) is not None
     has_per_leg = doc.get("legs", "per_leg", default=None) is not None
     if has_segments == has_per_leg:
@@ -444,9 +479,11 @@ def read_session(path: str | os.PathLike[str]) -> Session:
             "temperatures",
             "cmm",
             "quality",
+            "pose_check",
         ]
     )
     name = doc.string("name", default=path.parent.name)
+    _read_pose_check(doc)  # checked here, used by process (read_pose_check)
 
     def existing(*keys: Any) -> Path:
         rel = doc.string(*keys)
@@ -478,6 +515,43 @@ def read_session(path: str | os.PathLike[str]) -> Session:
         _read_cmm(doc),
         _read_quality(doc),
     )
+
+
+def read_pose_check(path: str | os.PathLike[str]) -> dict[str, Any] | None:
+    """The optional ``pose_check:`` mapping of a session file (an extension), checked.
+
+    ``path`` is the session file or its folder. The mapping's keys, all optional:
+    ``tolerance_mm`` and ``tolerance_deg`` (> 0, ``.inf`` turns the check off): the
+    largest deviation of a step's measured pose relative to O from its commanded pose
+    relative to O; ``offset`` (``[Tx, Ty, Tz, Rx, Ry, Rz]``, mm and deg): a known,
+    constant deviation of every step but O. Returns None without the mapping, else a
+    dict of the keys given (``offset`` as a list of six floats).
+    """
+    path = Path(path)
+    if path.is_dir():
+        path = path / "session.yaml"
+    return _read_pose_check(YamlDoc.load(path))
+
+
+def _read_pose_check(doc: YamlDoc) -> dict[str, Any] | None:
+    if doc.get("pose_check", default=None) is None:
+        return None
+    doc.check_keys(["tolerance_mm", "tolerance_deg", "offset"], "pose_check")
+    found: dict[str, Any] = {}
+    for key in ("tolerance_mm", "tolerance_deg"):
+        value = doc.get("pose_check", key, default=None)
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, int | float) or not value > 0:
+            raise doc.error(
+                f"expected a number > 0 (.inf turns the check off), got {value!r}",
+                "pose_check",
+                key,
+            )
+        found[key] = float(value)
+    if doc.get("pose_check", "offset", default=None) is not None:
+        found["offset"] = doc.vector("pose_check", "offset", size=6)
+    return found
 
 
 def _read_quality(doc: YamlDoc) -> dict[str, float]:
