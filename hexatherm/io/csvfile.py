@@ -7,7 +7,24 @@ holds is told by (in this order) its extra columns, its name (``centres``,
 with one row means centres). ``time`` is an ISO 8601 timestamp or a number of seconds, the same kind
 on every row.
 
-Errors name the file, the line (header = line 1) and the column.
+Errors name the file, the line (header = line 1) and the column. What is refused:
+
+* files that are not regular, or larger than
+  :data:`~hexatherm.io.files.MAX_MEASUREMENT_BYTES`; text that is not UTF-8;
+* a file whose last line has no line break: it may be cut short, in the middle of
+  its last number (``allow_truncated`` drops that line, with an
+  :class:`~hexatherm.io.files.InputWarning`);
+* ISO times that are not ``YYYY-MM-DDTHH:MM[:SS[.f]]`` with two-digit fields and
+  an optional offset (``Z``, ``+HH:MM``, ``+HHMM``, ``+HH``): ``T10:1``, ``09:35:5``,
+  ``2019-12-2`` and a date alone are refused rather than guessed; a file mixing times
+  with and without a UTC offset (:func:`~hexatherm.io.records.check_time_zones`
+  compares files); any year from 1 to 9999;
+* non-finite numbers (``nan``, ``inf``, ``1e400``); ``u_um`` outside (0, 1000] um,
+  a ``diameter`` <= 0, a ``form_um`` < 0, an ``n`` that is not a whole number >= 1;
+  temperatures outside [-60, 150] degC (kelvin?);
+* a ball measured twice in one step (two groups of rows, or two centre rows) and
+  a point label seen twice (:func:`~hexatherm.io.records.check_groups`;
+  ``keep_later`` keeps the later group).
 """
 
 from __future__ import annotations
@@ -15,8 +32,10 @@ from __future__ import annotations
 import io
 import os
 import re
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -25,24 +44,26 @@ import pandas as pd
 
 from hexatherm.core.plan import NAME_PATTERN
 from hexatherm.errors import InputError
-from hexatherm.io.records import RecordKind, Records, TimeKind, seconds_to_iso
+from hexatherm.io.files import InputWarning, read_bytes, refuse_utf16
+from hexatherm.io.records import RecordKind, Records, TimeKind, check_groups, seconds_to_iso
 
 BASE_COLUMNS = ("label", "ball", "x", "y", "z", "time")
 CENTRE_EXTRA = ("diameter", "form_um", "n", "u_um")  # all but diameter: extensions
 POINT_EXTRA = ("i", "j", "k")
 
 
+#: The largest standard uncertainty ``u_um`` of a centre accepted, um
+U_UM_MAX = 1000.0
+#: Temperatures accepted in a thermocouple log, degC (a value in kelvin is refused)
+TEMPERATURE_RANGE_C = (-60.0, 150.0)
+
+
 def read_text(path: str | os.PathLike[str]) -> str:
-    """A file's text as UTF-8 (BOM allowed), any line ending; InputError when unreadable."""
+    """A file's text as UTF-8 (BOM allowed), any line ending; InputError when it is not
+    a regular file of a sane size, unreadable, UTF-16 or otherwise not UTF-8, or binary."""
     path = os.fspath(path)
-    try:
-        raw = Path(path).read_bytes()
-    except FileNotFoundError:
-        raise InputError("file not found", path=path) from None
-    except IsADirectoryError:
-        raise InputError("is a directory, expected a file", path=path) from None
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", path=path) from None
+    raw = read_bytes(path)
+    refuse_utf16(raw, path)
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
@@ -52,6 +73,39 @@ def read_text(path: str | os.PathLike[str]) -> str:
         line = text[: text.index("\x00")].count("\n") + 1
         raise InputError("NUL byte: not a text file", path=path, line=line)
     return text
+
+
+def _complete_lines(text: str, path: str, allow_truncated: bool) -> str:
+    """``text`` (line ends made LF) when its last line ends with a line break; else
+    InputError naming the line and the field it ends in, or with ``allow_truncated``
+    the text without that line and an :class:`InputWarning`."""
+    if "\r" in text:
+        text = text.replace("\r\n", "\n").replace("\r", "\n")
+    cut = text.rfind("\n") + 1
+    last = text[cut:]
+    if not last.strip():
+        return text
+    line = text.count("\n", 0, cut) + 1
+    header = text.partition("\n")[0].split(",")
+    index = last.count(",")
+    field = header[index].strip() if line > 1 and index < len(header) else None
+    inside = f", inside field '{field}'" if field else ""
+    if allow_truncated:
+        warnings.warn(
+            InputWarning(
+                f"{path}:{line}: the file ends without a line break{inside}: "
+                "its last line dropped (cut short?)"
+            ),
+            stacklevel=3,
+        )
+        return text[:cut]
+    raise InputError(
+        f"the file ends without a line break{inside}: cut short? (a complete file ends "
+        "with a line break; --allow-truncated drops this line)",
+        path=path,
+        line=line,
+        field=field,
+    )
 
 
 def _frame(text: str, path: str) -> pd.DataFrame:
@@ -79,9 +133,27 @@ def _frame(text: str, path: str) -> pd.DataFrame:
     except (ValueError, pd.errors.EmptyDataError) as exc:
         raise InputError(f"malformed CSV: {exc}", path=path, line=1) from None
     frame.columns = [str(c).strip() for c in frame.columns]
+    if '"' not in text:
+        _refuse_short_rows(text, list(frame.columns), path)
     frame.index = np.arange(len(frame)) + 2
     frame = frame.fillna("")
     return frame.apply(lambda col: col.str.strip())
+
+
+def _refuse_short_rows(text: str, columns: list[str], path: str) -> None:
+    """A row with fewer fields than the header (pandas would fill them in as empty): cut
+    short, or a value missing without its comma. Blank lines are left alone."""
+    expected = len(columns) - 1
+    for number, line in enumerate(text.split("\n")[1:], start=2):
+        found = line.count(",")
+        if found < expected and line.strip():
+            raise InputError(
+                f"expected {expected + 1} comma-separated fields, found {found + 1}: "
+                f"'{columns[found + 1]}' and after are missing (cut short?)",
+                path=path,
+                line=number,
+                field=columns[found + 1],
+            )
 
 
 def _drop_blank(frame: pd.DataFrame) -> pd.DataFrame:
@@ -108,40 +180,108 @@ def _numbers(
     return values
 
 
-def _times(frame: pd.DataFrame, path: str) -> tuple[npt.NDArray[np.float64], TimeKind]:
+#: An ISO 8601 time as hexatherm reads it: two-digit fields, a time of day, an optional
+#: offset (``T`` or a blank between date and time)
+ISO_TIME = re.compile(
+    r"[0-9]{4}-[0-9]{2}-[0-9]{2}[T ][0-9]{2}:[0-9]{2}(?::[0-9]{2}(?:\.[0-9]{1,9})?)?"
+    r"(?P<offset>Z|[+-][0-9]{2}(?::?[0-9]{2})?)?"
+)
+_ISO_HELP = "YYYY-MM-DDTHH:MM[:SS[.ffffff]][Z|+HH:MM]"
+
+
+def _iso_layout(values: npt.NDArray[np.str_]) -> bool | None:
+    """Whether every time has an offset (True) or none has (False), when all follow one
+    layout that :data:`ISO_TIME` accepts (digits anywhere the first has one, the
+    same other characters); None when they do not: then each is checked on its own."""
+    codes = np.ascontiguousarray(values).view(np.uint32).reshape(values.size, -1)
+    digit = (codes >= 48) & (codes <= 57)
+    shape = np.where(digit, 48, codes)
+    if not np.array_equal(shape, np.broadcast_to(shape[0], shape.shape)):
+        return None
+    template = "".join(map(chr, shape[0].tolist())).rstrip("\0")
+    match = ISO_TIME.fullmatch(template)
+    return None if match is None else match.group("offset") is not None
+
+
+def _iso_seconds(
+    text: pd.Series, lines: npt.NDArray[np.int64], path: str
+) -> tuple[npt.NDArray[np.float64], bool]:
+    """POSIX seconds of strict ISO times (naive ones taken as UTC) and whether they have
+    an offset; InputError for a time off the layout, mixed offsets or an invalid date."""
+    values = text.to_numpy(dtype=str)
+    aware = _iso_layout(values) if values.size else False
+    if aware is None:  # check one by one, in order, for the first bad one
+        first_aware: bool | None = None
+        for row, value in enumerate(values.tolist()):
+            match = ISO_TIME.fullmatch(value)
+            if match is None:
+                raise InputError(
+                    f"not an ISO 8601 time with two-digit fields ({_ISO_HELP}) "
+                    f"or a number of seconds: {value!r}",
+                    path=path,
+                    line=int(lines[row]),
+                    field="time",
+                )
+            has = match.group("offset") is not None
+            if first_aware is None:
+                first_aware = has
+            elif has != first_aware:
+                what = "has a UTC offset" if has else "has no UTC offset"
+                raise InputError(
+                    f"time {value!r} {what} but the time on line {int(lines[0])} "
+                    f"({str(values[0])!r}) {'has none' if has else 'has one'}: mixed naive and "
+                    "offset-aware times; give every time an offset or none",
+                    path=path,
+                    line=int(lines[row]),
+                    field="time",
+                )
+        aware = bool(first_aware)
+    stamps = pd.to_datetime(text, errors="coerce", utc=True, format="ISO8601")
+    seconds = (stamps - pd.Timestamp(0, tz="UTC")).dt.total_seconds().to_numpy(dtype=np.float64)
+    missing = np.flatnonzero(np.isnan(seconds))
+    for row in missing.tolist():  # beyond pandas' years 1677-2262, or invalid
+        value = str(values[row])
+        try:
+            stamp = datetime.fromisoformat(value)
+        except ValueError as exc:
+            raise InputError(
+                f"not a valid date and time: {value!r} ({exc})",
+                path=path,
+                line=int(lines[row]),
+                field="time",
+            ) from None
+        if stamp.tzinfo is None:
+            stamp = stamp.replace(tzinfo=UTC)
+        seconds[row] = (stamp - datetime(1970, 1, 1, tzinfo=UTC)).total_seconds()
+    return np.asarray(seconds, dtype=np.float64), aware
+
+
+def _times(frame: pd.DataFrame, path: str) -> tuple[npt.NDArray[np.float64], TimeKind, bool | None]:
+    """The ``time`` column: seconds, its kind, and (ISO) whether it has UTC offsets."""
     text = frame["time"]
+    lines = frame.index.to_numpy(dtype=np.int64)
     empty = (text == "").to_numpy()
     if np.any(empty):
         row = int(np.argmax(empty))
-        raise InputError("missing time", path=path, line=int(frame.index[row]), field="time")
+        raise InputError("missing time", path=path, line=int(lines[row]), field="time")
     if all(":" in value for value in text.to_numpy()):
         is_number = np.zeros(len(text), dtype=bool)  # numbers have no ':': skip parsing them
     else:
         numeric = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
         is_number = np.isfinite(numeric)
         if np.all(is_number):
-            return numeric, "seconds"
+            return numeric, "seconds", None
     if np.any(is_number):
         row = int(np.argmax(is_number))
         raise InputError(
             f"time {text.iloc[row]!r} is a number of seconds but other rows are "
             "ISO 8601 timestamps: use one kind in a file",
             path=path,
-            line=int(frame.index[row]),
+            line=int(lines[row]),
             field="time",
         )
-    stamps = pd.to_datetime(text, errors="coerce", utc=True, format="ISO8601")
-    bad = stamps.isna().to_numpy()
-    if np.any(bad):
-        row = int(np.argmax(bad))
-        raise InputError(
-            f"not an ISO 8601 timestamp or a number of seconds: {text.iloc[row]!r}",
-            path=path,
-            line=int(frame.index[row]),
-            field="time",
-        )
-    seconds = (stamps - pd.Timestamp(0, tz="UTC")).dt.total_seconds().to_numpy(dtype=np.float64)
-    return np.asarray(seconds, dtype=np.float64), "iso"
+    seconds, aware = _iso_seconds(text, lines, path)
+    return seconds, "iso", aware
 
 
 def _check_header(frame: pd.DataFrame, path: str, extras: tuple[str, ...]) -> None:
@@ -193,13 +333,39 @@ def _kind(frame: pd.DataFrame, path: str) -> RecordKind:
     return "centres" if len(counts) and (counts == 1).mean() >= 0.5 else "points"
 
 
-def read_measurement_csv(path: str | os.PathLike[str], kind: RecordKind | None = None) -> Records:
-    """Read a centres or points CSV file into :class:`Records`."""
+def read_measurement_csv(
+    path: str | os.PathLike[str],
+    kind: RecordKind | None = None,
+    *,
+    allow_truncated: bool = False,
+    keep_later: bool = False,
+) -> Records:
+    """Read a centres or points CSV file into :class:`Records`.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file.
+    kind : {"centres", "points"}, optional
+        What the file holds; told from its columns, name or content when not given.
+    allow_truncated : bool, optional
+        Drop a last line without a line break (with an :class:`InputWarning`) instead
+        of refusing the file.
+    keep_later : bool, optional
+        Keep the later group of a ball measured twice in one step (with an
+        :class:`InputWarning`) instead of refusing the file; see
+        :func:`~hexatherm.io.records.check_groups`.
+
+    Raises
+    ------
+    InputError
+        Naming the file, the line and the field (see the module's list).
+    """
     path = os.fspath(path)
-    text = read_text(path)
+    text = _complete_lines(read_text(path), path, allow_truncated)
     fast = _fast_measurement_csv(text, path, kind)
     if fast is not None:
-        return fast
+        return check_groups(fast, keep_later=keep_later)
     frame = _frame(text, path)
     _check_header(frame, path, CENTRE_EXTRA + POINT_EXTRA)
     frame = _drop_blank(frame)
@@ -217,33 +383,23 @@ def read_measurement_csv(path: str | os.PathLike[str], kind: RecordKind | None =
         )
     label, ball = _names(frame, "label", path), _names(frame, "ball", path)
     xyz = np.column_stack([_numbers(frame, c, path) for c in ("x", "y", "z")])
-    time, time_kind = _times(frame, path)
+    time, time_kind, aware = _times(frame, path)
     lines = frame.index.to_numpy(dtype=np.int64)
     diameter = ijk = None
     extra: dict[str, object] = {}
     if kind == "centres":
-        keys = pd.Series(label).str.cat(pd.Series(ball), sep="\x1f")
-        dup = keys.duplicated().to_numpy()
-        if np.any(dup):
-            row = int(np.argmax(dup))
-            first = int(np.argmax((keys == keys.iloc[row]).to_numpy()))
-            raise InputError(
-                f"duplicate centre for step {label[row]} ball {ball[row]} "
-                f"(also on line {lines[first]})",
-                path=path,
-                line=int(lines[row]),
-                field="label",
-            )
-        if "diameter" in frame.columns:
-            diameter = _numbers(frame, "diameter", path, allow_empty=True)
-        for column in ("form_um", "n", "u_um"):
+        checked: dict[str, npt.NDArray[np.float64] | None] = {}
+        for column in CENTRE_EXTRA:
             if column in frame.columns:
-                extra[column] = _numbers(frame, column, path, allow_empty=True)
+                checked[column] = _numbers(frame, column, path, allow_empty=True)
+        _check_centre_columns(checked, lines, path, frame)
+        diameter = checked.pop("diameter", None)
+        extra.update(checked)
     elif all(c in frame.columns for c in POINT_EXTRA):
         ijk = np.column_stack([_numbers(frame, c, path, allow_empty=True) for c in POINT_EXTRA])
     elif any(c in frame.columns for c in POINT_EXTRA):
         raise InputError("give all of i, j, k or none", path=path, line=1)
-    return Records(
+    records = Records(
         path=path,
         kind=kind,
         label=label,
@@ -255,7 +411,43 @@ def read_measurement_csv(path: str | os.PathLike[str], kind: RecordKind | None =
         diameter_mm=diameter,
         ijk=ijk,
         extra=extra,
+        time_aware=aware,
     )
+    return check_groups(records, keep_later=keep_later)
+
+
+#: What the extension columns of a centres file must hold: (test, requirement)
+_CENTRE_RULES: dict[str, tuple[Callable[[npt.NDArray[np.float64]], npt.NDArray[np.bool_]], str]] = {
+    "diameter": (lambda v: v > 0, "a diameter must be > 0 mm"),
+    "form_um": (lambda v: v >= 0, "a form error must be >= 0 um"),
+    "n": (lambda v: (v >= 1) & (v == np.round(v)), "a point count must be a whole number >= 1"),
+    "u_um": (
+        lambda v: (v > 0) & (v <= U_UM_MAX),
+        f"a standard uncertainty must be > 0 and <= {U_UM_MAX:g} um",
+    ),
+}
+
+
+def _check_centre_columns(
+    columns: dict[str, npt.NDArray[np.float64] | None],
+    lines: npt.NDArray[np.int64],
+    path: str,
+    frame: pd.DataFrame | None = None,
+) -> None:
+    """InputError at the first value of an extension column out of its range (empty
+    values, NaN here, are allowed: not given)."""
+    for column, values in columns.items():
+        if values is None:
+            continue
+        test, requirement = _CENTRE_RULES[column]
+        with np.errstate(invalid="ignore"):
+            bad = ~test(values) & ~np.isnan(values)
+        if np.any(bad):
+            row = int(np.argmax(bad))
+            shown = frame[column].iloc[row] if frame is not None else str(float(values[row]))
+            raise InputError(
+                f"{requirement}, got {shown!r}", path=path, line=int(lines[row]), field=column
+            )
 
 
 def _fast_measurement_csv(text: str, path: str, kind: RecordKind | None) -> Records | None:
@@ -316,16 +508,16 @@ def _fast_measurement_csv(text: str, path: str, kind: RecordKind | None) -> Reco
     if any(c not in extras for c in columns[6:]):
         return None
     label, ball = frame["label"].to_numpy(dtype=str), frame["ball"].to_numpy(dtype=str)
+    lines = frame.index.to_numpy(dtype=np.int64)
     try:
-        time, time_kind = _times(frame, path)
+        time, time_kind, aware = _times(frame, path)
+        if kind == "centres":
+            _check_centre_columns({c: values.get(c) for c in CENTRE_EXTRA}, lines, path)
     except InputError:
         return None
-    lines = frame.index.to_numpy(dtype=np.int64)
     diameter = ijk = None
     extra: dict[str, object] = {}
     if kind == "centres":
-        if pd.Series(label).str.cat(pd.Series(ball), sep="\x1f").duplicated().any():
-            return None
         if "diameter" in values:
             diameter = values["diameter"]
         extra = {c: values[c] for c in ("form_um", "n", "u_um") if c in values}
@@ -346,6 +538,7 @@ def _fast_measurement_csv(text: str, path: str, kind: RecordKind | None) -> Reco
         diameter_mm=diameter,
         ijk=ijk,
         extra=extra,
+        time_aware=aware,
     )
 
 
@@ -385,6 +578,9 @@ class Temperatures:
     time_kind : {"iso", "seconds"}
     legs_C : ndarray, shape (m, 6)
     others_C : dict of str to ndarray, shape (m,)
+    time_aware : bool or None
+        For ISO times: whether they carry a UTC offset (see
+        :func:`~hexatherm.io.records.check_time_zones`).
     """
 
     path: str
@@ -392,15 +588,38 @@ class Temperatures:
     time_kind: TimeKind
     legs_C: npt.NDArray[np.float64]
     others_C: dict[str, npt.NDArray[np.float64]]
+    time_aware: bool | None = None
 
 
 LEG_COLUMNS = tuple(f"leg{i}" for i in range(1, 7))
 
 
-def read_temperatures(path: str | os.PathLike[str]) -> Temperatures:
-    """Read ``temperatures.csv`` (time sorted, at least one row)."""
+def _temperatures(frame: pd.DataFrame, column: str, path: str) -> npt.NDArray[np.float64]:
+    values = _numbers(frame, column, path)
+    low, high = TEMPERATURE_RANGE_C
+    bad = (values < low) | (values > high)
+    if np.any(bad):
+        row = int(np.argmax(bad))
+        hint = " (kelvin? the log is in degC)" if 200 <= values[row] <= 450 else ""
+        raise InputError(
+            f"temperature {frame[column].iloc[row]!r} degC outside [{low:g}, {high:g}]{hint}",
+            path=path,
+            line=int(frame.index[row]),
+            field=column,
+        )
+    return values
+
+
+def read_temperatures(
+    path: str | os.PathLike[str], *, allow_truncated: bool = False
+) -> Temperatures:
+    """Read ``temperatures.csv`` (time sorted, at least one row).
+
+    ``allow_truncated`` drops a last line without a line break (a logger stopped while
+    writing), with an :class:`InputWarning`, instead of refusing the file.
+    """
     path = os.fspath(path)
-    frame = _frame(read_text(path), path)
+    frame = _frame(_complete_lines(read_text(path), path, allow_truncated), path)
     columns = list(frame.columns)
     expected = ("time",) + LEG_COLUMNS
     if tuple(columns[:7]) != expected:
@@ -414,38 +633,48 @@ def read_temperatures(path: str | os.PathLike[str]) -> Temperatures:
     frame = _drop_blank(frame)
     if frame.empty:
         raise InputError("no data rows", path=path, line=2)
-    time, kind = _times(frame, path)
+    time, kind, aware = _times(frame, path)
     decreasing = np.diff(time) < 0
     if np.any(decreasing):
         row = int(np.argmax(decreasing)) + 1
         raise InputError("time goes backwards", path=path, line=int(frame.index[row]), field="time")
-    legs = np.column_stack([_numbers(frame, c, path) for c in LEG_COLUMNS])
-    others = {c: _numbers(frame, c, path) for c in columns[7:]}
-    return Temperatures(path, time, kind, legs, others)
+    legs = np.column_stack([_temperatures(frame, c, path) for c in LEG_COLUMNS])
+    others = {c: _temperatures(frame, c, path) for c in columns[7:]}
+    return Temperatures(path, time, kind, legs, others, aware)
 
 
 def read_measurements(
-    path: str | os.PathLike[str], *, progress: Callable[[int, int], None] | None = None
+    path: str | os.PathLike[str],
+    *,
+    progress: Callable[[int, int], None] | None = None,
+    allow_truncated: bool = False,
+    keep_later: bool = False,
 ) -> list[Records]:
     """Read any measurement file: centres/points CSV or DMIS output (by extension or content).
 
     ``progress(lines_done, lines_total)``, when given, is called now and then while a
     DMIS file is read the slow way (one with continuations or comments: seconds for
     a hundred thousand points); a CSV file or a plain DMIS file reports once, done.
+    ``allow_truncated`` and ``keep_later``: as for :func:`read_measurement_csv` and
+    :func:`~hexatherm.io.dmis.read_dmis` (a DMIS file without ``ENDFIL``).
     """
     path = os.fspath(path)
     suffix = Path(path).suffix.lower()
     if suffix in (".dmo", ".dms", ".dmi"):
         from hexatherm.io.dmis import read_dmis
 
-        return read_dmis(path, progress=progress)
+        return read_dmis(
+            path, progress=progress, allow_truncated=allow_truncated, keep_later=keep_later
+        )
     if suffix != ".csv":
         text = read_text(path)
         from hexatherm.io.dmis import looks_like_dmis, read_dmis
 
         if looks_like_dmis(text[:4096]):
-            return read_dmis(path, progress=progress)
-    records = [read_measurement_csv(path)]
+            return read_dmis(
+                path, progress=progress, allow_truncated=allow_truncated, keep_later=keep_later
+            )
+    records = [read_measurement_csv(path, allow_truncated=allow_truncated, keep_later=keep_later)]
     if progress is not None:
         progress(len(records[0]) + 1, len(records[0]) + 1)
     return records

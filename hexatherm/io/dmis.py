@@ -22,6 +22,14 @@ Lines are joined into statements the way CMM software writes them:
 
 Each actual feature becomes a :class:`Feature`; :func:`read_dmis` turns the
 hexatherm-named spheres and points into :class:`~hexatherm.io.records.Records`.
+
+A DMIS output ends with ``ENDFIL``: a file whose last statement is not ``ENDFIL``
+was cut short, perhaps in the middle of a number that still reads as one, and is
+refused, naming its last record and the field it may be cut in. With
+``allow_truncated`` its last actual feature (and whatever follows it) is dropped
+instead, with an :class:`~hexatherm.io.files.InputWarning`. A ball measured twice in
+one step and a point label seen twice are refused (see
+:func:`~hexatherm.io.records.check_groups`; ``keep_later`` keeps the later group).
 Every problem in what hexatherm reads raises :class:`~hexatherm.errors.InputError`
 naming the file, the line where the statement starts and the field.
 """
@@ -31,16 +39,18 @@ from __future__ import annotations
 import math
 import os
 import re
+import warnings
+from collections import deque
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from datetime import UTC, date, datetime, time, timedelta
-from pathlib import Path
 from typing import NoReturn
 
 import numpy as np
 
 from hexatherm.errors import InputError
-from hexatherm.io.records import RecordKind, Records
+from hexatherm.io.files import InputWarning, read_bytes, refuse_utf16
+from hexatherm.io.records import RecordKind, Records, check_groups
 
 __all__ = [
     "DMIS_SUFFIXES",
@@ -230,7 +240,10 @@ def looks_like_dmis(text_head: str) -> bool:
 
 
 def read_dmis_features(
-    path: str | os.PathLike[str], *, progress: Progress | None = None
+    path: str | os.PathLike[str],
+    *,
+    progress: Progress | None = None,
+    allow_truncated: bool = False,
 ) -> list[Feature]:
     """Read every actual feature ``FA(...)`` of a DMIS output file, in file order.
 
@@ -241,6 +254,10 @@ def read_dmis_features(
     progress : callable, optional
         Called as ``progress(lines_done, lines_total)`` now and then while the
         statements are read (for a progress bar: large files take seconds).
+    allow_truncated : bool, optional
+        Read a file that does not end with ``ENDFIL`` without its last actual
+        feature (and what follows it), with an :class:`InputWarning`, instead of
+        refusing it.
 
     Returns
     -------
@@ -249,18 +266,27 @@ def read_dmis_features(
     Raises
     ------
     InputError
-        If the file cannot be read, is not UTF-8, ends inside a continued
-        statement, has a bad ``UNITS``, ``DATE`` or ``TIME`` statement, or an
-        actual feature is malformed (non-numeric coordinate, missing field, ...).
+        If the file is not a regular file of a sane size, cannot be read, is not
+        UTF-8, does not end with ``ENDFIL`` (unless ``allow_truncated``), has a bad
+        ``UNITS``, ``DATE`` or ``TIME`` statement, or an actual feature is malformed
+        (non-numeric coordinate, missing field, ...).
 
     See Also
     --------
     features_from_text : the same from text already in memory.
     """
-    return features_from_text(_read_text(path), path, progress=progress)
+    return features_from_text(
+        _read_text(path), path, progress=progress, allow_truncated=allow_truncated
+    )
 
 
-def read_dmis(path: str | os.PathLike[str], *, progress: Progress | None = None) -> list[Records]:
+def read_dmis(
+    path: str | os.PathLike[str],
+    *,
+    progress: Progress | None = None,
+    allow_truncated: bool = False,
+    keep_later: bool = False,
+) -> list[Records]:
     """Read the hexatherm measurements of a DMIS output file.
 
     Sphere actuals ``FA(<label>_<ball>)=FEAT/SPHERE,...`` give ball centres,
@@ -273,6 +299,11 @@ def read_dmis(path: str | os.PathLike[str], *, progress: Progress | None = None)
         The DMIS file.
     progress : callable, optional
         As for :func:`read_dmis_features`.
+    allow_truncated : bool, optional
+        As for :func:`read_dmis_features`.
+    keep_later : bool, optional
+        Keep the later group of a ball measured twice in one step, with an
+        :class:`InputWarning` (see :func:`~hexatherm.io.records.check_groups`).
 
     Returns
     -------
@@ -286,22 +317,35 @@ def read_dmis(path: str | os.PathLike[str], *, progress: Progress | None = None)
     ------
     InputError
         As :func:`read_dmis_features`, and when a sphere or point label does not
-        follow hexatherm's naming or a sphere or point has no ``DATE=`` and
-        ``TIME=`` before it.
+        follow hexatherm's naming, a sphere or point has no ``DATE=`` and
+        ``TIME=`` before it, a ball is measured twice in a step (unless
+        ``keep_later``) or a point label is seen twice.
     """
     data = _read_bytes(path)
     text = _decode(data, path)
-    fast = _fast_records(data, path)
+    fast_data: bytes | None = data
+    dropped: tuple[int, str] | None = None
+    if not _ends_with_endfil(data):
+        cut = _cut_last_record(data) if allow_truncated else None
+        fast_data, dropped = (None, None) if cut is None else cut
+    fast = None if fast_data is None else _fast_records(fast_data, path)
     if fast is not None:
+        if dropped is not None:
+            _warn_truncated(path, *dropped)
         if progress is not None:
             lines = text.count("\n") + 1
             progress(lines, lines)
-        return fast
-    return records_from_features(features_from_text(text, path, progress=progress), path)
+        return [check_groups(records, keep_later=keep_later) for records in fast]
+    features = features_from_text(text, path, progress=progress, allow_truncated=allow_truncated)
+    return records_from_features(features, path, keep_later=keep_later)
 
 
 def features_from_text(
-    text: str, path: str | os.PathLike[str] = "<string>", *, progress: Progress | None = None
+    text: str,
+    path: str | os.PathLike[str] = "<string>",
+    *,
+    progress: Progress | None = None,
+    allow_truncated: bool = False,
 ) -> list[Feature]:
     """Read the actual features of DMIS text (see :func:`read_dmis_features`).
 
@@ -313,6 +357,9 @@ def features_from_text(
         The file name used in error messages.
     progress : callable, optional
         As for :func:`read_dmis_features`.
+    allow_truncated : bool, optional
+        As for :func:`read_dmis_features`: text that does not end with ``ENDFIL`` is
+        refused unless it is given.
 
     Returns
     -------
@@ -343,27 +390,165 @@ def features_from_text(
     angle_unit = "ANGDEC"
     day: date | None = None
     clock: time | None = None
-    statements = _statements(text, path)
+    statements, unfinished = _split_statements(text)
+    ended = unfinished is None and _is_endfil(statements)
+    if not ended and allow_truncated:
+        if unfinished is not None:
+            statements.append(unfinished[:2])
+        last = _last_actual(statements)
+        if last is None and unfinished is not None:
+            last = len(statements) - 1
+        if last is not None:
+            _warn_truncated(path, statements[last][0], _shown_label(statements[last][1]))
+            statements = statements[:last]
+    elif unfinished is not None:
+        _raise_unfinished(unfinished, text, path)
     total = statements[-1][0] if statements else 0
-    for count, (line, statement) in enumerate(statements):
-        if progress is not None and count % _PROGRESS_EVERY == 0:
-            progress(line, total)
-        if _FA_START.match(statement):
-            when = None if day is None or clock is None else datetime.combine(day, clock)
-            features.append(_parse_actual(statement, line, path, scale, angle_unit, when))
-        elif (match := _UNITS.match(statement)) is not None:
-            scale, angle_unit = _parse_units(match.group(1), line, path)
-        elif (match := _DATE.match(statement)) is not None:
-            day = _parse_date(match.group(1), line, path)
-        elif (match := _TIME.match(statement)) is not None:
-            clock = _parse_time(match.group(1), line, path)
+    try:
+        for count, (line, statement) in enumerate(statements):
+            if progress is not None and count % _PROGRESS_EVERY == 0:
+                progress(line, total)
+            if _FA_START.match(statement):
+                when = None if day is None or clock is None else datetime.combine(day, clock)
+                features.append(_parse_actual(statement, line, path, scale, angle_unit, when))
+            elif (match := _UNITS.match(statement)) is not None:
+                scale, angle_unit = _parse_units(match.group(1), line, path)
+            elif (match := _DATE.match(statement)) is not None:
+                day = _parse_date(match.group(1), line, path)
+            elif (match := _TIME.match(statement)) is not None:
+                clock = _parse_time(match.group(1), line, path)
+    except InputError as error:
+        if ended or allow_truncated or error.line is None or error.line < total:
+            raise
+        raise InputError(
+            f"{error.message} (the file does not end with ENDFIL: cut short? "
+            "--allow-truncated drops its last record)",
+            path=error.path,
+            line=error.line,
+            field=error.field,
+        ) from None
+    if not ended and not allow_truncated:
+        _raise_not_ended(statements, path)
     if progress is not None:
         progress(total, total)
     return features
 
 
+def _is_endfil(statements: Sequence[tuple[int, str]]) -> bool:
+    return bool(statements) and statements[-1][1].strip().upper() == "ENDFIL"
+
+
+def _last_actual(statements: Sequence[tuple[int, str]]) -> int | None:
+    """Index of the last ``FA(...)`` statement, or None."""
+    for index in range(len(statements) - 1, -1, -1):
+        if _FA_START.match(statements[index][1]):
+            return index
+    return None
+
+
+def _shown_label(statement: str) -> str:
+    match = _FA_LABEL.match(statement)
+    return f"FA({match.group(1).strip()})" if match else statement[:40]
+
+
+_FIELD_NAMES = {
+    ("SPHERE", "CART"): ("x", "y", "z", "diameter"),
+    ("POINT", "CART"): ("x", "y", "z", "i", "j", "k"),
+    ("SPHERE", "POL"): ("r", "angle", "z", "diameter"),
+    ("POINT", "POL"): ("r", "angle", "z", "i", "j", "k"),
+}
+
+
+def _last_field(statement: str) -> str:
+    """The field an actual feature statement ends in (where a cut would be)."""
+    label = _FA_LABEL.match(statement)
+    if label is None:
+        return "label"
+    feat = _FA_FEAT.fullmatch(statement, label.end())
+    if feat is None:
+        return "type"
+    parts = [part.strip().upper() for part in feat.group(1).split(",")]
+    systems = [n for n, part in enumerate(parts[1:], start=1) if part in _SYSTEMS]
+    if not systems:
+        return "type" if len(parts) == 1 else "coordinates"
+    at = systems[0]
+    count = len(parts) - at - 1
+    if count == 0:
+        return "coordinates"
+    names = _FIELD_NAMES.get((parts[0], parts[at]), ("x", "y", "z"))
+    return names[count - 1] if count <= len(names) else "values"
+
+
+def _raise_not_ended(statements: Sequence[tuple[int, str]], path: str | os.PathLike[str]) -> None:
+    last = _last_actual(statements)
+    if last is None:
+        raise InputError(
+            "the file does not end with ENDFIL: cut short? (--allow-truncated reads it as it is)",
+            path=path,
+            line=statements[-1][0] if statements else 1,
+        )
+    line, statement = statements[last]
+    field = _last_field(statement)
+    raise InputError(
+        f"the file does not end with ENDFIL: cut short? Its last record {_shown_label(statement)} "
+        f"may be cut in field '{field}' (--allow-truncated drops it)",
+        path=path,
+        line=line,
+        field=field,
+    )
+
+
+def _warn_truncated(path: str | os.PathLike[str], line: int, label: str) -> None:
+    warnings.warn(
+        InputWarning(
+            f"{os.fspath(path)}:{line}: the file does not end with ENDFIL (cut short?): "
+            f"its last record {label} and what follows it dropped"
+        ),
+        stacklevel=3,
+    )
+
+
+_FA_LINE = re.compile(rb"^[ \t]*FA[ \t]*\(", re.IGNORECASE | re.MULTILINE)
+
+
+def _ends_with_endfil(data: bytes) -> bool:
+    """Whether the last line with text is ``ENDFIL``, on bytes (the fast lane's test: when
+    it says so, so do the statements, for a file the fast lane reads; otherwise the
+    general reader decides)."""
+    tail = data.rstrip(b" \t\r\n")
+    return tail[tail.rfind(b"\n") + 1 :].strip(b" \t").upper() == b"ENDFIL"
+
+
+def _cut_last_record(data: bytes) -> tuple[bytes, tuple[int, str] | None] | None:
+    """``data`` without its last ``FA(`` line and what follows, and that line's number and
+    label (None when there is no actual feature), for a file whose lines are its
+    statements (no ``$``); None when the general reader must decide (a ``$``, a line
+    after it that starts with ``,`` or that the general reader would take for an
+    actual feature)."""
+    if b"$" in data:
+        return None
+    last = deque(_FA_LINE.finditer(data), maxlen=1)
+    found = last[0] if last else None
+    start = 0 if found is None else found.start()
+    tail = data[start:].decode("utf-8", "replace")
+    if start == 0:
+        tail = tail.removeprefix("\ufeff")
+    lines = tail.split("\n")
+    for other in lines if found is None else lines[1:]:
+        text = other.strip()
+        if text.startswith(",") or _FA_START.match(text):
+            return None
+    if found is None:
+        return data, None
+    line = data.count(b"\n", 0, start) + 1
+    return data[:start], (line, _shown_label(lines[0].strip()))
+
+
 def records_from_features(
-    features: Iterable[Feature], path: str | os.PathLike[str] = "<string>"
+    features: Iterable[Feature],
+    path: str | os.PathLike[str] = "<string>",
+    *,
+    keep_later: bool = False,
 ) -> list[Records]:
     """Turn hexatherm-named sphere and point features into measurement records.
 
@@ -373,11 +558,19 @@ def records_from_features(
         Actual features, as :func:`read_dmis_features` returns them.
     path : str or path-like, optional
         The file they came from (kept in the records, used in messages).
+    keep_later : bool, optional
+        As for :func:`read_dmis`.
 
     Returns
     -------
     list of Records
         See :func:`read_dmis`.
+
+    Raises
+    ------
+    InputError
+        As :func:`read_dmis` for labels, times, balls measured twice and point
+        labels seen twice.
 
     Examples
     --------
@@ -385,7 +578,8 @@ def records_from_features(
     ... TIME=00:00:10
     ... FA(S1_B1)=FEAT/SPHERE,CART,1,2,3,25.4
     ... FA(S1_B2_7)=FEAT/POINT,CART,4,5,6
-    ... FA(Datum_A)=FEAT/PLANE,CART,0,0,0,0,0,1'''
+    ... FA(Datum_A)=FEAT/PLANE,CART,0,0,0,0,0,1
+    ... ENDFIL'''
     >>> centres, points = records_from_features(features_from_text(text))
     >>> centres.kind, centres.label.tolist(), centres.ball.tolist(), centres.diameter_mm.tolist()
     ('centres', ['S1'], ['B1'], [25.4])
@@ -398,7 +592,10 @@ def records_from_features(
         row = _feature_row(feature, where)
         if row is not None:
             rows[row[0]].append(row[1])
-    return _rows_to_records(where, rows["centres"], rows["points"])
+    return [
+        check_groups(records, keep_later=keep_later)
+        for records in _rows_to_records(where, rows["centres"], rows["points"])
+    ]
 
 
 def _feature_row(feature: Feature, where: str) -> tuple[str, _Row] | None:
@@ -460,10 +657,9 @@ def _read_text(path: str | os.PathLike[str]) -> str:
 
 
 def _read_bytes(path: str | os.PathLike[str]) -> bytes:
-    try:
-        return Path(path).read_bytes()
-    except OSError as exc:
-        raise InputError(f"cannot read the file: {exc.strerror or exc}", path=path) from exc
+    data = read_bytes(path)
+    refuse_utf16(data, path)
+    return data
 
 
 def _decode(data: bytes, path: str | os.PathLike[str]) -> str:
@@ -509,6 +705,19 @@ def _statements(text: str, path: str | os.PathLike[str]) -> list[tuple[int, str]
     >>> _statements(text, "f")
     [(1, 'A/1,2'), (4, 'B/'), (5, 'FA(a)=FEAT/POINT, 1'), (7, 'C/3,4')]
     """
+    statements, unfinished = _split_statements(text)
+    if unfinished is not None:
+        _raise_unfinished(unfinished, text, path)
+    return statements
+
+
+#: A statement the text ends inside: (first line, text so far, mode, lines of the text)
+_Unfinished = tuple[int, str, int, int]
+
+
+def _split_statements(text: str) -> tuple[list[tuple[int, str]], _Unfinished | None]:
+    """The statements of DMIS text, and the one it ends inside (continued with ``$`` or
+    ``,$$`` on its last line), if any."""
     lines = text.split("\n")
     while lines and not lines[-1].strip():
         lines.pop()
@@ -546,19 +755,20 @@ def _statements(text: str, path: str | os.PathLike[str]) -> list[tuple[int, str]
             pieces.append(body)
             statements.append((start, "".join(pieces).strip()))
             mode = _END
-    if mode == _RAW:
-        raise InputError(
-            f"the file ends inside a statement continued with '$' (last line {len(lines)})",
-            path=path,
-            line=start,
-        )
-    if mode == _SOFT:
-        raise InputError(
-            f"the file ends inside a statement continued with ',$$' (last line {len(lines)})",
-            path=path,
-            line=start,
-        )
-    return statements
+    if mode == _END:
+        return statements, None
+    return statements, (start, "".join(pieces).strip(), mode, len(lines))
+
+
+def _raise_unfinished(unfinished: _Unfinished, text: str, path: str | os.PathLike[str]) -> None:
+    start, _, mode, count = unfinished
+    mark = "'$'" if mode == _RAW else "',$$'"
+    raise InputError(
+        f"the file ends inside a statement continued with {mark} (last line {count}): "
+        "cut short? (--allow-truncated drops its last record)",
+        path=path,
+        line=start,
+    )
 
 
 # ---------------------------------------------------------------------------
@@ -784,6 +994,7 @@ def _records(path: str, kind: RecordKind, rows: list[_Row], **optional: object) 
         time_s=np.array([row.seconds for row in rows], dtype=np.float64),
         time_kind="iso",
         line=np.array([row.line for row in rows], dtype=np.int64),
+        time_aware=False,
         **optional,  # type: ignore[arg-type]
     )
 
@@ -1015,6 +1226,7 @@ def _fast_lane(data: bytes, where: str) -> list[Records]:
                 line=lines[order].astype(np.int64),
                 ijk=ijk[order],
                 extra={"n": numbers[order]},
+                time_aware=False,
             )
         )
     return records

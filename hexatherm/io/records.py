@@ -8,12 +8,17 @@ errors can point at it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import warnings
+from collections.abc import Iterable
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
-from typing import Literal
+from typing import Literal, Protocol
 
 import numpy as np
 import numpy.typing as npt
+
+from hexatherm.errors import InputError
+from hexatherm.io.files import InputWarning
 
 RecordKind = Literal["centres", "points"]
 TimeKind = Literal["iso", "seconds"]
@@ -44,6 +49,11 @@ class Records:
         Fitted diameter of each centre row (NaN where the file gave none).
     ijk : ndarray, shape (n, 3), optional
         Probing direction of each point row (NaN where the file gave none).
+    extra : dict of str to ndarray, optional
+        Further per-row columns (``u_um``, ``form_um``, ``n``, a DMIS point's number).
+    time_aware : bool or None, optional
+        For ISO times: whether they carry a UTC offset (True) or are naive, taken as
+        UTC (False); None for seconds or when unknown. See :func:`check_time_zones`.
     """
 
     path: str
@@ -57,6 +67,7 @@ class Records:
     diameter_mm: npt.NDArray[np.float64] | None = None
     ijk: npt.NDArray[np.float64] | None = None
     extra: dict[str, object] = field(default_factory=dict)
+    time_aware: bool | None = None
 
     def __len__(self) -> int:
         return int(self.xyz_mm.shape[0])
@@ -91,6 +102,8 @@ def concat_records(records: list[Records]) -> Records:
     first = records[0]
     if any(r.kind != first.kind or r.time_kind != first.time_kind for r in records):
         raise ValueError("records of different kinds or time kinds cannot be joined")
+    check_time_zones(records)
+    aware = {r.time_aware for r in records} - {None}
 
     def join(name: str) -> npt.NDArray[np.float64] | None:
         values = [getattr(r, name) for r in records]
@@ -112,4 +125,223 @@ def concat_records(records: list[Records]) -> Records:
         diameter_mm=join("diameter_mm"),
         ijk=join("ijk"),
         extra=extra,
+        time_aware=aware.pop() if aware else None,
+    )
+
+
+class TimeSource(Protocol):
+    """What :func:`check_time_zones` needs of a file's times (Records, Temperatures)."""
+
+    @property
+    def path(self) -> str: ...
+
+    @property
+    def time_kind(self) -> TimeKind: ...
+
+    @property
+    def time_aware(self) -> bool | None: ...
+
+
+def check_time_zones(sources: Iterable[TimeSource]) -> None:
+    """Refuse files of one session that mix naive ISO times and times with a UTC offset.
+
+    A naive time is taken as UTC: beside times with offsets it would be off by the
+    offset (hours), silently. Files with times in seconds, or whose kind is unknown
+    (``time_aware`` None), are not compared.
+
+    Parameters
+    ----------
+    sources : iterable of Records or Temperatures
+        The session's measurement records and thermocouple log (anything with
+        ``path``, ``time_kind`` and ``time_aware``; ``line`` when it has one).
+
+    Raises
+    ------
+    InputError
+        Naming the later file (and its first row's line when known), field ``time``,
+        and the earlier file of the other kind.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as Source
+    >>> check_time_zones([Source(path="a.csv", time_kind="iso", time_aware=False),
+    ...                   Source(path="b.dmo", time_kind="iso", time_aware=False)])
+    >>> check_time_zones([Source(path="a.csv", time_kind="iso", time_aware=True),
+    ...                   Source(path="t.csv", time_kind="iso", time_aware=False)])
+    Traceback (most recent call last):
+    hexatherm.errors.InputError: t.csv: field 'time': times naive (no UTC offset) here but with ...
+    """
+    seen: dict[bool, TimeSource] = {}
+    for source in sources:
+        aware = source.time_aware
+        if source.time_kind != "iso" or aware is None:
+            continue
+        other = seen.get(not aware)
+        if other is not None:
+            naive, offset = "naive (no UTC offset)", "with a UTC offset"
+            mine, theirs = (offset, naive) if aware else (naive, offset)
+            lines = getattr(source, "line", None)
+            raise InputError(
+                f"times {mine} here but {theirs} in {other.path}: naive times would be "
+                "taken as UTC, hours off; give every time an offset or none",
+                path=source.path,
+                line=int(lines[0]) if lines is not None and len(lines) else None,
+                field="time",
+            )
+        seen.setdefault(aware, source)
+
+
+def _line_span(lines: npt.NDArray[np.int64], start: int, stop: int) -> str:
+    first, last = int(lines[start]), int(lines[stop - 1])
+    return f"line {first}" if first == last else f"lines {first}-{last}"
+
+
+def check_groups(records: Records, *, keep_later: bool = False) -> Records:
+    """Refuse a ball measured twice in one step, and a point label seen twice.
+
+    The records of one file, in file order. Each step's ball is one *group* of
+    consecutive rows (its probed points; a centre is a group of one row). A second
+    group for the same step and ball (the ball probed again later, perhaps minutes
+    and microns apart) would be merged into one sphere fit: it is refused, naming
+    both groups' lines, unless ``keep_later``, which keeps the last group of each
+    step and ball and drops the earlier ones with an :class:`InputWarning`. Then a
+    point number (``extra["n"]``, a DMIS point label ``<step>_<ball>_<n>``) seen
+    twice within a group is refused, naming both lines.
+
+    Parameters
+    ----------
+    records : Records
+        One file's rows, in the order of the file.
+    keep_later : bool, optional
+        Keep the last group of a step and ball measured more than once.
+
+    Returns
+    -------
+    Records
+        ``records`` itself when nothing is dropped, else the rows kept.
+
+    Raises
+    ------
+    InputError
+        Naming the file, the line of the later group (or row) and field ``ball``
+        (``label`` for a centre given twice or a point label seen twice).
+
+    Examples
+    --------
+    >>> rec = Records(path="p.csv", kind="points", label=np.array(["S1"] * 3),
+    ...               ball=np.array(["B1", "B2", "B1"]), xyz_mm=np.zeros((3, 3)),
+    ...               time_s=np.arange(3.0), time_kind="seconds", line=np.array([2, 3, 4]))
+    >>> check_groups(rec)
+    Traceback (most recent call last):
+    hexatherm.errors.InputError: p.csv:4: field 'ball': step S1 ball B1 probed twice: ...
+    >>> import warnings
+    >>> with warnings.catch_warnings(record=True) as caught:
+    ...     warnings.simplefilter("always")
+    ...     check_groups(rec, keep_later=True).line.tolist()
+    [3, 4]
+    >>> str(caught[0].message)
+    'p.csv:2: step S1 ball B1 probed twice: the earlier group (line 2) dropped, line 4 kept'
+    """
+    n = len(records)
+    if n == 0:
+        return records
+    label, ball, lines = records.label, records.ball, records.line
+    if records.kind == "centres":
+        starts = np.arange(n)
+    else:
+        change = (label[1:] != label[:-1]) | (ball[1:] != ball[:-1])
+        starts = np.concatenate(([0], np.flatnonzero(change) + 1))
+    stops = np.append(starts[1:], n)
+    groups: dict[tuple[str, str], list[int]] = {}
+    for g, row in enumerate(starts.tolist()):
+        groups.setdefault((str(label[row]), str(ball[row])), []).append(g)
+    repeated = {key: gs for key, gs in groups.items() if len(gs) > 1}
+    keep = None
+    if repeated and not keep_later:
+        key, gs = min(repeated.items(), key=lambda item: item[1][1])
+        first, second = gs[0], gs[1]
+        if records.kind == "centres":
+            message = (
+                f"duplicate centre for step {key[0]} ball {key[1]} "
+                f"(also on line {int(lines[starts[first]])}): keep_later keeps the later one"
+            )
+            name = "label"
+        else:
+            message = (
+                f"step {key[0]} ball {key[1]} probed twice: "
+                f"{_line_span(lines, starts[first], stops[first])} and "
+                f"{_line_span(lines, starts[second], stops[second])}, "
+                "two groups of records that one sphere fit would merge "
+                "(keep_later keeps the later group)"
+            )
+            name = "ball"
+        raise InputError(message, path=records.path, line=int(lines[starts[second]]), field=name)
+    if repeated:
+        keep = np.ones(n, dtype=bool)
+        for key, gs in sorted(repeated.items(), key=lambda item: item[1][0]):
+            dropped = ", ".join(_line_span(lines, starts[g], stops[g]) for g in gs[:-1])
+            kept = _line_span(lines, starts[gs[-1]], stops[gs[-1]])
+            what = "centre" if records.kind == "centres" else "group"
+            many = "s" if len(gs) > 2 else ""
+            times = "twice" if len(gs) == 2 else f"{len(gs)} times"
+            warnings.warn(
+                InputWarning(
+                    f"{records.path}:{int(lines[starts[gs[0]]])}: step {key[0]} ball {key[1]} "
+                    f"{'given' if records.kind == 'centres' else 'probed'} {times}: "
+                    f"the earlier {what}{many} ({dropped}) dropped, {kept} kept"
+                ),
+                stacklevel=2,
+            )
+            for g in gs[:-1]:
+                keep[starts[g] : stops[g]] = False
+        records = _select(records, keep)
+    number = records.extra.get("n")
+    if records.kind == "points" and number is not None:
+        _refuse_repeated_numbers(records, np.asarray(number))
+    return records
+
+
+def _refuse_repeated_numbers(records: Records, number: npt.NDArray[np.generic]) -> None:
+    """A point number seen twice within a group (groups are unique by now)."""
+    label, ball = records.label, records.ball
+    change = (label[1:] != label[:-1]) | (ball[1:] != ball[:-1])
+    group = np.concatenate(([0], np.cumsum(change)))
+    order = np.lexsort((number, group))
+    same = (group[order][1:] == group[order][:-1]) & (number[order][1:] == number[order][:-1])
+    if not np.any(same):
+        return
+    pairs = np.flatnonzero(same)
+    rows = np.stack((order[pairs], order[pairs + 1]), axis=1)
+    rows.sort(axis=1)
+    first, second = rows[np.argmin(rows[:, 1])].tolist()
+    lines = records.line
+    name = f"{label[second]}_{ball[second]}_{number[second]}"
+    raise InputError(
+        f"point label {name} seen twice (also on line {int(lines[first])}): "
+        "its points would count twice",
+        path=records.path,
+        line=int(lines[second]),
+        field="label",
+    )
+
+
+def _select(records: Records, keep: npt.NDArray[np.bool_]) -> Records:
+    """The rows ``keep`` of ``records`` (every per-row array, extra columns too)."""
+    n = len(records)
+
+    def pick(value: object) -> object:
+        if isinstance(value, np.ndarray) and value.ndim >= 1 and value.shape[0] == n:
+            return value[keep]
+        return value
+
+    return replace(
+        records,
+        label=records.label[keep],
+        ball=records.ball[keep],
+        xyz_mm=records.xyz_mm[keep],
+        time_s=records.time_s[keep],
+        line=records.line[keep],
+        diameter_mm=None if records.diameter_mm is None else records.diameter_mm[keep],
+        ijk=None if records.ijk is None else records.ijk[keep],
+        extra={key: pick(value) for key, value in records.extra.items()},
     )

@@ -29,7 +29,7 @@ def test_centres_and_times(tmp_path):
     assert rec.kind == "centres" and rec.time_kind == "seconds"
     np.testing.assert_array_equal(rec.xyz_mm, [[1.5, 2, 3], [4, 5, 6]])
     np.testing.assert_array_equal(rec.line, [2, 3])
-    iso = CENTRES.replace(",0\n", ",2020-01-01T00:00:00\n").replace(
+    iso = CENTRES.replace(",0\n", ",2020-01-01T00:00:00Z\n").replace(
         ",1.5\n", ",2020-01-01T01:00:01+01:00\n"
     )
     rec = read_measurement_csv(write(tmp_path, "c2.csv", iso))
@@ -103,7 +103,7 @@ def test_reader_chosen_by_content(tmp_path):
         tmp_path,
         "noext",
         "DMISMN/'x',04.0\nDATE=2020/01/01\nTIME=10:00:00\n"
-        "FA(S1_B1)=FEAT/SPHERE,OUTER,CART,1,2,3,25.4\n",
+        "FA(S1_B1)=FEAT/SPHERE,OUTER,CART,1,2,3,25.4\nENDFIL\n",
     )
     [rec] = read_measurements(path)
     assert rec.kind == "centres" and rec.diameter_mm.tolist() == [25.4]

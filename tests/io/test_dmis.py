@@ -258,7 +258,7 @@ def test_lines_starting_with_blank_or_comma(tmp_path: Path) -> None:
         ",25\n"
         "\tFA(S1_B2)=FEAT/SPHERE,CART,4,5,6,25\n"
     )
-    first, second = read_dmis_features(write(tmp_path, text))
+    first, second = read_dmis_features(write(tmp_path, text + "ENDFIL\n"))
     assert (first.xyz_mm, first.size_mm, first.line) == ((1.0, 2.0, 3.0), 25.0, 5)
     assert (second.xyz_mm, second.line) == ((4.0, 5.0, 6.0), 7)
 
@@ -269,7 +269,7 @@ def test_empty_fields(tmp_path: Path) -> None:
         "FA(C1)=FEAT/CIRCLE,INNER,CART,32.5,75.5,-10,,,,15\n"
         "FA(P1)=FEAT/POINT,CART,1,2,3,,,\n"
     )
-    circle, point = read_dmis_features(write(tmp_path, text))
+    circle, point = read_dmis_features(write(tmp_path, text + "ENDFIL\n"))
     assert circle.values == ("INNER", "CART", 32.5, 75.5, -10.0, None, None, None, 15.0)
     assert circle.xyz_mm == (32.5, 75.5, -10.0)
     assert circle.ijk is None
@@ -284,7 +284,7 @@ def test_sphere_with_and_without_inner_outer(tmp_path: Path) -> None:
         "FA(S1_B3)=FEAT/SPHERE,INNER,CART,1,2,3,25\n"
         "fa(S1_B4)=feat/sphere,outer,cart,1,2,3,25\n"
     )
-    features = read_dmis_features(write(tmp_path, text))
+    features = read_dmis_features(write(tmp_path, text + "ENDFIL\n"))
     assert [feature.xyz_mm for feature in features] == [(1.0, 2.0, 3.0)] * 4
     assert [feature.size_mm for feature in features] == [25.0] * 4
     assert [feature.type for feature in features] == ["SPHERE"] * 4
@@ -299,7 +299,7 @@ def test_units_inch_converts_lengths_not_directions(tmp_path: Path) -> None:
         "UNITS/MM,ANGDEC\n"
         "FA(S1_B2)=FEAT/SPHERE,CART,1,-2,0.5,1\n"
     )
-    inch, point, cylinder, mm = read_dmis_features(write(tmp_path, text))
+    inch, point, cylinder, mm = read_dmis_features(write(tmp_path, text + "ENDFIL\n"))
     assert inch.xyz_mm == (25.4, -50.8, 12.7)
     assert inch.size_mm == 25.4
     assert inch.values == ("CART", 1.0, -2.0, 0.5, 1.0)  # as written
@@ -316,7 +316,7 @@ def test_units_inch_converts_lengths_not_directions(tmp_path: Path) -> None:
 )
 def test_other_dmis_length_units(tmp_path: Path, units: str, scale: float) -> None:
     text = dated(f"UNITS/{units}\nFA(S1_B1)=FEAT/SPHERE,CART,1,2,0,1\n")
-    (sphere,) = read_dmis_features(write(tmp_path, text))
+    (sphere,) = read_dmis_features(write(tmp_path, text + "ENDFIL\n"))
     assert sphere.xyz_mm == (scale, 2 * scale, 0.0)
     assert sphere.size_mm == scale
 
@@ -327,7 +327,7 @@ def test_polar_coordinates(tmp_path: Path) -> None:
         "UNITS/INCH,ANGRAD\n"
         f"FA(S1_B2_1)=FEAT/POINT,POL,1,{math.pi},2,-1,0,0\n"
     )
-    sphere, point = read_dmis_features(write(tmp_path, text))
+    sphere, point = read_dmis_features(write(tmp_path, text + "ENDFIL\n"))
     assert sphere.xyz_mm == pytest.approx((0.0, 10.0, 5.0), abs=1e-12)
     assert sphere.size_mm == 25.0
     assert point.xyz_mm == pytest.approx((-25.4, 0.0, 50.8), abs=1e-12)
@@ -346,7 +346,7 @@ def test_date_and_time_assignment(tmp_path: Path) -> None:
         "TIME=00:00:01.25\n"
         "FA(S2_B1_1)=FEAT/POINT,CART,1,2,3\n"
     )
-    features = read_dmis_features(write(tmp_path, text))
+    features = read_dmis_features(write(tmp_path, text + "ENDFIL\n"))
     assert [feature.time for feature in features] == [
         None,
         None,
@@ -391,7 +391,7 @@ def test_records_kinds_are_omitted_when_empty(tmp_path: Path) -> None:
         "FA(Datum)=FEAT/PLANE,CART,0,0,0,0,0,1\n"
         "FA(Bore)=FEAT/CIRCLE,INNER,CART,0,0,0,0,0,1,10\n"
     )
-    (points,) = read_dmis(write(tmp_path, only_points))
+    (points,) = read_dmis(write(tmp_path, only_points + "ENDFIL\n"))
     assert points.kind == "points"
     assert read_dmis(write(tmp_path, "DMISMN/'empty',05.3\nENDFIL\n")) == []
 
@@ -408,14 +408,16 @@ def test_nominals_tolerances_and_malformed_other_statements_are_read_past(
         "FA(S1_B1)=FEAT/SPHERE,CART,1,2,3,25\n"
         "FA(Pattern)=FEAT/PATERN,F(a),F(b)\n"
     )
-    sphere, pattern = read_dmis_features(write(tmp_path, text))
+    sphere, pattern = read_dmis_features(write(tmp_path, text + "ENDFIL\n"))
     assert sphere.line == 8
     assert (pattern.type, pattern.xyz_mm, pattern.values) == ("PATERN", None, ("F(a)", "F(b)"))
 
 
 def test_utf8_bom_and_labels(tmp_path: Path) -> None:
     path = tmp_path / "bom.dmo"
-    path.write_bytes("\ufeffDATE=2024/05/02\nFA(Círculo_13)=FEAT/POINT,CART,1,2,3\n".encode())
+    path.write_bytes(
+        "\ufeffDATE=2024/05/02\nFA(Círculo_13)=FEAT/POINT,CART,1,2,3\nENDFIL\n".encode()
+    )
     (feature,) = read_dmis_features(path)
     assert feature.label == "Círculo_13"
     assert feature.line == 2
@@ -503,7 +505,7 @@ def test_undecodable_bytes(tmp_path: Path) -> None:
 
 
 def test_missing_file(tmp_path: Path) -> None:
-    with pytest.raises(InputError, match="cannot read the file"):
+    with pytest.raises(InputError, match="file not found"):
         read_dmis(tmp_path / "nowhere.dmo")
 
 
@@ -529,7 +531,7 @@ def test_missing_file(tmp_path: Path) -> None:
 def test_read_dmis_rejects_foreign_labels(
     tmp_path: Path, body: str, message: str, line: int, field: str
 ) -> None:
-    path = write(tmp_path, dated(body))
+    path = write(tmp_path, dated(body) + "ENDFIL\n")
     with pytest.raises(InputError, match=message) as info:
         read_dmis(path)
     assert (info.value.line, info.value.field) == (line, field)
@@ -540,7 +542,7 @@ def test_read_dmis_rejects_foreign_labels(
 )
 def test_read_dmis_needs_date_and_time(tmp_path: Path, head: str) -> None:
     body = head + "FA(S1_B1)=FEAT/SPHERE,CART,1,2,3,25\n"
-    path = write(tmp_path, body)
+    path = write(tmp_path, body + "ENDFIL\n")
     line = body.count("\n")
     with pytest.raises(
         InputError, match=rf"run\.dmo:{line}: field 'time': FA\(S1_B1\) has no DATE= and TIME="
