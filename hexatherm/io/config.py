@@ -184,7 +184,7 @@ def _read_effects(doc: YamlDoc) -> tuple[dict[str, Any], ...]:
     items = doc.get("thermal_model", "effects", default=[])
     if not isinstance(items, list):
         raise doc.error("expected a list of effects", "thermal_model", "effects")
-    effects = []
+    effects: list[dict[str, Any]] = []
     for i in range(len(items)):
         keys = ("thermal_model", "effects", i)
         doc.check_keys(["name", "parameters"], *keys)
