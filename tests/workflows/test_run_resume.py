@@ -1,0 +1,128 @@
+"""``hexatherm run --resume`` after a crash of hexatherm (SIGKILL) or of either machine."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from hexatherm.devices.controller import InPositionCriteria
+from hexatherm.errors import IncompleteSession
+from hexatherm.workflows.run.run import run_campaign
+from hexatherm.workflows.serve import AcceleratedClock, TwinMachines, TwinWorld
+from tests.sessions import ROOT
+from tests.workflows.test_run import (
+    HEATING,
+    NOMINAL_ORIGIN,
+    TRUE_ORIGIN,
+    Bench,
+    check_complete,
+    make_bench,
+)
+
+SHORT = {"targets": [[5.0, -3.0, 4.0, 1.0, -2.0, 3.0]], "points_per_ball": 6}
+
+
+def _lines(path: Path) -> int:
+    try:
+        with open(path, "rb") as handle:
+            return handle.read().count(b"\n")
+    except FileNotFoundError:
+        return 0
+
+
+def test_sigkill_of_run_at_random_points_then_resume(tmp_path: Path) -> None:
+    """hexatherm killed twice (SIGKILL, at seeded random points of its transcript) while it
+    measures against machines on accelerated time, then resumed to the end: every ball once,
+    on its own step, and points.csv what the transcript replays to."""
+    b = make_bench(tmp_path, **SHORT)  # type: ignore[arg-type]
+    b.machines.close()
+    clock = AcceleratedClock(100.0)
+    b.world = TwinWorld(
+        b.world.hexapod,
+        b.files.balls,
+        heating=HEATING,
+        origin_on_cmm=TRUE_ORIGIN,
+        clock=clock,
+        sleep=clock.sleep,
+        cmm_move_s=0.1,
+    )
+    b.machines = TwinMachines(b.world)
+    rng = np.random.default_rng(2024)
+    transcript = b.session / "ipp.transcript"
+    command = [
+        sys.executable, "-m", "hexatherm", "run", str(tmp_path / "plan.yaml"),
+        "--cmm", b.machines.cmm_url, "--controller", b.machines.controller_url,
+        "--session", str(b.session),
+        "--hexapod", str(ROOT / "configs" / "symetrie-like.yaml"),
+        "--balls", str(ROOT / "configs" / "balls-3.yaml"),
+        "--origin-on-cmm", ",".join(str(v) for v in NOMINAL_ORIGIN),
+        "--settle", "0.02", "--poll", "0.01", "--readback-tol-um", "2", "--no-fsync",
+    ]  # fmt: skip
+    killed = 0
+    try:
+        for round_ in range(2):
+            target = _lines(transcript) + int(rng.integers(150, 600))
+            args = command + (["--resume"] if round_ else [])
+            proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+            deadline = time.monotonic() + 120.0
+            while proc.poll() is None and _lines(transcript) < target:
+                assert time.monotonic() < deadline, "the run made no progress"
+                time.sleep(0.005)
+            if proc.poll() is None:
+                os.kill(proc.pid, signal.SIGKILL)
+                killed += 1
+            _, err = proc.communicate(timeout=60)
+            assert proc.returncode in (0, -signal.SIGKILL), err.decode()
+        assert killed >= 1
+        # the last resume in process, on the wall clock like the killed runs
+        criteria = InPositionCriteria(settle_s=0.02, tolerance_um=2.0, poll_s=0.01)
+        options = b.options(resume=True, reconnect_wait_s=0.1, criteria=criteria)
+        run_campaign(b.files, b.world.hexapod, options, b.notify)
+        text = transcript.read_text()
+        assert text.count("run resume") == 2 and text.count("run start") == 1
+        check_complete(b, max_rms_um=3.0)
+    finally:
+        b.machines.close()
+
+
+def _kill_on(b: Bench, prefix: str, which: str) -> None:
+    """Close one server as soon as the run says ``prefix`` (a machine that crashes)."""
+    done: list[bool] = []
+
+    def notify(level: str, message: str) -> None:
+        b.messages.append((level, message))
+        if message.startswith(prefix) and not done:
+            done.append(True)
+            getattr(b.machines, which).close()
+
+    b.notify = notify  # type: ignore[method-assign]
+
+
+@pytest.mark.parametrize(
+    ("prefix", "which"),
+    [("R0 B2:", "cmm"), ("step 3/4 S1", "cmm"), ("R0 B3:", "controller")],
+    ids=["cmm-between-balls", "cmm-after-a-move", "controller"],
+)
+def test_a_machine_that_crashes_then_resume(tmp_path: Path, prefix: str, which: str) -> None:
+    b = make_bench(tmp_path, **SHORT)  # type: ignore[arg-type]
+    _kill_on(b, prefix, which)
+    try:
+        with pytest.raises(IncompleteSession, match="--resume"):
+            b.run(reconnects=2)
+        before = pd.read_csv(b.session / "points.csv")
+        assert 0 < len(before) < 4 * 3 * 6
+        b.restart()  # the machine is back (new ports, the same twin)
+        b.notify = lambda level, message: b.messages.append((level, message))  # type: ignore[method-assign]
+        b.run(resume=True)
+        after = check_complete(b)
+        pd.testing.assert_frame_equal(after.iloc[: len(before)], before)
+    finally:
+        b.machines.close()
