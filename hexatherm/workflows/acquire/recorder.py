@@ -557,7 +557,9 @@ class Recorder:
             if slot < cur:
                 return "reject", slot, f"on {self._name(slot)}, which is complete (an extra point)"
             return "reject", slot, f"on {self._name(slot)}, {being}"
-        slot = int(np.argmin(dev))
+        # steps of one commanded pose (the references) share their balls: name the one
+        # nearest in the walk
+        slot = int(np.lexsort((np.abs(np.arange(dev.size) - cur), np.round(dev, 9)))[0])
         return (
             "reject",
             None,
