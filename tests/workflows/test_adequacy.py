@@ -27,6 +27,7 @@ from hexatherm.workflows.diagnose.outputs import (
     diagnosis_document,
     story,
 )
+from hexatherm.workflows.diagnose.report import report_markdown
 from hexatherm.workflows.diagnose.run import DiagnosisResult, read_for_diagnosis, run_diagnosis
 from hexatherm.workflows.simulate.campaigns import NOMINAL_HIDDEN, diagnosis_campaign
 from hexatherm.workflows.simulate.twinsession import write_twin_session
@@ -104,6 +105,10 @@ def test_an_effect_outside_the_registry_is_reported_as_unexplained(
     first = story(result).splitlines()[0]
     assert first.startswith("NOT ADEQUATE")
     assert f"{verdict.unexplained_rms_um:.3f} um RMS is left unexplained" in first
+    report = report_markdown(result, {})
+    headline = report.split("\n\n")[1]
+    assert headline.startswith("**NOT ADEQUATE")
+    assert f"unexplained {verdict.unexplained_rms_um:.3f} um" in report
     assert "it shows in:" in first
     # whatever the registry named explains part of it at most; a named effect whose
     # parameters move by more than 2 SE when the runner-up joins it gets a caution

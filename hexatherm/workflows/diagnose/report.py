@@ -696,6 +696,43 @@ def _alternatives_text(diagnosis: Diagnosis) -> str:
     return "\n".join(lines) if lines else "None (nothing was added)."
 
 
+def adequacy_section(diagnosis: Diagnosis) -> list[str]:
+    """Lines of the ``## Adequacy`` section: the verdict's numbers, where the residual
+    shows, the failed structure tests and how each named effect moves with its runner-up."""
+    v = diagnosis.adequacy
+    if v is None:
+        return []
+    md = [
+        "## Adequacy",
+        "",
+        f"- verdict: **{'adequate' if v.adequate else 'NOT adequate'}**"
+        + (f" ({'; '.join(v.reasons)})" if v.reasons else ""),
+        f"- final RMS {v.final_rms_um:.3f} um; noise floor {v.noise_floor_um:.3f} um "
+        f"(from the {v.noise_floor_source}); unexplained {v.unexplained_rms_um:.3f} um",
+        f"- chi2/dof {v.chi2_per_dof:.2f}, expected 1 ± {v.chi2_spread:.2f} "
+        f"({v.dof} degrees of freedom); limit {v.chi2_limit:.2f}",
+        f"- structure tests: {len(v.findings)} of {v.n_tests} fail "
+        "(Bonferroni, family level 0.001)",
+    ]
+    md += [f"- note: {n}" for n in v.notes]
+    if not v.adequate:
+        md += [f"- it shows in: {'; '.join(v.where())}"]
+    md += [f"  - {f.text()}" for f in v.findings[:12]]
+    for a in diagnosis.added:
+        r = a.runner_up
+        line = f"- {a.effect.name} explains {a.explains}"
+        if a.flags:
+            line += f"; flags: {'; '.join(a.flags)}"
+        if r is not None:
+            moves = ", ".join(
+                f"{p} {shift:+.1f} SE (SE ×{r.se_ratio()[p]:.2f})"
+                for p, shift in r.shift_in_se().items()
+            )
+            line += f"; with the runner-up {r.name} fitted too: {moves}"
+        md.append(line)
+    return md + [""]
+
+
 def _figure_link(key: str, figure_names: Mapping[str, str]) -> str:
     if key not in figure_names:
         return ""
@@ -733,6 +770,7 @@ def report_markdown(result: DiagnosisResult, figure_names: Mapping[str, str] | N
         "",
     ]
 
+    md += adequacy_section(d)
     md += ["## What was added", ""]
     if d.added:
         rows = []
