@@ -1,0 +1,98 @@
+"""``hexatherm run`` from the command line, against the twin's machines on accelerated time."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+
+from hexatherm.cli import main
+from hexatherm.core.planning import build_plan
+from hexatherm.io.config import plan_to_yaml, read_balls, read_hexapod
+from hexatherm.workflows.serve import AcceleratedClock, TwinMachines, TwinWorld
+from tests.sessions import ROOT
+from tests.workflows.test_run import HEATING, NOMINAL_ORIGIN, TRUE_ORIGIN
+
+HEXAPOD = ROOT / "configs" / "symetrie-like.yaml"
+BALLS = ROOT / "configs" / "balls-3.yaml"
+
+
+@pytest.fixture
+def machines():
+    clock = AcceleratedClock(100.0)
+    world = TwinWorld(
+        read_hexapod(HEXAPOD),
+        read_balls(BALLS),
+        heating=HEATING,
+        origin_on_cmm=TRUE_ORIGIN,
+        clock=clock,
+        sleep=clock.sleep,
+        cmm_move_s=0.1,
+    )
+    with TwinMachines(world) as m:
+        yield m
+
+
+def write_plan(tmp_path: Path, targets: list[list[float]]) -> Path:
+    plan = build_plan(targets, (0.0, 0.0, -40.0, 0.0, 0.0, 0.0), points_per_ball=6)
+    path = tmp_path / "plan.yaml"
+    path.write_text(plan_to_yaml(plan))
+    return path
+
+
+def invoke(*args: object):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def base(plan: Path, m: TwinMachines, session: Path) -> list[object]:
+    return [
+        "run", plan, "--cmm", m.cmm_url, "--controller", m.controller_url,
+        "--session", session, "--hexapod", HEXAPOD, "--balls", BALLS,
+        "--origin-on-cmm", ",".join(str(v) for v in NOMINAL_ORIGIN),
+        "--settle", "0.02", "--poll", "0.01", "--readback-tol-um", "2", "--no-fsync",
+    ]  # fmt: skip
+
+
+def test_run_then_process(tmp_path: Path, machines: TwinMachines) -> None:
+    plan = write_plan(tmp_path, [[5.0, -3.0, 4.0, 1.0, -2.0, 3.0]])
+    session = tmp_path / "s"
+    result = invoke(*base(plan, machines, session))
+    assert result.exit_code == 0, result.output
+    table = [line for line in result.stdout.splitlines() if line]
+    assert table[0].startswith("label,ball,n,x,y,z") and len(table) >= 1 + 12
+    assert "72 points in" in result.stderr and "session.yaml" in result.stderr
+    processed = invoke("process", session)
+    assert processed.exit_code == 0, processed.output
+    poses = pd.read_csv(session / "results" / "poses.csv")
+    assert list(poses["label"]) == ["S1"]
+    # again into the same folder: refused, a resume is what continues a run
+    again = invoke(*base(plan, machines, session))
+    assert again.exit_code == 1 and "--resume" in again.output
+
+
+def test_dry_run_names_the_step_out_of_the_stroke(tmp_path: Path, machines: TwinMachines) -> None:
+    plan = write_plan(tmp_path, [[0.0, 0.0, 0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 60.0, 0.0, 0.0, 0.0]])
+    result = invoke(*base(plan, machines, tmp_path / "s"), "--dry-run")
+    assert result.exit_code == 1
+    assert "step S2: pose [0, 0, 60, 0, 0, 0]" in result.output
+    assert "Nothing was moved" in result.output
+    assert machines.world.model.moves == 0 and machines.cmm.touches == 0
+    ok = write_plan(tmp_path, [[5.0, -3.0, 4.0, 1.0, -2.0, 3.0]])
+    good = invoke(*base(ok, machines, tmp_path / "t"), "--dry-run")
+    assert good.exit_code == 0, good.output
+    assert "4 steps can be measured; nothing moved" in good.stderr
+
+
+def test_usage_errors(tmp_path: Path, machines: TwinMachines) -> None:
+    plan = write_plan(tmp_path, [[5.0, -3.0, 4.0, 1.0, -2.0, 3.0]])
+    args = base(plan, machines, tmp_path / "s")
+    cut = args.index("--origin-on-cmm")
+    result = invoke(*args[:cut], *args[cut + 2 :])
+    assert result.exit_code == 2 and "--origin-on-cmm is needed" in result.output
+    result = invoke(*args, "--origin-on-cmm", "1,2,3")
+    assert result.exit_code == 2 and "expected 6 finite numbers" in result.output
+    result = invoke("run", plan, "--cmm", "ipp://127.0.0.1:1", "--controller", "x://h",
+                    "--session", tmp_path / "r", "--resume")  # fmt: skip
+    assert result.exit_code != 0
