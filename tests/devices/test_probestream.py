@@ -174,3 +174,17 @@ def test_temperature_lines():
     )
     assert parse_numbers(b"20.1,20.2,20.3,20.4,20.5") is None
     assert parse_numbers(b"T1=20.1 T2=20.2 T3 T4 T5 T6") is None
+
+
+@pytest.mark.parametrize(
+    "line", [b"X=1e400 Y=0 Z=0", b"1,2,1e999", b"-1e309;0;0", b"X+1e400mm Y0mm Z0mm"]
+)
+def test_numbers_that_overflow_are_never_a_point(line):
+    record = parse_record(line)
+    assert record.kind == "garbage" and record.xyz_mm is None
+    assert record.reason == "a number overflows (not finite)"
+
+
+def test_temperature_lines_that_overflow_are_refused():
+    assert parse_numbers("20, 20, 20, 20, 20, 1e400") is None
+    assert parse_numbers("20, 20, 20, 20, 20, 1e-400") == (20.0,) * 5 + (0.0,)

@@ -1,8 +1,10 @@
 """Live acquisition of a session: serial probe stream in, session folder out.
 
 The acquisition walks the plan step by step and ball by ball (plan order, then
-balls-file order) and gives every point the probe sends to the current step and
-ball. Three files make it crash-safe:
+balls-file order) and gives every point the probe sends to a step and ball: once O
+is measured, the ball whose surface at its commanded pose the point lies on (the
+current ball or the next; others are rejected), before that by count and distance
+(see :mod:`hexatherm.workflows.acquire.recorder`). These files make it crash-safe:
 
 ``serial.log``
     Every byte received, with the time it arrived, and every event that changes
@@ -18,13 +20,18 @@ ball. Three files make it crash-safe:
     is the time the bytes that completed its line arrived (as logged).
 ``temperatures.csv``
     The lines of a thermocouple logger on a second port, when there is one.
+``rejected.csv``
+    The points not assigned (``label,ball,x,y,z,time,status,reason``): ``rejected``
+    (on no expected ball, an extra point, a ball out of turn) or ``set-aside`` (the
+    interrupted ball's points on ``--resume``); written only when there is one.
 
 :class:`Recorder` is the state machine that turns log entries into points: the
 live loop and the replay of a log feed it the same entries, so a replay gives
 the same ``points.csv`` byte for byte. ``--resume`` replays the session's own log
 to rebuild the state (nothing lost, nothing doubled, even if the process died
-between logging bytes and writing their points) and continues at the first
-incomplete ball.
+between logging bytes and writing their points), sets the interrupted ball's points
+aside (a ``note`` entry in the log says which), tells the operator what to probe and
+continues at the first incomplete ball.
 """
 
 from __future__ import annotations
