@@ -428,8 +428,9 @@ class Recorder:
             self._time_shift_s[item.source] = shift
             self.notify(
                 "warn",
-                f"{item.source}: the clock went back by {step:.6f} s (log line {item.line}); "
-                "later times are shifted by that much",
+                f"{item.source}: the clock went back by {step:.6f} s"
+                + (f" (log line {item.line})" if item.line else "")
+                + "; later times are shifted by that much",
             )
         self._last_time_s[item.source] = seconds + shift
         return item.time if shift == 0.0 else seconds_to_iso(seconds + shift)
