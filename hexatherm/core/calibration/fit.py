@@ -445,8 +445,7 @@ def fit_calibration(
             r_w, j_w = _leg_problem(model, x_cmd, x_meas, leg_weights, z_new)
             step = z_new - z
             z = z_new
-            cov_z = _inverse_normal(j_w)
-            if step @ np.linalg.solve(cov_z, step) < 1e-6:
+            if np.sum((j_w @ step) ** 2) < 1e-6:  # the step in units of its uncertainty
                 break
         r_w, j_w = _leg_problem(model, x_cmd, x_meas, leg_weights, z)
     theta = model.parameters(z)
@@ -511,9 +510,9 @@ def _solve(
         jac=lambda z: evaluate(z)[1],
         method="lm",
         x_scale="jac",
-        xtol=1e-15,
-        ftol=1e-15,
-        gtol=1e-15,
+        xtol=1e-10,
+        ftol=1e-10,
+        gtol=1e-10,
         max_nfev=100 * (model.n_free + 1),
     )
     return np.asarray(result.x, float), int(result.nfev)

@@ -34,6 +34,9 @@ N_PARAMETERS = 48
 BASE, PLATFORM, OFFSETS, GAINS = 0, 18, 36, 42
 #: FGM tolerance of the predictions, mm (the hexapod's default is 1e-10)
 PREDICTION_TOL_MM = 1e-11
+#: the FGM starts from the last solution of the same poses when no parameter moved
+#: further than this since (mm, or unit gain)
+_WARM_START_MM = 0.5
 
 _AXES = "xyz"
 #: names of the 48 parameters, in the order of the parameter vector
@@ -355,6 +358,9 @@ class CalibrationModel:
     basis: FloatArray = field(init=False, repr=False)
     mask: BoolArray = field(init=False, repr=False)
     home_leg_mm: FloatArray = field(init=False, repr=False)
+    _warm: dict[bytes, tuple[FloatArray, FloatArray]] = field(
+        init=False, repr=False, compare=False, default_factory=dict
+    )
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "level", check_level(self.level))
@@ -465,6 +471,29 @@ class CalibrationModel:
         rhs = dq - self._igm_by_joints(geometry, poses)
         return poses, np.asarray(np.linalg.solve(jac, rhs), float)
 
+    def _stand_with_origin(
+        self, geometry: Hexapod, theta: FloatArray, x_cmd: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Frame O (6,) and the poses (N, 6) in the base frame, with derivatives.
+
+        One FGM for O and the poses. Its start is the commanded pose (the zero pose for
+        O), or, when the same poses were solved for parameters within
+        :data:`_WARM_START_MM` of these, that solution: the FGM then needs one or two
+        Newton steps (the fit evaluates the model many times at nearby parameters).
+        """
+        commanded = np.concatenate([np.zeros((1, 6)), x_cmd])
+        key = commanded.tobytes()
+        start = commanded
+        previous = self._warm.get(key)
+        if previous is not None and np.abs(previous[0] - theta).max() <= _WARM_START_MM:
+            start = previous[1]
+        q_cmd = np.concatenate([self.home_leg_mm[None], self.commanded_legs(x_cmd)])
+        poses, d = self._stand(geometry, theta, q_cmd, start)
+        if len(self._warm) >= 8:
+            self._warm.clear()
+        self._warm[key] = (theta.copy(), poses)
+        return poses[0], d[0], poses[1:], d[1:]
+
     def origin(self, theta: npt.ArrayLike) -> tuple[FloatArray, FloatArray]:
         """Frame O of a geometry: the pose (6,) it stands at for the zero command, in
         its base frame, and the derivatives (6, 48)."""
@@ -492,9 +521,7 @@ class CalibrationModel:
         """
         t = _check_theta(theta)
         x_cmd = np.atleast_2d(check_poses(commanded_poses, "commanded pose"))
-        geometry = self.hexapod(t)
-        stand, d_stand = self._stand(geometry, t, self.commanded_legs(x_cmd), x_cmd)
-        origin, d_origin = self._stand(geometry, t, self.home_leg_mm[None], np.zeros((1, 6)))
+        origin, d_origin, stand, d_stand = self._stand_with_origin(self.hexapod(t), t, x_cmd)
         poses, d_a, d_b = relative_pose(origin, stand, self.nominal.convention)
         return poses, d_a @ d_origin + d_b @ d_stand
 

@@ -52,18 +52,21 @@ class PoseWeights:
                 "uncertainty in all six components (frame O itself carries no information: "
                 "leave it out)"
             ) from None
+        # the full form's inverse factor, once: a product per use is much faster than
+        # a triangular solve on a machine whose BLAS threads compete
+        self._inverse: FloatArray | None = None
+        if not self.blocks:
+            self._inverse = np.asarray(
+                solve_triangular(self.cholesky, np.eye(6 * n_poses), lower=True), float
+            )
 
     def whiten(self, x: FloatArray) -> FloatArray:
         """``L^-1 x`` for x (N, 6) or (N, 6, p), flattened to (6N,) or (6N, p)."""
         if self.blocks:
             flat = solve_triangular_blocks(self.cholesky, x)
             return flat.reshape((6 * self.n_poses,) + x.shape[2:])
-        return np.asarray(
-            solve_triangular(
-                self.cholesky, x.reshape((6 * self.n_poses,) + x.shape[2:]), lower=True
-            ),
-            float,
-        )
+        assert self._inverse is not None
+        return np.asarray(self._inverse @ x.reshape((6 * self.n_poses,) + x.shape[2:]), float)
 
     def subset(self, index: npt.ArrayLike) -> PoseWeights:
         """The weights of some poses (their marginal covariance)."""
