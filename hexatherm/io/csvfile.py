@@ -236,8 +236,12 @@ def _iso_seconds(
                     field="time",
                 )
         aware = bool(first_aware)
-    stamps = pd.to_datetime(text, errors="coerce", utc=True, format="ISO8601")
-    seconds = (stamps - pd.Timestamp(0, tz="UTC")).dt.total_seconds().to_numpy(dtype=np.float64)
+    try:
+        stamps = pd.to_datetime(text, errors="coerce", utc=True, format="ISO8601")
+        since = (stamps - pd.Timestamp(0, tz="UTC")).dt.total_seconds()
+        seconds = since.to_numpy(dtype=np.float64)
+    except (OverflowError, pd.errors.OutOfBoundsDatetime, pd.errors.OutOfBoundsTimedelta):
+        seconds = np.full(values.size, np.nan)  # years beyond pandas' nanoseconds: below
     missing = np.flatnonzero(np.isnan(seconds))
     for row in missing.tolist():  # beyond pandas' years 1677-2262, or invalid
         value = str(values[row])

@@ -396,8 +396,8 @@ def features_from_text(
         if unfinished is not None:
             statements.append(unfinished[:2])
         last = _last_actual(statements)
-        if last is None and unfinished is not None:
-            last = len(statements) - 1
+        if last is None and statements:
+            last = len(statements) - 1  # no record: the last statement, which may be cut
         if last is not None:
             _warn_truncated(path, statements[last][0], _shown_label(statements[last][1]))
             statements = statements[:last]
@@ -502,7 +502,8 @@ def _warn_truncated(path: str | os.PathLike[str], line: int, label: str) -> None
     warnings.warn(
         InputWarning(
             f"{os.fspath(path)}:{line}: the file does not end with ENDFIL (cut short?): "
-            f"its last record {label} and what follows it dropped"
+            f"its last {'record' if label.startswith('FA(') else 'statement'} {label} "
+            "and what follows it dropped"
         ),
         stacklevel=3,
     )
@@ -520,28 +521,35 @@ def _ends_with_endfil(data: bytes) -> bool:
 
 
 def _cut_last_record(data: bytes) -> tuple[bytes, tuple[int, str] | None] | None:
-    """``data`` without its last ``FA(`` line and what follows, and that line's number and
-    label (None when there is no actual feature), for a file whose lines are its
-    statements (no ``$``); None when the general reader must decide (a ``$``, a line
-    after it that starts with ``,`` or that the general reader would take for an
-    actual feature)."""
+    """``data`` without its last ``FA(`` line (or, with none, its last line with text) and
+    what follows, and that line's number and label (None when there is no statement),
+    for a file whose lines are its statements (no ``$``); None when the general reader
+    must decide (a ``$``, a line after it that starts with ``,`` or that the general
+    reader would take for an actual feature)."""
     if b"$" in data:
         return None
     last = deque(_FA_LINE.finditer(data), maxlen=1)
-    found = last[0] if last else None
-    start = 0 if found is None else found.start()
-    tail = data[start:].decode("utf-8", "replace")
-    if start == 0:
-        tail = tail.removeprefix("\ufeff")
-    lines = tail.split("\n")
-    for other in lines if found is None else lines[1:]:
-        text = other.strip()
-        if text.startswith(",") or _FA_START.match(text):
-            return None
-    if found is None:
-        return data, None
+    if last:
+        start = last[0].start()
+    else:
+        end = len(data.rstrip())
+        if end == 0:
+            return data, None
+        start = data.rfind(b"\n", 0, end) + 1
+    text = data[start if last else 0 :].decode("utf-8", "replace")
+    if start == 0 or not last:
+        text = text.removeprefix("\ufeff")
+    lines = [line.strip() for line in text.split("\n")]
+    if last:
+        first, others = lines[0], lines[1:]
+    else:  # every line: none may be an actual feature to the general reader
+        first, others = lines[data.count(b"\n", 0, start)], lines
+    if not first or first.startswith(","):
+        return None
+    if any(line.startswith(",") or _FA_START.match(line) for line in others):
+        return None
     line = data.count(b"\n", 0, start) + 1
-    return data[:start], (line, _shown_label(lines[0].strip()))
+    return data[:start], (line, _shown_label(first))
 
 
 def records_from_features(

@@ -191,9 +191,12 @@ def check_time_zones(sources: Iterable[TimeSource]) -> None:
         seen.setdefault(aware, source)
 
 
-def _line_span(lines: npt.NDArray[np.int64], start: int, stop: int) -> str:
+def _line_span(lines: npt.NDArray[np.int64], start: int, stop: int, prefix: bool = True) -> str:
     first, last = int(lines[start]), int(lines[stop - 1])
-    return f"line {first}" if first == last else f"lines {first}-{last}"
+    span = str(first) if first == last else f"{first}-{last}"
+    if not prefix:
+        return span
+    return f"line {span}" if first == last else f"lines {span}"
 
 
 def check_groups(records: Records, *, keep_later: bool = False) -> Records:
@@ -268,9 +271,9 @@ def check_groups(records: Records, *, keep_later: bool = False) -> Records:
             name = "label"
         else:
             message = (
-                f"step {key[0]} ball {key[1]} probed twice: "
-                f"{_line_span(lines, starts[first], stops[first])} and "
-                f"{_line_span(lines, starts[second], stops[second])}, "
+                f"step {key[0]} ball {key[1]} probed twice: lines "
+                f"{_line_span(lines, starts[first], stops[first], prefix=False)} and "
+                f"{_line_span(lines, starts[second], stops[second], prefix=False)}, "
                 "two groups of records that one sphere fit would merge "
                 "(keep_later keeps the later group)"
             )
