@@ -14,8 +14,9 @@ hexapod file) by its parameters ``theta`` (48, :data:`PARAMETER_NAMES`): base jo
    gain scales the travel from it (a screw-pitch error; written about ``q_home``
    and not about 0 so that offset and gain are not 99.99 % correlated);
 3. the platform stands at ``Y = FGM_theta(q_true)`` in B, the FGM started from
-   ``X_cmd`` (the assembly mode of the commanded pose), and at ``Y_O =
-   FGM_theta(q_true(0))`` for the zero command;
+   ``X_cmd`` (the assembly mode of the commanded pose; during a fit, from the last
+   solution for nearby parameters), and at ``Y_O = FGM_theta(q_true(0))`` for the
+   zero command;
 4. the CMM measures the platform frame, and poses are taken relative to the
    measured frame O: ``X_meas = inv(T(O)) T(S)``, predicted as
    ``X_pred(theta) = inv(T(Y_O)) T(Y)``.
@@ -57,8 +58,9 @@ known (a common frame O, say).
   measured pose put into B through the model's frame O; no FGM per pose, but the
   covariance ``A C A^T`` (``A = dr/dX_meas``) depends on ``theta`` and is
   re-evaluated at each estimate until the step is below 1e-3 sigma. To first order
-  ``r_leg = -J_q r_pose``, so both estimate the same parameters (a test: their
-  difference is a small fraction of the uncertainty).
+  ``r_leg = A r_pose``, so the whitened leg residuals are the whitened pose residuals
+  and both estimate the same parameters (a test: their difference is a small
+  fraction of the uncertainty).
 
 The Jacobian is analytic: by the implicit function theorem on ``IGM_theta(Y) =
 q_true``, ``dY/dtheta = J(Y)^-1 (dq_true/dtheta - dIGM/dtheta)`` with ``d|l_i|/db_i =
