@@ -202,3 +202,28 @@ class IppTimeout(IppDmeError):
 
 class IppConnectionLost(IppDmeError):
     """The connection to the server is closed or broken."""
+
+
+# calibration (hexatherm.core.calibration)
+class CalibrationError(HexathermError):
+    """A calibration that cannot be done as asked (bad input, too few poses)."""
+
+
+class RankDeficientError(CalibrationError):
+    """The poses do not identify the level's parameters (the message says why and what to add).
+
+    Attributes
+    ----------
+    rank : int
+        Rank counted over the level's parameters, the gauge's fixed freedoms included.
+    n_parameters : int
+        The level's number of parameters (6, 42 or 48).
+    directions : ndarray, shape (k, 48)
+        Unit parameter directions the poses cannot see (gauge excluded).
+    """
+
+    def __init__(self, message: str, *, rank: int, n_parameters: int, directions: Any):
+        self.rank = rank
+        self.n_parameters = n_parameters
+        self.directions = directions
+        super().__init__(message)

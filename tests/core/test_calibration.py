@@ -17,10 +17,8 @@ from scipy.spatial.transform import Rotation
 
 from hexatherm.core.calibration import (
     LEVELS,
-    CalibrationError,
     CalibrationModel,
     PoseWeights,
-    RankDeficientError,
     commanded_leg_lengths,
     compose_pose,
     fit_calibration,
@@ -34,7 +32,7 @@ from hexatherm.core.calibration import (
 )
 from hexatherm.core.geometry import pose_from_transform, relative_transform, transform_from_pose
 from hexatherm.core.hexapod import Hexapod
-from hexatherm.errors import HexathermError
+from hexatherm.errors import CalibrationError, HexathermError, RankDeficientError
 
 CONFIG = Path(__file__).resolve().parents[2] / "configs" / "symetrie-like.yaml"
 #: the issue's box: +-20/+-20/+-15 mm, +-4/+-4/+-8 deg

@@ -10,9 +10,7 @@ import numpy as np
 import pytest
 
 from hexatherm.core.calibration import (
-    CalibrationError,
     CalibrationModel,
-    RankDeficientError,
     fit_calibration,
     join_parameters,
     pose_covariance_from_sigma,
@@ -25,6 +23,7 @@ from hexatherm.core.geometry import (
     to_um_urad,
     transform_from_pose,
 )
+from hexatherm.errors import CalibrationError, RankDeficientError
 from tests.core.test_calibration import SPAN, simulate, symetrie_like, true_geometry
 
 #: the issue's noise: 1 um and 5 urad per pose component

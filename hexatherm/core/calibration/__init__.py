@@ -153,9 +153,7 @@ from hexatherm.core.calibration.model import (
     N_PARAMETERS,
     PARAMETER_NAMES,
     PARAMETER_UNITS,
-    CalibrationError,
     CalibrationModel,
-    RankDeficientError,
     commanded_leg_lengths,
     compose_pose,
     gauge_directions,
@@ -168,6 +166,7 @@ from hexatherm.core.calibration.model import (
     true_leg_lengths,
 )
 from hexatherm.core.calibration.weights import PoseWeights, pose_covariance_from_sigma
+from hexatherm.errors import CalibrationError, RankDeficientError
 
 __all__ = [
     "CRITERIA",

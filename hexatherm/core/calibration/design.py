@@ -19,16 +19,11 @@ from hexatherm.core.calibration.fit import (
     observability,
     refuse_rank_deficient,
 )
-from hexatherm.core.calibration.model import (
-    LEVELS,
-    CalibrationError,
-    CalibrationModel,
-    Level,
-    check_level,
-)
+from hexatherm.core.calibration.model import LEVELS, CalibrationModel, Level, check_level
 from hexatherm.core.calibration.weights import PoseWeights, pose_covariance_from_sigma
 from hexatherm.core.geometry import check_poses, to_um_urad
 from hexatherm.core.hexapod import Hexapod
+from hexatherm.errors import CalibrationError
 from hexatherm.typing import BoolArray, FloatArray, IntArray
 
 #: BIC drop a larger level must exceed to be chosen (as ``diagnose``'s effects)

@@ -21,16 +21,15 @@ from hexatherm.core.calibration.model import (
     OFFSETS,
     PARAMETER_NAMES,
     PLATFORM,
-    CalibrationError,
     CalibrationModel,
     Level,
-    RankDeficientError,
     angle_axes,
     check_level,
 )
 from hexatherm.core.calibration.weights import PoseWeights
 from hexatherm.core.geometry import check_poses, rotation_from_angles, to_um_urad
 from hexatherm.core.hexapod import Hexapod
+from hexatherm.errors import CalibrationError, RankDeficientError
 from hexatherm.typing import FloatArray, IntArray
 
 ResidualKind = Literal["pose", "leg"]

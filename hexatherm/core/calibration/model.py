@@ -22,7 +22,7 @@ from hexatherm.core.geometry import (
     rotation_from_angles,
 )
 from hexatherm.core.hexapod import Hexapod
-from hexatherm.errors import HexathermError
+from hexatherm.errors import CalibrationError
 from hexatherm.typing import BoolArray, FloatArray
 
 Level = Literal["offsets", "joints", "joints+gains"]
@@ -48,30 +48,6 @@ PARAMETER_NAMES: tuple[str, ...] = (
 )
 #: units of the 48 parameters (a gain is a ratio: 1e-6 is 1 ppm of the stroke)
 PARAMETER_UNITS: tuple[str, ...] = ("mm",) * 42 + ("mm/mm",) * 6
-
-
-class CalibrationError(HexathermError):
-    """A calibration that cannot be done as asked (bad input, too few poses)."""
-
-
-class RankDeficientError(CalibrationError):
-    """The poses do not identify the level's parameters (the message says why and what to add).
-
-    Attributes
-    ----------
-    rank : int
-        Rank counted over the level's parameters, the gauge's fixed freedoms included.
-    n_parameters : int
-        The level's number of parameters (6, 42 or 48).
-    directions : ndarray, shape (k, 48)
-        Unit parameter directions the poses cannot see (gauge excluded).
-    """
-
-    def __init__(self, message: str, *, rank: int, n_parameters: int, directions: FloatArray):
-        self.rank = rank
-        self.n_parameters = n_parameters
-        self.directions = directions
-        super().__init__(message)
 
 
 def check_level(level: str) -> Level:

@@ -6,7 +6,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.linalg import solve_triangular
 
-from hexatherm.core.calibration.model import CalibrationError
+from hexatherm.errors import CalibrationError
 from hexatherm.typing import FloatArray
 
 
