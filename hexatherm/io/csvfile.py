@@ -189,17 +189,20 @@ ISO_TIME = re.compile(
 _ISO_HELP = "YYYY-MM-DDTHH:MM[:SS[.ffffff]][Z|+HH:MM]"
 
 
-def _iso_layout(values: npt.NDArray[np.str_]) -> bool | None:
+def _iso_layout(values: npt.NDArray[np.object_]) -> bool | None:
     """Whether every time has an offset (True) or none has (False), when all follow one
-    layout that :data:`ISO_TIME` accepts (digits anywhere the first has one, the
-    same other characters); None when they do not: then each is checked on its own."""
-    codes = np.ascontiguousarray(values).view(np.uint32).reshape(values.size, -1)
+    layout that :data:`ISO_TIME` accepts (of one length, digits where the first has
+    digits, the same other characters); None when they do not: then each is checked."""
+    width = len(values[0])
+    data = "\n".join(values).encode("utf-8", "replace") + b"\n"
+    if len(data) != values.size * (width + 1):
+        return None  # lengths differ, or characters beyond ASCII
+    codes = np.frombuffer(data, dtype=np.uint8).reshape(values.size, width + 1)
     digit = (codes >= 48) & (codes <= 57)
-    shape = np.where(digit, 48, codes)
-    if not np.array_equal(shape, np.broadcast_to(shape[0], shape.shape)):
+    shape = np.where(digit, np.uint8(48), codes)
+    if not (shape == shape[0]).all():
         return None
-    template = "".join(map(chr, shape[0].tolist())).rstrip("\0")
-    match = ISO_TIME.fullmatch(template)
+    match = ISO_TIME.fullmatch(shape[0, :width].tobytes().decode("ascii", "replace"))
     return None if match is None else match.group("offset") is not None
 
 
@@ -208,7 +211,7 @@ def _iso_seconds(
 ) -> tuple[npt.NDArray[np.float64], bool]:
     """POSIX seconds of strict ISO times (naive ones taken as UTC) and whether they have
     an offset; InputError for a time off the layout, mixed offsets or an invalid date."""
-    values = text.to_numpy(dtype=str)
+    values = text.to_numpy(dtype=object)
     aware = _iso_layout(values) if values.size else False
     if aware is None:  # check one by one, in order, for the first bad one
         first_aware: bool | None = None
