@@ -1,0 +1,242 @@
+"""The figures of diagnose: residuals over time (pose, legs), ball centres, temperatures."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+
+from hexatherm.core.diagnosis import PoseResiduals
+from hexatherm.core.residuals import (
+    LEG_NAMES,
+    POSE_COMPONENTS,
+    POSE_UNITS,
+)
+from hexatherm.typing import FloatArray
+from hexatherm.workflows.diagnose.report.tables import (
+    _HOUR_S,
+    AFTER_COLOUR,
+    BEFORE_COLOUR,
+    TEMPERATURE_COLOUR,
+    changed,
+    start_time_s,
+)
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
+    from hexatherm.workflows.diagnose.run import DiagnosisResult
+
+
+# ------------------------------------------------------------------- figures
+def _new_figure(width_in: float, height_in: float, **margins: float) -> Figure:
+    """A figure on the Agg canvas (no pyplot: nothing global, nothing to close)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width_in, height_in))
+    FigureCanvasAgg(fig)
+    fig.subplots_adjust(**{"left": 0.08, "right": 0.98, "bottom": 0.08, "top": 0.92, **margins})
+    return fig
+
+
+def _time_order(result: DiagnosisResult) -> tuple[npt.NDArray[np.intp], FloatArray]:
+    """Steps in time order and their time in hours since the start."""
+    times = result.data.observations.times_s
+    order = np.argsort(times, kind="stable")
+    return order, (times[order] - start_time_s(result)) / _HOUR_S
+
+
+def _models(result: DiagnosisResult) -> list[tuple[str, PoseResiduals, str]]:
+    if changed(result):
+        return [("before", result.before, BEFORE_COLOUR), ("after", result.after, AFTER_COLOUR)]
+    return [("before", result.before, BEFORE_COLOUR)]
+
+
+def _model_title(result: DiagnosisResult, state: str) -> str:
+    d = result.diagnosis
+    if not changed(result):
+        return f"current model (nothing added), RMS {d.baseline_rms_um:.2f} um"
+    if state == "before":
+        return f"before: current model, RMS {d.baseline_rms_um:.2f} um"
+    names = ", ".join(a.effect.name for a in d.added)
+    return f"after: + {names}, RMS {d.final_rms_um:.2f} um"
+
+
+def _series_time_figure(
+    result: DiagnosisResult, attribute: str, names: Sequence[str], units: Sequence[str], title: str
+) -> Figure:
+    order, hours = _time_order(result)
+    models = _models(result)
+    fig = _new_figure(
+        5.5 * len(models) + 0.5,
+        11.0,
+        left=0.1 if len(models) == 1 else 0.075,
+        hspace=0.15,
+        wspace=0.22,
+        top=0.93,
+        bottom=0.06,
+    )
+    axes = fig.subplots(6, len(models), sharex=True, squeeze=False)
+    for c, (state, res, colour) in enumerate(models):
+        values = getattr(res, attribute)
+        for j in range(6):
+            ax = axes[j, c]
+            ax.plot(
+                hours,
+                values[order, j],
+                "o-",
+                color=colour,
+                markersize=3,
+                linewidth=0.8,
+                label=state,
+            )
+            ax.axhline(0.0, color="#999999", linewidth=0.6, zorder=0)
+            ax.grid(True, linewidth=0.3)
+            ax.tick_params(labelsize=8)
+            ax.set_ylabel(f"{names[j]} ({units[j]})", fontsize=9)
+            if j == 0:
+                ax.set_title(_model_title(result, state), fontsize=10)
+        axes[-1, c].set_xlabel("time since start (h)", fontsize=9)
+    fig.suptitle(title, fontsize=11)
+    return fig
+
+
+def pose_time_figure(result: DiagnosisResult) -> Figure:
+    """Pose residuals (Tx..Rz) vs time: one row per component, a column per model.
+
+    Columns: before (current model) and after (with the added effects), each
+    with its own scale; one column when nothing was added. Axes ``[j, c]`` hold
+    one line, labelled ``"before"`` or ``"after"``, in time order.
+    """
+    return _series_time_figure(
+        result, "pose_um", POSE_COMPONENTS, POSE_UNITS, "Pose residuals, measured - twin (um, urad)"
+    )
+
+
+def legs_time_figure(result: DiagnosisResult) -> Figure:
+    """Leg-space residuals (IGM of the measured minus the twin's pose) vs time, like
+    :func:`pose_time_figure`."""
+    return _series_time_figure(
+        result,
+        "legs_um",
+        LEG_NAMES,
+        ("um",) * 6,
+        "Leg-space residuals, IGM(measured) - IGM(twin) (um)",
+    )
+
+
+def centre_rms_figure(result: DiagnosisResult) -> Figure:
+    """Centre RMS of every step vs time, before and after, and the mean leg temperature.
+
+    The first axes hold the lines labelled ``"before: RMS .. um"`` (and ``"after: .."``)
+    in time order;
+    the second (right) axis the line ``"mean leg temperature"``. Reference and
+    origin steps are marked by hollow squares / a diamond on the residual lines.
+    """
+    order, hours = _time_order(result)
+    obs = result.data.observations
+    kinds = np.array(obs.plan.kinds)[order]
+    fig = _new_figure(10.0, 4.5, right=0.9, bottom=0.14, top=0.88)
+    ax = fig.subplots()
+    for state, res, colour in _models(result):
+        y = res.centre_rms_um[order]
+        ax.plot(
+            hours,
+            y,
+            "o-",
+            color=colour,
+            markersize=3,
+            linewidth=0.8,
+            label=f"{state}: {_model_title(result, state).split(', ')[-1]}",
+        )
+        for kind, marker in (("reference", "s"), ("origin", "D")):
+            sel = kinds == kind
+            if sel.any():
+                ax.plot(
+                    hours[sel],
+                    y[sel],
+                    marker,
+                    markerfacecolor="none",
+                    color=colour,
+                    markersize=6,
+                    linestyle="none",
+                    label=f"_{kind} {state}",
+                )
+    ax.set_xlabel("time since start (h)", fontsize=9)
+    ax.set_ylabel("centre RMS of the step (um)", fontsize=9)
+    ax.set_ylim(bottom=0.0)
+    ax.grid(True, linewidth=0.3)
+    temp_ax = ax.twinx()
+    temperature = obs.log.legs_at(obs.times_s).mean(axis=1)[order]
+    temp_ax.plot(
+        hours,
+        temperature,
+        "--",
+        color=TEMPERATURE_COLOUR,
+        linewidth=1.0,
+        label="mean leg temperature",
+    )
+    temp_ax.set_ylabel("mean leg temperature (degC)", fontsize=9, color=TEMPERATURE_COLOUR)
+    handles, labels = ax.get_legend_handles_labels()
+    more, more_labels = temp_ax.get_legend_handles_labels()
+    ax.legend(handles + more, labels + more_labels, fontsize=8, loc="upper left")
+    fig.suptitle(
+        "Centre residual of every step (squares: references, diamond: origin)", fontsize=11
+    )
+    return fig
+
+
+def temperature_figure(result: DiagnosisResult) -> Figure:
+    """Pose residuals vs the mean leg temperature at each step, before and after.
+
+    2 x 3 panels (Tx..Rz); in each, the lines ``"before"`` (and ``"after"``)
+    join the steps in time order (a loop means a lag behind the temperature).
+    """
+    order, _ = _time_order(result)
+    obs = result.data.observations
+    temperature = obs.log.legs_at(obs.times_s).mean(axis=1)[order]
+    fig = _new_figure(12.0, 7.0, left=0.07, hspace=0.3, wspace=0.3, bottom=0.14, top=0.9)
+    axes = fig.subplots(2, 3, sharex=True)
+    for j, ax in enumerate(axes.flat):
+        for state, res, colour in _models(result):
+            ax.plot(
+                temperature,
+                res.pose_um[order, j],
+                "o-",
+                color=colour,
+                markersize=3,
+                linewidth=0.5,
+                label=state,
+            )
+        ax.axhline(0.0, color="#999999", linewidth=0.6, zorder=0)
+        ax.grid(True, linewidth=0.3)
+        ax.tick_params(labelsize=8)
+        ax.set_title(POSE_COMPONENTS[j], fontsize=10)
+        ax.set_ylabel(f"{POSE_COMPONENTS[j]} ({POSE_UNITS[j]})", fontsize=9)
+        if j >= 3:
+            ax.set_xlabel("mean leg temperature (degC)", fontsize=9)
+    _legend_below(fig, axes.flat[0])
+    fig.suptitle("Pose residuals vs mean leg temperature (measured - twin)", fontsize=11)
+    return fig
+
+
+def _legend_below(fig: Figure, ax: Axes) -> None:
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncols=max(1, len(labels)), fontsize=9)
+
+
+def report_figures(result: DiagnosisResult) -> dict[str, Figure]:
+    """Every figure of the report, by key of :data:`FIGURE_FILES`."""
+    return {
+        "pose_time": pose_time_figure(result),
+        "legs_time": legs_time_figure(result),
+        "centre_rms": centre_rms_figure(result),
+        "temperature": temperature_figure(result),
+    }
