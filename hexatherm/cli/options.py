@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import math
 import os
 import sys
 from collections.abc import Callable
@@ -42,6 +43,118 @@ quality_threshold_option = click.option(
     "mapping): form_um, radius_dev_um, distance_dev_um, registration_rms_um, time_gap_s, "
     "temperature_change_C, min_rcond; inf (0 for min_rcond) disables a check.",
 )
+#: the largest number of Monte Carlo draws (the draws of every centre are held at once)
+MAX_DRAWS = 100_000
+#: seeds accepted (numpy's SeedSequence takes any integer >= 0; 64 bits are plenty)
+MAX_SEED = 2**64 - 1
+
+
+class CheckedFloat(click.ParamType):
+    """A float option that refuses NaN (and infinity unless ``allow_inf``), within bounds.
+
+    ``click.FloatRange`` lets ``nan`` through (every comparison with it is false), and a
+    NaN tolerance turns its check off unseen.
+
+    >>> CheckedFloat(min=0).convert("2.5", None, None)
+    2.5
+    >>> CheckedFloat(min=0).convert("nan", None, None)
+    Traceback (most recent call last):
+    ...
+    click.exceptions.BadParameter: 'nan' is not a number
+    """
+
+    name = "float"
+
+    def __init__(
+        self,
+        min: float | None = None,
+        max: float | None = None,
+        *,
+        min_open: bool = False,
+        allow_inf: bool = False,
+    ) -> None:
+        self.min, self.max, self.min_open, self.allow_inf = min, max, min_open, allow_inf
+
+    def convert(
+        self, value: Any, param: click.Parameter | None, ctx: click.Context | None
+    ) -> float:
+        try:
+            number = float(value)
+        except (TypeError, ValueError):
+            self.fail(f"{value!r} is not a number", param, ctx)
+        if math.isnan(number):
+            self.fail(f"{value!r} is not a number", param, ctx)
+        if math.isinf(number) and not self.allow_inf:
+            self.fail(f"{value!r}: must be finite", param, ctx)
+        if self.min is not None and (number < self.min or (self.min_open and number == self.min)):
+            sign = ">" if self.min_open else ">="
+            self.fail(f"{value!r}: must be {sign} {self.min:g}", param, ctx)
+        if self.max is not None and number > self.max:
+            self.fail(f"{value!r}: must be <= {self.max:g}", param, ctx)
+        return number
+
+
+class PoseTolerance(click.ParamType):
+    """``MM,DEG``: the largest deviation of a measured pose from its commanded one;
+    ``inf`` (or ``inf,inf``) turns the check off.
+
+    >>> PoseTolerance().convert("2,1", None, None)
+    (2.0, 1.0)
+    >>> PoseTolerance().convert("inf", None, None)
+    (inf, inf)
+    """
+
+    name = "MM,DEG"
+
+    def convert(
+        self, value: Any, param: click.Parameter | None, ctx: click.Context | None
+    ) -> tuple[float, float]:
+        if isinstance(value, tuple):
+            return value
+        parts = str(value).split(",")
+        if len(parts) == 1 and parts[0].strip().lower() in ("inf", "+inf"):
+            parts = parts * 2
+        if len(parts) != 2:
+            self.fail(f"{value!r}: expected MM,DEG (e.g. 2,1) or inf", param, ctx)
+        check = CheckedFloat(min=0, min_open=True, allow_inf=True)
+        mm, deg = (check.convert(p.strip(), param, ctx) for p in parts)
+        return mm, deg
+
+
+pose_tolerance_option = click.option(
+    "--pose-tolerance",
+    type=PoseTolerance(),
+    default=None,
+    help="Refuse a step whose measured pose relative to O deviates more from its commanded "
+    "pose relative to O (translation mm, rotation deg; inf: no check) [default: the session "
+    "file's pose_check:, else 2 % of the leg stroke, at least 2 mm, and the angle that "
+    "moves the platform's joints as much].",
+)
+mc_option = click.option(
+    "--mc",
+    "mc",
+    type=click.IntRange(min=0, max=MAX_DRAWS),
+    default=0,
+    show_default=True,
+    metavar="N",
+    help="Monte Carlo uncertainty with N draws (GUM Supplement 1; 2 to "
+    f"{MAX_DRAWS:,}), checked against the linear propagation; 0: linear propagation only.",
+)
+seed_option = click.option(
+    "--seed",
+    type=click.IntRange(min=0, max=MAX_SEED),
+    default=0,
+    show_default=True,
+    help="Seed of the Monte Carlo draws (an integer >= 0).",
+)
+
+
+def check_draws(mc: int) -> None:
+    """A usage error for ``--mc 1`` (a standard deviation needs two draws)."""
+    if mc == 1:
+        raise click.BadParameter("Monte Carlo needs at least 2 draws", param_hint="'--mc'")
+
+
 max_gap_option = click.option(
     "--max-gap",
     type=click.FloatRange(min=0),

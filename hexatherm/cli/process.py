@@ -9,13 +9,18 @@ import click
 import numpy as np
 
 from hexatherm.cli.options import (
+    CheckedFloat,
     ProgressBars,
+    check_draws,
     clean_errors,
     echo_err,
     interpolation_option,
+    mc_option,
     output_dir_option,
     overwrite_option,
+    pose_tolerance_option,
     quality_threshold_option,
+    seed_option,
 )
 
 if TYPE_CHECKING:
@@ -39,14 +44,14 @@ QUALITY_EXIT = 3
 )
 @click.option(
     "--distance-tolerance-um",
-    type=click.FloatRange(min=0),
+    type=CheckedFloat(min=0, allow_inf=True),
     default=50.0,
     show_default=True,
-    help="Refuse a step whose inter-ball distances deviate more.",
+    help="Refuse a step whose inter-ball distances deviate more (inf: no check).",
 )
 @click.option(
     "--registration-tolerance-um",
-    type=click.FloatRange(min=0),
+    type=CheckedFloat(min=0, allow_inf=True),
     default=10.0,
     show_default=True,
     help="Warn about a step whose registration RMS is larger.",
@@ -56,19 +61,9 @@ QUALITY_EXIT = 3
     is_flag=True,
     help="Fail instead of warning when a registration exceeds its tolerance.",
 )
-@click.option(
-    "--mc",
-    "mc",
-    type=click.IntRange(min=0),
-    default=0,
-    show_default=True,
-    metavar="N",
-    help="Monte Carlo uncertainty with N draws (GUM Supplement 1), "
-    "checked against the linear propagation; 0: linear propagation only.",
-)
-@click.option(
-    "--seed", type=int, default=0, show_default=True, help="Seed of the Monte Carlo draws."
-)
+@pose_tolerance_option
+@mc_option
+@seed_option
 @quality_threshold_option
 @click.option(
     "--method",
@@ -104,6 +99,7 @@ def command(
     distance_tolerance_um: float,
     registration_tolerance_um: float,
     strict_registration: bool,
+    pose_tolerance: tuple[float, float] | None,
     mc: int,
     seed: int,
     quality_thresholds: tuple[str, ...],
@@ -131,13 +127,18 @@ def command(
     )
     from hexatherm.workflows.process.uncertainty import pose_uncertainty
 
-    if mc == 1:
-        raise click.BadParameter("Monte Carlo needs at least 2 draws", param_hint="'--mc'")
+    check_draws(mc)
+    if hexapod_path is not None and "twin" not in methods:
+        raise click.BadParameter(
+            "--hexapod is the twin's model: use it with --method twin", param_hint="'--hexapod'"
+        )
     overrides = dict(parse_threshold(t) for t in quality_thresholds)
     folder = session if session.is_dir() else session.parent
     out_dir = Path(out) if out is not None else folder / "results"
     refuse_existing(out_dir, overwrite)
-    checks = Checks(distance_tolerance_um, registration_tolerance_um, strict_registration)
+    checks = Checks(
+        distance_tolerance_um, registration_tolerance_um, strict_registration, pose_tolerance
+    )
     with ProgressBars() as bars:
         result = process_session(
             session,
@@ -161,10 +162,6 @@ def command(
             f"twin ({hexapod_path or 'the session hexapod'}; effects: {effects}): "
             f"twin-corrected minus corrected by the references, RMS "
             f"{np.sqrt(np.mean(gap**2)):.3f} um over the targets' translations"
-        )
-    elif hexapod_path is not None:
-        raise click.BadParameter(
-            "--hexapod is the twin's model: use it with --method twin", param_hint="'--hexapod'"
         )
     with ProgressBars() as bars:
         uncertainty = pose_uncertainty(result, mc=mc, seed=seed, progress=bars.draws)

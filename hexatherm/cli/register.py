@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from hexatherm.cli.options import clean_errors, echo_err, overwrite_option
+from hexatherm.cli.options import CheckedFloat, clean_errors, echo_err, overwrite_option
 
 
 @click.command("register")
@@ -31,10 +31,23 @@ from hexatherm.cli.options import clean_errors, echo_err, overwrite_option
     is_flag=True,
     help="Fit the balls with their diameters fixed (plus the tip if uncompensated).",
 )
+@click.option(
+    "--diameter-tolerance-um",
+    type=CheckedFloat(min=0, allow_inf=True),
+    default=20.0,
+    show_default=True,
+    help="Refuse a ball whose fitted diameter (free radius) deviates more from the datums "
+    "file's (inf: no check).",
+)
 @overwrite_option
 @clean_errors
 def command(
-    measurement: Path, datums_path: Path, out: Path, fixed_diameter: bool, overwrite: bool
+    measurement: Path,
+    datums_path: Path,
+    out: Path,
+    fixed_diameter: bool,
+    diameter_tolerance_um: float,
+    overwrite: bool,
 ) -> None:
     """Build the platform frame from MEASUREMENT and write the balls file.
 
@@ -50,7 +63,7 @@ def command(
 
     refuse_existing(out, overwrite)
     datums = read_datums(datums_path)
-    result = register_balls(measurement, datums, fixed_diameter)
+    result = register_balls(measurement, datums, fixed_diameter, diameter_tolerance_um)
     atomic_write_text(out, balls_to_yaml(result.balls))
     plane, (b1, b2) = result.frame.plane, result.frame.bores
     echo_err(f"top face: {plane.n} points, flatness {plane.form_um:.2f} um")

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from hexatherm.cli.options import clean_errors, echo_err
+from hexatherm.cli.options import CheckedFloat, clean_errors, echo_err
 
 
 @click.command("replay")
@@ -19,13 +19,22 @@ from hexatherm.cli.options import clean_errors, echo_err
 @click.option(
     "--update",
     is_flag=True,
-    help="Rewrite expected/ with the new results (after a deliberate change) and say what changed.",
+    help="After a deliberate change: rewrite the files of expected/ whose values moved "
+    "beyond the tolerances, and list them (nothing else there is touched).",
 )
 @click.option(
-    "--tol-mm", type=float, default=1e-7, show_default=True, help="Tolerance of columns in mm."
+    "--tol-mm",
+    type=CheckedFloat(min=0),
+    default=1e-7,
+    show_default=True,
+    help="Tolerance of columns in mm.",
 )
 @click.option(
-    "--tol-deg", type=float, default=1e-6, show_default=True, help="Tolerance of columns in deg."
+    "--tol-deg",
+    type=CheckedFloat(min=0),
+    default=1e-6,
+    show_default=True,
+    help="Tolerance of columns in deg.",
 )
 @clean_errors
 def command(sessions_dir: Path, update: bool, tol_mm: float, tol_deg: float) -> None:
@@ -51,11 +60,14 @@ def command(sessions_dir: Path, update: bool, tol_mm: float, tol_deg: float) -> 
     click.echo(f"{'session':28} {'status':8} worst deviation")
     for folder in sessions:
         result = replay_session(folder, tolerances, update=update)
-        status = "ok" if result.ok else ("updated" if update else "MISMATCH")
+        repaired = not result.ok and result.repaired
+        status = "ok" if result.ok else ("updated" if repaired else "MISMATCH")
         click.echo(f"{folder.name:28} {status:8} {format_worst(result.worst)}")
         for line in result.mismatches:
-            echo_err(("changed: " if update else "mismatch: ") + line)
-        failed += (not result.ok) and not update
+            echo_err(("changed: " if repaired else "mismatch: ") + line)
+        for path in result.updated:
+            echo_err(f"rewrote {path}")
+        failed += not (result.ok or repaired)
     if failed:
         raise click.ClickException(f"{failed} of {len(sessions)} session(s) do not replay")
     echo_err(f"{len(sessions)} session(s) replayed")

@@ -8,11 +8,15 @@ import click
 
 from hexatherm.cli.options import (
     ProgressBars,
+    check_draws,
     clean_errors,
     echo_err,
     interpolation_option,
+    mc_option,
     overwrite_option,
+    pose_tolerance_option,
     quality_threshold_option,
+    seed_option,
 )
 
 
@@ -35,16 +39,9 @@ from hexatherm.cli.options import (
     help="Fit spheres to probed points with the radius fixed to the balls file's "
     "(as in process); default: free radius.",
 )
-@click.option(
-    "--mc",
-    type=click.IntRange(min=0),
-    default=0,
-    show_default=True,
-    help="Monte Carlo draws for the pose uncertainty (0: linear propagation).",
-)
-@click.option(
-    "--seed", type=int, default=0, show_default=True, help="Seed of the Monte Carlo draws."
-)
+@pose_tolerance_option
+@mc_option
+@seed_option
 @quality_threshold_option
 @clean_errors
 def command(
@@ -53,6 +50,7 @@ def command(
     overwrite: bool,
     interpolation: str,
     fixed_diameter: bool,
+    pose_tolerance: tuple[float, float] | None,
     mc: int,
     seed: int,
     quality_thresholds: tuple[str, ...],
@@ -66,10 +64,11 @@ def command(
     session's metadata. Nothing is written when processing fails.
     """
     from hexatherm.io.atomic import atomic_write_text, refuse_existing
-    from hexatherm.workflows.process.pipeline import process_session
+    from hexatherm.workflows.process.pipeline import Checks, process_session
     from hexatherm.workflows.process.quality import parse_threshold, session_thresholds
     from hexatherm.workflows.report import build_report
 
+    check_draws(mc)
     overrides = dict(parse_threshold(t) for t in quality_thresholds)
     folder = session if session.is_dir() else session.parent
     out_file = out if out is not None else folder / "report.html"
@@ -79,6 +78,7 @@ def command(
             session,
             interpolation,  # type: ignore[arg-type]
             0.0 if fixed_diameter else None,
+            Checks(pose_tolerance=pose_tolerance),
             progress=bars.reading,
         )
     for warning in result.warnings:

@@ -30,6 +30,33 @@ class BallRegistration:
     bore_distance_mm: float
 
 
+def _check_diameters(
+    rec: Records,
+    names: list[str],
+    fitted_mm: npt.NDArray[np.float64],
+    nominal_mm: npt.NDArray[np.float64],
+    datums: Datums,
+    tolerance_um: float,
+) -> None:
+    """InputError for the first ball whose fitted diameter is off its nominal one."""
+    deviation_um = (fitted_mm - nominal_mm) * 1e3
+    bad = np.abs(deviation_um) > tolerance_um
+    if not np.any(bad):
+        return
+    j = int(np.argmax(bad))
+    first = int(np.argmax(rec.ball == names[j]))
+    tip = "" if datums.probe_compensated else " (ball plus probe tip: uncompensated points)"
+    raise InputError(
+        f"ball {names[j]}: fitted diameter {fitted_mm[j]:.4f} mm is {deviation_um[j]:+.1f} um "
+        f"from the nominal {nominal_mm[j]:.4f} mm{tip} (tolerance {tolerance_um:g} um, "
+        "--diameter-tolerance-um): a wrong diameter in the datums file, another ball, or a "
+        "wrong probe: setting",
+        path=rec.path,
+        line=int(rec.line[first]),
+        field="ball",
+    )
+
+
 def _points(path: str | os.PathLike[str], step: str | None) -> Records:
     found = [r for r in read_measurements(path) if r.kind == "points"]
     if not found:
@@ -63,10 +90,27 @@ def _points(path: str | os.PathLike[str], step: str | None) -> Records:
     )
 
 
+#: largest deviation of a ball's fitted diameter from its nominal one, um (``register``)
+DIAMETER_TOLERANCE_UM = 20.0
+
+
 def register_balls(
-    path: str | os.PathLike[str], datums: Datums, fixed_diameter: bool = False
+    path: str | os.PathLike[str],
+    datums: Datums,
+    fixed_diameter: bool = False,
+    diameter_tolerance_um: float = DIAMETER_TOLERANCE_UM,
 ) -> BallRegistration:
-    """Fit the datums and the balls of one measurement; balls in the platform frame."""
+    """Fit the datums and the balls of one measurement; balls in the platform frame.
+
+    Every ball's diameter fitted with a free radius (plus the probe tip's when the
+    points are not compensated) is compared with the datums file's nominal one: a
+    wrong nominal diameter moves every centre fitted with a fixed radius (a 1 mm error
+    moves it about 0.7 mm over a 70 deg cap), and the balls file carries it into every
+    session. Beyond ``diameter_tolerance_um`` (um, ``inf`` turns the check off) an
+    InputError names the measurement file, the ball's first line and both diameters.
+    """
+    if not diameter_tolerance_um >= 0:
+        raise ValueError(f"diameter_tolerance_um must be >= 0, got {diameter_tolerance_um!r}")
     rec = _points(path, datums.step)
 
     def feature(name: str) -> npt.NDArray[np.float64]:
@@ -83,16 +127,30 @@ def register_balls(
     tip_r = 0.0 if datums.probe_compensated else datums.tip_diameter_mm / 2
     ball_points = [feature(n) for n in names]
     groups = np.concatenate([np.full(len(p), i) for i, p in enumerate(ball_points)])
-    radius = None
-    if fixed_diameter:
-        radius = np.array(
-            [
-                probe_radius_mm(datums.balls[n], datums.tip_diameter_mm, datums.probe_compensated)
-                for n in names
-            ]
-        )
+    nominal_mm = np.array(
+        [
+            2 * probe_radius_mm(datums.balls[n], datums.tip_diameter_mm, datums.probe_compensated)
+            for n in names
+        ]
+    )
+    radius = nominal_mm / 2 if fixed_diameter else None
+    points = np.concatenate(ball_points)
     try:
-        fits = fit_spheres(np.concatenate(ball_points), groups, radius_mm=radius)
+        try:
+            free = fit_spheres(points, groups)
+        except FitError:
+            if radius is None:
+                raise
+            free = None  # too few points for a free radius (a fixed one takes 3): no check
+        if free is not None:
+            _check_diameters(
+                rec, names, 2 * free.radius_mm, nominal_mm, datums, diameter_tolerance_um
+            )
+        fits = (
+            fit_spheres(points, groups, radius_mm=radius)
+            if free is None or radius is not None
+            else free
+        )
         towards = fits.centre_mm.mean(axis=0) - feature(datums.plane).mean(axis=0)
         frame = datum_frame(
             feature(datums.plane),

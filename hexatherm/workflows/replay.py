@@ -31,6 +31,8 @@ class Comparison:
     mismatches: list[str] = field(default_factory=list)
     worst: dict[str, float] = field(default_factory=dict)  # unit -> worst |difference|
     files: list[str] = field(default_factory=list)
+    updated: list[str] = field(default_factory=list)  # files rewritten (update)
+    repaired: bool = False  # update rewrote every mismatching file
 
     @property
     def ok(self) -> bool:
@@ -99,44 +101,73 @@ def compare_tables(
 def replay_session(
     folder: Path, tolerances: dict[str, float] | None = None, update: bool = False
 ) -> Comparison:
-    """Process ``folder`` and compare with (or, with ``update``, rewrite) ``expected/``."""
+    """Process ``folder`` and compare with (or, with ``update``, rewrite) ``expected/``.
+
+    A session that does not process, or whose ``expected`` is not a folder, is a
+    mismatch naming why. With ``update``, only the CSV files whose values moved beyond
+    the tolerances (or that are new) are rewritten, and listed in
+    ``Comparison.updated``; nothing else in ``expected/`` is touched (a CSV file that
+    ``process`` no longer writes stays a mismatch, to be removed by hand).
+    """
+    from hexatherm.errors import HexathermError
+
     tolerances = tolerances or DEFAULT_TOLERANCES
     result = Comparison(folder.name)
     expected_dir = folder / "expected"
+    if expected_dir.is_symlink() or not expected_dir.is_dir():
+        what = "a link" if expected_dir.is_symlink() else "not a folder"
+        result.mismatches.append(f"{folder.name}/expected: {what}; expected/ must be a folder")
+        return result
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "out"
-        processed = process_session(folder)
-        write_results(processed, out, quality=quality_checks(processed))
+        try:
+            processed = process_session(folder)
+            write_results(processed, out, quality=quality_checks(processed))
+        except HexathermError as exc:
+            result.mismatches.append(f"{folder.name}: does not process: {exc}")
+            return result
         names = sorted(p.name for p in out.glob("*.csv"))
         result.files = names
+        changed: list[str] = []
         for name in names:
             got = pd.read_csv(out / name)
             exp_path = expected_dir / name
-            if not exp_path.exists():
+            if not exp_path.is_file():
                 result.mismatches.append(f"{folder.name}/{name}: not in expected/")
+                changed.append(name)
                 continue
+            before = len(result.mismatches)
             compare_tables(name, pd.read_csv(exp_path), got, tolerances, result)
-        for stale in sorted(p.name for p in expected_dir.glob("*.csv")):
-            if stale not in names:
-                result.mismatches.append(f"{folder.name}/{stale}: no longer written by process")
+            if len(result.mismatches) > before:
+                changed.append(name)
+        stale = sorted(p.name for p in expected_dir.glob("*.csv") if p.name not in names)
+        for name in stale:
+            result.mismatches.append(f"{folder.name}/{name}: no longer written by process")
         if update:
-            from hexatherm.io.atomic import atomic_output_dir
+            from hexatherm.io.atomic import atomic_write_text
 
-            texts = {n: (out / n).read_text() for n in names}
-            with atomic_output_dir(expected_dir, overwrite=True) as target:
-                for n, text in texts.items():
-                    (target / n).write_text(text, encoding="utf-8", newline="")
+            for name in changed:
+                atomic_write_text(expected_dir / name, (out / name).read_text(encoding="utf-8"))
+                result.updated.append(f"{folder.name}/expected/{name}")
+            # a CSV that process no longer writes stays (it may be someone's): named above
+            result.repaired = not stale
     return result
 
 
 def find_sessions(root: Path) -> list[Path]:
-    """Session folders under ``root`` (or ``root`` itself) that have an ``expected/``."""
+    """Session folders under ``root`` (or ``root`` itself) that have an ``expected``
+    entry (a folder, or anything else there, which :func:`replay_session` reports)."""
     candidates = (
         [root]
         if (root / "session.yaml").exists()
         else sorted(p for p in root.iterdir() if p.is_dir())
     )
-    return [p for p in candidates if (p / "expected").is_dir() and (p / "session.yaml").exists()]
+    return [
+        p
+        for p in candidates
+        if ((p / "expected").exists() or (p / "expected").is_symlink())
+        and (p / "session.yaml").exists()
+    ]
 
 
 def format_worst(worst: dict[str, float]) -> str:

@@ -47,11 +47,12 @@ def session(folder, *, plan=None, gain=GAIN, output="points", noise_mm=0.5e-3, *
 
 def failing(folder, **kw):
     """{check: labels of the steps where it failed}."""
-    frame = quality_checks(process_session(folder), **kw).frame
+    report = quality_checks(process_session(folder), **kw)
+    frame = report.frame
     return {
-        check: frame.loc[~frame[f"ok_{check}"], "label"].tolist()
+        check: frame.loc[report.failing(check), "label"].tolist()
         for check in CHECKS
-        if not frame[f"ok_{check}"].all()
+        if report.failing(check).any()
     }
 
 
@@ -126,10 +127,13 @@ def test_time_gap(tmp_path):
 def test_temperature_change(tmp_path):
     s = session(tmp_path / "s", gain=(30.0, 7.0, 2.0, 3.0, 9.0, 3.5))  # leg 1 heats fast
     assert set(failing(s)) == {"temperature"}
-    # no temperatures file: not checked
+    # no temperatures file: not checked, and it says so ("na", not True; "n/a" on screen)
     replace_in(s / "session.yaml", "temperatures: temperatures.csv\n", "")
-    frame = quality_checks(process_session(s)).frame
-    assert frame["temperature_change_C"].isna().all() and frame["ok_temperature"].all()
+    report = quality_checks(process_session(s))
+    frame = report.frame
+    assert frame["temperature_change_C"].isna().all() and (frame["ok_temperature"] == "na").all()
+    line = next(x for x in report.summary() if x.lstrip().startswith("temperature"))
+    assert "n/a (could not run: no thermocouple log in the session)" in line
 
 
 def test_fgm_conditioning(tmp_path):
@@ -152,7 +156,7 @@ def test_fgm_conditioning(tmp_path):
 def test_centres_session_skips_the_sphere_checks(tmp_path):
     frame = quality_checks(process_session(session(tmp_path / "s", output="centres"))).frame
     assert frame["form_um"].isna().all() and frame["radius_dev_um"].isna().all()
-    assert frame["ok_form"].all() and frame["ok_radius"].all()
+    assert (frame["ok_form"] == "na").all() and (frame["ok_radius"] == "na").all()
 
 
 def test_thresholds_parse_and_refuse():

@@ -8,21 +8,30 @@ writes nothing: :mod:`hexatherm.workflows.process.outputs` does.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
 
-from hexatherm.core.correction import Correction, Interpolation, StepPoses, correct
+from hexatherm.core.correction import Correction, Interpolation, StepPoses, correct, step_poses
+from hexatherm.core.plausibility import (
+    PoseCheck,
+    commanded_relative,
+    default_pose_tolerance,
+    likeliest_cause,
+    mirrored,
+    pose_deviations,
+)
 from hexatherm.core.registration import Registration, check_distances, register
 from hexatherm.core.spherefit import fit_spheres, probe_radius_mm
-from hexatherm.errors import FitError, InputError, PlanError
-from hexatherm.io.config import read_session
+from hexatherm.errors import FitError, InputError, PlanError, StepError
+from hexatherm.io.config import read_pose_check, read_session
 from hexatherm.io.csvfile import Temperatures, read_measurements, read_temperatures
-from hexatherm.io.records import Records, TimeKind
+from hexatherm.io.records import Records, TimeKind, seconds_to_iso
 from hexatherm.session import Balls, Session
 from hexatherm.typing import FloatArray
 
@@ -92,11 +101,31 @@ class Checks:
         Largest registration RMS residual of a step.
     registration_fails : bool
         Whether exceeding ``registration_tolerance_um`` is an error (else a warning).
+    pose_tolerance : (float, float) or None
+        Largest deviation ``(mm, deg)`` of a step's measured pose relative to O from its
+        commanded pose relative to O (see :mod:`hexatherm.core.plausibility`); beyond it
+        the step is refused, naming the likeliest cause. None: the session file's
+        ``pose_check:`` tolerances, else the default sized from the leg stroke;
+        ``(inf, inf)`` turns the check off.
+
+    Raises
+    ------
+    ValueError
+        A tolerance that is not a number >= 0 (NaN would turn a check off unseen).
     """
 
     distance_tolerance_um: float = 50.0
     registration_tolerance_um: float = 10.0
     registration_fails: bool = False
+    pose_tolerance: tuple[float, float] | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("distance_tolerance_um", "registration_tolerance_um"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float) or not value >= 0:
+                raise ValueError(f"{name} must be a number >= 0, got {value!r}")
+        if self.pose_tolerance is not None:
+            PoseCheck(*self.pose_tolerance)  # the same checks
 
 
 def nominal_fit_diameter_mm(balls: Balls) -> FloatArray:
@@ -187,16 +216,17 @@ def fit_points(
         "cov_centre_mm2": fits.cov_centre_mm2,
         "sigma_um": sigma_um,
     }
-    return Records(
-        path=records.path,
+    # replace() keeps every other attribute of the file's records (its time zone kind)
+    return dataclasses.replace(
+        records,
         kind="centres",
         label=records.label[first],
         ball=records.ball[first],
         xyz_mm=fits.centre_mm,
         time_s=times,
-        time_kind=records.time_kind,
         line=records.line[first],
         diameter_mm=2 * fits.radius_mm,
+        ijk=None,
         extra=extra,
     )
 
@@ -328,7 +358,139 @@ def read_measured(
                 line=2,
                 field="time",
             )
+    check_time_zones([*records, *([] if temperatures is None else [temperatures])])
+    if temperatures is not None:
+        check_log_span(centres.times_s, session.plan.labels, temperatures)
     return records, points, centres, temperatures
+
+
+def check_time_zones(sources: Sequence[object]) -> None:
+    """Refuse a session whose files mix naive ISO times and times with a UTC offset.
+
+    A naive time is taken as UTC: beside times with an offset it is hours off, and a
+    thermocouple log read that way is held at its ends silently. ``sources`` are
+    records and thermocouple logs; one whose reader does not tell (no ``time_aware``,
+    or None) is not compared. InputError naming the later file and field ``time``.
+    """
+    seen: dict[bool, object] = {}
+    for source in sources:
+        aware = getattr(source, "time_aware", None)
+        if getattr(source, "time_kind", None) != "iso" or aware is None:
+            continue
+        other = seen.get(not aware)
+        if other is not None:
+            naive, offset = "naive (no UTC offset)", "with a UTC offset"
+            mine, theirs = (offset, naive) if aware else (naive, offset)
+            raise InputError(
+                f"times {mine} here but {theirs} in {getattr(other, 'path', '?')}: naive "
+                "times would be taken as UTC, hours off; give every time an offset or none",
+                path=getattr(source, "path", None),
+                field="time",
+            )
+        seen.setdefault(bool(aware), source)
+
+
+def _format_time(seconds: float, kind: TimeKind) -> str:
+    return seconds_to_iso(seconds) if kind == "iso" else f"{seconds:g} s"
+
+
+def check_log_span(times_s: FloatArray, labels: Sequence[str], temperatures: Temperatures) -> None:
+    """Refuse steps whose time is outside the thermocouple log's span.
+
+    ``np.interp`` holds a log's first and last values beyond its ends: a logger that
+    stopped early would give every later step the last temperatures, and the twin,
+    the temperature check and the diagnosis would take them for measured ones.
+
+    Parameters
+    ----------
+    times_s : ndarray, shape (N,)
+        Every step's time, seconds (as the log's).
+    labels : sequence of str
+        The steps' labels.
+    temperatures : Temperatures
+        The thermocouple log.
+
+    Raises
+    ------
+    InputError
+        Naming the log, field ``time``, the first step outside, its time and the log's span.
+    """
+    log = np.asarray(temperatures.time_s, dtype=float)
+    t = np.asarray(times_s, dtype=float)
+    start, end = float(log[0]), float(log[-1])
+    outside = (t < start) | (t > end)
+    if not np.any(outside):
+        return
+    i = int(np.argmax(outside))
+    kind = temperatures.time_kind
+    side = "before its first row" if t[i] < start else "after its last row"
+    more = f" ({int(outside.sum()) - 1} more step(s) too)" if outside.sum() > 1 else ""
+    raise InputError(
+        f"step {labels[i]} at {_format_time(float(t[i]), kind)} is outside the thermocouple "
+        f"log, {side} (the log spans {_format_time(start, kind)} to "
+        f"{_format_time(end, kind)}){more}: its temperatures are unknown; complete the log "
+        "or remove 'temperatures:' from the session file",
+        path=temperatures.path,
+        field="time",
+    )
+
+
+def session_pose_check(session: Session, checks: Checks | None = None) -> PoseCheck:
+    """The measured-versus-commanded check of ``session``: ``checks.pose_tolerance`` (the
+    command line) over the session file's ``pose_check:`` mapping over the default
+    sized from the leg stroke (:func:`hexatherm.core.plausibility.default_pose_tolerance`);
+    the session file's offset."""
+    tol_mm, tol_deg = default_pose_tolerance(
+        session.hexapod.stroke_mm, session.hexapod.platform_joints_mm
+    )
+    offset = np.zeros(6)
+    declared = read_pose_check(session.path)
+    if declared is not None:
+        tol_mm = declared.get("tolerance_mm", tol_mm)
+        tol_deg = declared.get("tolerance_deg", tol_deg)
+        offset = np.asarray(declared.get("offset", offset), dtype=float)
+    if checks is not None and checks.pose_tolerance is not None:
+        tol_mm, tol_deg = checks.pose_tolerance
+    return PoseCheck(float(tol_mm), float(tol_deg), offset)
+
+
+def check_poses(session: Session, centres: StepCentres, steps: StepPoses, check: PoseCheck) -> None:
+    """Refuse a step whose measured pose relative to O is not its commanded one.
+
+    Thermal errors are micrometres; millimetres or degrees are a mistake in the data
+    that registers without a residual: swapped step labels, a mirrored measurement
+    (x and y columns swapped), a plan in other units. PlanError (a StepError) naming
+    the first failing step, its deviation, the tolerance and the likeliest cause
+    (:func:`hexatherm.core.plausibility.likeliest_cause`).
+    """
+    if not check.enabled:
+        return
+    plan = session.plan
+    commanded = commanded_relative(plan.poses, plan.origin_index, session.hexapod.convention)
+    dev = pose_deviations(steps.pose, commanded, check, plan.origin_index)
+    if not np.any(dev.failing):
+        return
+    i = int(np.argmax(dev.failing))
+    flipped = mirrored(centres.centres_mm, session.balls.centres_mm)
+    cause = likeliest_cause(
+        i, steps.pose, commanded, check, plan.labels, flipped, plan.origin_index
+    )
+    more = int(dev.failing.sum()) - 1
+
+    def pose(p: FloatArray) -> str:
+        return "[" + ", ".join(f"{v:.4f}" for v in p) + "]"
+
+    offset = " less the declared offset" if np.any(check.offset) else ""
+    raise StepError(
+        f"measured pose relative to O {pose(steps.pose[i])} is {dev.translation_mm[i]:.3f} mm, "
+        f"{dev.rotation_deg[i]:.3f} deg from the commanded {pose(commanded[i])}{offset} "
+        f"(tolerance {check.tolerance_mm:g} mm, {check.tolerance_deg:.3g} deg: "
+        "--pose-tolerance MM,DEG or the session file's pose_check:)"
+        + (f" ({more} more step(s) too)" if more else "")
+        + f"; likeliest cause: {cause}",
+        step=plan.labels[i],
+        index=i,
+    )
 
 
 def process_session(
@@ -357,6 +519,11 @@ def process_session(
         centres.centres_mm, balls.centres_mm, registration_weights(centres.u_um)
     )
     warnings = []
+    if temperatures is None:
+        warnings.append(
+            "no thermocouple log in the session (no 'temperatures:' in the session file): the "
+            "correction rests on the references alone, and the temperature check is n/a"
+        )
     over = np.flatnonzero(registration.rms_um > checks.registration_tolerance_um)
     if over.size:
         message = (
@@ -368,6 +535,12 @@ def process_session(
         if checks.registration_fails:
             raise PlanError(message)
         warnings.append(message)
+    check_poses(
+        session,
+        centres,
+        step_poses(session.hexapod, registration.platform2cmm, plan.origin_index),
+        session_pose_check(session, checks),
+    )
     q_steps = session.hexapod.igm(plan.poses)
     outside = np.flatnonzero(session.hexapod.check_stroke(q_steps).any(axis=1))
     if outside.size and session.hexapod.stroke_mm is not None:

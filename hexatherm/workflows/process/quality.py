@@ -1,9 +1,10 @@
 """Quality checks of every step of a processed session (``OUT/quality.csv``).
 
 One row per plan step; each check has a measured value (units in the column
-name) and a pass/fail column ``ok_<check>``. A value that does not apply to a
-step (no sphere fit, not a target, no temperature log) is NaN and the check
-passes.
+name) and a pass/fail column ``ok_<check>``: ``True``, ``False``, or :data:`NA`
+(``"na"``) where the check could not run (no sphere fit, not a target, no
+temperature log); its value is then NaN (empty in ``quality.csv``). A check that
+could not run does not fail, and it never reads "ok": the screen says ``n/a``.
 
 ==============  =========================  ===============================================
 check           value                      fails when
@@ -39,7 +40,10 @@ from hexatherm.session import QualityLimits, Session
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.pipeline import ProcessResult, nominal_fit_diameter_mm
 
-__all__ = ["CHECKS", "QualityReport", "parse_threshold", "quality_checks"]
+__all__ = ["CHECKS", "NA", "QualityReport", "parse_threshold", "quality_checks"]
+
+#: the ``ok_<check>`` entry of a check that could not run on a step
+NA = "na"
 
 
 #: check name -> (value column, threshold field, value must be at least the threshold)
@@ -62,12 +66,23 @@ class QualityReport:
     ----------
     frame : pandas.DataFrame
         One row per step: ``label``, ``kind``, the values of :data:`CHECKS`,
-        ``ok_<check>`` for each check, ``failed`` (the failed checks, ``;``-separated).
+        ``ok_<check>`` for each check (True, False or :data:`NA`), ``failed`` (the
+        failed checks, ``;``-separated).
     thresholds : QualityLimits
     """
 
     frame: pd.DataFrame
     thresholds: QualityLimits
+
+    def failing(self, check: str) -> pd.Series:
+        """Whether ``check`` (a key of :data:`CHECKS`) failed at each step (boolean)."""
+        return self.frame[f"ok_{check}"].map(lambda ok: ok is False).astype(bool)
+
+    def ran(self, check: str) -> pd.Series:
+        """Whether ``check`` could run at each step (boolean)."""
+        return (
+            self.frame[f"ok_{check}"].map(lambda ok: isinstance(ok, bool | np.bool_)).astype(bool)
+        )
 
     @property
     def failed_steps(self) -> list[str]:
@@ -91,9 +106,12 @@ class QualityReport:
             else:
                 worst = np.nanmin(shown) if at_least else np.nanmax(shown)
                 worst_text = f"{worst:.4g}"
-            failing = self.frame.loc[~self.frame[f"ok_{check}"], "label"].tolist()
+            failing = self.frame.loc[self.failing(check), "label"].tolist()
+            ran = self.ran(check)
             status = (
-                "ok"
+                "n/a (could not run: " + _why_not(check, self.frame) + ")"
+                if not ran.any()
+                else "ok"
                 if not failing
                 else (
                     f"FAILED at {len(failing)} step(s): "
@@ -107,6 +125,21 @@ class QualityReport:
                 f"(limit {sign} {limit:g})  {status}"
             )
         return lines
+
+
+def _why_not(check: str, frame: pd.DataFrame) -> str:
+    """Why a check ran on no step, in a few words."""
+    if (
+        check in ("time_gap", "temperature", "conditioning")
+        and not (frame["kind"] == "target").any()
+    ):
+        return "no target"
+    reasons = {
+        "form": "no probed points, centres given as such",
+        "radius": "no fitted diameters, centres given as such",
+        "temperature": "no thermocouple log in the session",
+    }
+    return reasons.get(check, "no value")
 
 
 def parse_threshold(text: str) -> tuple[str, float]:
@@ -232,9 +265,9 @@ def quality_checks(result: ProcessResult, thresholds: QualityLimits | None = Non
     failed = [[] for _ in range(n)]  # type: list[list[str]]
     for check, (column, field, at_least) in CHECKS.items():
         value, limit = values[column], getattr(thresholds, field)
-        bad = (value < limit) if at_least else (np.abs(value) > limit)
-        bad &= ~np.isnan(value)
-        frame[f"ok_{check}"] = ~bad
+        missing = np.isnan(value)
+        bad = ((value < limit) if at_least else (np.abs(value) > limit)) & ~missing
+        frame[f"ok_{check}"] = [NA if m else not b for m, b in zip(missing, bad, strict=True)]
         for i in np.flatnonzero(bad):
             failed[i].append(check)
     frame["failed"] = [";".join(f) for f in failed]

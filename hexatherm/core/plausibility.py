@@ -1,0 +1,382 @@
+"""Is a measured pose the pose that was commanded? The plausibility of measured steps.
+
+Every step of a plan has a commanded pose; the CMM measures the platform frame of every
+step, and ``process`` works on the poses relative to the origin step O. Thermal errors
+are micrometres: a measured pose relative to O that is millimetres or degrees away from
+the commanded pose relative to O is not a thermal error but a mistake in the data, and
+a mistake that no other check sees: swapped step labels, a mirrored measurement (x and y
+columns swapped: with three balls a mirror image registers with zero residual) or a plan
+in other units. This module compares the two and names the likeliest cause.
+
+Conventions: poses are ``[Tx, Ty, Tz, Rx, Ry, Rz]`` (mm, deg) in the hexapod's
+convention (see :mod:`hexatherm.core.geometry`). The commanded pose of step S relative
+to O is ``inv(T(O_cmd)) @ T(S_cmd)`` (the plan's poses less O's; exactly that when O is
+the zero pose). The deviation of a step is ``measured - commanded - offset``, per
+component, angles wrapped to (-180, 180] deg; its translation is the norm of the first
+three components (mm), its rotation the largest absolute angle (deg).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from hexatherm.core.geometry import (
+    check_convention,
+    check_poses,
+    invert_transform,
+    pose_from_transform,
+    transform_from_pose,
+)
+from hexatherm.typing import BoolArray, FloatArray
+
+__all__ = [
+    "DEFAULT_TOLERANCE_FRACTION",
+    "MIN_TOLERANCE_MM",
+    "PoseCheck",
+    "PoseDeviations",
+    "UNIT_SCALES",
+    "commanded_relative",
+    "default_pose_tolerance",
+    "likeliest_cause",
+    "mirrored",
+    "pose_deviations",
+]
+
+#: default translation tolerance as a fraction of the leg stroke (max - min leg length)
+DEFAULT_TOLERANCE_FRACTION = 0.02
+#: smallest default translation tolerance, mm (also the default without a stroke: 2 mm)
+MIN_TOLERANCE_MM = 2.0
+#: scale factors of unit mix-ups, (factor, what it looks like): measured = factor x commanded
+UNIT_SCALES: tuple[tuple[float, str, str], ...] = (
+    (25.4, "translations", "the plan's translations in inches, the measurements in mm?"),
+    (1 / 25.4, "translations", "the plan's translations in mm, the measurements in inches?"),
+    (1000.0, "translations", "the plan's translations in metres?"),
+    (1e-3, "translations", "the plan's translations in micrometres?"),
+    (180.0 / np.pi, "rotations", "the plan's rotations in radians?"),
+    (np.pi / 180.0, "rotations", "the plan's rotations in milliradians or arc-minutes?"),
+)
+
+
+@dataclass(frozen=True)
+class PoseCheck:
+    """Tolerances of the measured-versus-commanded check, and a known offset.
+
+    Attributes
+    ----------
+    tolerance_mm : float
+        Largest translation deviation (norm of ``dTx, dTy, dTz``), mm; ``inf`` turns
+        the check off.
+    tolerance_deg : float
+        Largest rotation deviation (largest ``|dRx|, |dRy|, |dRz|``), deg.
+    offset : ndarray, shape (6,)
+        A known, constant deviation of every step but O from its commanded pose
+        relative to O (mm, deg), subtracted before comparing.
+
+    Examples
+    --------
+    >>> PoseCheck(2.0, 1.0).offset.tolist()
+    [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    >>> PoseCheck(float("nan"), 1.0)
+    Traceback (most recent call last):
+    ...
+    ValueError: pose tolerance_mm must be a number > 0 (inf turns the check off), got nan
+    """
+
+    tolerance_mm: float
+    tolerance_deg: float
+    offset: FloatArray = field(default_factory=lambda: np.zeros(6))
+
+    def __post_init__(self) -> None:
+        for name in ("tolerance_mm", "tolerance_deg"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float) or not value > 0:
+                raise ValueError(
+                    f"pose {name} must be a number > 0 (inf turns the check off), got {value!r}"
+                )
+        offset = np.asarray(self.offset, dtype=float)
+        if offset.shape != (6,) or not np.all(np.isfinite(offset)):
+            raise ValueError(f"pose offset must be six finite numbers, got {self.offset!r}")
+        object.__setattr__(self, "offset", offset)
+
+    @property
+    def enabled(self) -> bool:
+        """Whether any tolerance is finite."""
+        return bool(np.isfinite(self.tolerance_mm) or np.isfinite(self.tolerance_deg))
+
+
+def default_pose_tolerance(
+    stroke_mm: npt.ArrayLike | None, platform_joints_mm: npt.ArrayLike
+) -> tuple[float, float]:
+    """Default tolerances ``(mm, deg)`` sized from the hexapod's leg stroke.
+
+    The translation tolerance is :data:`DEFAULT_TOLERANCE_FRACTION` of the stroke
+    (``max - min`` leg length), at least :data:`MIN_TOLERANCE_MM`; the rotation
+    tolerance is the angle that moves the platform's joints, at their mean radius
+    ``r`` from the platform's centre, by as much: ``tol_mm / r`` rad.
+
+    Parameters
+    ----------
+    stroke_mm : array_like, shape (2,), or None
+        ``[min, max]`` leg length (None: :data:`MIN_TOLERANCE_MM`).
+    platform_joints_mm : array_like, shape (6, 3)
+        The platform's joints in the platform frame.
+
+    Returns
+    -------
+    (float, float)
+        Translation tolerance (mm), rotation tolerance (deg).
+
+    Examples
+    --------
+    >>> joints = [[100.0 * np.cos(a), 100.0 * np.sin(a), 0.0] for a in np.arange(6) * np.pi / 3]
+    >>> [round(v, 4) for v in default_pose_tolerance([220.0, 310.0], joints)]
+    [2.0, 1.1459]
+    >>> [round(v, 4) for v in default_pose_tolerance([200.0, 400.0], joints)]
+    [4.0, 2.2918]
+    """
+    joints = np.asarray(platform_joints_mm, dtype=float)
+    if joints.shape != (6, 3) or not np.all(np.isfinite(joints)):
+        raise ValueError("platform_joints_mm must be six finite [x, y, z] joints")
+    tol_mm = MIN_TOLERANCE_MM
+    if stroke_mm is not None:
+        stroke = np.asarray(stroke_mm, dtype=float)
+        tol_mm = max(MIN_TOLERANCE_MM, DEFAULT_TOLERANCE_FRACTION * float(stroke[1] - stroke[0]))
+    radius = float(np.linalg.norm(joints[:, :2] - joints[:, :2].mean(axis=0), axis=1).mean())
+    if not radius > 0:
+        raise ValueError("the platform's joints have no radius")
+    return tol_mm, float(np.rad2deg(tol_mm / radius))
+
+
+def commanded_relative(
+    poses: npt.ArrayLike, origin_index: int = 0, convention: str = "symetrie"
+) -> FloatArray:
+    """The commanded pose of every step relative to the origin step, ``inv(T_O) @ T_S``.
+
+    Parameters
+    ----------
+    poses : array_like, shape (N, 6)
+        Commanded poses (the plan's), mm and deg.
+    origin_index : int
+    convention : {"symetrie", "pi"}
+
+    Returns
+    -------
+    ndarray, shape (N, 6)
+        mm and deg; equal to ``poses - poses[origin_index]`` when O is the zero pose.
+
+    Examples
+    --------
+    >>> commanded_relative([[0, 0, 5, 0, 0, 0], [1, 2, 3, 0, 0, 10]]).round(9) + 0.0
+    array([[ 0.,  0.,  0.,  0.,  0.,  0.],
+           [ 1.,  2., -2.,  0.,  0., 10.]])
+    """
+    convention = check_convention(convention)
+    p = check_poses(poses)
+    if not -p.shape[0] <= origin_index < p.shape[0]:
+        raise ValueError(f"origin_index {origin_index} out of range for {p.shape[0]} poses")
+    frames = transform_from_pose(p, convention)
+    return pose_from_transform(invert_transform(frames[origin_index]) @ frames, convention)
+
+
+def _wrap_deg(angles: FloatArray) -> FloatArray:
+    """Angles wrapped to [-180, 180) deg."""
+    return (angles + 180.0) % 360.0 - 180.0
+
+
+@dataclass(frozen=True)
+class PoseDeviations:
+    """Measured minus commanded pose of every step, relative to O.
+
+    Attributes
+    ----------
+    deviation : ndarray, shape (N, 6)
+        ``measured - commanded - offset``, mm and deg (angles wrapped).
+    translation_mm : ndarray, shape (N,)
+        Norm of the translation deviation.
+    rotation_deg : ndarray, shape (N,)
+        Largest absolute angle deviation.
+    failing : ndarray of bool, shape (N,)
+        Beyond either tolerance.
+    """
+
+    deviation: FloatArray
+    translation_mm: FloatArray
+    rotation_deg: FloatArray
+    failing: BoolArray
+
+
+def pose_deviations(
+    measured: npt.ArrayLike, commanded: npt.ArrayLike, check: PoseCheck, origin_index: int = 0
+) -> PoseDeviations:
+    """Compare every step's measured pose relative to O with its commanded one.
+
+    Parameters
+    ----------
+    measured, commanded : array_like, shape (N, 6)
+        Poses relative to O, mm and deg (see :func:`commanded_relative`).
+    check : PoseCheck
+    origin_index : int
+        O's step: its offset is not applied (its deviation is zero by construction).
+
+    Returns
+    -------
+    PoseDeviations
+
+    Examples
+    --------
+    >>> cmd = np.array([[0.0] * 6, [0, 0, 40, 0, 0, 0], [0, 0, 0, 0, 0, 0]])
+    >>> meas = cmd + [[0] * 6, [0.01, 0, -80, 0, 0, 0], [0, 0, 0, 0, 0, 0.5]]
+    >>> dev = pose_deviations(meas, cmd, PoseCheck(2.0, 1.0))
+    >>> dev.failing.tolist(), dev.translation_mm.round(3).tolist()
+    ([False, True, False], [0.0, 80.0, 0.0])
+    """
+    m, c = check_poses(measured, "measured"), check_poses(commanded, "commanded")
+    if m.shape != c.shape:
+        raise ValueError(f"measured {m.shape} and commanded {c.shape} poses differ in shape")
+    offset = np.broadcast_to(check.offset, m.shape).copy()
+    if m.shape[0]:
+        offset[origin_index] = 0.0
+    deviation = m - c - offset
+    deviation[:, 3:] = _wrap_deg(deviation[:, 3:])
+    translation = np.linalg.norm(deviation[:, :3], axis=1)
+    rotation = np.abs(deviation[:, 3:]).max(axis=1, initial=0.0)
+    failing = (translation > check.tolerance_mm) | (rotation > check.tolerance_deg)
+    return PoseDeviations(deviation, translation, rotation, failing)
+
+
+def mirrored(centres_mm: npt.ArrayLike, balls_mm: npt.ArrayLike) -> BoolArray:
+    """Whether each step's measured balls are a mirror image of the balls file's.
+
+    Three balls register with zero residual on their mirror image, so the handedness
+    is read against the one direction both frames share: up. The balls' polygon
+    normal (Newell's method, in the balls file's order) points to the platform's +Z
+    in the balls file; measured on a hexapod that stands on the CMM's table and is
+    probed from above (as ``plan``'s DMIS program probes), it points to the CMM's
+    +Z. A step whose measured normal points down while the file's points up (each
+    more than 30 deg from horizontal) is mirrored: x and y columns swapped, or one
+    axis' sign flipped.
+
+    Parameters
+    ----------
+    centres_mm : array_like, shape (N, k, 3)
+        Measured ball centres of every step, CMM frame.
+    balls_mm : array_like, shape (k, 3)
+        The balls' centres in the platform frame, in the same order.
+
+    Returns
+    -------
+    ndarray of bool, shape (N,)
+
+    Examples
+    --------
+    >>> balls = np.array([[100.0, 0, 10], [-50, 86.6, 10], [-50, -86.6, 10]])
+    >>> steps = np.stack([balls + [400, 300, 200], balls[:, [1, 0, 2]] + [400, 300, 200]])
+    >>> mirrored(steps, balls).tolist()
+    [False, True]
+    """
+    c = np.asarray(centres_mm, dtype=float)
+    b = np.asarray(balls_mm, dtype=float)
+    if c.ndim != 3 or c.shape[1:] != b.shape or b.ndim != 2 or b.shape[1] != 3:
+        raise ValueError("centres_mm must be (N, k, 3) and balls_mm (k, 3)")
+
+    def unit_normal(points: FloatArray) -> FloatArray:
+        rel = points - points.mean(axis=-2, keepdims=True)
+        n = np.cross(rel, np.roll(rel, -1, axis=-2)).sum(axis=-2)
+        norm = np.linalg.norm(n, axis=-1, keepdims=True)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(norm > 0, n / norm, 0.0)
+
+    sin30 = 0.5
+    nb, nm = unit_normal(b)[2], unit_normal(c)[:, 2]
+    if abs(nb) <= sin30:
+        return np.zeros(c.shape[0], dtype=bool)
+    return (np.abs(nm) > sin30) & (np.sign(nm) != np.sign(nb))
+
+
+def likeliest_cause(
+    index: int,
+    measured: npt.ArrayLike,
+    commanded: npt.ArrayLike,
+    check: PoseCheck,
+    labels: tuple[str, ...] | list[str],
+    is_mirrored: npt.ArrayLike | None = None,
+    origin_index: int = 0,
+) -> str:
+    """The likeliest cause of step ``index``'s deviation, in words.
+
+    In this order: a mirrored measurement (see :func:`mirrored`); swapped labels (the
+    step's measured pose matches another step's commanded pose, within the
+    tolerances); wrong units (the measured translations, or rotations, are one of
+    :data:`UNIT_SCALES` times the commanded ones, within the tolerances, over every
+    step); else a step measured at another pose than the plan's.
+
+    Parameters
+    ----------
+    index : int
+        The step.
+    measured, commanded : array_like, shape (N, 6)
+        Poses relative to O, mm and deg.
+    check : PoseCheck
+    labels : sequence of str
+        Step labels, for the message.
+    is_mirrored : array_like of bool, shape (N,), optional
+    origin_index : int
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> cmd = np.array([[0.0] * 6, [0, 0, 40, 0, 0, 0], [0, 0, 10, 0, 0, 0]])
+    >>> meas = cmd[[0, 2, 1]]
+    >>> likeliest_cause(1, meas, cmd, PoseCheck(2.0, 1.0), ["O", "S1", "S2"])
+    'swapped labels: its measured pose is the commanded pose of S2 (and S2 measured as S1)'
+    >>> likeliest_cause(1, cmd * 25.4, cmd, PoseCheck(2.0, 1.0), ["O", "S1", "S2"])
+    "wrong units: measured translations = 25.4 x commanded (the plan's translations in inches, the measurements in mm?)"
+    """  # noqa: E501
+    m, c = check_poses(measured, "measured"), check_poses(commanded, "commanded")
+    n = m.shape[0]
+    if is_mirrored is not None and bool(np.asarray(is_mirrored)[index]):
+        return (
+            "mirrored axes: the measured balls are a mirror image of the balls file's "
+            "(x and y columns swapped, or an axis' sign flipped?)"
+        )
+    # swapped labels: this step measured at another step's commanded pose
+    others = np.array([j for j in range(n) if j != index and j != origin_index], dtype=np.intp)
+    if others.size:
+        dev = pose_deviations(
+            np.repeat(m[index : index + 1], others.size, axis=0), c[others], check
+        )
+        matches = others[~dev.failing]
+        # a pose that equals its own commanded one does not tell a swap apart
+        matches = matches[np.abs(c[matches] - c[index]).max(axis=1) > 1e-9]
+        if matches.size:
+            # a mutual swap first: the other step measured at this one's commanded pose
+            back = pose_deviations(
+                m[matches], np.repeat(c[index : index + 1], matches.size, 0), check
+            )
+            mutual = matches[~back.failing]
+            j = int(mutual[0] if mutual.size else matches[0])
+            also = f" and {matches.size - 1} other step(s)" if matches.size > 1 else ""
+            swap = f" (and {labels[j]} measured as {labels[index]})" if mutual.size else ""
+            return (
+                f"swapped labels: its measured pose is the commanded pose of {labels[j]}"
+                f"{also}{swap}"
+            )
+    # wrong units, fitted over every step
+    for factor, part, hint in UNIT_SCALES:
+        cols = slice(0, 3) if part == "translations" else slice(3, 6)
+        if np.abs(c[:, cols]).max(initial=0.0) == 0.0:
+            continue
+        scaled = c.copy()
+        scaled[:, cols] *= factor
+        if not pose_deviations(m, scaled, check, origin_index).failing.any():
+            return f"wrong units: measured {part} = {factor:.4g} x commanded ({hint})"
+    return (
+        "the step was measured at another pose than the plan commands (a wrong plan or "
+        "session, a move that did not happen, or a known offset to declare)"
+    )
