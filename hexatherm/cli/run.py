@@ -229,7 +229,8 @@ def command(
     from hexatherm.devices.serialport import PortSettings
     from hexatherm.io.config import read_hexapod
     from hexatherm.workflows.acquire.files import load_files
-    from hexatherm.workflows.run.run import BallChecks, ProbeSettings, RunOptions, run_campaign
+    from hexatherm.workflows.run.resume import ProbeSettings
+    from hexatherm.workflows.run.run import BallChecks, RunOptions, run_campaign
     from hexatherm.workflows.run.run import dry_run as check_plan
 
     if dry_run and resume:

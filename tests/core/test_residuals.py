@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from hexatherm.core.diagnosis import PoseResiduals
 from hexatherm.core.residuals import (
+    PoseResiduals,
     autocorrelation,
     default_lags,
     linear_trend,

@@ -20,9 +20,9 @@ from hexatherm.core.diagnosis import (
     diagnose,
     fit_model,
     rms_um,
-    time_blocks,
 )
 from hexatherm.core.effects import EFFECTS, make_effect
+from hexatherm.core.residuals import time_blocks
 from hexatherm.errors import InputError
 from hexatherm.io.config import read_hexapod_text
 from hexatherm.workflows.diagnose.outputs import diagnosed_hexapod_yaml, diagnosis_document

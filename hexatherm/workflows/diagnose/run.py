@@ -17,12 +17,12 @@ import numpy as np
 from hexatherm.core.diagnosis import (
     Diagnosis,
     Observations,
-    PoseResiduals,
     diagnose,
     pose_residuals,
 )
 from hexatherm.core.effects import Effect
 from hexatherm.core.hexapod import Hexapod
+from hexatherm.core.residuals import PoseResiduals
 from hexatherm.errors import InputError
 from hexatherm.io.config import read_hexapod, read_session
 from hexatherm.io.csvfile import Temperatures

@@ -8,11 +8,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from hexatherm.core.diagnosis import PoseResiduals
 from hexatherm.core.residuals import (
     LEG_NAMES,
     POSE_COMPONENTS,
     POSE_UNITS,
+    PoseResiduals,
 )
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.diagnose.report.tables import (

@@ -11,13 +11,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from hexatherm.core.diagnosis import Diagnosis, PoseResiduals
+from hexatherm.core.diagnosis import Diagnosis
 from hexatherm.core.residuals import (
     ALPHA,
     LEG_NAMES,
     POSE_COMPONENTS,
     POSE_UNITS,
     TIME_PARTS,
+    PoseResiduals,
     ResidualSummary,
     SeriesTests,
     WorstStep,

@@ -1,36 +1,6 @@
-"""The unattended campaign: drive the hexapod controller and the CMM through a plan.
+"""The unattended campaign.
 
-For every step of the plan, in order (O, R0, then the targets with their references):
-
-1. the probe goes up to the travel height (above every ball of every step of the plan);
-2. the hexapod is commanded to the step's pose (every pose was validated before the first
-   move: the stroke by the hexapod model, then the controller's own check) and waited for
-   in position (flag, settle, a stable read-back; :class:`InPositionCriteria`); the step's
-   record (commanded pose, read-back poses, actuator lengths, the controller's
-   temperatures) goes to ``steps.csv``;
-3. each ball's upper cap is probed around its **predicted** centre: the placement of frame
-   O on the CMM (measured, once O's balls are; before that the nominal ``origin_on_cmm``)
-   times the commanded pose, shifted by the mean offset of the balls of the same step
-   already measured; each ball is fitted at once (free-radius sphere) and checked (fit,
-   radius, form, RMS, distance from the prediction): a bad ball is probed once more,
-   around its fitted centre when there is one; the second probing is kept, with a warning
-   if it is still bad (``process``'s quality checks see it);
-4. before a target, when its reference right before it was measured longer than
-   ``max_gap_s`` ago (a late in-position flag, a reconnection, a resume), that reference
-   is measured again first (its new points replace the old ones in ``points.csv``; the old
-   ones stay in the transcript).
-
-A dropped connection to either machine is reopened (``reconnects`` times per ball or
-move) and the ball probed, or the move commanded, again from its start. Errors that need
-the operator (I++ severity 3, a refused pose, no in-position flag) stop the run; so do
-Ctrl-C and a machine that stays away. On every stop that is not the end of the plan the
-hexapod gets ``stop()``, and :class:`~hexatherm.errors.IncompleteSession` says how to go
-on: ``--resume`` rebuilds the state from the transcript (:mod:`.resume`) and continues
-at the first step with a ball not accepted (the hexapod is commanded to that step's pose
-again). At the end ``session.yaml`` makes the folder a session for ``hexatherm process``.
-
-Clock and sleep are injectable (POSIX seconds): with the simulators' manual clock a whole
-campaign runs without waiting.
+Walk the plan, move, wait in position, probe, fit, re-probe, re-measure late references, resume.
 """
 
 from __future__ import annotations
@@ -38,21 +8,18 @@ from __future__ import annotations
 import collections
 import contextlib
 import math
-import queue
-import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from hexatherm.core.geometry import apply_transform, invert_transform, transform_from_pose
+from hexatherm.core.geometry import invert_transform, transform_from_pose
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.registration import register
 from hexatherm.core.spherefit import fit_spheres, probe_radius_mm
-from hexatherm.devices.controller import InPositionCriteria, SocketController, format_pose
+from hexatherm.devices.controller import SocketController, format_pose
 from hexatherm.devices.ipp import (
     TRANSCRIPT_MAGIC,
     IppClient,
@@ -62,7 +29,6 @@ from hexatherm.devices.ipp import (
     parse_ipp_url,
     probe_cap,
 )
-from hexatherm.devices.serialport import PortReader, PortSettings
 from hexatherm.devices.urls import controller_from_url
 from hexatherm.errors import (
     AcquisitionError,
@@ -79,18 +45,8 @@ from hexatherm.errors import (
 )
 from hexatherm.io.atomic import atomic_write_text
 from hexatherm.io.seriallog import (
-    LOG_NAME,
     POINTS_HEADER,
-    TEMPERATURE,
-    TEMPERATURES_NAME,
-    FileSink,
-    LogEntry,
-    MemorySink,
-    SerialLog,
-    entry,
-    parse_log,
 )
-from hexatherm.session import Balls
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.acquire.files import (
     SessionFiles,
@@ -98,7 +54,6 @@ from hexatherm.workflows.acquire.files import (
     finish_session,
     write_copies,
 )
-from hexatherm.workflows.acquire.recorder import Recorder as StreamRecorder
 from hexatherm.workflows.run.files import (
     CONTROLLER_LOG_MAGIC,
     CONTROLLER_LOG_NAME,
@@ -116,368 +71,14 @@ from hexatherm.workflows.run.files import (
     write_lines,
 )
 from hexatherm.workflows.run.resume import (
-    ProbeSettings,
     RunSettings,
     RunState,
     read_run_settings,
     rebuild_state,
     write_run_settings,
 )
-
-Notify = Callable[[str, str], None]
-
-__all__ = [
-    "BallChecks",
-    "BallResult",
-    "ProbeSettings",
-    "RunOptions",
-    "RunResult",
-    "dry_run",
-    "run_campaign",
-]
-
-
-@dataclass(frozen=True)
-class BallChecks:
-    """When a ball's live fit calls for probing it again.
-
-    Attributes
-    ----------
-    radius_tol_um : float
-        Largest deviation of the fitted radius from the nominal (ball radius, plus the tip
-        radius when the probe is not compensated), um.
-    form_um : float
-        Largest form error (max - min residual), um.
-    rms_um : float
-        Largest RMS of the residuals, um.
-    centre_tol_mm : float
-        Largest distance of the fitted centre from the predicted one, mm (a larger one means
-        the prediction, hence the touch points, were off: probed again around the fit).
-    """
-
-    radius_tol_um: float = 20.0
-    form_um: float = 10.0
-    rms_um: float = 3.0
-    centre_tol_mm: float = 0.5
-
-
-@dataclass(frozen=True)
-class RunOptions:
-    """Options of ``hexatherm run`` (see its ``--help``).
-
-    Attributes
-    ----------
-    session : Path
-        The session folder.
-    cmm_url, controller_url : str
-        ``ipp://HOST[:PORT]``; ``symetrie://HOST[:PORT]`` or ``pi://HOST[:PORT]``.
-    origin_on_cmm : tuple of 6 floats, optional
-        Nominal placement of frame O on the CMM (hexapod's convention, mm and deg);
-        required for a new run, taken from ``run.yaml`` on a resume.
-    resume : bool
-    probe : ProbeSettings
-    checks : BallChecks
-    criteria : InPositionCriteria
-    max_gap_s : float
-        Largest time between a target and the reference right before it, s.
-    cmm_limits_mm : pair of 3 floats, optional
-        Lower and upper corners of the CMM's travel, mm: every probe position is checked.
-    temperature_port : PortSettings, optional
-        A thermocouple logger on a serial port (as ``acquire --temperature-port``).
-    durable : bool
-        fsync every log line (the default); flushing alone survives a killed process.
-    reconnects : int
-        Reopenings of a dropped connection per ball or per move.
-    reconnect_wait_s : float
-        Wait before reopening, s.
-    ipp_timeout_s : float
-        Longest I++ transaction, s.
-    reply_timeout_s : float
-        Longest wait for a controller's reply, s.
-    """
-
-    session: Path
-    cmm_url: str
-    controller_url: str
-    origin_on_cmm: tuple[float, ...] | None = None
-    resume: bool = False
-    probe: ProbeSettings = field(default_factory=ProbeSettings)
-    checks: BallChecks = field(default_factory=BallChecks)
-    criteria: InPositionCriteria = field(default_factory=InPositionCriteria)
-    max_gap_s: float = 600.0
-    cmm_limits_mm: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
-    temperature_port: PortSettings | None = None
-    durable: bool = True
-    reconnects: int = 3
-    reconnect_wait_s: float = 1.0
-    ipp_timeout_s: float = 120.0
-    reply_timeout_s: float = 5.0
-
-
-@dataclass(frozen=True)
-class BallResult:
-    """The live fit of one accepted ball.
-
-    Attributes
-    ----------
-    label, ball : str
-    n : int
-    centre_mm : ndarray, shape (3,)
-        Fitted centre (NaN when the fit failed).
-    radius_mm, form_um, rms_um : float
-    predicted_mm : ndarray, shape (3,)
-        The centre the touch points were planned around.
-    attempts : int
-        Probings of this ball in this visit (2: probed again).
-    problems : tuple of str
-        Checks the kept probing still fails.
-    """
-
-    label: str
-    ball: str
-    n: int
-    centre_mm: FloatArray
-    radius_mm: float
-    form_um: float
-    rms_um: float
-    predicted_mm: FloatArray
-    attempts: int
-    problems: tuple[str, ...]
-
-
-@dataclass(frozen=True)
-class RunResult:
-    """What a run produced."""
-
-    session: Path
-    n_points: int
-    balls: tuple[BallResult, ...]
-    remeasured: tuple[str, ...]
-    session_file: Path
-
-
-# ----------------------------------------------------------------------- helpers
-def _pose_problems(controller: SocketController, poses: FloatArray) -> list[tuple[int, str]]:
-    """``(step index, why)`` for every pose the hexapod model or the controller refuses."""
-    problems = []
-    for i, pose in enumerate(poses):
-        try:
-            controller.validate(pose)
-        except PoseRefusedError as exc:
-            problems.append((i, str(exc)))
-    return problems
-
-
-def _cmm_problems(
-    positions_mm: FloatArray,
-    limits: tuple[tuple[float, float, float], tuple[float, float, float]] | None,
-) -> str | None:
-    if limits is None:
-        return None
-    low, high = np.asarray(limits[0], dtype=float), np.asarray(limits[1], dtype=float)
-    out = (positions_mm < low) | (positions_mm > high)
-    if not out.any():
-        return None
-    worst = positions_mm[np.flatnonzero(out.any(axis=-1))[0]]
-    return (
-        f"probe position {', '.join(f'{v:.3f}' for v in worst)} mm is outside the CMM's "
-        f"travel [{', '.join(f'{v:g}' for v in low)}] .. [{', '.join(f'{v:g}' for v in high)}]"
-    )
-
-
-class _Geometry:
-    """Predicted ball centres and probe positions of every step (CMM frame, mm)."""
-
-    def __init__(self, hexapod: Hexapod, balls: Balls, poses: FloatArray, probe: ProbeSettings):
-        self.hexapod, self.balls, self.poses, self.probe = hexapod, balls, poses, probe
-        self.step2origin = transform_from_pose(poses, hexapod.convention)
-
-    def centres(self, origin2cmm: FloatArray, index: int | slice = slice(None)) -> FloatArray:
-        """Predicted centres (k, 3) of step ``index`` (or (N, k, 3) of all)."""
-        frames = origin2cmm @ self.step2origin[index]
-        return apply_transform(frames, self.balls.centres_mm)
-
-    def top_z(self, centres_mm: FloatArray) -> float:
-        """Highest tip-centre height touching any ball top, mm."""
-        r = 0.5 * self.balls.diameters_mm + 0.5 * self.balls.tip_diameter_mm
-        return float(np.max(centres_mm[..., 2] + r))
-
-    def touch_positions(self, centres_mm: FloatArray, n_points: int) -> FloatArray:
-        """Every probe position of the touch plans of these centres (.., 3)."""
-        out = []
-        tip = self.balls.tip_diameter_mm or 1e-3
-        for j, d in enumerate(self.balls.diameters_mm):
-            plan = cap_touch_plan(
-                centres_mm[..., j, :],
-                float(d),
-                tip,
-                n_points,
-                self.probe.cap_angle_deg,
-                approach_mm=self.probe.approach_mm,
-                clearance_mm=self.probe.clearance_mm,
-            )
-            out += [plan.approach_mm.reshape(-1, 3), plan.above_mm.reshape(-1, 3)]
-            out.append(plan.safe_mm.reshape(-1, 3))
-        return np.concatenate(out)
-
-
-def _validate_plan(
-    files: SessionFiles,
-    hexapod: Hexapod,
-    controller: SocketController,
-    geometry: _Geometry,
-    origin2cmm: FloatArray,
-    options: RunOptions,
-    travel_z: float,
-) -> None:
-    """Raise :class:`PoseError` naming every step the machines cannot do; moves nothing."""
-    plan = files.plan
-    problems = _pose_problems(controller, plan.poses)
-    centres = geometry.centres(origin2cmm)
-    for i in range(len(plan.labels)):
-        positions = geometry.touch_positions(centres[i], plan.points_per_ball)
-        travel = positions.copy()
-        travel[:, 2] = travel_z
-        cmm = _cmm_problems(np.concatenate([positions, travel]), options.cmm_limits_mm)
-        if cmm is not None:
-            problems.append((i, cmm))
-    if problems:
-        problems.sort(key=lambda p: p[0])
-        first, why = problems[0]
-        others = "; ".join(f"step {plan.labels[i]} ({plan.kinds[i]}): {w}" for i, w in problems[1:])
-        raise PoseError(
-            why + (f". Also: {others}" if others else "") + ". Nothing was moved",
-            step=plan.labels[first],
-            pose=plan.poses[first],
-        )
-
-
-def _travel_z(geometry: _Geometry, origin2cmm: FloatArray) -> float:
-    probe = geometry.probe
-    return geometry.top_z(geometry.centres(origin2cmm)) + probe.clearance_mm + probe.travel_mm
-
-
-# ----------------------------------------------------------------------- dry run
-def dry_run(
-    files: SessionFiles,
-    hexapod: Hexapod,
-    options: RunOptions,
-    notify: Notify,
-    *,
-    clock: Callable[[], float] = time.time,
-    sleep: Callable[[float], None] = time.sleep,
-) -> int:
-    """Check the whole plan against both machines' limits without moving either.
-
-    Every pose goes through the controller's validation (the hexapod model's stroke, then
-    the controller's own check), every probe position of every step (touch points,
-    clearance and travel positions around the nominal prediction) through the CMM's travel
-    box when one is given; the CMM is asked whether it knows the tool. Nothing moves.
-
-    Returns
-    -------
-    int
-        The number of steps checked.
-
-    Raises
-    ------
-    PoseError
-        Naming the first step refused (and the others in the message).
-    """
-    if options.origin_on_cmm is None:
-        raise AcquisitionError("a dry run needs --origin-on-cmm (nominal placement of O)")
-    geometry = _Geometry(hexapod, files.balls, files.plan.poses, options.probe)
-    origin2cmm = transform_from_pose(options.origin_on_cmm, hexapod.convention)
-    controller = controller_from_url(
-        options.controller_url,
-        hexapod=hexapod,
-        reply_timeout_s=options.reply_timeout_s,
-        clock=clock,
-        sleep=sleep,
-    )
-    controller.connect()
-    try:
-        _validate_plan(
-            files,
-            hexapod,
-            controller,
-            geometry,
-            origin2cmm,
-            options,
-            _travel_z(geometry, origin2cmm),
-        )
-    finally:
-        controller.close()
-    host, port = parse_ipp_url(options.cmm_url)
-    with IppClient(host, port, timeout_s=options.ipp_timeout_s) as cmm:
-        cmm.start_session()
-        cmm.find_tool(options.probe.tool)
-        cmm.end_session()
-    if options.cmm_limits_mm is None:
-        notify("warn", "no --cmm-limits: the probe positions were not checked against the CMM")
-    notify("info", f"dry run: {len(files.plan.labels)} steps can be measured; nothing moved")
-    return len(files.plan.labels)
-
-
-# ------------------------------------------------------------------- temperatures
-class _Thermocouples:
-    """A thermocouple logger on a serial port: ``serial.log`` and ``temperatures.csv``.
-
-    The lines are parsed by ``acquire``'s recorder (the same format); on a resume the log is
-    replayed to rebuild ``temperatures.csv``.
-    """
-
-    def __init__(self, folder: Path, settings: PortSettings, files: SessionFiles, resume: bool):
-        self.folder, self.settings = folder, settings
-        self.items: queue.Queue[Any] = queue.Queue()
-        self.stop_event = threading.Event()
-        log_path = folder / LOG_NAME
-        self.sink = FileSink(folder / TEMPERATURES_NAME)
-        self.recorder = StreamRecorder(
-            files.plan, files.balls, points=MemorySink(), temperatures=MemorySink()
-        )
-        if resume and log_path.is_file():
-            raw = log_path.read_bytes()
-            entries, complete = parse_log(raw, str(log_path))
-            if complete < len(raw):
-                with open(log_path, "r+b") as handle:
-                    handle.truncate(complete)
-            for item in entries:
-                self.recorder.apply(item)
-            lines = self.recorder.temperatures.lines
-            atomic_write_text(folder / TEMPERATURES_NAME, "".join(x + "\n" for x in lines))
-            self.log = SerialLog(log_path, create=False)
-            self._record(entry("resume"))
-        else:
-            self.log = SerialLog(log_path, create=True)
-        self.recorder.temperature_sink = self.sink
-        self._record(entry("open", TEMPERATURE, settings.describe()))
-        port = settings.open()
-        self.reader = PortReader(TEMPERATURE, settings, port, self.items, self.stop_event)
-        self.reader.start()
-        self.thread = threading.Thread(target=self._drain, name="hexatherm-thermo", daemon=True)
-        self.thread.start()
-
-    def _record(self, item: LogEntry) -> None:
-        self.log.append(item)
-        self.recorder.apply(item)
-
-    def _drain(self) -> None:
-        while not (self.stop_event.is_set() and self.items.empty()):
-            try:
-                item = self.items.get(timeout=0.1)
-            except queue.Empty:
-                continue
-            kind, source, when, data = item
-            payload = data if isinstance(data, bytes) else str(data).encode("utf-8", "replace")
-            self._record(LogEntry(when, kind, source, payload))
-
-    def close(self) -> None:
-        self.stop_event.set()
-        self.reader.join(timeout=5.0)
-        self.thread.join(timeout=5.0)
-        self.log.close()
-        self.sink.close()
+from hexatherm.workflows.run.run.options import BallResult, Notify, RunOptions, RunResult
+from hexatherm.workflows.run.run.support import _Geometry, _Thermocouples, _travel_z, _validate_plan
 
 
 # ------------------------------------------------------------------------ the run

@@ -1,0 +1,475 @@
+"""Fitting candidate effects.
+
+Weighted least squares with frame O as a nuisance, BIC and held-out folds, clustered
+standard errors.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import numpy.typing as npt
+from scipy.optimize import least_squares
+
+from hexatherm.core.diagnosis.adequacy import Adequacy, _bound_note, adequacy, bound_flags
+from hexatherm.core.diagnosis.model import (
+    _FD_STEP,
+    DELTA_BIC_THRESHOLD,
+    SIMILARITY_THRESHOLD,
+    Addition,
+    BoolArray,
+    Candidate,
+    Fit,
+    Observations,
+    RunnerUp,
+    place,
+    rms_um,
+    twin_centres,
+)
+from hexatherm.core.effects import EFFECTS, Effect
+from hexatherm.core.hexapod import Hexapod
+from hexatherm.core.residuals import (
+    time_blocks,
+)
+from hexatherm.typing import FloatArray
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """The outcome of :func:`diagnose`.
+
+    Attributes
+    ----------
+    baseline : Fit
+        The current model (the hexapod's own effects), only ``C`` fitted.
+    final : Fit
+        The model with every added effect, fitted jointly.
+    added : tuple of Addition
+        In the order they were added.
+    rounds : tuple of tuple of Candidate
+        Every candidate of every round.
+    baseline_heldout_rms_um, final_heldout_rms_um : float
+    skipped : dict of str to str
+        Candidates not tried at all, and why (e.g. no air temperature).
+    adequacy : Adequacy or None
+        The verdict on the final model (None when not assessed).
+    """
+
+    baseline: Fit
+    final: Fit
+    added: tuple[Addition, ...]
+    rounds: tuple[tuple[Candidate, ...], ...]
+    baseline_heldout_rms_um: float
+    final_heldout_rms_um: float
+    skipped: dict[str, str] = field(default_factory=dict)
+    adequacy: Adequacy | None = None
+
+    @property
+    def baseline_rms_um(self) -> float:
+        return rms_um(self.baseline.residual_mm)
+
+    @property
+    def final_rms_um(self) -> float:
+        return rms_um(self.final.residual_mm)
+
+
+# --------------------------------------------------------------------- the model
+
+
+# ------------------------------------------------------------------- the fitting
+class _Problem:
+    """The twin's centres as a function of the free effects' parameters, memoized.
+
+    The twin (a forward model per step) is the expensive part; placing frame O
+    for a set of steps is cheap. So one evaluation of the twin serves the fit on
+    all steps and the fits on the held-out folds alike.
+    """
+
+    def __init__(
+        self,
+        hexapod: Hexapod,
+        obs: Observations,
+        fixed: Sequence[Effect],
+        free: Sequence[type[Effect]],
+    ) -> None:
+        self.hexapod, self.obs = hexapod, obs
+        self.fixed, self.free = tuple(fixed), tuple(free)
+        self.sizes = [len(cls.parameters) for cls in self.free]
+
+        def cat(parts: list[FloatArray]) -> FloatArray:
+            return np.concatenate(parts) if parts else np.zeros(0)
+
+        self.scale = cat([cls.scales() for cls in self.free])
+        self.lo = cat([np.array([r[0] for r in cls.ranges]) for cls in self.free])
+        self.hi = cat([np.array([r[1] for r in cls.ranges]) for cls in self.free])
+        self.sqrt_w = 1.0 / obs.u_mm[..., None]
+        self._cache: dict[bytes, FloatArray] = {}
+
+    def effects(self, theta: FloatArray) -> tuple[Effect, ...]:
+        out, i = [], 0
+        for cls, size in zip(self.free, self.sizes, strict=True):
+            out.append(cls.from_vector(theta[i : i + size].tolist()))
+            i += size
+        return self.fixed + tuple(out)
+
+    def centres(self, theta: FloatArray) -> FloatArray:
+        key = np.asarray(theta, dtype=float).tobytes()
+        if key not in self._cache:
+            self._cache[key] = twin_centres(self.hexapod, self.obs, self.effects(theta))
+        return self._cache[key]
+
+    def evaluate(
+        self, theta: FloatArray, mask: BoolArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Placement of O, predicted centres and residuals (all steps) fitted on ``mask``."""
+        origin2cmm, predicted = place(self.centres(theta), self.obs, self.effects(theta), mask)
+        return origin2cmm, predicted, self.obs.centres_mm - predicted
+
+    def weighted(self, theta: FloatArray, mask: BoolArray) -> FloatArray:
+        return (self.evaluate(theta, mask)[2] * self.sqrt_w)[mask].ravel()
+
+    def jacobian(self, theta: FloatArray, mask: BoolArray) -> FloatArray:
+        """Forward differences of the weighted residuals in units of each parameter's scale."""
+        r0 = self.weighted(theta, mask)
+        cols = []
+        for j in range(theta.size):
+            h = _FD_STEP * self.scale[j]
+            if theta[j] + h > self.hi[j]:
+                h = -h
+            step = theta.copy()
+            step[j] += h
+            cols.append((self.weighted(step, mask) - r0) / (h / self.scale[j]))
+        return np.column_stack(cols) if cols else np.zeros((r0.size, 0))
+
+    def start(self, starts: Sequence[FloatArray | None], mask: BoolArray) -> FloatArray:
+        """The best combination of start values (given ones, or each effect's own)."""
+        options = [
+            [s] if s is not None else cls.start_values()
+            for cls, s in zip(self.free, starts, strict=True)
+        ]
+        combos = [np.zeros(0)]
+        for opts in options:
+            combos = [np.concatenate([c, o]) for c in combos for o in opts]
+        combos = [np.clip(c, self.lo, self.hi) for c in combos]
+        costs = [float(np.sum(self.weighted(c, mask) ** 2)) for c in combos]
+        return combos[int(np.argmin(costs))]
+
+    def solve(self, theta0: FloatArray, mask: BoolArray) -> FloatArray:
+        """Least squares from ``theta0`` within the ranges (trust region, scaled)."""
+        if theta0.size == 0:
+            return theta0
+        # z = 1 + (theta - theta0) / scale: starting at z = 1 gives the trust region
+        # a unit first radius (least_squares sizes it by |z0|, tiny near zero)
+        z_lo, z_hi = 1 + (self.lo - theta0) / self.scale, 1 + (self.hi - theta0) / self.scale
+        inside = 1e-9 * (z_hi - z_lo)
+        z0 = np.clip(np.ones(theta0.size), z_lo + inside, z_hi - inside)
+
+        def theta_of(z: FloatArray) -> FloatArray:
+            return theta0 + (z - 1) * self.scale
+
+        solution = least_squares(
+            lambda z: self.weighted(theta_of(z), mask),
+            z0,
+            jac=lambda z: self.jacobian(theta_of(z), mask),
+            bounds=(z_lo, z_hi),
+            method="trf",
+            x_scale=1.0,
+            max_nfev=30,
+            xtol=1e-8,
+            ftol=1e-8,
+            gtol=None,
+        )
+        return np.clip(theta_of(solution.x), self.lo, self.hi)
+
+    def refit(self, theta_hat: FloatArray, mask: BoolArray, iterations: int = 3) -> FloatArray:
+        """Refit from a nearby solution with its Jacobian kept (chord iterations).
+
+        The held-out folds start from the fit on all steps; the twin at the
+        Jacobian's points is already memoized, so each iteration costs one twin.
+        """
+        if theta_hat.size == 0:
+            return theta_hat
+        jac = self.jacobian(theta_hat, mask)
+        theta = theta_hat
+        for _ in range(iterations):
+            r = self.weighted(theta, mask)
+            dz = np.linalg.lstsq(jac, -r, rcond=None)[0]
+            theta = np.clip(theta + dz * self.scale, self.lo, self.hi)
+        return theta
+
+    def fit(self, theta: FloatArray, mask: BoolArray) -> Fit:
+        """The :class:`Fit` at ``theta`` (standard errors from the Jacobian there)."""
+        origin2cmm, predicted, residual = self.evaluate(theta, mask)
+        rss = float(np.sum((residual * self.sqrt_w)[mask] ** 2))
+        n = int(residual[mask].size)
+        p = 6 + int(theta.size)
+        errors: list[dict[str, float]] = []
+        covariance = np.zeros((theta.size, theta.size))
+        if theta.size:
+            covariance = self.covariance(theta, mask)
+            se = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+            i = 0
+            for cls, size in zip(self.free, self.sizes, strict=True):
+                errors.append(
+                    dict(zip(cls.parameters, (float(v) for v in se[i : i + size]), strict=True))
+                )
+                i += size
+        return Fit(
+            self.effects(theta)[len(self.fixed) :],
+            tuple(errors),
+            origin2cmm,
+            residual,
+            predicted,
+            rss,
+            n,
+            p,
+            covariance,
+        )
+
+    def covariance(self, theta: FloatArray, mask: BoolArray) -> FloatArray:
+        """Covariance of the fitted parameters: the sandwich, clustered by step.
+
+        ``A^-1 (sum_s J_s^T r_s r_s^T J_s) A^-1 G/(G-1)`` with ``A = J^T J`` and ``G``
+        the number of steps: it holds when the noise differs between axes (a
+        sphere fit's centre is looser along the cap's axis) and when a step's
+        residuals move together (the hexapod's positioning noise), where the
+        textbook ``s^2 A^-1`` would be too optimistic.
+        """
+        jac = self.jacobian(theta, mask)
+        r = self.weighted(theta, mask)
+        groups = int(mask.sum())
+        per_step = r.size // groups
+        scores = (jac * r[:, None]).reshape(groups, per_step, -1).sum(axis=1)
+        bread = np.linalg.pinv(jac.T @ jac)
+        meat = scores.T @ scores * groups / max(groups - 1, 1)
+        cov_z = bread @ meat @ bread
+        return cov_z * np.outer(self.scale, self.scale)
+
+
+def fit_model(
+    hexapod: Hexapod,
+    obs: Observations,
+    fixed: Sequence[Effect],
+    free: Sequence[type[Effect]],
+    start: Sequence[FloatArray | None] = (),
+    mask: BoolArray | None = None,
+) -> Fit:
+    """Fit the parameters of the ``free`` effects (and ``C``) to the steps in ``mask``.
+
+    Parameters
+    ----------
+    hexapod : Hexapod
+    obs : Observations
+    fixed : sequence of Effect
+        The current model's effects, kept as they are.
+    free : sequence of Effect classes
+        The effects whose parameters are fitted, jointly, within their ranges.
+    start : sequence of (ndarray or None)
+        A starting value per free effect (None: try the effect's start values).
+    mask : ndarray of bool, shape (N,), optional
+        The steps fitted (default all); residuals are returned for every step.
+
+    Returns
+    -------
+    Fit
+    """
+    problem = _Problem(hexapod, obs, fixed, free)
+    mask = np.ones(obs.n_steps, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+    starts = list(start) + [None] * (len(problem.free) - len(start))
+    theta = problem.solve(problem.start(starts, mask), mask)
+    return problem.fit(theta, mask)
+
+
+def heldout_rms_um(problem: _Problem, theta_hat: FloatArray, blocks: npt.NDArray[np.intp]) -> float:
+    """RMS (um) of the residuals of steps the model was not fitted to.
+
+    Two folds: fitted on the even blocks of time, evaluated on the odd ones, and
+    the other way round (each fold refitted from ``theta_hat``, the fit on all
+    steps); the RMS is over both held-out halves.
+    """
+    squares, count = 0.0, 0
+    for parity in (0, 1):
+        train = blocks % 2 == parity
+        theta = problem.refit(theta_hat, train)
+        held = problem.evaluate(theta, train)[2][~train]
+        squares += float(np.sum(held**2))
+        count += held.size
+    return float(np.sqrt(squares / count) * 1e3)
+
+
+def _fit_and_hold_out(
+    hexapod: Hexapod,
+    obs: Observations,
+    fixed: Sequence[Effect],
+    free: Sequence[type[Effect]],
+    start: Sequence[FloatArray | None],
+    blocks: npt.NDArray[np.intp],
+) -> tuple[Fit, float]:
+    problem = _Problem(hexapod, obs, fixed, free)
+    everything = np.ones(obs.n_steps, dtype=bool)
+    starts = list(start) + [None] * (len(problem.free) - len(start))
+    theta = problem.solve(problem.start(starts, everything), everything)
+    return problem.fit(theta, everything), heldout_rms_um(problem, theta, blocks)
+
+
+def _change(before: Fit, after: Fit, obs: Observations) -> FloatArray:
+    """Weighted change of the residuals from one model to another (a direction)."""
+    return ((before.residual_mm - after.residual_mm) / obs.u_mm[..., None]).ravel()
+
+
+def _cosine(a: FloatArray, b: FloatArray) -> float:
+    na, nb = np.linalg.norm(a), np.linalg.norm(b)
+    return float(a @ b / (na * nb)) if na > 0 and nb > 0 else 0.0
+
+
+def diagnose(
+    hexapod: Hexapod,
+    obs: Observations,
+    current: Sequence[Effect] = (),
+    candidates: Sequence[str] | None = None,
+    *,
+    n_blocks: int = 6,
+    max_additions: int = 3,
+    progress: Callable[[int, int, int], None] | None = None,
+) -> Diagnosis:
+    """Find the effects missing from the model, one by one (see the module's text).
+
+    Parameters
+    ----------
+    hexapod : Hexapod
+        Nominal geometry and leg model.
+    obs : Observations
+    current : sequence of Effect
+        The model's effects (the hexapod file's ``thermal_model``), kept fixed.
+    candidates : sequence of str, optional
+        Names of the effects to try (default: every registered one not in ``current``).
+    n_blocks : int
+        Blocks of time for the held-out check.
+    max_additions : int
+        Stop after adding this many effects.
+    progress : callable, optional
+        Called as ``progress(round, done, total)`` after every candidate fitted.
+
+    Returns
+    -------
+    Diagnosis
+    """
+    current = tuple(current)
+    in_model = {e.name for e in current}
+    names = [n for n in (candidates if candidates is not None else EFFECTS) if n not in in_model]
+    skipped: dict[str, str] = {}
+    for name in list(names):
+        if EFFECTS[name].needs_air and obs.log.air_C is None:
+            skipped[name] = "needs the air temperature (an 'air' column in temperatures.csv)"
+            names.remove(name)
+    blocks = time_blocks(obs.times_s, n_blocks)
+    baseline, heldout = _fit_and_hold_out(hexapod, obs, current, (), (), blocks)
+    baseline_heldout = heldout
+    model = baseline
+    added: list[Addition] = []
+    rounds: list[tuple[Candidate, ...]] = []
+    added_classes: list[type[Effect]] = []
+    while names and len(added) < max_additions:
+        starts: list[FloatArray | None] = [e.vector() for e in model.effects]
+        tried: list[Candidate] = []
+        for name in names:
+            cls = EFFECTS[name]
+            free = [*added_classes, cls]
+            fit, held = _fit_and_hold_out(hexapod, obs, current, free, starts, blocks)
+            delta = model.bic - fit.bic
+            note = _bound_note(fit.effects[-1])
+            tried.append(
+                Candidate(
+                    name,
+                    fit,
+                    delta,
+                    rms_um(fit.residual_mm),
+                    held,
+                    bool(delta > DELTA_BIC_THRESHOLD and held < heldout),
+                    note,
+                )
+            )
+            if progress is not None:
+                progress(len(rounds) + 1, len(tried), len(names))
+        rounds.append(tuple(tried))
+        passing = sorted((c for c in tried if c.passes), key=lambda c: -c.delta_bic)
+        if not passing:
+            break
+        best = passing[0]
+        assert best.fit is not None
+        direction = _change(model, best.fit, obs)
+        alternatives = []
+        for other in passing[1:]:
+            assert other.fit is not None
+            cos = _cosine(direction, _change(model, other.fit, obs))
+            if abs(cos) > SIMILARITY_THRESHOLD:
+                alternatives.append((other.name, other.delta_bic, cos))
+        others = sorted(
+            (c for c in tried if c is not best and c.fit is not None and np.isfinite(c.delta_bic)),
+            key=lambda c: -c.delta_bic,
+        )
+        runner = (
+            _runner_up(hexapod, obs, current, added_classes, best, others[0]) if others else None
+        )
+        added.append(
+            Addition(
+                best.fit.effects[-1],
+                best.fit.std_errors[-1],
+                best.delta_bic,
+                rms_um(model.residual_mm),
+                best.rms_um,
+                heldout,
+                best.heldout_rms_um,
+                tuple(alternatives),
+                adequacy(hexapod, obs, best.fit).adequate,
+                (),
+                runner,
+            )
+        )
+        added_classes.append(EFFECTS[best.name])
+        names.remove(best.name)
+        model, heldout = best.fit, best.heldout_rms_um
+        # the joint refit of everything added so far is ``best.fit`` itself
+    # the flags are those of the final joint fit (the values written to hexapod.yaml)
+    added = [
+        replace(a, flags=bound_flags(effect))
+        for a, effect in zip(added, model.effects, strict=True)
+    ]
+    return Diagnosis(
+        baseline,
+        model,
+        tuple(added),
+        tuple(rounds),
+        baseline_heldout,
+        heldout,
+        skipped,
+        adequacy(hexapod, obs, model),
+    )
+
+
+def _runner_up(
+    hexapod: Hexapod,
+    obs: Observations,
+    current: Sequence[Effect],
+    before: Sequence[type[Effect]],
+    best: Candidate,
+    runner: Candidate,
+) -> RunnerUp:
+    """Refit the round's chosen effect together with its runner-up (see :class:`RunnerUp`)."""
+    assert best.fit is not None and runner.fit is not None
+    chosen = best.fit.effects[-1]
+    free = [*before, type(chosen), EFFECTS[runner.name]]
+    starts: list[FloatArray | None] = [e.vector() for e in best.fit.effects]
+    both = fit_model(hexapod, obs, current, free, [*starts, runner.fit.effects[-1].vector()])
+    return RunnerUp(
+        runner.name,
+        runner.delta_bic,
+        dict(chosen.values),
+        dict(best.fit.std_errors[-1]),
+        dict(both.effects[-2].values),
+        dict(both.std_errors[-2]),
+        dict(both.effects[-1].values),
+        dict(both.std_errors[-1]),
+    )
