@@ -94,6 +94,8 @@ _REASONS = {
     errno.ENAMETOOLONG: "name too long",
     errno.ELOOP: "too many levels of symbolic links",
 }
+#: flock errors of file systems that cannot lock a folder (then writes are not serialized)
+_NO_LOCKS = {errno.ENOLCK, errno.EBADF, errno.EINVAL, errno.EOPNOTSUPP, errno.ENOTSUP}
 #: errors that can only come from writing, wherever they are raised
 _WRITE_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
 
@@ -380,6 +382,10 @@ def output_lock(
     The lock is the folder itself, so that nothing is left behind. Not re-entrant:
     a process holding it must not take it again.
 
+    On a file system that cannot lock a folder (some NFS mounts answer ``ENOLCK``
+    or ``EBADF``) the block runs unlocked: the swap and its recovery still work,
+    but concurrent runs are not serialized there.
+
     Parameters
     ----------
     path : path-like
@@ -411,7 +417,11 @@ def output_lock(
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
                 break
-            except BlockingIOError:
+            except OSError as exc:
+                if exc.errno in _NO_LOCKS:
+                    break  # a file system without flock on folders (NFS): unserialized
+                if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                    raise write_error(path, exc) from None
                 if time.monotonic() >= deadline:
                     raise OutputBusyError(
                         f"cannot write {os.fspath(path)}: another hexatherm run is writing "
@@ -473,7 +483,8 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
             prefix=f".{target.name}.{os.getpid()}.", suffix=".tmp", dir=target.parent
         )
         try:
-            os.fchmod(fd, file_mode())
+            if hasattr(os, "fchmod"):  # not on Windows before Python 3.13
+                os.fchmod(fd, file_mode())
             _write_all(fd, data)
             os.fsync(fd)
         finally:

@@ -428,6 +428,25 @@ def test_files_and_folders_are_fsynced_before_the_swap_and_the_parent_after(tmp_
     assert synced[-1] == folder and any(LEFTOVER.fullmatch(Path(p).name) for p in synced)
 
 
+@pytest.mark.parametrize(("code", "works"), [(errno.ENOLCK, True), (errno.EIO, False)])
+def test_a_file_system_without_folder_locks_still_writes(tmp_path, monkeypatch, code, works):
+    """NFS may refuse flock on a folder (ENOLCK): the write goes on, unserialized."""
+    fcntl = pytest.importorskip("fcntl")
+
+    def no_lock(fd: int, operation: int) -> None:
+        raise OSError(code, os.strerror(code))
+
+    monkeypatch.setattr(fcntl, "flock", no_lock)
+    if works:
+        write_results(tmp_path / "results", "1")
+        write_output_file(tmp_path / "report.html", "x")
+        assert (tmp_path / "results" / "poses.csv").read_text() == "Tx_mm\n1\n"
+    else:
+        with pytest.raises(OutputWriteError, match="cannot write"):
+            write_results(tmp_path / "results", "1")
+        assert list(tmp_path.iterdir()) == []
+
+
 # --------------------------------------------------------------------------- 3. modes
 
 
