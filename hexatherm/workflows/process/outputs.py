@@ -31,7 +31,7 @@ import numpy as np
 import pandas as pd
 
 from hexatherm.core.geometry import to_um_urad
-from hexatherm.io.atomic import atomic_output_dir
+from hexatherm.io.outputs import output_dir
 from hexatherm.io.records import seconds_to_iso
 from hexatherm.workflows.process.pipeline import ProcessResult, nominal_fit_diameter_mm
 
@@ -219,10 +219,20 @@ def write_results(
     if quality is not None:
         tables["quality.csv"] = quality.frame
     texts = {name: to_csv_text(frame) for name, frame in tables.items()}
-    with atomic_output_dir(out, overwrite=overwrite) as tmp:
+    with output_dir(out, inputs=session_inputs(result), overwrite=overwrite) as tmp:
         for name, text in texts.items():
             (tmp / name).write_text(text, encoding="utf-8", newline="")
     return [Path(out) / name for name in texts]
+
+
+def session_inputs(result: ProcessResult) -> list[Path]:
+    """The files the run read: the session file, its measurements and temperatures (an
+    output may never be, contain or sit inside any of them)."""
+    session = result.session
+    files = [session.path, *session.measurements]
+    if session.temperatures is not None:
+        files.append(session.temperatures)
+    return [Path(f) for f in files]
 
 
 def deviation_table(result: ProcessResult, twin: np.ndarray | None = None) -> str:
