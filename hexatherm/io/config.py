@@ -698,6 +698,8 @@ def read_datums(path: str | os.PathLike[str]) -> Datums:
         if not isinstance(compensated, bool):
             raise doc.error("expected true or false", "probe", "compensated")
         tip = doc.number("probe", "tip_diameter", default=0.0)
+        if tip < 0:
+            raise doc.error(f"must not be negative, got {tip:g}", "probe", "tip_diameter")
     return Datums(
         step,
         names["plane"],

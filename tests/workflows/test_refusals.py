@@ -10,6 +10,7 @@ with two labels swapped is swapped, a plan divided by 25.4 is in inches.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import re
 import shutil
@@ -24,11 +25,13 @@ from hexatherm.errors import InputError, PlanError
 from hexatherm.io.config import plan_to_yaml, read_datums, read_plan, read_session
 from hexatherm.workflows.process.pipeline import Checks, process_session, read_measured
 from hexatherm.workflows.process.quality import quality_checks
+from hexatherm.workflows.process.twin import twin_poses
 from hexatherm.workflows.register import register_balls
 from hexatherm.workflows.replay import find_sessions, replay_session
 from hexatherm.workflows.simulate.twinsession import Heating, TwinSessionSpec, write_twin_session
 from tests.sessions import BALLS, REFERENCE, ROOT
 
+DATUMS = ROOT / "sessions" / "register-datums"
 TARGETS = (
     [5.0, -3.0, 2.0, 2.0, -3.0, 5.0],
     [-4.0, 6.0, -3.0, -2.5, 1.5, -4.0],
@@ -402,6 +405,36 @@ def test_the_twin_and_diagnose_refuse_a_step_outside_the_log(session):
         read_measured(read_session(session))
 
 
+def test_twin_and_quality_refuse_a_log_that_does_not_cover_the_steps(pristine):
+    """Given a result whose log ends early (built in memory, past read_measured's check),
+    the twin correction and the temperature check still refuse rather than hold the
+    log's last values."""
+    result = process_session(pristine)
+    temps = result.temperatures
+    half = len(temps.time_s) // 2
+    short = dataclasses.replace(
+        temps,
+        time_s=temps.time_s[:half],
+        legs_C=temps.legs_C[:half],
+        others_C={k: v[:half] for k, v in temps.others_C.items()},
+    )
+    cut = dataclasses.replace(result, temperatures=short)
+    with pytest.raises(InputError, match=r"field 'time': step S\d at .* after its last row"):
+        twin_poses(cut, result.session.hexapod)
+    with pytest.raises(InputError, match=r"field 'time': step S\d at .* after its last row"):
+        quality_checks(cut)
+
+
+def test_datums_with_a_negative_tip_are_refused(tmp_path):
+    datums = tmp_path / "datums.yaml"
+    text = (DATUMS / "datums.yaml").read_text()
+    datums.write_text(text.replace("tip_diameter: 2.0", "tip_diameter: -2.0"))
+    with pytest.raises(
+        InputError, match=r"datums\.yaml:\d+: field 'probe\.tip_diameter': must not be negative"
+    ):
+        read_datums(datums)
+
+
 # ---------------------------------------------------------------- item 11
 def test_a_check_that_could_not_run_says_na(session):
     (session / "session.yaml").write_text(
@@ -424,7 +457,6 @@ def test_a_check_that_could_not_run_says_na(session):
 
 
 # ---------------------------------------------------------------- item 10
-DATUMS = ROOT / "sessions" / "register-datums"
 
 
 @pytest.mark.parametrize(

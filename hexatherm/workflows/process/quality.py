@@ -38,7 +38,11 @@ from hexatherm.core.registration import check_distances
 from hexatherm.errors import HexathermError
 from hexatherm.session import QualityLimits, Session
 from hexatherm.typing import FloatArray
-from hexatherm.workflows.process.pipeline import ProcessResult, nominal_fit_diameter_mm
+from hexatherm.workflows.process.pipeline import (
+    ProcessResult,
+    check_log_span,
+    nominal_fit_diameter_mm,
+)
 
 __all__ = ["CHECKS", "NA", "QualityReport", "parse_threshold", "quality_checks"]
 
@@ -214,6 +218,7 @@ def _leg_temperatures(result: ProcessResult) -> FloatArray | None:
     if temps is None:
         return None
     t = result.centres.times_s
+    check_log_span(t, result.session.plan.labels, temps)  # np.interp would hold the ends
     return np.column_stack([np.interp(t, temps.time_s, temps.legs_C[:, i]) for i in range(6)])
 
 

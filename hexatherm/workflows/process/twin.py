@@ -18,7 +18,7 @@ from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.twin import twin_corrected
 from hexatherm.errors import InputError
 from hexatherm.io.csvfile import Temperatures
-from hexatherm.workflows.process.pipeline import ProcessResult
+from hexatherm.workflows.process.pipeline import ProcessResult, check_log_span
 
 
 def twin_poses(
@@ -36,6 +36,8 @@ def twin_poses(
             path=str(session.path),
             field="temperatures",
         )
+    # a step outside the log would get the log's end values (np.interp holds them)
+    check_log_span(result.centres.times_s, session.plan.labels, result.temperatures)
     effects = model_effects(hexapod, source or None)
     log = thermocouple_log(result.temperatures)
     if log.air_C is None and any(type(e).needs_air for e in effects):
