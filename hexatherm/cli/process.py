@@ -117,7 +117,7 @@ def command(
     step), and prints the deviations from the commanded poses side by side, in
     um and urad.
     """
-    from hexatherm.io.outputs import check_output
+    from hexatherm.io.outputs import check_output_settled
     from hexatherm.workflows.process.outputs import deviation_table, write_results
     from hexatherm.workflows.process.pipeline import Checks, process_session
     from hexatherm.workflows.process.quality import (
@@ -138,7 +138,7 @@ def command(
     session_file = session if session.is_file() else session / "session.yaml"
     # before any work: never into, around or onto the session's files (a full check of every
     # input is repeated when the results are written)
-    check_output(out_dir, kind="folder", inputs=[session_file], overwrite=overwrite)
+    check_output_settled(out_dir, kind="folder", inputs=[session_file], overwrite=overwrite)
     checks = Checks(
         distance_tolerance_um, registration_tolerance_um, strict_registration, pose_tolerance
     )

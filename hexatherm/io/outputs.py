@@ -98,6 +98,7 @@ __all__ = [
     "OutputWriteError",
     "check_not_input",
     "check_output",
+    "check_output_settled",
     "foreign_entries",
     "output_dir",
     "read_manifest",
@@ -508,6 +509,35 @@ def check_output(
 # --------------------------------------------------------------------------- writes
 
 
+def check_output_settled(
+    output: PathLike,
+    *,
+    kind: Literal["folder", "file"],
+    inputs: Iterable[PathLike] = (),
+    overwrite: bool = False,
+    option: str = "-o",
+    lock_timeout_s: float = DEFAULT_LOCK_TIMEOUT_S,
+    on_wait: Callable[[Path], None] | None = None,
+) -> Path:
+    """:func:`check_output`, looked at again under the output's lock when it finds foreign files.
+
+    Without the lock, another run may be swapping the same folder while it is listed
+    (entries vanish, files are replaced): what looks foreign then is only in flux. Every
+    swap holds the lock, so a second look under it sees a settled folder; the answer of
+    that look stands.
+    """
+    inputs = list(inputs)
+    try:
+        return check_output(output, kind=kind, inputs=inputs, overwrite=overwrite, option=option)
+    except ForeignFilesError:
+        if not Path(os.path.abspath(output)).parent.is_dir():
+            raise
+        with output_lock(output, timeout_s=lock_timeout_s, on_wait=on_wait):
+            return check_output(
+                output, kind=kind, inputs=inputs, overwrite=overwrite, option=option
+            )
+
+
 @contextlib.contextmanager
 def output_dir(
     output: PathLike,
@@ -536,7 +566,15 @@ def output_dir(
     """
     inputs = list(inputs)
     given = os.fspath(output)
-    check_output(given, kind="folder", inputs=inputs, overwrite=overwrite, option=option)
+    check_output_settled(
+        given,
+        kind="folder",
+        inputs=inputs,
+        overwrite=overwrite,
+        option=option,
+        lock_timeout_s=lock_timeout_s,
+        on_wait=on_wait,
+    )
 
     def under_lock(target: Path, tmp: Path) -> None:
         check_not_input(target, inputs, option=option)
