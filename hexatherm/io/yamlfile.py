@@ -36,6 +36,7 @@ anything else, so that errors stay those of :class:`YamlDoc`.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import re
@@ -167,7 +168,29 @@ def _keys(stack: list[_Level]) -> tuple[Key, ...]:
 def _scan(text: str, path: str) -> None:
     """Refuse a document nested deeper than :data:`MAX_DEPTH` or whose aliases expand to
     more than :data:`MAX_ALIAS_NODES` nodes, from the parser's events (no recursion, no
-    expansion), before it is composed; the error names the file, line and field."""
+    expansion), before it is composed; the error names the file, line and field.
+
+    PyYAML >= 6.0.4 stops flow collections nested deeper than its own limit (1000) in
+    the scanner, which looks ahead before it gives the first event of the nest: the text
+    up to that point is then scanned again, so the error still names the field where
+    the nest passed :data:`MAX_DEPTH`.
+    """
+    try:
+        _scan_events(text, path)
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark
+        if mark is None or "nesting depth" not in str(exc.problem):
+            raise
+        lines = text.splitlines(keepends=True)
+        head = "".join(lines[: mark.line]) + lines[mark.line][: mark.column]
+        with contextlib.suppress(yaml.YAMLError):
+            _scan_events(head, path)
+        raise InputError(
+            f"nested deeper than {MAX_DEPTH} levels", path=path, line=mark.line + 1
+        ) from None
+
+
+def _scan_events(text: str, path: str) -> None:
     if "&" not in text and _shallow(text):
         return  # no anchors, so no aliases: only the depth mattered
     root = _Level(False, None)
