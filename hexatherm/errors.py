@@ -95,6 +95,46 @@ class OutputExistsError(HexathermError):
     """The output exists and overwriting was not asked for."""
 
 
+class OutputWriteError(HexathermError):
+    """An output that cannot be written (disk full, read-only, dangling link, ...).
+
+    ``path`` is the output, ``errno`` the file system's error number (or ``None``).
+    Nothing was left behind.
+    """
+
+    def __init__(self, message: str, *, path: str | os.PathLike[str], errno: int | None = None):
+        self.path = os.fspath(path)
+        self.errno = errno
+        super().__init__(message)
+
+
+class OutputBusyError(HexathermError):
+    """Another hexatherm run holds the lock of the output's folder for too long."""
+
+
+class OutputIsInputError(HexathermError):
+    """The output is, contains, or sits inside an input of the run.
+
+    ``output`` and ``input`` are the paths as the caller gave them.
+    """
+
+    def __init__(self, message: str, *, output: str, input: str) -> None:
+        self.output = output
+        self.input = input
+        super().__init__(message)
+
+
+class ForeignFilesError(OutputExistsError):
+    """``--overwrite`` would replace something hexatherm did not write (or that was edited).
+
+    ``entries`` lists ``(relative path, reason)`` pairs.
+    """
+
+    def __init__(self, message: str, *, entries: list[tuple[str, str]]) -> None:
+        self.entries = entries
+        super().__init__(message)
+
+
 class ConvergenceError(HexathermError):
     """An iterative solver did not reach its tolerance."""
 
@@ -227,3 +267,8 @@ class RankDeficientError(CalibrationError):
         self.n_parameters = n_parameters
         self.directions = directions
         super().__init__(message)
+
+
+class InputWarning(UserWarning):
+    """Input that a reader read past or dropped because it was asked to (``allow_truncated``,
+    ``keep_later``); the message names the file and the line."""

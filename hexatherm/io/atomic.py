@@ -69,7 +69,7 @@ import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
-from hexatherm.errors import HexathermError, OutputExistsError
+from hexatherm.errors import OutputBusyError, OutputExistsError, OutputWriteError
 
 try:  # POSIX only; without it writes are not serialized
     import fcntl
@@ -98,23 +98,6 @@ _REASONS = {
 _NO_LOCKS = {errno.ENOLCK, errno.EBADF, errno.EINVAL, errno.EOPNOTSUPP, errno.ENOTSUP}
 #: errors that can only come from writing, wherever they are raised
 _WRITE_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
-
-
-class OutputWriteError(HexathermError):
-    """An output that cannot be written (disk full, read-only, dangling link, ...).
-
-    ``path`` is the output, ``errno`` the file system's error number (or ``None``).
-    Nothing was left behind.
-    """
-
-    def __init__(self, message: str, *, path: str | os.PathLike[str], errno: int | None = None):
-        self.path = os.fspath(path)
-        self.errno = errno
-        super().__init__(message)
-
-
-class OutputBusyError(HexathermError):
-    """Another hexatherm run holds the lock of the output's folder for too long."""
 
 
 # --------------------------------------------------------------------------- modes

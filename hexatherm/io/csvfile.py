@@ -13,7 +13,7 @@ Errors name the file, the line (header = line 1) and the column. What is refused
   :data:`~hexatherm.io.files.MAX_MEASUREMENT_BYTES`; text that is not UTF-8;
 * a file whose last line has no line break: it may be cut short, in the middle of
   its last number (``allow_truncated`` drops that line, with an
-  :class:`~hexatherm.io.files.InputWarning`);
+  :class:`~hexatherm.errors.InputWarning`);
 * ISO times that are not ``YYYY-MM-DDTHH:MM[:SS[.f]]`` with two-digit fields and
   an optional offset (``Z``, ``+HH:MM``, ``+HHMM``, ``+HH``): ``T10:1``, ``09:35:5``,
   ``2019-12-2`` and a date alone are refused rather than guessed; a file mixing times
@@ -43,8 +43,8 @@ import numpy.typing as npt
 import pandas as pd
 
 from hexatherm.core.plan import NAME_PATTERN
-from hexatherm.errors import InputError
-from hexatherm.io.files import InputWarning, read_bytes, refuse_utf16
+from hexatherm.errors import InputError, InputWarning
+from hexatherm.io.files import read_bytes, refuse_utf16
 from hexatherm.io.records import RecordKind, Records, TimeKind, check_groups, seconds_to_iso
 
 BASE_COLUMNS = ("label", "ball", "x", "y", "z", "time")

@@ -27,7 +27,7 @@ A DMIS output ends with ``ENDFIL``: a file whose last statement is not ``ENDFIL`
 was cut short, perhaps in the middle of a number that still reads as one, and is
 refused, naming its last record and the field it may be cut in. With
 ``allow_truncated`` its last actual feature (and whatever follows it) is dropped
-instead, with an :class:`~hexatherm.io.files.InputWarning`. A ball measured twice in
+instead, with an :class:`~hexatherm.errors.InputWarning`. A ball measured twice in
 one step and a point label seen twice are refused (see
 :func:`~hexatherm.io.records.check_groups`; ``keep_later`` keeps the later group).
 Every problem in what hexatherm reads raises :class:`~hexatherm.errors.InputError`
@@ -48,8 +48,8 @@ from typing import NoReturn
 
 import numpy as np
 
-from hexatherm.errors import InputError
-from hexatherm.io.files import InputWarning, read_bytes, refuse_utf16
+from hexatherm.errors import InputError, InputWarning
+from hexatherm.io.files import read_bytes, refuse_utf16
 from hexatherm.io.records import RecordKind, Records, check_groups
 
 __all__ = [

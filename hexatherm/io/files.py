@@ -36,7 +36,7 @@ import errno
 import os
 import stat
 
-from hexatherm.errors import InputError
+from hexatherm.errors import InputError, InputWarning
 
 __all__ = [
     "MAX_MEASUREMENT_BYTES",
@@ -54,11 +54,6 @@ MAX_MEASUREMENT_BYTES = 2 * 1024**3
 MAX_YAML_BYTES = 16 * 1024**2
 
 _CHUNK = 1 << 24
-
-
-class InputWarning(UserWarning):
-    """Input that a reader read past or dropped because it was asked to (``allow_truncated``,
-    ``keep_later``); the message names the file and the line."""
 
 
 def _kind_of(mode: int) -> str | None:

@@ -75,11 +75,14 @@ from pathlib import Path
 from typing import Literal
 
 from hexatherm import __version__
-from hexatherm.errors import HexathermError, OutputExistsError
+from hexatherm.errors import (
+    ForeignFilesError,
+    HexathermError,
+    OutputExistsError,
+    OutputIsInputError,
+)
 from hexatherm.io.atomic import (
     DEFAULT_LOCK_TIMEOUT_S,
-    OutputBusyError,
-    OutputWriteError,
     atomic_output_dir,
     atomic_write_bytes,
     make_parents,
@@ -91,11 +94,7 @@ from hexatherm.io.atomic import (
 
 __all__ = [
     "MANIFEST_NAME",
-    "ForeignFilesError",
     "Manifest",
-    "OutputBusyError",
-    "OutputIsInputError",
-    "OutputWriteError",
     "check_not_input",
     "check_output",
     "check_output_settled",
@@ -116,29 +115,6 @@ _NAMED = 5
 _CHUNK = 1 << 20
 
 PathLike = str | os.PathLike[str]
-
-
-class OutputIsInputError(HexathermError):
-    """The output is, contains, or sits inside an input of the run.
-
-    ``output`` and ``input`` are the paths as the caller gave them.
-    """
-
-    def __init__(self, message: str, *, output: str, input: str) -> None:
-        self.output = output
-        self.input = input
-        super().__init__(message)
-
-
-class ForeignFilesError(OutputExistsError):
-    """``--overwrite`` would replace something hexatherm did not write (or that was edited).
-
-    ``entries`` lists ``(relative path, reason)`` pairs.
-    """
-
-    def __init__(self, message: str, *, entries: list[tuple[str, str]]) -> None:
-        self.entries = entries
-        super().__init__(message)
 
 
 # --------------------------------------------------------------------------- inputs

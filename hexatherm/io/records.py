@@ -17,8 +17,7 @@ from typing import Literal, Protocol
 import numpy as np
 import numpy.typing as npt
 
-from hexatherm.errors import InputError
-from hexatherm.io.files import InputWarning
+from hexatherm.errors import InputError, InputWarning
 
 RecordKind = Literal["centres", "points"]
 TimeKind = Literal["iso", "seconds"]

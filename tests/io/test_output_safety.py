@@ -24,18 +24,21 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from hexatherm import __version__
-from hexatherm.errors import HexathermError, OutputExistsError
+from hexatherm.errors import (
+    ForeignFilesError,
+    HexathermError,
+    OutputExistsError,
+    OutputIsInputError,
+    OutputWriteError,
+)
 from hexatherm.io import atomic, outputs
 from hexatherm.io.atomic import (
-    OutputWriteError,
     atomic_output_dir,
     atomic_write_text,
     refuse_existing,
 )
 from hexatherm.io.outputs import (
     MANIFEST_NAME,
-    ForeignFilesError,
-    OutputIsInputError,
     check_not_input,
     check_output,
     foreign_entries,
