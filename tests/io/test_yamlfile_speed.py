@@ -16,7 +16,8 @@ from hypothesis import strategies as st
 
 from hexatherm.core.plan import Plan
 from hexatherm.errors import InputError
-from hexatherm.io.config import _plan_from_doc, _read_plan_fast, plan_to_yaml, read_plan
+from hexatherm.io.config import plan_to_yaml, read_plan
+from hexatherm.io.config.plan import _plan_from_doc, _read_plan_fast
 from hexatherm.io.yamlfile import PLAIN_NUMBER, YamlDoc, plain_numbers, plain_tag
 from tests.sessions import small_plan
 

@@ -1,0 +1,179 @@
+"""The session file (``hexatherm-session/1``): files, quality limits, CMM noise, pose check."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from pathlib import Path
+from typing import Any
+
+from hexatherm.io.config.balls import read_balls
+from hexatherm.io.config.hexapod import read_hexapod
+from hexatherm.io.config.plan import read_plan
+from hexatherm.io.config.yamlout import _dump
+from hexatherm.io.yamlfile import YamlDoc
+from hexatherm.session import CmmNoise, QualityLimits, Session
+
+SESSION_FORMAT = "hexatherm-session/1"
+
+
+def read_session(path: str | os.PathLike[str]) -> Session:
+    """Read a session file, or the ``session.yaml`` of a session folder, and its configs."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "session.yaml"
+    doc = YamlDoc.load(path)
+    doc.check_format(SESSION_FORMAT)
+    doc.check_keys(
+        [
+            "format",
+            "name",
+            "hexapod",
+            "balls",
+            "plan",
+            "measurements",
+            "temperatures",
+            "cmm",
+            "quality",
+            "pose_check",
+        ]
+    )
+    name = doc.string("name", default=path.parent.name)
+    _read_pose_check(doc)  # checked here, used by process (read_pose_check)
+
+    def existing(*keys: Any) -> Path:
+        rel = doc.string(*keys)
+        target = doc.resolve(rel)
+        if not target.is_file():
+            raise doc.error(f"file not found: {target}", *keys)
+        return target
+
+    hexapod = read_hexapod(existing("hexapod"))
+    balls = read_balls(existing("balls"))
+    plan = read_plan(existing("plan"))
+    files = doc.get("measurements")
+    if isinstance(files, str):
+        raise doc.error("expected a list of files, e.g. [centres.csv]", "measurements")
+    if not isinstance(files, list) or not files:
+        raise doc.error("expected a non-empty list of measurement files", "measurements")
+    measurements = tuple(existing("measurements", i) for i in range(len(files)))
+    temperatures = None
+    if doc.get("temperatures", default=None) is not None:
+        temperatures = existing("temperatures")
+    return Session(
+        path,
+        name,
+        hexapod,
+        balls,
+        plan,
+        measurements,
+        temperatures,
+        _read_cmm(doc),
+        _read_quality(doc),
+    )
+
+
+def read_pose_check(path: str | os.PathLike[str]) -> dict[str, Any] | None:
+    """The optional ``pose_check:`` mapping of a session file (an extension), checked.
+
+    ``path`` is the session file or its folder. The mapping's keys, all optional:
+    ``tolerance_mm`` and ``tolerance_deg`` (> 0, ``.inf`` turns the check off): the
+    largest deviation of a step's measured pose relative to O from its commanded pose
+    relative to O; ``offset`` (``[Tx, Ty, Tz, Rx, Ry, Rz]``, mm and deg): a known,
+    constant deviation of every step but O. Returns None without the mapping, else a
+    dict of the keys given (``offset`` as a list of six floats).
+    """
+    path = Path(path)
+    if path.is_dir():
+        path = path / "session.yaml"
+    return _read_pose_check(YamlDoc.load(path))
+
+
+def _read_pose_check(doc: YamlDoc) -> dict[str, Any] | None:
+    if doc.get("pose_check", default=None) is None:
+        return None
+    doc.check_keys(["tolerance_mm", "tolerance_deg", "offset"], "pose_check")
+    found: dict[str, Any] = {}
+    for key in ("tolerance_mm", "tolerance_deg"):
+        value = doc.get("pose_check", key, default=None)
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, int | float) or not value > 0:
+            raise doc.error(
+                f"expected a number > 0 (.inf turns the check off), got {value!r}",
+                "pose_check",
+                key,
+            )
+        found[key] = float(value)
+    if doc.get("pose_check", "offset", default=None) is not None:
+        found["offset"] = doc.vector("pose_check", "offset", size=6)
+    return found
+
+
+def _read_quality(doc: YamlDoc) -> dict[str, float]:
+    """The optional ``quality:`` mapping of a session file: check name -> limit (>= 0;
+    ``.inf`` turns a check off, as does 0 for ``min_rcond``)."""
+    if doc.get("quality", default=None) is None:
+        return {}
+    doc.check_keys([f.name for f in dataclasses.fields(QualityLimits)], "quality")
+    limits = {}
+    for name in doc.get("quality"):
+        value = doc.get("quality", name)
+        if isinstance(value, bool) or not isinstance(value, int | float) or not value >= 0:
+            raise doc.error(
+                f"expected a number >= 0 (.inf turns the check off), got {value!r}", "quality", name
+            )
+        limits[name] = float(value)
+    return limits
+
+
+def _read_cmm(doc: YamlDoc) -> CmmNoise | None:
+    """The optional ``cmm:`` mapping of a session file."""
+    if doc.get("cmm", default=None) is None:
+        return None
+    doc.check_keys(["point_noise_um", "mpe_um", "points_per_ball", "cap_angle_deg"], "cmm")
+    given = [k for k in ("point_noise_um", "mpe_um") if doc.get("cmm", k, default=None) is not None]
+    if len(given) != 1:
+        raise doc.error(
+            "give point_noise_um or mpe_um (sigma = MPE/2), exactly one", "cmm", *given[1:]
+        )
+    sigma = doc.number("cmm", given[0], positive=True)
+    if given[0] == "mpe_um":
+        sigma /= 2.0
+    points = doc.get("cmm", "points_per_ball", default=None)
+    if points is not None and (
+        isinstance(points, bool) or not isinstance(points, int) or points < 4
+    ):
+        raise doc.error(f"expected a whole number >= 4, got {points!r}", "cmm", "points_per_ball")
+    cap = doc.number("cmm", "cap_angle_deg", default=70.0, positive=True)
+    if cap > 180.0:
+        raise doc.error(f"must be at most 180, got {cap!r}", "cmm", "cap_angle_deg")
+    return CmmNoise(sigma, points, cap)
+
+
+def session_to_yaml(
+    name: str,
+    hexapod: str,
+    balls: str,
+    plan: str,
+    measurements: list[str],
+    temperatures: str | None = None,
+    cmm: dict[str, float] | None = None,
+) -> str:
+    """The session file text (paths relative to the session file).
+
+    ``cmm`` is the optional ``cmm:`` mapping, e.g. ``{"mpe_um": 1.0}``.
+    """
+    doc: dict[str, Any] = {
+        "format": SESSION_FORMAT,
+        "name": name,
+        "hexapod": hexapod,
+        "balls": balls,
+        "plan": plan,
+        "measurements": list(measurements),
+    }
+    if temperatures is not None:
+        doc["temperatures"] = temperatures
+    if cmm:
+        doc["cmm"] = dict(cmm)
+    return _dump(doc)
