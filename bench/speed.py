@@ -50,7 +50,7 @@ import straightforward  # noqa: E402
 
 from hexatherm.core.registration import register  # noqa: E402
 from hexatherm.core.spherefit import fit_spheres  # noqa: E402
-from hexatherm.io import csvfile, dmis  # noqa: E402
+from hexatherm.io import csvfile, dmis, measurements, temperatures  # noqa: E402
 from hexatherm.io.config import read_hexapod, read_session  # noqa: E402
 from hexatherm.workflows.process.pipeline import (  # noqa: E402
     assemble_centres,
@@ -177,7 +177,7 @@ def phase_times(folder: Path, repeat: int) -> dict[str, float]:
     state: dict[str, Any] = {}
 
     def measurements() -> None:
-        state["records"] = [r for f in sess.measurements for r in csvfile.read_measurements(f)]
+        state["records"] = [r for f in sess.measurements for r in measurements.read_measurements(f)]
 
     def fits() -> None:
         state["centres"] = assemble_centres(
@@ -200,7 +200,7 @@ def phase_times(folder: Path, repeat: int) -> dict[str, float]:
     return {
         "session, hexapod, balls, plan (YAML)": best(lambda: read_session(folder), repeat),
         "measurements": best(measurements, repeat),
-        "temperatures": best(lambda: csvfile.read_temperatures(sess.temperatures), repeat)
+        "temperatures": best(lambda: temperatures.read_temperatures(sess.temperatures), repeat)
         if sess.temperatures is not None
         else 0.0,
         "sphere fits and centres": best(fits, repeat),
@@ -306,7 +306,7 @@ def main() -> None:
         from hexatherm.workflows.process.uncertainty import pose_uncertainty
 
         t_unc = best(lambda r=result: pose_uncertainty(r), rep)
-        records = [r for file in sess.measurements for r in csvfile.read_measurements(file)]
+        records = [r for file in sess.measurements for r in measurements.read_measurements(file)]
         n_points = sum(len(r) for r in records)
         end_to_end.append(
             [
@@ -416,7 +416,7 @@ def main() -> None:
         ("DMIS", sessions["DMIS"], "dmis"),
     ):
         file = read_session(folder).measurements[0]
-        t_fast = best(lambda f=file: csvfile.read_measurements(f), rep)
+        t_fast = best(lambda f=file: measurements.read_measurements(f), rep)
         t_general = best(lambda f=file, k=kind: general(k)(f), slow)
         readers.append(
             [

@@ -40,7 +40,8 @@ def command(
     import numpy as np
 
     from hexatherm.io.atomic import atomic_write_text, refuse_existing
-    from hexatherm.io.csvfile import centres_to_csv, read_measurements
+    from hexatherm.io.csvfile import centres_to_csv
+    from hexatherm.io.measurements import read_measurements
     from hexatherm.io.records import Records, concat_records
     from hexatherm.workflows.process.pipeline import fit_points
 

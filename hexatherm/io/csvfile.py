@@ -1,11 +1,12 @@
-"""CSV readers: ball centres, probed points and thermocouple logs.
+"""CSV readers of ball centres and probed points, and the CSV primitives that the
+thermocouple log (:mod:`hexatherm.io.temperatures`) shares.
 
 Centres and points files share the header ``label,ball,x,y,z,time``; centres may
 add ``diameter``, points ``i,j,k`` (probing direction). Which of the two a file
 holds is told by (in this order) its extra columns, its name (``centres``,
 ``centers`` or ``points`` in it), or its content (at least half the steps and balls
-with one row means centres). ``time`` is an ISO 8601 timestamp or a number of seconds, the same kind
-on every row.
+with one row means centres). ``time`` is an ISO 8601 timestamp or a number of
+seconds, the same kind on every row.
 
 Errors name the file, the line (header = line 1) and the column. What is refused:
 
@@ -34,7 +35,6 @@ import os
 import re
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -54,8 +54,6 @@ POINT_EXTRA = ("i", "j", "k")
 
 #: The largest standard uncertainty ``u_um`` of a centre accepted, um
 U_UM_MAX = 1000.0
-#: Temperatures accepted in a thermocouple log, degC (a value in kelvin is refused)
-TEMPERATURE_RANGE_C = (-60.0, 150.0)
 
 
 def read_text(path: str | os.PathLike[str]) -> str:
@@ -75,7 +73,7 @@ def read_text(path: str | os.PathLike[str]) -> str:
     return text
 
 
-def _complete_lines(text: str, path: str, allow_truncated: bool) -> str:
+def complete_lines(text: str, path: str, allow_truncated: bool) -> str:
     """``text`` (line ends made LF) when its last line ends with a line break; else
     InputError naming the line and the field it ends in, or with ``allow_truncated``
     the text without that line and an :class:`InputWarning`."""
@@ -108,7 +106,7 @@ def _complete_lines(text: str, path: str, allow_truncated: bool) -> str:
     )
 
 
-def _frame(text: str, path: str) -> pd.DataFrame:
+def csv_frame(text: str, path: str) -> pd.DataFrame:
     """All cells as stripped strings; row ``r`` of the result is file line ``r + 2``."""
     text = text.replace("\r\n", "\n").replace("\r", "\n")
     if not text.strip():
@@ -156,12 +154,12 @@ def _refuse_short_rows(text: str, columns: list[str], path: str) -> None:
             )
 
 
-def _drop_blank(frame: pd.DataFrame) -> pd.DataFrame:
+def drop_blank_rows(frame: pd.DataFrame) -> pd.DataFrame:
     blank = (frame == "").all(axis=1)
     return frame[~blank.to_numpy()]
 
 
-def _numbers(
+def column_numbers(
     frame: pd.DataFrame, column: str, path: str, allow_empty: bool = False
 ) -> npt.NDArray[np.float64]:
     text = frame[column]
@@ -263,7 +261,9 @@ def _iso_seconds(
     return np.asarray(seconds, dtype=np.float64), aware
 
 
-def _times(frame: pd.DataFrame, path: str) -> tuple[npt.NDArray[np.float64], TimeKind, bool | None]:
+def column_times(
+    frame: pd.DataFrame, path: str
+) -> tuple[npt.NDArray[np.float64], TimeKind, bool | None]:
     """The ``time`` column: seconds, its kind, and (ISO) whether it has UTC offsets."""
     text = frame["time"]
     lines = frame.index.to_numpy(dtype=np.int64)
@@ -369,13 +369,13 @@ def read_measurement_csv(
         Naming the file, the line and the field (see the module's list).
     """
     path = os.fspath(path)
-    text = _complete_lines(read_text(path), path, allow_truncated)
+    text = complete_lines(read_text(path), path, allow_truncated)
     fast = _fast_measurement_csv(text, path, kind)
     if fast is not None:
         return check_groups(fast, keep_later=keep_later)
-    frame = _frame(text, path)
+    frame = csv_frame(text, path)
     _check_header(frame, path, CENTRE_EXTRA + POINT_EXTRA)
-    frame = _drop_blank(frame)
+    frame = drop_blank_rows(frame)
     if frame.empty:
         raise InputError("no data rows", path=path, line=2)
     kind = kind or _kind(frame, path)
@@ -389,8 +389,8 @@ def read_measurement_csv(
             field=misplaced[0],
         )
     label, ball = _names(frame, "label", path), _names(frame, "ball", path)
-    xyz = np.column_stack([_numbers(frame, c, path) for c in ("x", "y", "z")])
-    time, time_kind, aware = _times(frame, path)
+    xyz = np.column_stack([column_numbers(frame, c, path) for c in ("x", "y", "z")])
+    time, time_kind, aware = column_times(frame, path)
     lines = frame.index.to_numpy(dtype=np.int64)
     diameter = ijk = None
     extra: dict[str, object] = {}
@@ -398,12 +398,14 @@ def read_measurement_csv(
         checked: dict[str, npt.NDArray[np.float64] | None] = {}
         for column in CENTRE_EXTRA:
             if column in frame.columns:
-                checked[column] = _numbers(frame, column, path, allow_empty=True)
+                checked[column] = column_numbers(frame, column, path, allow_empty=True)
         _check_centre_columns(checked, lines, path, frame)
         diameter = checked.pop("diameter", None)
         extra.update(checked)
     elif all(c in frame.columns for c in POINT_EXTRA):
-        ijk = np.column_stack([_numbers(frame, c, path, allow_empty=True) for c in POINT_EXTRA])
+        ijk = np.column_stack(
+            [column_numbers(frame, c, path, allow_empty=True) for c in POINT_EXTRA]
+        )
     elif any(c in frame.columns for c in POINT_EXTRA):
         raise InputError("give all of i, j, k or none", path=path, line=1)
     records = Records(
@@ -517,7 +519,7 @@ def _fast_measurement_csv(text: str, path: str, kind: RecordKind | None) -> Reco
     label, ball = frame["label"].to_numpy(dtype=str), frame["ball"].to_numpy(dtype=str)
     lines = frame.index.to_numpy(dtype=np.int64)
     try:
-        time, time_kind, aware = _times(frame, path)
+        time, time_kind, aware = column_times(frame, path)
         if kind == "centres":
             _check_centre_columns({c: values.get(c) for c in CENTRE_EXTRA}, lines, path)
     except InputError:
@@ -572,116 +574,3 @@ def centres_to_csv(records: Records) -> str:
     buffer = io.StringIO()
     pd.DataFrame(data).to_csv(buffer, index=False, lineterminator="\n")
     return buffer.getvalue()
-
-
-@dataclass(frozen=True)
-class Temperatures:
-    """A thermocouple log: ``time`` plus ``leg1``..``leg6`` and optional further columns.
-
-    Attributes
-    ----------
-    path : str
-    time_s : ndarray, shape (m,)
-    time_kind : {"iso", "seconds"}
-    legs_C : ndarray, shape (m, 6)
-    others_C : dict of str to ndarray, shape (m,)
-    time_aware : bool or None
-        For ISO times: whether they carry a UTC offset (see
-        :func:`~hexatherm.io.records.check_time_zones`).
-    """
-
-    path: str
-    time_s: npt.NDArray[np.float64]
-    time_kind: TimeKind
-    legs_C: npt.NDArray[np.float64]
-    others_C: dict[str, npt.NDArray[np.float64]]
-    time_aware: bool | None = None
-
-
-LEG_COLUMNS = tuple(f"leg{i}" for i in range(1, 7))
-
-
-def _temperatures(frame: pd.DataFrame, column: str, path: str) -> npt.NDArray[np.float64]:
-    values = _numbers(frame, column, path)
-    low, high = TEMPERATURE_RANGE_C
-    bad = (values < low) | (values > high)
-    if np.any(bad):
-        row = int(np.argmax(bad))
-        hint = " (kelvin? the log is in degC)" if 200 <= values[row] <= 450 else ""
-        raise InputError(
-            f"temperature {frame[column].iloc[row]!r} degC outside [{low:g}, {high:g}]{hint}",
-            path=path,
-            line=int(frame.index[row]),
-            field=column,
-        )
-    return values
-
-
-def read_temperatures(
-    path: str | os.PathLike[str], *, allow_truncated: bool = False
-) -> Temperatures:
-    """Read ``temperatures.csv`` (time sorted, at least one row).
-
-    ``allow_truncated`` drops a last line without a line break (a logger stopped while
-    writing), with an :class:`InputWarning`, instead of refusing the file.
-    """
-    path = os.fspath(path)
-    frame = _frame(_complete_lines(read_text(path), path, allow_truncated), path)
-    columns = list(frame.columns)
-    expected = ("time",) + LEG_COLUMNS
-    if tuple(columns[:7]) != expected:
-        raise InputError(
-            f"header must start with {','.join(expected)}, got {','.join(columns)}",
-            path=path,
-            line=1,
-        )
-    if len(set(columns)) != len(columns) or any(not c for c in columns):
-        raise InputError("duplicate or empty column name in header", path=path, line=1)
-    frame = _drop_blank(frame)
-    if frame.empty:
-        raise InputError("no data rows", path=path, line=2)
-    time, kind, aware = _times(frame, path)
-    decreasing = np.diff(time) < 0
-    if np.any(decreasing):
-        row = int(np.argmax(decreasing)) + 1
-        raise InputError("time goes backwards", path=path, line=int(frame.index[row]), field="time")
-    legs = np.column_stack([_temperatures(frame, c, path) for c in LEG_COLUMNS])
-    others = {c: _temperatures(frame, c, path) for c in columns[7:]}
-    return Temperatures(path, time, kind, legs, others, aware)
-
-
-def read_measurements(
-    path: str | os.PathLike[str],
-    *,
-    progress: Callable[[int, int], None] | None = None,
-    allow_truncated: bool = False,
-    keep_later: bool = False,
-) -> list[Records]:
-    """Read any measurement file: centres/points CSV or DMIS output (by extension or content).
-
-    ``progress(lines_done, lines_total)``, when given, is called now and then while a
-    DMIS file is read the slow way (one with continuations or comments: seconds for
-    a hundred thousand points); a CSV file or a plain DMIS file reports once, done.
-    ``allow_truncated`` and ``keep_later``: as for :func:`read_measurement_csv` and
-    :func:`~hexatherm.io.dmis.read_dmis` (a DMIS file without ``ENDFIL``).
-    """
-    path = os.fspath(path)
-    suffix = Path(path).suffix.lower()
-    if suffix in (".dmo", ".dms", ".dmi"):
-        from hexatherm.io.dmis import read_dmis
-
-        return read_dmis(
-            path, progress=progress, allow_truncated=allow_truncated, keep_later=keep_later
-        )
-    if suffix != ".csv":
-        text = read_text(path)
-        from hexatherm.io.dmis import looks_like_dmis, read_dmis
-
-        if looks_like_dmis(text[:4096]):
-            return read_dmis(
-                path, progress=progress, allow_truncated=allow_truncated, keep_later=keep_later
-            )
-    records = [read_measurement_csv(path, allow_truncated=allow_truncated, keep_later=keep_later)]
-    if progress is not None:
-        progress(len(records[0]) + 1, len(records[0]) + 1)
-    return records

@@ -12,7 +12,7 @@ from hexatherm.core.datum import DatumFrame, datum_frame
 from hexatherm.core.geometry import apply_transform, invert_transform
 from hexatherm.core.spherefit import fit_spheres, probe_radius_mm
 from hexatherm.errors import FitError, InputError
-from hexatherm.io.csvfile import read_measurements
+from hexatherm.io.measurements import read_measurements
 from hexatherm.io.records import Records
 from hexatherm.session import Balls, Datums
 

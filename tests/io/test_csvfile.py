@@ -8,12 +8,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from hexatherm.errors import InputError
-from hexatherm.io.csvfile import (
-    centres_to_csv,
-    read_measurement_csv,
-    read_measurements,
-    read_temperatures,
-)
+from hexatherm.io.csvfile import centres_to_csv, read_measurement_csv
+from hexatherm.io.measurements import read_measurements
+from hexatherm.io.temperatures import read_temperatures
 
 CENTRES = "label,ball,x,y,z,time\nO,B1,1.5,2,3,0\nO,B2,4,5,6,1.5\n"
 

@@ -25,10 +25,12 @@ import pytest
 
 from hexatherm.errors import HexathermError, InputError, InputWarning
 from hexatherm.io import files
-from hexatherm.io.csvfile import read_measurement_csv, read_measurements, read_temperatures
+from hexatherm.io.csvfile import read_measurement_csv
 from hexatherm.io.dmis import read_dmis, read_dmis_features
 from hexatherm.io.files import MAX_MEASUREMENT_BYTES, MAX_YAML_BYTES
+from hexatherm.io.measurements import read_measurements
 from hexatherm.io.records import Records, check_time_zones
+from hexatherm.io.temperatures import read_temperatures
 from hexatherm.io.yamlfile import YamlDoc
 
 TIMEOUT_S = 30.0

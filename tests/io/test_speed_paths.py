@@ -23,7 +23,7 @@ from hypothesis import strategies as st
 
 from hexatherm.core.geometry import rotation_derivatives
 from hexatherm.errors import InputError
-from hexatherm.io import csvfile, dmis
+from hexatherm.io import csvfile, dmis, measurements
 from hexatherm.io.records import Records
 from tests.conftest import make_hexapod, random_poses
 
@@ -591,14 +591,14 @@ def test_progress_callbacks_report_lines(tmp_path, monkeypatch):
     text = points_dmo(n_steps=30, balls=3, points=25)
     slow = write(tmp_path, text.replace("OUTPUT/", "$$ a comment\r\nOUTPUT/"), "slow.dmo")
     fast = write(tmp_path, text, "fast.dmo")
-    csvfile.read_measurements(slow, progress=lambda done, total: calls.append((done, total)))
+    measurements.read_measurements(slow, progress=lambda done, total: calls.append((done, total)))
     lines = slow.read_text().count("\n")
     assert len(calls) > 2 and calls[-1][0] == calls[-1][1] and calls[-1][1] >= lines - 2
     assert [done for done, _ in calls] == sorted(done for done, _ in calls)
     calls.clear()
-    csvfile.read_measurements(fast, progress=lambda done, total: calls.append((done, total)))
+    measurements.read_measurements(fast, progress=lambda done, total: calls.append((done, total)))
     assert len(calls) == 1 and calls[0][0] == calls[0][1]
     calls.clear()
     points = write(tmp_path, points_csv(), "points.csv")
-    csvfile.read_measurements(points, progress=lambda done, total: calls.append((done, total)))
+    measurements.read_measurements(points, progress=lambda done, total: calls.append((done, total)))
     assert calls == [(25, 25)]

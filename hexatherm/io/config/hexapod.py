@@ -13,6 +13,7 @@ from hexatherm.core.geometry import CONVENTIONS
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.thermal import LegThermalModel, SegmentSpec
 from hexatherm.io.config.yamlout import _dump
+from hexatherm.io.temperatures import TEMPERATURE_RANGE_C
 from hexatherm.io.yamlfile import YamlDoc
 
 HEXAPOD_FORMAT = "hexatherm-hexapod/1"
@@ -26,8 +27,6 @@ EFFECT_PARAMETERS: dict[str, tuple[str, ...]] = {
 #: coefficients of thermal expansion accepted in a leg model, 1/K (invar to plastics; a
 #: value in ppm/K, 23 for 23e-6, is refused)
 CTE_RANGE_PER_K = (-1e-4, 1e-3)
-#: temperatures accepted, degC (a value in kelvin, 293.15 for 20 degC, is refused)
-TEMPERATURE_RANGE_C = (-60.0, 150.0)
 
 
 def _checked_cte(doc: YamlDoc, value: float, *keys: Any) -> float:

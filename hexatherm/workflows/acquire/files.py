@@ -100,7 +100,7 @@ def finish_session(folder: Path, notify: Notify, temperatures_file: Path | None 
     ISO times like the points; otherwise a warning says why it was left out.
     """
     from hexatherm.io.config import session_to_yaml
-    from hexatherm.io.csvfile import read_temperatures
+    from hexatherm.io.temperatures import read_temperatures
 
     target = folder / TEMPERATURES_NAME
     if temperatures_file is not None:

@@ -25,7 +25,7 @@ from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.residuals import PoseResiduals
 from hexatherm.errors import InputError
 from hexatherm.io.config import read_hexapod, read_session
-from hexatherm.io.csvfile import Temperatures
+from hexatherm.io.temperatures import Temperatures
 from hexatherm.session import Session
 from hexatherm.workflows.process.pipeline import read_measured
 from hexatherm.workflows.process.twin import model_effects, thermocouple_log

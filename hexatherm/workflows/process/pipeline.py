@@ -30,8 +30,9 @@ from hexatherm.core.registration import Registration, check_distances, register
 from hexatherm.core.spherefit import fit_spheres, probe_radius_mm
 from hexatherm.errors import FitError, InputError, PlanError, StepError
 from hexatherm.io.config import read_pose_check, read_session
-from hexatherm.io.csvfile import Temperatures, read_measurements, read_temperatures
+from hexatherm.io.measurements import read_measurements
 from hexatherm.io.records import Records, TimeKind, seconds_to_iso
+from hexatherm.io.temperatures import Temperatures, read_temperatures
 from hexatherm.session import Balls, Session
 from hexatherm.typing import FloatArray
 
@@ -330,7 +331,7 @@ def read_measured(
     """Every measurement file of ``session`` (points fitted) and its thermocouple log.
 
     ``progress(path, lines_done, lines_total)``, when given, is called now and then
-    while a measurement file is read (see :func:`~hexatherm.io.csvfile.read_measurements`).
+    while a measurement file is read (see :func:`~hexatherm.io.measurements.read_measurements`).
 
     Returns the records (centres), the probed points each was fitted to (None for
     centres read as such), the centres of every step and the temperatures (None

@@ -17,7 +17,7 @@ from hexatherm.core.effects import Effect, ThermocoupleLog, effects_from_dicts
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.twin import twin_corrected
 from hexatherm.errors import InputError
-from hexatherm.io.csvfile import Temperatures
+from hexatherm.io.temperatures import Temperatures
 from hexatherm.workflows.process.pipeline import ProcessResult, check_log_span
 
 
