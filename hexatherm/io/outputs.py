@@ -37,8 +37,8 @@ API for the commands
 ``write_output_file(output, data, *, inputs=(), overwrite=False, option="-o", ...)``
     Write one file (``str`` as UTF-8, or ``bytes``) and record it in its folder's
     manifest.
-``check_not_input(output, inputs, *, option="-o")``, ``foreign_entries(folder)``,
-``read_manifest(folder)``
+``check_not_input(output, inputs, *, option="-o")``; ``foreign_entries(folder)`` and
+``read_manifest(folder)`` in :mod:`hexatherm.io.manifest`
     The pieces, for callers that need them alone.
 
 Errors (all :class:`~hexatherm.errors.HexathermError`, one line):
@@ -52,6 +52,7 @@ Errors (all :class:`~hexatherm.errors.HexathermError`, one line):
 >>> inputs = [session / "centres.csv"]
 >>> with output_dir(session / "results", inputs=inputs) as tmp:
 ...     _ = (tmp / "poses.csv").write_text("Tx_mm\\n0.0\\n")
+>>> from hexatherm.io.manifest import read_manifest
 >>> sorted(read_manifest(session / "results").files)
 ['poses.csv']
 >>> try:
@@ -65,16 +66,11 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-import json
 import os
-import stat
-import time
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
-from hexatherm import __version__
 from hexatherm.errors import (
     ForeignFilesError,
     HexathermError,
@@ -91,28 +87,27 @@ from hexatherm.io.atomic import (
     remove_created,
     resolve_output_path,
 )
+from hexatherm.io.manifest import (
+    MANIFEST_MAX_BYTES,
+    MANIFEST_NAME,
+    Manifest,
+    foreign_entries,
+    manifest_for_tree,
+    read_manifest,
+    read_regular_bytes,
+    sha256_file,
+)
 
 __all__ = [
-    "MANIFEST_NAME",
-    "Manifest",
     "check_not_input",
     "check_output",
     "check_output_settled",
-    "foreign_entries",
     "output_dir",
-    "read_manifest",
     "write_output_file",
 ]
 
-#: the manifest's file name, in every folder hexatherm writes into
-MANIFEST_NAME = ".hexatherm-manifest.json"
-#: the manifest's format tag
-MANIFEST_FORMAT = "hexatherm-manifest/1"
-#: a manifest larger than this is not hexatherm's (bytes)
-MANIFEST_MAX_BYTES = 64 * 1024 * 1024
 #: how many foreign entries a message names
 _NAMED = 5
-_CHUNK = 1 << 20
 
 PathLike = str | os.PathLike[str]
 
@@ -175,195 +170,6 @@ def check_not_input(output: PathLike, inputs: Iterable[PathLike], *, option: str
         )
 
 
-# --------------------------------------------------------------------------- manifest
-
-
-def _now_utc() -> str:
-    return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
-
-
-@dataclass
-class Manifest:
-    """What hexatherm wrote in one folder.
-
-    Attributes
-    ----------
-    files : dict of str to tuple of str
-        Relative path (``/``-separated) -> the SHA-256 (hex) its content may have;
-        the first is the content written, a second one the content it replaces
-        while a replacement is under way (so that a kill leaves either one owned).
-    sizes : dict of str to int
-        Relative path -> size in bytes, as written.
-    times : dict of str to str
-        Relative path -> UTC time of the write (ISO 8601).
-    folders : tuple of str
-        Sub-folders hexatherm created (relative paths).
-    version : str
-        hexatherm's version that wrote the manifest last.
-    """
-
-    files: dict[str, tuple[str, ...]] = field(default_factory=dict)
-    sizes: dict[str, int] = field(default_factory=dict)
-    times: dict[str, str] = field(default_factory=dict)
-    folders: tuple[str, ...] = ()
-    version: str = __version__
-
-    def to_json(self) -> bytes:
-        """The manifest file's content (JSON, UTF-8)."""
-        files: dict[str, dict[str, object]] = {}
-        for name in sorted(self.files):
-            hashes = self.files[name]
-            entry: dict[str, object] = {"sha256": hashes[0]}
-            if len(hashes) > 1:
-                entry["replaces_sha256"] = hashes[1]
-            if name in self.sizes:
-                entry["bytes"] = self.sizes[name]
-            if name in self.times:
-                entry["written_utc"] = self.times[name]
-            files[name] = entry
-        doc = {
-            "format": MANIFEST_FORMAT,
-            "hexatherm": __version__,
-            "written_utc": _now_utc(),
-            "files": files,
-            "folders": sorted(self.folders),
-        }
-        return (json.dumps(doc, indent=1) + "\n").encode("utf-8")
-
-    @classmethod
-    def from_json(cls, data: bytes) -> Manifest:
-        """Parse a manifest file; ``ValueError`` when it is not one."""
-        doc = json.loads(data.decode("utf-8"))
-        if not isinstance(doc, dict) or doc.get("format") != MANIFEST_FORMAT:
-            raise ValueError(f"not a {MANIFEST_FORMAT} file")
-        raw_files = doc.get("files")
-        raw_folders = doc.get("folders", [])
-        if not isinstance(raw_files, dict) or not isinstance(raw_folders, list):
-            raise ValueError("'files' must be a mapping and 'folders' a list")
-        manifest = cls(version=str(doc.get("hexatherm", "")))
-        for name, entry in raw_files.items():
-            if not isinstance(entry, dict) or not isinstance(entry.get("sha256"), str):
-                raise ValueError(f"entry {name!r} has no sha256")
-            hashes = [entry["sha256"]]
-            if isinstance(entry.get("replaces_sha256"), str):
-                hashes.append(entry["replaces_sha256"])
-            manifest.files[str(name)] = tuple(hashes)
-            if isinstance(entry.get("bytes"), int):
-                manifest.sizes[str(name)] = entry["bytes"]
-            if isinstance(entry.get("written_utc"), str):
-                manifest.times[str(name)] = entry["written_utc"]
-        manifest.folders = tuple(str(f) for f in raw_folders)
-        return manifest
-
-    def record(self, name: str, digest: str, size: int, replaces: str | None = None) -> None:
-        """Record that ``name`` is written with content ``digest`` (replacing ``replaces``)."""
-        self.files[name] = (digest,) if replaces is None else (digest, replaces)
-        self.sizes[name] = size
-        self.times[name] = _now_utc()
-
-
-def _read_regular(path: Path, limit: int) -> bytes:
-    """Content of a regular file (no link, no FIFO), at most ``limit`` bytes; ``OSError``."""
-    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | os.O_NONBLOCK)
-    try:
-        info = os.fstat(fd)
-        if not stat.S_ISREG(info.st_mode):
-            raise OSError(f"{path} is not a regular file")
-        if info.st_size > limit:
-            raise OSError(f"{path} is larger than {limit} bytes")
-        chunks = []
-        while chunk := os.read(fd, _CHUNK):
-            chunks.append(chunk)
-        return b"".join(chunks)
-    finally:
-        os.close(fd)
-
-
-def read_manifest(folder: PathLike) -> Manifest | None:
-    """The manifest of ``folder``, or ``None`` when it has none (or an unreadable one).
-
-    An unreadable manifest vouches for nothing: the folder is then treated as
-    holding only foreign files.
-    """
-    try:
-        return Manifest.from_json(_read_regular(Path(folder) / MANIFEST_NAME, MANIFEST_MAX_BYTES))
-    except (OSError, ValueError):
-        return None
-
-
-def _sha256_file(path: Path) -> str | None:
-    """SHA-256 of a regular file's content (not following links); ``None`` if unreadable."""
-    digest = hashlib.sha256()
-    try:
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | os.O_NONBLOCK)
-    except OSError:
-        return None
-    try:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
-            return None
-        while chunk := os.read(fd, _CHUNK):
-            digest.update(chunk)
-    except OSError:
-        return None
-    finally:
-        os.close(fd)
-    return digest.hexdigest()
-
-
-def foreign_entries(folder: PathLike) -> list[tuple[str, str]]:
-    """Entries of ``folder`` that hexatherm did not write, or that changed since.
-
-    Returns
-    -------
-    list of (str, str)
-        ``(relative path, reason)``, sorted; empty when replacing ``folder`` loses
-        nothing but hexatherm's own unchanged output. A sub-folder is foreign unless
-        the manifest lists it or it has a manifest of its own that vouches for all of it.
-    """
-    top = Path(folder)
-    manifest = read_manifest(top)
-    found: list[tuple[str, str]] = []
-    _foreign_walk(top, "", manifest, found)
-    return sorted(found)
-
-
-def _foreign_walk(
-    folder: Path, prefix: str, manifest: Manifest | None, found: list[tuple[str, str]]
-) -> None:
-    """Add the foreign entries of ``folder`` (``prefix`` relative to ``manifest``'s folder)."""
-    no_manifest = "not written by hexatherm: no " + MANIFEST_NAME
-    try:
-        entries = sorted(os.scandir(folder), key=lambda e: e.name)
-    except OSError as exc:
-        found.append((prefix or ".", f"cannot be listed ({exc.strerror})"))
-        return
-    for entry in entries:
-        rel = prefix + entry.name
-        if rel == MANIFEST_NAME and manifest is not None and entry.is_file(follow_symlinks=False):
-            continue
-        if entry.is_symlink():
-            found.append((rel, "a symbolic link hexatherm did not make"))
-        elif entry.is_dir(follow_symlinks=False):
-            sub = Path(entry.path)
-            if manifest is not None and rel in manifest.folders:
-                _foreign_walk(sub, rel + "/", manifest, found)
-            elif (own := read_manifest(sub)) is not None:
-                nested: list[tuple[str, str]] = []
-                _foreign_walk(sub, "", own, nested)
-                found.extend((f"{rel}/{name}", why) for name, why in nested)
-            else:
-                why = no_manifest if manifest is None else "a folder hexatherm did not write"
-                found.append((rel + "/", why))
-        elif not entry.is_file(follow_symlinks=False):
-            found.append((rel, "not a regular file"))
-        elif manifest is None:
-            found.append((rel, no_manifest))
-        elif rel not in manifest.files:
-            found.append((rel, "not written by hexatherm"))
-        elif _sha256_file(Path(entry.path)) not in manifest.files[rel]:
-            found.append((rel, "changed since hexatherm wrote it"))
-
-
 def _foreign_message(option: str, output: str, entries: list[tuple[str, str]]) -> str:
     named = ", ".join(f"{name} ({why})" for name, why in entries[:_NAMED])
     more = f" and {len(entries) - _NAMED} more" if len(entries) > _NAMED else ""
@@ -371,26 +177,6 @@ def _foreign_message(option: str, output: str, entries: list[tuple[str, str]]) -
         f"{option} {output}: --overwrite replaces only what hexatherm wrote, and it holds "
         f"{named}{more}; move them away or choose another {option}"
     )
-
-
-def _manifest_for_tree(folder: Path) -> Manifest:
-    """A manifest of every file and folder under ``folder`` (a freshly written output)."""
-    manifest = Manifest()
-    folders: list[str] = []
-    for top, dirs, files in os.walk(folder):
-        rel_top = Path(top).relative_to(folder).as_posix()
-        prefix = "" if rel_top == "." else rel_top + "/"
-        folders.extend(prefix + d for d in dirs)
-        for name in files:
-            rel = prefix + name
-            if rel == MANIFEST_NAME:
-                continue
-            full = Path(top) / name
-            digest = _sha256_file(full)
-            if digest is not None:
-                manifest.record(rel, digest, full.lstat().st_size)
-    manifest.folders = tuple(sorted(folders))
-    return manifest
 
 
 # --------------------------------------------------------------------------- checks
@@ -406,7 +192,7 @@ def _file_foreign(path: Path) -> str | None:
     hashes = manifest.files.get(path.name)
     if hashes is None:
         return "not written by hexatherm"
-    if _sha256_file(path) not in hashes:
+    if sha256_file(path) not in hashes:
         return "changed since hexatherm wrote it"
     return None
 
@@ -558,7 +344,7 @@ def output_dir(
             entries = foreign_entries(target)
             if entries:
                 raise ForeignFilesError(_foreign_message(option, given, entries), entries=entries)
-        (tmp / MANIFEST_NAME).write_bytes(_manifest_for_tree(tmp).to_json())
+        (tmp / MANIFEST_NAME).write_bytes(manifest_for_tree(tmp).to_json())
 
     with atomic_output_dir(
         given,
@@ -626,14 +412,14 @@ def _write_recorded(target: Path, payload: bytes) -> None:
     manifest_path = target.parent / MANIFEST_NAME
     existed = os.path.lexists(manifest_path)
     try:
-        before: bytes | None = _read_regular(manifest_path, MANIFEST_MAX_BYTES)
+        before: bytes | None = read_regular_bytes(manifest_path, MANIFEST_MAX_BYTES)
     except OSError:
         before = None  # missing, or unreadable: it vouched for nothing and is rewritten
     manifest = read_manifest(target.parent) or Manifest()
     for name in [n for n in manifest.files if "/" not in n]:
         if name != target.name and not (target.parent / name).is_file():
             del manifest.files[name]  # pruned: no longer there
-    old = _sha256_file(target) if target.exists() else None
+    old = sha256_file(target) if target.exists() else None
     new = hashlib.sha256(payload).hexdigest()
     manifest.record(target.name, new, len(payload), replaces=old if old != new else None)
     atomic_write_bytes(manifest_path, manifest.to_json())

@@ -19,7 +19,8 @@ import pytest
 
 from hexatherm.errors import OutputExistsError
 from hexatherm.io.atomic import output_lock, recover_output
-from hexatherm.io.outputs import MANIFEST_NAME, foreign_entries, output_dir, write_output_file
+from hexatherm.io.manifest import MANIFEST_NAME, foreign_entries
+from hexatherm.io.outputs import output_dir, write_output_file
 from tests.io.test_output_safety import leftovers, snapshot
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals and flock")

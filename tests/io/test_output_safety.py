@@ -37,15 +37,8 @@ from hexatherm.io.atomic import (
     atomic_write_text,
     refuse_existing,
 )
-from hexatherm.io.outputs import (
-    MANIFEST_NAME,
-    check_not_input,
-    check_output,
-    foreign_entries,
-    output_dir,
-    read_manifest,
-    write_output_file,
-)
+from hexatherm.io.manifest import MANIFEST_NAME, foreign_entries, read_manifest
+from hexatherm.io.outputs import check_not_input, check_output, output_dir, write_output_file
 
 SESSION_FILES = {
     "session.yaml": b"format: hexatherm-session/1\nname: s\n",
