@@ -231,3 +231,64 @@ def test_the_checker_finds_maths_that_knows_of_sessions(tmp_path: Path) -> None:
 def test_the_checker_finds_a_deliberate_cycle(tmp_path: Path, files: dict[str, str]) -> None:
     root = _package(tmp_path, files)
     assert import_cycles(root) == [["io.a", "io.b"]]
+
+
+#: modules longer than :data:`MAX_LINES` that are one cohesive algorithm (docs/design.md)
+LONG_MODULES = {
+    "io.dmis",
+    "workflows.acquire.recorder",
+    "workflows.run.run.campaign",
+    "core.spherefit",
+    "core.hexapod",
+    "core.effects",
+}
+MAX_LINES = 600
+
+
+def long_modules(root: Path) -> set[str]:
+    """Modules outside ``cli`` longer than :data:`MAX_LINES` lines."""
+    return {
+        name
+        for name, path in modules_of(root).items()
+        if not (name == "cli" or name.startswith("cli."))
+        and len(path.read_text().splitlines()) > MAX_LINES
+    }
+
+
+def test_long_modules_are_the_argued_ones() -> None:
+    assert long_modules(PACKAGE) <= LONG_MODULES
+
+
+def exceptions_outside_errors(root: Path) -> list[str]:
+    """Public classes deriving (by name) from an exception or warning, defined outside
+    ``errors.py``."""
+    found = []
+    for name, path in modules_of(root).items():
+        if name == "errors":
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(node, ast.ClassDef) or node.name.startswith("_"):
+                continue
+            bases = [ast.unparse(b).split(".")[-1] for b in node.bases]
+            if any(b.endswith(("Error", "Exception", "Warning")) for b in bases):
+                found.append(f"{name}.{node.name}")
+    return found
+
+
+def test_every_exception_lives_in_errors() -> None:
+    assert exceptions_outside_errors(PACKAGE) == []
+
+
+def test_the_checkers_find_a_long_module_and_a_stray_exception(tmp_path: Path) -> None:
+    root = _package(
+        tmp_path,
+        {
+            "io/big.py": "x = 1\n" * (MAX_LINES + 1),
+            "cli/big.py": "x = 1\n" * (MAX_LINES + 1),
+            "io/stray.py": "class StrayError(ValueError):\n    pass\n",
+            "io/private.py": "class _Stop(Exception):\n    pass\n",
+            "errors.py": "class GoodError(Exception):\n    pass\n",
+        },
+    )
+    assert long_modules(root) == {"io.big"}
+    assert exceptions_outside_errors(root) == ["io.stray.StrayError"]
