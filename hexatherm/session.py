@@ -135,6 +135,8 @@ class Session:
     quality : dict of str to float
         The optional ``quality:`` mapping: limits of the quality checks kept with
         the session (names of :class:`hexatherm.workflows.process.quality.QualityLimits`).
+    config_files : tuple of Path
+        The hexapod, balls and plan files the session file names.
     """
 
     path: Path
@@ -146,6 +148,16 @@ class Session:
     temperatures: Path | None
     cmm: CmmNoise | None = None
     quality: dict[str, float] = dataclasses.field(default_factory=dict)
+    config_files: tuple[Path, ...] = ()
+
+    def input_files(self) -> list[Path]:
+        """Every file a run on this session reads: the session file, the hexapod, balls
+        and plan files, the measurements and the temperatures (an output may never be,
+        contain or sit inside any of them)."""
+        files = [self.path, *self.config_files, *self.measurements]
+        if self.temperatures is not None:
+            files.append(self.temperatures)
+        return files
 
 
 @dataclass(frozen=True)

@@ -42,14 +42,19 @@ def command(session: Path, out: str | None, overwrite: bool, hexapod_path: Path 
     effects in its thermal_model, for simulate and process --method twin) and
     OUT/report.md with its figures; prints the story to standard output.
     """
-    from hexatherm.io.atomic import atomic_output_dir, refuse_existing
+    from hexatherm.io.config import read_session
+    from hexatherm.io.outputs import check_output_settled, output_dir
     from hexatherm.workflows.diagnose.outputs import diagnosed_hexapod_yaml, diagnosis_json, story
     from hexatherm.workflows.diagnose.report import terminal_tables, write_report_files
     from hexatherm.workflows.diagnose.run import read_for_diagnosis, run_diagnosis
 
     folder = session if session.is_dir() else session.parent
     out_dir = Path(out) if out is not None else folder / "diagnosis"
-    refuse_existing(out_dir, overwrite)
+    inputs = read_session(session).input_files()
+    inputs += [hexapod_path] if hexapod_path is not None else []
+    # before any work: never into, around or onto the session's files (checked again
+    # under the output's lock when the results are written)
+    check_output_settled(out_dir, kind="folder", inputs=inputs, overwrite=overwrite)
     data = read_for_diagnosis(session, hexapod_path)
     echo_err(f"diagnosing {data.session.name}: {data.observations.n_steps} steps")
     with ProgressBars() as bars:
@@ -62,7 +67,7 @@ def command(session: Path, out: str | None, overwrite: bool, hexapod_path: Path 
         "hexapod.yaml": diagnosed_hexapod_yaml(result),
     }
     written: list[Path] = []
-    with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
+    with output_dir(out_dir, inputs=inputs, overwrite=overwrite) as tmp:
         for name, text in files.items():
             (tmp / name).write_text(text, encoding="utf-8")
             written.append(out_dir / name)

@@ -39,14 +39,14 @@ def command(
     """
     import numpy as np
 
-    from hexatherm.io.atomic import atomic_write_text, refuse_existing
     from hexatherm.io.csvfile import centres_to_csv
     from hexatherm.io.measurements import read_measurements
+    from hexatherm.io.outputs import check_output_settled, write_output_file
     from hexatherm.io.records import Records, concat_records
     from hexatherm.workflows.process.pipeline import fit_points
 
     if out is not None:
-        refuse_existing(out, overwrite)
+        check_output_settled(out, kind="file", inputs=points, overwrite=overwrite)
     fitted: list[Records] = []
     for path in points:
         with ProgressBars() as bars:
@@ -64,7 +64,7 @@ def command(
     if out is None:
         sys.stdout.write(text)
     else:
-        atomic_write_text(out, text)
+        write_output_file(out, text, inputs=points, overwrite=overwrite)
         echo_err(f"wrote {out}")
     for rec in fitted:
         form_um = float(np.max(np.asarray(rec.extra["form_um"], dtype=float)))

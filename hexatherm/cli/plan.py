@@ -226,7 +226,7 @@ def command(
     OUT (or standard output); --dmis and --checklist add the CMM program and the
     operator's sheet.
     """
-    from hexatherm.io.atomic import atomic_write_text, refuse_existing
+    from hexatherm.io.outputs import check_output_settled, write_output_file
     from hexatherm.workflows.plan import PlanRequest, make_plan
 
     sources_given = sum(x is not None for x in (targets_path, grid, n_random))
@@ -271,8 +271,9 @@ def command(
         dmis_name=None if dmis_path is None else Path(dmis_path).stem,
         checklist=checklist_path is not None,
     )
+    inputs = [p for p in (hexapod_path, balls_path, targets_path) if p is not None]
     for path in outputs:
-        refuse_existing(path, overwrite)
+        check_output_settled(path, kind="file", inputs=inputs, overwrite=overwrite)
     made = make_plan(request)
     if made.redrawn:
         echo_err(f"drew {made.redrawn} random pose(s) again: out of the stroke or near-singular")
@@ -289,7 +290,7 @@ def command(
         if target is None:
             click.echo(text, nl=False)
         else:
-            atomic_write_text(target, text)
+            write_output_file(target, text, inputs=inputs, overwrite=overwrite)
             echo_err(f"wrote {target}")
     plan = made.plan
     echo_err(

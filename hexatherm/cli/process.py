@@ -117,6 +117,7 @@ def command(
     step), and prints the deviations from the commanded poses side by side, in
     um and urad.
     """
+    from hexatherm.io.config import read_session
     from hexatherm.io.outputs import check_output_settled
     from hexatherm.workflows.process.outputs import deviation_table, write_results
     from hexatherm.workflows.process.pipeline import Checks, process_session
@@ -135,10 +136,10 @@ def command(
     overrides = dict(parse_threshold(t) for t in quality_thresholds)
     folder = session if session.is_dir() else session.parent
     out_dir = Path(out) if out is not None else folder / "results"
-    session_file = session if session.is_file() else session / "session.yaml"
-    # before any work: never into, around or onto the session's files (a full check of every
-    # input is repeated when the results are written)
-    check_output_settled(out_dir, kind="folder", inputs=[session_file], overwrite=overwrite)
+    # before any work: never into, around or onto the session's files (checked again under
+    # the output's lock when the results are written)
+    inputs = read_session(session).input_files()
+    check_output_settled(out_dir, kind="folder", inputs=inputs, overwrite=overwrite)
     checks = Checks(
         distance_tolerance_um, registration_tolerance_um, strict_registration, pose_tolerance
     )

@@ -57,14 +57,15 @@ def command(
     face's normal (towards the balls), X runs from the first bore's centre to the
     second's, the origin is the first bore's centre on the face plus the offset.
     """
-    from hexatherm.io.atomic import atomic_write_text, refuse_existing
     from hexatherm.io.config import balls_to_yaml, read_datums
+    from hexatherm.io.outputs import check_output_settled, write_output_file
     from hexatherm.workflows.register import register_balls
 
-    refuse_existing(out, overwrite)
+    inputs = [measurement, datums_path]
+    check_output_settled(out, kind="file", inputs=inputs, overwrite=overwrite)
     datums = read_datums(datums_path)
     result = register_balls(measurement, datums, fixed_diameter, diameter_tolerance_um)
-    atomic_write_text(out, balls_to_yaml(result.balls))
+    write_output_file(out, balls_to_yaml(result.balls), inputs=inputs, overwrite=overwrite)
     plane, (b1, b2) = result.frame.plane, result.frame.bores
     echo_err(f"top face: {plane.n} points, flatness {plane.form_um:.2f} um")
     echo_err(

@@ -63,7 +63,8 @@ def command(
     growth at the references; the registration residuals; quality flags; and the
     session's metadata. Nothing is written when processing fails.
     """
-    from hexatherm.io.atomic import atomic_write_text, refuse_existing
+    from hexatherm.io.config import read_session
+    from hexatherm.io.outputs import check_output_settled, write_output_file
     from hexatherm.workflows.process.pipeline import Checks, process_session
     from hexatherm.workflows.process.quality import parse_threshold, session_thresholds
     from hexatherm.workflows.report import build_report
@@ -72,7 +73,8 @@ def command(
     overrides = dict(parse_threshold(t) for t in quality_thresholds)
     folder = session if session.is_dir() else session.parent
     out_file = out if out is not None else folder / "report.html"
-    refuse_existing(out_file, overwrite)
+    inputs = read_session(session).input_files()
+    check_output_settled(out_file, kind="file", inputs=inputs, overwrite=overwrite)
     with ProgressBars() as bars:
         result = process_session(
             session,
@@ -87,5 +89,5 @@ def command(
         page = build_report(
             result, mc, seed, session_thresholds(result.session, overrides), progress=bars.draws
         )
-    atomic_write_text(out_file, page)
+    write_output_file(out_file, page, inputs=inputs, overwrite=overwrite)
     echo_err(f"wrote {out_file}")

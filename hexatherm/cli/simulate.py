@@ -40,10 +40,10 @@ def command(scenario: Path, out: Path, seed: int | None, overwrite: bool) -> Non
     """
     import numpy as np
 
-    from hexatherm.io.atomic import refuse_existing
+    from hexatherm.io.outputs import check_output_settled
     from hexatherm.workflows.simulate.run import simulate_file
 
-    refuse_existing(out, overwrite)
+    check_output_settled(out, kind="folder", inputs=[scenario], overwrite=overwrite)
     read, simulated, written = simulate_file(scenario, out, seed, overwrite)
     plan, truth = read.plan, simulated.truth
     duration_h = float(simulated.step_times_s[-1]) / 3600.0

@@ -106,6 +106,9 @@ class Scenario:
         The scenario's hidden effects.
     readme : str
         Written as the session's ``README.md`` when not empty.
+    input_files : tuple of Path
+        The scenario file and the hexapod, balls and plan files it names (an output
+        may never be, contain or sit inside any of them).
     """
 
     path: str
@@ -130,6 +133,7 @@ class Scenario:
     model_effects: tuple[Effect, ...]
     hidden_effects: tuple[Effect, ...]
     readme: str = ""
+    input_files: tuple[Path, ...] = ()
 
     @property
     def effects(self) -> tuple[Effect, ...]:
@@ -167,8 +171,12 @@ def read_scenario(path: str | os.PathLike[str]) -> Scenario:
     hexapod_path = _existing(doc, "hexapod")
     hexapod_text = _read_text(hexapod_path)
     hexapod = read_hexapod_text(hexapod_text, str(hexapod_path))
-    balls = read_balls(_existing(doc, "balls"))
+    balls_path = _existing(doc, "balls")
+    balls = read_balls(balls_path)
     plan = _plan(doc)
+    inputs = [Path(doc.path), hexapod_path, balls_path]
+    if isinstance(doc.get("plan"), str):
+        inputs.append(_existing(doc, "plan"))
     _check_stroke(doc, hexapod, plan)
 
     origin = tuple(
@@ -243,6 +251,7 @@ def read_scenario(path: str | os.PathLike[str]) -> Scenario:
         model_effects=model_effects,
         hidden_effects=hidden,
         readme=doc.string("readme", default=""),
+        input_files=tuple(inputs),
     )
 
 

@@ -36,6 +36,7 @@ def test_diagnose_writes_the_files_and_tells_the_story(diagnosed) -> None:
     result, out = diagnosed
     assert result.exit_code == 0, result.output
     assert sorted(p.name for p in out.iterdir()) == [
+        ".hexatherm-manifest.json",  # what hexatherm wrote there, for --overwrite
         "diagnosis.json",
         "hexapod.yaml",
         "report.md",

@@ -266,7 +266,17 @@ def test_refusals(tmp_path):
     exists = run(*args, "-o", tmp_path / "plan.yaml")
     assert exists.exit_code == 1 and "use --overwrite" in exists.stderr
     assert (tmp_path / "plan.yaml").read_text() == "keep me"
+    # --overwrite replaces only what hexatherm wrote: this file is the user's
+    foreign = run(*args, "-o", tmp_path / "plan.yaml", "--overwrite")
+    assert foreign.exit_code == 1 and "plan.yaml (not written by hexatherm" in foreign.stderr
+    assert (tmp_path / "plan.yaml").read_text() == "keep me"
+    (tmp_path / "plan.yaml").unlink()
+    assert run(*args, "-o", tmp_path / "plan.yaml").exit_code == 0
     assert run(*args, "-o", tmp_path / "plan.yaml", "--overwrite").exit_code == 0
+    # an input is never an output, --overwrite or not
+    onto = run(*args, "-o", tmp_path / "t.csv", "--overwrite")
+    assert onto.exit_code == 1 and "is the input" in onto.stderr
+    assert (tmp_path / "t.csv").read_text().startswith("Tx")
     no_origin = run(*args, "--dmis", tmp_path / "p.dmi")
     assert no_origin.exit_code == 2 and "--origin-on-cmm" in no_origin.stderr
     two = run(*args, "--grid", 2, "--box", "Tx=-1:1")

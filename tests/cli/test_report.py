@@ -12,6 +12,7 @@ from click.testing import CliRunner
 
 import hexatherm.workflows.report
 from hexatherm.cli import main
+from hexatherm.io.manifest import read_manifest
 
 SESSION = Path(__file__).resolve().parents[2] / "sessions" / "paper-zero-pose"
 IMG = re.compile(r'<img src="data:image/png;base64,([A-Za-z0-9+/=]+)"')
@@ -38,7 +39,13 @@ def test_report_writes_the_page_into_the_session_folder(session):
     assert all(base64.b64decode(data).startswith(b"\x89PNG\r\n\x1a\n") for data in images)
     assert "paper-zero-pose" in page and "<td>S10</td>" in page
     assert f"wrote {session / 'report.html'}" in result.output
-    assert sorted(p.name for p in session.iterdir() if p.name.startswith(".")) == []
+    # the one hidden file is hexatherm's record of what it wrote there, for --overwrite
+    assert sorted(p.name for p in session.iterdir() if p.name.startswith(".")) == [
+        ".hexatherm-manifest.json"
+    ]
+    assert sorted(read_manifest(session).files) == ["report.html"]
+    again = run("report", session, "--overwrite")
+    assert again.exit_code == 0, again.output
 
 
 def test_report_refuses_to_overwrite_unless_asked(session, tmp_path, monkeypatch):
@@ -48,6 +55,10 @@ def test_report_refuses_to_overwrite_unless_asked(session, tmp_path, monkeypatch
     again = run("report", session, "-o", out)
     assert again.exit_code == 1 and "use --overwrite" in again.output
     assert out.read_text() == "keep me\n"
+    foreign = run("report", session, "-o", out, "--overwrite")
+    assert foreign.exit_code == 1 and "r.html (not written by hexatherm" in foreign.output
+    assert out.read_text() == "keep me\n"
+    out.unlink()
     # the page itself is tested above; here that --overwrite replaces the file and
     # that the options reach the report
     calls = []
@@ -75,10 +86,10 @@ def test_report_refuses_to_overwrite_unless_asked(session, tmp_path, monkeypatch
         "registration_rms_um=1.5",
     )
     assert replaced.exit_code == 0, replaced.output
-    assert calls == [("before", 50, 3, 1.5)]
+    assert calls[-1] == ("before", 50, 3, 1.5)
     assert "Monte Carlo draws" in replaced.output  # the draws' progress bar
     assert out.read_text() == "<html>new</html>\n"
-    assert [p.name for p in out.parent.iterdir()] == ["r.html"]
+    assert sorted(p.name for p in out.parent.iterdir()) == [".hexatherm-manifest.json", "r.html"]
 
 
 def test_report_of_a_bad_session_fails_cleanly_and_writes_nothing(session):

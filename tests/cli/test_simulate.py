@@ -14,6 +14,7 @@ from hexatherm.cli import main
 from hexatherm.core.plan import Plan
 from hexatherm.core.planning import sequence_steps
 from hexatherm.io.config import plan_to_yaml, read_session
+from hexatherm.io.manifest import MANIFEST_NAME
 from tests.sessions import ROOT
 
 UM, URAD = 1e3, np.pi / 180 * 1e6
@@ -107,8 +108,11 @@ def worst(poses, truth, got, want):
 
 
 def files_of(folder: Path) -> dict[str, bytes]:
+    """The session's files (not hexatherm's manifest, which records when they were written)."""
     return {
-        str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()
+        str(p.relative_to(folder)): p.read_bytes()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file() and p.name != MANIFEST_NAME
     }
 
 
@@ -276,8 +280,22 @@ def test_existing_output_is_kept_without_overwrite(tmp_path):
     result = run("simulate", write_scenario(tmp_path, scenario_text()), "-o", out)
     assert result.exit_code != 0 and "--overwrite" in result.output
     assert (out / "keep.txt").read_text() == "mine"
+    # --overwrite replaces only what hexatherm wrote: keep.txt is named and kept
+    foreign = run("simulate", write_scenario(tmp_path, scenario_text()), "-o", out, "--overwrite")
+    assert foreign.exit_code == 1 and "keep.txt (not written by hexatherm" in foreign.output
+    assert sorted(p.name for p in out.iterdir()) == ["keep.txt"]
+    (out / "keep.txt").unlink()
+    simulate(tmp_path, scenario_text(), "s", "--overwrite")  # an empty folder is no one's
+    first = (out / "centres.csv").read_bytes()
     simulate(tmp_path, scenario_text(), "s", "--overwrite")
-    assert not (out / "keep.txt").exists() and (out / "session.yaml").exists()
+    assert (out / "centres.csv").read_bytes() == first
+
+
+def test_simulate_never_writes_into_or_around_its_inputs(tmp_path):
+    scenario = write_scenario(tmp_path, scenario_text())
+    around = run("simulate", scenario, "-o", tmp_path, "--overwrite")
+    assert around.exit_code == 1 and "contains the input" in around.output
+    assert scenario.exists()
 
 
 # ---------------------------------------------------------------- bad input

@@ -48,9 +48,10 @@ def read_session(path: str | os.PathLike[str]) -> Session:
             raise doc.error(f"file not found: {target}", *keys)
         return target
 
-    hexapod = read_hexapod(existing("hexapod"))
-    balls = read_balls(existing("balls"))
-    plan = read_plan(existing("plan"))
+    config_files = (existing("hexapod"), existing("balls"), existing("plan"))
+    hexapod = read_hexapod(config_files[0])
+    balls = read_balls(config_files[1])
+    plan = read_plan(config_files[2])
     files = doc.get("measurements")
     if isinstance(files, str):
         raise doc.error("expected a list of files, e.g. [centres.csv]", "measurements")
@@ -70,6 +71,7 @@ def read_session(path: str | os.PathLike[str]) -> Session:
         temperatures,
         _read_cmm(doc),
         _read_quality(doc),
+        config_files,
     )
 
 

@@ -226,13 +226,8 @@ def write_results(
 
 
 def session_inputs(result: ProcessResult) -> list[Path]:
-    """The files the run read: the session file, its measurements and temperatures (an
-    output may never be, contain or sit inside any of them)."""
-    session = result.session
-    files = [session.path, *session.measurements]
-    if session.temperatures is not None:
-        files.append(session.temperatures)
-    return [Path(f) for f in files]
+    """The files the run read (:meth:`~hexatherm.session.Session.input_files`)."""
+    return result.session.input_files()
 
 
 def deviation_table(result: ProcessResult, twin: np.ndarray | None = None) -> str:

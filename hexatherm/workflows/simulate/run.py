@@ -81,5 +81,5 @@ def simulate_file(
     """
     scenario = read_scenario(path)
     simulated = simulate(scenario, seed)
-    written = write_files(simulated.files, out, overwrite)
+    written = write_files(simulated.files, out, overwrite, scenario.input_files)
     return scenario, simulated, written

@@ -32,6 +32,7 @@ the air. The hexapod's positioning noise comes from its own stream,
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -52,9 +53,9 @@ from hexatherm.core.twin import (
     predict,
     probe_points,
 )
-from hexatherm.io.atomic import atomic_output_dir
 from hexatherm.io.config import balls_to_yaml, plan_to_yaml, read_hexapod_text, session_to_yaml
 from hexatherm.io.dmisout import dmis_output
+from hexatherm.io.outputs import output_dir
 from hexatherm.io.records import iso_to_seconds, seconds_to_iso
 from hexatherm.session import Balls
 from hexatherm.typing import FloatArray
@@ -258,11 +259,16 @@ def simulate_session(spec: TwinSessionSpec) -> SimulatedSession:
 
 
 def write_files(
-    files: dict[str, str], out: str | os.PathLike[str], overwrite: bool = False
+    files: dict[str, str],
+    out: str | os.PathLike[str],
+    overwrite: bool = False,
+    inputs: Sequence[Path] = (),
 ) -> list[Path]:
-    """Write ``files`` (relative path -> text) as the folder ``out``, all or nothing."""
+    """Write ``files`` (relative path -> text) as the folder ``out``, all or nothing,
+    through the output guard (:func:`~hexatherm.io.outputs.output_dir`: never into or
+    around ``inputs``; ``overwrite`` replaces only a folder hexatherm wrote)."""
     written = []
-    with atomic_output_dir(out, overwrite=overwrite) as tmp:
+    with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
         for rel, text in files.items():
             target = tmp / rel
             target.parent.mkdir(parents=True, exist_ok=True)
