@@ -6,7 +6,14 @@ from pathlib import Path
 
 import click
 
-from hexatherm.cli.options import ProgressBars, clean_errors, echo_err, overwrite_option
+from hexatherm.cli.options import (
+    ProgressBars,
+    clean_errors,
+    echo_err,
+    overwrite_option,
+    reading_options,
+)
+from hexatherm.io.files import ReadOptions
 
 
 @click.command("diagnose")
@@ -28,8 +35,15 @@ from hexatherm.cli.options import ProgressBars, clean_errors, echo_err, overwrit
     help="The model to diagnose (a hexapod file, e.g. an earlier diagnosis' "
     "hexapod.yaml) instead of the session's; its thermal_model effects are kept.",
 )
+@reading_options
 @clean_errors
-def command(session: Path, out: str | None, overwrite: bool, hexapod_path: Path | None) -> None:
+def command(
+    session: Path,
+    out: str | None,
+    overwrite: bool,
+    hexapod_path: Path | None,
+    reading: ReadOptions,
+) -> None:
     """Compare SESSION's measurements with the twin and find the missing effects.
 
     The twin predicts every ball of every step from the commanded poses and the
@@ -55,7 +69,7 @@ def command(session: Path, out: str | None, overwrite: bool, hexapod_path: Path 
     # before any work: never into, around or onto the session's files (checked again
     # under the output's lock when the results are written)
     check_output_settled(out_dir, kind="folder", inputs=inputs, overwrite=overwrite)
-    data = read_for_diagnosis(session, hexapod_path)
+    data = read_for_diagnosis(session, hexapod_path, reading)
     echo_err(f"diagnosing {data.session.name}: {data.observations.n_steps} steps")
     with ProgressBars() as bars:
         result = run_diagnosis(

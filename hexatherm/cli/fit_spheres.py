@@ -8,7 +8,14 @@ from pathlib import Path
 
 import click
 
-from hexatherm.cli.options import ProgressBars, clean_errors, echo_err, overwrite_option
+from hexatherm.cli.options import (
+    ProgressBars,
+    clean_errors,
+    echo_err,
+    overwrite_option,
+    reading_options,
+)
+from hexatherm.io.files import ReadOptions
 
 
 @click.command("fit-spheres")
@@ -27,9 +34,14 @@ from hexatherm.cli.options import ProgressBars, clean_errors, echo_err, overwrit
     help="Fix the sphere diameter (mm) instead of fitting it: better on small caps.",
 )
 @overwrite_option
+@reading_options
 @clean_errors
 def command(
-    points: tuple[Path, ...], out: Path | None, fixed_diameter: float | None, overwrite: bool
+    points: tuple[Path, ...],
+    out: Path | None,
+    fixed_diameter: float | None,
+    overwrite: bool,
+    reading: ReadOptions,
 ) -> None:
     """Fit a sphere to every (label, ball) group of the POINTS files.
 
@@ -50,7 +62,12 @@ def command(
     fitted: list[Records] = []
     for path in points:
         with ProgressBars() as bars:
-            records = read_measurements(path, progress=functools.partial(bars.reading, str(path)))
+            records = read_measurements(
+                path,
+                progress=functools.partial(bars.reading, str(path)),
+                allow_truncated=reading.allow_truncated,
+                keep_later=reading.keep_later,
+            )
         found = [r for r in records if r.kind == "points"]
         if not found:
             echo_err(f"{path}: no probed points, skipped")

@@ -6,12 +6,14 @@ import functools
 import math
 import os
 import sys
+import warnings
 from collections.abc import Callable
 from typing import Any, TypeVar
 
 import click
 
-from hexatherm.errors import HexathermError
+from hexatherm.errors import HexathermError, InputWarning
+from hexatherm.io.files import ReadOptions
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -149,6 +151,30 @@ seed_option = click.option(
 )
 
 
+def reading_options(func: F) -> F:
+    """``--allow-truncated`` and ``--keep-later``, given to the command as one
+    ``reading`` argument (:class:`~hexatherm.io.files.ReadOptions`)."""
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, allow_truncated: bool, keep_later: bool, **kwargs: Any) -> Any:
+        return func(*args, reading=ReadOptions(allow_truncated, keep_later), **kwargs)
+
+    wrapper = click.option(
+        "--keep-later",
+        is_flag=True,
+        help="A ball probed twice in one step, or a DMIS point label seen twice: keep the "
+        "later one, with a warning naming both (default: refused).",
+    )(wrapper)
+    wrapper = click.option(
+        "--allow-truncated",
+        is_flag=True,
+        help="Read a measurement or temperature file cut short (no line break at its end, a "
+        "DMIS output without ENDFIL): its last record is dropped, with a warning (default: "
+        "refused).",
+    )(wrapper)
+    return wrapper  # type: ignore[return-value]
+
+
 def check_draws(mc: int) -> None:
     """A usage error for ``--mc 1`` (a standard deviation needs two draws)."""
     if mc == 1:
@@ -165,17 +191,30 @@ max_gap_option = click.option(
 
 
 def clean_errors(func: F) -> F:
-    """Turn hexatherm's own errors into a one-line message on stderr and exit status 1.
+    """Turn hexatherm's own errors into a one-line message on stderr and exit status 1,
+    and each :class:`~hexatherm.errors.InputWarning` (input read past because an option
+    asked for it) into a ``warning:`` line on stderr as it happens.
 
     Anything else is a bug and keeps its traceback.
     """
 
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        try:
-            return func(*args, **kwargs)
-        except HexathermError as exc:
-            raise click.ClickException(str(exc)) from None
+        with warnings.catch_warnings():
+            warnings.simplefilter("always", InputWarning)
+            shown = warnings.showwarning
+
+            def show(message: Any, category: Any, *rest: Any, **options: Any) -> None:
+                if issubclass(category, InputWarning):
+                    echo_err(f"warning: {message}")
+                else:
+                    shown(message, category, *rest, **options)
+
+            warnings.showwarning = show
+            try:
+                return func(*args, **kwargs)
+            except HexathermError as exc:
+                raise click.ClickException(str(exc)) from None
 
     return wrapper  # type: ignore[return-value]
 

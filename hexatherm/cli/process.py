@@ -20,8 +20,10 @@ from hexatherm.cli.options import (
     overwrite_option,
     pose_tolerance_option,
     quality_threshold_option,
+    reading_options,
     seed_option,
 )
+from hexatherm.io.files import ReadOptions
 
 if TYPE_CHECKING:
     from hexatherm.workflows.process.uncertainty import PoseUncertainty
@@ -89,6 +91,7 @@ QUALITY_EXIT = 3
     help=f"Exit with status {QUALITY_EXIT} when a quality check fails (the results "
     "are still written); without it a failed check is a warning.",
 )
+@reading_options
 @clean_errors
 def command(
     session: Path,
@@ -106,6 +109,7 @@ def command(
     methods: tuple[str, ...],
     hexapod_path: Path | None,
     strict: bool,
+    reading: ReadOptions,
 ) -> None:
     """Process SESSION (a folder with session.yaml, or the file itself).
 
@@ -150,6 +154,7 @@ def command(
             0.0 if fixed_diameter else None,
             checks,
             bars.reading,
+            reading,
         )
     for warning in result.warnings:
         echo_err(f"warning: {warning}")

@@ -6,7 +6,14 @@ from pathlib import Path
 
 import click
 
-from hexatherm.cli.options import CheckedFloat, clean_errors, echo_err, overwrite_option
+from hexatherm.cli.options import (
+    CheckedFloat,
+    clean_errors,
+    echo_err,
+    overwrite_option,
+    reading_options,
+)
+from hexatherm.io.files import ReadOptions
 
 
 @click.command("register")
@@ -40,6 +47,7 @@ from hexatherm.cli.options import CheckedFloat, clean_errors, echo_err, overwrit
     "file's (inf: no check).",
 )
 @overwrite_option
+@reading_options
 @clean_errors
 def command(
     measurement: Path,
@@ -48,6 +56,7 @@ def command(
     fixed_diameter: bool,
     diameter_tolerance_um: float,
     overwrite: bool,
+    reading: ReadOptions,
 ) -> None:
     """Build the platform frame from MEASUREMENT and write the balls file.
 
@@ -64,7 +73,7 @@ def command(
     inputs = [measurement, datums_path]
     check_output_settled(out, kind="file", inputs=inputs, overwrite=overwrite)
     datums = read_datums(datums_path)
-    result = register_balls(measurement, datums, fixed_diameter, diameter_tolerance_um)
+    result = register_balls(measurement, datums, fixed_diameter, diameter_tolerance_um, reading)
     write_output_file(out, balls_to_yaml(result.balls), inputs=inputs, overwrite=overwrite)
     plane, (b1, b2) = result.frame.plane, result.frame.bores
     echo_err(f"top face: {plane.n} points, flatness {plane.form_um:.2f} um")

@@ -16,8 +16,10 @@ from hexatherm.cli.options import (
     overwrite_option,
     pose_tolerance_option,
     quality_threshold_option,
+    reading_options,
     seed_option,
 )
+from hexatherm.io.files import ReadOptions
 
 
 @click.command("report")
@@ -43,6 +45,7 @@ from hexatherm.cli.options import (
 @mc_option
 @seed_option
 @quality_threshold_option
+@reading_options
 @clean_errors
 def command(
     session: Path,
@@ -54,6 +57,7 @@ def command(
     mc: int,
     seed: int,
     quality_thresholds: tuple[str, ...],
+    reading: ReadOptions,
 ) -> None:
     """Process SESSION (a folder with session.yaml, or the file itself) and write its report.
 
@@ -82,6 +86,7 @@ def command(
             0.0 if fixed_diameter else None,
             Checks(pose_tolerance=pose_tolerance),
             progress=bars.reading,
+            reading=reading,
         )
     for warning in result.warnings:
         echo_err(f"warning: {warning}")

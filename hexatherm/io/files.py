@@ -35,6 +35,7 @@ from __future__ import annotations
 import errno
 import os
 import stat
+from dataclasses import dataclass
 
 from hexatherm.errors import InputError, InputWarning
 
@@ -54,6 +55,30 @@ MAX_MEASUREMENT_BYTES = 2 * 1024**3
 MAX_YAML_BYTES = 16 * 1024**2
 
 _CHUNK = 1 << 24
+
+
+@dataclass(frozen=True)
+class ReadOptions:
+    """What the measurement and temperature readers may read past, when asked.
+
+    Attributes
+    ----------
+    allow_truncated : bool
+        A file cut short (a last line without a line break, a DMIS output without
+        ``ENDFIL``) loses its last record, with an :class:`~hexatherm.errors.InputWarning`,
+        instead of being refused.
+    keep_later : bool
+        A ball probed twice in one step (two groups of rows), or a DMIS point label
+        seen twice: the later one is kept, with an :class:`~hexatherm.errors.InputWarning`,
+        instead of the file being refused.
+    """
+
+    allow_truncated: bool = False
+    keep_later: bool = False
+
+
+#: read nothing past: the default of every reader
+STRICT = ReadOptions()
 
 
 def _kind_of(mode: int) -> str | None:

@@ -265,7 +265,7 @@ def check_groups(records: Records, *, keep_later: bool = False) -> Records:
         if records.kind == "centres":
             message = (
                 f"duplicate centre for step {key[0]} ball {key[1]} "
-                f"(also on line {int(lines[starts[first]])}): keep_later keeps the later one"
+                f"(also on line {int(lines[starts[first]])}): --keep-later keeps the later one"
             )
             name = "label"
         else:
@@ -274,7 +274,7 @@ def check_groups(records: Records, *, keep_later: bool = False) -> Records:
                 f"{_line_span(lines, starts[first], stops[first], prefix=False)} and "
                 f"{_line_span(lines, starts[second], stops[second], prefix=False)}, "
                 "two groups of records that one sphere fit would merge "
-                "(keep_later keeps the later group)"
+                "(--keep-later keeps the later group)"
             )
             name = "ball"
         raise InputError(message, path=records.path, line=int(lines[starts[second]]), field=name)

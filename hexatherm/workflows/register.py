@@ -12,6 +12,7 @@ from hexatherm.core.datum import DatumFrame, datum_frame
 from hexatherm.core.geometry import apply_transform, invert_transform
 from hexatherm.core.spherefit import fit_spheres, probe_radius_mm
 from hexatherm.errors import FitError, InputError
+from hexatherm.io.files import STRICT, ReadOptions
 from hexatherm.io.measurements import read_measurements
 from hexatherm.io.records import Records
 from hexatherm.session import Balls, Datums
@@ -57,8 +58,11 @@ def _check_diameters(
     )
 
 
-def _points(path: str | os.PathLike[str], step: str | None) -> Records:
-    found = [r for r in read_measurements(path) if r.kind == "points"]
+def _points(path: str | os.PathLike[str], step: str | None, reading: ReadOptions) -> Records:
+    read = read_measurements(
+        path, allow_truncated=reading.allow_truncated, keep_later=reading.keep_later
+    )
+    found = [r for r in read if r.kind == "points"]
     if not found:
         raise InputError(
             "no probed points: register needs points on the datums and balls", path=os.fspath(path)
@@ -99,6 +103,7 @@ def register_balls(
     datums: Datums,
     fixed_diameter: bool = False,
     diameter_tolerance_um: float = DIAMETER_TOLERANCE_UM,
+    reading: ReadOptions = STRICT,
 ) -> BallRegistration:
     """Fit the datums and the balls of one measurement; balls in the platform frame.
 
@@ -108,10 +113,11 @@ def register_balls(
     moves it about 0.7 mm over a 70 deg cap), and the balls file carries it into every
     session. Beyond ``diameter_tolerance_um`` (um, ``inf`` turns the check off) an
     InputError names the measurement file, the ball's first line and both diameters.
+    ``reading`` says what the reader may read past (:class:`~hexatherm.io.files.ReadOptions`).
     """
     if not diameter_tolerance_um >= 0:
         raise ValueError(f"diameter_tolerance_um must be >= 0, got {diameter_tolerance_um!r}")
-    rec = _points(path, datums.step)
+    rec = _points(path, datums.step, reading)
 
     def feature(name: str) -> npt.NDArray[np.float64]:
         mask = rec.ball == name

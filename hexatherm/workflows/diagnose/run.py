@@ -25,6 +25,7 @@ from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.residuals import PoseResiduals
 from hexatherm.errors import InputError
 from hexatherm.io.config import read_hexapod, read_session
+from hexatherm.io.files import STRICT, ReadOptions
 from hexatherm.io.temperatures import Temperatures
 from hexatherm.session import Session
 from hexatherm.workflows.process.pipeline import read_measured
@@ -69,8 +70,13 @@ class DiagnosisResult:
     after: PoseResiduals
 
 
-def read_for_diagnosis(path: str | Path, hexapod_path: str | Path | None = None) -> SessionData:
-    """Read a session (and optionally another hexapod file) for the diagnosis."""
+def read_for_diagnosis(
+    path: str | Path,
+    hexapod_path: str | Path | None = None,
+    reading: ReadOptions = STRICT,
+) -> SessionData:
+    """Read a session (and optionally another hexapod file) for the diagnosis; ``reading``
+    as in :func:`~hexatherm.workflows.process.pipeline.read_measured`."""
     session = read_session(path)
     if session.temperatures is None:
         raise InputError(
@@ -82,7 +88,7 @@ def read_for_diagnosis(path: str | Path, hexapod_path: str | Path | None = None)
         )
     hexapod = session.hexapod if hexapod_path is None else read_hexapod(hexapod_path)
     current = model_effects(hexapod, str(hexapod_path or session.path))
-    _, _, centres, temperatures = read_measured(session)
+    _, _, centres, temperatures = read_measured(session, reading=reading)
     assert temperatures is not None  # the session names them (checked above)
     log = thermocouple_log(temperatures)
     u_um = centres.u_um

@@ -30,6 +30,7 @@ from hexatherm.core.registration import Registration, check_distances, register
 from hexatherm.core.spherefit import fit_spheres, probe_radius_mm
 from hexatherm.errors import FitError, InputError, PlanError, StepError
 from hexatherm.io.config import read_pose_check, read_session
+from hexatherm.io.files import STRICT, ReadOptions
 from hexatherm.io.measurements import read_measurements
 from hexatherm.io.records import Records, TimeKind, seconds_to_iso
 from hexatherm.io.temperatures import Temperatures, read_temperatures
@@ -326,9 +327,15 @@ def registration_weights(u_um: FloatArray, floor_um: float = 1e-3) -> FloatArray
 
 
 def read_measured(
-    session: Session, fixed_diameter_mm: float | None = None, progress: FileProgress | None = None
+    session: Session,
+    fixed_diameter_mm: float | None = None,
+    progress: FileProgress | None = None,
+    reading: ReadOptions = STRICT,
 ) -> tuple[list[Records], list[Records | None], StepCentres, Temperatures | None]:
     """Every measurement file of ``session`` (points fitted) and its thermocouple log.
+
+    ``reading`` says what the readers may read past (a file cut short, a ball
+    probed twice), each with an :class:`~hexatherm.errors.InputWarning`.
 
     ``progress(path, lines_done, lines_total)``, when given, is called now and then
     while a measurement file is read (see :func:`~hexatherm.io.measurements.read_measurements`).
@@ -342,7 +349,13 @@ def read_measured(
     points: list[Records | None] = []
     for file in session.measurements:
         report = None if progress is None else functools.partial(progress, str(file))
-        for rec in read_measurements(file, progress=report):
+        found = read_measurements(
+            file,
+            progress=report,
+            allow_truncated=reading.allow_truncated,
+            keep_later=reading.keep_later,
+        )
+        for rec in found:
             records.append(
                 rec if rec.kind == "centres" else fit_points(rec, session.balls, fixed_diameter_mm)
             )
@@ -350,7 +363,9 @@ def read_measured(
     centres = assemble_centres(records, session)
     temperatures = None
     if session.temperatures is not None:
-        temperatures = read_temperatures(session.temperatures)
+        temperatures = read_temperatures(
+            session.temperatures, allow_truncated=reading.allow_truncated
+        )
         if temperatures.time_kind != centres.time_kind:
             raise InputError(
                 f"times are {temperatures.time_kind} here but "
@@ -500,13 +515,17 @@ def process_session(
     fixed_diameter_mm: float | None = None,
     checks: Checks | None = None,
     progress: FileProgress | None = None,
+    reading: ReadOptions = STRICT,
 ) -> ProcessResult:
     """Read a session and compute conventional and corrected poses of every target.
 
-    ``progress`` reports the reading of the measurement files (see :func:`read_measured`).
+    ``progress`` reports the reading of the measurement files and ``reading`` says what
+    the readers may read past (see :func:`read_measured`).
     """
     session = read_session(path)
-    records, points, centres, temperatures = read_measured(session, fixed_diameter_mm, progress)
+    records, points, centres, temperatures = read_measured(
+        session, fixed_diameter_mm, progress, reading
+    )
     checks = checks or Checks()
     plan, balls = session.plan, session.balls
     distances = check_distances(
