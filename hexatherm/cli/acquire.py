@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from hexatherm.cli.options import clean_errors, echo_err, max_gap_option
+from hexatherm.cli.options import MAX_BAUD, CheckedFloat, clean_errors, echo_err, max_gap_option
 
 if TYPE_CHECKING:
     from hexatherm.workflows.acquire.recorder import BallFit
@@ -56,7 +56,7 @@ def _fits_table(fits: Sequence[BallFit]) -> str:
     type=click.Path(file_okay=False, path_type=Path),
     help="Session folder to record into (or, with --replay, to create).",
 )
-@click.option("--baud", type=click.IntRange(min=1), default=9600, show_default=True)
+@click.option("--baud", type=click.IntRange(min=1, max=MAX_BAUD), default=9600, show_default=True)
 @click.option("--bytesize", type=click.Choice(["5", "6", "7", "8"]), default="8", show_default=True)
 @click.option(
     "--parity",
@@ -70,14 +70,14 @@ def _fits_table(fits: Sequence[BallFit]) -> str:
 @click.option("--dsrdtr", is_flag=True, help="Hardware (DSR/DTR) flow control.")
 @click.option(
     "--read-timeout",
-    type=click.FloatRange(min=0.001),
+    type=CheckedFloat(min=0.001),
     default=0.1,
     show_default=True,
     help="Serial read timeout (s); partial lines are kept.",
 )
 @click.option(
     "--reopen-interval",
-    type=click.FloatRange(min=0.001),
+    type=CheckedFloat(min=0.001),
     default=1.0,
     show_default=True,
     help="Seconds between attempts to reopen a lost port.",
@@ -106,35 +106,35 @@ def _fits_table(fits: Sequence[BallFit]) -> str:
 )
 @click.option(
     "--idle-timeout",
-    type=click.FloatRange(min=0),
+    type=CheckedFloat(min=0),
     default=None,
     help="Stop (resumable) when the probe sends nothing for this long (s).",
 )
 @max_gap_option
 @click.option(
     "--radius-tol-um",
-    type=click.FloatRange(min=0),
+    type=CheckedFloat(min=0),
     default=20.0,
     show_default=True,
     help="Warn when a ball's fitted radius is further off.",
 )
 @click.option(
     "--form-tol-um",
-    type=click.FloatRange(min=0),
+    type=CheckedFloat(min=0),
     default=15.0,
     show_default=True,
     help="Warn when a ball's form error is larger.",
 )
 @click.option(
     "--min-points",
-    type=click.IntRange(min=1),
+    type=click.IntRange(min=1, max=100_000),
     default=5,
     show_default=True,
     help="Warn when a ball has fewer points.",
 )
 @click.option(
     "--surface-tol-um",
-    type=click.FloatRange(min=0, min_open=True),
+    type=CheckedFloat(min=0, min_open=True),
     default=500.0,
     show_default=True,
     help="Once O is measured, a point goes to the ball whose commanded surface it lies "
@@ -151,7 +151,9 @@ def _fits_table(fits: Sequence[BallFit]) -> str:
     help="Second port with a thermocouple logger (lines of "
     "six or more numbers: leg1..leg6, then others).",
 )
-@click.option("--temperature-baud", type=click.IntRange(min=1), default=9600, show_default=True)
+@click.option(
+    "--temperature-baud", type=click.IntRange(min=1, max=MAX_BAUD), default=9600, show_default=True
+)
 @clean_errors
 def command(
     plan: Path,

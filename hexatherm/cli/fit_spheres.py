@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from hexatherm.cli.options import (
+    CheckedFloat,
     ProgressBars,
     clean_errors,
     echo_err,
@@ -29,7 +30,7 @@ from hexatherm.io.files import ReadOptions
 )
 @click.option(
     "--fixed-diameter",
-    type=click.FloatRange(min=0, min_open=True),
+    type=CheckedFloat(min=0, min_open=True),
     default=None,
     help="Fix the sphere diameter (mm) instead of fitting it: better on small caps.",
 )

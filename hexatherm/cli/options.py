@@ -49,6 +49,8 @@ quality_threshold_option = click.option(
 MAX_DRAWS = 100_000
 #: seeds accepted (numpy's SeedSequence takes any integer >= 0; 64 bits are plenty)
 MAX_SEED = 2**64 - 1
+#: the fastest serial line accepted, baud (USB adapters reach a few Mbaud)
+MAX_BAUD = 100_000_000
 
 
 class CheckedFloat(click.ParamType):
@@ -183,7 +185,7 @@ def check_draws(mc: int) -> None:
 
 max_gap_option = click.option(
     "--max-gap",
-    type=click.FloatRange(min=0),
+    type=CheckedFloat(min=0),
     default=600.0,
     show_default=True,
     help="Warn when a target and its reference are further apart (s).",

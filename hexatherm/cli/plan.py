@@ -2,13 +2,21 @@
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Sequence
 from pathlib import Path
 
 import click
 
-from hexatherm.cli.options import clean_errors, echo_err, max_gap_option, overwrite_option
+from hexatherm.cli.options import (
+    MAX_SEED,
+    CheckedFloat,
+    clean_errors,
+    echo_err,
+    max_gap_option,
+    overwrite_option,
+)
 
 AXES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
 
@@ -54,6 +62,15 @@ def parse_box(specs: Sequence[str]) -> tuple[list[float], list[float]]:
     return lower, upper
 
 
+#: the most targets a plan takes (--random, --grid): a campaign of a thousand targets
+#: is a week of measuring
+MAX_TARGETS = 100_000
+#: the most cycles over the targets
+MAX_CYCLES = 1_000
+#: the most points probed on one ball
+MAX_POINTS_PER_BALL = 10_000
+
+
 def parse_levels(text: str) -> list[int]:
     """Grid levels: one count for every axis, or six counts."""
     try:
@@ -97,11 +114,13 @@ def parse_levels(text: str) -> list[int]:
 @click.option(
     "--random",
     "n_random",
-    type=click.IntRange(min=1),
+    type=click.IntRange(min=1, max=MAX_TARGETS),
     metavar="N",
     help="N targets drawn uniformly in the --box (poses out of reach are drawn again).",
 )
-@click.option("--seed", type=int, default=None, help="Seed of --random.")
+@click.option(
+    "--seed", type=click.IntRange(min=0, max=MAX_SEED), default=None, help="Seed of --random."
+)
 @click.option(
     "--box",
     "box",
@@ -119,7 +138,7 @@ def parse_levels(text: str) -> list[int]:
 )
 @click.option(
     "--cycles",
-    type=click.IntRange(min=1),
+    type=click.IntRange(min=1, max=MAX_CYCLES),
     default=1,
     show_default=True,
     help="Measure the targets this many times.",
@@ -132,17 +151,22 @@ def parse_levels(text: str) -> list[int]:
     help="both/after: one R between consecutive targets and one after the last, so "
     "each target has R on both sides; before: no R after the last target.",
 )
-@click.option("--points-per-ball", type=click.IntRange(min=1), default=25, show_default=True)
+@click.option(
+    "--points-per-ball",
+    type=click.IntRange(min=1, max=MAX_POINTS_PER_BALL),
+    default=25,
+    show_default=True,
+)
 @click.option(
     "--seconds-per-point",
-    type=click.FloatRange(min=0),
+    type=CheckedFloat(min=0),
     default=2.0,
     show_default=True,
     help="Estimated probing time per point.",
 )
 @click.option(
     "--seconds-per-move",
-    type=click.FloatRange(min=0),
+    type=CheckedFloat(min=0),
     default=30.0,
     show_default=True,
     help="Estimated time to command a pose and settle.",
@@ -150,7 +174,7 @@ def parse_levels(text: str) -> list[int]:
 @max_gap_option
 @click.option(
     "--min-rcond",
-    type=click.FloatRange(min=0),
+    type=CheckedFloat(min=0),
     default=None,
     help="Refuse poses whose Jacobian's reciprocal condition number is below this [default: 1e-2].",
 )
@@ -167,14 +191,14 @@ def parse_levels(text: str) -> list[int]:
 )
 @click.option(
     "--cap-angle",
-    type=click.FloatRange(min=1, max=180),
+    type=CheckedFloat(min=1, max=180),
     default=75.0,
     show_default=True,
     help="Half-angle of the ball cap the touch points cover (deg).",
 )
 @click.option(
     "--clearance",
-    type=click.FloatRange(min=0),
+    type=CheckedFloat(min=0),
     default=30.0,
     show_default=True,
     help="Probe clearance above the balls between balls (mm).",
@@ -247,6 +271,14 @@ def command(
     if len({os.path.realpath(p) for p in outputs}) != len(outputs):
         raise click.UsageError("-o, --dmis and --checklist must be different files")
     lower, upper = parse_box(box) if box else (None, None)
+    if grid is not None and lower is not None and upper is not None:
+        varied = [n for n, lo, hi in zip(parse_levels(grid), lower, upper, strict=True) if hi > lo]
+        if math.prod(varied) > MAX_TARGETS:
+            raise click.BadParameter(
+                f"{grid!r} over the --box gives {math.prod(varied):,} targets (at most "
+                f"{MAX_TARGETS:,})",
+                param_hint="--grid",
+            )
     origin = None if origin_on_cmm is None else parse_pose(origin_on_cmm, "--origin-on-cmm")
     request = PlanRequest(
         hexapod_path=hexapod_path,

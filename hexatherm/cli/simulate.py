@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from hexatherm.cli.options import clean_errors, echo_err, overwrite_option
+from hexatherm.cli.options import MAX_SEED, clean_errors, echo_err, overwrite_option
 
 
 @click.command("simulate")
@@ -21,7 +21,7 @@ from hexatherm.cli.options import clean_errors, echo_err, overwrite_option
 )
 @click.option(
     "--seed",
-    type=click.IntRange(min=0),
+    type=click.IntRange(min=0, max=MAX_SEED),
     default=None,
     help="Seed of the random draws [default: the scenario's seed].",
 )
