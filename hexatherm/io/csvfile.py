@@ -30,6 +30,7 @@ Errors name the file, the line (header = line 1) and the column. What is refused
 
 from __future__ import annotations
 
+import csv
 import io
 import os
 import re
@@ -111,6 +112,21 @@ def csv_frame(text: str, path: str) -> pd.DataFrame:
     text = text.replace("\r\n", "\n").replace("\r", "\n")
     if not text.strip():
         raise InputError("empty file: expected a header line", path=path, line=1)
+    # before pandas, which renames a repeated column ("air", "air.1") instead of saying so
+    try:
+        first = next(csv.reader(io.StringIO(text.partition("\n")[0])), [])
+    except csv.Error:
+        first = []  # pandas names what is wrong with it
+    header = [name.strip() for name in first]
+    seen: set[str] = set()
+    for number, name in enumerate(header, 1):
+        if not name:
+            raise InputError(f"column {number} of the header has no name", path=path, line=1)
+        if name in seen:
+            raise InputError(
+                f"column {name!r} appears twice in the header", path=path, line=1, field=name
+            )
+        seen.add(name)
     try:
         frame = pd.read_csv(
             io.StringIO(text),
@@ -307,8 +323,6 @@ def _check_header(frame: pd.DataFrame, path: str, extras: tuple[str, ...]) -> No
                 line=1,
                 field=column,
             )
-    if len(set(columns)) != len(columns):
-        raise InputError("duplicate column in header", path=path, line=1)
 
 
 def _names(frame: pd.DataFrame, column: str, path: str) -> npt.NDArray[np.str_]:

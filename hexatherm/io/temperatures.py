@@ -86,8 +86,6 @@ def read_temperatures(
             path=path,
             line=1,
         )
-    if len(set(columns)) != len(columns) or any(not c for c in columns):
-        raise InputError("duplicate or empty column name in header", path=path, line=1)
     frame = drop_blank_rows(frame)
     if frame.empty:
         raise InputError("no data rows", path=path, line=2)
