@@ -3,6 +3,19 @@
 Each command lives in ``hexatherm.cli.<name>`` as a click command called
 ``command``; the group imports it only when that command runs (or its help is
 asked for), so ``hexatherm --help`` stays fast.
+
+Exit status, the same for every command (:data:`EXIT_CODES`):
+
+====  ==========================================================================
+code  meaning
+====  ==========================================================================
+0     done
+1     refused: bad input, an output that would touch an input, a failed
+      computation (one line on stderr naming file, line and field, or the step)
+2     usage error: a bad option or argument (click's message)
+3     ``process --strict``: results written, but a quality check failed
+130   interrupted (Ctrl-C); outputs are whole or absent, a hexapod is stopped
+====  ==========================================================================
 """
 
 from __future__ import annotations
@@ -12,6 +25,17 @@ import importlib
 import click
 
 from hexatherm import __version__
+
+#: exit status -> meaning, for every command
+EXIT_CODES = {
+    0: "done",
+    1: "refused: bad input or a failed computation (one line naming file, line and field)",
+    2: "usage error: a bad option or argument",
+    3: "process --strict: results written, but a quality check failed",
+    130: "interrupted (Ctrl-C)",
+}
+#: the exit status of an interrupted command (128 + SIGINT, as shells report it)
+INTERRUPTED = 130
 
 #: command name -> (module, one-line help shown by ``hexatherm --help``)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -43,6 +67,14 @@ class LazyGroup(click.Group):
         command: click.Command = module.command
         return command
 
+    def invoke(self, ctx: click.Context) -> object:
+        """Run the command; Ctrl-C exits with :data:`INTERRUPTED` (click would say 1)."""
+        try:
+            return super().invoke(ctx)
+        except KeyboardInterrupt:
+            click.echo("interrupted", err=True)
+            raise click.exceptions.Exit(INTERRUPTED) from None
+
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         rows = [(name, COMMANDS[name][1]) for name in self.list_commands(ctx)]
         with formatter.section("Commands"):
@@ -54,5 +86,7 @@ class LazyGroup(click.Group):
 def main() -> None:
     """Thermal deflection decoupled 6-DOF pose measurement of hexapods.
 
-    Data goes to standard output, messages and logs to standard error.
+    Data goes to standard output, messages and logs to standard error. Exit
+    status: 0 done, 1 refused (bad input), 2 usage error, 3 process --strict with
+    a failed quality check, 130 interrupted.
     """
