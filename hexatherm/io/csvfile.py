@@ -58,8 +58,9 @@ U_UM_MAX = 1000.0
 
 
 def read_text(path: str | os.PathLike[str]) -> str:
-    """A file's text as UTF-8 (BOM allowed), any line ending; InputError when it is not
-    a regular file of a sane size, unreadable, UTF-16 or otherwise not UTF-8, or binary."""
+    """A CSV file's text as UTF-8 (BOM allowed), any line ending, with ``,`` separators
+    (:func:`semicolons_to_commas`); InputError when it is not a regular file of a sane
+    size, unreadable, UTF-16 or otherwise not UTF-8, or binary."""
     path = os.fspath(path)
     raw = read_bytes(path)
     refuse_utf16(raw, path)
@@ -71,6 +72,28 @@ def read_text(path: str | os.PathLike[str]) -> str:
     if "\x00" in text:
         line = text[: text.index("\x00")].count("\n") + 1
         raise InputError("NUL byte: not a text file", path=path, line=line)
+    return semicolons_to_commas(text)
+
+
+def semicolons_to_commas(text: str) -> str:
+    """The text of a CSV file written with ``;`` separators (and ``,`` decimal commas,
+    as a European spreadsheet exports it) as the same file with ``,`` and ``.``.
+
+    The separator is told from the first line that is neither blank nor a ``#``
+    comment: ``;`` and no ``,`` there means a semicolon file. Every character keeps its
+    line, so messages name the same lines and fields. Names (steps, balls, columns)
+    hold neither character.
+
+    >>> semicolons_to_commas("Tx;Ty;Tz;Rx;Ry;Rz\\n1,5;0;0;0;0;0,25\\n")
+    'Tx,Ty,Tz,Rx,Ry,Rz\\n1.5,0,0,0,0,0.25\\n'
+    >>> semicolons_to_commas("label,ball,x\\nO,B1,1.5\\n")  # a comma file: as it is
+    'label,ball,x\\nO,B1,1.5\\n'
+    """
+    for line in text.splitlines():
+        if line.strip() and not line.lstrip().startswith("#"):
+            if ";" in line and "," not in line:
+                return text.replace(",", ".").replace(";", ",")
+            return text
     return text
 
 
