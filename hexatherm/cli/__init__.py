@@ -21,6 +21,7 @@ code  meaning
 from __future__ import annotations
 
 import importlib
+from typing import Any
 
 import click
 
@@ -36,6 +37,9 @@ EXIT_CODES = {
 }
 #: the exit status of an interrupted command (128 + SIGINT, as shells report it)
 INTERRUPTED = 130
+
+#: where the group keeps its arguments as given, in ``click.Context.meta``
+ARGV_KEY = "hexatherm.argv"
 
 #: command name -> (module, one-line help shown by ``hexatherm --help``)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -66,6 +70,19 @@ class LazyGroup(click.Group):
         module = importlib.import_module(COMMANDS[cmd_name][0])
         command: click.Command = module.command
         return command
+
+    def make_context(
+        self,
+        info_name: str | None,
+        args: list[str],
+        parent: click.Context | None = None,
+        **extra: Any,
+    ) -> click.Context:
+        """The group's context, keeping the arguments as given (for ``provenance.json``)."""
+        given = list(args)
+        ctx = super().make_context(info_name, args, parent=parent, **extra)
+        ctx.meta[ARGV_KEY] = given
+        return ctx
 
     def invoke(self, ctx: click.Context) -> object:
         """Run the command; Ctrl-C exits with :data:`INTERRUPTED` (click would say 1)."""

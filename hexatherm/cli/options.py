@@ -14,6 +14,7 @@ import click
 
 from hexatherm.errors import HexathermError, InputWarning
 from hexatherm.io.files import ReadOptions
+from hexatherm.io.provenance import run_context
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -213,8 +214,12 @@ def clean_errors(func: F) -> F:
                     shown(message, category, *rest, **options)
 
             warnings.showwarning = show
+            ctx = click.get_current_context()
+            given = ctx.meta.get("hexatherm.argv", [])  # the group's arguments as given
+            argv = given[1:] if given[:1] == [ctx.info_name] else given
             try:
-                return func(*args, **kwargs)
+                with run_context(ctx.info_name or "", argv, ctx.params):
+                    return func(*args, **kwargs)
             except HexathermError as exc:
                 raise click.ClickException(str(exc)) from None
 

@@ -97,6 +97,7 @@ from hexatherm.io.manifest import (
     read_regular_bytes,
     sha256_file,
 )
+from hexatherm.io.provenance import PROVENANCE_NAME, current_run, provenance_json
 
 __all__ = [
     "check_not_input",
@@ -314,7 +315,9 @@ def output_dir(
 
     Checks as :func:`check_output` before the block and again under the lock before
     the swap (another run may have written meanwhile); writes the manifest of what
-    the block wrote into the folder; swaps it in (:func:`hexatherm.io.atomic.atomic_output_dir`).
+    the block wrote into the folder, and (in a command line's run) ``provenance.json``
+    (:mod:`hexatherm.io.provenance`); swaps it in
+    (:func:`hexatherm.io.atomic.atomic_output_dir`).
     On any error nothing is left behind and ``output`` is as it was.
 
     Parameters
@@ -344,6 +347,9 @@ def output_dir(
             entries = foreign_entries(target)
             if entries:
                 raise ForeignFilesError(_foreign_message(option, given, entries), entries=entries)
+        facts = current_run()
+        if facts is not None:  # a command line's run: where the folder came from
+            (tmp / PROVENANCE_NAME).write_text(provenance_json(facts, inputs), encoding="utf-8")
         (tmp / MANIFEST_NAME).write_bytes(manifest_for_tree(tmp).to_json())
 
     with atomic_output_dir(

@@ -39,6 +39,7 @@ def test_diagnose_writes_the_files_and_tells_the_story(diagnosed) -> None:
         ".hexatherm-manifest.json",  # what hexatherm wrote there, for --overwrite
         "diagnosis.json",
         "hexapod.yaml",
+        "provenance.json",  # command, options, inputs with SHA-256, times
         "report.md",
         "residuals_legs_time.png",
         "residuals_steps.png",

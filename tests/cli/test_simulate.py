@@ -15,6 +15,7 @@ from hexatherm.core.plan import Plan
 from hexatherm.core.planning import sequence_steps
 from hexatherm.io.config import plan_to_yaml, read_session
 from hexatherm.io.manifest import MANIFEST_NAME
+from hexatherm.io.provenance import PROVENANCE_NAME
 from tests.sessions import ROOT
 
 UM, URAD = 1e3, np.pi / 180 * 1e6
@@ -108,11 +109,12 @@ def worst(poses, truth, got, want):
 
 
 def files_of(folder: Path) -> dict[str, bytes]:
-    """The session's files (not hexatherm's manifest, which records when they were written)."""
+    """The session's files (not hexatherm's manifest and provenance, which record when
+    and how they were written)."""
     return {
         str(p.relative_to(folder)): p.read_bytes()
         for p in sorted(folder.rglob("*"))
-        if p.is_file() and p.name != MANIFEST_NAME
+        if p.is_file() and p.name not in (MANIFEST_NAME, PROVENANCE_NAME)
     }
 
 

@@ -1,0 +1,149 @@
+"""Where an output came from: ``provenance.json`` in every output folder.
+
+The command line sets the run's facts once (:func:`run_context`: the command, its
+arguments and options, the start time); every folder hexatherm writes through
+:func:`hexatherm.io.outputs.output_dir` then gets a ``provenance.json`` beside its
+manifest, with those facts, the end time, the versions of hexatherm and of the
+libraries its numbers rest on, and every input file with its size and SHA-256. A run
+outside the command line (a test, a script) sets none and writes none.
+
+Times are ISO 8601 with the local UTC offset (``2026-11-25T13:02:11+01:00``).
+
+>>> with run_context("process", ["process", "s"], {"mc": 0}):
+...     facts = current_run()
+>>> facts.command, facts.options, current_run() is None
+('process', {'mc': 0}, True)
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import hashlib
+import json
+import math
+import os
+import platform
+from collections.abc import Iterable, Iterator, Mapping
+from contextvars import ContextVar
+from datetime import datetime
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+from hexatherm import __version__
+
+#: the file's name in every output folder
+PROVENANCE_NAME = "provenance.json"
+#: its format tag
+PROVENANCE_FORMAT = "hexatherm-provenance/1"
+#: the libraries whose versions are recorded
+LIBRARIES = ("numpy", "scipy", "pandas")
+_CHUNK = 1 << 20
+
+
+@dataclasses.dataclass(frozen=True)
+class RunFacts:
+    """What the command line knows of a run.
+
+    Attributes
+    ----------
+    command : str
+        The command's name (``process``).
+    argv : tuple of str
+        Its arguments as given (after the command's name).
+    options : dict
+        Every parameter's value, defaults included, as JSON-ready values.
+    started : str
+        ISO 8601 time with offset.
+    """
+
+    command: str
+    argv: tuple[str, ...]
+    options: dict[str, Any]
+    started: str
+
+
+_current: ContextVar[RunFacts | None] = ContextVar("hexatherm_run", default=None)
+
+
+def now_iso() -> str:
+    """The local time, ISO 8601 to the second, with its UTC offset."""
+    return datetime.now().astimezone().isoformat(timespec="seconds")
+
+
+def json_ready(value: Any) -> Any:
+    """``value`` with paths, tuples, dataclasses and non-finite floats made JSON values
+    (``inf`` -> ``"inf"``)."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return json_ready(dataclasses.asdict(value))
+    if isinstance(value, Mapping):
+        return {str(k): json_ready(v) for k, v in value.items()}
+    if isinstance(value, list | tuple | set | frozenset):
+        return [json_ready(v) for v in value]
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    if value is None or isinstance(value, bool | int | float | str):
+        return value
+    return str(value)
+
+
+@contextlib.contextmanager
+def run_context(command: str, argv: Iterable[str], options: Mapping[str, Any]) -> Iterator[None]:
+    """Set the run's facts for the block (the command line does, once per command)."""
+    facts = RunFacts(command, tuple(argv), json_ready(dict(options)), now_iso())
+    token = _current.set(facts)
+    try:
+        yield
+    finally:
+        _current.reset(token)
+
+
+def current_run() -> RunFacts | None:
+    """The facts of the command running, or None outside the command line."""
+    return _current.get()
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        while chunk := handle.read(_CHUNK):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def _version(name: str) -> str | None:
+    try:
+        return metadata.version(name)
+    except metadata.PackageNotFoundError:
+        return None
+
+
+def provenance_json(facts: RunFacts, inputs: Iterable[str | os.PathLike[str]]) -> str:
+    """The content of ``provenance.json`` for a run that read ``inputs``."""
+    files = []
+    for given in dict.fromkeys(os.fspath(p) for p in inputs):
+        path = Path(given)
+        entry: dict[str, Any] = {"path": os.path.abspath(given)}
+        if path.is_file():
+            entry["bytes"] = path.stat().st_size
+            entry["sha256"] = _sha256(path)
+        elif path.is_dir():
+            entry["folder"] = True
+        files.append(entry)
+    doc = {
+        "format": PROVENANCE_FORMAT,
+        "hexatherm": __version__,
+        "command": facts.command,
+        "command_line": " ".join(["hexatherm", facts.command, *facts.argv]),
+        "argv": list(facts.argv),
+        "options": facts.options,
+        "started": facts.started,
+        "finished": now_iso(),
+        "inputs": files,
+        "python": platform.python_version(),
+        "libraries": {name: _version(name) for name in LIBRARIES},
+    }
+    return json.dumps(doc, indent=1, allow_nan=False) + "\n"

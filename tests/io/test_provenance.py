@@ -1,0 +1,79 @@
+"""``provenance.json`` in every output folder a command writes (issue 16, item 2): the
+command line, every option, every input with its SHA-256, start and end times with
+their UTC offset, the versions; none for a run outside the command line."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+from datetime import datetime
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from hexatherm import __version__
+from hexatherm.cli import main
+from hexatherm.io.manifest import read_manifest
+from hexatherm.io.outputs import output_dir
+from hexatherm.io.provenance import PROVENANCE_NAME, json_ready
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+@pytest.fixture
+def session(tmp_path: Path) -> Path:
+    return Path(shutil.copytree(ROOT / "sessions" / "paper-zero-pose", tmp_path / "s"))
+
+
+def test_process_records_its_command_options_and_inputs(session: Path, tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    args = ["process", str(session), "-o", str(out), "--mc", "20", "--seed", "7"]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    doc = json.loads((out / PROVENANCE_NAME).read_text())
+    assert doc["format"] == "hexatherm-provenance/1" and doc["hexatherm"] == __version__
+    assert doc["command_line"] == "hexatherm " + " ".join(args)
+    assert doc["options"]["mc"] == 20 and doc["options"]["seed"] == 7
+    assert doc["options"]["interpolation"] == "linear"  # defaults too
+    inputs = {Path(entry["path"]).name: entry for entry in doc["inputs"]}
+    assert set(inputs) == {
+        "session.yaml",
+        "hexapod.yaml",
+        "balls.yaml",
+        "plan.yaml",
+        "centres.csv",
+        "temperatures.csv",
+    }
+    for name, entry in inputs.items():
+        assert entry["sha256"] == sha256(session / name)
+        assert entry["bytes"] == (session / name).stat().st_size
+    started = datetime.fromisoformat(doc["started"])
+    finished = datetime.fromisoformat(doc["finished"])
+    assert started.utcoffset() is not None and started <= finished
+    assert set(doc["libraries"]) == {"numpy", "scipy", "pandas"}
+    # hexatherm wrote it: listed in the manifest, so --overwrite replaces it
+    assert PROVENANCE_NAME in read_manifest(out).files
+    again = CliRunner().invoke(main, [*args, "--overwrite"])
+    assert again.exit_code == 0, again.output
+
+
+def test_a_run_outside_the_command_line_writes_none(tmp_path: Path) -> None:
+    with output_dir(tmp_path / "out") as folder:
+        (folder / "poses.csv").write_text("Tx_mm\n0\n")
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
+        ".hexatherm-manifest.json",
+        "poses.csv",
+    ]
+
+
+def test_values_are_made_json() -> None:
+    assert json_ready({"a": (Path("x"), float("inf")), "b": None}) == {
+        "a": ["x", "inf"],
+        "b": None,
+    }
