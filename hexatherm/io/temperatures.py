@@ -10,14 +10,8 @@ import numpy.typing as npt
 import pandas as pd
 
 from hexatherm.errors import InputError
-from hexatherm.io.csvfile import (
-    column_numbers,
-    column_times,
-    complete_lines,
-    csv_frame,
-    drop_blank_rows,
-    read_text,
-)
+from hexatherm.io.csvfile import column_numbers, column_times, drop_blank_rows
+from hexatherm.io.csvtext import complete_lines, csv_frame, read_text
 from hexatherm.io.records import TimeKind
 
 #: Temperatures accepted, degC, in a thermocouple log and in a hexapod file (a value
