@@ -10,6 +10,8 @@ import os
 from collections.abc import Iterable
 from typing import Any
 
+from hexatherm.text import format_pose
+
 
 class HexathermError(Exception):
     """Base class of every error hexatherm raises deliberately."""
@@ -62,12 +64,6 @@ class StepError(PlanError):
         super().__init__(f"step {step}: {message}" if step is not None else message)
 
 
-def _format_pose(pose: tuple[float, ...]) -> str:
-    """``[Tx, Ty, Tz, Rx, Ry, Rz]`` with up to 6 decimals (as ``core.planning.format_pose``)."""
-    texts = (f"{v:.6f}".rstrip("0").rstrip(".") for v in pose)
-    return "[" + ", ".join("0" if x in ("-0", "") else x for x in texts) + "]"
-
-
 class PoseError(PlanError):
     """A commanded pose the hexapod cannot (or should not) reach, naming its step.
 
@@ -88,7 +84,7 @@ class PoseError(PlanError):
         self.pose = tuple(float(v) for v in pose)
         self.source = source
         where = f" ({source})" if source else ""
-        super().__init__(f"step {step}{where}: pose {_format_pose(self.pose)}: {message}")
+        super().__init__(f"step {step}{where}: pose {format_pose(self.pose)}: {message}")
 
 
 class OutputExistsError(HexathermError):

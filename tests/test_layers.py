@@ -24,6 +24,7 @@ FLOORS = {
     "": 0,  # the package's __init__: the version only
     "errors": 0,
     "typing": 0,
+    "text": 0,  # how numbers and poses are written in messages
     "data": 0,  # package data (YAML), no code
     "core": 1,
     "session": 1,
@@ -33,7 +34,13 @@ FLOORS = {
     "cli": 4,
     "__main__": 4,
 }
-FLOOR_NAMES = {0: "errors/typing", 1: "core/session", 2: "io/devices", 3: "workflows", 4: "cli"}
+FLOOR_NAMES = {
+    0: "errors/typing/text",
+    1: "core/session",
+    2: "io/devices",
+    3: "workflows",
+    4: "cli",
+}
 #: (importer prefix, imported prefix) pairs forbidden although on one floor
 FORBIDDEN_SIDEWAYS = {("core", "session")}
 

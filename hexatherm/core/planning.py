@@ -32,6 +32,7 @@ import numpy.typing as npt
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
 from hexatherm.errors import InputError, PlanError, PoseError
+from hexatherm.text import format_number
 from hexatherm.typing import FloatArray
 
 ReferenceEvery = Literal["both", "before", "after", "alternate"]
@@ -44,25 +45,6 @@ DEFAULT_REFERENCE = (0.0, 0.0, -40.0, 0.0, 0.0, 0.0)
 #: reciprocal condition number of the Jacobian dq/dX (mm per mm, mm per degree)
 #: below which a commanded pose is called near-singular
 DEFAULT_MIN_RCOND = 1e-2
-
-
-def format_pose(pose: Sequence[float]) -> str:
-    """A pose as ``[Tx, Ty, Tz, Rx, Ry, Rz]`` with up to 6 decimals.
-
-    >>> format_pose([1, -0.5, 40.1234567, 0, 0, 0])
-    '[1, -0.5, 40.123457, 0, 0, 0]'
-    """
-    return "[" + ", ".join(format_number(v) for v in pose) + "]"
-
-
-def format_number(value: float, decimals: int = 6) -> str:
-    """A number with at most ``decimals`` decimals, trailing zeros dropped.
-
-    >>> format_number(-0.0000001), format_number(2.50), format_number(1 / 3, 3)
-    ('0', '2.5', '0.333')
-    """
-    text = f"{float(value):.{decimals}f}".rstrip("0").rstrip(".")
-    return "0" if text in ("-0", "") else text
 
 
 # ----------------------------------------------------------------------- targets

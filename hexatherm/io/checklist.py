@@ -18,7 +18,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from hexatherm.core.plan import Plan
-from hexatherm.core.planning import ReferenceGap, StepTiming, format_number
+from hexatherm.core.planning import ReferenceGap, StepTiming
+from hexatherm.text import format_number
 
 
 def _clock(seconds: float) -> str:

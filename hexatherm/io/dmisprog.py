@@ -42,9 +42,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from hexatherm.core.plan import Plan
-from hexatherm.core.planning import StepTiming, format_pose
+from hexatherm.core.planning import StepTiming
 from hexatherm.core.touch import TouchPoints
 from hexatherm.session import Balls
+from hexatherm.text import format_pose
 
 #: DMIS version written in the ``DMISMN`` statement
 DMIS_VERSION = "05.2"

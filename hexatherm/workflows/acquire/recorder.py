@@ -68,7 +68,7 @@ import numpy as np
 
 from hexatherm.core.geometry import apply_transform, invert_transform, transform_from_pose
 from hexatherm.core.plan import Plan
-from hexatherm.core.planning import format_pose, reference_gaps
+from hexatherm.core.planning import reference_gaps
 from hexatherm.devices.probestream import (
     UNITS_MM,
     LineSplitter,
@@ -89,6 +89,7 @@ from hexatherm.io.seriallog import (
     Sink,
 )
 from hexatherm.session import Balls
+from hexatherm.text import format_pose
 
 OPERATOR_EVENTS = ("next", "redo", "quit")
 
