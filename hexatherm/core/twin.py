@@ -30,11 +30,12 @@ np.float64(25.0)
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
 
+from hexatherm.core.calibration.model import split_parameters
 from hexatherm.core.effects import Effect, ThermocoupleLog, check_distinct
 from hexatherm.core.geometry import (
     apply_transform,
@@ -159,6 +160,7 @@ def predict(
     ball_times_s: npt.ArrayLike | None = None,
     positioning_error_mm: npt.ArrayLike | None = None,
     reference_state: bool = True,
+    true_parameters: npt.ArrayLike | None = None,
 ) -> TwinSteps:
     """Predict every step of ``plan`` from its times, a thermocouple log and effects.
 
@@ -186,12 +188,20 @@ def predict(
         Also solve every step in the reference thermal state (``corrected_pose``,
         ``reference_growth_mm``, ``reference_q_mm``); when False those are NaN and
         the prediction costs one forward model instead of two (the diagnosis).
+    true_parameters : array_like, shape (48,), optional
+        The hexapod's true geometry where it differs from the nominal ``hexapod`` (a
+        calibration's truth), in the layout of
+        :data:`hexatherm.core.calibration.model.PARAMETER_NAMES`: base and platform
+        joints, leg offsets and gains. The controller commands ``IGM_nominal(X_cmd)``;
+        the actuators then give ``q_cmd + dq + g (q_cmd - q_home)`` (plus the thermal
+        growth), and the platform stands where the true joints put it.
 
     Returns
     -------
     TwinSteps
     """
     legs = _leg_model(hexapod)
+    true = _TrueGeometry.of(hexapod, true_parameters)
     effects = tuple(effects)
     check_distinct(effects)
     t = np.asarray(times_s, dtype=float).reshape(-1)
@@ -202,10 +212,12 @@ def predict(
     segments = np.broadcast_to(leg[..., None], leg.shape + (legs.variable.shape[1],))
     for effect in effects:
         segments = effect.segment_temperature_C(segments, leg, leg0, legs.variable)
-    base = hexapod.base_joints_mm
+    base = true.solver.base_joints_mm
     for effect in effects:
         base = effect.base_joints_mm(base, t, log)
-    step_base = None if base is hexapod.base_joints_mm else np.broadcast_to(base, (t.size, 6, 3))
+    step_base = (
+        None if base is true.solver.base_joints_mm else np.broadcast_to(base, (t.size, 6, 3))
+    )
     balls = np.asarray(balls_mm, dtype=float)
     if ball_times_s is None:
         ball_t = np.broadcast_to(t[:, None], (t.size, balls.shape[0]))
@@ -227,6 +239,7 @@ def predict(
         ball_t,
         reference_state,
         np.argsort(t, kind="stable"),
+        true,
     )
 
 
@@ -279,21 +292,25 @@ def _solve(
     ball_times_s: FloatArray | None,
     reference_state: bool,
     order: npt.NDArray[np.intp],
+    true: _TrueGeometry | None = None,
 ) -> TwinSteps:
     """Leg lengths, poses and centres from the segment temperatures and base joints.
 
     ``balls_mm`` are the balls in the platform frame, (k, 3) or per step (N, k, 3);
-    ``order`` lists the steps in the order they were moved through.
+    ``order`` lists the steps in the order they were moved through; ``true`` the
+    geometry the platform really has (default: the nominal ``hexapod``).
     """
     legs = _leg_model(hexapod)
+    true = true or _TrueGeometry.of(hexapod, None)
     q_cmd = hexapod.igm(plan.poses)
+    actuated = true.actuated_mm(q_cmd)
     error = None if positioning_error_mm is None else np.asarray(positioning_error_mm, float)
 
     def lengths(segments: FloatArray, leg: FloatArray) -> tuple[FloatArray, FloatArray]:
         growth = legs.growth_mm(q_cmd, segments, per_segment=True)
         for effect in effects:
             growth = effect.leg_growth_mm(growth, leg, legs.reference_temperature_C)
-        q = q_cmd + growth
+        q = actuated + growth
         for effect in effects:
             q = effect.commanded_leg_length_mm(q, q_cmd, order)
         if error is not None:
@@ -301,7 +318,7 @@ def _solve(
         return growth, q
 
     growth, q = lengths(segment_C, leg_C)
-    absolute = hexapod.fgm(q, initial_poses=plan.poses, base_joints_mm=base)
+    absolute = true.solver.fgm(q, initial_poses=plan.poses, base_joints_mm=base)
     platform2origin = transform_from_pose(absolute, hexapod.convention)
     origin = plan.origin_index
     origin2measured = invert_transform(platform2origin[origin])
@@ -315,7 +332,7 @@ def _solve(
             np.broadcast_to(leg_C[r], leg_C.shape),
         )
         base0 = None if base is None else np.broadcast_to(base[r], base.shape)
-        absolute0 = hexapod.fgm(q0, initial_poses=plan.poses, base_joints_mm=base0)
+        absolute0 = true.solver.fgm(q0, initial_poses=plan.poses, base_joints_mm=base0)
         corrected = pose_from_transform(
             origin2measured @ transform_from_pose(absolute0, hexapod.convention),
             hexapod.convention,
@@ -341,13 +358,37 @@ def _solve(
         leg_temperature_C=np.array(leg_C, dtype=float),
         segment_temperature_C=np.array(segment_C, dtype=float),
         base_joints_mm=np.array(
-            np.broadcast_to(hexapod.base_joints_mm if base is None else base, (n, 6, 3))
+            np.broadcast_to(true.solver.base_joints_mm if base is None else base, (n, 6, 3))
         ),
         reference_growth_mm=growth0,
         reference_q_mm=q0,
         reference_index=r,
         measured_centres_cmm_mm=measured_centres,
     )
+
+
+@dataclass(frozen=True)
+class _TrueGeometry:
+    """The geometry a twin's platform really has: its joints (``solver``) and the
+    actuators' offsets and gains about the nominal home lengths."""
+
+    solver: Hexapod
+    offsets_mm: FloatArray
+    gains: FloatArray
+    home_mm: FloatArray
+
+    @classmethod
+    def of(cls, hexapod: Hexapod, true_parameters: npt.ArrayLike | None) -> _TrueGeometry:
+        zeros = np.zeros(6)
+        if true_parameters is None:
+            return cls(hexapod, zeros, zeros, zeros)
+        base, platform, offsets, gains = split_parameters(true_parameters)
+        solver = replace(hexapod, base_joints_mm=base, platform_joints_mm=platform)
+        return cls(solver, offsets, gains, hexapod.zero_pose_leg_length_mm())
+
+    def actuated_mm(self, q_cmd: FloatArray) -> FloatArray:
+        """Joint-to-joint lengths the actuators give for commanded lengths (no heat)."""
+        return q_cmd + self.offsets_mm + self.gains * (q_cmd - self.home_mm)
 
 
 def probe_points(
