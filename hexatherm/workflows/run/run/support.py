@@ -27,6 +27,7 @@ from hexatherm.errors import (
     PoseRefusedError,
 )
 from hexatherm.io.atomic import atomic_write_text
+from hexatherm.io.records import seconds_to_iso
 from hexatherm.io.seriallog import (
     LOG_NAME,
     TEMPERATURE,
@@ -218,11 +219,24 @@ class _Thermocouples:
     """A thermocouple logger on a serial port: ``serial.log`` and ``temperatures.csv``.
 
     The lines are parsed by ``acquire``'s recorder (the same format); on a resume the log is
-    replayed to rebuild ``temperatures.csv``.
+    replayed to rebuild ``temperatures.csv``. Every entry is stamped with ``clock`` (the
+    run's clock, which also stamps the transcript, hence the points: one time line).
     """
 
-    def __init__(self, folder: Path, settings: PortSettings, files: SessionFiles, resume: bool):
+    def __init__(
+        self,
+        folder: Path,
+        settings: PortSettings,
+        files: SessionFiles,
+        resume: bool,
+        clock: Callable[[], float] = time.time,
+    ):
         self.folder, self.settings = folder, settings
+
+        def stamp() -> str:
+            return seconds_to_iso(clock())
+
+        self.stamp = stamp
         self.items: queue.Queue[Any] = queue.Queue()
         self.stop_event = threading.Event()
         log_path = folder / LOG_NAME
@@ -241,13 +255,15 @@ class _Thermocouples:
             lines = self.recorder.temperatures.lines
             atomic_write_text(folder / TEMPERATURES_NAME, "".join(x + "\n" for x in lines))
             self.log = SerialLog(log_path, create=False)
-            self._record(entry("resume"))
+            self._record(entry("resume", when=stamp()))
         else:
             self.log = SerialLog(log_path, create=True)
         self.recorder.temperature_sink = self.sink
-        self._record(entry("open", TEMPERATURE, settings.describe()))
+        self._record(entry("open", TEMPERATURE, settings.describe(), when=stamp()))
         port = settings.open()
-        self.reader = PortReader(TEMPERATURE, settings, port, self.items, self.stop_event)
+        self.reader = PortReader(
+            TEMPERATURE, settings, port, self.items, self.stop_event, stamp=stamp
+        )
         self.reader.start()
         self.thread = threading.Thread(target=self._drain, name="hexatherm-thermo", daemon=True)
         self.thread.start()
