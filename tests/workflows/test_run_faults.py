@@ -274,3 +274,89 @@ def test_a_resume_the_next_morning_measures_the_open_targets_references_again(tm
         assert quality.loc["S1", "time_gap_s"] < 600.0 and quality.loc["S1", "ok_time_gap"]
     finally:
         b.machines.close()
+
+
+def test_a_controller_error_code_on_a_move_stops_the_run_and_resume_finishes(tmp: Path) -> None:
+    """controller-error: the controller answers MOVE#ABS with an error code (here once R0 is
+    measured): nothing is retried blindly, the hexapod gets STOP, the code is named, and
+    --resume finishes."""
+    b = bench_with(tmp)
+
+    def notify(level: str, message: str) -> None:
+        b.messages.append((level, message))
+        if message.startswith("R0 B3:"):
+            injected = parse_fault("controller-error:command=MOVE#ABS,code=-104").controller
+            b.machines.controller.faults.errors.update(injected.errors)
+
+    b.notify = notify  # type: ignore[method-assign]
+    try:
+        with pytest.raises(IncompleteSession, match=r"-104") as stopped:
+            b.run()
+        assert "step S1 (target), ball B1" in str(stopped.value)
+        assert b.machines.controller.received[-1] == "STOP"
+        before = pd.read_csv(b.session / "points.csv")
+        assert set(before["label"]) == {"O", "R0"}
+        b.notify = lambda level, message: b.messages.append((level, message))  # type: ignore[method-assign]
+        b.run(resume=True)
+        after = check_complete(b)
+        pd.testing.assert_frame_equal(after.iloc[: len(before)], before)
+    finally:
+        b.machines.close()
+
+
+def test_no_in_position_flag_stops_the_run_and_resume_finishes(tmp: Path) -> None:
+    """The flag does not come within the in-position timeout (a late flag beyond it): the
+    run stops with the hexapod sent STOP; once the controller is well, --resume finishes."""
+    b = bench_with(tmp, faults=Faults(late_in_position_s=600.0))
+    criteria = InPositionCriteria(settle_s=2.0, poll_s=1.0, timeout_s=300.0)
+    try:
+        with pytest.raises(IncompleteSession, match=r"step O \(origin\)"):
+            b.run(criteria=criteria)
+        assert "STOP" in b.machines.controller.received
+        assert not (b.session / "points.csv").read_text().strip().count("\n")
+        b.machines.controller.faults.late_in_position_s = 0.0
+        b.run(resume=True, criteria=criteria)
+        check_complete(b)
+    finally:
+        b.machines.close()
+
+
+def test_ctrl_c_stops_the_hexapod_and_resume_finishes(tmp: Path) -> None:
+    b = bench_with(tmp)
+
+    def notify(level: str, message: str) -> None:
+        b.messages.append((level, message))
+        if message.startswith("S1 B2:"):
+            raise KeyboardInterrupt
+
+    b.notify = notify  # type: ignore[method-assign]
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            b.run()
+        assert b.machines.controller.received[-1] == "STOP"
+        assert "run stopped interrupted (Ctrl-C)" in transcript(b)
+        before = pd.read_csv(b.session / "points.csv")
+        assert len(before) == (2 * 3 + 2) * 6  # O, R0 and S1's first two balls
+        b.notify = lambda level, message: b.messages.append((level, message))  # type: ignore[method-assign]
+        b.run(resume=True)
+        after = check_complete(b)
+        pd.testing.assert_frame_equal(after.iloc[: len(before)], before)
+    finally:
+        b.machines.close()
+
+
+def test_the_pi_dialect_end_to_end(tmp: Path) -> None:
+    """The same campaign through a PI GCS controller (U, V, W axes, the pi convention on the
+    wire): every ball on its own step, the controller's log in GCS."""
+    b = bench_with(tmp)
+    b.restart(dialect="pi")
+    try:
+        b.run()
+        check_complete(b)
+        log = (b.session / "controller.log").read_text()
+        assert ' > "MOV ' in log and ' > "POS?' in log and "MOVE#ABS" not in log
+        steps = pd.read_csv(b.session / "steps.csv")
+        q = b.world.hexapod.igm(b.files.plan.poses)
+        np.testing.assert_allclose(steps[[f"q_leg{i}_mm" for i in range(1, 7)]], q, atol=1e-4)
+    finally:
+        b.machines.close()

@@ -150,7 +150,7 @@ def test_sigkill_of_run_then_resume_loses_or_doubles_no_temperature_line(tmp_pat
     the same temperatures.csv."""
     b = make_bench(tmp_path, **SHORT)  # type: ignore[arg-type]
     b.machines.close()
-    clock = AcceleratedClock(100.0)
+    clock = AcceleratedClock(1000.0)
     b.world = TwinWorld(
         b.world.hexapod,
         b.files.balls,
@@ -160,7 +160,7 @@ def test_sigkill_of_run_then_resume_loses_or_doubles_no_temperature_line(tmp_pat
         sleep=clock.sleep,
         cmm_move_s=0.1,
     )
-    b.machines = TwinMachines(b.world, thermocouple_period_s=5.0)
+    b.machines = TwinMachines(b.world, thermocouple_period_s=20.0)
     log = b.session / "serial.log"
     command = [
         sys.executable, "-m", "hexatherm", "run", str(tmp_path / "plan.yaml"),
