@@ -263,7 +263,7 @@ class _Campaign:
                 self.clog.note("start")
             if options.temperature_port is not None:
                 port = options.temperature_port
-                thermo = _Thermocouples(folder, port, self.files, options.resume, self.clock)
+                thermo = _Thermocouples(folder, port, self.files, self.clock)
             self._connect_controller()
             travel = _travel_z(self.geometry, self.origin2cmm())
             assert self.controller is not None

@@ -218,9 +218,10 @@ def dry_run(
 class _Thermocouples:
     """A thermocouple logger on a serial port: ``serial.log`` and ``temperatures.csv``.
 
-    The lines are parsed by ``acquire``'s recorder (the same format); on a resume the log is
-    replayed to rebuild ``temperatures.csv``. Every entry is stamped with ``clock`` (the
-    run's clock, which also stamps the transcript, hence the points: one time line).
+    The lines are parsed by ``acquire``'s recorder (the same format); an existing log (a
+    resume) is replayed to rebuild ``temperatures.csv`` and continued. Every entry is
+    stamped with ``clock`` (the run's clock, which also stamps the transcript, hence the
+    points: one time line).
     """
 
     def __init__(
@@ -228,7 +229,6 @@ class _Thermocouples:
         folder: Path,
         settings: PortSettings,
         files: SessionFiles,
-        resume: bool,
         clock: Callable[[], float] = time.time,
     ):
         self.folder, self.settings = folder, settings
@@ -244,7 +244,9 @@ class _Thermocouples:
         self.recorder = StreamRecorder(
             files.plan, files.balls, points=MemorySink(), temperatures=MemorySink()
         )
-        if resume and log_path.is_file():
+        # a log there already (a resume, or a new run in a folder where an attempt stopped
+        # before its first I++ command) is continued, never replaced: what it recorded stays
+        if log_path.is_file():
             raw = log_path.read_bytes()
             entries, complete = parse_log(raw, str(log_path))
             if complete < len(raw):
