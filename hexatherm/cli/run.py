@@ -107,8 +107,8 @@ def _numbers(text: str | None, n: int, what: str) -> tuple[float, ...] | None:
     default=600.0,
     show_default=True,
     help="Largest time from a target to the references right before and after it (s): "
-    "a delay that breaks it has the target measured again between fresh references "
-    "(inf: never).",
+    "a delay that breaks it has the reference before measured again, or, when the "
+    "reference after comes too late, the target with it (inf: never).",
 )
 @click.option(
     "--settle",
@@ -241,9 +241,10 @@ def command(
     Walks the plan (O, R0, then the targets with their references): validates every pose
     first, then for each step moves the hexapod and waits until it is in position, probes
     every ball's upper cap around its predicted position, fits it at once (a bad ball is
-    probed again once) and measures a reference again when the plan's --max-gap is broken.
-    SESSION gets the I++ transcript, the controller log, steps.csv and points.csv as it
-    goes, and session.yaml at the end (then: hexatherm process SESSION). Ctrl-C or an
+    probed again once) and measures a reference (or a target with its references) again
+    when a delay breaks --max-gap. SESSION gets the I++ transcript, the controller log,
+    steps.csv and points.csv as it goes (with --temperature-port also serial.log and
+    temperatures.csv), and session.yaml at the end (then: hexatherm process SESSION). Ctrl-C or an
     error stops the hexapod; --resume continues. The balls' fits go to standard output.
     """
     from hexatherm.devices.controller import InPositionCriteria
