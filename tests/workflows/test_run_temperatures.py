@@ -110,7 +110,8 @@ def test_run_logs_the_twins_thermocouples_replayably_and_process_uses_them(tmp_p
     points = pd.read_csv(session / "points.csv")
     point_t = points["time"].map(iso_to_seconds)
     assert times[0] <= point_t.min() and times[-1] <= point_t.max() + 600.0
-    # serial.log replays into the same temperatures.csv, byte for byte
+    # serial.log ends with the run, and replays into the same temperatures.csv, byte for byte
+    assert (session / "serial.log").read_text().splitlines()[-1].endswith(' end - "complete"')
     replay = session_from_log(b.files, session / "serial.log", tmp_path / "replay", b.notify)
     assert not replay.complete  # no probe data in a thermocouple log: no points
     assert (tmp_path / "replay" / "temperatures.csv").read_bytes() == (
@@ -203,6 +204,11 @@ def test_sigkill_of_run_then_resume_loses_or_doubles_no_temperature_line(tmp_pat
     np.testing.assert_array_equal(times[: len(before)], before_t)
     assert counts[0] >= len(before)
     assert (np.diff(times) >= 0).all()
+    entries = log.read_text().splitlines()
+    assert entries[-1].endswith(' end - "complete"')  # the killed run could write no end
+    assert (
+        sum(" end - " in e for e in entries) == 1 and sum(" resume - " in e for e in entries) == 1
+    )
     replay = session_from_log(b.files, log, tmp_path / "replay", b.notify)
     assert not replay.complete
     assert (tmp_path / "replay" / "temperatures.csv").read_bytes() == (
@@ -227,6 +233,7 @@ def test_a_logger_that_does_not_open_stops_the_run_and_its_log_is_kept(tmp_path:
         b.machines.close()
     log = (b.session / "serial.log").read_bytes()
     assert log.startswith(first) and log.count(b" rx temperature ") >= 2
+    assert first.endswith(b' end - "interrupted"\n') and log.endswith(b' end - "complete"\n')
     replay = session_from_log(b.files, b.session / "serial.log", tmp_path / "replay", b.notify)
     assert not replay.complete
     assert (tmp_path / "replay" / "temperatures.csv").read_bytes() == (

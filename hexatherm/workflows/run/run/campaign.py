@@ -297,7 +297,7 @@ class _Campaign:
             raise
         finally:
             if thermo is not None:
-                thermo.close()
+                thermo.close("complete" if completed else "interrupted")
             if self.cmm is not None:
                 if completed:
                     with contextlib.suppress(HexathermError):

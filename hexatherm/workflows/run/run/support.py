@@ -262,7 +262,13 @@ class _Thermocouples:
             self.log = SerialLog(log_path, create=True)
         self.recorder.temperature_sink = self.sink
         self._record(entry("open", TEMPERATURE, settings.describe(), when=stamp()))
-        port = settings.open()
+        try:
+            port = settings.open()
+        except AcquisitionError:
+            self.log.append(entry("end", payload="interrupted", when=stamp()))
+            self.log.close()
+            self.sink.close()
+            raise
         self.reader = PortReader(
             TEMPERATURE, settings, port, self.items, self.stop_event, stamp=stamp
         )
@@ -284,9 +290,13 @@ class _Thermocouples:
             payload = data if isinstance(data, bytes) else str(data).encode("utf-8", "replace")
             self._record(LogEntry(when, kind, source, payload))
 
-    def close(self) -> None:
+    def close(self, outcome: str = "interrupted") -> None:
+        """Stop reading, log what arrived until now and ``end`` with ``outcome``."""
         self.stop_event.set()
         self.reader.join(timeout=5.0)
         self.thread.join(timeout=5.0)
-        self.log.close()
-        self.sink.close()
+        try:
+            self.log.append(entry("end", payload=outcome, when=self.stamp()))
+        finally:
+            self.log.close()
+            self.sink.close()
