@@ -159,6 +159,17 @@ class ThermocoupleSimulator:
                 pass
             sock.close()
 
+    def drop(self) -> int:
+        """Drop every connection, and go on listening (a pulled cable); returns how many."""
+        with self._lock:
+            live = list(self._live)
+        for sock in live:
+            try:
+                sock.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+        return len(live)
+
     def close(self) -> None:
         """Stop serving and drop every connection (a logger switched off)."""
         self._closing.set()

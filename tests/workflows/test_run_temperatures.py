@@ -239,3 +239,39 @@ def test_a_logger_that_does_not_open_stops_the_run_and_its_log_is_kept(tmp_path:
     assert (tmp_path / "replay" / "temperatures.csv").read_bytes() == (
         b.session / "temperatures.csv"
     ).read_bytes()
+
+
+def test_a_logger_connection_lost_mid_run_is_reopened(tmp_path: Path) -> None:
+    """The logger's connection drops while R0 is measured (a pulled cable): the port is
+    logged lost, reopened, and the rows go on with the new connection's lines; nothing
+    doubled, and serial.log still replays into the same temperatures.csv."""
+    b = make_bench(tmp_path, **SHORT)  # type: ignore[arg-type]
+    log = b.session / "serial.log"
+    dropped: list[int] = []
+
+    def notify(level: str, message: str) -> None:
+        b.messages.append((level, message))
+        if message.startswith("R0 B1:") and not dropped:
+            dropped.append(b.machines.thermocouples.drop())
+            deadline = time.monotonic() + 60.0
+            while b'reopen temperature "socket://' not in log.read_bytes():
+                assert time.monotonic() < deadline, "the port was not reopened"
+                time.sleep(0.01)
+
+    b.notify = notify  # type: ignore[method-assign]
+    try:
+        b.run(temperature_port=PortSettings(b.machines.thermocouples_url))
+        sent = list(b.machines.thermocouples.sent)
+    finally:
+        b.machines.close()
+    assert dropped == [1]
+    text = log.read_text()
+    assert text.count(" lost temperature ") == 1 and text.count(" reopen temperature ") == 1
+    _, values = read_rows(b.session)
+    counts = [n for _, n in split_by_connection(values, sent)]
+    assert len(counts) == 2 and min(counts) >= 1
+    replay = session_from_log(b.files, log, tmp_path / "replay", b.notify)
+    assert not replay.complete
+    assert (tmp_path / "replay" / "temperatures.csv").read_bytes() == (
+        b.session / "temperatures.csv"
+    ).read_bytes()

@@ -263,7 +263,9 @@ class _Campaign:
                 self.clog.note("start")
             if options.temperature_port is not None:
                 port = options.temperature_port
-                thermo = _Thermocouples(folder, port, self.files, self.clock)
+                thermo = _Thermocouples(
+                    folder, port, self.files, self.clock, options.reconnect_wait_s
+                )
             self._connect_controller()
             travel = _travel_z(self.geometry, self.origin2cmm())
             assert self.controller is not None

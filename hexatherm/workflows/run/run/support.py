@@ -221,7 +221,8 @@ class _Thermocouples:
     The lines are parsed by ``acquire``'s recorder (the same format); an existing log (a
     resume) is replayed to rebuild ``temperatures.csv`` and continued. Every entry is
     stamped with ``clock`` (the run's clock, which also stamps the transcript, hence the
-    points: one time line).
+    points: one time line). A lost port is reopened every ``reopen_interval_s`` (at least
+    0.05 s) until it opens.
     """
 
     def __init__(
@@ -230,6 +231,7 @@ class _Thermocouples:
         settings: PortSettings,
         files: SessionFiles,
         clock: Callable[[], float] = time.time,
+        reopen_interval_s: float = 1.0,
     ):
         self.folder, self.settings = folder, settings
 
@@ -270,7 +272,13 @@ class _Thermocouples:
             self.sink.close()
             raise
         self.reader = PortReader(
-            TEMPERATURE, settings, port, self.items, self.stop_event, stamp=stamp
+            TEMPERATURE,
+            settings,
+            port,
+            self.items,
+            self.stop_event,
+            reopen_interval_s=max(reopen_interval_s, 0.05),
+            stamp=stamp,
         )
         self.reader.start()
         self.thread = threading.Thread(target=self._drain, name="hexatherm-thermo", daemon=True)
