@@ -7,10 +7,14 @@ from pathlib import Path
 
 import click
 
-from hexatherm.cli.options import clean_errors, echo_err, max_gap_option
+from hexatherm.cli.options import CheckedFloat, clean_errors, echo_err
+
+#: the largest coordinate (mm) or angle (deg) an option of run or serve-twin takes
+LARGEST_MM = 1e5
 
 
 def _numbers(text: str | None, n: int, what: str) -> tuple[float, ...] | None:
+    """``n`` comma-separated finite numbers, none beyond :data:`LARGEST_MM` (or None)."""
     if text is None:
         return None
     try:
@@ -19,6 +23,10 @@ def _numbers(text: str | None, n: int, what: str) -> tuple[float, ...] | None:
         values = ()
     if len(values) != n or not all(abs(v) < float("inf") for v in values):
         raise click.BadParameter(f"{text!r}: expected {n} finite numbers", param_hint=what)
+    if max(abs(v) for v in values) > LARGEST_MM:
+        raise click.BadParameter(
+            f"{text!r}: a number beyond {LARGEST_MM:g} (mm, deg) is no machine's", param_hint=what
+        )
     return values
 
 
@@ -62,28 +70,28 @@ def _numbers(text: str | None, n: int, what: str) -> tuple[float, ...] | None:
 @click.option("--tool", default="Probe1", show_default=True, help="The CMM's tool (ChangeTool).")
 @click.option(
     "--cap-angle",
-    type=click.FloatRange(min=1, max=90),
+    type=CheckedFloat(min=1, max=90),
     default=70.0,
     show_default=True,
     help="Half-angle of the probed upper cap (deg).",
 )
 @click.option(
     "--approach",
-    type=click.FloatRange(min=0.01),
+    type=CheckedFloat(min=0.01, max=100),
     default=2.0,
     show_default=True,
     help="Approach distance off the predicted surface (mm).",
 )
 @click.option(
     "--clearance",
-    type=click.FloatRange(min=0.01),
+    type=CheckedFloat(min=0.01, max=1000),
     default=5.0,
     show_default=True,
     help="Safe plane above each ball's top (mm).",
 )
 @click.option(
     "--travel",
-    type=click.FloatRange(min=0),
+    type=CheckedFloat(min=0, max=2000),
     default=30.0,
     show_default=True,
     help="Travel height above the plan's highest ball top while the hexapod moves (mm).",
@@ -93,66 +101,74 @@ def _numbers(text: str | None, n: int, what: str) -> tuple[float, ...] | None:
     metavar="X0,Y0,Z0,X1,Y1,Z1",
     help="The CMM's travel box (mm): every probe position of the plan is checked against it.",
 )
-@max_gap_option
+@click.option(
+    "--max-gap",
+    type=CheckedFloat(min=0, allow_inf=True),
+    default=600.0,
+    show_default=True,
+    help="Largest time from a target to the references right before and after it (s): "
+    "a delay that breaks it has the reference before measured again, or, when the "
+    "reference after comes too late, the target with it (inf: never).",
+)
 @click.option(
     "--settle",
-    type=click.FloatRange(min=0),
+    type=CheckedFloat(min=0, max=3600),
     default=2.0,
     show_default=True,
     help="Wait after the in-position flag (s).",
 )
 @click.option(
     "--poll",
-    type=click.FloatRange(min=0.001),
+    type=CheckedFloat(min=0.001, max=60),
     default=0.2,
     show_default=True,
     help="Interval of the controller's status queries (s).",
 )
 @click.option(
     "--in-position-timeout",
-    type=click.FloatRange(min=0.001),
+    type=CheckedFloat(min=0.001, max=86400),
     default=120.0,
     show_default=True,
     help="Longest wait for the in-position flag (s).",
 )
 @click.option(
     "--readback-tol-um",
-    type=click.FloatRange(min=0),
+    type=CheckedFloat(min=0, max=10000),
     default=0.5,
     show_default=True,
     help="Largest spread of the stable read-back poses (um; urad x5).",
 )
 @click.option(
     "--readings",
-    type=click.IntRange(min=1),
+    type=click.IntRange(min=1, max=1000),
     default=3,
     show_default=True,
     help="Consecutive read-backs that must agree.",
 )
 @click.option(
     "--radius-tol-um",
-    type=click.FloatRange(min=0),
+    type=CheckedFloat(min=0, max=10000),
     default=20.0,
     show_default=True,
     help="Probe a ball again when its fitted radius is further off (um).",
 )
 @click.option(
     "--form-tol-um",
-    type=click.FloatRange(min=0),
+    type=CheckedFloat(min=0, max=10000),
     default=10.0,
     show_default=True,
     help="Probe a ball again when its form error is larger (um).",
 )
 @click.option(
     "--rms-tol-um",
-    type=click.FloatRange(min=0),
+    type=CheckedFloat(min=0, max=10000),
     default=3.0,
     show_default=True,
     help="Probe a ball again when its fit RMS is larger (um).",
 )
 @click.option(
     "--centre-tol-mm",
-    type=click.FloatRange(min=0),
+    type=CheckedFloat(min=0, max=100),
     default=0.5,
     show_default=True,
     help="Probe a ball again around its fit when it is further from the prediction.",
@@ -161,17 +177,22 @@ def _numbers(text: str | None, n: int, what: str) -> tuple[float, ...] | None:
     "--temperature-port",
     help="A thermocouple logger's port (as acquire: lines of six or more numbers).",
 )
-@click.option("--temperature-baud", type=click.IntRange(min=1), default=9600, show_default=True)
+@click.option(
+    "--temperature-baud",
+    type=click.IntRange(min=1, max=10_000_000),
+    default=9600,
+    show_default=True,
+)
 @click.option(
     "--reconnects",
-    type=click.IntRange(min=0),
+    type=click.IntRange(min=0, max=1000),
     default=3,
     show_default=True,
     help="Reopenings of a dropped connection per ball or move.",
 )
 @click.option(
     "--ipp-timeout",
-    type=click.FloatRange(min=0.001),
+    type=CheckedFloat(min=0.001, max=86400),
     default=120.0,
     show_default=True,
     help="Longest I++ transaction (s).",
@@ -220,9 +241,10 @@ def command(
     Walks the plan (O, R0, then the targets with their references): validates every pose
     first, then for each step moves the hexapod and waits until it is in position, probes
     every ball's upper cap around its predicted position, fits it at once (a bad ball is
-    probed again once) and measures a reference again when the plan's --max-gap is broken.
-    SESSION gets the I++ transcript, the controller log, steps.csv and points.csv as it
-    goes, and session.yaml at the end (then: hexatherm process SESSION). Ctrl-C or an
+    probed again once) and measures a reference (or a target with its references) again
+    when a delay breaks --max-gap. SESSION gets the I++ transcript, the controller log,
+    steps.csv and points.csv as it goes (with --temperature-port also serial.log and
+    temperatures.csv), and session.yaml at the end (then: hexatherm process SESSION). Ctrl-C or an
     error stops the hexapod; --resume continues. The balls' fits go to standard output.
     """
     from hexatherm.devices.controller import InPositionCriteria
@@ -245,6 +267,11 @@ def command(
     hexapod = read_hexapod(hexapod_path)
     origin = _numbers(origin_on_cmm, 6, "--origin-on-cmm")
     limits = _numbers(cmm_limits, 6, "--cmm-limits")
+    if limits is not None and not all(a < b for a, b in zip(limits[:3], limits[3:], strict=True)):
+        raise click.BadParameter(
+            f"{cmm_limits!r}: the lower corner X0,Y0,Z0 must be below the upper X1,Y1,Z1",
+            param_hint="--cmm-limits",
+        )
     options = RunOptions(
         session=session,
         cmm_url=cmm_url,

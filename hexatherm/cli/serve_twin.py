@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from hexatherm.cli.options import clean_errors, echo_err
+from hexatherm.cli.options import CheckedFloat, clean_errors, echo_err
 
 
 @click.command("serve-twin")
@@ -38,7 +38,7 @@ from hexatherm.cli.options import clean_errors, echo_err
 )
 @click.option(
     "--time-scale",
-    type=click.FloatRange(min=1e-3),
+    type=CheckedFloat(min=1e-3, max=1e6),
     default=60.0,
     show_default=True,
     help="Simulated seconds per wall-clock second (thermal drift, moves, settle).",
@@ -61,11 +61,16 @@ from hexatherm.cli.options import clean_errors, echo_err
 )
 @click.option(
     "--point-noise-um",
-    type=click.FloatRange(min=0),
+    type=CheckedFloat(min=0, max=1000),
     default=None,
     help="Probing noise along the normal (um) [default: the scenario's, or 0.5].",
 )
-@click.option("--seed", type=int, default=None, help="Noise seed [default: the scenario's, or 0].")
+@click.option(
+    "--seed",
+    type=click.IntRange(min=0, max=2**32 - 1),
+    default=None,
+    help="Noise seed [default: the scenario's, or 0].",
+)
 @click.option("--tool", default="Probe1", show_default=True, help="Name of the CMM's tool.")
 @click.option(
     "--cmm-port",
@@ -83,24 +88,38 @@ from hexatherm.cli.options import clean_errors, echo_err
 )
 @click.option(
     "--speed-mm-s",
-    type=click.FloatRange(min=1e-3),
+    type=CheckedFloat(min=1e-3, max=1000),
     default=2.0,
     show_default=True,
     help="The hexapod's speed (simulated mm/s; deg/s half of it).",
 )
 @click.option(
     "--settle",
-    type=click.FloatRange(min=0),
+    type=CheckedFloat(min=0, max=3600),
     default=2.0,
     show_default=True,
     help="In-position flag after the motion ends (simulated s).",
 )
 @click.option(
     "--cmm-move-s",
-    type=click.FloatRange(min=0),
+    type=CheckedFloat(min=0, max=3600),
     default=1.0,
     show_default=True,
     help="Duration of each CMM motion (simulated s).",
+)
+@click.option(
+    "--thermocouple-port",
+    type=click.IntRange(0, 65535),
+    default=0,
+    show_default=True,
+    help="Thermocouple logger port on 127.0.0.1 (0: a free one).",
+)
+@click.option(
+    "--thermocouple-period",
+    type=CheckedFloat(min=0.01, max=3600),
+    default=10.0,
+    show_default=True,
+    help="The logger's sampling period (simulated s).",
 )
 @clean_errors
 def command(
@@ -119,15 +138,20 @@ def command(
     speed_mm_s: float,
     settle: float,
     cmm_move_s: float,
+    thermocouple_port: int,
+    thermocouple_period: float,
 ) -> None:
-    """Serve a simulated CMM (I++ DME) and hexapod controller on 127.0.0.1, until Ctrl-C.
+    """Serve a simulated CMM (I++ DME), hexapod controller and thermocouple logger on
+    127.0.0.1, until Ctrl-C.
 
-    Both are backed by the hexapod twin: the balls are where the commanded pose and the
+    All are backed by the hexapod twin: the balls are where the commanded pose and the
     legs' thermal growth put them, in accelerated time (--time-scale); the hexapod moves
     at a finite speed and reports in position after a settle time, with read-back noise,
-    actuator lengths and the legs' temperatures. Prints the two URLs for hexatherm run
-    (standard output), then serves; --fault injects failures. The rehearsal of an
-    overnight campaign.
+    actuator lengths and the legs' temperatures; the logger sends the six legs' and the
+    air's temperatures every --thermocouple-period (lines as acquire and run read them).
+    Prints the three URLs for hexatherm run (standard output: cmm, controller,
+    thermocouples), then serves; --fault injects failures. The rehearsal of an overnight
+    campaign.
     """
     from hexatherm.cli.run import _numbers
     from hexatherm.core.effects import Effect
@@ -194,16 +218,20 @@ def command(
         ipp_faults=injected.ipp,
         cmm_port=cmm_port,
         controller_port=controller_port,
+        thermocouple_port=thermocouple_port,
+        thermocouple_period_s=thermocouple_period,
     ) as machines:
         click.echo(f"cmm: {machines.cmm_url}")
-        click.echo(f"controller: {machines.controller_url}", nl=True)
+        click.echo(f"controller: {machines.controller_url}")
+        click.echo(f"thermocouples: {machines.thermocouples_url}")
         sys_stdout_flush()
         echo_err(
             f"serving the twin ({dialect}, x{time_scale:g} time, {noise:g} um probing noise, "
             f"{len(injected.ipp)} I++ fault(s)); Ctrl-C to stop. Rehearse with:\n"
             f"  hexatherm run PLAN --cmm {machines.cmm_url} --controller "
-            f"{machines.controller_url} --hexapod H --balls B --origin-on-cmm "
-            f"{','.join(f'{v:g}' for v in origin)} --session DIR"
+            f"{machines.controller_url} --temperature-port {machines.thermocouples_url} "
+            f"--hexapod H --balls B --origin-on-cmm {','.join(f'{v:g}' for v in origin)} "
+            "--session DIR"
         )
         try:
             while not stop.wait(0.5):

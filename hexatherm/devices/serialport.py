@@ -7,6 +7,7 @@ from __future__ import annotations
 import contextlib
 import queue
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -67,7 +68,9 @@ class PortReader(threading.Thread):
     """Reads a port into a queue; reopens it when it is lost.
 
     Puts ``("rx", source, time, bytes)``, ``("lost", source, time, reason)`` and
-    ``("reopen", source, time, url)`` items; the main loop logs and applies them.
+    ``("reopen", source, time, url)`` items; the main loop logs and applies them. ``time``
+    is ``stamp()`` at the arrival (default :func:`~hexatherm.io.seriallog.now_iso`; a run
+    stamps with its own clock, the one its other logs use).
     """
 
     def __init__(
@@ -78,6 +81,7 @@ class PortReader(threading.Thread):
         out: queue.Queue[Any],
         stop: threading.Event,
         reopen_interval_s: float = 1.0,
+        stamp: Callable[[], str] = now_iso,
     ) -> None:
         super().__init__(name=f"hexatherm-{source}", daemon=True)
         self.source = source
@@ -86,6 +90,7 @@ class PortReader(threading.Thread):
         self.out = out
         self.stop = stop
         self.reopen_interval_s = reopen_interval_s
+        self.stamp = stamp
 
     def run(self) -> None:
         import serial
@@ -97,12 +102,12 @@ class PortReader(threading.Thread):
                     while data and len(data) < 65536 and (waiting := self.port.in_waiting):
                         data += self.port.read(waiting)
                 except (serial.SerialException, OSError) as exc:
-                    self.out.put(("lost", self.source, now_iso(), str(exc)))
+                    self.out.put(("lost", self.source, self.stamp(), str(exc)))
                     self._close()
                     self._reopen()
                     continue
                 if data:
-                    self.out.put(("rx", self.source, now_iso(), bytes(data)))
+                    self.out.put(("rx", self.source, self.stamp(), bytes(data)))
         finally:
             self._close()
 
@@ -118,5 +123,5 @@ class PortReader(threading.Thread):
                 self.port = self.settings.open()
             except AcquisitionError:
                 continue
-            self.out.put(("reopen", self.source, now_iso(), self.settings.url))
+            self.out.put(("reopen", self.source, self.stamp(), self.settings.url))
             return

@@ -1,9 +1,11 @@
 """``hexatherm serve-twin``: a simulated CMM and hexapod controller backed by the twin.
 
 The rehearsal of an unattended campaign (``hexatherm run``): an I++ DME server
-(:class:`~hexatherm.devices.ippserver.IppSimServer`) and a controller server
+(:class:`~hexatherm.devices.ippserver.IppSimServer`), a controller server
 (:class:`~hexatherm.devices.controllersim.SymetrieSimulator` or
-:class:`~hexatherm.devices.controllersim.PISimulator`) on 127.0.0.1, both backed by one
+:class:`~hexatherm.devices.controllersim.PISimulator`) and a thermocouple logger
+(:class:`~hexatherm.devices.thermosim.ThermocoupleSimulator`, for ``run
+--temperature-port socket://127.0.0.1:PORT``) on 127.0.0.1, all backed by one
 :class:`TwinWorld`:
 
 - the hexapod (:class:`~hexatherm.devices.controllersim.SimulatedHexapod`): moves in a
@@ -14,6 +16,8 @@ The rehearsal of an unattended campaign (``hexatherm run``): an I++ DME server
   commanded pose the platform is at, with the legs grown by the heating model's
   temperatures at that time (and the effects: the hexapod file's thermal model plus a
   scenario's hidden ones), placed on the CMM by ``origin_on_cmm``;
+- the thermocouples: the heating model's six leg temperatures and the air's (a seventh
+  channel), one line per sampling period, as a logger sends them;
 - time: one clock for everything, in seconds; :class:`AcceleratedClock` runs the thermal
   history ``time_scale`` times faster than the wall clock (a night in minutes), a
   :class:`~hexatherm.devices.controllersim.ManualClock` moves only when the run's waits
@@ -50,6 +54,7 @@ from hexatherm.devices.controllersim import (
     SymetrieSimulator,
 )
 from hexatherm.devices.ippserver import Fault, IppSimServer
+from hexatherm.devices.thermosim import ThermocoupleSimulator
 from hexatherm.errors import HexathermError, InputError
 from hexatherm.session import Balls
 from hexatherm.typing import FloatArray
@@ -178,6 +183,13 @@ class TwinWorld:
     def leg_temperatures_C(self, t_s: float) -> list[float]:
         """The legs' temperatures (6 channels) at clock time ``t_s``, deg C."""
         return [float(v) for v in self.heating.legs(np.array([t_s - self.start_s]))[0]]
+
+    def thermocouples_C(self, t_s: float) -> list[float]:
+        """What the thermocouple logger reads at clock time ``t_s``: the six legs, then the
+        air, deg C."""
+        rel = np.array([t_s - self.start_s])
+        legs = self.heating.legs(rel)[0]
+        return [float(v) for v in legs] + [float(self.heating.air(rel)[0])]
 
     def log(self, t_s: float) -> ThermocoupleLog:
         """The thermocouple history from the start to ``t_s`` (seconds from the start)."""
@@ -311,9 +323,12 @@ def parse_fault(text: str, into: ServeFaults | None = None) -> ServeFaults:
                 raise InputError(f"fault {kind} needs {key}=...")
             return default
         try:
-            return float(values[key])
+            value = float(values[key])
         except ValueError:
             raise InputError(f"fault {kind}: {key} must be a number, got {values[key]!r}") from None
+        if not np.isfinite(value):
+            raise InputError(f"fault {kind}: {key} must be a finite number, got {values[key]!r}")
+        return value
 
     def whole(key: str, default: int | None = None) -> int:
         value = number(key, None if default is None else float(default))
@@ -344,7 +359,10 @@ def parse_fault(text: str, into: ServeFaults | None = None) -> ServeFaults:
                 Fault("split", whole("nth", 1), values.get("method"), chunk_bytes=whole("chunk", 3))
             )
         elif kind == "late-in-position":
-            out.controller.late_in_position_s = number("seconds")
+            seconds = number("seconds")
+            if seconds < 0:
+                raise InputError(f"fault {kind}: seconds must be >= 0, got {values['seconds']!r}")
+            out.controller.late_in_position_s = seconds
         elif kind == "controller-drop":
             out.controller.drop_mid_move = True
         elif kind == "controller-split":
@@ -375,7 +393,8 @@ def parse_fault(text: str, into: ServeFaults | None = None) -> ServeFaults:
 
 
 class TwinMachines:
-    """Both simulated machines around one :class:`TwinWorld` (a context manager).
+    """The simulated machines (CMM, controller, thermocouple logger) around one
+    :class:`TwinWorld` (a context manager).
 
     Parameters
     ----------
@@ -388,8 +407,10 @@ class TwinMachines:
     seed : int
         Seed of the probing noise.
     ipp_faults : sequence of Fault
-    cmm_port, controller_port : int
+    cmm_port, controller_port, thermocouple_port : int
         Ports on 127.0.0.1 (0: free ones).
+    thermocouple_period_s : float
+        Sampling period of the thermocouple logger, on the world's clock, s.
     cmm_limits_mm : pair of 3 floats
         The CMM's travel box.
 
@@ -397,6 +418,7 @@ class TwinMachines:
     ----------
     cmm : IppSimServer
     controller : SimulatedController
+    thermocouples : ThermocoupleSimulator
     """
 
     def __init__(
@@ -410,6 +432,8 @@ class TwinMachines:
         ipp_faults: Sequence[Fault] = (),
         cmm_port: int = 0,
         controller_port: int = 0,
+        thermocouple_port: int = 0,
+        thermocouple_period_s: float = 10.0,
         cmm_limits_mm: tuple[Sequence[float], Sequence[float]] = (
             (-2000.0, -2000.0, -2000.0),
             (2000.0, 2000.0, 2000.0),
@@ -439,6 +463,17 @@ class TwinMachines:
         except BaseException:
             self.cmm.close()
             raise
+        try:
+            self.thermocouples = ThermocoupleSimulator(
+                world.thermocouples_C,
+                clock=world.clock,
+                period_s=thermocouple_period_s,
+                port=thermocouple_port,
+            )
+        except BaseException:
+            self.controller.close()
+            self.cmm.close()
+            raise
 
     @property
     def cmm_url(self) -> str:
@@ -450,12 +485,20 @@ class TwinMachines:
         """``symetrie://127.0.0.1:PORT`` or ``pi://127.0.0.1:PORT``."""
         return self.controller.url
 
+    @property
+    def thermocouples_url(self) -> str:
+        """``socket://127.0.0.1:PORT``: the thermocouple logger, for ``--temperature-port``."""
+        return self.thermocouples.url
+
     def close(self) -> None:
-        """Stop both servers (their connections drop, as machines that go away)."""
+        """Stop the servers (their connections drop, as machines that go away)."""
         try:
-            self.controller.close()
+            self.thermocouples.close()
         finally:
-            self.cmm.close()
+            try:
+                self.controller.close()
+            finally:
+                self.cmm.close()
 
     def __enter__(self) -> TwinMachines:
         return self

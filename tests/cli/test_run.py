@@ -58,8 +58,15 @@ def base(plan: Path, m: TwinMachines, session: Path) -> list[object]:
 def test_run_then_process(tmp_path: Path, machines: TwinMachines) -> None:
     plan = write_plan(tmp_path, [[5.0, -3.0, 4.0, 1.0, -2.0, 3.0]])
     session = tmp_path / "s"
-    result = invoke(*base(plan, machines, session))
+    result = invoke(
+        *base(plan, machines, session), "--temperature-port", machines.thermocouples_url
+    )
     assert result.exit_code == 0, result.output
+    # the thermocouples logged as the run went, attached to the session
+    temperatures = pd.read_csv(session / "temperatures.csv")
+    assert list(temperatures.columns) == ["time"] + [f"leg{k}" for k in range(1, 7)] + ["ch7"]
+    assert len(temperatures) >= 2 and (temperatures["ch7"] == 20.0).all()
+    assert "temperatures: temperatures.csv" in (session / "session.yaml").read_text()
     table = [line for line in result.stdout.splitlines() if line]
     assert table[0].startswith("label,ball,n,x,y,z") and len(table) >= 1 + 12
     assert "72 points in" in result.stderr and "session.yaml" in result.stderr
@@ -96,3 +103,48 @@ def test_usage_errors(tmp_path: Path, machines: TwinMachines) -> None:
     result = invoke("run", plan, "--cmm", "ipp://127.0.0.1:1", "--controller", "x://h",
                     "--session", tmp_path / "r", "--resume")  # fmt: skip
     assert result.exit_code != 0
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "message"),
+    [
+        ("--settle", "nan", "'nan' is not a number"),
+        ("--poll", "inf", "must be finite"),
+        ("--readback-tol-um", "nan", "'nan' is not a number"),
+        ("--radius-tol-um", "-1", "must be >= 0"),
+        ("--form-tol-um", "1e400", "must be finite"),
+        ("--rms-tol-um", "nan", "'nan' is not a number"),
+        ("--centre-tol-mm", "NaN", "'NaN' is not a number"),
+        ("--max-gap", "nan", "'nan' is not a number"),
+        ("--max-gap", "-5", "must be >= 0"),
+        ("--cap-angle", "nan", "'nan' is not a number"),
+        ("--cap-angle", "91", "must be <= 90"),
+        ("--approach", "inf", "must be finite"),
+        ("--clearance", "0", "must be >= 0.01"),
+        ("--travel", "1e9", "must be <= 2000"),
+        ("--in-position-timeout", "nan", "'nan' is not a number"),
+        ("--ipp-timeout", "-inf", "must be finite"),
+        ("--readings", "0", "not in the range"),
+        ("--reconnects", "99999999999", "not in the range"),
+        ("--temperature-baud", "0", "not in the range"),
+        ("--origin-on-cmm", "nan,0,0,0,0,0", "expected 6 finite numbers"),
+        ("--origin-on-cmm", "1e300,0,0,0,0,0", "is no machine's"),
+        ("--cmm-limits", "0,0,0,inf,1,1", "expected 6 finite numbers"),
+        ("--cmm-limits", "0,0,0,-1,1,1", "lower corner"),
+    ],
+)
+def test_hostile_values_are_one_line_usage_errors(
+    tmp_path: Path, option: str, value: str, message: str
+) -> None:
+    """NaN, infinities and absurd numbers never reach the machines nor give a traceback."""
+    plan = write_plan(tmp_path, [[5.0, -3.0, 4.0, 1.0, -2.0, 3.0]])
+    args = [
+        "run", plan, "--cmm", "ipp://127.0.0.1:1", "--controller", "symetrie://127.0.0.1:1",
+        "--session", tmp_path / "s", "--hexapod", HEXAPOD, "--balls", BALLS,
+        "--origin-on-cmm", ",".join(str(v) for v in NOMINAL_ORIGIN),
+    ]  # fmt: skip
+    result = invoke(*args, option, value)
+    assert result.exit_code == 2, result.output
+    assert result.exception is None or isinstance(result.exception, SystemExit)
+    assert message in result.output and option in result.output
+    assert not (tmp_path / "s").exists()

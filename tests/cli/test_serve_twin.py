@@ -6,10 +6,13 @@ import signal
 import subprocess
 import sys
 
+import pytest
 from click.testing import CliRunner
 
 from hexatherm.cli import main
 from hexatherm.devices.ipp import IppClient, parse_ipp_url
+from hexatherm.devices.probestream import parse_numbers
+from hexatherm.devices.serialport import PortSettings
 from hexatherm.devices.urls import controller_from_url
 from hexatherm.io.config import read_hexapod
 from tests.sessions import ROOT
@@ -30,8 +33,21 @@ def test_serve_twin_prints_its_urls_serves_and_stops_on_ctrl_c() -> None:
     try:
         assert proc.stdout is not None
         cmm_line, controller_line = proc.stdout.readline(), proc.stdout.readline()
+        thermo_line = proc.stdout.readline()
         assert cmm_line.startswith("cmm: ipp://127.0.0.1:"), cmm_line
         assert controller_line.startswith("controller: pi://127.0.0.1:"), controller_line
+        assert thermo_line.startswith("thermocouples: socket://127.0.0.1:"), thermo_line
+        # the logger, opened as run --temperature-port opens it (pyserial), sends lines that
+        # acquire's parser reads as six legs and the air, the mats' heating on the legs
+        port = PortSettings(thermo_line.split()[1], timeout_s=10.0).open()
+        try:
+            port.readline()  # the first line may be cut by pyserial's flush at open
+            samples = [parse_numbers(port.readline()) for _ in range(2)]
+        finally:
+            port.close()
+        for sample in samples:
+            assert sample is not None and len(sample) == 7
+            assert all(15.0 < v < 40.0 for v in sample) and sample[6] == 20.0
         host, port = parse_ipp_url(cmm_line.split()[1])
         with IppClient(host, port, timeout_s=30) as cmm:
             cmm.start_session()
@@ -62,3 +78,35 @@ def test_a_bad_fault_is_refused() -> None:
     assert result.exit_code == 1 and "bad setting 'colour=red'" in result.output
     result = CliRunner().invoke(main, ["serve-twin", "--hexapod", str(HEXAPOD)])
     assert result.exit_code == 2 and "--balls" in result.output
+
+
+@pytest.mark.parametrize(
+    ("args", "code", "message"),
+    [
+        (["--time-scale", "nan"], 2, "'nan' is not a number"),
+        (["--time-scale", "0"], 2, "must be >= 0.001"),
+        (["--time-scale", "inf"], 2, "must be finite"),
+        (["--speed-mm-s", "nan"], 2, "'nan' is not a number"),
+        (["--settle", "-1"], 2, "must be >= 0"),
+        (["--cmm-move-s", "inf"], 2, "must be finite"),
+        (["--point-noise-um", "nan"], 2, "'nan' is not a number"),
+        (["--thermocouple-period", "0"], 2, "must be >= 0.01"),
+        (["--thermocouple-period", "nan"], 2, "'nan' is not a number"),
+        (["--seed", "-1"], 2, "not in the range"),
+        (["--origin-on-cmm", "0,0,0,0,0,inf"], 2, "expected 6 finite numbers"),
+        (["--fault", "late-in-position:seconds=nan"], 1, "must be a finite number"),
+        (["--fault", "late-in-position:seconds=-3"], 1, "seconds must be >= 0"),
+        (["--fault", "refuse:axis=Tz,max=nan"], 1, "must be a finite number"),
+        (["--fault", "ipp-error:severity=2,nth=inf"], 1, "must be a finite number"),
+        (["--fault", "ipp-error:severity=12"], 1, "severity must be 0..9"),
+    ],
+)
+def test_hostile_values_are_one_line_errors(args: list[str], code: int, message: str) -> None:
+    """Refused before any server starts: one line, no traceback."""
+    result = CliRunner().invoke(
+        main, ["serve-twin", "--hexapod", str(HEXAPOD), "--balls", str(BALLS), *args]
+    )
+    assert result.exit_code == code, result.output
+    assert result.exception is None or isinstance(result.exception, SystemExit)
+    assert message in result.output
+    assert "Traceback" not in result.output and "serving" not in result.output

@@ -7,14 +7,16 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from click.testing import CliRunner
 
+from hexatherm.cli import main
 from hexatherm.devices.controller import InPositionCriteria
 from hexatherm.devices.controllersim import Faults
 from hexatherm.devices.ippserver import Fault
-from hexatherm.errors import IncompleteSession, PoseError
+from hexatherm.errors import ControllerError, IncompleteSession, PoseError
 from hexatherm.io.records import iso_to_seconds
 from hexatherm.workflows.serve import parse_fault
-from tests.workflows.test_run import Bench, check_complete, make_bench
+from tests.workflows.test_run import START, Bench, check_complete, make_bench
 
 
 @pytest.fixture
@@ -192,5 +194,169 @@ def test_a_bad_ball_is_probed_once_more(tmp: Path) -> None:
         assert len(s1b2) == 1 and s1b2[0].attempts == 2 and not s1b2[0].problems
         assert abs(s1b2[0].radius_mm - 12.7) < 1e-3
         check_complete(b)
+    finally:
+        b.machines.close()
+
+
+def _gaps_s(b: Bench) -> dict[str, float]:
+    """Time from each step's last point to the next step's first point, by the next step."""
+    points = check_complete(b)
+    points["t"] = points["time"].map(iso_to_seconds)
+    span = points.groupby("label")["t"].agg(["min", "max"]).loc[list(b.files.plan.labels)]
+    return {
+        later: float(span.loc[later, "min"] - span.loc[earlier, "max"])
+        for earlier, later in zip(span.index[:-1], span.index[1:], strict=True)
+    }
+
+
+def test_a_delay_after_a_target_has_it_measured_again_between_fresh_references(
+    tmp: Path,
+) -> None:
+    """The after-reference would come too late (a delay once the target is measured): the
+    target is measured again, with its reference before it, then the after-reference."""
+    b = bench_with(tmp)
+    jumped: list[float] = []
+
+    def notify(level: str, message: str) -> None:
+        b.messages.append((level, message))
+        if message.startswith("S1 B3:") and not jumped:  # S1's last ball accepted
+            jumped.append(b.clock())
+            b.clock.advance(900.0)
+
+    b.notify = notify  # type: ignore[method-assign]
+    try:
+        result = b.run(max_gap_s=600.0)
+        assert result.remeasured == ("S1", "R0")
+        text = transcript(b)
+        assert "run remeasure S1 for R1 gap 90" in text  # 900 s and the time it took
+        assert "run remeasure R0 for S1 gap 10" in text
+        # the delay was seen before moving: no move to R1 before S1 and R0 were measured again
+        steps = pd.read_csv(b.session / "steps.csv")
+        assert list(steps["label"]) == ["O", "R0", "S1", "R0", "S1", "R1"]
+        gaps = _gaps_s(b)
+        assert max(gaps["S1"], gaps["R1"]) < 600.0  # the target between fresh references
+        points = pd.read_csv(b.session / "points.csv")
+        first = points.groupby("label")["time"].min().map(iso_to_seconds)
+        assert jumped[0] + 900.0 < first["R0"] < first["S1"] < first["R1"]
+    finally:
+        b.machines.close()
+
+
+def test_a_resume_the_next_morning_measures_the_open_targets_references_again(tmp: Path) -> None:
+    """Stopped once R1 is in position (an emergency stop), resumed 2 h later: S1 is measured
+    again between a new R0 and R1, and process finds their time gaps within the limit."""
+    b = bench_with(tmp)
+
+    def notify(level: str, message: str) -> None:
+        b.messages.append((level, message))
+        if " R1 (reference) in position" in message and b.clock() < START + 3600:
+            raise ControllerError("emergency stop pressed")
+
+    b.notify = notify  # type: ignore[method-assign]
+    try:
+        with pytest.raises(IncompleteSession, match=r"step R1 \(reference\), ball B1"):
+            b.run(max_gap_s=600.0)
+        b.clock.advance(7200.0)
+        stopped = b.clock()
+        result = b.run(resume=True, max_gap_s=600.0)
+        assert result.remeasured == ("S1", "R0")
+        steps = pd.read_csv(b.session / "steps.csv")
+        assert list(steps["label"]) == ["O", "R0", "S1", "R1", "R0", "S1", "R1"]
+        gaps = _gaps_s(b)
+        assert gaps["R0"] > 7200.0  # O was not measured again: only R0's thermal state counts
+        assert max(gaps["S1"], gaps["R1"]) < 600.0
+        points = pd.read_csv(b.session / "points.csv")
+        first = points.groupby("label")["time"].min().map(iso_to_seconds)
+        assert stopped < first["R0"] < first["S1"] < first["R1"]
+        result = CliRunner().invoke(main, ["process", str(b.session)])
+        assert result.exit_code == 0, result.output
+        quality = pd.read_csv(b.session / "results" / "quality.csv").set_index("label")
+        assert quality.loc["S1", "time_gap_s"] < 600.0 and quality.loc["S1", "ok_time_gap"]
+    finally:
+        b.machines.close()
+
+
+def test_a_controller_error_code_on_a_move_stops_the_run_and_resume_finishes(tmp: Path) -> None:
+    """controller-error: the controller answers MOVE#ABS with an error code (here once R0 is
+    measured): nothing is retried blindly, the hexapod gets STOP, the code is named, and
+    --resume finishes."""
+    b = bench_with(tmp)
+
+    def notify(level: str, message: str) -> None:
+        b.messages.append((level, message))
+        if message.startswith("R0 B3:"):
+            injected = parse_fault("controller-error:command=MOVE#ABS,code=-104").controller
+            b.machines.controller.faults.errors.update(injected.errors)
+
+    b.notify = notify  # type: ignore[method-assign]
+    try:
+        with pytest.raises(IncompleteSession, match=r"-104") as stopped:
+            b.run()
+        assert "step S1 (target), ball B1" in str(stopped.value)
+        assert b.machines.controller.received[-1] == "STOP"
+        before = pd.read_csv(b.session / "points.csv")
+        assert set(before["label"]) == {"O", "R0"}
+        b.notify = lambda level, message: b.messages.append((level, message))  # type: ignore[method-assign]
+        b.run(resume=True)
+        after = check_complete(b)
+        pd.testing.assert_frame_equal(after.iloc[: len(before)], before)
+    finally:
+        b.machines.close()
+
+
+def test_no_in_position_flag_stops_the_run_and_resume_finishes(tmp: Path) -> None:
+    """The flag does not come within the in-position timeout (a late flag beyond it): the
+    run stops with the hexapod sent STOP; once the controller is well, --resume finishes."""
+    b = bench_with(tmp, faults=Faults(late_in_position_s=600.0))
+    criteria = InPositionCriteria(settle_s=2.0, poll_s=1.0, timeout_s=300.0)
+    try:
+        with pytest.raises(IncompleteSession, match=r"step O \(origin\)"):
+            b.run(criteria=criteria)
+        assert "STOP" in b.machines.controller.received
+        assert not (b.session / "points.csv").read_text().strip().count("\n")
+        b.machines.controller.faults.late_in_position_s = 0.0
+        b.run(resume=True, criteria=criteria)
+        check_complete(b)
+    finally:
+        b.machines.close()
+
+
+def test_ctrl_c_stops_the_hexapod_and_resume_finishes(tmp: Path) -> None:
+    b = bench_with(tmp)
+
+    def notify(level: str, message: str) -> None:
+        b.messages.append((level, message))
+        if message.startswith("S1 B2:"):
+            raise KeyboardInterrupt
+
+    b.notify = notify  # type: ignore[method-assign]
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            b.run()
+        assert b.machines.controller.received[-1] == "STOP"
+        assert "run stopped interrupted (Ctrl-C)" in transcript(b)
+        before = pd.read_csv(b.session / "points.csv")
+        assert len(before) == (2 * 3 + 2) * 6  # O, R0 and S1's first two balls
+        b.notify = lambda level, message: b.messages.append((level, message))  # type: ignore[method-assign]
+        b.run(resume=True)
+        after = check_complete(b)
+        pd.testing.assert_frame_equal(after.iloc[: len(before)], before)
+    finally:
+        b.machines.close()
+
+
+def test_the_pi_dialect_end_to_end(tmp: Path) -> None:
+    """The same campaign through a PI GCS controller (U, V, W axes, the pi convention on the
+    wire): every ball on its own step, the controller's log in GCS."""
+    b = bench_with(tmp)
+    b.restart(dialect="pi")
+    try:
+        b.run()
+        check_complete(b)
+        log = (b.session / "controller.log").read_text()
+        assert ' > "MOV ' in log and ' > "POS?' in log and "MOVE#ABS" not in log
+        steps = pd.read_csv(b.session / "steps.csv")
+        q = b.world.hexapod.igm(b.files.plan.poses)
+        np.testing.assert_allclose(steps[[f"q_leg{i}_mm" for i in range(1, 7)]], q, atol=1e-4)
     finally:
         b.machines.close()

@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import multiprocessing
+import multiprocessing.process
 import os
 import signal
 import subprocess
 import sys
+import threading
 import time
+from multiprocessing.connection import Connection
 from pathlib import Path
 
 import numpy as np
@@ -126,3 +130,96 @@ def test_a_machine_that_crashes_then_resume(tmp_path: Path, prefix: str, which: 
         pd.testing.assert_frame_equal(after.iloc[: len(before)], before)
     finally:
         b.machines.close()
+
+
+class _WallClock:
+    """The twin's time on the wall clock, ``scale`` times faster from ``anchor`` (shared by
+    every incarnation of a server process: a restarted server continues the same history)."""
+
+    def __init__(self, scale: float, anchor_s: float) -> None:
+        self.scale, self.anchor_s = scale, anchor_s
+
+    def __call__(self) -> float:
+        return self.anchor_s + self.scale * (time.time() - self.anchor_s)
+
+    def sleep(self, seconds: float) -> None:
+        if seconds > 0:
+            time.sleep(seconds / self.scale)
+
+
+def _serve(b: Bench, clock: _WallClock, ports: tuple[int, int], pipe: Connection) -> None:
+    """A server process: the twin's CMM and controller until it is killed."""
+    world = TwinWorld(
+        b.world.hexapod,
+        b.files.balls,
+        heating=HEATING,
+        origin_on_cmm=TRUE_ORIGIN,
+        clock=clock,
+        sleep=clock.sleep,
+        start_s=clock.anchor_s,
+        cmm_move_s=0.1,
+    )
+    machines = TwinMachines(world, cmm_port=ports[0], controller_port=ports[1])
+    pipe.send((machines.cmm.port, machines.controller.port))
+    while True:
+        time.sleep(1.0)
+
+
+def test_sigkill_of_the_server_process_then_resume(tmp_path: Path) -> None:
+    """The process serving both machines is killed (SIGKILL, at a seeded random point of the
+    transcript) under a running campaign: the run stops (the machines stay away), the
+    server is started again on the same ports, continuing the same thermal history, and
+    --resume finishes: every ball once, on its own step, what was accepted kept."""
+    b = make_bench(tmp_path, **SHORT)  # type: ignore[arg-type]
+    b.machines.close()
+    context = multiprocessing.get_context("fork")
+    clock = _WallClock(1000.0, time.time())
+
+    def start(
+        ports: tuple[int, int],
+    ) -> tuple[multiprocessing.process.BaseProcess, tuple[int, int]]:
+        parent, child = context.Pipe()
+        proc = context.Process(target=_serve, args=(b, clock, ports, child), daemon=True)
+        proc.start()
+        assert parent.poll(60), "the server did not start"
+        return proc, parent.recv()
+
+    server, ports = start((0, 0))
+    urls = {"cmm_url": f"ipp://127.0.0.1:{ports[0]}",
+            "controller_url": f"symetrie://127.0.0.1:{ports[1]}"}  # fmt: skip
+    criteria = InPositionCriteria(settle_s=0.02, tolerance_um=2.0, poll_s=0.01)
+    options = b.options(reconnects=1, reconnect_wait_s=0.05, criteria=criteria, **urls)
+    failure: list[BaseException] = []
+
+    def first_run() -> None:
+        try:
+            run_campaign(b.files, b.world.hexapod, options, b.notify)
+        except BaseException as exc:  # noqa: BLE001 - handed to the test's thread
+            failure.append(exc)
+
+    transcript = b.session / "ipp.transcript"
+    try:
+        thread = threading.Thread(target=first_run)
+        thread.start()
+        target = int(np.random.default_rng(7).integers(150, 600))
+        deadline = time.monotonic() + 120.0
+        while thread.is_alive() and _lines(transcript) < target:
+            assert time.monotonic() < deadline, "the run made no progress"
+            time.sleep(0.002)
+        os.kill(server.pid, signal.SIGKILL)
+        server.join(timeout=30)
+        thread.join(timeout=120)
+        assert len(failure) == 1 and isinstance(failure[0], IncompleteSession), failure
+        before = pd.read_csv(b.session / "points.csv")
+        assert 0 < len(before) < 4 * 3 * 6
+        server, again = start(ports)  # the machine is back, on its ports
+        assert again == ports
+        run_campaign(b.files, b.world.hexapod, b.options(resume=True, criteria=criteria, **urls),
+                     b.notify)  # fmt: skip
+        after = check_complete(b, max_rms_um=3.0)
+        pd.testing.assert_frame_equal(after.iloc[: len(before)], before)
+        assert transcript.read_text().count("run resume") == 1
+    finally:
+        if server.is_alive():
+            os.kill(server.pid, signal.SIGKILL)
+            server.join(timeout=30)

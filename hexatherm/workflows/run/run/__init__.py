@@ -17,8 +17,14 @@ For every step of the plan, in order (O, R0, then the targets with their referen
    if it is still bad (``process``'s quality checks see it);
 4. before a target, when its reference right before it was measured longer than
    ``max_gap_s`` ago (a late in-position flag, a reconnection, a resume), that reference
-   is measured again first (its new points replace the old ones in ``points.csv``; the old
-   ones stay in the transcript).
+   is measured again first; before a reference, when the target right before it (whose
+   after-reference it is) was measured longer than ``max_gap_s`` ago (a stop after the
+   target, a resume the next morning), that target is measured again first, and with it
+   its reference before it by the first rule: the target ends between fresh references.
+   New points replace the old ones in ``points.csv`` (the old ones stay in the
+   transcript); the rules do not cascade further back (the target before a reference
+   measured again gets a later after-reference, which ``process``'s time-gap check
+   reports).
 
 A dropped connection to either machine is reopened (``reconnects`` times per ball or
 move) and the ball probed, or the move commanded, again from its start. Errors that need

@@ -263,7 +263,9 @@ class _Campaign:
                 self.clog.note("start")
             if options.temperature_port is not None:
                 port = options.temperature_port
-                thermo = _Thermocouples(folder, port, self.files, options.resume)
+                thermo = _Thermocouples(
+                    folder, port, self.files, self.clock, options.reconnect_wait_s
+                )
             self._connect_controller()
             travel = _travel_z(self.geometry, self.origin2cmm())
             assert self.controller is not None
@@ -297,7 +299,7 @@ class _Campaign:
             raise
         finally:
             if thermo is not None:
-                thermo.close()
+                thermo.close("complete" if completed else "interrupted")
             if self.cmm is not None:
                 if completed:
                     with contextlib.suppress(HexathermError):
@@ -422,35 +424,62 @@ class _Campaign:
         while (i := self._next_step()) is not None:
             self._visit(i)
 
-    def _gap_broken(self, i: int) -> float | None:
-        """The time since the reference right before target i, if longer than allowed."""
+    def _last_time_s(self, i: int) -> float:
+        """Time of the last point of step i (every ball accepted), s."""
+        label = self.plan.labels[i]
+        return max(self.state.accepted[(label, b)].last_time_s for b in self.balls.names)
+
+    def _stale_neighbour(self, i: int) -> tuple[int, float] | None:
+        """The step to measure again before step i, and the gap that calls for it, if any.
+
+        - Step i a target: the reference right before it, measured longer than
+          ``max_gap_s`` ago (a delay between them).
+        - Step i a reference: the target right before it (whose after-reference step i is),
+          measured longer than ``max_gap_s`` ago (a delay after the target, a resume the
+          next morning): the target is measured again (its own reference before it too,
+          by the rule above), then step i, so the target has fresh references both sides.
+        """
         plan = self.plan
         r = i - 1
-        if plan.kinds[i] != "target" or r < 0 or plan.kinds[r] != "reference" or not self._done(r):
+        if r < 0 or not self._done(r):
             return None
-        last = max(self.state.accepted[(plan.labels[r], b)].last_time_s for b in self.balls.names)
-        gap = self.clock() - last
-        return gap if gap > self.options.max_gap_s else None
+        pairs = (("target", "reference"), ("reference", "target"))
+        if (plan.kinds[i], plan.kinds[r]) not in pairs:
+            return None
+        gap = self.clock() - self._last_time_s(r)
+        return (r, gap) if gap > self.options.max_gap_s else None
 
-    def _visit(self, i: int, again: bool = False) -> None:
-        """Bring the hexapod to step i and probe its balls not accepted (all if ``again``)."""
+    def _visit(self, i: int, again: bool = False, check: bool = True) -> None:
+        """Bring the hexapod to step i and probe its balls not accepted (all if ``again``).
+
+        With ``check``, a neighbour that a delay made stale (:meth:`_stale_neighbour`) is
+        measured again first (before the move when the delay is already there, else once
+        in position), and then every ball of step i. A reference measured again for a
+        target checks nothing further (no cascade back through the plan).
+        """
         plan = self.plan
         label = plan.labels[i]
         travel = _travel_z(self.geometry, self.origin2cmm())
-        self._cmm_call(lambda: self._lift(travel))
-        self._move(i)
-        gap = None if again else self._gap_broken(i)
-        if gap is not None:
-            r = i - 1
+        stale = self._stale_neighbour(i) if check else None
+        if stale is None:
+            self._cmm_call(lambda: self._lift(travel))
+            self._move(i)
+            stale = self._stale_neighbour(i) if check else None
+        if stale is not None:
+            r, gap = stale
+            before, after = plan.labels[r], label
             self.notify(
                 "warn",
-                f"{plan.labels[r]} was measured {gap / 60:.1f} min before {label} (allowed "
-                f"{self.options.max_gap_s / 60:.1f} min): measuring {plan.labels[r]} again",
+                f"{before} was measured {gap / 60:.1f} min before {after} (allowed "
+                f"{self.options.max_gap_s / 60:.1f} min): measuring {before} again",
             )
             assert self.tlog is not None
-            self.tlog.note(f"remeasure {plan.labels[r]} for {label} gap {gap:.3f} s")
-            self.remeasured.append(plan.labels[r])
-            self._visit(r, again=True)
+            self.tlog.note(f"remeasure {before} for {after} gap {gap:.3f} s")
+            self.remeasured.append(before)
+            # a target measured again checks its own reference before it; a reference
+            # measured again for a target does not look further back
+            self._visit(r, again=True, check=plan.kinds[r] == "target")
+            travel = _travel_z(self.geometry, self.origin2cmm())
             self._cmm_call(lambda: self._lift(travel))
             self._move(i)
             again = True

@@ -68,7 +68,8 @@ class RunOptions:
     reconnects : int
         Reopenings of a dropped connection per ball or per move.
     reconnect_wait_s : float
-        Wait before reopening, s.
+        Wait before reopening a connection, s (the thermocouple port: between attempts,
+        at least 0.05 s).
     ipp_timeout_s : float
         Longest I++ transaction, s.
     reply_timeout_s : float

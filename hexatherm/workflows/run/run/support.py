@@ -27,6 +27,7 @@ from hexatherm.errors import (
     PoseRefusedError,
 )
 from hexatherm.io.atomic import atomic_write_text
+from hexatherm.io.records import seconds_to_iso
 from hexatherm.io.seriallog import (
     LOG_NAME,
     TEMPERATURE,
@@ -217,12 +218,27 @@ def dry_run(
 class _Thermocouples:
     """A thermocouple logger on a serial port: ``serial.log`` and ``temperatures.csv``.
 
-    The lines are parsed by ``acquire``'s recorder (the same format); on a resume the log is
-    replayed to rebuild ``temperatures.csv``.
+    The lines are parsed by ``acquire``'s recorder (the same format); an existing log (a
+    resume) is replayed to rebuild ``temperatures.csv`` and continued. Every entry is
+    stamped with ``clock`` (the run's clock, which also stamps the transcript, hence the
+    points: one time line). A lost port is reopened every ``reopen_interval_s`` (at least
+    0.05 s) until it opens.
     """
 
-    def __init__(self, folder: Path, settings: PortSettings, files: SessionFiles, resume: bool):
+    def __init__(
+        self,
+        folder: Path,
+        settings: PortSettings,
+        files: SessionFiles,
+        clock: Callable[[], float] = time.time,
+        reopen_interval_s: float = 1.0,
+    ):
         self.folder, self.settings = folder, settings
+
+        def stamp() -> str:
+            return seconds_to_iso(clock())
+
+        self.stamp = stamp
         self.items: queue.Queue[Any] = queue.Queue()
         self.stop_event = threading.Event()
         log_path = folder / LOG_NAME
@@ -230,7 +246,9 @@ class _Thermocouples:
         self.recorder = StreamRecorder(
             files.plan, files.balls, points=MemorySink(), temperatures=MemorySink()
         )
-        if resume and log_path.is_file():
+        # a log there already (a resume, or a new run in a folder where an attempt stopped
+        # before its first I++ command) is continued, never replaced: what it recorded stays
+        if log_path.is_file():
             raw = log_path.read_bytes()
             entries, complete = parse_log(raw, str(log_path))
             if complete < len(raw):
@@ -241,13 +259,27 @@ class _Thermocouples:
             lines = self.recorder.temperatures.lines
             atomic_write_text(folder / TEMPERATURES_NAME, "".join(x + "\n" for x in lines))
             self.log = SerialLog(log_path, create=False)
-            self._record(entry("resume"))
+            self._record(entry("resume", when=stamp()))
         else:
             self.log = SerialLog(log_path, create=True)
         self.recorder.temperature_sink = self.sink
-        self._record(entry("open", TEMPERATURE, settings.describe()))
-        port = settings.open()
-        self.reader = PortReader(TEMPERATURE, settings, port, self.items, self.stop_event)
+        self._record(entry("open", TEMPERATURE, settings.describe(), when=stamp()))
+        try:
+            port = settings.open()
+        except AcquisitionError:
+            self.log.append(entry("end", payload="interrupted", when=stamp()))
+            self.log.close()
+            self.sink.close()
+            raise
+        self.reader = PortReader(
+            TEMPERATURE,
+            settings,
+            port,
+            self.items,
+            self.stop_event,
+            reopen_interval_s=max(reopen_interval_s, 0.05),
+            stamp=stamp,
+        )
         self.reader.start()
         self.thread = threading.Thread(target=self._drain, name="hexatherm-thermo", daemon=True)
         self.thread.start()
@@ -266,9 +298,13 @@ class _Thermocouples:
             payload = data if isinstance(data, bytes) else str(data).encode("utf-8", "replace")
             self._record(LogEntry(when, kind, source, payload))
 
-    def close(self) -> None:
+    def close(self, outcome: str = "interrupted") -> None:
+        """Stop reading, log what arrived until now and ``end`` with ``outcome``."""
         self.stop_event.set()
         self.reader.join(timeout=5.0)
         self.thread.join(timeout=5.0)
-        self.log.close()
-        self.sink.close()
+        try:
+            self.log.append(entry("end", payload=outcome, when=self.stamp()))
+        finally:
+            self.log.close()
+            self.sink.close()

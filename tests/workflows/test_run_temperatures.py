@@ -1,0 +1,277 @@
+"""``hexatherm run --temperature-port`` against the twin's thermocouple logger.
+
+The logger of :class:`~hexatherm.workflows.serve.TwinMachines` streams the twin's leg and
+air temperatures (``socket://127.0.0.1:PORT``, what pyserial opens) on the twin's clock and
+keeps every line it sent with its clock time: the truth the recorded ``temperatures.csv``
+is compared with. The leg temperatures are also recomputed here from the heating model.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+
+from hexatherm.cli import main
+from hexatherm.devices.controller import InPositionCriteria
+from hexatherm.devices.serialport import PortSettings
+from hexatherm.devices.thermosim import SentSample
+from hexatherm.errors import IncompleteSession
+from hexatherm.io.records import iso_to_seconds
+from hexatherm.workflows.acquire.run import session_from_log
+from hexatherm.workflows.run.run import run_campaign
+from hexatherm.workflows.serve import AcceleratedClock, TwinMachines, TwinWorld
+from tests.sessions import ROOT
+from tests.workflows.test_run import (
+    HEATING,
+    NOMINAL_ORIGIN,
+    START,
+    TRUE_ORIGIN,
+    URAD,
+    make_bench,
+    step_times,
+)
+
+SHORT = {"targets": [[5.0, -3.0, 4.0, 1.0, -2.0, 3.0]], "points_per_ball": 6}
+CHANNELS = [f"leg{k}" for k in range(1, 7)] + ["ch7"]
+
+
+def read_rows(session: Path) -> tuple[np.ndarray, np.ndarray]:
+    """The times (s) and values (n, 7) of a session's temperatures.csv."""
+    table = pd.read_csv(session / "temperatures.csv")
+    assert list(table.columns) == ["time", *CHANNELS]
+    times = np.array([iso_to_seconds(x) for x in table["time"]])
+    return times, table[CHANNELS].to_numpy()
+
+
+def split_by_connection(values: np.ndarray, sent: Sequence[SentSample]) -> list[tuple[int, int]]:
+    """Which lines (first, count) of each of the logger's connections the rows hold, checking
+    that they
+    are, in order, consecutive lines of the first connection, then of the second, ...:
+    nothing doubled, nothing missing in between. A connection's first lines may be missing
+    (pyserial flushes the input when it opens a port) and so may its last ones (in flight
+    when it dropped): lines that never reached hexatherm."""
+    by_connection: dict[int, list[list[float]]] = {}
+    for number, _, _, line in sent:
+        by_connection.setdefault(number, []).append([float(v) for v in line.split(b",")])
+    counts: list[tuple[int, int]] = []
+    k = 0
+    for number in sorted(by_connection):
+        lines = by_connection[number]
+        start = next((i for i, v in enumerate(lines) if np.array_equal(values[k], v)), None)
+        if k == len(values) or start is None:
+            counts.append((0, 0))
+            continue
+        n = 0
+        while (
+            k < len(values)
+            and start + n < len(lines)
+            and np.array_equal(values[k], lines[start + n])
+        ):
+            k, n = k + 1, n + 1
+        counts.append((start, n))
+    assert k == len(values), f"row {k + 2} of temperatures.csv is no line the logger sent next"
+    return counts
+
+
+def test_run_logs_the_twins_thermocouples_replayably_and_process_uses_them(tmp_path: Path) -> None:
+    b = make_bench(tmp_path, **SHORT)  # type: ignore[arg-type]
+    try:
+        b.run(temperature_port=PortSettings(b.machines.thermocouples_url))
+        sent = list(b.machines.thermocouples.sent)
+    finally:
+        b.machines.close()
+    session = b.session
+    times, values = read_rows(session)
+    assert len(values) >= 10
+    # the rows are the lines the logger sent, in order, none lost or doubled
+    ((first, count),) = split_by_connection(values, sent)
+    assert count == len(values)
+    sent_t = np.array([s[1] for s in sent[first : first + count]])
+    # ... and those lines are the twin's temperatures at the time they were sent
+    # (recomputed from the heating model: the world started 1200 s before START)
+    truth = np.column_stack(
+        [HEATING.legs(sent_t - (START - 1200.0)), HEATING.air(sent_t - (START - 1200.0))]
+    )
+    assert np.abs(values - truth).max() <= 5e-4 + 1e-12
+    assert np.ptp(values[:, 4]) > 1.0  # the legs heat up during the run (leg 5 by > 1 K)
+    # each row is stamped on the run's clock when its line arrived: not before it was sent,
+    # never going back, within the run's time span (the points' clock)
+    assert (times >= sent_t - 1e-6).all() and (np.diff(times) >= 0).all()
+    points = pd.read_csv(session / "points.csv")
+    point_t = points["time"].map(iso_to_seconds)
+    assert times[0] <= point_t.min() and times[-1] <= point_t.max() + 600.0
+    # serial.log ends with the run, and replays into the same temperatures.csv, byte for byte
+    assert (session / "serial.log").read_text().splitlines()[-1].endswith(' end - "complete"')
+    replay = session_from_log(b.files, session / "serial.log", tmp_path / "replay", b.notify)
+    assert not replay.complete  # no probe data in a thermocouple log: no points
+    assert (tmp_path / "replay" / "temperatures.csv").read_bytes() == (
+        session / "temperatures.csv"
+    ).read_bytes()
+    # the session attaches them; process uses them (quality check, --method twin)
+    assert "temperatures: temperatures.csv" in (session / "session.yaml").read_text()
+    result = CliRunner().invoke(main, ["process", str(session), "--method", "twin"])
+    assert result.exit_code == 0, result.output
+    poses = pd.read_csv(session / "results" / "poses.csv")
+    quality = pd.read_csv(session / "results" / "quality.csv").set_index("label")
+    assert 0.1 < quality.loc["S1", "temperature_change_C"] < 2.0
+    plan = b.files.plan
+    twin = b.world.truth(plan, step_times(session, plan.labels))
+    axes = ["Tx_", "Ty_", "Tz_", "Rx_", "Ry_", "Rz_"]
+    unit = ["mm"] * 3 + ["deg"] * 3
+    twin_cols = [f"{a}twin_{u}" for a, u in zip(axes, unit, strict=True)]
+    conv_cols = [f"{a}conv_{u}" for a, u in zip(axes, unit, strict=True)]
+    i = plan.labels.index("S1")
+    # corrected from the thermocouples alone: the truth within 0.3 um and 10 urad, where
+    # the conventional pose is off by over a micrometre
+    err = poses[twin_cols].to_numpy()[0] - twin.corrected_pose[i]
+    assert np.abs(err[:3]).max() * 1e3 < 0.3 and np.abs(err[3:]).max() * URAD < 10.0
+    thermal = poses[conv_cols].to_numpy()[0] - twin.corrected_pose[i]
+    assert np.abs(thermal[:3]).max() * 1e3 > 1.0
+
+
+def _lines(path: Path) -> int:
+    try:
+        return path.read_bytes().count(b"\n")
+    except FileNotFoundError:
+        return 0
+
+
+def test_sigkill_of_run_then_resume_loses_or_doubles_no_temperature_line(tmp_path: Path) -> None:
+    """hexatherm killed (SIGKILL) while it logs thermocouples, then resumed to the end: the
+    rows are the logger's lines of each connection in order, each once (only lines in flight
+    when the killed process's connection dropped never arrive), and serial.log replays into
+    the same temperatures.csv."""
+    b = make_bench(tmp_path, **SHORT)  # type: ignore[arg-type]
+    b.machines.close()
+    clock = AcceleratedClock(1000.0)
+    b.world = TwinWorld(
+        b.world.hexapod,
+        b.files.balls,
+        heating=HEATING,
+        origin_on_cmm=TRUE_ORIGIN,
+        clock=clock,
+        sleep=clock.sleep,
+        cmm_move_s=0.1,
+    )
+    b.machines = TwinMachines(b.world, thermocouple_period_s=20.0)
+    log = b.session / "serial.log"
+    command = [
+        sys.executable, "-m", "hexatherm", "run", str(tmp_path / "plan.yaml"),
+        "--cmm", b.machines.cmm_url, "--controller", b.machines.controller_url,
+        "--temperature-port", b.machines.thermocouples_url, "--session", str(b.session),
+        "--hexapod", str(ROOT / "configs" / "symetrie-like.yaml"),
+        "--balls", str(ROOT / "configs" / "balls-3.yaml"),
+        "--origin-on-cmm", ",".join(str(v) for v in NOMINAL_ORIGIN),
+        "--settle", "0.02", "--poll", "0.01", "--readback-tol-um", "2", "--no-fsync",
+    ]  # fmt: skip
+    try:
+        proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        deadline = time.monotonic() + 120.0
+        target = 2 + int(np.random.default_rng(17).integers(4, 12))  # rx entries logged
+        while proc.poll() is None and _lines(log) < 2 + target:
+            assert time.monotonic() < deadline, "the run logged no temperatures"
+            time.sleep(0.002)
+        assert proc.poll() is None, proc.communicate()[1].decode()
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.communicate(timeout=60)
+        before_t, before = read_rows(b.session)
+        criteria = InPositionCriteria(settle_s=0.02, tolerance_um=2.0, poll_s=0.01)
+        options = b.options(
+            resume=True,
+            reconnect_wait_s=0.1,
+            criteria=criteria,
+            temperature_port=PortSettings(b.machines.thermocouples_url),
+        )
+        run_campaign(b.files, b.world.hexapod, options, b.notify)
+        sent = list(b.machines.thermocouples.sent)
+    finally:
+        b.machines.close()
+    times, values = read_rows(b.session)
+    counts = [n for _, n in split_by_connection(values, sent)]
+    assert len(counts) == 2 and min(counts) >= 1
+    # what was recorded before the kill is kept as it was
+    np.testing.assert_array_equal(values[: len(before)], before)
+    np.testing.assert_array_equal(times[: len(before)], before_t)
+    assert counts[0] >= len(before)
+    assert (np.diff(times) >= 0).all()
+    entries = log.read_text().splitlines()
+    assert entries[-1].endswith(' end - "complete"')  # the killed run could write no end
+    assert (
+        sum(" end - " in e for e in entries) == 1 and sum(" resume - " in e for e in entries) == 1
+    )
+    replay = session_from_log(b.files, log, tmp_path / "replay", b.notify)
+    assert not replay.complete
+    assert (tmp_path / "replay" / "temperatures.csv").read_bytes() == (
+        b.session / "temperatures.csv"
+    ).read_bytes()
+    assert "temperatures: temperatures.csv" in (b.session / "session.yaml").read_text()
+
+
+def test_a_logger_that_does_not_open_stops_the_run_and_its_log_is_kept(tmp_path: Path) -> None:
+    """The thermocouple port refuses (logger off): the run stops before its first move; the
+    same command started again (nothing was sent to the CMM) continues serial.log, never
+    replaces it, and replays into the same temperatures.csv."""
+    b = make_bench(tmp_path, **SHORT)  # type: ignore[arg-type]
+    try:
+        with pytest.raises(IncompleteSession, match="cannot open port socket://127.0.0.1:1"):
+            b.run(temperature_port=PortSettings("socket://127.0.0.1:1"))
+        assert b.world.model.moves == 0 and b.machines.cmm.touches == 0
+        first = (b.session / "serial.log").read_bytes()
+        assert b'open temperature "socket://127.0.0.1:1 ' in first
+        b.run(temperature_port=PortSettings(b.machines.thermocouples_url))
+    finally:
+        b.machines.close()
+    log = (b.session / "serial.log").read_bytes()
+    assert log.startswith(first) and log.count(b" rx temperature ") >= 2
+    assert first.endswith(b' end - "interrupted"\n') and log.endswith(b' end - "complete"\n')
+    replay = session_from_log(b.files, b.session / "serial.log", tmp_path / "replay", b.notify)
+    assert not replay.complete
+    assert (tmp_path / "replay" / "temperatures.csv").read_bytes() == (
+        b.session / "temperatures.csv"
+    ).read_bytes()
+
+
+def test_a_logger_connection_lost_mid_run_is_reopened(tmp_path: Path) -> None:
+    """The logger's connection drops while R0 is measured (a pulled cable): the port is
+    logged lost, reopened, and the rows go on with the new connection's lines; nothing
+    doubled, and serial.log still replays into the same temperatures.csv."""
+    b = make_bench(tmp_path, **SHORT)  # type: ignore[arg-type]
+    log = b.session / "serial.log"
+    dropped: list[int] = []
+
+    def notify(level: str, message: str) -> None:
+        b.messages.append((level, message))
+        if message.startswith("R0 B1:") and not dropped:
+            dropped.append(b.machines.thermocouples.drop())
+            deadline = time.monotonic() + 60.0
+            while b'reopen temperature "socket://' not in log.read_bytes():
+                assert time.monotonic() < deadline, "the port was not reopened"
+                time.sleep(0.01)
+
+    b.notify = notify  # type: ignore[method-assign]
+    try:
+        b.run(temperature_port=PortSettings(b.machines.thermocouples_url))
+        sent = list(b.machines.thermocouples.sent)
+    finally:
+        b.machines.close()
+    assert dropped == [1]
+    text = log.read_text()
+    assert text.count(" lost temperature ") == 1 and text.count(" reopen temperature ") == 1
+    _, values = read_rows(b.session)
+    counts = [n for _, n in split_by_connection(values, sent)]
+    assert len(counts) == 2 and min(counts) >= 1
+    replay = session_from_log(b.files, log, tmp_path / "replay", b.notify)
+    assert not replay.complete
+    assert (tmp_path / "replay" / "temperatures.csv").read_bytes() == (
+        b.session / "temperatures.csv"
+    ).read_bytes()
