@@ -33,6 +33,15 @@ one in parentheses)::
     output: centres                    # centres | points | dmis
     hidden_effects:                    # applied to the truth only (none)
       - {name: leg_thermal_lag, parameters: {tau_s: 1800}}
+    geometry_errors:                   # the true geometry differs from the hexapod file (none)
+      seed: 0                          # a seeded draw with these sigmas (0):
+      joint_sigma_um: 50               #   every base and platform joint coordinate
+      offset_sigma_um: 30              #   every leg length at the home pose
+      gain_sigma_ppm: 0                #   every leg's scale
+      base_joints_um: [[dx, dy, dz], ...]   # and/or given errors, added to the draw:
+      platform_joints_um: [[dx, dy, dz], ...]   # six each (0)
+      leg_offsets_um: [d1, .., d6]
+      leg_gains_ppm: [g1, .., g6]
     readme: |                          # written as README.md in the session folder
       # my-campaign ...
 
@@ -52,6 +61,14 @@ from typing import Any
 
 import numpy as np
 
+from hexatherm.core.calibration.model import (
+    BASE,
+    GAINS,
+    N_PARAMETERS,
+    OFFSETS,
+    PLATFORM,
+    nominal_parameters,
+)
 from hexatherm.core.effects import EFFECTS, Effect, effects_from_dicts
 from hexatherm.core.heating import Mat, MatHeating
 from hexatherm.core.hexapod import Hexapod
@@ -62,6 +79,7 @@ from hexatherm.io.config import read_balls, read_hexapod_text, read_plan
 from hexatherm.io.records import iso_to_seconds
 from hexatherm.io.yamlfile import YamlDoc
 from hexatherm.session import Balls
+from hexatherm.typing import FloatArray
 
 SCENARIO_FORMAT = "hexatherm-scenario/1"
 #: what ``output:`` may say; ``serial`` writes the ``serial.log`` of an ``acquire --auto``
@@ -106,6 +124,10 @@ class Scenario:
         The scenario's hidden effects.
     readme : str
         Written as the session's ``README.md`` when not empty.
+    true_parameters : ndarray, shape (48,), or None
+        The true geometry (``geometry_errors:``), in the layout of
+        :data:`hexatherm.core.calibration.model.PARAMETER_NAMES`; None: the hexapod
+        file's.
     input_files : tuple of Path
         The scenario file and the hexapod, balls and plan files it names (an output
         may never be, contain or sit inside any of them).
@@ -133,6 +155,7 @@ class Scenario:
     model_effects: tuple[Effect, ...]
     hidden_effects: tuple[Effect, ...]
     readme: str = ""
+    true_parameters: FloatArray | None = None
     input_files: tuple[Path, ...] = ()
 
     @property
@@ -162,6 +185,7 @@ def read_scenario(path: str | os.PathLike[str]) -> Scenario:
             "hexapod_repeatability_um",
             "output",
             "hidden_effects",
+            "geometry_errors",
             "readme",
         ]
     )
@@ -251,6 +275,7 @@ def read_scenario(path: str | os.PathLike[str]) -> Scenario:
         model_effects=model_effects,
         hidden_effects=hidden,
         readme=doc.string("readme", default=""),
+        true_parameters=_geometry_errors(doc, hexapod),
         input_files=tuple(inputs),
     )
 
@@ -418,6 +443,53 @@ def _probe(doc: YamlDoc, balls: Balls) -> Balls:
         )
     tip = _non_negative(doc, "cmm", "probe", "tip_diameter", default=balls.tip_diameter_mm)
     return replace(balls, probe_compensated=compensated, tip_diameter_mm=tip)
+
+
+#: the keys of ``geometry_errors:`` and the scale of each to mm (or to a unit gain)
+_GEOMETRY_KEYS = {
+    "base_joints_um": (BASE, 18, 1e-3),
+    "platform_joints_um": (PLATFORM, 18, 1e-3),
+    "leg_offsets_um": (OFFSETS, 6, 1e-3),
+    "leg_gains_ppm": (GAINS, 6, 1e-6),
+}
+_GEOMETRY_SIGMAS = {
+    "joint_sigma_um": ((BASE, OFFSETS), 1e-3),
+    "offset_sigma_um": ((OFFSETS, GAINS), 1e-3),
+    "gain_sigma_ppm": ((GAINS, N_PARAMETERS), 1e-6),
+}
+#: the largest geometry error accepted, mm (a millimetre is a wrong file, not an error)
+_GEOMETRY_MAX_MM = 1.0
+
+
+def _geometry_errors(doc: YamlDoc, hexapod: Hexapod) -> FloatArray | None:
+    """The true geometry of ``geometry_errors:`` (None without it)."""
+    if doc.get("geometry_errors", default=None) is None:
+        return None
+    key = "geometry_errors"
+    doc.check_keys(["seed", *_GEOMETRY_SIGMAS, *_GEOMETRY_KEYS], key)
+    delta = np.zeros(N_PARAMETERS)
+    rng = np.random.default_rng(_whole(doc, key, "seed", default=0))
+    for name, ((start, stop), scale) in _GEOMETRY_SIGMAS.items():
+        sigma = _non_negative(doc, key, name, default=0.0)
+        delta[start:stop] += rng.normal(0.0, sigma, stop - start) * scale
+    for name, (start, size, scale) in _GEOMETRY_KEYS.items():
+        value = doc.get(key, name, default=None)
+        if value is None:
+            continue
+        if size == 18:
+            rows = value if isinstance(value, list) and len(value) == 6 else None
+            if rows is None:
+                raise doc.error("expected six [dx, dy, dz] (one per joint)", key, name)
+            numbers = [doc.vector(key, name, i, size=3) for i in range(6)]
+            delta[start : start + 18] += np.ravel(numbers) * scale
+        else:
+            delta[start : start + 6] += np.asarray(doc.vector(key, name, size=6)) * scale
+    mm = np.abs(delta[:GAINS])
+    if mm.size and mm.max() > _GEOMETRY_MAX_MM:
+        raise doc.error(
+            f"an error of {mm.max():g} mm: at most {_GEOMETRY_MAX_MM:g} mm (um expected)", key
+        )
+    return nominal_parameters(hexapod) + delta
 
 
 def _hidden_effects(doc: YamlDoc, model: set[str]) -> tuple[Effect, ...]:

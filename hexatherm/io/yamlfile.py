@@ -442,7 +442,10 @@ class YamlDoc:
 
     def vector(self, *keys: Key, size: int, default: Any = ...) -> list[float]:
         """A list of ``size`` finite numbers at ``keys``."""
-        value = self.get(*keys, default=default)
+        missing = object()
+        value = self.get(*keys, default=missing if default is not ... else ...)
+        if value is missing:
+            return [float(v) for v in default]
         if not isinstance(value, list) or len(value) != size:
             raise self.error(f"expected a list of {size} numbers, got {value!r}", *keys)
         return [self.number(*keys, i) for i in range(size)]

@@ -318,3 +318,15 @@ def test_fuzzed_plans_read_as_yaml_says(edits):
         position %= len(text) + 1
         text = text[:position] + insert + text[position + cut :]
     assert outcome(read_plan_text, text) == outcome(general, text)
+
+
+def test_a_missing_vector_takes_its_default_and_a_given_one_is_checked() -> None:
+    """A vector with a default was refused as 'missing (required)' when left out of a
+    scenario (origin_on_cmm) or a datums file (origin_offset)."""
+    doc = YamlDoc.from_text("a: [1, 2, 3]\nb: [1, x, 3]\n", "d.yaml")
+    assert doc.vector("missing", size=3, default=[0, 0, 1]) == [0.0, 0.0, 1.0]
+    assert doc.vector("a", size=3, default=[0, 0, 0]) == [1.0, 2.0, 3.0]
+    with pytest.raises(InputError, match="d.yaml:2: field 'b\\[1\\]'"):
+        doc.vector("b", size=3, default=[0, 0, 0])
+    with pytest.raises(InputError, match="missing"):
+        doc.vector("missing", size=3)

@@ -60,6 +60,7 @@ def scenario_spec(scenario: Scenario, seed: int | None = None) -> TwinSessionSpe
         effects=scenario.effects,
         repeatability_mm=scenario.repeatability_mm,
         fit_centres=True,
+        true_parameters=scenario.true_parameters,
     )
 
 

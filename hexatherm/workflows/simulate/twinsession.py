@@ -41,6 +41,11 @@ import numpy.typing as npt
 import pandas as pd
 import yaml
 
+from hexatherm.core.calibration.model import (
+    PARAMETER_NAMES,
+    PARAMETER_UNITS,
+    nominal_parameters,
+)
 from hexatherm.core.effects import Effect, ThermocoupleLog
 from hexatherm.core.geometry import transform_from_pose
 from hexatherm.core.heating import Heating, HeatingModel
@@ -119,6 +124,9 @@ class TwinSessionSpec:
         With ``output="centres"``: the centres are sphere fits (free radius) of
         probed points, as a CMM reports them, instead of true centres plus
         ``centre_noise_mm``.
+    true_parameters : ndarray, shape (48,), optional
+        The hexapod's true geometry where it differs from the hexapod file (see
+        :func:`hexatherm.core.twin.predict`); written to ``truth/geometry.csv``.
     """
 
     name: str
@@ -143,6 +151,7 @@ class TwinSessionSpec:
     effects: tuple[Effect, ...] = ()
     repeatability_mm: float = 0.0
     fit_centres: bool = False
+    true_parameters: FloatArray | None = None
 
 
 @dataclass(frozen=True)
@@ -208,6 +217,7 @@ def simulate_session(spec: TwinSessionSpec) -> SimulatedSession:
         spec.effects,
         ball_times_s=ball_t,
         positioning_error_mm=error,
+        true_parameters=spec.true_parameters,
     )
     centres = truth.centres_cmm_mm + rng.normal(scale=spec.centre_noise_mm, size=(n, k, 3))
 
@@ -341,7 +351,7 @@ def _truth_files(
         "reference_step": plan.labels[truth.reference_index],
         "effects": [e.as_dict() for e in spec.effects],
     }
-    return {
+    files = {
         "truth/steps.csv": to_csv_text(pd.DataFrame(steps)),
         "truth/legs.csv": to_csv_text(pd.DataFrame(legs)),
         "truth/temperatures.csv": to_csv_text(pd.DataFrame(temps)),
@@ -349,6 +359,29 @@ def _truth_files(
             effects_doc, sort_keys=False, default_flow_style=None, width=100
         ),
     }
+    if spec.true_parameters is not None:
+        files["truth/geometry.csv"] = _geometry_csv(spec)
+    return files
+
+
+def _geometry_csv(spec: TwinSessionSpec) -> str:
+    """``truth/geometry.csv``: every parameter of the geometry, nominal and true."""
+    hexapod = read_hexapod_text(spec.hexapod_text, "hexapod.yaml")
+    nominal = nominal_parameters(hexapod)
+    true = np.asarray(spec.true_parameters, dtype=float)
+    gain = np.array(PARAMETER_UNITS) != "mm"
+    error = true - nominal
+    frame = pd.DataFrame(
+        {
+            "parameter": PARAMETER_NAMES,
+            "unit": PARAMETER_UNITS,
+            "nominal": nominal,
+            "true": true,
+            "error_um": np.where(gain, np.nan, error * 1e3),
+            "error_ppm": np.where(gain, error * 1e6, np.nan),
+        }
+    )
+    return to_csv_text(frame)
 
 
 def _measurements(
