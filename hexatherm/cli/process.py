@@ -212,6 +212,7 @@ def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
             f"  u ({uncertainty.method}, k=1) of the {name} poses: up to "
             f"{t_um:.3f} um, {r_urad:.2f} urad"
         )
+    lines.extend(shared_summary(uncertainty))
     if uncertainty.method == "monte-carlo":
         ratio = uncertainty.ratio_to_linear()
         if np.isfinite(ratio).any():
@@ -225,4 +226,33 @@ def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
                 f"over linear propagation: {np.nanmin(ratio):.3f} to "
                 f"{np.nanmax(ratio):.3f} ({drawn})"
             )
+    return lines
+
+
+def shared_summary(uncertainty: PoseUncertainty) -> list[str]:
+    """Screen lines: the parts of u common to all targets (O and R0) and of their own."""
+    common, own = uncertainty.common_u, uncertainty.own_u
+    if common is None or own is None or common.size == 0:
+        return []
+    from hexatherm.core.geometry import to_um_urad
+
+    def rms(values: np.ndarray) -> str:
+        v = np.sqrt(np.mean(to_um_urad(values) ** 2, axis=0))
+        return (
+            " ".join(f"{n} {x:.3g}" for n, x in zip(("Tx", "Ty", "Tz"), v[:3], strict=True))
+            + " um, "
+            + " ".join(f"{n} {x:.3g}" for n, x in zip(("Rx", "Ry", "Rz"), v[3:], strict=True))
+            + " urad"
+        )
+
+    scaled = " (linear shares of the Monte Carlo u)" if uncertainty.method == "monte-carlo" else ""
+    lines = [
+        "  parts of u, RMS over the targets" + scaled + ": common to all targets (the one "
+        "measurement of O and R0 every pose carries; it shifts all targets together and "
+        "cancels in their differences) and own (the target's step and its references):"
+    ]
+    for name, cols in (("conventional", slice(0, 6)), ("corrected", slice(6, 12))):
+        lines.append(f"    {name:12} common {rms(common[:, cols])}")
+        lines.append(f"    {'':12} own    {rms(own[:, cols])}")
+    lines.append("  covariance between targets: covariance.csv")
     return lines

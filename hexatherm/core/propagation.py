@@ -152,6 +152,73 @@ def output_difference(a: npt.ArrayLike, b: npt.ArrayLike) -> FloatArray:
     return d
 
 
+@dataclass(frozen=True)
+class TargetJacobian:
+    """Derivatives of every target's outputs by the centres of the steps it depends on.
+
+    Attributes
+    ----------
+    jac : ndarray, shape (M, 5, 12, k, 3)
+        ``d output / d centre`` of target m by the centres of its part p (mm/mm, deg/mm):
+        O, R0, the target, its reference before, its reference after. A step that plays
+        two parts (R0 as the reference before the first targets) holds the sum in its
+        first part; the later part is zero and its step -1.
+    steps : ndarray of int, shape (M, 5)
+        Step index of each part (-1: not used, or merged into an earlier part).
+    """
+
+    jac: FloatArray
+    steps: IntArray
+
+    #: parts shared by every target: O and R0 (their noise moves every target's pose)
+    COMMON_PARTS = (0, 1)
+
+    def covariance(self, centre_cov_mm2: npt.ArrayLike, parts: tuple[int, ...] = ()) -> FloatArray:
+        """Covariance (M, 12, 12) of every target's outputs (from the given parts only).
+
+        The centres are independent from step to step, so the covariance is a sum over
+        the parts; ``parts`` (default: all five) picks some of them, e.g.
+        :attr:`COMMON_PARTS`.
+        """
+        cov = np.asarray(centre_cov_mm2, dtype=float)
+        m, n_parts, n_out, k = self.jac.shape[:4]
+        use = np.zeros(n_parts, dtype=bool)
+        use[list(parts) if parts else slice(None)] = True
+        live = (self.steps >= 0) & use
+        part_cov = np.where(live[..., None, None, None], cov[np.maximum(self.steps, 0)], 0.0)
+        return np.asarray(
+            np.einsum("mpybi,mpbij,mpzbj->myz", self.jac, part_cov, self.jac, optimize=True)
+        )
+
+    def between_targets(self, centre_cov_mm2: npt.ArrayLike) -> FloatArray:
+        """Covariance (12, M, M) of each output between every pair of targets.
+
+        ``C[y, a, b] = sum_steps J_a,s,y U_s J_b,s,y^T`` over the steps both targets
+        depend on (O and R0 for every pair, a shared reference for neighbours); the
+        diagonal ``C[y, a, a]`` is the variance of :meth:`covariance`. Sparse products:
+        each target has at most five steps.
+        """
+        from scipy import sparse
+
+        cov = np.asarray(centre_cov_mm2, dtype=float)
+        m, n_parts, n_out, k = self.jac.shape[:4]
+        n = cov.shape[0]
+        live = self.steps >= 0
+        at = np.maximum(self.steps, 0)
+        root = covariance_root(cov)  # (N, k, 3, 3)
+        # whitened: J L, (M, 5, 12, k, 3); then C = (J L)(J L)^T over shared coordinates
+        white = np.einsum("mpybi,mpbij->mpybj", self.jac, root[at])
+        white = np.where(live[:, :, None, None, None], white, 0.0)
+        coord = at[:, :, None, None] * (3 * k) + np.arange(3 * k).reshape(1, 1, k, 3)
+        rows = np.broadcast_to(np.arange(m)[:, None, None, None], coord.shape).ravel()
+        cols = coord.ravel()
+        out = np.empty((n_out, m, m))
+        for y in range(n_out):
+            a = sparse.csr_matrix((white[:, :, y].ravel(), (rows, cols)), shape=(m, n * 3 * k))
+            out[y] = (a @ a.T).toarray()
+        return out
+
+
 def linear_covariance(
     chain: PoseChain,
     centres_mm: npt.ArrayLike,
@@ -159,6 +226,33 @@ def linear_covariance(
     step_mm: float = DEFAULT_STEP_MM,
 ) -> FloatArray:
     """Covariance (M, 12, 12) of every target's outputs by linear propagation.
+
+    ``target_jacobian(chain, centres_mm, step_mm).covariance(centre_cov_mm2)``: see
+    :func:`target_jacobian`.
+
+    Parameters
+    ----------
+    chain : PoseChain
+    centres_mm : array_like, shape (N, k, 3)
+        The measured centres.
+    centre_cov_mm2 : array_like, shape (N, k, 3, 3)
+        Covariance of each centre (finite; independent centres).
+    step_mm : float
+        Central-difference step on each coordinate.
+
+    Returns
+    -------
+    ndarray, shape (M, 12, 12)
+    """
+    return target_jacobian(chain, centres_mm, step_mm).covariance(centre_cov_mm2)
+
+
+def target_jacobian(
+    chain: PoseChain,
+    centres_mm: npt.ArrayLike,
+    step_mm: float = DEFAULT_STEP_MM,
+) -> TargetJacobian:
+    """Jacobian of every target's outputs by the centres of the steps it depends on.
 
     The Jacobian of target S_i's outputs by the centres of the (at most) five
     steps they depend on (O, R0, S_i, its references before and after) is put
@@ -184,23 +278,22 @@ def linear_covariance(
     chain : PoseChain
     centres_mm : array_like, shape (N, k, 3)
         The measured centres.
-    centre_cov_mm2 : array_like, shape (N, k, 3, 3)
-        Covariance of each centre (finite; independent centres).
     step_mm : float
         Central-difference step on each coordinate.
 
     Returns
     -------
-    ndarray, shape (M, 12, 12)
+    TargetJacobian
     """
     c = np.asarray(centres_mm, dtype=float)
-    cov = np.asarray(centre_cov_mm2, dtype=float)
     n, k = c.shape[:2]
     plan, hexapod = chain.plan, chain.hexapod
     targets, origin = plan.target_indices, plan.origin_index
     m = targets.size
     if m == 0:
-        return np.zeros((0, OUTPUTS_PER_TARGET, OUTPUTS_PER_TARGET))
+        return TargetJacobian(
+            np.zeros((0, 5, OUTPUTS_PER_TARGET, k, 3)), np.zeros((0, 5), dtype=np.intp)
+        )
     legs = hexapod.legs
     if legs is None:
         raise ValueError("the hexapod has no leg model")
@@ -278,9 +371,8 @@ def linear_covariance(
             jac[same, earlier] += jac[same, part]
             jac[same, part] = 0.0
             steps[same, part] = -1
-    part_cov = np.where((steps >= 0)[..., None, None, None], cov[at], 0.0)  # (M, 5, k, 3, 3)
-    jac = jac.reshape(m, 5, OUTPUTS_PER_TARGET, k, 3)
-    return np.einsum("mpybi,mpbij,mpzbj->myz", jac, part_cov, jac, optimize=True)
+    jac[steps < 0] = 0.0
+    return TargetJacobian(jac.reshape(m, 5, OUTPUTS_PER_TARGET, k, 3), steps)
 
 
 def monte_carlo_covariance(

@@ -37,12 +37,13 @@ import numpy.typing as npt
 from hexatherm.core.propagation import (
     CentreSampler,
     PoseChain,
+    TargetJacobian,
     cap_centre_covariance,
     covariance_root,
     draw_centres,
-    linear_covariance,
     monte_carlo_covariance,
     residual_scale,
+    target_jacobian,
 )
 from hexatherm.core.spherefit import fit_spheres, refine_spheres
 from hexatherm.typing import FloatArray
@@ -113,6 +114,16 @@ class PoseUncertainty:
         What the Monte Carlo draws: the probed points, refitted
         (:func:`point_sampler`), or the centres from their covariance (a session
         without probed points); empty for linear propagation.
+    common_u, own_u : ndarray, shape (M, 12)
+        The part of each standard uncertainty (mm, deg; conventional then corrected)
+        common to all targets, from the noise of O and R0 that every target's pose
+        carries, and the part of its own (its own step and its references);
+        ``u^2 = common^2 + own^2``. By linear propagation; with Monte Carlo the linear
+        shares of the variance applied to the Monte Carlo u.
+    between_covariance : ndarray, shape (12, M, M)
+        Covariance of each output between every pair of targets (mm^2, deg^2): the
+        linear one; with Monte Carlo the linear correlations times the Monte Carlo u.
+        Its diagonal is ``u^2``.
     """
 
     conventional_u: FloatArray
@@ -124,6 +135,9 @@ class PoseUncertainty:
     seed: int | None
     centres: CentreCovariance
     drawn: str = ""
+    common_u: FloatArray | None = None
+    own_u: FloatArray | None = None
+    between_covariance: FloatArray | None = None
 
     def ratio_to_linear(self) -> FloatArray:
         """Reported over linear standard uncertainty, (M, 12) (1 for the linear method)."""
@@ -321,7 +335,8 @@ def pose_uncertainty(
     """
     centres = centre_covariance(result)
     chain = pose_chain(result)
-    linear = linear_covariance(chain, result.centres.centres_mm, centres.cov_mm2)
+    jacobian = target_jacobian(chain, result.centres.centres_mm)
+    linear = jacobian.covariance(centres.cov_mm2)
     covariance, method, draws, drawn = linear, "linear", 0, ""
     if mc:
         sampler = point_sampler(result, centres.cov_mm2)
@@ -337,6 +352,7 @@ def pose_uncertainty(
         method, draws = "monte-carlo", int(mc)
         drawn = "centres" if sampler is None else "points"
     u = np.sqrt(np.clip(np.diagonal(covariance, axis1=1, axis2=2), 0.0, None))
+    common_u, own_u, between = shared_parts(jacobian, centres.cov_mm2, u)
     return PoseUncertainty(
         conventional_u=u[:, :6],
         corrected_u=u[:, 6:],
@@ -347,4 +363,33 @@ def pose_uncertainty(
         seed=seed if mc else None,
         centres=centres,
         drawn=drawn,
+        common_u=common_u,
+        own_u=own_u,
+        between_covariance=between,
     )
+
+
+def shared_parts(
+    jacobian: TargetJacobian, centre_cov_mm2: FloatArray, u: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Common and own parts of the standard uncertainties ``u`` (M, 12), and the
+    covariance (12, M, M) of each output between the targets.
+
+    The linear propagation splits each variance by source: O and R0, measured once
+    and carried by every target (common), and the target's own step and references
+    (own). The shares of the linear variance are applied to ``u`` (equal to the
+    linear u unless ``u`` comes from Monte Carlo), and so are the linear correlations
+    between targets: ``common^2 + own^2 = u^2`` and the covariance's diagonal is ``u^2``.
+    """
+    between = jacobian.between_targets(centre_cov_mm2)  # (12, M, M)
+    total = np.diagonal(between, axis1=1, axis2=2).T  # (M, 12)
+    common = np.diagonal(
+        jacobian.covariance(centre_cov_mm2, TargetJacobian.COMMON_PARTS), axis1=1, axis2=2
+    )
+    with np.errstate(invalid="ignore", divide="ignore"):
+        share = np.where(total > 0, np.clip(common / np.where(total > 0, total, 1.0), 0, 1), 0.0)
+    lin_u = np.sqrt(np.clip(total.T, 0.0, None))  # (12, M)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scale = np.where(lin_u > 0, u.T / np.where(lin_u > 0, lin_u, 1.0), 0.0)
+    between = between * scale[:, :, None] * scale[:, None, :]
+    return u * np.sqrt(share), u * np.sqrt(1.0 - share), between
