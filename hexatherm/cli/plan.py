@@ -132,6 +132,24 @@ def parse_levels(text: str) -> list[int]:
     help="both/after: one R between consecutive targets and one after the last, so "
     "each target has R on both sides; before: no R after the last target.",
 )
+@click.option(
+    "--origin-repeats",
+    type=click.IntRange(min=1),
+    default=1,
+    show_default=True,
+    metavar="N",
+    help="Measure O N times (O, R0, O-2, R0-2, ...: a repeat of O is a target at the "
+    "zero pose labelled O-n, with R0 measured again beside it); process averages them.",
+)
+@click.option(
+    "--reference0-repeats",
+    type=click.IntRange(min=1),
+    default=1,
+    show_default=True,
+    metavar="N",
+    help="Measure R0 N times (references labelled R0-n, before the first target; at "
+    "least as often as O); process averages them.",
+)
 @click.option("--points-per-ball", type=click.IntRange(min=1), default=25, show_default=True)
 @click.option(
     "--seconds-per-point",
@@ -205,6 +223,8 @@ def command(
     reference: str,
     cycles: int,
     reference_every: str,
+    origin_repeats: int,
+    reference0_repeats: int,
     points_per_ball: int,
     seconds_per_point: float,
     seconds_per_move: float,
@@ -226,6 +246,7 @@ def command(
     OUT (or standard output); --dmis and --checklist add the CMM program and the
     operator's sheet.
     """
+    from hexatherm.core.plan import find_repeats
     from hexatherm.io.atomic import atomic_write_text, refuse_existing
     from hexatherm.workflows.plan import PlanRequest, make_plan
 
@@ -260,6 +281,8 @@ def command(
         box_upper=upper,
         cycles=cycles,
         reference_every=reference_every,
+        origin_repeats=origin_repeats,
+        reference0_repeats=reference0_repeats,
         points_per_ball=points_per_ball,
         seconds_per_point=seconds_per_point,
         seconds_per_move=seconds_per_move,
@@ -292,8 +315,16 @@ def command(
             atomic_write_text(target, text)
             echo_err(f"wrote {target}")
     plan = made.plan
+    repeats = find_repeats(plan)
+    n_targets = len(plan.target_indices) - (len(repeats.origin) - 1)
     echo_err(
-        f"plan: {len(plan.labels)} steps ({len(plan.target_indices)} targets x "
+        f"plan: {len(plan.labels)} steps ({n_targets} targets x "
         f"{len(made.ball_names)} balls x {points_per_ball} points), estimated "
         f"{made.timing.total_s / 3600:.2f} h"
     )
+    if repeats.any:
+        echo_err(
+            f"O measured {len(repeats.origin)} time(s), R0 {len(repeats.reference0)} time(s) "
+            f"({', '.join(plan.labels[i] for i in sorted(repeats.origin + repeats.reference0))}): "
+            "process averages each"
+        )

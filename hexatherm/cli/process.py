@@ -173,9 +173,12 @@ def command(
         result, out_dir, overwrite=overwrite, uncertainty=uncertainty, quality=quality, twin=twin
     )
     n = len(result.correction.target_index)
+    averaged = "".join(
+        f", {g.label} averaged over {len(g.labels)} measurements" for g in result.repeats
+    )
     echo_err(
         f"session {result.session.name}: {len(result.session.plan.labels)} steps, "
-        f"{n} targets, interpolation {interpolation}"
+        f"{n} targets, interpolation {interpolation}{averaged}"
     )
     click.echo(deviation_table(result, twin))
     for line in uncertainty_summary(uncertainty):
@@ -213,6 +216,21 @@ def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
             f"{t_um:.3f} um, {r_urad:.2f} urad"
         )
     lines.extend(shared_summary(uncertainty))
+    for check in uncertainty.repeats:
+        line = (
+            f"  {check.label} measured {check.n} times, averaged: their scatter is "
+            f"{check.ratio:.2f}x the claimed u (chi2 {check.chi2:.1f} over {check.dof} dof"
+            + (", after a straight-line drift" if check.n >= 3 else "")
+            + ")"
+        )
+        lines.append(line)
+        if not check.ok:
+            lines.append(
+                f"warning: the {check.n} measurements of {check.label} scatter more than "
+                f"their u allows (p = {check.p_value:.1g}): the platform moved or drifted "
+                "between them, or a ball was probed badly; the average is used, and u "
+                "does not include that scatter"
+            )
     if uncertainty.method == "monte-carlo":
         ratio = uncertainty.ratio_to_linear()
         if np.isfinite(ratio).any():

@@ -61,6 +61,7 @@ DEFAULT_CAP_ANGLE_DEG = 70.0
 
 __all__ = [
     "CentreCovariance",
+    "RepeatCheck",
     "PoseUncertainty",
     "centre_covariance",
     "pose_chain",
@@ -124,6 +125,8 @@ class PoseUncertainty:
         Covariance of each output between every pair of targets (mm^2, deg^2): the
         linear one; with Monte Carlo the linear correlations times the Monte Carlo u.
         Its diagonal is ``u^2``.
+    repeats : tuple of RepeatCheck
+        The scatter of repeated O and R0 against their claimed uncertainty.
     """
 
     conventional_u: FloatArray
@@ -138,6 +141,7 @@ class PoseUncertainty:
     common_u: FloatArray | None = None
     own_u: FloatArray | None = None
     between_covariance: FloatArray | None = None
+    repeats: tuple[RepeatCheck, ...] = ()
 
     def ratio_to_linear(self) -> FloatArray:
         """Reported over linear standard uncertainty, (M, 12) (1 for the linear method)."""
@@ -171,9 +175,12 @@ def centre_covariance(result: ProcessResult) -> CentreCovariance:
         parts.append(f"u_um of the centres file ({int(file.sum())} centres)")
     rest = source == ""
     cmm = result.session.cmm
+    # steps averaging repeated measurements (O, R0): 1/n of one measurement's covariance
+    per_step = 1.0 / np.broadcast_to(centres.measurements[:, None], (n, k))
     if rest.any() and cmm is not None:
         points = cmm.points_per_ball or result.session.plan.points_per_ball
-        cov[rest] = cap_centre_covariance(points, cmm.cap_angle_deg, cmm.point_noise_um * 1e-3)
+        single = cap_centre_covariance(points, cmm.cap_angle_deg, cmm.point_noise_um * 1e-3)
+        cov[rest] = per_step[rest][:, None, None] * single
         source[rest] = "cmm"
         parts.append(
             f"session cmm: point noise {cmm.point_noise_um:g} um, {points} points "
@@ -185,8 +192,11 @@ def centre_covariance(result: ProcessResult) -> CentreCovariance:
         # axis: keep the shape of a cap fit's covariance and scale it to the residuals
         points = result.session.plan.points_per_ball
         shape = cap_centre_covariance(points, DEFAULT_CAP_ANGLE_DEG, 1.0)
-        scale, seen = residual_scale(result.registration.residuals_mm, centres.centres_mm, shape)
-        cov[rest] = scale * shape
+        step_shape = per_step[:, :, None, None] * shape  # (N, k, 3, 3)
+        scale, seen = residual_scale(
+            result.registration.residuals_mm, centres.centres_mm, step_shape
+        )
+        cov[rest] = scale * step_shape[rest]
         source[rest] = "registration"
         u_xyz = np.sqrt(np.diag(scale * shape)) * 1e3
         parts.append(
@@ -205,6 +215,71 @@ def centre_covariance(result: ProcessResult) -> CentreCovariance:
     return CentreCovariance(cov, source.astype(str), "; ".join(parts))
 
 
+@dataclass(frozen=True)
+class RepeatCheck:
+    """Scatter of a repeated step's measurements against their claimed uncertainty.
+
+    Attributes
+    ----------
+    label : str
+        The step (``O``, ``R0``).
+    n : int
+        Its measurements.
+    ratio : float
+        ``sqrt(chi2 / dof)``: the observed scatter over the claimed one (about 1).
+    chi2 : float
+        ``sum d^T C^-1 d`` over measurements and balls, ``d`` a centre's deviation (from
+        the mean, or from a straight line in time for 3 or more), ``C`` one measurement's
+        centre covariance.
+    dof : int
+    p_value : float
+        Chance of a chi2 as large from noise alone.
+    """
+
+    label: str
+    n: int
+    ratio: float
+    chi2: float
+    dof: int
+    p_value: float
+
+    #: below this chance the scatter is more than noise: warn
+    P_LIMIT = 1e-3
+
+    @property
+    def ok(self) -> bool:
+        """Whether the scatter is what the claimed uncertainty allows."""
+        return not self.p_value < self.P_LIMIT
+
+
+def repeat_checks(result: ProcessResult, cov_mm2: FloatArray) -> tuple[RepeatCheck, ...]:
+    """Chi-square of every repeated step's measurements against one measurement's covariance.
+
+    One measurement's covariance is its sphere fit's where there is one, else the averaged
+    step's (``cov_mm2``, (N, k, 3, 3)) times the number of measurements.
+    """
+    from scipy.stats import chi2 as chi2_dist
+
+    index = {label: i for i, label in enumerate(result.session.plan.labels)}
+    checks = []
+    for group in result.repeats:
+        n = len(group.labels)
+        averaged = cov_mm2[index[group.label]] * n  # (k, 3, 3)
+        fitted = np.asarray(np.isfinite(group.cov_mm2).all(axis=(-2, -1)))
+        single = np.where(
+            fitted[..., None, None],
+            group.cov_mm2,
+            averaged[None],
+        )
+        d = group.deviations_mm
+        chi2 = float(np.einsum("nki,nkij,nkj->", d, np.linalg.pinv(single), d))
+        dof = group.dof
+        p = float(chi2_dist.sf(chi2, dof)) if dof > 0 else float("nan")
+        ratio = float(np.sqrt(chi2 / dof)) if dof > 0 else float("nan")
+        checks.append(RepeatCheck(group.label, n, ratio, chi2, dof, p))
+    return tuple(checks)
+
+
 #: probed points refitted at once in a Monte Carlo batch (memory)
 POINTS_PER_REFIT = 2_000_000
 
@@ -217,14 +292,16 @@ def point_sampler(result: ProcessResult, cov_mm2: FloatArray) -> CentreSampler |
     that fit (the noise the fit's covariance assumes); the spheres are refitted
     as ``process`` fits them (same free or fixed radii). Centres read as such,
     and those whose fit has no redundancy, are drawn from their covariance
-    ``cov_mm2`` (N, k, 3, 3). None when no centre comes from probed points.
+    ``cov_mm2`` (N, k, 3, 3). None when no centre comes from probed points, or when O
+    or R0 was measured repeatedly (then every centre is drawn from its covariance).
     """
     sources = [
         (fitted, raw)
         for fitted, raw in zip(result.records, result.points, strict=False)
         if raw is not None
     ]
-    if not sources:
+    if not sources or result.repeats:
+        # repeated O, R0 are averaged before registration: their centres are drawn
         return None
     step_index = {label: i for i, label in enumerate(result.session.plan.labels)}
     ball_index = {name: j for j, name in enumerate(result.session.balls.names)}
@@ -366,6 +443,7 @@ def pose_uncertainty(
         common_u=common_u,
         own_u=own_u,
         between_covariance=between,
+        repeats=repeat_checks(result, centres.cov_mm2),
     )
 
 
