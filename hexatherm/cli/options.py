@@ -28,11 +28,13 @@ output_dir_option = click.option(
 )
 interpolation_option = click.option(
     "--interpolation",
-    type=click.Choice(["linear", "before", "after", "nearest"]),
+    type=click.Choice(["linear", "before", "after", "nearest", "smooth"]),
     default="linear",
     show_default=True,
     help="With references on both sides of a target: interpolate their growth linearly in "
-    "time, or use one neighbour as in the paper.",
+    "time, or use one neighbour as in the paper; smooth: a smoothing spline of the growth "
+    "over all references (per leg, chosen by cross-validation, which falls back to linear "
+    "when the heating is not smooth).",
 )
 quality_threshold_option = click.option(
     "--quality-threshold",

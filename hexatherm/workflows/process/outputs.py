@@ -9,6 +9,9 @@ process"), then these extensions, documented in the README:
 * ``ref_before``, ``ref_after``: labels of the references used (empty: none);
 * ``dt_before_s``, ``dt_after_s``: ``t_S - t_before`` and ``t_after - t_S``;
 * ``weight_after``: weight of the later reference in the time interpolation;
+* ``interpolation`` (with ``--interpolation smooth`` only): ``smooth`` when the smooth
+  fit of the growth was used, ``linear`` when the cross-validation fell back to the
+  two neighbours;
 * ``u_Tx_conv_mm`` .. ``u_Rz_conv_deg``, ``u_Tx_corr_mm`` .. ``u_Rz_corr_deg``:
   standard uncertainties (k = 1) of the conventional and corrected poses
   (:mod:`hexatherm.workflows.process.uncertainty`);
@@ -103,6 +106,9 @@ def poses_frame(
     data["dt_before_s"] = corr.dt_before_s
     data["dt_after_s"] = corr.dt_after_s
     data["weight_after"] = corr.weight_after
+    if corr.smooth is not None:
+        # --interpolation smooth: what the growth at R came from (the fallback is linear)
+        data["interpolation"] = "smooth" if corr.smooth.used else "linear"
     if uncertainty is not None:
         for tag, values in (
             ("conv", uncertainty.conventional_u),

@@ -660,7 +660,12 @@ def process_session(
             f"{session.hexapod.stroke_mm.tolist()} mm"
         )
     steps, correction = correct(
-        session.hexapod, session.plan, centres.times_s, registration.platform2cmm, interpolation
+        session.hexapod,
+        session.plan,
+        centres.times_s,
+        registration.platform2cmm,
+        interpolation,
+        centres.measurements,
     )
     both = (correction.before_index >= 0) & (correction.after_index >= 0)
     untimed = both & (

@@ -383,6 +383,7 @@ def pose_chain(result: ProcessResult) -> PoseChain:
         weight_after=corr.weight_after,
         weights=registration_weights(result.centres.u_um),
         initial_poses=corr.corrected,
+        growth_weights=corr.growth_weights,
     )
 
 
@@ -462,7 +463,7 @@ def shared_parts(
     between = jacobian.between_targets(centre_cov_mm2)  # (12, M, M)
     total = np.diagonal(between, axis1=1, axis2=2).T  # (M, 12)
     common = np.diagonal(
-        jacobian.covariance(centre_cov_mm2, TargetJacobian.COMMON_PARTS), axis1=1, axis2=2
+        jacobian.covariance(centre_cov_mm2, jacobian.common_parts), axis1=1, axis2=2
     )
     with np.errstate(invalid="ignore", divide="ignore"):
         share = np.where(total > 0, np.clip(common / np.where(total > 0, total, 1.0), 0, 1), 0.0)
