@@ -53,6 +53,9 @@ OUTPUTS_PER_TARGET = 12
 DEFAULT_STEP_MM = 1e-3
 #: Monte Carlo draws evaluated at once
 DEFAULT_BATCH = 256
+#: largest dense Jacobian (outputs x targets x coordinates) for the between-target
+#: covariance; beyond it, sparse products
+DENSE_BETWEEN_LIMIT = 4_000_000
 #: ``sample(rng, size)``: Monte Carlo draws of all the centres, (size, N, k, 3)
 CentreSampler = Callable[[np.random.Generator, int], FloatArray]
 
@@ -224,6 +227,13 @@ class TargetJacobian:
         coord = at[:, :, None, None] * (3 * k) + np.arange(3 * k).reshape(1, 1, k, 3)
         rows = np.broadcast_to(np.arange(m)[:, None, None, None], coord.shape).ravel()
         cols = coord.ravel()
+        values = np.moveaxis(white, 2, 0).reshape(n_out, -1)  # (12, M*P*k*3)
+        if n_out * m * n * 3 * k <= DENSE_BETWEEN_LIMIT:
+            # small sessions: dense (a target's parts are distinct steps: no repeated cell)
+            dense = np.zeros((n_out, m, n * 3 * k))
+            keep = values.any(axis=0)
+            dense[:, rows[keep], cols[keep]] = values[:, keep]
+            return np.asarray(dense @ np.swapaxes(dense, 1, 2))
         out = np.empty((n_out, m, m))
         for y in range(n_out):
             a = sparse.csr_matrix((white[:, :, y].ravel(), (rows, cols)), shape=(m, n * 3 * k))

@@ -68,7 +68,7 @@ def test_smooth_jacobian_equals_the_brute_force_one(tmp_path: Path) -> None:
     assert target_jacobian(chain, centres).jac.shape[1] == 2 + N_TARGETS + 1
 
 
-REPLICAS = 60
+REPLICAS = 50
 
 
 @pytest.fixture(scope="module")
@@ -87,7 +87,7 @@ def test_smooth_uncertainty_is_the_replicas_scatter(
     replicas: list[tuple[ProcessResult, PoseUncertainty]],
 ) -> None:
     used = [r.correction.smooth is not None and r.correction.smooth.used for r, _ in replicas]
-    assert sum(used) >= 0.5 * REPLICAS  # 7 references only: kept in 40 of 60 (measured)
+    assert sum(used) >= 0.5 * REPLICAS  # 7 references only: kept in about 2 of 3 (measured)
     poses = np.array([r.correction.corrected for r, _ in replicas])
     claimed = np.array([u.corrected_u for _, u in replicas])
     observed = np.sqrt(np.var(poses, axis=0, ddof=1).mean(axis=0))

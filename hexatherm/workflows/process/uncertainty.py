@@ -258,6 +258,8 @@ def repeat_checks(result: ProcessResult, cov_mm2: FloatArray) -> tuple[RepeatChe
     One measurement's covariance is its sphere fit's where there is one, else the averaged
     step's (``cov_mm2``, (N, k, 3, 3)) times the number of measurements.
     """
+    if not result.repeats:
+        return ()
     from scipy.stats import chi2 as chi2_dist
 
     index = {label: i for i, label in enumerate(result.session.plan.labels)}
