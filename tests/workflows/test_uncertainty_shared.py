@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from hexatherm.core import propagation
 from hexatherm.core.propagation import TargetJacobian, output_difference, target_jacobian
 from hexatherm.workflows.process.outputs import deviation_columns, write_results
 from hexatherm.workflows.process.pipeline import ProcessResult, process_session
@@ -58,7 +59,11 @@ def one_sided(tmp_path_factory: pytest.TempPathFactory) -> ProcessResult:
     return process_session(session)
 
 
-def test_between_target_covariance_equals_the_brute_force_one(one_sided: ProcessResult) -> None:
+@pytest.mark.parametrize("dense_limit", [propagation.DENSE_BETWEEN_LIMIT, 0])
+def test_between_target_covariance_equals_the_brute_force_one(
+    one_sided: ProcessResult, dense_limit: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(propagation, "DENSE_BETWEEN_LIMIT", dense_limit)  # 0: sparse
     chain = pose_chain(one_sided)
     centres = one_sided.centres.centres_mm
     cov = centre_covariance(one_sided).cov_mm2
