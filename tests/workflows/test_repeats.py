@@ -231,3 +231,33 @@ def test_the_repeats_scatter_as_their_u_over_replicas(
         assert abs(chi2 / dof - 1) < 4 * np.sqrt(2 / dof), (label, chi2 / dof)
     false_alarms = sum(not c.ok for _, u in replicas for c in u.repeats)
     assert false_alarms <= 1
+
+
+def test_monte_carlo_refits_the_repeats_and_agrees_with_linear(tmp_path: Path) -> None:
+    """Probed points: every measurement of O and R0 is refitted and averaged per draw."""
+    spec = TwinSessionSpec(
+        name="s",
+        hexapod_text=HEXAPOD_TEXT,
+        balls=BALLS,
+        plan=repeated_plan(3, 3),
+        heating=Heating(on_s=0.0, tau_s=2400.0, gain_C=GAIN),
+        seed=6,
+        output="points",
+        point_noise_mm=1e-3,
+        points_per_ball=25,
+        cap_half_angle_deg=70.0,
+    )
+    write_files(simulate_session(spec).files, tmp_path / "s")
+    result = process_session(tmp_path / "s")
+    assert [len(g.labels) for g in result.repeats] == [3, 3]
+    mc = pose_uncertainty(result, mc=1500, seed=2)
+    assert mc.drawn == "points"
+    ratio = mc.ratio_to_linear()
+    assert np.all(np.abs(ratio - 1) < 0.1), ratio.round(3)
+    # the common part: O's and R0's refits averaged, not drawn whole
+    assert mc.common_u is not None and mc.own_u is not None
+    np.testing.assert_allclose(
+        mc.common_u**2 + mc.own_u**2,
+        np.concatenate([mc.conventional_u, mc.corrected_u], 1) ** 2,
+        rtol=1e-12,
+    )

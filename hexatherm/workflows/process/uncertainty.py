@@ -55,6 +55,7 @@ from hexatherm.workflows.process.pipeline import (
 )
 
 Method = Literal["linear", "monte-carlo"]
+IntArray = npt.NDArray[np.intp]
 
 #: cap half-angle assumed for centres given without an uncertainty (as ``cmm:``'s default)
 DEFAULT_CAP_ANGLE_DEG = 70.0
@@ -294,18 +295,30 @@ def point_sampler(result: ProcessResult, cov_mm2: FloatArray) -> CentreSampler |
     that fit (the noise the fit's covariance assumes); the spheres are refitted
     as ``process`` fits them (same free or fixed radii). Centres read as such,
     and those whose fit has no redundancy, are drawn from their covariance
-    ``cov_mm2`` (N, k, 3, 3). None when no centre comes from probed points, or when O
-    or R0 was measured repeatedly (then every centre is drawn from its covariance).
+    ``cov_mm2`` (N, k, 3, 3). A repeated O or R0 gets the mean of its measurements'
+    refits, as ``process`` averages them. None when no centre comes from probed points,
+    or when a repeated step has a measurement that is not refitted (then every centre is
+    drawn from its covariance).
     """
     sources = [
         (fitted, raw)
         for fitted, raw in zip(result.records, result.points, strict=False)
         if raw is not None
     ]
-    if not sources or result.repeats:
-        # repeated O, R0 are averaged before registration: their centres are drawn
+    if not sources:
         return None
     step_index = {label: i for i, label in enumerate(result.session.plan.labels)}
+    step_index.update({label: step_index[kept] for label, kept in result.repeat_of.items()})
+    count = result.centres.measurements
+    repeated = {step_index[g.label] for g in result.repeats}
+    refitted = np.zeros(len(count), dtype=int)
+    for fitted, _ in sources:
+        ok = np.isfinite(np.asarray(fitted.extra["sigma_um"], dtype=float))
+        for label in np.asarray(fitted.label)[ok]:
+            refitted[step_index[str(label)]] += 1
+    k = len(result.session.balls.names)
+    if any(refitted[i] != count[i] * k for i in repeated):
+        return None  # a repeated step's measurement is not refitted: draw every centre
     ball_index = {name: j for j, name in enumerate(result.session.balls.names)}
     fits = []
     for fitted, raw in sources:
@@ -331,9 +344,24 @@ def point_sampler(result: ProcessResult, cov_mm2: FloatArray) -> CentreSampler |
         )
     centres = result.centres.centres_mm
     root = covariance_root(cov_mm2)
+    averaged = sorted(repeated)
+
+    def put(drawn: FloatArray, rows: slice, step: IntArray, ball: IntArray, c: FloatArray) -> None:
+        """Refitted centres (d, n, 3) into ``drawn``; a repeat adds its share of the mean."""
+        share = 1.0 / count[step]
+        once = share == 1.0
+        drawn[rows, step[once], ball[once]] = c[:, once]
+        if not once.all():
+            view = np.moveaxis(drawn[rows], 0, 2)  # (N, k, d, 3), writes through
+            np.add.at(
+                view,
+                (step[~once], ball[~once]),
+                np.moveaxis(c[:, ~once] * share[~once, None], 0, 1),
+            )
 
     def sample(rng: np.random.Generator, size: int) -> FloatArray:
         drawn = draw_centres(centres, root, rng, size)
+        drawn[:, averaged] = 0.0  # the means of their measurements' refits, added below
         for xyz, noise_mm, groups, radius, step, ball, ok, fitted_mm in fits:
             chunk = max(1, POINTS_PER_REFIT // len(xyz))
             n_spheres = int(groups.max()) + 1
@@ -355,7 +383,7 @@ def point_sampler(result: ProcessResult, cov_mm2: FloatArray) -> CentreSampler |
                     centre, _ = refine_spheres(
                         moved, start, r0, fixed_radius=radius is not None, normal_points_mm=xyz_s
                     )
-                    drawn[first : first + d, step, ball] = centre[:, ok]
+                    put(drawn, slice(first, first + d), step, ball, centre[:, ok])
                 continue
             for first in range(0, size, chunk):
                 d = min(chunk, size - first)
@@ -365,9 +393,13 @@ def point_sampler(result: ProcessResult, cov_mm2: FloatArray) -> CentreSampler |
                     None if radius is None else np.broadcast_to(radius, (d, n_spheres)).reshape(-1)
                 )
                 refit = fit_spheres(moved.reshape(-1, 3), all_groups, radius_mm=radii)
-                drawn[first : first + d, step, ball] = refit.centre_mm.reshape(d, n_spheres, 3)[
-                    :, ok
-                ]
+                put(
+                    drawn,
+                    slice(first, first + d),
+                    step,
+                    ball,
+                    refit.centre_mm.reshape(d, n_spheres, 3)[:, ok],
+                )
         return drawn
 
     return sample
