@@ -219,18 +219,32 @@ def test_replicas_scatter_as_the_shrunk_u_claims(
     assert abs(mean_ratio.mean() - 1) < 0.12, mean_ratio.mean()
 
 
-def test_the_repeats_scatter_as_their_u_over_replicas(
+def test_the_repeats_scatter_as_their_u_without_heating(tmp_path: Path) -> None:
+    """Noise alone (mats off): chi2 / dof of the repeats, pooled over 30 replicas, is 1
+    within 4 standard errors, for O and for R0 (measured 0.88 and 1.08 over 40)."""
+    checks = [
+        pose_uncertainty(
+            process_session(session(tmp_path / f"r{seed}", seed, 3, n_targets=1, gain=(0.0,) * 6))
+        ).repeats
+        for seed in range(30)
+    ]
+    for k, label in enumerate(("O", "R0")):
+        assert all(c[k].label == label for c in checks)
+        chi2, dof = sum(c[k].chi2 for c in checks), sum(c[k].dof for c in checks)
+        assert abs(chi2 / dof - 1) < 4 * np.sqrt(2 / dof), (label, chi2 / dof)
+
+
+def test_the_repeat_check_does_not_cry_wolf_on_heating(
     replicas: list[tuple[ProcessResult, PoseUncertainty]],
 ) -> None:
-    """chi2 / dof of the repeats, pooled over the replicas, is about 1 (heating on: a
-    straight line in time takes the drift), and the check does not cry wolf."""
-    for k, label in enumerate(("O", "R0")):
+    """Mats on from the start (tau 40 min): the straight line takes most of the drift
+    between the repeats (measured chi2/dof 1.22 for O, the curvature left, 1.05 for R0);
+    at most one warning in 60 sessions (p < 1e-3)."""
+    for k in range(2):
         chi2 = sum(u.repeats[k].chi2 for _, u in replicas)
         dof = sum(u.repeats[k].dof for _, u in replicas)
-        assert all(u.repeats[k].label == label for _, u in replicas)
-        assert abs(chi2 / dof - 1) < 4 * np.sqrt(2 / dof), (label, chi2 / dof)
-    false_alarms = sum(not c.ok for _, u in replicas for c in u.repeats)
-    assert false_alarms <= 1
+        assert 0.8 < chi2 / dof < 1.35
+    assert sum(not c.ok for _, u in replicas for c in u.repeats) <= 1
 
 
 def test_monte_carlo_refits_the_repeats_and_agrees_with_linear(tmp_path: Path) -> None:
