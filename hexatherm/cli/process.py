@@ -111,11 +111,12 @@ def command(
 
     Measurement files may hold ball centres or probed points (CSV or DMIS);
     points are fitted with spheres. Writes OUT/poses.csv (conventional and
-    corrected pose of every target, with standard uncertainties), OUT/legs.csv
-    (pose, IGM leg lengths and registration residual of every step), OUT/fits.csv
-    (quality of every ball centre) and OUT/quality.csv (quality checks of every
-    step), and prints the deviations from the commanded poses side by side, in
-    um and urad.
+    corrected pose of every target, with standard uncertainties and their parts
+    common to all targets and of their own), OUT/covariance.csv (covariance between
+    targets), OUT/legs.csv (pose, IGM leg lengths and registration residual of every
+    step), OUT/fits.csv (quality of every ball centre) and OUT/quality.csv (quality
+    checks of every step), and prints the deviations from the commanded poses side by
+    side, in um and urad. Repeated O and R0 (plan --origin-repeats ...) are averaged.
     """
     from hexatherm.io.outputs import check_output_settled
     from hexatherm.workflows.process.outputs import deviation_table, write_results
