@@ -183,10 +183,10 @@ def command(
     )
     smooth = result.correction.smooth
     if smooth is not None:
-        lams = ", ".join(f"{v:.2g}" for v in smooth.lam) if smooth.used else ""
+        lams = ", ".join(sorted({f"{v:.2g}" for v in smooth.lam})) if smooth.used else ""
         echo_err(
             f"interpolation smooth: {smooth.reason}"
-            + (f" (smoothing per leg {lams}, times scaled to [0, 1])" if lams else "")
+            + (f" (smoothing {lams}, times scaled to [0, 1])" if lams else "")
         )
     click.echo(deviation_table(result, twin))
     for line in uncertainty_summary(uncertainty):

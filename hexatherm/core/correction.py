@@ -479,7 +479,12 @@ def smooth_growth(
     cv_smooth = float(np.sqrt(np.mean(loo**2))) * 1e3
     cv_linear = float(np.sqrt(np.mean(linear**2))) * 1e3
     used = cv_smooth < SMOOTH_MARGIN * cv_linear
-    verdict = "smooth fit used" if used else "the two neighbours kept (heating not smooth)"
+    verdict = (
+        "smooth fit used"
+        if used
+        else f"the two neighbours kept (the smooth fit is not below {SMOOTH_MARGIN:g}x: "
+        "the heating is not smooth enough for it)"
+    )
     reason = (
         f"leave-one-out error of the references' growth {cv_smooth:.3g} um smooth, "
         f"{cv_linear:.3g} um linear between neighbours: {verdict}"

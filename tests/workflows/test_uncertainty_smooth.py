@@ -127,5 +127,5 @@ def test_a_growth_step_falls_back_to_the_neighbours(tmp_path: Path) -> None:
     assert smooth.correction.smooth is not None and not smooth.correction.smooth.used
     np.testing.assert_array_equal(smooth.correction.corrected, linear.correction.corrected)
     result = CliRunner().invoke(main, ["process", str(folder), "--interpolation", "smooth"])
-    assert "the two neighbours kept (heating not smooth)" in result.output
+    assert "the two neighbours kept (the smooth fit is not below 0.95x" in result.output
     assert set(pd.read_csv(folder / "results" / "poses.csv")["interpolation"]) == {"linear"}
