@@ -451,11 +451,22 @@ def smooth_growth(
     empty = np.zeros((len(ts), 6, n))
     if n < MIN_SMOOTH_REFERENCES:
         return SmoothGrowth(
-            False, empty, nan6, np.nan, np.nan, f"{n} references: too few for a smooth fit"
+            False,
+            empty,
+            nan6,
+            np.nan,
+            np.nan,
+            f"{n} references, too few for a smooth fit (at least {MIN_SMOOTH_REFERENCES}): "
+            "the two neighbours kept",
         )
     if np.any(np.diff(t) <= 0):
         return SmoothGrowth(
-            False, empty, nan6, np.nan, np.nan, "references without distinct times in order"
+            False,
+            empty,
+            nan6,
+            np.nan,
+            np.nan,
+            "references without distinct times in order: the two neighbours kept",
         )
     scale = t[-1] - t[0]
     x, xs = (t - t[0]) / scale, (ts - t[0]) / scale
