@@ -27,6 +27,25 @@ Scenarios:
   there (b) and (c) are the same correction).
 
 Noise-free cells use one seed, the others ``N_SEEDS``.
+
+``bench/accuracy.py floor`` (issue 14, part 2) measures instead the error of the
+corrected pose over the **noise floor measured in the same run**: the error of a pose
+with noise on the target step alone (the chain of the session evaluated on the true
+centres, the target steps' centres replaced by the measured ones). 60 targets (12
+poses, 5 cycles) between references (a campaign of about 5.7 h), point noise 1 um,
+``N_SEEDS`` seeds. Heating:
+
+- ``smooth``: tau = 60 min, mats on an hour before the session starts;
+- ``on-off``: tau = 10 min, on at 1500 s and off at 5400 s (two kinks);
+- ``step``: tau = 20 s, on at 5000 s (the growth jumps between two references).
+
+With repeats the corrected poses refer to the mean thermal state of R0's measurements
+(and O's): the twin's truth refers to the first R0, and O's and R0's drift during the
+repeats largely cancel (O is averaged over the same minutes).
+
+It prints RMS error / floor of |dT| and |dR| for the linear default, ``--interpolation
+smooth``, and smooth with O and R0 measured ``REPEATS`` times (``plan --origin-repeats
+--reference0-repeats``), and how often the smooth fit was kept.
 """
 
 from __future__ import annotations
@@ -114,7 +133,111 @@ def run(heating: str, layout: str, noise_um: float, seed: int, work: Path) -> np
     return out
 
 
+# ----------------------------------------------------------------- error / floor
+FLOOR_HEATING = {
+    "smooth": MatHeating(tuple(Mat(g, 3600.0, ((-3600.0, np.inf),)) for g in GAINS_C)),
+    "on-off": MatHeating(tuple(Mat(g, 600.0, ((1500.0, 5400.0),)) for g in GAINS_C)),
+    "step": MatHeating(tuple(Mat(g, 20.0, ((5000.0, np.inf),)) for g in GAINS_C)),
+}
+REPEATS = 4
+FLOOR_NOISE_UM = 1.0
+FLOOR_CYCLES = 5
+
+
+def floor_run(heating: str, repeats: int, interpolation: str, seed: int, work: Path):
+    """Squared errors of the corrected poses and of the floor (targets, 2: |dT|^2 um^2,
+    |dR|^2 urad^2) of one session, and whether the smooth fit was kept."""
+    from hexatherm.workflows.process.uncertainty import pose_chain
+
+    plan = Plan.from_steps(
+        sequence_steps(
+            TARGETS,
+            REFERENCE,
+            cycles=FLOOR_CYCLES,
+            origin_repeats=repeats,
+            reference0_repeats=repeats,
+        ),
+        reference_pose=REFERENCE,
+    )
+    spec = TwinSessionSpec(
+        name="floor",
+        hexapod_text=(ROOT / "configs" / "symetrie-like.yaml").read_text(),
+        balls=read_balls(ROOT / "configs" / "balls-3.yaml"),
+        plan=plan,
+        heating=FLOOR_HEATING[heating],
+        seconds_per_ball=25 * 2.0,
+        seconds_per_move=20.0,
+        seed=seed,
+        output="centres",
+        points_per_ball=25,
+        cap_half_angle_deg=70.0,
+        point_noise_mm=FLOOR_NOISE_UM * 1e-3,
+        fit_centres=True,
+    )
+    simulated = simulate_session(spec)
+    folder = work / f"floor-{heating}-{repeats}-{interpolation}-{seed}"
+    write_files(simulated.files, folder)
+    result = process_session(folder, interpolation=interpolation)  # type: ignore[arg-type]
+    targets = plan.target_indices[repeats - 1 :]  # the repeats of O are not targets
+    truth = simulated.truth.corrected_pose[targets]
+    # the floor: the chain of the session on the true centres, only the targets' measured
+    kept = np.array([plan.labels.index(label) for label in result.session.plan.labels])
+    clean = simulated.truth.centres_cmm_mm[kept]
+    mixed = clean.copy()
+    reduced_targets = result.session.plan.target_indices
+    mixed[reduced_targets] = result.centres.centres_mm[reduced_targets]
+    chain = pose_chain(result)
+    floor = chain(mixed)[:, 6:] - chain(clean)[:, 6:]
+    out = np.empty((2, len(truth), 2))
+    for k, err in enumerate((result.correction.corrected - truth, floor)):
+        out[k, :, 0] = (np.linalg.norm(err[:, :3], axis=1) * 1e3) ** 2
+        out[k, :, 1] = (np.linalg.norm(err[:, 3:], axis=1) * URAD_PER_DEG) ** 2
+    smooth = result.correction.smooth
+    return out, bool(smooth is not None and smooth.used)
+
+
+def floor_table() -> None:
+    """Print error / floor for linear, smooth and smooth + repeats, per heating."""
+    start = time.perf_counter()
+    methods = (
+        ("linear", 1, "linear"),
+        ("smooth", 1, "smooth"),
+        ("smooth + repeats", REPEATS, "smooth"),
+    )
+    print(
+        "| heating | method | error / floor, translation | error / floor, rotation "
+        "| error um / urad | floor um / urad | smooth kept |"
+    )
+    print("|---|---|---:|---:|---:|---:|---:|")
+    with tempfile.TemporaryDirectory() as tmp:
+        for heating in FLOOR_HEATING:
+            for name, repeats, interpolation in methods:
+                runs = [
+                    floor_run(heating, repeats, interpolation, seed, Path(tmp))
+                    for seed in range(N_SEEDS)
+                ]
+                squares = np.concatenate([r for r, _ in runs], axis=1)  # (2, targets, 2)
+                rms = np.sqrt(squares.mean(axis=1))  # (2: error, floor; 2: T, R)
+                ratio = rms[0] / rms[1]
+                kept = f"{sum(u for _, u in runs)}/{len(runs)}" if interpolation == "smooth" else ""
+                print(
+                    f"| {heating} | {name} | {ratio[0]:.2f} | {ratio[1]:.2f} "
+                    f"| {rms[0, 0]:.2f} / {rms[0, 1]:.1f} | {rms[1, 0]:.2f} / {rms[1, 1]:.1f} "
+                    f"| {kept} |",
+                    flush=True,
+                )
+    print(
+        f"\n{N_SEEDS} seeds x {len(TARGETS) * FLOOR_CYCLES} targets per cell, point noise "
+        f"{FLOOR_NOISE_UM:g} um, "
+        f"repeats {REPEATS}; {time.perf_counter() - start:.0f} s",
+        file=sys.stderr,
+    )
+
+
 def main() -> None:
+    if sys.argv[1:] == ["floor"]:
+        floor_table()
+        return
     start = time.perf_counter()
     rows = []
     with tempfile.TemporaryDirectory() as tmp:

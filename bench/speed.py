@@ -52,12 +52,12 @@ from hexatherm.core.registration import register  # noqa: E402
 from hexatherm.core.spherefit import fit_spheres  # noqa: E402
 from hexatherm.io import csvfile, dmis, measurements, temperatures  # noqa: E402
 from hexatherm.io.config import read_hexapod, read_session  # noqa: E402
-from hexatherm.workflows.process.pipeline import (  # noqa: E402
+from hexatherm.workflows.process.measured import (  # noqa: E402
     assemble_centres,
     fit_points,
-    process_session,
     registration_weights,
 )
+from hexatherm.workflows.process.pipeline import process_session  # noqa: E402
 
 HALF_RANGE = np.array([20.0, 20.0, 15.0, 4.0, 4.0, 8.0])  # target box: +-mm, +-deg
 URAD_PER_DEG = np.pi / 180 * 1e6

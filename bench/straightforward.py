@@ -37,7 +37,7 @@ from hexatherm.core.hexapod import Hexapod
 from hexatherm.io.config import read_session
 from hexatherm.session import Session
 
-#: as in hexatherm.workflows.process.pipeline.registration_weights
+#: as in hexatherm.workflows.process.measured.registration_weights
 U_FLOOR_UM = 1e-3
 
 Groups = dict[tuple[str, str], tuple[list[list[float]], list[float]]]

@@ -248,6 +248,7 @@ LONG_MODULES = {
     "core.spherefit",
     "core.hexapod",
     "core.effects",
+    "core.propagation",
 }
 MAX_LINES = 600
 

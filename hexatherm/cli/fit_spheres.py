@@ -56,7 +56,7 @@ def command(
     from hexatherm.io.measurements import read_measurements
     from hexatherm.io.outputs import check_output_settled, write_output_file
     from hexatherm.io.records import Records, concat_records
-    from hexatherm.workflows.process.pipeline import fit_points
+    from hexatherm.workflows.process.measured import fit_points
 
     if out is not None:
         check_output_settled(out, kind="file", inputs=points, overwrite=overwrite)

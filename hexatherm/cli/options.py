@@ -31,11 +31,13 @@ output_dir_option = click.option(
 )
 interpolation_option = click.option(
     "--interpolation",
-    type=click.Choice(["linear", "before", "after", "nearest"]),
+    type=click.Choice(["linear", "before", "after", "nearest", "smooth"]),
     default="linear",
     show_default=True,
     help="With references on both sides of a target: interpolate their growth linearly in "
-    "time, or use one neighbour as in the paper.",
+    "time, or use one neighbour as in the paper; smooth: a smoothing spline of the growth "
+    "over all references (per leg, chosen by cross-validation, which falls back to linear "
+    "when the heating is not smooth).",
 )
 quality_threshold_option = click.option(
     "--quality-threshold",
@@ -257,7 +259,7 @@ class ProgressBars:
 
     def reading(self, path: str, done: int, total: int) -> None:
         """Progress of reading a measurement file (lines), as
-        :func:`hexatherm.workflows.process.pipeline.read_measured` reports it."""
+        :func:`hexatherm.workflows.process.measured.read_measured` reports it."""
         self.update(f"reading {os.path.basename(path)}", done, total)
 
     def draws(self, done: int, total: int) -> None:

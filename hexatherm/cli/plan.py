@@ -69,6 +69,8 @@ MAX_TARGETS = 100_000
 MAX_CYCLES = 1_000
 #: the most points probed on one ball
 MAX_POINTS_PER_BALL = 10_000
+#: the most repeats of O or R0
+MAX_REPEATS = 100
 
 
 def parse_levels(text: str) -> list[int]:
@@ -152,6 +154,24 @@ def parse_levels(text: str) -> list[int]:
     "each target has R on both sides; before: no R after the last target.",
 )
 @click.option(
+    "--origin-repeats",
+    type=click.IntRange(min=1, max=MAX_REPEATS),
+    default=1,
+    show_default=True,
+    metavar="N",
+    help="Measure O N times (O, R0, O-2, R0-2, ...: a repeat of O is a target at the "
+    "zero pose labelled O-n, with R0 measured again beside it); process averages them.",
+)
+@click.option(
+    "--reference0-repeats",
+    type=click.IntRange(min=1, max=MAX_REPEATS),
+    default=1,
+    show_default=True,
+    metavar="N",
+    help="Measure R0 N times (references labelled R0-n, before the first target; at "
+    "least as often as O); process averages them.",
+)
+@click.option(
     "--points-per-ball",
     type=click.IntRange(min=1, max=MAX_POINTS_PER_BALL),
     default=25,
@@ -229,6 +249,8 @@ def command(
     reference: str,
     cycles: int,
     reference_every: str,
+    origin_repeats: int,
+    reference0_repeats: int,
     points_per_ball: int,
     seconds_per_point: float,
     seconds_per_move: float,
@@ -250,6 +272,7 @@ def command(
     OUT (or standard output); --dmis and --checklist add the CMM program and the
     operator's sheet.
     """
+    from hexatherm.core.plan import find_repeats
     from hexatherm.io.outputs import check_output_settled, write_output_file
     from hexatherm.workflows.plan import PlanRequest, make_plan
 
@@ -292,6 +315,8 @@ def command(
         box_upper=upper,
         cycles=cycles,
         reference_every=reference_every,
+        origin_repeats=origin_repeats,
+        reference0_repeats=reference0_repeats,
         points_per_ball=points_per_ball,
         seconds_per_point=seconds_per_point,
         seconds_per_move=seconds_per_move,
@@ -325,8 +350,16 @@ def command(
             write_output_file(target, text, inputs=inputs, overwrite=overwrite)
             echo_err(f"wrote {target}")
     plan = made.plan
+    repeats = find_repeats(plan)
+    n_targets = len(plan.target_indices) - (len(repeats.origin) - 1)
     echo_err(
-        f"plan: {len(plan.labels)} steps ({len(plan.target_indices)} targets x "
+        f"plan: {len(plan.labels)} steps ({n_targets} targets x "
         f"{len(made.ball_names)} balls x {points_per_ball} points), estimated "
         f"{made.timing.total_s / 3600:.2f} h"
     )
+    if repeats.any:
+        echo_err(
+            f"O measured {len(repeats.origin)} time(s), R0 {len(repeats.reference0)} time(s) "
+            f"({', '.join(plan.labels[i] for i in sorted(repeats.origin + repeats.reference0))}): "
+            "process averages each"
+        )

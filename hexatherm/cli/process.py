@@ -115,11 +115,12 @@ def command(
 
     Measurement files may hold ball centres or probed points (CSV or DMIS);
     points are fitted with spheres. Writes OUT/poses.csv (conventional and
-    corrected pose of every target, with standard uncertainties), OUT/legs.csv
-    (pose, IGM leg lengths and registration residual of every step), OUT/fits.csv
-    (quality of every ball centre) and OUT/quality.csv (quality checks of every
-    step), and prints the deviations from the commanded poses side by side, in
-    um and urad.
+    corrected pose of every target, with standard uncertainties and their parts
+    common to all targets and of their own), OUT/covariance.csv (covariance between
+    targets), OUT/legs.csv (pose, IGM leg lengths and registration residual of every
+    step), OUT/fits.csv (quality of every ball centre) and OUT/quality.csv (quality
+    checks of every step), and prints the deviations from the commanded poses side by
+    side, in um and urad. Repeated O and R0 (plan --origin-repeats ...) are averaged.
     """
     from hexatherm.io.config import read_session
     from hexatherm.io.outputs import check_output_settled
@@ -179,10 +180,20 @@ def command(
         result, out_dir, overwrite=overwrite, uncertainty=uncertainty, quality=quality, twin=twin
     )
     n = len(result.correction.target_index)
+    averaged = "".join(
+        f", {g.label} averaged over {len(g.labels)} measurements" for g in result.repeats
+    )
     echo_err(
         f"session {result.session.name}: {len(result.session.plan.labels)} steps, "
-        f"{n} targets, interpolation {interpolation}"
+        f"{n} targets, interpolation {interpolation}{averaged}"
     )
+    smooth = result.correction.smooth
+    if smooth is not None:
+        lams = ", ".join(sorted({f"{v:.2g}" for v in smooth.lam})) if smooth.used else ""
+        echo_err(
+            f"interpolation smooth: {smooth.reason}"
+            + (f" (smoothing {lams}, times scaled to [0, 1])" if lams else "")
+        )
     click.echo(deviation_table(result, twin))
     for line in uncertainty_summary(uncertainty):
         echo_err(line)
@@ -218,6 +229,22 @@ def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
             f"  u ({uncertainty.method}, k=1) of the {name} poses: up to "
             f"{t_um:.3f} um, {r_urad:.2f} urad"
         )
+    lines.extend(shared_summary(uncertainty))
+    for check in uncertainty.repeats:
+        line = (
+            f"  {check.label} measured {check.n} times, averaged: their scatter is "
+            f"{check.ratio:.2f}x the claimed u (chi2 {check.chi2:.1f} over {check.dof} dof"
+            + (", after a straight-line drift" if check.n >= 3 else "")
+            + ")"
+        )
+        lines.append(line)
+        if not check.ok:
+            lines.append(
+                f"warning: the {check.n} measurements of {check.label} scatter more than "
+                f"their u allows (p = {check.p_value:.1g}): the platform moved or drifted "
+                "between them, or a ball was probed badly; the average is used, and u "
+                "does not include that scatter"
+            )
     if uncertainty.method == "monte-carlo":
         ratio = uncertainty.ratio_to_linear()
         if np.isfinite(ratio).any():
@@ -231,4 +258,33 @@ def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
                 f"over linear propagation: {np.nanmin(ratio):.3f} to "
                 f"{np.nanmax(ratio):.3f} ({drawn})"
             )
+    return lines
+
+
+def shared_summary(uncertainty: PoseUncertainty) -> list[str]:
+    """Screen lines: the parts of u common to all targets (O and R0) and of their own."""
+    common, own = uncertainty.common_u, uncertainty.own_u
+    if common is None or own is None or common.size == 0:
+        return []
+    from hexatherm.core.geometry import to_um_urad
+
+    def rms(values: np.ndarray) -> str:
+        v = np.sqrt(np.mean(to_um_urad(values) ** 2, axis=0))
+        return (
+            " ".join(f"{n} {x:.3g}" for n, x in zip(("Tx", "Ty", "Tz"), v[:3], strict=True))
+            + " um, "
+            + " ".join(f"{n} {x:.3g}" for n, x in zip(("Rx", "Ry", "Rz"), v[3:], strict=True))
+            + " urad"
+        )
+
+    scaled = " (linear shares of the Monte Carlo u)" if uncertainty.method == "monte-carlo" else ""
+    lines = [
+        "  parts of u, RMS over the targets" + scaled + ": common to all targets (the one "
+        "measurement of O and R0 every pose carries; it shifts all targets together and "
+        "cancels in their differences) and own (the target's step and its references):"
+    ]
+    for name, cols in (("conventional", slice(0, 6)), ("corrected", slice(6, 12))):
+        lines.append(f"    {name:12} common {rms(common[:, cols])}")
+        lines.append(f"    {'':12} own    {rms(own[:, cols])}")
+    lines.append("  covariance between targets: covariance.csv")
     return lines

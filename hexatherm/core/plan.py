@@ -157,3 +157,85 @@ class Plan:
             after = i + 1 if i + 1 < len(self.kinds) and self.kinds[i + 1] == "reference" else -1
             out.append((int(before), int(after)))
         return out
+
+
+@dataclass(frozen=True)
+class Repeats:
+    """Steps that measure O and R0 again (``plan --origin-repeats/--reference0-repeats``).
+
+    The plan contract allows one origin step and requires a reference next to every
+    target, so a repeat of O is a *target* labelled ``<O>-<n>`` commanded at O's pose,
+    and a repeat of R0 a *reference* labelled ``<R0>-<n>``, both before the first other
+    target (``O, R0, O-2, R0-2, O-3, R0-3, S1, R1, ...``). A reader that does not know
+    repeats sees targets at the zero pose and references measured early: valid.
+
+    Attributes
+    ----------
+    origin : tuple of int
+        Step indices measuring O: O itself first, then its repeats.
+    reference0 : tuple of int
+        Step indices measuring R0: R0 first, then its repeats.
+    """
+
+    origin: tuple[int, ...]
+    reference0: tuple[int, ...]
+
+    @property
+    def any(self) -> bool:
+        """Whether O or R0 is measured more than once."""
+        return len(self.origin) > 1 or len(self.reference0) > 1
+
+    def groups(self) -> tuple[tuple[int, ...], ...]:
+        """The groups of steps measuring one step again, O's then R0's (when repeated)."""
+        return tuple(g for g in (self.origin, self.reference0) if len(g) > 1)
+
+
+def repeat_label(label: str, n: int) -> str:
+    """Label of the ``n``-th measurement (n >= 2) of step ``label``: ``O-2``, ``R0-3``."""
+    return f"{label}-{n}"
+
+
+def find_repeats(plan: Plan) -> Repeats:
+    """The repeats of O and R0 in ``plan`` (see :class:`Repeats`).
+
+    >>> plan = Plan.from_steps([("O", "origin", [0] * 6), ("R0", "reference", [0, 0, -40, 0, 0, 0]),
+    ...     ("O-2", "target", [0] * 6), ("R0-2", "reference", [0, 0, -40, 0, 0, 0]),
+    ...     ("S1", "target", [1, 0, 0, 0, 0, 0]), ("R1", "reference", [0, 0, -40, 0, 0, 0])])
+    >>> find_repeats(plan)
+    Repeats(origin=(0, 2), reference0=(1, 3))
+    """
+    origin = plan.origin_index
+    refs = plan.reference_indices
+    if not refs.size:
+        return Repeats((origin,), ())
+    r0 = int(refs[0])
+    o_repeat = re.compile(re.escape(plan.labels[origin]) + r"-[0-9]+")
+    r_repeat = re.compile(re.escape(plan.labels[r0]) + r"-[0-9]+")
+    o_steps, r_steps = [origin], [r0]
+    for i in range(r0 + 1, len(plan.labels)):
+        label, kind = plan.labels[i], plan.kinds[i]
+        at_origin = np.abs(plan.poses[i] - plan.poses[origin]).max() <= SAME_POSE_TOL
+        if kind == "target" and o_repeat.fullmatch(label) and at_origin:
+            o_steps.append(i)
+        elif kind == "reference" and r_repeat.fullmatch(label):
+            r_steps.append(i)
+        elif kind == "target":
+            break
+    return Repeats(tuple(o_steps), tuple(r_steps))
+
+
+def without_repeats(plan: Plan, repeats: Repeats) -> tuple[Plan, npt.NDArray[np.intp]]:
+    """The plan with every repeat removed (O and R0 stand for their averages), and the
+    indices of the steps kept. The first target after the repeats then has R0 as its
+    reference before (the repeats of R0 being R0)."""
+    drop = set(repeats.origin[1:]) | set(repeats.reference0[1:])
+    keep = np.array([i for i in range(len(plan.labels)) if i not in drop], dtype=np.intp)
+    reduced = Plan(
+        tuple(plan.labels[i] for i in keep),
+        tuple(plan.kinds[i] for i in keep),
+        plan.poses[keep],
+        plan.reference_pose,
+        plan.points_per_ball,
+    )
+    reduced.validate()
+    return reduced, keep

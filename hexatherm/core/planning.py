@@ -30,7 +30,7 @@ import numpy as np
 import numpy.typing as npt
 
 from hexatherm.core.hexapod import Hexapod
-from hexatherm.core.plan import Plan
+from hexatherm.core.plan import Plan, repeat_label
 from hexatherm.errors import InputError, PlanError, PoseError
 from hexatherm.text import format_number
 from hexatherm.typing import FloatArray
@@ -260,6 +260,8 @@ def sequence_steps(
     *,
     cycles: int = 1,
     reference_every: ReferenceEvery = "both",
+    origin_repeats: int = 1,
+    reference0_repeats: int = 1,
 ) -> list[tuple[str, str, list[float]]]:
     """The steps ``(label, kind, pose)`` of a plan in measuring order.
 
@@ -276,6 +278,12 @@ def sequence_steps(
     scenarios' ``references: one-side``). References are numbered in the order they
     are measured; with ``both``, ``before`` and ``after``, ``R_i`` follows ``S_i``.
 
+    With ``origin_repeats`` or ``reference0_repeats`` above 1, O and R0 are measured
+    again right after R0, alternately: ``O, R0, O-2, R0-2, O-3, R0-3, S1 ...``
+    (:class:`~hexatherm.core.plan.Repeats`: a repeat of O is a target at the zero pose,
+    which needs a reference beside it, so R0 is measured at least as often as O).
+    ``process`` averages them.
+
     Parameters
     ----------
     targets : array_like, shape (n, 6)
@@ -283,6 +291,8 @@ def sequence_steps(
     cycles : int
         How many times the targets are measured.
     reference_every : {"both", "before", "after", "alternate"}
+    origin_repeats, reference0_repeats : int
+        How many times O and R0 are measured (1: once).
 
     Returns
     -------
@@ -301,11 +311,19 @@ def sequence_steps(
         )
     if not len(poses):
         raise PlanError("no target poses")
+    if origin_repeats < 1 or reference0_repeats < 1:
+        raise PlanError(
+            f"O and R0 are measured at least once, got {origin_repeats} and {reference0_repeats}"
+        )
     reference = [float(v) for v in reference_pose]
     steps: list[tuple[str, str, list[float]]] = [
         ("O", "origin", [0.0] * 6),
         ("R0", "reference", reference),
     ]
+    for n in range(2, max(origin_repeats, reference0_repeats) + 1):
+        if n <= origin_repeats:
+            steps.append((repeat_label("O", n), "target", [0.0] * 6))
+        steps.append((repeat_label("R0", n), "reference", list(reference)))
     all_targets = np.tile(poses, (cycles, 1))
     n = len(all_targets)
     n_refs = 0
@@ -328,6 +346,8 @@ def build_plan(
     cycles: int = 1,
     reference_every: ReferenceEvery = "both",
     points_per_ball: int = 25,
+    origin_repeats: int = 1,
+    reference0_repeats: int = 1,
 ) -> Plan:
     """A validated :class:`~hexatherm.core.plan.Plan` from target poses.
 
@@ -341,7 +361,14 @@ def build_plan(
     """
     if points_per_ball < 1:
         raise PlanError(f"points per ball must be at least 1, got {points_per_ball}")
-    steps = sequence_steps(targets, reference_pose, cycles=cycles, reference_every=reference_every)
+    steps = sequence_steps(
+        targets,
+        reference_pose,
+        cycles=cycles,
+        reference_every=reference_every,
+        origin_repeats=origin_repeats,
+        reference0_repeats=reference0_repeats,
+    )
     return Plan.from_steps(steps, reference_pose=reference_pose, points_per_ball=points_per_ball)
 
 

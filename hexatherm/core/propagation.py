@@ -53,6 +53,9 @@ OUTPUTS_PER_TARGET = 12
 DEFAULT_STEP_MM = 1e-3
 #: Monte Carlo draws evaluated at once
 DEFAULT_BATCH = 256
+#: largest dense Jacobian (outputs x targets x coordinates) for the between-target
+#: covariance; beyond it, sparse products
+DENSE_BETWEEN_LIMIT = 4_000_000
 #: ``sample(rng, size)``: Monte Carlo draws of all the centres, (size, N, k, 3)
 CentreSampler = Callable[[np.random.Generator, int], FloatArray]
 
@@ -81,6 +84,9 @@ class PoseChain:
         Registration weights.
     initial_poses : ndarray, shape (M, 6), optional
         Start of the FGM iterations (the corrected poses of the nominal centres).
+    growth_weights : ndarray, shape (M, 6, N), optional
+        The smooth fit's weights of every step's leg lengths in the growth at each target
+        (:class:`~hexatherm.core.correction.Correction`); None: the two neighbours.
     """
 
     hexapod: Hexapod
@@ -91,6 +97,7 @@ class PoseChain:
     weight_after: FloatArray
     weights: FloatArray | None = None
     initial_poses: FloatArray | None = None
+    growth_weights: FloatArray | None = None
 
     def __call__(self, centres_mm: npt.ArrayLike) -> FloatArray:
         """Outputs (..., M, 12) for centres (..., N, k, 3)."""
@@ -128,9 +135,12 @@ class PoseChain:
         if legs is None:
             raise ValueError("the hexapod has no leg model")
         q_r0 = q[:, self.plan.reference_indices[0]]
-        reference_growth = interpolated_growth(
-            q, q_r0, self.before_index, self.after_index, self.weight_after
-        )
+        if self.growth_weights is None:
+            reference_growth = interpolated_growth(
+                q, q_r0, self.before_index, self.after_index, self.weight_after
+            )
+        else:
+            reference_growth = np.einsum("mln,bnl->bml", self.growth_weights, q) - q_r0[:, None, :]
         q_s = q[:, targets]
         corrected_q = q_s - target_growth(legs, reference_growth, q_r0[:, None], q_s)
         start = (
@@ -152,6 +162,85 @@ def output_difference(a: npt.ArrayLike, b: npt.ArrayLike) -> FloatArray:
     return d
 
 
+@dataclass(frozen=True)
+class TargetJacobian:
+    """Derivatives of every target's outputs by the centres of the steps it depends on.
+
+    Attributes
+    ----------
+    jac : ndarray, shape (M, 5, 12, k, 3)
+        ``d output / d centre`` of target m by the centres of its part p (mm/mm, deg/mm):
+        O, R0, the target, its reference before, its reference after. A step that plays
+        two parts (R0 as the reference before the first targets) holds the sum in its
+        first part; the later part is zero and its step -1.
+    steps : ndarray of int, shape (M, 5)
+        Step index of each part (-1: not used, or merged into an earlier part).
+    common_parts : tuple of int
+        The parts that are O and R0 for every target (their noise moves every target's
+        pose): ``(0, 1)``; with the smooth growth the parts are O, the target, then every
+        reference (R0 first): ``(0, 2)``.
+    """
+
+    jac: FloatArray
+    steps: IntArray
+    common_parts: tuple[int, ...] = (0, 1)
+
+    #: parts shared by every target with the two neighbours: O and R0
+    COMMON_PARTS = (0, 1)
+
+    def covariance(self, centre_cov_mm2: npt.ArrayLike, parts: tuple[int, ...] = ()) -> FloatArray:
+        """Covariance (M, 12, 12) of every target's outputs (from the given parts only).
+
+        The centres are independent from step to step, so the covariance is a sum over
+        the parts; ``parts`` (default: all) picks some of them, e.g.
+        :attr:`common_parts`.
+        """
+        cov = np.asarray(centre_cov_mm2, dtype=float)
+        m, n_parts, n_out, k = self.jac.shape[:4]
+        use = np.zeros(n_parts, dtype=bool)
+        use[list(parts) if parts else slice(None)] = True
+        live = (self.steps >= 0) & use
+        part_cov = np.where(live[..., None, None, None], cov[np.maximum(self.steps, 0)], 0.0)
+        return np.asarray(
+            np.einsum("mpybi,mpbij,mpzbj->myz", self.jac, part_cov, self.jac, optimize=True)
+        )
+
+    def between_targets(self, centre_cov_mm2: npt.ArrayLike) -> FloatArray:
+        """Covariance (12, M, M) of each output between every pair of targets.
+
+        ``C[y, a, b] = sum_steps J_a,s,y U_s J_b,s,y^T`` over the steps both targets
+        depend on (O and R0 for every pair, a shared reference for neighbours); the
+        diagonal ``C[y, a, a]`` is the variance of :meth:`covariance`. Sparse products:
+        each target has at most five steps.
+        """
+        from scipy import sparse
+
+        cov = np.asarray(centre_cov_mm2, dtype=float)
+        m, n_parts, n_out, k = self.jac.shape[:4]
+        n = cov.shape[0]
+        live = self.steps >= 0
+        at = np.maximum(self.steps, 0)
+        root = covariance_root(cov)  # (N, k, 3, 3)
+        # whitened: J L, (M, 5, 12, k, 3); then C = (J L)(J L)^T over shared coordinates
+        white = np.einsum("mpybi,mpbij->mpybj", self.jac, root[at])
+        white = np.where(live[:, :, None, None, None], white, 0.0)
+        coord = at[:, :, None, None] * (3 * k) + np.arange(3 * k).reshape(1, 1, k, 3)
+        rows = np.broadcast_to(np.arange(m)[:, None, None, None], coord.shape).ravel()
+        cols = coord.ravel()
+        values = np.moveaxis(white, 2, 0).reshape(n_out, -1)  # (12, M*P*k*3)
+        if n_out * m * n * 3 * k <= DENSE_BETWEEN_LIMIT:
+            # small sessions: dense (a target's parts are distinct steps: no repeated cell)
+            dense = np.zeros((n_out, m, n * 3 * k))
+            keep = values.any(axis=0)
+            dense[:, rows[keep], cols[keep]] = values[:, keep]
+            return np.asarray(dense @ np.swapaxes(dense, 1, 2))
+        out = np.empty((n_out, m, m))
+        for y in range(n_out):
+            a = sparse.csr_matrix((white[:, :, y].ravel(), (rows, cols)), shape=(m, n * 3 * k))
+            out[y] = (a @ a.T).toarray()
+        return out
+
+
 def linear_covariance(
     chain: PoseChain,
     centres_mm: npt.ArrayLike,
@@ -159,6 +248,33 @@ def linear_covariance(
     step_mm: float = DEFAULT_STEP_MM,
 ) -> FloatArray:
     """Covariance (M, 12, 12) of every target's outputs by linear propagation.
+
+    ``target_jacobian(chain, centres_mm, step_mm).covariance(centre_cov_mm2)``: see
+    :func:`target_jacobian`.
+
+    Parameters
+    ----------
+    chain : PoseChain
+    centres_mm : array_like, shape (N, k, 3)
+        The measured centres.
+    centre_cov_mm2 : array_like, shape (N, k, 3, 3)
+        Covariance of each centre (finite; independent centres).
+    step_mm : float
+        Central-difference step on each coordinate.
+
+    Returns
+    -------
+    ndarray, shape (M, 12, 12)
+    """
+    return target_jacobian(chain, centres_mm, step_mm).covariance(centre_cov_mm2)
+
+
+def target_jacobian(
+    chain: PoseChain,
+    centres_mm: npt.ArrayLike,
+    step_mm: float = DEFAULT_STEP_MM,
+) -> TargetJacobian:
+    """Jacobian of every target's outputs by the centres of the steps it depends on.
 
     The Jacobian of target S_i's outputs by the centres of the (at most) five
     steps they depend on (O, R0, S_i, its references before and after) is put
@@ -184,23 +300,22 @@ def linear_covariance(
     chain : PoseChain
     centres_mm : array_like, shape (N, k, 3)
         The measured centres.
-    centre_cov_mm2 : array_like, shape (N, k, 3, 3)
-        Covariance of each centre (finite; independent centres).
     step_mm : float
         Central-difference step on each coordinate.
 
     Returns
     -------
-    ndarray, shape (M, 12, 12)
+    TargetJacobian
     """
     c = np.asarray(centres_mm, dtype=float)
-    cov = np.asarray(centre_cov_mm2, dtype=float)
     n, k = c.shape[:2]
     plan, hexapod = chain.plan, chain.hexapod
     targets, origin = plan.target_indices, plan.origin_index
     m = targets.size
     if m == 0:
-        return np.zeros((0, OUTPUTS_PER_TARGET, OUTPUTS_PER_TARGET))
+        return TargetJacobian(
+            np.zeros((0, 5, OUTPUTS_PER_TARGET, k, 3)), np.zeros((0, 5), dtype=np.intp)
+        )
     legs = hexapod.legs
     if legs is None:
         raise ValueError("the hexapod has no leg model")
@@ -234,7 +349,10 @@ def linear_covariance(
     q = hexapod.igm(pose)
     r0 = plan.reference_indices[0]
     before, after, w_after = chain.before_index, chain.after_index, chain.weight_after
-    growth = interpolated_growth(q, q[r0], before, after, w_after)
+    if chain.growth_weights is None:
+        growth = interpolated_growth(q, q[r0], before, after, w_after)
+    else:
+        growth = np.einsum("mln,nl->ml", chain.growth_weights, q) - q[r0]
     q_s = q[targets]
 
     def q_corr(g: FloatArray, q_r0: FloatArray, qs: FloatArray) -> FloatArray:
@@ -245,6 +363,22 @@ def linear_covariance(
     d_growth = (q_corr(growth + h, q_r0, q_s) - q_corr(growth - h, q_r0, q_s)) / (2 * h)
     d_r0 = (q_corr(growth, q_r0 + h, q_s) - q_corr(growth, q_r0 - h, q_s)) / (2 * h)
     d_s = (q_corr(growth, q_r0, q_s + h) - q_corr(growth, q_r0, q_s - h)) / (2 * h)
+    jac_fgm_inv = np.asarray(
+        np.linalg.inv(hexapod.jacobian(chain.outputs_from_poses(pose[None])[0, :, 6:])), float
+    )
+    if chain.growth_weights is not None:
+        return _smooth_jacobian(
+            chain,
+            dpose_own,
+            dpose_origin,
+            dq_own,
+            dq_origin,
+            d_growth,
+            d_r0,
+            d_s,
+            jac_fgm_inv,
+            k,
+        )
     w_before = np.where(before >= 0, 1.0 - w_after, 0.0)[:, None]
     w_after_used = np.where(after >= 0, w_after, 0.0)[:, None]
     # coefficient of dq of each part: O (none: through the others), R0, S, before, after
@@ -266,7 +400,6 @@ def linear_covariance(
     # 4. dq_corr and the outputs by each part's centres: (M, 5, 12, 3k)
     dq_corr = np.where(used[..., None, None], coef[..., None] * dq_own[at], 0.0)
     dq_corr[:, 0] = np.einsum("mpl,mplj->mlj", np.where(used[..., None], coef, 0.0), dq_origin[at])
-    jac_fgm_inv = np.linalg.inv(hexapod.jacobian(chain.outputs_from_poses(pose[None])[0, :, 6:]))
     jac = np.zeros((m, 5, OUTPUTS_PER_TARGET, 3 * k))
     jac[:, 0, :6] = dpose_origin[targets]
     jac[:, 2, :6] = dpose_own[targets]
@@ -278,9 +411,47 @@ def linear_covariance(
             jac[same, earlier] += jac[same, part]
             jac[same, part] = 0.0
             steps[same, part] = -1
-    part_cov = np.where((steps >= 0)[..., None, None, None], cov[at], 0.0)  # (M, 5, k, 3, 3)
-    jac = jac.reshape(m, 5, OUTPUTS_PER_TARGET, k, 3)
-    return np.einsum("mpybi,mpbij,mpzbj->myz", jac, part_cov, jac, optimize=True)
+    jac[steps < 0] = 0.0
+    return TargetJacobian(jac.reshape(m, 5, OUTPUTS_PER_TARGET, k, 3), steps)
+
+
+def _smooth_jacobian(
+    chain: PoseChain,
+    dpose_own: FloatArray,
+    dpose_origin: FloatArray,
+    dq_own: FloatArray,
+    dq_origin: FloatArray,
+    d_growth: FloatArray,
+    d_r0: FloatArray,
+    d_s: FloatArray,
+    jac_fgm_inv: FloatArray,
+    k: int,
+) -> TargetJacobian:
+    """The Jacobian when the growth is the smooth fit over every reference: parts O, the
+    target, then every reference (R0 first), each with its weight per leg."""
+    plan = chain.plan
+    assert chain.growth_weights is not None
+    targets, origin, refs = plan.target_indices, plan.origin_index, plan.reference_indices
+    m, n_refs = targets.size, refs.size
+    w = chain.growth_weights[:, :, refs]  # (M, 6, R)
+    # coefficient of dq of each reference per leg; R0 also through q_R0 (rows of w sum to 1)
+    coef = d_growth[:, :, None] * w  # (M, 6, R)
+    coef[:, :, 0] += d_r0 - d_growth
+    parts = 2 + n_refs
+    steps = np.empty((m, parts), dtype=np.intp)
+    steps[:, 0], steps[:, 1], steps[:, 2:] = origin, targets, refs
+    dq_corr = np.zeros((m, parts, 6, 3 * k))
+    dq_corr[:, 1] = d_s[:, :, None] * dq_own[targets]
+    dq_corr[:, 2:] = np.moveaxis(coef, 2, 1)[..., None] * dq_own[refs][None]
+    # O through every step it places: the target and every reference
+    dq_corr[:, 0] = d_s[:, :, None] * dq_origin[targets] + np.einsum(
+        "mlr,rlj->mlj", coef, dq_origin[refs]
+    )
+    jac = np.zeros((m, parts, OUTPUTS_PER_TARGET, 3 * k))
+    jac[:, 0, :6] = dpose_origin[targets]
+    jac[:, 1, :6] = dpose_own[targets]
+    jac[:, :, 6:] = jac_fgm_inv[:, None] @ dq_corr
+    return TargetJacobian(jac.reshape(m, parts, OUTPUTS_PER_TARGET, k, 3), steps, (0, 2))
 
 
 def monte_carlo_covariance(

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from hexatherm.core.plan import Plan
+from hexatherm.core.plan import Plan, find_repeats
 from hexatherm.core.planning import (
     DEFAULT_MIN_RCOND,
     ReferenceGap,
@@ -58,6 +58,8 @@ class PlanRequest:
     box_upper: Sequence[float] | None = None
     cycles: int = 1
     reference_every: str = "both"
+    origin_repeats: int = 1
+    reference0_repeats: int = 1
     points_per_ball: int = 25
     seconds_per_point: float = 3.0
     seconds_per_move: float = 30.0
@@ -139,11 +141,16 @@ def make_plan(request: PlanRequest) -> PlanTexts:
         cycles=request.cycles,
         reference_every=request.reference_every,  # type: ignore[arg-type]
         points_per_ball=request.points_per_ball,
+        origin_repeats=request.origin_repeats,
+        reference0_repeats=request.reference0_repeats,
     )
     step_sources: list[str | None] = []
     n_targets = 0
-    for kind in plan.kinds:
-        if kind == "target":
+    origin_again = set(find_repeats(plan).origin[1:])
+    for i, kind in enumerate(plan.kinds):
+        if i in origin_again:
+            step_sources.append("origin (repeat)")
+        elif kind == "target":
             step_sources.append(target_sources[n_targets % len(target_sources)])
             n_targets += 1
         else:

@@ -226,6 +226,8 @@ def test_process_writes_uncertainties_and_quality(tmp_path):
     assert 0.5e-3 < poses["u_Tx_corr_mm"].mean() < 3e-3
     assert "uncertainty: centres from registration residuals" in result.output
     assert "u (linear, k=1) of the corrected poses" in result.output
+    assert "common to all targets" in result.output and "corrected    common Tx" in result.output
+    assert (tmp_path / "s" / "results" / "covariance.csv").is_file()
     quality = pd.read_csv(tmp_path / "s" / "results" / "quality.csv")
     assert len(quality) == 8 and quality["failed"].isna().all()
     assert "quality checks of 8 steps:" in result.output

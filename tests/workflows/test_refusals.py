@@ -23,7 +23,8 @@ import pytest
 from hexatherm.core.plan import Plan
 from hexatherm.errors import InputError, PlanError
 from hexatherm.io.config import plan_to_yaml, read_datums, read_plan, read_session
-from hexatherm.workflows.process.pipeline import Checks, process_session, read_measured
+from hexatherm.workflows.process.measured import read_measured
+from hexatherm.workflows.process.pipeline import Checks, process_session
 from hexatherm.workflows.process.quality import quality_checks
 from hexatherm.workflows.process.twin import twin_poses
 from hexatherm.workflows.register import register_balls

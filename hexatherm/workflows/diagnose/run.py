@@ -28,7 +28,7 @@ from hexatherm.io.config import read_hexapod, read_session
 from hexatherm.io.files import STRICT, ReadOptions
 from hexatherm.io.temperatures import Temperatures
 from hexatherm.session import Session
-from hexatherm.workflows.process.pipeline import read_measured
+from hexatherm.workflows.process.measured import read_measured
 from hexatherm.workflows.process.twin import model_effects, thermocouple_log
 
 
@@ -76,7 +76,7 @@ def read_for_diagnosis(
     reading: ReadOptions = STRICT,
 ) -> SessionData:
     """Read a session (and optionally another hexapod file) for the diagnosis; ``reading``
-    as in :func:`~hexatherm.workflows.process.pipeline.read_measured`."""
+    as in :func:`~hexatherm.workflows.process.measured.read_measured`."""
     session = read_session(path)
     if session.temperatures is None:
         raise InputError(

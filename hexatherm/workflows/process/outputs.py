@@ -9,9 +9,18 @@ process"), then these extensions, documented in the README:
 * ``ref_before``, ``ref_after``: labels of the references used (empty: none);
 * ``dt_before_s``, ``dt_after_s``: ``t_S - t_before`` and ``t_after - t_S``;
 * ``weight_after``: weight of the later reference in the time interpolation;
+* ``interpolation`` (with ``--interpolation smooth`` only): ``smooth`` when the smooth
+  fit of the growth was used, ``linear`` when the cross-validation fell back to the
+  two neighbours;
 * ``u_Tx_conv_mm`` .. ``u_Rz_conv_deg``, ``u_Tx_corr_mm`` .. ``u_Rz_corr_deg``:
   standard uncertainties (k = 1) of the conventional and corrected poses
-  (:mod:`hexatherm.workflows.process.uncertainty`).
+  (:mod:`hexatherm.workflows.process.uncertainty`);
+* the deviations from the commanded pose ``dTx_conv_um`` .., each followed by its
+  standard uncertainty ``u_dTx_conv_um`` and its parts common to all targets (from O
+  and R0) and of its own, ``u_common_dTx_conv_um`` and ``u_own_dTx_conv_um``.
+
+``covariance.csv`` has the covariance of every deviation between every pair of
+targets (:func:`covariance_frame`).
 
 ``quality.csv`` has one row per step with the quality checks of
 :mod:`hexatherm.workflows.process.quality`.
@@ -33,7 +42,8 @@ import pandas as pd
 from hexatherm.core.geometry import to_um_urad
 from hexatherm.io.outputs import output_dir
 from hexatherm.io.records import seconds_to_iso
-from hexatherm.workflows.process.pipeline import ProcessResult, nominal_fit_diameter_mm
+from hexatherm.workflows.process.measured import nominal_fit_diameter_mm
+from hexatherm.workflows.process.pipeline import ProcessResult
 
 if TYPE_CHECKING:
     from hexatherm.workflows.process.quality import QualityReport
@@ -97,6 +107,9 @@ def poses_frame(
     data["dt_before_s"] = corr.dt_before_s
     data["dt_after_s"] = corr.dt_after_s
     data["weight_after"] = corr.weight_after
+    if corr.smooth is not None:
+        # --interpolation smooth: what the growth at R came from (the fallback is linear)
+        data["interpolation"] = "smooth" if corr.smooth.used else "linear"
     if uncertainty is not None:
         for tag, values in (
             ("conv", uncertainty.conventional_u),
@@ -118,12 +131,48 @@ def poses_frame(
             "corr": to_um_urad(uncertainty.corrected_u),
         }
     )
+    parts_of: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    if uncertainty is not None:
+        common, own = uncertainty.common_u, uncertainty.own_u
+        if common is not None and own is not None:
+            for tag, half in (("conv", slice(0, 6)), ("corr", slice(6, 12))):
+                parts_of[tag] = (to_um_urad(common[:, half]), to_um_urad(own[:, half]))
     for tag, values in measured:
         dev = to_um_urad(values - commanded)
         for j, col in enumerate(deviation_columns(tag)):
             data[col] = dev[:, j]
             if tag in u_of:
                 data[f"u_{col}"] = u_of[tag][:, j]
+            if tag in parts_of:
+                data[f"u_common_{col}"] = parts_of[tag][0][:, j]
+                data[f"u_own_{col}"] = parts_of[tag][1][:, j]
+    return pd.DataFrame(data)
+
+
+def covariance_frame(result: ProcessResult, uncertainty: PoseUncertainty) -> pd.DataFrame:
+    """The ``covariance.csv`` table: covariance of each deviation between two targets.
+
+    One row per pair of targets ``label_a, label_b`` (``a`` not after ``b`` in the plan,
+    each pair once, ``a = b`` included: there it is ``u^2``), then
+    ``cov_dTx_conv_um2`` .. ``cov_dRz_conv_urad2``, ``cov_dTx_corr_um2`` ..
+    ``cov_dRz_corr_urad2``: the covariance of that deviation (as in ``poses.csv``) of
+    target a with the same of target b, um^2 and urad^2. Every pair shares O's and R0's
+    noise; neighbours share a reference too.
+    """
+    between = uncertainty.between_covariance
+    if between is None:
+        raise ValueError("the uncertainty has no between-target covariance")
+    plan = result.session.plan
+    labels = np.array(plan.labels, dtype=object)[result.correction.target_index]
+    a, b = np.triu_indices(len(labels))
+    data: dict[str, object] = {"label_a": labels[a], "label_b": labels[b]}
+    # mm -> um and deg -> urad, squared
+    to_unit2 = np.tile(
+        [1e6, 1e6, 1e6, (np.pi / 180 * 1e6) ** 2, *[(np.pi / 180 * 1e6) ** 2] * 2], 2
+    )
+    names = [*deviation_columns("conv"), *deviation_columns("corr")]
+    for y, name in enumerate(names):
+        data[f"cov_{name}2"] = between[y, a, b] * to_unit2[y]
     return pd.DataFrame(data)
 
 
@@ -200,7 +249,8 @@ def write_results(
     quality: QualityReport | None = None,
     twin: np.ndarray | None = None,
 ) -> list[Path]:
-    """Write ``poses.csv``, ``legs.csv``, ``fits.csv`` (and ``quality.csv``) into ``out``.
+    """Write ``poses.csv``, ``legs.csv``, ``fits.csv``, ``covariance.csv`` (and
+    ``quality.csv``) into ``out``.
 
     The folder is replaced atomically. ``uncertainty`` defaults to linear
     propagation (:func:`hexatherm.workflows.process.uncertainty.pose_uncertainty`); ``quality.csv``
@@ -216,6 +266,8 @@ def write_results(
         "legs.csv": legs_frame(result),
         "fits.csv": fits_frame(result),
     }
+    if uncertainty.between_covariance is not None:
+        tables["covariance.csv"] = covariance_frame(result, uncertainty)
     if quality is not None:
         tables["quality.csv"] = quality.frame
     texts = {name: to_csv_text(frame) for name, frame in tables.items()}

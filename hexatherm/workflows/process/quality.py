@@ -38,11 +38,8 @@ from hexatherm.core.registration import check_distances
 from hexatherm.errors import HexathermError
 from hexatherm.session import QualityLimits, Session
 from hexatherm.typing import FloatArray
-from hexatherm.workflows.process.pipeline import (
-    ProcessResult,
-    check_log_span,
-    nominal_fit_diameter_mm,
-)
+from hexatherm.workflows.process.measured import check_log_span, nominal_fit_diameter_mm
+from hexatherm.workflows.process.pipeline import ProcessResult
 
 __all__ = ["CHECKS", "NA", "QualityReport", "parse_threshold", "quality_checks"]
 
@@ -198,6 +195,8 @@ def _ball_values(result: ProcessResult) -> tuple[FloatArray, FloatArray]:
     """Form error (um) and radius deviation (um) of every step and ball (NaN: unknown)."""
     plan, balls = result.session.plan, result.session.balls
     step_index = {label: i for i, label in enumerate(plan.labels)}
+    # a repeated O or R0 (averaged into one step): the worst of its measurements
+    step_index.update({label: step_index[kept] for label, kept in result.repeat_of.items()})
     ball_index = {name: j for j, name in enumerate(balls.names)}
     nominal_mm = nominal_fit_diameter_mm(balls)
     shape = (len(plan.labels), len(balls.names))
@@ -206,9 +205,13 @@ def _ball_values(result: ProcessResult) -> tuple[FloatArray, FloatArray]:
         si = np.array([step_index[s] for s in rec.label], dtype=np.intp)
         bi = np.array([ball_index[b] for b in rec.ball], dtype=np.intp)
         if "form_um" in rec.extra:
-            form[si, bi] = pd.to_numeric(pd.Series(rec.extra["form_um"]), errors="coerce")
+            values = pd.to_numeric(pd.Series(rec.extra["form_um"]), errors="coerce").to_numpy()
+            np.fmax.at(form, (si, bi), values)
         if rec.diameter_mm is not None:
-            radius[si, bi] = (rec.diameter_mm - nominal_mm[bi]) / 2 * 1e3
+            dev = (rec.diameter_mm - nominal_mm[bi]) / 2 * 1e3
+            for i, j, value in zip(si, bi, dev, strict=True):
+                if not abs(radius[i, j]) >= abs(value):  # NaN or smaller: the worse one
+                    radius[i, j] = value
     return form, radius
 
 

@@ -18,7 +18,8 @@ from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.twin import twin_corrected
 from hexatherm.errors import InputError
 from hexatherm.io.temperatures import Temperatures
-from hexatherm.workflows.process.pipeline import ProcessResult, check_log_span
+from hexatherm.workflows.process.measured import check_log_span
+from hexatherm.workflows.process.pipeline import ProcessResult
 
 
 def twin_poses(

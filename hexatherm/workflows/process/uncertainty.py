@@ -37,29 +37,28 @@ import numpy.typing as npt
 from hexatherm.core.propagation import (
     CentreSampler,
     PoseChain,
+    TargetJacobian,
     cap_centre_covariance,
     covariance_root,
     draw_centres,
-    linear_covariance,
     monte_carlo_covariance,
     residual_scale,
+    target_jacobian,
 )
 from hexatherm.core.spherefit import fit_spheres, refine_spheres
 from hexatherm.typing import FloatArray
-from hexatherm.workflows.process.pipeline import (
-    ProcessResult,
-    fit_radii,
-    point_groups,
-    registration_weights,
-)
+from hexatherm.workflows.process.measured import fit_radii, point_groups, registration_weights
+from hexatherm.workflows.process.pipeline import ProcessResult
 
 Method = Literal["linear", "monte-carlo"]
+IntArray = npt.NDArray[np.intp]
 
 #: cap half-angle assumed for centres given without an uncertainty (as ``cmm:``'s default)
 DEFAULT_CAP_ANGLE_DEG = 70.0
 
 __all__ = [
     "CentreCovariance",
+    "RepeatCheck",
     "PoseUncertainty",
     "centre_covariance",
     "pose_chain",
@@ -113,6 +112,18 @@ class PoseUncertainty:
         What the Monte Carlo draws: the probed points, refitted
         (:func:`point_sampler`), or the centres from their covariance (a session
         without probed points); empty for linear propagation.
+    common_u, own_u : ndarray, shape (M, 12)
+        The part of each standard uncertainty (mm, deg; conventional then corrected)
+        common to all targets, from the noise of O and R0 that every target's pose
+        carries, and the part of its own (its own step and its references);
+        ``u^2 = common^2 + own^2``. By linear propagation; with Monte Carlo the linear
+        shares of the variance applied to the Monte Carlo u.
+    between_covariance : ndarray, shape (12, M, M)
+        Covariance of each output between every pair of targets (mm^2, deg^2): the
+        linear one; with Monte Carlo the linear correlations times the Monte Carlo u.
+        Its diagonal is ``u^2``.
+    repeats : tuple of RepeatCheck
+        The scatter of repeated O and R0 against their claimed uncertainty.
     """
 
     conventional_u: FloatArray
@@ -124,6 +135,10 @@ class PoseUncertainty:
     seed: int | None
     centres: CentreCovariance
     drawn: str = ""
+    common_u: FloatArray | None = None
+    own_u: FloatArray | None = None
+    between_covariance: FloatArray | None = None
+    repeats: tuple[RepeatCheck, ...] = ()
 
     def ratio_to_linear(self) -> FloatArray:
         """Reported over linear standard uncertainty, (M, 12) (1 for the linear method)."""
@@ -157,9 +172,12 @@ def centre_covariance(result: ProcessResult) -> CentreCovariance:
         parts.append(f"u_um of the centres file ({int(file.sum())} centres)")
     rest = source == ""
     cmm = result.session.cmm
+    # steps averaging repeated measurements (O, R0): 1/n of one measurement's covariance
+    per_step = 1.0 / np.broadcast_to(centres.measurements[:, None], (n, k))
     if rest.any() and cmm is not None:
         points = cmm.points_per_ball or result.session.plan.points_per_ball
-        cov[rest] = cap_centre_covariance(points, cmm.cap_angle_deg, cmm.point_noise_um * 1e-3)
+        single = cap_centre_covariance(points, cmm.cap_angle_deg, cmm.point_noise_um * 1e-3)
+        cov[rest] = per_step[rest][:, None, None] * single
         source[rest] = "cmm"
         parts.append(
             f"session cmm: point noise {cmm.point_noise_um:g} um, {points} points "
@@ -171,8 +189,11 @@ def centre_covariance(result: ProcessResult) -> CentreCovariance:
         # axis: keep the shape of a cap fit's covariance and scale it to the residuals
         points = result.session.plan.points_per_ball
         shape = cap_centre_covariance(points, DEFAULT_CAP_ANGLE_DEG, 1.0)
-        scale, seen = residual_scale(result.registration.residuals_mm, centres.centres_mm, shape)
-        cov[rest] = scale * shape
+        step_shape = per_step[:, :, None, None] * shape  # (N, k, 3, 3)
+        scale, seen = residual_scale(
+            result.registration.residuals_mm, centres.centres_mm, step_shape
+        )
+        cov[rest] = scale * step_shape[rest]
         source[rest] = "registration"
         u_xyz = np.sqrt(np.diag(scale * shape)) * 1e3
         parts.append(
@@ -191,6 +212,73 @@ def centre_covariance(result: ProcessResult) -> CentreCovariance:
     return CentreCovariance(cov, source.astype(str), "; ".join(parts))
 
 
+@dataclass(frozen=True)
+class RepeatCheck:
+    """Scatter of a repeated step's measurements against their claimed uncertainty.
+
+    Attributes
+    ----------
+    label : str
+        The step (``O``, ``R0``).
+    n : int
+        Its measurements.
+    ratio : float
+        ``sqrt(chi2 / dof)``: the observed scatter over the claimed one (about 1).
+    chi2 : float
+        ``sum d^T C^-1 d`` over measurements and balls, ``d`` a centre's deviation (from
+        the mean, or from a straight line in time for 3 or more), ``C`` one measurement's
+        centre covariance.
+    dof : int
+    p_value : float
+        Chance of a chi2 as large from noise alone.
+    """
+
+    label: str
+    n: int
+    ratio: float
+    chi2: float
+    dof: int
+    p_value: float
+
+    #: below this chance the scatter is more than noise: warn
+    P_LIMIT = 1e-3
+
+    @property
+    def ok(self) -> bool:
+        """Whether the scatter is what the claimed uncertainty allows."""
+        return not self.p_value < self.P_LIMIT
+
+
+def repeat_checks(result: ProcessResult, cov_mm2: FloatArray) -> tuple[RepeatCheck, ...]:
+    """Chi-square of every repeated step's measurements against one measurement's covariance.
+
+    One measurement's covariance is its sphere fit's where there is one, else the averaged
+    step's (``cov_mm2``, (N, k, 3, 3)) times the number of measurements.
+    """
+    if not result.repeats:
+        return ()
+    from scipy.stats import chi2 as chi2_dist
+
+    index = {label: i for i, label in enumerate(result.session.plan.labels)}
+    checks = []
+    for group in result.repeats:
+        n = len(group.labels)
+        averaged = cov_mm2[index[group.label]] * n  # (k, 3, 3)
+        fitted = np.asarray(np.isfinite(group.cov_mm2).all(axis=(-2, -1)))
+        single = np.where(
+            fitted[..., None, None],
+            group.cov_mm2,
+            averaged[None],
+        )
+        d = group.deviations_mm
+        chi2 = float(np.einsum("nki,nkij,nkj->", d, np.linalg.pinv(single), d))
+        dof = group.dof
+        p = float(chi2_dist.sf(chi2, dof)) if dof > 0 else float("nan")
+        ratio = float(np.sqrt(chi2 / dof)) if dof > 0 else float("nan")
+        checks.append(RepeatCheck(group.label, n, ratio, chi2, dof, p))
+    return tuple(checks)
+
+
 #: probed points refitted at once in a Monte Carlo batch (memory)
 POINTS_PER_REFIT = 2_000_000
 
@@ -203,7 +291,10 @@ def point_sampler(result: ProcessResult, cov_mm2: FloatArray) -> CentreSampler |
     that fit (the noise the fit's covariance assumes); the spheres are refitted
     as ``process`` fits them (same free or fixed radii). Centres read as such,
     and those whose fit has no redundancy, are drawn from their covariance
-    ``cov_mm2`` (N, k, 3, 3). None when no centre comes from probed points.
+    ``cov_mm2`` (N, k, 3, 3). A repeated O or R0 gets the mean of its measurements'
+    refits, as ``process`` averages them. None when no centre comes from probed points,
+    or when a repeated step has a measurement that is not refitted (then every centre is
+    drawn from its covariance).
     """
     sources = [
         (fitted, raw)
@@ -213,6 +304,17 @@ def point_sampler(result: ProcessResult, cov_mm2: FloatArray) -> CentreSampler |
     if not sources:
         return None
     step_index = {label: i for i, label in enumerate(result.session.plan.labels)}
+    step_index.update({label: step_index[kept] for label, kept in result.repeat_of.items()})
+    count = result.centres.measurements
+    repeated = {step_index[g.label] for g in result.repeats}
+    refitted = np.zeros(len(count), dtype=int)
+    for fitted, _ in sources:
+        ok = np.isfinite(np.asarray(fitted.extra["sigma_um"], dtype=float))
+        for label in np.asarray(fitted.label)[ok]:
+            refitted[step_index[str(label)]] += 1
+    k = len(result.session.balls.names)
+    if any(refitted[i] != count[i] * k for i in repeated):
+        return None  # a repeated step's measurement is not refitted: draw every centre
     ball_index = {name: j for j, name in enumerate(result.session.balls.names)}
     fits = []
     for fitted, raw in sources:
@@ -238,9 +340,24 @@ def point_sampler(result: ProcessResult, cov_mm2: FloatArray) -> CentreSampler |
         )
     centres = result.centres.centres_mm
     root = covariance_root(cov_mm2)
+    averaged = sorted(repeated)
+
+    def put(drawn: FloatArray, rows: slice, step: IntArray, ball: IntArray, c: FloatArray) -> None:
+        """Refitted centres (d, n, 3) into ``drawn``; a repeat adds its share of the mean."""
+        share = 1.0 / count[step]
+        once = share == 1.0
+        drawn[rows, step[once], ball[once]] = c[:, once]
+        if not once.all():
+            view = np.moveaxis(drawn[rows], 0, 2)  # (N, k, d, 3), writes through
+            np.add.at(
+                view,
+                (step[~once], ball[~once]),
+                np.moveaxis(c[:, ~once] * share[~once, None], 0, 1),
+            )
 
     def sample(rng: np.random.Generator, size: int) -> FloatArray:
         drawn = draw_centres(centres, root, rng, size)
+        drawn[:, averaged] = 0.0  # the means of their measurements' refits, added below
         for xyz, noise_mm, groups, radius, step, ball, ok, fitted_mm in fits:
             chunk = max(1, POINTS_PER_REFIT // len(xyz))
             n_spheres = int(groups.max()) + 1
@@ -262,7 +379,7 @@ def point_sampler(result: ProcessResult, cov_mm2: FloatArray) -> CentreSampler |
                     centre, _ = refine_spheres(
                         moved, start, r0, fixed_radius=radius is not None, normal_points_mm=xyz_s
                     )
-                    drawn[first : first + d, step, ball] = centre[:, ok]
+                    put(drawn, slice(first, first + d), step, ball, centre[:, ok])
                 continue
             for first in range(0, size, chunk):
                 d = min(chunk, size - first)
@@ -272,9 +389,13 @@ def point_sampler(result: ProcessResult, cov_mm2: FloatArray) -> CentreSampler |
                     None if radius is None else np.broadcast_to(radius, (d, n_spheres)).reshape(-1)
                 )
                 refit = fit_spheres(moved.reshape(-1, 3), all_groups, radius_mm=radii)
-                drawn[first : first + d, step, ball] = refit.centre_mm.reshape(d, n_spheres, 3)[
-                    :, ok
-                ]
+                put(
+                    drawn,
+                    slice(first, first + d),
+                    step,
+                    ball,
+                    refit.centre_mm.reshape(d, n_spheres, 3)[:, ok],
+                )
         return drawn
 
     return sample
@@ -292,6 +413,7 @@ def pose_chain(result: ProcessResult) -> PoseChain:
         weight_after=corr.weight_after,
         weights=registration_weights(result.centres.u_um),
         initial_poses=corr.corrected,
+        growth_weights=corr.growth_weights,
     )
 
 
@@ -321,7 +443,8 @@ def pose_uncertainty(
     """
     centres = centre_covariance(result)
     chain = pose_chain(result)
-    linear = linear_covariance(chain, result.centres.centres_mm, centres.cov_mm2)
+    jacobian = target_jacobian(chain, result.centres.centres_mm)
+    linear = jacobian.covariance(centres.cov_mm2)
     covariance, method, draws, drawn = linear, "linear", 0, ""
     if mc:
         sampler = point_sampler(result, centres.cov_mm2)
@@ -337,6 +460,7 @@ def pose_uncertainty(
         method, draws = "monte-carlo", int(mc)
         drawn = "centres" if sampler is None else "points"
     u = np.sqrt(np.clip(np.diagonal(covariance, axis1=1, axis2=2), 0.0, None))
+    common_u, own_u, between = shared_parts(jacobian, centres.cov_mm2, u)
     return PoseUncertainty(
         conventional_u=u[:, :6],
         corrected_u=u[:, 6:],
@@ -347,4 +471,34 @@ def pose_uncertainty(
         seed=seed if mc else None,
         centres=centres,
         drawn=drawn,
+        common_u=common_u,
+        own_u=own_u,
+        between_covariance=between,
+        repeats=repeat_checks(result, centres.cov_mm2),
     )
+
+
+def shared_parts(
+    jacobian: TargetJacobian, centre_cov_mm2: FloatArray, u: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Common and own parts of the standard uncertainties ``u`` (M, 12), and the
+    covariance (12, M, M) of each output between the targets.
+
+    The linear propagation splits each variance by source: O and R0, measured once
+    and carried by every target (common), and the target's own step and references
+    (own). The shares of the linear variance are applied to ``u`` (equal to the
+    linear u unless ``u`` comes from Monte Carlo), and so are the linear correlations
+    between targets: ``common^2 + own^2 = u^2`` and the covariance's diagonal is ``u^2``.
+    """
+    between = jacobian.between_targets(centre_cov_mm2)  # (12, M, M)
+    total = np.diagonal(between, axis1=1, axis2=2).T  # (M, 12)
+    common = np.diagonal(
+        jacobian.covariance(centre_cov_mm2, jacobian.common_parts), axis1=1, axis2=2
+    )
+    with np.errstate(invalid="ignore", divide="ignore"):
+        share = np.where(total > 0, np.clip(common / np.where(total > 0, total, 1.0), 0, 1), 0.0)
+    lin_u = np.sqrt(np.clip(total.T, 0.0, None))  # (12, M)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scale = np.where(lin_u > 0, u.T / np.where(lin_u > 0, lin_u, 1.0), 0.0)
+    between = between * scale[:, :, None] * scale[:, None, :]
+    return u * np.sqrt(share), u * np.sqrt(1.0 - share), between
