@@ -53,6 +53,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "diagnose": ("hexatherm.cli.diagnose", "Find where the twin and a session disagree, and why."),
     "simulate": ("hexatherm.cli.simulate", "Simulate a session (and its truth) from a scenario."),
     "report": ("hexatherm.cli.report", "Write an HTML report of a session with figures."),
+    "calibrate": ("hexatherm.cli.calibrate", "Calibrate the hexapod's geometry from sessions."),
     "run": ("hexatherm.cli.run", "Measure a plan unattended: CMM (I++ DME) and controller."),
     "serve-twin": ("hexatherm.cli.serve_twin", "Serve a simulated CMM and controller (the twin)."),
 }

@@ -240,6 +240,39 @@ class TargetJacobian:
             out[y] = (a @ a.T).toarray()
         return out
 
+    def joint_covariance(self, centre_cov_mm2: npt.ArrayLike, outputs: slice) -> FloatArray:
+        """Covariance (M*d, M*d) of the ``outputs`` (d of the 12) of all targets together,
+        target by target (rows ``d*a .. d*a+d-1`` are target a's), every cross term
+        between targets and components included (a calibration's weights).
+
+        >>> jac = np.zeros((2, 5, 12, 1, 3)); jac[:, 0, 0, 0, 0] = 1.0  # both see O's x
+        >>> steps = np.array([[0, -1, -1, -1, -1]] * 2)
+        >>> TargetJacobian(jac, steps).joint_covariance(np.eye(3)[None, None], slice(0, 2))
+        array([[1., 0., 1., 0.],
+               [0., 0., 0., 0.],
+               [1., 0., 1., 0.],
+               [0., 0., 0., 0.]])
+        """
+        from scipy import sparse
+
+        cov = np.asarray(centre_cov_mm2, dtype=float)
+        m, n_parts, n_out, k = self.jac.shape[:4]
+        n = cov.shape[0]
+        picked = np.arange(n_out)[outputs]
+        d = picked.size
+        live = self.steps >= 0
+        at = np.maximum(self.steps, 0)
+        root = covariance_root(cov)  # (N, k, 3, 3)
+        white = np.einsum("mpybi,mpbij->mpybj", self.jac[:, :, picked], root[at])
+        white = np.where(live[:, :, None, None, None], white, 0.0)  # (M, P, d, k, 3)
+        rows = np.arange(m)[:, None, None, None, None] * d + np.arange(d)[None, None, :, None, None]
+        cols = at[:, :, None, None, None] * (3 * k) + np.arange(3 * k).reshape(1, 1, 1, k, 3)
+        rows, cols = np.broadcast_arrays(rows, cols)
+        a = sparse.csr_matrix(
+            (white.ravel(), (rows.ravel(), cols.ravel())), shape=(m * d, n * 3 * k)
+        )  # duplicates (a step in two parts of one target) are summed
+        return np.asarray((a @ a.T).toarray())
+
 
 def linear_covariance(
     chain: PoseChain,

@@ -10,6 +10,7 @@ import pytest
 from click.testing import CliRunner
 
 import hexatherm.io.measurements
+import hexatherm.workflows.calibrate.run
 import hexatherm.workflows.diagnose.run
 import hexatherm.workflows.inspect
 import hexatherm.workflows.plan
@@ -70,6 +71,7 @@ def bad_input(tmp_path: Path) -> dict[str, list[object]]:
         "plan": [*PLAN, "--targets", garbage],
         "simulate": [scenario, "-o", tmp_path / "sim"],
         "replay": [sessions],
+        "calibrate": [broken, "-o", tmp_path / "cal"],
         "acquire": [plan, *PLAN, "--port", "loop://", "--session", tmp_path / "acq"],
         "run": [
             plan,
@@ -122,6 +124,7 @@ INTERRUPTIBLE = {
     "plan": (hexatherm.workflows.plan, "make_plan", [*PLAN, "--grid", "2", "--box", "Tx=-1:1"]),
     "simulate": (hexatherm.workflows.simulate.run, "simulate_file", [SCENARIO, "-o", "{tmp}/s"]),
     "replay": (hexatherm.workflows.replay, "replay_session", [ROOT / "sessions"]),
+    "calibrate": (hexatherm.workflows.calibrate.run, "read_campaign", [S, "-o", "{tmp}/c"]),
 }
 
 

@@ -75,8 +75,10 @@ def _hexapod_from_doc(doc: YamlDoc) -> Hexapod:
             "stroke",
             "legs",
             "thermal_model",
+            "calibration",
         ]
     )
+    _check_calibration(doc)
     name = doc.string("name", default=Path(doc.path).stem)
     convention = doc.string("convention", default="symetrie", choices=CONVENTIONS)
     joints = {}
@@ -187,8 +189,51 @@ def _read_effects(doc: YamlDoc) -> tuple[dict[str, Any], ...]:
     return tuple(effects)
 
 
-def hexapod_to_yaml(hexapod: Hexapod) -> str:
-    """The hexapod file text of ``hexapod`` (reads back to the same model)."""
+#: the keys of a hexapod file's ``calibration:`` record (an extension) and their kinds
+CALIBRATION_KEYS = {
+    "level": "text",
+    "poses": "text",
+    "sessions": "texts",
+    "n_poses": "whole",
+    "leg_offsets_mm": "six",
+    "leg_gains": "six",
+    "chi_square_per_dof": "number",
+    "hexatherm": "text",
+    "written": "text",
+}
+
+
+def _check_calibration(doc: YamlDoc) -> None:
+    """The optional ``calibration:`` record that ``hexatherm calibrate`` writes: where
+    the geometry came from, and the actuators' offsets and gains (for the controller;
+    the joints above are what the IGM and FGM use). Checked, not used."""
+    key = "calibration"
+    if doc.get(key, default=None) is None:
+        return
+    doc.check_keys(list(CALIBRATION_KEYS), key)
+    record = doc.get(key)
+    for name, kind in CALIBRATION_KEYS.items():
+        if name not in record:
+            continue
+        if kind == "text":
+            doc.string(key, name)
+        elif kind == "texts":
+            items = doc.get(key, name)
+            if not isinstance(items, list) or not all(isinstance(i, str) for i in items):
+                raise doc.error("expected a list of texts", key, name)
+        elif kind == "six":
+            doc.vector(key, name, size=6)
+        elif kind == "whole":
+            value = doc.number(key, name)
+            if value != int(value) or value < 1:
+                raise doc.error(f"expected a whole number >= 1, got {value:g}", key, name)
+        elif doc.number(key, name) < 0:
+            raise doc.error("must not be negative", key, name)
+
+
+def hexapod_to_yaml(hexapod: Hexapod, calibration: dict[str, Any] | None = None) -> str:
+    """The hexapod file text of ``hexapod`` (reads back to the same model), with a
+    ``calibration:`` record when given (keys of :data:`CALIBRATION_KEYS`)."""
     legs = hexapod.legs
     doc: dict[str, Any] = {
         "format": HEXAPOD_FORMAT,
@@ -224,4 +269,6 @@ def hexapod_to_yaml(hexapod: Hexapod) -> str:
         doc["legs"] = leg_doc
     if hexapod.effects:
         doc["thermal_model"] = {"effects": [dict(e) for e in hexapod.effects]}
+    if calibration:
+        doc["calibration"] = dict(calibration)
     return _dump(doc)

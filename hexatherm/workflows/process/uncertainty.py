@@ -478,6 +478,15 @@ def pose_uncertainty(
     )
 
 
+def joint_pose_covariance(result: ProcessResult, corrected: bool = True) -> FloatArray:
+    """Covariance (6M, 6M) of all targets' corrected (or conventional) poses together, by
+    linear propagation: target by target, mm and deg, every term between targets and
+    components included (what a calibration weighs the poses with)."""
+    centres = centre_covariance(result)
+    jacobian = target_jacobian(pose_chain(result), result.centres.centres_mm)
+    return jacobian.joint_covariance(centres.cov_mm2, slice(6, 12) if corrected else slice(0, 6))
+
+
 def shared_parts(
     jacobian: TargetJacobian, centre_cov_mm2: FloatArray, u: FloatArray
 ) -> tuple[FloatArray, FloatArray, FloatArray]:

@@ -1,0 +1,84 @@
+"""``hexatherm calibrate``: the hexapod's geometry from thermally decoupled poses."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from hexatherm.cli.options import clean_errors, echo_err, overwrite_option, reading_options
+from hexatherm.io.files import ReadOptions
+
+
+@click.command("calibrate")
+@click.argument("sessions", nargs=-1, required=True, type=click.Path(exists=True, path_type=Path))
+@click.option(
+    "-o",
+    "--out",
+    "out",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Output folder: hexapod.yaml, parameters.csv, residuals.csv, calibration.json.",
+)
+@click.option(
+    "--poses",
+    type=click.Choice(["corrected", "conventional"]),
+    default="corrected",
+    show_default=True,
+    help="Fit the thermally corrected poses (the thermal state of each session's R0) or "
+    "the conventional ones (drift included, for comparison).",
+)
+@click.option(
+    "--level",
+    type=click.Choice(["auto", "offsets", "joints", "joints+gains"]),
+    default="auto",
+    show_default=True,
+    help="The model: 6 leg offsets, 42 joint coordinates and offsets, or 48 with the leg "
+    "gains; auto chooses as diagnose does (BIC and held-out folds of poses).",
+)
+@click.option(
+    "--residuals",
+    type=click.Choice(["pose", "leg"]),
+    default="pose",
+    show_default=True,
+    help="Residual space of the least squares.",
+)
+@overwrite_option
+@reading_options
+@clean_errors
+def command(
+    sessions: tuple[Path, ...],
+    out: Path,
+    poses: str,
+    level: str,
+    residuals: str,
+    overwrite: bool,
+    reading: ReadOptions,
+) -> None:
+    """Calibrate the geometry of the hexapod of SESSIONS from their measured poses.
+
+    Every session is processed as 'process' does; their targets are pooled and the
+    geometry (leg offsets, joint centres, leg gains) is fitted by weighted least
+    squares, each pose weighted by its covariance. The sessions must share one hexapod
+    file. Prints the level and the residuals before (nominal geometry) and after
+    (calibrated, held out when the level is chosen); writes OUT/hexapod.yaml (usable by
+    process, plan and simulate) and the parameters with their uncertainties.
+    """
+    from hexatherm.io.config import read_session
+    from hexatherm.io.outputs import check_output_settled, output_dir
+    from hexatherm.workflows.calibrate.outputs import output_files, summary_lines
+    from hexatherm.workflows.calibrate.run import calibrate, read_campaign
+
+    inputs = [f for s in sessions for f in read_session(s).input_files()]
+    check_output_settled(out, kind="folder", inputs=inputs, overwrite=overwrite)
+    campaign = read_campaign(sessions, poses, reading)  # type: ignore[arg-type]
+    echo_err(f"calibrating from {len(campaign.labels)} {poses} poses of {len(sessions)} session(s)")
+    run = calibrate(campaign, level, residuals)
+    files = output_files(run)
+    with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
+        for name, text in files.items():
+            (tmp / name).write_text(text, encoding="utf-8")
+    for line in summary_lines(run):
+        click.echo(line)
+    for name in files:
+        echo_err(f"wrote {out / name}")

@@ -1,0 +1,1 @@
+"""``hexatherm calibrate``: the hexapod's geometry from thermally decoupled poses."""

@@ -1,0 +1,195 @@
+"""The files ``hexatherm calibrate`` writes, and its table on screen.
+
+- ``hexapod.yaml``: the calibrated geometry in the hexapod file contract (base joints in
+  frame O, as ``process`` needs them; stroke, legs and effects of the nominal file),
+  with a ``calibration:`` record: level, poses, sessions, the actuators' leg offsets and
+  gains (for the controller), chi-square per degree of freedom, version, time.
+- ``parameters.csv``: every parameter of the level: ``parameter,unit,nominal,calibrated,
+  u,change_um,change_ppm,u_um,u_ppm,max_abs_correlation`` (the base joints in the fit's
+  gauge, see :mod:`hexatherm.core.calibration`).
+- ``residuals.csv``: every target: ``target``, then measured minus commanded (what the
+  nominal geometry leaves) and measured minus the calibrated prediction (held out when
+  the level was chosen), um and urad.
+- ``calibration.json``: level and how it was chosen (every level's BIC and held-out
+  RMS), chi-square and degrees of freedom, singular values, condition number and the
+  observability indices O1..O5, the pairs of parameters with |rho| > 0.9, the
+  predicted-pose standard uncertainty at the targets (worst and RMS).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from hexatherm import __version__
+from hexatherm.core.calibration import PARAMETER_NAMES, PARAMETER_UNITS
+from hexatherm.io.config import hexapod_to_yaml
+from hexatherm.io.provenance import now_iso
+from hexatherm.workflows.calibrate.run import Calibration, rms
+from hexatherm.workflows.process.outputs import to_csv_text
+
+COMPONENTS = ("dTx_um", "dTy_um", "dTz_um", "dRx_urad", "dRy_urad", "dRz_urad")
+
+
+def calibrated_hexapod_yaml(run: Calibration) -> str:
+    """``hexapod.yaml`` with its ``calibration:`` record."""
+    fit = run.fit
+    record: dict[str, Any] = {
+        "level": fit.level,
+        "poses": run.campaign.poses,
+        "sessions": [str(r.session.path) for r in run.campaign.results],
+        "n_poses": len(run.campaign.labels),
+        "leg_offsets_mm": [float(v) for v in fit.leg_offsets_mm],
+        "leg_gains": [float(v) for v in fit.leg_gains],
+        "chi_square_per_dof": float(fit.chi_square_per_dof),
+        "hexatherm": __version__,
+        "written": now_iso(),
+    }
+    return hexapod_to_yaml(fit.hexapod(), record)
+
+
+def parameters_frame(run: Calibration) -> pd.DataFrame:
+    """One row per parameter of the fitted level."""
+    fit = run.fit
+    mask = fit.model.mask
+    nominal = fit.model.theta0
+    value = fit.parameters
+    u = fit.std_errors
+    gain = np.array(PARAMETER_UNITS) != "mm"
+    rho = np.abs(np.nan_to_num(fit.correlation))
+    np.fill_diagonal(rho, 0.0)
+    frame = pd.DataFrame(
+        {
+            "parameter": PARAMETER_NAMES,
+            "unit": PARAMETER_UNITS,
+            "nominal": nominal,
+            "calibrated": value,
+            "u": u,
+            "change_um": np.where(gain, np.nan, (value - nominal) * 1e3),
+            "change_ppm": np.where(gain, (value - nominal) * 1e6, np.nan),
+            "u_um": np.where(gain, np.nan, u * 1e3),
+            "u_ppm": np.where(gain, u * 1e6, np.nan),
+            "max_abs_correlation": rho.max(axis=1),
+        }
+    )
+    return frame[mask].reset_index(drop=True)
+
+
+def residuals_frame(run: Calibration) -> pd.DataFrame:
+    """Before (nominal) and after (calibrated) residuals of every target, um and urad."""
+    frame = pd.DataFrame({"target": run.campaign.labels})
+    for k, name in enumerate(COMPONENTS):
+        frame[f"{name}_nominal"] = run.residuals_before_um_urad[:, k]
+    for k, name in enumerate(COMPONENTS):
+        frame[f"{name}_calibrated"] = run.residuals_after_um_urad[:, k]
+    return frame
+
+
+def _finite(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
+
+
+def calibration_json(run: Calibration) -> str:
+    """``calibration.json`` (see the module text)."""
+    fit = run.fit
+    obs = fit.observability
+    sigma = fit.predicted_sigma_um_urad(run.campaign.commanded)
+    levels = []
+    if run.choice is not None:
+        for score in run.choice.scores:
+            levels.append(
+                {
+                    "level": score.level,
+                    "fitted": score.fit is not None,
+                    "bic": _finite(score.bic),
+                    "heldout_rms_whitened": _finite(score.heldout_rms_w),
+                    "heldout_rms_um_urad": dict(
+                        zip(COMPONENTS, map(_finite, score.heldout_rms_um_urad), strict=True)
+                    )
+                    if score.fit is not None
+                    else None,
+                    "note": score.note,
+                }
+            )
+    doc = {
+        "format": "hexatherm-calibration/1",
+        "level": fit.level,
+        "level_chosen": run.choice is not None,
+        "levels": levels,
+        "poses": run.campaign.poses,
+        "n_poses": len(run.campaign.labels),
+        "residual_space": fit.residual_kind,
+        "chi_square": float(fit.chi_square),
+        "dof": int(fit.dof),
+        "chi_square_per_dof": float(fit.chi_square_per_dof),
+        "rank": int(obs.rank),
+        "n_parameters": int(obs.n_parameters),
+        "gauge_freedoms": int(obs.n_gauge),
+        "singular_values": [float(v) for v in obs.singular_values],
+        "observability": {k: _finite(v) for k, v in obs.indices().items()},
+        "high_correlations": [
+            {"a": a, "b": b, "rho": rho} for a, b, rho in fit.high_correlations()
+        ],
+        "predicted_sigma_at_targets_um_urad": {
+            "worst": dict(zip(COMPONENTS, map(float, sigma.max(axis=0)), strict=True)),
+            "rms": dict(zip(COMPONENTS, map(float, rms(sigma)), strict=True)),
+        },
+        "residual_rms_um_urad": {
+            "nominal": dict(
+                zip(COMPONENTS, map(float, rms(run.residuals_before_um_urad)), strict=True)
+            ),
+            "calibrated": dict(
+                zip(COMPONENTS, map(float, rms(run.residuals_after_um_urad)), strict=True)
+            ),
+            "calibrated_heldout": run.heldout,
+        },
+    }
+    return json.dumps(doc, indent=1, allow_nan=False) + "\n"
+
+
+def output_files(run: Calibration) -> dict[str, str]:
+    """Every file of the output folder, name -> text."""
+    return {
+        "hexapod.yaml": calibrated_hexapod_yaml(run),
+        "parameters.csv": to_csv_text(parameters_frame(run)),
+        "residuals.csv": to_csv_text(residuals_frame(run)),
+        "calibration.json": calibration_json(run),
+    }
+
+
+def summary_lines(run: Calibration) -> list[str]:
+    """What the terminal shows: level, fit, residuals before and after."""
+    fit = run.fit
+    obs = fit.observability
+    how = "chosen by BIC and held-out folds" if run.choice is not None else "forced"
+    lines = [
+        f"level {fit.level} ({how}): {obs.n_parameters} parameters ({obs.n_gauge} fixed by the "
+        f"gauge) from {len(run.campaign.labels)} {run.campaign.poses} poses; chi2/dof "
+        f"{fit.chi_square_per_dof:.2f}, condition number {obs.condition_number:.3g}",
+    ]
+    if run.choice is not None:
+        for score in run.choice.scores:
+            if score.fit is None:
+                lines.append(f"  {score.level:13} not fitted: {score.note}")
+            else:
+                lines.append(
+                    f"  {score.level:13} BIC {score.bic:10.1f}  held-out RMS (whitened) "
+                    f"{score.heldout_rms_w:.2f}"
+                )
+    after = "held out" if run.heldout else "in sample"
+    lines.append(f"{'RMS':10} " + " ".join(f"{c:>9}" for c in COMPONENTS))
+    lines.append(
+        f"{'nominal':10} " + " ".join(f"{v:9.3f}" for v in rms(run.residuals_before_um_urad))
+    )
+    lines.append(
+        f"{'calibrated':10} "
+        + " ".join(f"{v:9.3f}" for v in rms(run.residuals_after_um_urad))
+        + f"   ({after})"
+    )
+    for a, b, rho in fit.high_correlations()[:5]:
+        lines.append(f"warning: {a} and {b} are correlated (rho = {rho:+.3f})")
+    return lines

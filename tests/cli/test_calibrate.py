@@ -1,0 +1,100 @@
+"""``hexatherm calibrate`` on a simulated campaign whose true geometry differs from its
+hexapod file (issue 15): the level is chosen, the parameters land on the truth within
+their uncertainty, the residuals shrink to the noise, and the calibrated hexapod file
+reads back."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+
+from hexatherm.cli import main
+from hexatherm.core.calibration import gauge_fixed
+from hexatherm.io.config import read_hexapod
+
+ROOT = Path(__file__).resolve().parents[2]
+SPAN = np.array([20.0, 20.0, 15.0, 4.0, 4.0, 8.0])
+
+
+def scenario(seed: int) -> str:
+    targets = np.random.default_rng(seed).uniform(-1, 1, (36, 6)) * SPAN
+    rows = "\n".join(f"    - [{', '.join(f'{v:.4f}' for v in t)}]" for t in targets)
+    return f"""format: hexatherm-scenario/1
+name: calibration-{seed}
+hexapod: {ROOT / "configs" / "symetrie-like.yaml"}
+balls: {ROOT / "configs" / "balls-3.yaml"}
+seed: {seed}
+plan:
+  reference_pose: [0, 0, -40, 0, 0, 0]
+  points_per_ball: 12
+  targets:
+{rows}
+cmm: {{point_noise_um: 0.3, cap_angle_deg: 70}}
+geometry_errors: {{seed: 5, joint_sigma_um: 50, offset_sigma_um: 30}}
+"""
+
+
+def run(*args: object):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+@pytest.fixture(scope="module")
+def calibrated(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, object]:
+    root = tmp_path_factory.mktemp("cal")
+    (root / "scenario.yaml").write_text(scenario(3))
+    made = run("simulate", root / "scenario.yaml", "-o", root / "s")
+    assert made.exit_code == 0, made.output
+    result = run("calibrate", root / "s", "-o", root / "cal")
+    assert result.exit_code == 0, result.output
+    return root / "s", root / "cal", result
+
+
+def test_the_level_is_chosen_and_the_truth_recovered(calibrated) -> None:
+    session, out, result = calibrated
+    doc = json.loads((out / "calibration.json").read_text())
+    assert doc["level"] == "joints" and doc["level_chosen"]  # no gain errors in the truth
+    assert doc["rank"] == doc["n_parameters"] == 42
+    params = pd.read_csv(out / "parameters.csv").set_index("parameter")
+    truth = pd.read_csv(session / "truth" / "geometry.csv")
+    nominal = read_hexapod(session / "hexapod.yaml")
+    expected = pd.Series(
+        gauge_fixed(truth["true"].to_numpy(), nominal.base_joints_mm), index=truth["parameter"]
+    )
+    z = (params["calibrated"] - expected[params.index]) / params["u"]
+    assert np.abs(z).max() < 4.5  # every parameter within its uncertainty
+    assert 0.4 < np.sqrt(np.mean(z**2)) < 1.6  # and the uncertainties honest
+    assert 0.5 < doc["chi_square_per_dof"] < 1.6
+
+
+def test_residuals_shrink_to_the_noise_and_the_file_reads_back(calibrated) -> None:
+    session, out, result = calibrated
+    residuals = pd.read_csv(out / "residuals.csv")
+    before = np.sqrt(np.mean(residuals["dTx_um_nominal"] ** 2))
+    after = np.sqrt(np.mean(residuals["dTx_um_calibrated"] ** 2))
+    assert before > 5.0 and after < 0.1 * before
+    assert "level joints (chosen by BIC and held-out folds)" in result.stdout
+    calibrated_hexapod = read_hexapod(out / "hexapod.yaml")  # the record is checked
+    assert calibrated_hexapod.legs is not None
+    text = (out / "hexapod.yaml").read_text()
+    assert "calibration:" in text and "leg_offsets_mm:" in text
+    assert (out / "provenance.json").is_file()
+
+
+def test_sessions_of_two_hexapods_are_refused(calibrated, tmp_path: Path) -> None:
+    session, _, _ = calibrated
+    other = tmp_path / "other"
+    shutil.copytree(session, other, ignore=shutil.ignore_patterns("results"))
+    text = (other / "hexapod.yaml").read_text()
+    joints = read_hexapod(other / "hexapod.yaml").base_joints_mm
+    moved = repr(float(joints[0, 0]))
+    assert moved in text
+    (other / "hexapod.yaml").write_text(text.replace(moved, repr(float(joints[0, 0]) + 0.1), 1))
+    result = run("calibrate", session, other, "-o", tmp_path / "out")
+    assert result.exit_code == 1 and "hexapod" in result.output
+    assert not (tmp_path / "out").exists()
