@@ -6,7 +6,13 @@ from pathlib import Path
 
 import click
 
-from hexatherm.cli.options import clean_errors, echo_err, overwrite_option, reading_options
+from hexatherm.cli.options import (
+    clean_errors,
+    echo_err,
+    interpolation_option,
+    overwrite_option,
+    reading_options,
+)
 from hexatherm.io.files import ReadOptions
 
 
@@ -43,6 +49,7 @@ from hexatherm.io.files import ReadOptions
     show_default=True,
     help="Residual space of the least squares.",
 )
+@interpolation_option
 @overwrite_option
 @reading_options
 @clean_errors
@@ -52,6 +59,7 @@ def command(
     poses: str,
     level: str,
     residuals: str,
+    interpolation: str,
     overwrite: bool,
     reading: ReadOptions,
 ) -> None:
@@ -71,7 +79,7 @@ def command(
 
     inputs = [f for s in sessions for f in read_session(s).input_files()]
     check_output_settled(out, kind="folder", inputs=inputs, overwrite=overwrite)
-    campaign = read_campaign(sessions, poses, reading)  # type: ignore[arg-type]
+    campaign = read_campaign(sessions, poses, reading, interpolation)  # type: ignore[arg-type]
     echo_err(f"calibrating from {len(campaign.labels)} {poses} poses of {len(sessions)} session(s)")
     run = calibrate(campaign, level, residuals)
     files = output_files(run)

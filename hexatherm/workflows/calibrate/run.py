@@ -28,6 +28,7 @@ from hexatherm.core.calibration import (
     fit_calibration,
     select_level,
 )
+from hexatherm.core.correction import Interpolation
 from hexatherm.core.geometry import to_um_urad
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.errors import CalibrationError, InputError
@@ -73,14 +74,18 @@ class Campaign:
 
 
 def read_campaign(
-    paths: Sequence[str | Path], poses: PoseKind = "corrected", reading: ReadOptions = STRICT
+    paths: Sequence[str | Path],
+    poses: PoseKind = "corrected",
+    reading: ReadOptions = STRICT,
+    interpolation: Interpolation = "linear",
 ) -> Campaign:
-    """Process every session of ``paths`` and pool their targets (see the module text)."""
+    """Process every session of ``paths`` (``interpolation`` of the growth at the
+    references as in ``process``) and pool their targets (see the module text)."""
     if poses not in POSE_KINDS:
         raise ValueError(f"poses must be one of {', '.join(POSE_KINDS)}, got {poses!r}")
     if not paths:
         raise ValueError("calibrate needs at least one session")
-    results = [process_session(path, reading=reading) for path in paths]
+    results = [process_session(path, interpolation, reading=reading) for path in paths]
     nominal = results[0].session.hexapod
     for result in results[1:]:
         other = result.session.hexapod

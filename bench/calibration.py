@@ -1,0 +1,156 @@
+"""The paper's claim, measured: calibration from thermally decoupled poses (a script, not
+a test; issue 15, item 7).
+
+Run with ``.venv/bin/python bench/calibration.py [--seeds N]``. For seeded campaigns of
+the Symetrie-like hexapod whose true geometry differs from its hexapod file (joints
+sigma 50 um, leg offsets sigma 30 um: ``geometry_errors:``), 30 targets drawn in
++-20/+-20/+-15 mm, +-4/+-4/+-8 deg with a reference R between every two targets, 12
+points per ball on a 70 deg cap with 0.3 um probing noise, it simulates the campaign
+(``simulate``), processes it, calibrates the ``joints`` level (42 parameters) and
+prints the RMS translation error (um) of the calibrated model's predictions on 200
+held-out poses in the reference thermal state, against the truth, from:
+
+- ``drift-free``: the same campaign with the legs at the reference temperature;
+- ``conventional``: the poses as measured, thermal drift included;
+- ``decoupled``: the corrected poses (``process``: references on both sides, linear);
+- ``decoupled, smooth``: the corrected poses with ``--interpolation smooth``.
+
+Heating: ``none``; ``1 K`` (mats raising the legs about 1 K, a few um of growth); ``mats``
+(about 10 K, tens of um: the paper's heating mats). Also printed: the nominal model's
+error, and the ratios decoupled / drift-free and conventional / decoupled.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from hexatherm.core.calibration import CalibrationModel, fit_calibration  # noqa: E402
+from hexatherm.io.config import read_hexapod  # noqa: E402
+from hexatherm.io.scenario import read_scenario  # noqa: E402
+from hexatherm.workflows.calibrate.run import Campaign, read_campaign  # noqa: E402
+from hexatherm.workflows.simulate.run import simulate  # noqa: E402
+from hexatherm.workflows.simulate.twinsession import write_files  # noqa: E402
+
+SPAN = np.array([20.0, 20.0, 15.0, 4.0, 4.0, 8.0])
+HEATING = {
+    "none": "",
+    "1 K": "heating:\n  mats: ["
+    + ", ".join(["{gain_C: 1.0, tau_s: 3600, power: [[0, null]]}"] * 6)
+    + "]\n",
+    "mats": "heating:\n  mats: ["
+    + ", ".join(
+        f"{{gain_C: {g}, tau_s: 2400, power: [[300, null]]}}" for g in (8, 10, 12, 9, 11, 10)
+    )
+    + "]\n",
+}
+
+
+def scenario_text(seed: int, heating: str) -> str:
+    targets = np.random.default_rng(seed).uniform(-1, 1, (30, 6)) * SPAN
+    rows = "\n".join(f"    - [{', '.join(f'{v:.4f}' for v in t)}]" for t in targets)
+    return f"""format: hexatherm-scenario/1
+name: calibration-{seed}
+hexapod: {ROOT / "configs" / "symetrie-like.yaml"}
+balls: {ROOT / "configs" / "balls-3.yaml"}
+seed: {seed}
+plan:
+  reference_pose: [0, 0, -40, 0, 0, 0]
+  points_per_ball: 12
+  targets:
+{rows}
+timing: {{seconds_per_point: 2.0, seconds_per_move: 20}}
+cmm: {{point_noise_um: 0.3, cap_angle_deg: 70}}
+thermocouples: {{period_s: 30, noise_C: 0.02}}
+geometry_errors: {{seed: {seed + 1000}, joint_sigma_um: 50, offset_sigma_um: 30}}
+{heating}"""
+
+
+def campaign_folder(root: Path, seed: int, heating: str) -> tuple[Path, np.ndarray]:
+    """Simulate the campaign; its folder and the true parameters."""
+    path = root / f"scenario-{seed}-{heating.replace(' ', '')}.yaml"
+    path.write_text(scenario_text(seed, HEATING[heating]))
+    scenario = read_scenario(path)
+    folder = root / f"s-{seed}-{heating.replace(' ', '')}"
+    write_files(simulate(scenario).files, folder)
+    assert scenario.true_parameters is not None
+    return folder, scenario.true_parameters
+
+
+def heldout_error_um(campaign: Campaign, truth: np.ndarray, held: np.ndarray) -> float:
+    """RMS translation error (um) of the calibrated predictions of ``held`` poses."""
+    fit = fit_calibration(
+        campaign.nominal, campaign.commanded, campaign.measured, campaign.covariance
+    )
+    true_poses, _ = CalibrationModel(campaign.nominal, "joints+gains").predict(truth, held)
+    error = (fit.predict(held) - true_poses)[:, :3] * 1e3
+    return float(np.sqrt(np.mean(np.sum(error**2, axis=1))))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--seeds", type=int, default=3)
+    args = parser.parse_args()
+    held = np.random.default_rng(99).uniform(-1, 1, (200, 6)) * SPAN
+    nominal = read_hexapod(ROOT / "configs" / "symetrie-like.yaml")
+    rows: dict[str, dict[str, list[float]]] = {h: {} for h in HEATING}
+    nominal_error: list[float] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        for seed in range(args.seeds):
+            free, truth = campaign_folder(root, seed, "none")
+            drift_free = heldout_error_um(read_campaign([free], "conventional"), truth, held)
+            true_poses, _ = CalibrationModel(nominal, "joints+gains").predict(truth, held)
+            nominal_error.append(
+                float(np.sqrt(np.mean(np.sum(((true_poses - held)[:, :3] * 1e3) ** 2, axis=1))))
+            )
+            for heating in HEATING:
+                folder = free if heating == "none" else campaign_folder(root, seed, heating)[0]
+                cells = rows[heating]
+                cells.setdefault("drift-free", []).append(drift_free)
+                for name, poses, interpolation in (
+                    ("conventional", "conventional", "linear"),
+                    ("decoupled", "corrected", "linear"),
+                    ("decoupled, smooth", "corrected", "smooth"),
+                ):
+                    campaign = read_campaign([folder], poses, interpolation=interpolation)  # type: ignore[arg-type]
+                    growth = campaign.results[0].correction
+                    cells.setdefault(name, []).append(heldout_error_um(campaign, truth, held))
+                drift = np.abs((growth.conventional - growth.corrected)[:, :3]).max() * 1e3
+                cells.setdefault("largest thermal error of a pose (um)", []).append(drift)
+            print(f"seed {seed} done", file=sys.stderr, flush=True)
+    rms = lambda values: float(np.sqrt(np.mean(np.square(values))))  # noqa: E731
+    print(
+        f"Calibrated model's RMS translation error on 200 held-out poses (um), "
+        f"{args.seeds} seeds; nominal model: {rms(nominal_error):.1f} um"
+    )
+    columns = [
+        "drift-free",
+        "conventional",
+        "decoupled",
+        "decoupled, smooth",
+        "largest thermal error of a pose (um)",
+    ]
+    print(
+        f"{'heating':8} "
+        + " ".join(f"{c[:18]:>18}" for c in columns)
+        + f" {'dec/free':>9} {'conv/dec':>9}"
+    )
+    for heating, cells in rows.items():
+        values = [rms(cells[c]) for c in columns]
+        print(
+            f"{heating:8} "
+            + " ".join(f"{v:18.3f}" for v in values)
+            + f" {values[2] / values[0]:9.2f} {values[1] / values[2]:9.2f}"
+        )
+
+
+if __name__ == "__main__":
+    main()
