@@ -224,6 +224,23 @@ def parse_levels(text: str) -> list[int]:
     help="Probe clearance above the balls between balls (mm).",
 )
 @click.option(
+    "--calibration",
+    "calibration_poses",
+    type=click.IntRange(min=1, max=MAX_TARGETS),
+    default=None,
+    metavar="N",
+    help="Plan a calibration campaign: of the targets, grid or random poses given "
+    "(candidates), keep the N that best identify the geometry (greedy D-optimal); "
+    "refused when they cannot identify it, naming why.",
+)
+@click.option(
+    "--calibration-level",
+    type=click.Choice(["offsets", "joints", "joints+gains"]),
+    default="joints",
+    show_default=True,
+    help="The calibration model --calibration designs for.",
+)
+@click.option(
     "--checklist",
     "checklist_path",
     type=click.Path(dir_okay=False, path_type=Path),
@@ -260,6 +277,8 @@ def command(
     origin_on_cmm: str | None,
     cap_angle: float,
     clearance: float,
+    calibration_poses: int | None,
+    calibration_level: str,
     checklist_path: Path | None,
     out: Path | None,
     overwrite: bool,
@@ -327,6 +346,8 @@ def command(
         clearance_mm=clearance,
         dmis_name=None if dmis_path is None else Path(dmis_path).stem,
         checklist=checklist_path is not None,
+        calibration_poses=calibration_poses,
+        calibration_level=calibration_level,
     )
     inputs = [p for p in (hexapod_path, balls_path, targets_path) if p is not None]
     for path in outputs:
@@ -334,6 +355,16 @@ def command(
     made = make_plan(request)
     if made.redrawn:
         echo_err(f"drew {made.redrawn} random pose(s) again: out of the stroke or near-singular")
+    if made.selection is not None:
+        chosen = made.selection
+        refused = ", ".join(f"{n} {why}" for why, n in chosen.refused.items() if n)
+        echo_err(
+            f"calibration ({calibration_level}): kept {len(chosen.indices)} of the candidates "
+            f"({', '.join(str(int(k) + 1) for k in chosen.indices)}"
+            f"{'; refused: ' + refused if refused else ''}); predicted standard "
+            f"uncertainty of a calibrated pose at most {chosen.worst_sigma_um:.2f} um, "
+            f"{chosen.worst_sigma_urad:.2f} urad (1 um / 5 urad per measured pose)"
+        )
     for gap in made.gaps:
         echo_err(
             f"warning: {gap.target} and its reference {gap.reference} are expected "

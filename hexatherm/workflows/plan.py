@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from hexatherm.core.calibration import PoseSelection, select_poses
 from hexatherm.core.plan import Plan, find_repeats
 from hexatherm.core.planning import (
     DEFAULT_MIN_RCOND,
@@ -70,6 +71,8 @@ class PlanRequest:
     clearance_mm: float = 10.0
     dmis_name: str | None = None
     checklist: bool = False
+    calibration_poses: int | None = None
+    calibration_level: str = "joints"
 
 
 @dataclass(frozen=True)
@@ -89,6 +92,9 @@ class PlanTexts:
     plan_yaml : str
     dmis : str or None
     checklist : str or None
+    selection : PoseSelection or None
+        With ``calibration_poses``: the targets chosen from the candidates (the
+        targets, grid or random poses asked for) for a calibration.
     """
 
     plan: Plan
@@ -99,6 +105,7 @@ class PlanTexts:
     plan_yaml: str
     dmis: str | None
     checklist: str | None
+    selection: PoseSelection | None = None
 
 
 def make_plan(request: PlanRequest) -> PlanTexts:
@@ -135,6 +142,20 @@ def make_plan(request: PlanRequest) -> PlanTexts:
             )
             target_sources = [f"random pose {k + 1}" for k in range(len(targets))]
 
+    selection = None
+    if request.calibration_poses is not None:
+        # the targets are candidates: keep the n that best identify the geometry
+        selection = select_poses(
+            hexapod,
+            targets,
+            request.calibration_poses,
+            level=request.calibration_level,
+            box_lower=request.box_lower,
+            box_upper=request.box_upper,
+            min_rcond=rcond,
+        )
+        targets = selection.poses
+        target_sources = [target_sources[int(k)] for k in selection.indices]
     plan = build_plan(
         targets,
         request.reference_pose,
@@ -191,4 +212,14 @@ def make_plan(request: PlanRequest) -> PlanTexts:
             max_gap_s=request.max_gap_s,
             hexapod_name=hexapod.name,
         )
-    return PlanTexts(plan, balls.names, timing, gaps, redrawn, plan_to_yaml(plan), dmis, checklist)
+    return PlanTexts(
+        plan,
+        balls.names,
+        timing,
+        gaps,
+        redrawn,
+        plan_to_yaml(plan),
+        dmis,
+        checklist,
+        selection,
+    )
