@@ -166,14 +166,23 @@ class _Problem:
         inside = 1e-9 * (z_hi - z_lo)
         z0 = np.clip(np.ones(theta0.size), z_lo + inside, z_hi - inside)
 
+        # a parameter that moves no prediction on these data (an air-driven effect when
+        # the air is constant) stays where it starts: the trust region cannot scale a
+        # zero column (NaN steps)
+        seen = np.linalg.norm(self.jacobian(theta0, mask), axis=0) > 0
+        if not seen.any():
+            return np.clip(theta0, self.lo, self.hi)
+
         def theta_of(z: FloatArray) -> FloatArray:
-            return theta0 + (z - 1) * self.scale
+            full = np.ones(theta0.size)
+            full[seen] = z
+            return theta0 + (full - 1) * self.scale
 
         solution = least_squares(
             lambda z: self.weighted(theta_of(z), mask),
-            z0,
-            jac=lambda z: self.jacobian(theta_of(z), mask),
-            bounds=(z_lo, z_hi),
+            z0[seen],
+            jac=lambda z: self.jacobian(theta_of(z), mask)[:, seen],
+            bounds=(z_lo[seen], z_hi[seen]),
             method="trf",
             x_scale=1.0,
             max_nfev=30,
