@@ -49,6 +49,12 @@ from hexatherm.io.files import ReadOptions
     show_default=True,
     help="Residual space of the least squares.",
 )
+@click.option(
+    "--iterate",
+    is_flag=True,
+    help="Reprocess the sessions with the calibrated geometry (the thermal correction's "
+    "IGM and FGM) and calibrate again, until the parameters stop moving.",
+)
 @interpolation_option
 @overwrite_option
 @reading_options
@@ -59,6 +65,7 @@ def command(
     poses: str,
     level: str,
     residuals: str,
+    iterate: bool,
     interpolation: str,
     overwrite: bool,
     reading: ReadOptions,
@@ -75,13 +82,34 @@ def command(
     from hexatherm.io.config import read_session
     from hexatherm.io.outputs import check_output_settled, output_dir
     from hexatherm.workflows.calibrate.outputs import output_files, summary_lines
-    from hexatherm.workflows.calibrate.run import calibrate, read_campaign
+    from hexatherm.workflows.calibrate.run import (
+        calibrate,
+        calibrate_iterated,
+        read_campaign,
+    )
 
     inputs = [f for s in sessions for f in read_session(s).input_files()]
     check_output_settled(out, kind="folder", inputs=inputs, overwrite=overwrite)
-    campaign = read_campaign(sessions, poses, reading, interpolation)  # type: ignore[arg-type]
-    echo_err(f"calibrating from {len(campaign.labels)} {poses} poses of {len(sessions)} session(s)")
-    run = calibrate(campaign, level, residuals)
+    if iterate:
+        run, moves = calibrate_iterated(
+            sessions,
+            poses,  # type: ignore[arg-type]
+            reading,
+            interpolation,  # type: ignore[arg-type]
+            level,
+            residuals,
+        )
+        for k, move in enumerate(moves, 2):
+            echo_err(
+                f"round {k}: reprocessed with the calibrated geometry; the parameters "
+                f"moved at most {move * 1e3:.3g} um"
+            )
+    else:
+        campaign = read_campaign(sessions, poses, reading, interpolation)  # type: ignore[arg-type]
+        run = calibrate(campaign, level, residuals)
+    echo_err(
+        f"calibrated from {len(run.campaign.labels)} {poses} poses of {len(sessions)} session(s)"
+    )
     files = output_files(run)
     with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
         for name, text in files.items():

@@ -98,3 +98,49 @@ def test_sessions_of_two_hexapods_are_refused(calibrated, tmp_path: Path) -> Non
     result = run("calibrate", session, other, "-o", tmp_path / "out")
     assert result.exit_code == 1 and "hexapod" in result.output
     assert not (tmp_path / "out").exists()
+
+
+def small_scenario(targets: str, extra: str = "") -> str:
+    return f"""format: hexatherm-scenario/1
+hexapod: {ROOT / "configs" / "symetrie-like.yaml"}
+balls: {ROOT / "configs" / "balls-3.yaml"}
+plan: {{targets: {targets}, reference_pose: [0, 0, -40, 0, 0, 0], points_per_ball: 8}}
+cmm: {{point_noise_um: 0.3}}
+geometry_errors: {{seed: 5, joint_sigma_um: 50, offset_sigma_um: 30}}
+{extra}"""
+
+
+def simulated(tmp_path: Path, name: str, text: str) -> Path:
+    (tmp_path / f"{name}.yaml").write_text(text)
+    made = run("simulate", tmp_path / f"{name}.yaml", "-o", tmp_path / name)
+    assert made.exit_code == 0, made.output
+    return tmp_path / name
+
+
+def test_iterate_converges_in_a_few_rounds(tmp_path: Path) -> None:
+    mats = ", ".join(["{gain_C: 10, tau_s: 2400, power: [[0, null]]}"] * 6)
+    targets = np.random.default_rng(2).uniform(-1, 1, (30, 6)) * SPAN
+    text = small_scenario(str(targets.round(3).tolist()), f"heating: {{mats: [{mats}]}}\n")
+    session = simulated(tmp_path, "heated", text)
+    result = run("calibrate", session, "-o", tmp_path / "cal", "--iterate", "--level", "joints")
+    assert result.exit_code == 0, result.output
+    rounds = [line for line in result.stderr.splitlines() if line.startswith("round ")]
+    assert 1 <= len(rounds) <= 3  # the last round moved nothing worth a nanometre
+    assert rounds[-1].endswith(" um") and float(rounds[-1].split()[-2]) <= 0.01
+
+
+def test_bad_campaigns_are_refused_naming_why(tmp_path: Path) -> None:
+    few = simulated(tmp_path, "few", small_scenario("[[5, 0, 0, 0, 0, 0], [0, 5, 0, 0, 0, 0]]"))
+    refused = run("calibrate", few, "-o", tmp_path / "out")
+    assert refused.exit_code == 1 and "at least 4" in refused.output
+    translations = np.random.default_rng(4).uniform(-1, 1, (30, 3)) * SPAN[:3]
+    flat = np.hstack([translations, np.zeros((30, 3))])
+    moved = simulated(tmp_path, "moved", small_scenario(str(flat.round(3).tolist())))
+    rank = run("calibrate", moved, "-o", tmp_path / "out", "--level", "joints")
+    assert rank.exit_code == 1 and "rank" in rank.output and "Rx, Ry, Rz" in rank.output
+    warm = simulated(
+        tmp_path, "warm", small_scenario(str(flat.round(3).tolist()), "heating: {air_C: 23}\n")
+    )
+    states = run("calibrate", moved, warm, "-o", tmp_path / "out", "--level", "offsets")
+    assert states.exit_code == 1 and "another thermal state" in states.output
+    assert not (tmp_path / "out").exists()

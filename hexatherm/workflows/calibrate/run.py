@@ -23,6 +23,7 @@ import numpy as np
 from scipy.linalg import block_diag
 
 from hexatherm.core.calibration import (
+    PARAMETER_UNITS,
     CalibrationFit,
     LevelChoice,
     fit_calibration,
@@ -32,6 +33,7 @@ from hexatherm.core.correction import Interpolation
 from hexatherm.core.geometry import to_um_urad
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.errors import CalibrationError, InputError
+from hexatherm.io.config import read_session
 from hexatherm.io.files import STRICT, ReadOptions
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.pipeline import ProcessResult, process_session
@@ -78,17 +80,23 @@ def read_campaign(
     poses: PoseKind = "corrected",
     reading: ReadOptions = STRICT,
     interpolation: Interpolation = "linear",
+    geometry: Hexapod | None = None,
 ) -> Campaign:
     """Process every session of ``paths`` (``interpolation`` of the growth at the
-    references as in ``process``) and pool their targets (see the module text)."""
+    references as in ``process``; ``geometry``, a calibrated hexapod, for the
+    correction's IGM and FGM instead of the sessions' file) and pool their targets (see
+    the module text). The nominal geometry, the one the controller commanded with,
+    stays the sessions' hexapod file."""
     if poses not in POSE_KINDS:
         raise ValueError(f"poses must be one of {', '.join(POSE_KINDS)}, got {poses!r}")
     if not paths:
         raise ValueError("calibrate needs at least one session")
-    results = [process_session(path, interpolation, reading=reading) for path in paths]
-    nominal = results[0].session.hexapod
-    for result in results[1:]:
-        other = result.session.hexapod
+    results = [
+        process_session(path, interpolation, reading=reading, hexapod=geometry) for path in paths
+    ]
+    nominal = read_session(paths[0]).hexapod
+    for path, result in zip(paths[1:], results[1:], strict=True):
+        other = read_session(path).hexapod
         same = other.convention == nominal.convention and all(
             np.array_equal(getattr(other, name), getattr(nominal, name))
             for name in ("base_joints_mm", "platform_joints_mm")
@@ -100,6 +108,7 @@ def read_campaign(
                 path=str(result.session.path),
                 field="hexapod",
             )
+    check_reference_states(results)
     labels: list[str] = []
     commanded, measured, covariance = [], [], []
     for result in results:
@@ -125,6 +134,37 @@ def read_campaign(
         block_diag(*covariance),
         poses,
     )
+
+
+#: the largest difference of the legs' mean temperature at R0 between the sessions of
+#: one calibration, K (each session's corrected poses refer to its own R0)
+MAX_REFERENCE_STATE_K = 0.5
+
+
+def check_reference_states(results: Sequence[ProcessResult]) -> None:
+    """Refuse sessions whose reference states (the legs' temperature at each R0, where
+    logged) differ by more than :data:`MAX_REFERENCE_STATE_K`."""
+    states = []
+    for result in results:
+        temps = result.temperatures
+        if temps is None:
+            continue
+        r0 = int(result.session.plan.reference_indices[0])
+        t = float(result.centres.times_s[r0])
+        legs = np.array([np.interp(t, temps.time_s, temps.legs_C[:, k]) for k in range(6)])
+        states.append((result, float(legs.mean())))
+    if len(states) < 2:
+        return
+    first, base = states[0]
+    for result, mean in states[1:]:
+        if abs(mean - base) > MAX_REFERENCE_STATE_K:
+            raise InputError(
+                f"the legs were at {mean:.2f} degC at its R0 and at {base:.2f} degC at "
+                f"{first.session.path}'s: its corrected poses refer to another thermal state "
+                f"(more than {MAX_REFERENCE_STATE_K} K apart); calibrate them apart",
+                path=str(result.session.path),
+                field="temperatures",
+            )
 
 
 @dataclass(frozen=True)
@@ -184,6 +224,41 @@ def calibrate(campaign: Campaign, level: str = "auto", residuals: str = "pose") 
         raise CalibrationError(f"level {level}: {exc}") from None
     after = to_um_urad(campaign.measured - fit.predict(campaign.commanded))
     return Calibration(campaign, fit, None, before, after, False)
+
+
+#: ``--iterate`` stops when no parameter moved more than this between rounds (mm; a gain
+#: counts per 1000 mm of travel)
+ITERATE_TOL_MM = 1e-5
+#: and gives up after this many rounds
+MAX_ROUNDS = 6
+
+
+def calibrate_iterated(
+    paths: Sequence[str | Path],
+    poses: PoseKind = "corrected",
+    reading: ReadOptions = STRICT,
+    interpolation: Interpolation = "linear",
+    level: str = "auto",
+    residuals: str = "pose",
+) -> tuple[Calibration, list[float]]:
+    """Calibrate, reprocess the sessions with the calibrated geometry (the correction's
+    IGM and FGM), calibrate again, until no parameter moves more than
+    :data:`ITERATE_TOL_MM`; returns the last calibration and each round's largest move
+    (mm). CalibrationError after :data:`MAX_ROUNDS` rounds without convergence."""
+    run = calibrate(read_campaign(paths, poses, reading, interpolation), level, residuals)
+    moves: list[float] = []
+    while len(moves) < MAX_ROUNDS:
+        campaign = read_campaign(paths, poses, reading, interpolation, run.fit.hexapod())
+        again = calibrate(campaign, level, residuals)
+        scale = np.where(np.array(PARAMETER_UNITS) == "mm", 1.0, 1000.0)
+        moves.append(float(np.max(np.abs(again.fit.parameters - run.fit.parameters) * scale)))
+        run = again
+        if moves[-1] <= ITERATE_TOL_MM:
+            return run, moves
+    raise CalibrationError(
+        f"--iterate: the parameters still moved {moves[-1] * 1e3:.3g} um after {MAX_ROUNDS} "
+        "rounds (expected: a fraction of a micrometre after the first)"
+    )
 
 
 def rms(values: FloatArray) -> FloatArray:

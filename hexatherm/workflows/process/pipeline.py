@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from hexatherm.core.correction import Correction, Interpolation, StepPoses, correct, step_poses
+from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import find_repeats, without_repeats
 from hexatherm.core.plausibility import (
     PoseCheck,
@@ -268,13 +269,18 @@ def process_session(
     checks: Checks | None = None,
     progress: FileProgress | None = None,
     reading: ReadOptions = STRICT,
+    hexapod: Hexapod | None = None,
 ) -> ProcessResult:
     """Read a session and compute conventional and corrected poses of every target.
 
     ``progress`` reports the reading of the measurement files and ``reading`` says what
-    the readers may read past (see :func:`read_measured`).
+    the readers may read past (see :func:`read_measured`). ``hexapod`` replaces the
+    session's hexapod file for the IGM and FGM of the correction (a calibrated
+    geometry; the commanded poses stay as planned).
     """
     session = read_session(path)
+    if hexapod is not None:
+        session = dataclasses.replace(session, hexapod=hexapod)
     records, points, centres, temperatures = read_measured(
         session, fixed_diameter_mm, progress, reading
     )
