@@ -16,6 +16,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from hexatherm.workflows.calibrate.outputs import output_files
+from hexatherm.workflows.calibrate.run import calibrate, read_campaign
 from hexatherm.workflows.process.outputs import write_results
 from hexatherm.workflows.process.pipeline import process_session
 from hexatherm.workflows.process.quality import quality_checks
@@ -108,6 +110,10 @@ def replay_session(
     the tolerances (or that are new) are rewritten, and listed in
     ``Comparison.updated``; nothing else in ``expected/`` is touched (a CSV file that
     ``process`` no longer writes stays a mismatch, to be removed by hand).
+
+    A session whose ``expected/`` holds a ``calibration/`` folder is a calibration
+    campaign: it is also calibrated as ``hexatherm calibrate`` does (level chosen, the
+    corrected poses), and ``parameters.csv`` and ``residuals.csv`` are compared there.
     """
     from hexatherm.errors import HexathermError
 
@@ -126,7 +132,17 @@ def replay_session(
         except HexathermError as exc:
             result.mismatches.append(f"{folder.name}: does not process: {exc}")
             return result
-        names = sorted(p.name for p in out.glob("*.csv"))
+        if (expected_dir / "calibration").is_dir():
+            try:
+                calibrated = calibrate(read_campaign([folder]))
+            except HexathermError as exc:
+                result.mismatches.append(f"{folder.name}: does not calibrate: {exc}")
+                return result
+            (out / "calibration").mkdir()
+            for name, text in output_files(calibrated).items():
+                if name.endswith(".csv"):
+                    (out / "calibration" / name).write_text(text, encoding="utf-8")
+        names = sorted(p.relative_to(out).as_posix() for p in out.rglob("*.csv"))
         result.files = names
         changed: list[str] = []
         for name in names:
@@ -140,7 +156,11 @@ def replay_session(
             compare_tables(name, pd.read_csv(exp_path), got, tolerances, result)
             if len(result.mismatches) > before:
                 changed.append(name)
-        stale = sorted(p.name for p in expected_dir.glob("*.csv") if p.name not in names)
+        stale = sorted(
+            p.relative_to(expected_dir).as_posix()
+            for p in expected_dir.rglob("*.csv")
+            if p.relative_to(expected_dir).as_posix() not in names
+        )
         for name in stale:
             result.mismatches.append(f"{folder.name}/{name}: no longer written by process")
         if update:
