@@ -59,7 +59,7 @@ td .u { display: block; color: #666; font-size: 0.85em; }
 tr.fail td { background: #fdd; }
 tr.total td { border-top: 2px solid #888; }
 td.bad { color: #b00; font-weight: bold; }
-table.meta td { overflow-wrap: anywhere; }
+table.meta td { overflow-wrap: anywhere; } table.meta td:first-child { white-space: nowrap; }
 figure { margin: 0.5em 0; } figure img { max-width: 100%; }
 figcaption, p.note { font-size: 0.85em; color: #555; }
 pre { font-size: 0.75em; background: #f7f7f7; padding: 4px 8px; white-space: pre-wrap; }
