@@ -158,6 +158,22 @@ def test_temperature_figure_plots_the_log(hidden):
     assert ax.get_xlim()[1] > 3.5  # a 3.9 h session
 
 
+def test_no_leg_hides_another_in_the_temperature_figure(hidden):
+    # legs 1 and 4 lie on each other in this log: each leg needs its own line style and
+    # marker, and markers at its own samples, to be seen under another
+    log = pd.read_csv(SESSIONS / "with-hidden-effect" / "temperatures.csv")
+    assert np.max(np.abs(log["leg1"] - log["leg4"])) < 0.5
+    lines = labelled_lines(temperature_figure(hidden).axes[0], "leg ")
+    styles = {(str(line.get_linestyle()), str(line.get_marker())) for line in lines.values()}
+    assert len(styles) == 6
+    marked = []
+    for line in lines.values():
+        start, step = line.get_markevery()
+        marked.append(set(range(start, len(line.get_xdata()), step)))
+    assert all(not (a & b) for i, a in enumerate(marked) for b in marked[i + 1 :])
+    assert all(len(m) >= 10 for m in marked)
+
+
 def test_growth_figure_plots_the_growth_at_every_reference(paper):
     legs = expected("paper-zero-pose", "legs.csv")
     refs = legs[legs["kind"] == "reference"]
