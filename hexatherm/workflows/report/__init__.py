@@ -57,19 +57,25 @@ from hexatherm.workflows.report.figures import (
     temperature_figure,
 )
 from hexatherm.workflows.report.html import (
-    STYLE,
     build_report,
     metadata_rows,
-    provenance_html,
+    provenance_block,
     report_html,
     verdict_html,
+)
+from hexatherm.workflows.report.page import (
+    STYLE,
+    Cell,
+    figure_html,
+    html_table,
+    page_html,
+    provenance_html,
 )
 from hexatherm.workflows.report.tables import (
     FAIL_MARK,
     commanded_columns,
     failing_rows,
     growth_table_html,
-    html_table,
     poses_table_html,
     quality_summary_html,
     quality_table_html,
@@ -79,12 +85,16 @@ from hexatherm.workflows.report.verdict import Extreme, Verdict, verdict
 
 __all__ = [
     "FAIL_MARK",
+    "Cell",
     "LEG_STYLES",
     "Extreme",
     "Verdict",
     "commanded_columns",
     "exact",
     "fixed",
+    "figure_html",
+    "page_html",
+    "provenance_block",
     "provenance_html",
     "unit_text",
     "verdict",

@@ -2,11 +2,7 @@
 
 from __future__ import annotations
 
-import base64
-import html
-import os
 from collections.abc import Callable
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -15,19 +11,25 @@ from hexatherm import __version__
 from hexatherm.workflows.process.pipeline import ProcessResult
 from hexatherm.workflows.report.figures import (
     _time_text,
-    figure_png,
     growth_figure,
     pose_figure,
     registration_figure,
     start_time_s,
     temperature_figure,
 )
+from hexatherm.workflows.report.page import (
+    STYLE,
+    escape,
+    figure_html,
+    html_table,
+    page_html,
+    provenance_html,
+)
 from hexatherm.workflows.report.tables import (
     FAIL_MARK,
     QUALITY_HEADS,
     failing_rows,
     growth_table_html,
-    html_table,
     poses_table_html,
     quality_summary_html,
     quality_table_html,
@@ -35,62 +37,15 @@ from hexatherm.workflows.report.tables import (
 from hexatherm.workflows.report.text import exact, fixed, unit_text
 from hexatherm.workflows.report.verdict import Extreme, Verdict, verdict
 
-if TYPE_CHECKING:
-    from matplotlib.figure import Figure
+_e = escape
 
+__all__ = ["STYLE", "build_report", "metadata_rows", "provenance_block", "report_html"]
+
+if TYPE_CHECKING:
     from hexatherm.io.provenance import RunFacts
     from hexatherm.session import QualityLimits
     from hexatherm.workflows.process.quality import QualityReport
     from hexatherm.workflows.process.uncertainty import PoseUncertainty
-
-# --------------------------------------------------------------------- HTML
-STYLE = """
-body { font-family: "DejaVu Sans", "Liberation Sans", sans-serif; margin: 1.5em auto;
-  max-width: 1000px; color: #222; font-size: 11pt; }
-h1 { font-size: 1.5em; } h2 { font-size: 1.2em; margin-top: 1.6em; border-bottom: 1px solid #ccc; }
-table { border-collapse: collapse; font-size: 8.5pt; margin: 0.5em 0; }
-caption { caption-side: top; text-align: left; font-size: 9pt; color: #555; padding: 2px 0; }
-th, td { border: 1px solid #ccc; padding: 1px 4px; vertical-align: top; }
-th { background: #f0f0f0; font-weight: 600; }
-td.num { text-align: right; white-space: nowrap; font-variant-numeric: tabular-nums;
-  font-family: "DejaVu Sans Mono", "Liberation Mono", monospace; }
-td.wrap { overflow-wrap: anywhere; word-break: break-all; }
-td .u { display: block; color: #666; font-size: 0.85em; }
-tr.fail td { background: #fdd; }
-tr.total td { border-top: 2px solid #888; }
-td.bad { color: #b00; font-weight: bold; }
-table.meta td { overflow-wrap: anywhere; } table.meta td:first-child { white-space: nowrap; }
-figure { margin: 0.5em 0; } figure img { max-width: 100%; }
-figcaption, p.note { font-size: 0.85em; color: #555; }
-pre { font-size: 0.75em; background: #f7f7f7; padding: 4px 8px; white-space: pre-wrap; }
-p.missing { background: #fff3cd; border: 1px solid #e0c060; padding: 4px 8px; }
-div.verdict { border: 2px solid #444; padding: 0.3em 1em; margin: 1em 0; }
-div.verdict.failed { border-color: #b00; }
-div.verdict li { margin: 0.2em 0; }
-@page { size: A4; margin: 14mm 15mm; }
-@media print {
-  body { max-width: none; margin: 0; font-size: 9.5pt; }
-  h2 { break-after: avoid; page-break-after: avoid; }
-  table { font-size: 7.5pt; }
-  thead { display: table-header-group; }
-  tr, figure, div.verdict, caption { break-inside: avoid; page-break-inside: avoid; }
-  img { max-width: 100%; }
-}
-""".strip()
-
-
-def _e(value: object) -> str:
-    return html.escape(str(value), quote=True)
-
-
-def _figure_html(fig: Figure | None, alt: str, caption: str) -> str:
-    if fig is None:
-        return ""
-    data = base64.b64encode(figure_png(fig)).decode("ascii")
-    return (
-        f'<figure><img src="data:image/png;base64,{data}" alt="{_e(alt)}">'
-        f"<figcaption>{_e(caption)}</figcaption></figure>"
-    )
 
 
 def _session_files(result: ProcessResult) -> dict[str, str]:
@@ -219,58 +174,22 @@ def _options_text(options: dict[str, object]) -> str:
     return "; ".join(f"{key} = {value}" for key, value in options.items())
 
 
-def provenance_html(
+def provenance_block(
     result: ProcessResult,
     quality: QualityReport | None,
     facts: RunFacts | None,
     generated: str,
 ) -> str:
-    """The provenance block: when, by what, how, and from which files (SHA-256, size)."""
-    from hexatherm.io.provenance import input_entries
-
-    if facts is None:
-        command, options = "not run from the command line", "not run from the command line"
-    else:
-        command = " ".join(["hexatherm", facts.command, *facts.argv])
-        options = _options_text(facts.options)
-    rows = [
-        ["generated", generated],
-        ["hexatherm", __version__],
-        ["command line", command],
-        ["options", options],
-        [
-            "quality limits",
-            "not available" if quality is None else "; ".join(threshold_texts(quality.thresholds)),
-        ],
-    ]
-    if facts is not None:
-        rows.append(["started", facts.started])
-    out = [
-        "<h2>Provenance</h2>",
-        html_table([[("field", 1), ("value", 1)]], rows, numeric_from=99).replace(
-            "<table>", '<table class="meta">', 1
-        ),
-    ]
-    folder = result.session.path.parent
-    files = []
-    for entry in input_entries(result.session.input_files()):
-        path = Path(entry["path"])
-        try:
-            shown = os.path.relpath(path, folder.resolve())
-        except ValueError:  # another drive
-            shown = str(path)
-        if shown.startswith(".."):
-            shown = str(path)
-        size = str(entry["bytes"]) if "bytes" in entry else "folder"
-        files.append([shown, size, entry.get("sha256", "")])
-    table = html_table(
-        [[("input file", 1), ("bytes", 1), ("SHA-256", 1)]],
-        files,
-        numeric_from=1,
-        caption=f"Input files, relative to {folder.resolve()}",
+    """The provenance block of a session's report (:func:`page.provenance_html`), with the
+    quality limits."""
+    limits = "not available" if quality is None else "; ".join(threshold_texts(quality.thresholds))
+    return provenance_html(
+        facts,
+        result.session.input_files(),
+        result.session.path.parent,
+        generated,
+        extra=[("quality limits", limits)],
     )
-    out.append(table.replace('<td class="num">' + "", '<td class="num">'))
-    return "\n".join(out)
 
 
 def report_html(
@@ -312,14 +231,7 @@ def report_html(
     failing = dict(summary.failing_targets + summary.failing_other)
     k_text = exact(coverage_factor)
     name = result.session.name
-    parts = [
-        "<!DOCTYPE html>",
-        '<html lang="en"><head><meta charset="utf-8">',
-        f"<title>hexatherm report: {_e(name)}</title>",
-        f"<style>\n{STYLE}\n</style></head><body>",
-        f"<h1>hexatherm report: {_e(name)}</h1>",
-        verdict_html(summary),
-    ]
+    parts = [verdict_html(summary)]
     if result.warnings:
         parts.append(
             "<h2>Warnings</h2><ul>"
@@ -334,7 +246,7 @@ def report_html(
             "without uncertainty bars.</p>"
         )
     parts += [
-        _figure_html(
+        figure_html(
             pose_figure(result, uncertainty, coverage_factor, failing),
             "pose parameters per trial",
             "Deviations of the conventional (measured) and corrected (thermal state "
@@ -362,7 +274,7 @@ def report_html(
         parts.append('<p class="missing">no temperature log in this session.</p>')
     else:
         parts.append(
-            _figure_html(
+            figure_html(
                 temperature,
                 "measured temperatures",
                 "Thermocouple temperatures over time; ticks at the bottom: the targets' times.",
@@ -371,7 +283,7 @@ def report_html(
 
     parts += [
         "<h2>Leg growth at the references</h2>",
-        _figure_html(
+        figure_html(
             growth_figure(result),
             "leg growth at the references",
             "Growth of each leg since R0 (\u00b5m), from the IGM of the measured reference "
@@ -379,7 +291,7 @@ def report_html(
         ),
         growth_table_html(result, failing),
         "<h2>Registration residuals</h2>",
-        _figure_html(
+        figure_html(
             registration_figure(result),
             "registration residuals",
             "RMS distance between the measured ball centres and the registered "
@@ -404,12 +316,11 @@ def report_html(
             [[("field", 1), ("value", 1)]],
             [[k, v] for k, v in metadata_rows(result)],
             numeric_from=99,
-        ).replace("<table>", '<table class="meta">', 1),
-        provenance_html(result, quality, facts, generated or now_iso()),
-        f'<p class="note">Made by hexatherm {_e(__version__)}.</p>',
-        "</body></html>",
+            css="meta",
+        ),
+        provenance_block(result, quality, facts, generated or now_iso()),
     ]
-    return "\n".join(parts) + "\n"
+    return page_html(f"hexatherm report: {name}", parts)
 
 
 def build_report(

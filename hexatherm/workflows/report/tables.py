@@ -8,9 +8,8 @@ appears in (its row highlighted, its label followed by :data:`FAIL_MARK`).
 
 from __future__ import annotations
 
-import html
 import re
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
@@ -27,7 +26,10 @@ from hexatherm.workflows.report.figures import (
     reference_growth_um,
     target_labels,
 )
+from hexatherm.workflows.report.page import Cell, escape, html_table
 from hexatherm.workflows.report.text import exact, fixed, unit_text
+
+_e = escape
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -37,9 +39,6 @@ if TYPE_CHECKING:
 
 #: what follows the label of a step that failed a quality check, in every table
 FAIL_MARK = " \u2717"
-
-#: a cell: a text, or a value with its expanded uncertainty (printed one under the other)
-Cell = str | tuple[str, str]
 
 #: the quality checks' columns as the report heads them, with their unit
 QUALITY_HEADS = {
@@ -53,62 +52,9 @@ QUALITY_HEADS = {
 }
 
 
-def _e(value: object) -> str:
-    return html.escape(str(value), quote=True)
-
-
 def head(name: str, unit: str) -> str:
     """A column head with its unit as the report writes it: ``Tx (µm)``."""
     return f"{name} ({unit_text(unit)})" if unit else name
-
-
-def _cell(cell: Cell, numeric: bool) -> str:
-    if isinstance(cell, tuple):
-        value, u = cell
-        body = _e(value) + (f'<span class="u">\u00b1\u00a0{_e(u)}</span>' if u else "")
-    else:
-        body = _e(cell)
-    return f'<td class="num">{body}</td>' if numeric else f"<td>{body}</td>"
-
-
-def html_table(
-    header_rows: Sequence[Sequence[tuple[str, int]]],
-    rows: Iterable[Sequence[Cell]],
-    numeric_from: int = 1,
-    row_classes: Sequence[str] | None = None,
-    caption: str = "",
-) -> str:
-    """An escaped HTML table.
-
-    Parameters
-    ----------
-    header_rows : sequence of sequence of (text, colspan)
-    rows : iterable of sequence of Cell
-        Cell texts (escaped here); a ``(value, U)`` pair prints U under the value.
-    numeric_from : int
-        Cells from this column on are right-aligned numbers.
-    row_classes : sequence of str, optional
-        CSS class of each body row (``"fail"`` highlights it).
-    caption : str
-        The table's caption (escaped).
-    """
-    out = ["<table>"]
-    if caption:
-        out.append(f"<caption>{_e(caption)}</caption>")
-    out.append("<thead>")
-    for header in header_rows:
-        cells = "".join(
-            f'<th colspan="{span}">{_e(text)}</th>' if span > 1 else f"<th>{_e(text)}</th>"
-            for text, span in header
-        )
-        out.append(f"<tr>{cells}</tr>")
-    out.append("</thead><tbody>")
-    for i, row in enumerate(rows):
-        cls = row_classes[i] if row_classes is not None else ""
-        cells = "".join(_cell(c, k >= numeric_from) for k, c in enumerate(row))
-        out.append(f'<tr class="{_e(cls)}">{cells}</tr>' if cls else f"<tr>{cells}</tr>")
-    out.append("</tbody></table>")
-    return "\n".join(out)
 
 
 def marked(label: str, failing: Mapping[str, str]) -> str:
