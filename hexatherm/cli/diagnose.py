@@ -54,7 +54,8 @@ def command(
 
     Writes OUT/diagnosis.json, OUT/hexapod.yaml (the model with the added
     effects in its thermal_model, for simulate and process --method twin) and
-    OUT/report.md with its figures; prints the story to standard output.
+    OUT/report.md with its figures and OUT/report.html (the same, one page); prints the
+    story to standard output.
     """
     from hexatherm.io.config import read_session
     from hexatherm.io.outputs import check_output_settled, output_dir

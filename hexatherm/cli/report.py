@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from hexatherm.cli.options import (
+    CheckedFloat,
     ProgressBars,
     check_draws,
     clean_errors,
@@ -45,6 +46,15 @@ from hexatherm.io.files import ReadOptions
 @mc_option
 @seed_option
 @quality_threshold_option
+@click.option(
+    "--coverage-factor",
+    "coverage_factor",
+    type=CheckedFloat(min=0, min_open=True),
+    default=2.0,
+    show_default=True,
+    help="Coverage factor k of the expanded uncertainties U = k u in the figure, the "
+    "tables and the verdict (2, as calibration certificates use; > 0).",
+)
 @reading_options
 @clean_errors
 def command(
@@ -57,15 +67,19 @@ def command(
     mc: int,
     seed: int,
     quality_thresholds: tuple[str, ...],
+    coverage_factor: float,
     reading: ReadOptions,
 ) -> None:
     """Process SESSION (a folder with session.yaml, or the file itself) and write its report.
 
-    One HTML file, figures embedded: the pose parameters of every target,
-    conventional and corrected, as deviations from the commanded pose with their
-    uncertainty (the paper's Figure 6); the temperatures (Figure 7); the legs'
-    growth at the references; the registration residuals; quality flags; and the
-    session's metadata. Nothing is written when processing fails.
+    One HTML file, figures embedded, that prints on A4: a verdict first (targets,
+    failed checks, the largest corrected deviation with its expanded uncertainty
+    U = k u, the thermal correction's size); the pose parameters of every target,
+    conventional and corrected, as deviations from the commanded pose with U (the
+    paper's Figure 6); the temperatures (Figure 7); the legs' growth at the
+    references; the registration residuals; quality flags; the session's metadata
+    and the provenance (command line, options, limits, inputs' SHA-256). Nothing is
+    written when processing fails.
     """
     from hexatherm.io.config import read_session
     from hexatherm.io.outputs import check_output_settled, write_output_file
@@ -92,7 +106,12 @@ def command(
         echo_err(f"warning: {warning}")
     with ProgressBars() as bars:
         page = build_report(
-            result, mc, seed, session_thresholds(result.session, overrides), progress=bars.draws
+            result,
+            mc,
+            seed,
+            session_thresholds(result.session, overrides),
+            progress=bars.draws,
+            coverage_factor=coverage_factor,
         )
     write_output_file(out_file, page, inputs=inputs, overwrite=overwrite)
     echo_err(f"wrote {out_file}")

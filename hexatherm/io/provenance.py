@@ -121,8 +121,9 @@ def _version(name: str) -> str | None:
         return None
 
 
-def provenance_json(facts: RunFacts, inputs: Iterable[str | os.PathLike[str]]) -> str:
-    """The content of ``provenance.json`` for a run that read ``inputs``."""
+def input_entries(inputs: Iterable[str | os.PathLike[str]]) -> list[dict[str, Any]]:
+    """Every input once, in order: ``{"path", "bytes", "sha256"}`` for a file (the
+    absolute path), ``{"path", "folder": True}`` for a folder, ``{"path"}`` for neither."""
     files = []
     for given in dict.fromkeys(os.fspath(p) for p in inputs):
         path = Path(given)
@@ -133,6 +134,12 @@ def provenance_json(facts: RunFacts, inputs: Iterable[str | os.PathLike[str]]) -
         elif path.is_dir():
             entry["folder"] = True
         files.append(entry)
+    return files
+
+
+def provenance_json(facts: RunFacts, inputs: Iterable[str | os.PathLike[str]]) -> str:
+    """The content of ``provenance.json`` for a run that read ``inputs``."""
+    files = input_entries(inputs)
     doc = {
         "format": PROVENANCE_FORMAT,
         "hexatherm": __version__,

@@ -40,6 +40,7 @@ def test_diagnose_writes_the_files_and_tells_the_story(diagnosed) -> None:
         "diagnosis.json",
         "hexapod.yaml",
         "provenance.json",  # command, options, inputs with SHA-256, times
+        "report.html",  # the story as one page, figures embedded
         "report.md",
         "residuals_legs_time.png",
         "residuals_steps.png",

@@ -38,6 +38,9 @@ def test_report_writes_the_page_into_the_session_folder(session):
     assert len(images) == 4
     assert all(base64.b64decode(data).startswith(b"\x89PNG\r\n\x1a\n") for data in images)
     assert "paper-zero-pose" in page and "<td>S10</td>" in page
+    # the provenance of a command-line run: its command line and options
+    assert f"<td>hexatherm report {session}</td>" in page
+    assert "coverage_factor = 2.0" in page and "(k = 2)" in page
     assert f"wrote {session / 'report.html'}" in result.output
     # the one hidden file is hexatherm's record of what it wrote there, for --overwrite
     assert sorted(p.name for p in session.iterdir() if p.name.startswith(".")) == [
@@ -63,8 +66,10 @@ def test_report_refuses_to_overwrite_unless_asked(session, tmp_path, monkeypatch
     # that the options reach the report
     calls = []
 
-    def fake_report(result, mc, seed, thresholds, progress=None):
-        calls.append((result.interpolation, mc, seed, thresholds.registration_rms_um))
+    def fake_report(result, mc, seed, thresholds, progress=None, coverage_factor=2.0):
+        calls.append(
+            (result.interpolation, mc, seed, thresholds.registration_rms_um, coverage_factor)
+        )
         if progress is not None:
             progress(10, mc)
         return "<html>new</html>\n"
@@ -84,9 +89,11 @@ def test_report_refuses_to_overwrite_unless_asked(session, tmp_path, monkeypatch
         3,
         "--quality-threshold",
         "registration_rms_um=1.5",
+        "--coverage-factor",
+        "3",
     )
     assert replaced.exit_code == 0, replaced.output
-    assert calls[-1] == ("before", 50, 3, 1.5)
+    assert calls[-1] == ("before", 50, 3, 1.5, 3.0)
     assert "Monte Carlo draws" in replaced.output  # the draws' progress bar
     assert out.read_text() == "<html>new</html>\n"
     assert sorted(p.name for p in out.parent.iterdir()) == [".hexatherm-manifest.json", "r.html"]
@@ -107,6 +114,13 @@ def test_report_of_a_bad_session_fails_cleanly_and_writes_nothing(session):
 def test_report_refuses_a_bad_quality_threshold(session):
     result = run("report", session, "--quality-threshold", "form=5")
     assert result.exit_code == 1 and "unknown name 'form'" in result.output
+    assert not (session / "report.html").exists()
+
+
+@pytest.mark.parametrize("k", ["nan", "0", "-1", "inf", "two"])
+def test_report_refuses_a_bad_coverage_factor(session, k):
+    result = run("report", session, "--coverage-factor", k)
+    assert result.exit_code == 2 and "--coverage-factor" in result.output, result.output
     assert not (session / "report.html").exists()
 
 

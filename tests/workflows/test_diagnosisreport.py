@@ -9,7 +9,9 @@ session's own times and temperatures, the tables with numbers computed here.
 
 from __future__ import annotations
 
+import base64
 import dataclasses
+import hashlib
 import re
 from pathlib import Path
 
@@ -104,13 +106,42 @@ def test_report_links_pngs_that_exist(written: list[Path]) -> None:
     links = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", text)
     assert sorted(links) == sorted(dr.FIGURE_FILES.values())
     folder = written[0].parent
-    assert sorted(p.name for p in written[1:]) == sorted(links)
+    assert sorted(p.name for p in written[1:-1]) == sorted(links)
+    assert written[-1].name == "report.html"
     for link in links:
         path = folder / link
         assert not Path(link).is_absolute() and path.is_file()
         assert path.read_bytes()[:8] == PNG_SIGNATURE
         image = imread(path)
         assert image.ndim == 3 and image.shape[0] > 200 and image.shape[1] > 400
+
+
+def test_report_html_is_the_same_story_with_the_figures_embedded(
+    result: DiagnosisResult, written: list[Path]
+) -> None:
+    page = written[-1].read_text(encoding="utf-8")
+    text = written[0].read_text(encoding="utf-8")
+    assert page.startswith("<!DOCTYPE html>") and page.rstrip().endswith("</html>")
+    assert not re.search(r'(src|href)="(?!data:)', page)  # self-contained
+    # every figure: the very PNG written beside it
+    embedded = re.findall(r'<img src="data:image/png;base64,([A-Za-z0-9+/=]+)"', page)
+    pngs = [p.read_bytes() for p in written[1:-1]]
+    assert sorted(base64.b64decode(d) for d in embedded) == sorted(pngs)
+    # every table of report.md (a header line followed by its alignment line), plus the
+    # provenance block's two
+    md_tables = len(re.findall(r"^\|.*\|\n\|[:-]", text, flags=re.M))
+    assert md_tables >= 5 and page.count("<table") == md_tables + 2
+    # the story's numbers, in µm
+    added = result.diagnosis.added[0]
+    tau, se = added.effect.values["tau_s"], added.std_errors["tau_s"]
+    assert f"{tau:.0f} ± {se:.0f} s" in page and f"{added.delta_bic:.1f}" in page
+    assert "µm" in page and not re.search(r"\b(um|urad)\b", re.sub(r"<[^>]+>", "", page))
+    # its provenance: the session's files, hashed here
+    session = result.data.session
+    for path in session.input_files():
+        digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()
+        assert f'<td class="num">{digest}</td>' in page, path
+    assert "not run from the command line" in page
 
 
 # -------------------------------------------------------------------- figures

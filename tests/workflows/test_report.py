@@ -91,10 +91,16 @@ def test_report_embeds_every_figure_as_a_png(hidden):
     # every target in the poses table, with its uncertainty; the quality table
     for label in ("S1", "S20", "S40"):
         assert f"<td>{label}</td>" in page
-    assert len(re.findall(r"\d ± \d", page)) == 40 * 12 and "standard uncertainty (k = 1)" in page
+    # a value and its expanded uncertainty (k = 2 by default) in every deviation cell of
+    # the conventional and the corrected tables
+    assert len(re.findall(r'\d<span class="u">±\xa0\d', page)) == 40 * 12
+    assert "expanded uncertainty U (k = 2)" in page
     assert "Uncertainty: linear propagation (GUM)" in page
-    assert "<th>registration_rms_um</th>" in page and "<td>R40</td>" in page
+    assert "<th>registration RMS (µm)</th>" in page and "<td>R40</td>" in page
     assert "not available" not in page
+    # units as a reader writes them, not as the files' column names
+    assert "µrad" in page and "°C" in page
+    assert not re.search(r"\((um|urad|degC)\)", page)
 
 
 def test_pose_figure_plots_every_trial_conventional_and_corrected(paper):
@@ -104,7 +110,7 @@ def test_pose_figure_plots_every_trial_conventional_and_corrected(paper):
     fig = pose_figure(paper)
     assert len(fig.axes) == 6
     for j, ax in enumerate(fig.axes):
-        assert ax.get_title() == NAMES[j]
+        assert ax.get_title() == f"{NAMES[j]} ({'µm' if j < 3 else 'µrad'})"
         containers = {c.get_label(): c for c in ax.containers}
         assert set(containers) == {"conventional", "corrected"}
         for name, values in (("conventional", conventional), ("corrected", corrected)):
@@ -118,18 +124,19 @@ def test_pose_figure_plots_every_trial_conventional_and_corrected(paper):
         assert np.ptp(conventional[:, j]) > 10 * np.ptp(corrected[:, j]) / 2
 
 
-def test_pose_figure_error_bars_are_the_standard_uncertainties(paper):
+def test_pose_figure_error_bars_are_the_expanded_uncertainties(paper):
     u = pose_uncertainty(paper)
     assert np.all(u.corrected_u > 0)
-    fig = pose_figure(paper, u)
-    assert "k = 1" in fig.get_suptitle()
+    k = 2.5
+    fig = pose_figure(paper, u, coverage_factor=k)
+    assert "k = 2.5" in fig.get_suptitle()
     for j, ax in enumerate(fig.axes):
         scale = 1e3 if j < 3 else URAD_PER_DEG
         for c in ax.containers:
             u_mm_deg = u.conventional_u if c.get_label() == "conventional" else u.corrected_u
             segments = c.lines[2][0].get_segments()
             half = np.array([abs(s[1, 1] - s[0, 1]) / 2 for s in segments])
-            np.testing.assert_allclose(half, u_mm_deg[:, j] * scale, rtol=1e-9)
+            np.testing.assert_allclose(half, k * u_mm_deg[:, j] * scale, rtol=1e-9)
             centre = np.array([(s[1, 1] + s[0, 1]) / 2 for s in segments])
             np.testing.assert_allclose(centre, c.lines[0].get_ydata(), atol=1e-9)
 
@@ -149,6 +156,22 @@ def test_temperature_figure_plots_the_log(hidden):
         np.testing.assert_allclose(x, hours, atol=1e-9)
         np.testing.assert_allclose(y, log[column])
     assert ax.get_xlim()[1] > 3.5  # a 3.9 h session
+
+
+def test_no_leg_hides_another_in_the_temperature_figure(hidden):
+    # legs 1 and 4 lie on each other in this log: each leg needs its own line style and
+    # marker, and markers at its own samples, to be seen under another
+    log = pd.read_csv(SESSIONS / "with-hidden-effect" / "temperatures.csv")
+    assert np.max(np.abs(log["leg1"] - log["leg4"])) < 0.5
+    lines = labelled_lines(temperature_figure(hidden).axes[0], "leg ")
+    styles = {(str(line.get_linestyle()), str(line.get_marker())) for line in lines.values()}
+    assert len(styles) == 6
+    marked = []
+    for line in lines.values():
+        start, step = line.get_markevery()
+        marked.append(set(range(start, len(line.get_xdata()), step)))
+    assert all(not (a & b) for i, a in enumerate(marked) for b in marked[i + 1 :])
+    assert all(len(m) >= 10 for m in marked)
 
 
 def test_growth_figure_plots_the_growth_at_every_reference(paper):
@@ -200,7 +223,10 @@ def test_report_escapes_text_says_what_is_missing_and_flags_failures(paper):
     assert "step &lt;S1&gt;: too far" in page
     assert "quality checks not available" not in page
     assert f"{len(failing)} step(s) failing a check" in page
-    highlighted = re.findall(r'<tr class="fail"><td>([^<]*)</td>', page)
+    # the quality table's failing rows, marked; the verdict names them (not targets
+    # only: the origin and references failing are listed apart)
+    highlighted = re.findall(r'<tr class="fail"><td>([^<]*) \u2717</td><td>', page)
     assert highlighted == failing
     assert page.count('class="num bad"') == len(failing)
-    assert "limit &lt;= 0.5" in page
+    assert "<td>registration RMS (µm)</td>" in page and "≤ 0.5" in page
+    assert "uncertainty not available" in page and "Uncertainty:</b> not available" in page

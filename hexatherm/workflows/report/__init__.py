@@ -7,14 +7,25 @@ uncertainty of :func:`hexatherm.workflows.process.uncertainty.pose_uncertainty` 
 :func:`hexatherm.workflows.process.quality.quality_checks`; :func:`report_html` takes them as
 given (either may be left out, and the page says so). It holds:
 
-* the session's metadata (files, hexapod, steps, time span, interpolation, version);
+* the verdict first (:mod:`~hexatherm.workflows.report.verdict`): targets, the ones
+  that failed a check, the largest corrected deviation with its expanded uncertainty
+  ``U = k u``, the size of the thermal correction, the uncertainty's basis;
 * the paper's Figure 6: the six pose parameters of every target, conventional and
-  corrected, as deviations from the commanded pose (um, urad), with standard
-  uncertainty bars (k = 1) when an uncertainty is given; and their table;
+  corrected, as deviations from the commanded pose (µm, µrad), with expanded
+  uncertainty bars (``k`` stated) when an uncertainty is given; and their tables, one
+  for the conventional and one for the corrected pose;
 * the paper's Figure 7: leg (and air, ...) temperatures over time;
 * the legs' thermal growth measured at the references over time, and its table;
 * the registration residual of every step;
-* the quality flags of every step, failing rows highlighted.
+* the quality flags of every step, failing rows highlighted;
+* the session's metadata (files, hexapod, steps, time span, interpolation, version)
+  and the provenance: generation time, command line and options, quality limits,
+  input files with size and SHA-256.
+
+Numbers have fixed decimals per unit and nominal values are exact
+(:mod:`~hexatherm.workflows.report.text`); a step that failed a check is marked in
+every table (:mod:`~hexatherm.workflows.report.tables`) and shaded in the pose
+figure. The page prints on A4 (a print style sheet; the widest table fits 180 mm).
 
 The figure functions return :class:`matplotlib.figure.Figure` objects drawn with
 the Agg canvas (no pyplot, no global state), so tests can read their axes' data.
@@ -30,6 +41,7 @@ from hexatherm.workflows.report.figures import (
     FIGURE_DPI,
     KIND_STYLES,
     LEG_COLOURS,
+    LEG_STYLES,
     POSE_NAMES,
     POSE_UNITS,
     TRIAL_OFFSET,
@@ -45,18 +57,48 @@ from hexatherm.workflows.report.figures import (
     temperature_figure,
 )
 from hexatherm.workflows.report.html import (
-    STYLE,
     build_report,
+    metadata_rows,
+    provenance_block,
+    report_html,
+    verdict_html,
+)
+from hexatherm.workflows.report.page import (
+    STYLE,
+    Cell,
+    figure_html,
+    html_table,
+    page_html,
+    provenance_html,
+)
+from hexatherm.workflows.report.tables import (
+    FAIL_MARK,
+    commanded_columns,
     failing_rows,
     growth_table_html,
-    html_table,
-    metadata_rows,
     poses_table_html,
+    quality_summary_html,
     quality_table_html,
-    report_html,
 )
+from hexatherm.workflows.report.text import exact, fixed, unit_text
+from hexatherm.workflows.report.verdict import Extreme, Verdict, verdict
 
 __all__ = [
+    "FAIL_MARK",
+    "Cell",
+    "LEG_STYLES",
+    "Extreme",
+    "Verdict",
+    "commanded_columns",
+    "exact",
+    "fixed",
+    "figure_html",
+    "page_html",
+    "provenance_block",
+    "provenance_html",
+    "unit_text",
+    "verdict",
+    "verdict_html",
     "CONVENTIONAL_COLOUR",
     "CORRECTED_COLOUR",
     "DEVIATION_UNITS",
@@ -78,6 +120,7 @@ __all__ = [
     "pose_deviations",
     "pose_figure",
     "poses_table_html",
+    "quality_summary_html",
     "quality_table_html",
     "reference_growth_um",
     "registration_figure",

@@ -1,11 +1,12 @@
 """The report's numbers and figures (matplotlib).
 
-The paper's Figures 6 and 7, the growth at the references, the registration residuals."""
+The paper's Figures 6 and 7, the growth at the references, the registration residuals,
+drawn at :data:`FIGURE_DPI` with units as the report writes them (µm, µrad, °C)."""
 
 from __future__ import annotations
 
 import io
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -15,13 +16,7 @@ from hexatherm.core.geometry import to_um_urad
 from hexatherm.io.records import seconds_to_iso
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.pipeline import ProcessResult
-
-if TYPE_CHECKING:
-    from matplotlib.axes import Axes
-    from matplotlib.figure import Figure
-
-    from hexatherm.workflows.process.uncertainty import PoseUncertainty
-
+from hexatherm.workflows.report.text import exact, unit_text
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -61,7 +56,22 @@ KIND_STYLES = {
 TRIAL_OFFSET = 0.12
 
 
-FIGURE_DPI = 100
+FIGURE_DPI = 150
+
+
+#: line style and marker of each leg (and of the further temperature columns), so
+#: that no line hides another where they overlap
+LEG_STYLES = (
+    ("-", "o"),
+    ("--", "s"),
+    ("-.", "^"),
+    (":", "D"),
+    ((0, (6, 2, 1, 2, 1, 2)), "v"),
+    ((0, (1, 1)), "P"),
+)
+
+#: markers along a line of many samples: about this many per line, shifted per leg
+MARKS_PER_LINE = 12
 
 
 # --------------------------------------------------------------------- numbers
@@ -134,38 +144,51 @@ def _trial_ticks(ax: Axes, labels: Sequence[str]) -> None:
     every = max(1, int(np.ceil(len(labels) / 12)))
     positions = np.arange(1, len(labels) + 1)[::every]
     shown = [labels[p - 1] for p in positions]
-    ax.set_xticks(positions, shown, rotation=90 if sum(map(len, shown)) > 30 else 0, fontsize=8)
+    ax.set_xticks(positions, shown, rotation=90 if sum(map(len, shown)) > 16 else 0, fontsize=8)
     ax.set_xlim(0.4, len(labels) + 0.6)
 
 
-def pose_figure(result: ProcessResult, uncertainty: PoseUncertainty | None = None) -> Figure:
+def pose_figure(
+    result: ProcessResult,
+    uncertainty: PoseUncertainty | None = None,
+    coverage_factor: float = 2.0,
+    failing: Collection[str] = (),
+) -> Figure:
     """The paper's Figure 6: pose parameters per trial, conventional and corrected.
 
     One panel per pose parameter; each target (trial) is at position 1..M on x,
     the conventional pose slightly left of it and the corrected one slightly
-    right, as deviations from the commanded pose (um, urad). With
-    ``uncertainty``, each marker has a standard uncertainty bar (k = 1).
+    right, as deviations from the commanded pose (µm, µrad). With
+    ``uncertainty``, each marker has an expanded uncertainty bar ``U = k u``
+    (``k = coverage_factor``, stated in the title).
 
-    The lines are labelled ``"conventional"`` and ``"corrected"``.
+    The lines are labelled ``"conventional"`` and ``"corrected"``; a target in
+    ``failing`` (labels that failed a quality check) gets a shaded band with gid
+    ``"failed"``, labelled ``"failed a check"`` in the legend.
     """
     conventional, corrected = pose_deviations(result)
     labels = target_labels(result)
     trials = np.arange(1, len(labels) + 1, dtype=float)
     bars: tuple[FloatArray | None, FloatArray | None] = (None, None)
     if uncertainty is not None:
-        bars = (to_um_urad(uncertainty.conventional_u), to_um_urad(uncertainty.corrected_u))
-    fig = _new_figure(11.0, 6.5, left=0.065, bottom=0.17, top=0.87, wspace=0.32, hspace=0.22)
+        bars = (
+            coverage_factor * to_um_urad(uncertainty.conventional_u),
+            coverage_factor * to_um_urad(uncertainty.corrected_u),
+        )
+    bad = [i for i, label in enumerate(labels) if label in failing]
+    fig = _new_figure(9.5, 6.2, left=0.08, bottom=0.1, top=0.84, wspace=0.36, hspace=0.2)
     axes = fig.subplots(2, 3, sharex=True)
     for j, ax in enumerate(axes.flat):
-        for values, u, name, colour, marker, dx in (
-            (conventional, bars[0], "conventional", CONVENTIONAL_COLOUR, "o", -TRIAL_OFFSET),
-            (corrected, bars[1], "corrected", CORRECTED_COLOUR, "s", TRIAL_OFFSET),
+        for values, u, name, colour, marker, line, dx in (
+            (conventional, bars[0], "conventional", CONVENTIONAL_COLOUR, "o", "--", -TRIAL_OFFSET),
+            (corrected, bars[1], "corrected", CORRECTED_COLOUR, "s", "-", TRIAL_OFFSET),
         ):
             ax.errorbar(
                 trials + dx,
                 values[:, j],
                 yerr=None if u is None else u[:, j],
-                fmt=f"{marker}-",
+                fmt=marker,
+                linestyle=line,
                 color=colour,
                 label=name,
                 markersize=4,
@@ -173,17 +196,28 @@ def pose_figure(result: ProcessResult, uncertainty: PoseUncertainty | None = Non
                 elinewidth=0.8,
                 capsize=2,
             )
+        for n, i in enumerate(bad):
+            ax.axvspan(
+                i + 0.55,
+                i + 1.45,
+                color="#f4a6a6",
+                alpha=0.5,
+                zorder=0,
+                gid="failed",
+                label="failed a check" if n == 0 else "_failed",
+            )
         ax.axhline(0.0, color="#999999", linewidth=0.6, zorder=0)
-        ax.set_title(POSE_NAMES[j], fontsize=10)
-        ax.set_ylabel(f"{POSE_NAMES[j]} - commanded ({DEVIATION_UNITS[j]})", fontsize=9)
+        unit = unit_text(DEVIATION_UNITS[j])
+        ax.set_title(f"{POSE_NAMES[j]} ({unit})", fontsize=10)
+        ax.set_ylabel(f"{POSE_NAMES[j]} \u2212 commanded ({unit})", fontsize=9)
         ax.grid(True, linewidth=0.3)
         _trial_ticks(ax, labels)
         if j >= 3:
             ax.set_xlabel("trial (target step)", fontsize=9)
     handles, names = axes.flat[0].get_legend_handles_labels()
-    fig.legend(handles, names, loc="lower center", ncols=2, fontsize=9)
+    fig.legend(handles, names, loc="upper center", bbox_to_anchor=(0.5, 0.925), ncols=3, fontsize=9)
     bar_text = (
-        "error bars: standard uncertainty (k = 1)"
+        f"error bars: expanded uncertainty U = k\u00b7u, k = {exact(coverage_factor)}"
         if uncertainty is not None
         else "uncertainty not available: no error bars"
     )
@@ -193,11 +227,31 @@ def pose_figure(result: ProcessResult, uncertainty: PoseUncertainty | None = Non
     return fig
 
 
+def _styled_line(
+    ax: Axes, x: FloatArray, y: FloatArray, k: int, n_lines: int, **kw: object
+) -> None:
+    """A line in the style of :data:`LEG_STYLES` ``[k]``, its markers shifted per line so
+    that lines lying on each other still show each one's markers."""
+    style, marker = LEG_STYLES[k % len(LEG_STYLES)]
+    every = max(1, len(x) // MARKS_PER_LINE)
+    ax.plot(
+        x,
+        y,
+        linestyle=style,
+        marker=marker,
+        markevery=(min(len(x) - 1, (k * every) // max(1, n_lines)), every) if len(x) else None,
+        markersize=4,
+        markerfacecolor="none",
+        **kw,  # type: ignore[arg-type]
+    )
+
+
 def temperature_figure(result: ProcessResult) -> Figure | None:
     """The paper's Figure 7: leg temperatures (and air, ...) over time; None without a log.
 
     Lines are labelled ``"leg 1"`` .. ``"leg 6"`` and by the further columns' names
-    (``"air"`` ...), x in hours since the start of the session.
+    (``"air"`` ...), x in hours since the start of the session; every line has its
+    own colour, line style and marker (:data:`LEG_STYLES`).
     """
     temps = result.temperatures
     if temps is None:
@@ -205,10 +259,14 @@ def temperature_figure(result: ProcessResult) -> Figure | None:
     hours = hours_since_start(result, temps.time_s)
     fig = _new_figure(9.0, 4.5)
     ax = fig.subplots()
+    n_lines = 6 + len(temps.others_C)
     for leg in range(6):
-        ax.plot(
+        _styled_line(
+            ax,
             hours,
             temps.legs_C[:, leg],
+            leg,
+            n_lines,
             color=LEG_COLOURS[leg],
             linewidth=1.0,
             label=f"leg {leg + 1}",
@@ -224,7 +282,7 @@ def temperature_figure(result: ProcessResult) -> Figure | None:
         )
     _mark_targets(ax, result)
     ax.set_xlabel("time since start (h)")
-    ax.set_ylabel("temperature (degC)")
+    ax.set_ylabel(f"temperature ({unit_text('degC')})")
     ax.grid(True, linewidth=0.3)
     ax.legend(fontsize=8, ncols=2)
     ax.set_title("Measured temperatures", fontsize=11)
@@ -258,11 +316,14 @@ def growth_figure(result: ProcessResult) -> Figure:
     fig = _new_figure(9.0, 4.5)
     ax = fig.subplots()
     for leg in range(6):
+        style, marker = LEG_STYLES[leg]
         ax.plot(
             hours,
             growth[:, leg],
-            marker="o",
-            markersize=3,
+            linestyle=style,
+            marker=marker,
+            markersize=4,
+            markerfacecolor="none",
             linewidth=1.0,
             color=LEG_COLOURS[leg],
             label=f"leg {leg + 1}",
@@ -270,7 +331,7 @@ def growth_figure(result: ProcessResult) -> Figure:
     ax.axhline(0.0, color="#999999", linewidth=0.6, zorder=0)
     _mark_targets(ax, result)
     ax.set_xlabel("time since start (h)")
-    ax.set_ylabel("growth since R0 (um)")
+    ax.set_ylabel(f"growth since R0 ({unit_text('um')})")
     ax.grid(True, linewidth=0.3)
     ax.legend(fontsize=8, ncols=2)
     ax.set_title("Leg growth measured at the references (IGM of the measured pose)", fontsize=11)
@@ -301,7 +362,7 @@ def registration_figure(result: ProcessResult) -> Figure:
             )
     ax.set_ylim(bottom=0.0)
     ax.set_xlabel("time since start (h)")
-    ax.set_ylabel("registration RMS (um)")
+    ax.set_ylabel(f"registration RMS ({unit_text('um')})")
     ax.grid(True, linewidth=0.3)
     ax.legend(fontsize=8)
     ax.set_title("Registration residual of every step", fontsize=11)

@@ -1,113 +1,51 @@
-"""The report's HTML: tables, embedded figures, the page, and build_report."""
+"""The report's page: verdict, figures, tables, session and provenance, and build_report."""
 
 from __future__ import annotations
 
-import base64
-import html
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from hexatherm import __version__
-from hexatherm.core.geometry import to_um_urad
-from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.pipeline import ProcessResult
 from hexatherm.workflows.report.figures import (
-    DEVIATION_UNITS,
-    POSE_NAMES,
-    POSE_UNITS,
     _time_text,
-    figure_png,
     growth_figure,
-    hours_since_start,
-    pose_deviations,
     pose_figure,
-    reference_growth_um,
     registration_figure,
     start_time_s,
-    target_labels,
     temperature_figure,
 )
+from hexatherm.workflows.report.page import (
+    STYLE,
+    escape,
+    figure_html,
+    html_table,
+    page_html,
+    provenance_html,
+)
+from hexatherm.workflows.report.tables import (
+    FAIL_MARK,
+    QUALITY_HEADS,
+    failing_rows,
+    growth_table_html,
+    poses_table_html,
+    quality_summary_html,
+    quality_table_html,
+)
+from hexatherm.workflows.report.text import exact, fixed, unit_text
+from hexatherm.workflows.report.verdict import Extreme, Verdict, verdict
+
+_e = escape
+
+__all__ = ["STYLE", "build_report", "metadata_rows", "provenance_block", "report_html"]
 
 if TYPE_CHECKING:
-    import pandas as pd
-    from matplotlib.figure import Figure
-
+    from hexatherm.io.provenance import RunFacts
     from hexatherm.session import QualityLimits
     from hexatherm.workflows.process.quality import QualityReport
     from hexatherm.workflows.process.uncertainty import PoseUncertainty
-
-# --------------------------------------------------------------------- HTML
-STYLE = """
-body { font-family: sans-serif; margin: 1.5em auto; max-width: 1150px; color: #222; }
-h1 { font-size: 1.5em; } h2 { font-size: 1.2em; margin-top: 2em; border-bottom: 1px solid #ccc; }
-table { border-collapse: collapse; font-size: 0.8em; margin: 0.5em 0; }
-th, td { border: 1px solid #ccc; padding: 2px 6px; }
-td.num { text-align: right; font-family: monospace; white-space: nowrap; }
-th { background: #f0f0f0; }
-tr.fail td { background: #fdd; }
-td.bad { color: #b00; font-weight: bold; }
-figure { margin: 0.5em 0; } figure img { max-width: 100%; }
-figcaption, p.note { font-size: 0.85em; color: #555; }
-pre { font-size: 0.8em; background: #f7f7f7; padding: 4px 8px; overflow-x: auto; }
-p.missing { background: #fff3cd; border: 1px solid #e0c060; padding: 4px 8px; }
-""".strip()
-
-
-def _e(value: object) -> str:
-    return html.escape(str(value), quote=True)
-
-
-def _num(value: float, fmt: str = ".3f") -> str:
-    return "" if not np.isfinite(value) else format(value, fmt)
-
-
-def html_table(
-    header_rows: Sequence[Sequence[tuple[str, int]]],
-    rows: Iterable[Sequence[str]],
-    numeric_from: int = 1,
-    row_classes: Sequence[str] | None = None,
-) -> str:
-    """An escaped HTML table.
-
-    Parameters
-    ----------
-    header_rows : sequence of sequence of (text, colspan)
-    rows : iterable of sequence of str
-        Cell texts (escaped here).
-    numeric_from : int
-        Cells from this column on are right-aligned numbers.
-    row_classes : sequence of str, optional
-        CSS class of each body row (``"fail"`` highlights it).
-    """
-    out = ["<table>", "<thead>"]
-    for header in header_rows:
-        cells = "".join(
-            f'<th colspan="{span}">{_e(text)}</th>' if span > 1 else f"<th>{_e(text)}</th>"
-            for text, span in header
-        )
-        out.append(f"<tr>{cells}</tr>")
-    out.append("</thead><tbody>")
-    for i, row in enumerate(rows):
-        cls = row_classes[i] if row_classes is not None else ""
-        cells = "".join(
-            f'<td class="num">{_e(c)}</td>' if k >= numeric_from else f"<td>{_e(c)}</td>"
-            for k, c in enumerate(row)
-        )
-        out.append(f'<tr class="{_e(cls)}">{cells}</tr>' if cls else f"<tr>{cells}</tr>")
-    out.append("</tbody></table>")
-    return "\n".join(out)
-
-
-def _figure_html(fig: Figure | None, alt: str, caption: str) -> str:
-    if fig is None:
-        return ""
-    data = base64.b64encode(figure_png(fig)).decode("ascii")
-    return (
-        f'<figure><img src="data:image/png;base64,{data}" alt="{_e(alt)}">'
-        f"<figcaption>{_e(caption)}</figcaption></figure>"
-    )
 
 
 def _session_files(result: ProcessResult) -> dict[str, str]:
@@ -148,7 +86,7 @@ def metadata_rows(result: ProcessResult) -> list[tuple[str, str]]:
             f"{len(plan.labels)}: 1 origin, {n_refs} references, "
             f"{len(result.correction.target_index)} targets",
         ),
-        ("reference pose (mm, deg)", ", ".join(f"{v:g}" for v in plan.reference_pose)),
+        ("reference pose (mm, \u00b0)", ", ".join(exact(v) for v in plan.reference_pose)),
         (
             "time span",
             f"{_time_text(result, start)} to {_time_text(result, end)} "
@@ -159,105 +97,110 @@ def metadata_rows(result: ProcessResult) -> list[tuple[str, str]]:
     ]
 
 
-def poses_table_html(result: ProcessResult, uncertainty: PoseUncertainty | None) -> str:
-    """Every target: commanded pose, conventional and corrected deviations (+- u, k = 1)."""
-    conventional, corrected = pose_deviations(result)
-    idx = result.correction.target_index
-    commanded = result.session.plan.poses[idx]
-    hours = hours_since_start(result, result.centres.times_s[idx])
-    u_conv = u_corr = None
-    if uncertainty is not None:
-        u_conv = to_um_urad(uncertainty.conventional_u)
-        u_corr = to_um_urad(uncertainty.corrected_u)
+def _extreme_text(extreme: Extreme, unit: str, k: float) -> str:
+    if not extreme.parameter:
+        return "none"
+    text = (
+        f"{fixed(extreme.value, unit)} {unit_text(unit)} ({extreme.parameter} of {extreme.target})"
+    )
+    if np.isfinite(extreme.expanded_u):
+        text += f", U = {fixed(extreme.expanded_u, unit)} {unit_text(unit)} (k = {exact(k)})"
+    return text
 
-    def cells(values: FloatArray, u: FloatArray | None) -> list[str]:
-        if u is None:
-            return [_num(v) for v in values]
-        return [f"{_num(v)} ± {_num(s)}" for v, s in zip(values, u, strict=True)]
 
-    rows = []
-    for i, label in enumerate(target_labels(result)):
-        rows.append(
-            [
-                label,
-                _time_text(result, float(result.centres.times_s[idx[i]])),
-                _num(hours[i]),
-                *(_num(v, ".4g") for v in commanded[i]),
-                *cells(conventional[i], None if u_conv is None else u_conv[i]),
-                *cells(corrected[i], None if u_corr is None else u_corr[i]),
-            ]
+def _steps_text(steps: list[tuple[str, str]]) -> str:
+    return "; ".join(f"{label} ({checks})" for label, checks in steps)
+
+
+def verdict_html(summary: Verdict) -> str:
+    """The verdict block (see :class:`~hexatherm.workflows.report.verdict.Verdict`)."""
+    k = summary.coverage_factor
+    n_fail = len(summary.failing_targets)
+    if not summary.quality_ran:
+        checks = "quality checks not available"
+    elif n_fail == 0:
+        checks = f"all {summary.targets} targets passed every quality check"
+    else:
+        checks = (
+            f"{n_fail} of {summary.targets} targets failed a quality check "
+            f"(marked {FAIL_MARK.strip()} in every table, shaded in the pose figure): "
+            + _steps_text(summary.failing_targets)
         )
-    if len(rows) > 1:
-        rows.append(
-            [
-                "spread (max - min)",
-                "",
-                "",
-                *[""] * 6,
-                *(_num(v) for v in np.ptp(conventional, axis=0)),
-                *(_num(v) for v in np.ptp(corrected, axis=0)),
-            ]
+    items = [
+        f"<b>Targets:</b> {summary.targets}; {_e(checks)}.",
+    ]
+    if summary.failing_other:
+        items.append(
+            "<b>Origin and references failing a check:</b> "
+            + _e(_steps_text(summary.failing_other))
+            + "."
         )
-    units = [f"{n} ({u})" for n, u in zip(POSE_NAMES, POSE_UNITS, strict=True)]
-    devs = [f"{n} ({u})" for n, u in zip(POSE_NAMES, DEVIATION_UNITS, strict=True)]
-    header = [
-        [("", 3), ("commanded", 6), ("conventional - commanded", 6), ("corrected - commanded", 6)],
-        [("step", 1), ("time", 1), ("t (h)", 1), *[(c, 1) for c in units + devs + devs]],
+    items += [
+        "<b>Largest corrected deviation from the commanded pose:</b> translation "
+        + _e(_extreme_text(summary.deviation_um, "um", k))
+        + "; rotation "
+        + _e(_extreme_text(summary.deviation_urad, "urad", k))
+        + ".",
+        "<b>Thermal correction</b> (largest |corrected \u2212 conventional|): translation "
+        + _e(_extreme_text(summary.correction_um, "um", k))
+        + "; rotation "
+        + _e(_extreme_text(summary.correction_urad, "urad", k))
+        + ".",
+        f"<b>Uncertainty:</b> {_e(summary.basis)}; expanded uncertainty U = k\u00b7u with "
+        f"coverage factor k = {_e(exact(k))} wherever U or error bars appear.",
     ]
-    return html_table(header, rows, numeric_from=2)
+    cls = "verdict failed" if summary.failing_targets or summary.failing_other else "verdict"
+    return (
+        f'<div class="{cls}"><h2>Verdict</h2><ul>'
+        + "".join(f"<li>{item}</li>" for item in items)
+        + "</ul></div>"
+    )
 
 
-def growth_table_html(result: ProcessResult) -> str:
-    """Every reference step: its time and the growth of each leg since R0 (um)."""
-    refs, growth = reference_growth_um(result)
-    hours = hours_since_start(result, result.centres.times_s[refs])
-    rows = [
-        [result.session.plan.labels[r], _num(h), *(_num(g) for g in growth[k])]
-        for k, (r, h) in enumerate(zip(refs, hours, strict=True))
-    ]
-    header = [[("reference", 1), ("t (h)", 1), *[(f"leg {i} (um)", 1) for i in range(1, 7)]]]
-    return html_table(header, rows)
-
-
-def failing_rows(frame: pd.DataFrame) -> list[bool]:
-    """Whether each row of a quality table failed a check (its ``failed`` column is not empty)."""
-    return [bool(text) for text in frame["failed"].fillna("").astype(str)]
-
-
-def quality_table_html(quality: QualityReport) -> str:
-    """The quality checks, one row per step: failing rows highlighted, failing values marked.
-
-    Columns: ``label``, ``kind``, the value of every check (units in the name; empty
-    when it does not apply) and ``failed`` (the failed checks).
-    """
+def threshold_texts(thresholds: QualityLimits) -> list[str]:
+    """Every quality limit as ``form \u2264 10 \u00b5m``."""
     from hexatherm.workflows.process.quality import CHECKS
 
-    frame = quality.frame
-    checks = [(column, f"ok_{check}") for check, (column, _, _) in CHECKS.items()]
-    failed = failing_rows(frame)
-    out = [
-        "<table>",
-        "<thead><tr><th>step</th><th>kind</th>"
-        + "".join(f"<th>{_e(column)}</th>" for column, _ in checks)
-        + "<th>failed</th></tr></thead><tbody>",
-    ]
-    for i, row in enumerate(frame.to_dict("records")):
-        cells = [f"<td>{_e(row['label'])}</td>", f"<td>{_e(row['kind'])}</td>"]
-        for column, ok in checks:
-            cls = "num" if row[ok] else "num bad"
-            cells.append(f'<td class="{cls}">{_e(_num(float(row[column]), ".4g"))}</td>')
-        cells.append(f"<td>{_e(row['failed'])}</td>")
-        out.append(('<tr class="fail">' if failed[i] else "<tr>") + "".join(cells) + "</tr>")
-    out.append("</tbody></table>")
-    return "\n".join(out)
+    texts = []
+    for column, field, at_least in CHECKS.values():
+        name, unit = QUALITY_HEADS.get(column, (column, ""))
+        sign = "\u2265" if at_least else "\u2264"
+        value = getattr(thresholds, field)
+        texts.append(f"{name} {sign} {exact(value)}" + (f" {unit_text(unit)}" if unit else ""))
+    return texts
+
+
+def _options_text(options: dict[str, object]) -> str:
+    return "; ".join(f"{key} = {value}" for key, value in options.items())
+
+
+def provenance_block(
+    result: ProcessResult,
+    quality: QualityReport | None,
+    facts: RunFacts | None,
+    generated: str,
+) -> str:
+    """The provenance block of a session's report (:func:`page.provenance_html`), with the
+    quality limits."""
+    limits = "not available" if quality is None else "; ".join(threshold_texts(quality.thresholds))
+    return provenance_html(
+        facts,
+        result.session.input_files(),
+        result.session.path.parent,
+        generated,
+        extra=[("quality limits", limits)],
+    )
 
 
 def report_html(
     result: ProcessResult,
     uncertainty: PoseUncertainty | None = None,
     quality: QualityReport | None = None,
+    coverage_factor: float = 2.0,
+    facts: RunFacts | None = None,
+    generated: str | None = None,
 ) -> str:
-    """The report page of a processed session (see the module's docstring).
+    """The report page of a processed session (see the package's docstring).
 
     Parameters
     ----------
@@ -267,26 +210,28 @@ def report_html(
         bars and the page says "uncertainty not available".
     quality : QualityReport, optional
         Quality checks; without it the page says "quality checks not available".
+    coverage_factor : float
+        ``k`` of the expanded uncertainties ``U = k u`` of the figure and tables (> 0).
+    facts : RunFacts, optional
+        The command line's facts of the run (default: :func:`current_run`, None
+        outside the command line: the page says "not run from the command line").
+    generated : str, optional
+        Generation time, ISO 8601 with UTC offset (default: now).
 
     Returns
     -------
     str
         One self-contained HTML document.
     """
+    from hexatherm.io.provenance import current_run, now_iso
+
+    if facts is None:
+        facts = current_run()
+    summary = verdict(result, uncertainty, quality, coverage_factor)
+    failing = dict(summary.failing_targets + summary.failing_other)
+    k_text = exact(coverage_factor)
     name = result.session.name
-    parts = [
-        "<!DOCTYPE html>",
-        '<html lang="en"><head><meta charset="utf-8">',
-        f"<title>hexatherm report: {_e(name)}</title>",
-        f"<style>\n{STYLE}\n</style></head><body>",
-        f"<h1>hexatherm report: {_e(name)}</h1>",
-        "<h2>Session</h2>",
-        html_table(
-            [[("field", 1), ("value", 1)]],
-            [[k, v] for k, v in metadata_rows(result)],
-            numeric_from=99,
-        ),
-    ]
+    parts = [verdict_html(summary)]
     if result.warnings:
         parts.append(
             "<h2>Warnings</h2><ul>"
@@ -301,29 +246,26 @@ def report_html(
             "without uncertainty bars.</p>"
         )
     parts += [
-        _figure_html(
-            pose_figure(result, uncertainty),
+        figure_html(
+            pose_figure(result, uncertainty, coverage_factor, failing),
             "pose parameters per trial",
             "Deviations of the conventional (measured) and corrected (thermal state "
-            "of R0) poses from the commanded pose: translations in um, rotations in "
-            "urad."
+            "of R0) poses from the commanded pose: translations in \u00b5m, rotations in "
+            "\u00b5rad."
             + (
-                " Error bars and \u00b1 values in the table: standard uncertainty (k = 1)."
+                f" Error bars: expanded uncertainty U = k\u00b7u, k = {k_text}."
                 if uncertainty is not None
                 else ""
-            ),
+            )
+            + (" Shaded: targets that failed a quality check." if summary.failing_targets else ""),
         ),
-        poses_table_html(result, uncertainty),
+        poses_table_html(result, uncertainty, "conventional", coverage_factor, failing),
+        poses_table_html(result, uncertainty, "corrected", coverage_factor, failing),
     ]
     if uncertainty is not None:
-        method = (
-            "linear propagation (GUM)"
-            if uncertainty.method == "linear"
-            else f"Monte Carlo, {uncertainty.draws} draws, seed {uncertainty.seed}"
-        )
         parts.append(
-            f'<p class="note">Uncertainty: {_e(method)}; ball centres: '
-            f"{_e(uncertainty.centres.description)}.</p>"
+            f'<p class="note">Uncertainty: {_e(summary.basis)}; ball centres: '
+            f"{_e(uncertainty.centres.description)}. U = k\u00b7u with k = {_e(k_text)}.</p>"
         )
 
     parts.append("<h2>Temperatures (the paper's Figure 7)</h2>")
@@ -332,7 +274,7 @@ def report_html(
         parts.append('<p class="missing">no temperature log in this session.</p>')
     else:
         parts.append(
-            _figure_html(
+            figure_html(
                 temperature,
                 "measured temperatures",
                 "Thermocouple temperatures over time; ticks at the bottom: the targets' times.",
@@ -341,19 +283,19 @@ def report_html(
 
     parts += [
         "<h2>Leg growth at the references</h2>",
-        _figure_html(
+        figure_html(
             growth_figure(result),
             "leg growth at the references",
-            "Growth of each leg since R0 (um), from the IGM of the measured reference "
+            "Growth of each leg since R0 (\u00b5m), from the IGM of the measured reference "
             "poses; ticks at the bottom: the targets' times.",
         ),
-        growth_table_html(result),
+        growth_table_html(result, failing),
         "<h2>Registration residuals</h2>",
-        _figure_html(
+        figure_html(
             registration_figure(result),
             "registration residuals",
             "RMS distance between the measured ball centres and the registered "
-            "balls file, per step (um).",
+            "balls file, per step (\u00b5m).",
         ),
         "<h2>Quality flags</h2>",
     ]
@@ -362,14 +304,23 @@ def report_html(
     else:
         failed = sum(failing_rows(quality.frame))
         parts.append(
-            f'<p class="note">{failed} step(s) failing a check (highlighted, the '
-            "failing values in bold). Worst value of every check and its limit:</p>"
+            f'<p class="note">{failed} step(s) failing a check (highlighted and marked '
+            f"{FAIL_MARK.strip()}, the failing values in bold). Worst value of every check "
+            "and its limit:</p>"
         )
-        parts.append(f"<pre>{_e(chr(10).join(quality.summary()))}</pre>")
+        parts.append(quality_summary_html(quality))
         parts.append(quality_table_html(quality))
-    parts.append(f'<p class="note">Made by hexatherm {_e(__version__)}.</p>')
-    parts.append("</body></html>")
-    return "\n".join(parts) + "\n"
+    parts += [
+        "<h2>Session</h2>",
+        html_table(
+            [[("field", 1), ("value", 1)]],
+            [[k, v] for k, v in metadata_rows(result)],
+            numeric_from=99,
+            css="meta",
+        ),
+        provenance_block(result, quality, facts, generated or now_iso()),
+    ]
+    return page_html(f"hexatherm report: {name}", parts)
 
 
 def build_report(
@@ -378,6 +329,7 @@ def build_report(
     seed: int = 0,
     thresholds: QualityLimits | None = None,
     progress: Callable[[int, int], None] | None = None,
+    coverage_factor: float = 2.0,
 ) -> str:
     """The report page of ``result`` with its pose uncertainty and quality checks.
 
@@ -392,6 +344,8 @@ def build_report(
         Limits of the quality checks (default: :class:`QualityLimits`'s).
     progress : callable, optional
         ``progress(draws_done, draws)`` during Monte Carlo draws.
+    coverage_factor : float
+        ``k`` of the expanded uncertainties (> 0).
     """
     from hexatherm.workflows.process.quality import quality_checks
     from hexatherm.workflows.process.uncertainty import pose_uncertainty
@@ -400,4 +354,5 @@ def build_report(
         result,
         uncertainty=pose_uncertainty(result, mc=mc, seed=seed, progress=progress),
         quality=quality_checks(result, thresholds),
+        coverage_factor=coverage_factor,
     )

@@ -14,8 +14,10 @@ From a :class:`~hexatherm.workflows.diagnose.run.DiagnosisResult`:
   pyplot, nothing global); every residual line is labelled ``"before"`` or
   ``"after"`` and drawn in time order, so its data can be read back;
 * :func:`report_markdown` writes ``report.md`` (the story, the candidates of
-  every round, the tables before and after, the tests, links to the figures)
-  and :func:`write_report_files` writes it with the PNGs into a folder.
+  every round, the tables before and after, the tests, links to the figures),
+  :func:`report_html` the same story as one page in the style of ``report``
+  (figures embedded, provenance; :mod:`hexatherm.workflows.report.page`), and
+  :func:`write_report_files` writes both with the PNGs into a folder.
 
 matplotlib is imported inside the figure functions only.
 """
@@ -29,11 +31,16 @@ from hexatherm.workflows.diagnose.report.figures import (
     report_figures,
     temperature_figure,
 )
+from hexatherm.workflows.diagnose.report.html import (
+    REPORT_HTML,
+    markdown_html,
+    report_html,
+    write_report_files,
+)
 from hexatherm.workflows.diagnose.report.markdown import (
     adequacy_section,
     headline,
     report_markdown,
-    write_report_files,
 )
 from hexatherm.workflows.diagnose.report.tables import (
     AFTER_COLOUR,
@@ -59,6 +66,9 @@ from hexatherm.workflows.diagnose.report.tables import (
 )
 
 __all__ = [
+    "REPORT_HTML",
+    "markdown_html",
+    "report_html",
     "AFTER_COLOUR",
     "BEFORE_COLOUR",
     "FIGURE_CAPTIONS",

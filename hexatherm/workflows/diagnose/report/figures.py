@@ -23,6 +23,7 @@ from hexatherm.workflows.diagnose.report.tables import (
     changed,
     start_time_s,
 )
+from hexatherm.workflows.report.text import unit_text
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -62,11 +63,11 @@ def _models(result: DiagnosisResult) -> list[tuple[str, PoseResiduals, str]]:
 def _model_title(result: DiagnosisResult, state: str) -> str:
     d = result.diagnosis
     if not changed(result):
-        return f"current model (nothing added), RMS {d.baseline_rms_um:.2f} um"
+        return f"current model (nothing added), RMS {d.baseline_rms_um:.2f} µm"
     if state == "before":
-        return f"before: current model, RMS {d.baseline_rms_um:.2f} um"
+        return f"before: current model, RMS {d.baseline_rms_um:.2f} µm"
     names = ", ".join(a.effect.name for a in d.added)
-    return f"after: + {names}, RMS {d.final_rms_um:.2f} um"
+    return f"after: + {names}, RMS {d.final_rms_um:.2f} µm"
 
 
 def _series_time_figure(
@@ -100,7 +101,7 @@ def _series_time_figure(
             ax.axhline(0.0, color="#999999", linewidth=0.6, zorder=0)
             ax.grid(True, linewidth=0.3)
             ax.tick_params(labelsize=8)
-            ax.set_ylabel(f"{names[j]} ({units[j]})", fontsize=9)
+            ax.set_ylabel(f"{names[j]} ({unit_text(units[j])})", fontsize=9)
             if j == 0:
                 ax.set_title(_model_title(result, state), fontsize=10)
         axes[-1, c].set_xlabel("time since start (h)", fontsize=9)
@@ -116,7 +117,7 @@ def pose_time_figure(result: DiagnosisResult) -> Figure:
     one line, labelled ``"before"`` or ``"after"``, in time order.
     """
     return _series_time_figure(
-        result, "pose_um", POSE_COMPONENTS, POSE_UNITS, "Pose residuals, measured - twin (um, urad)"
+        result, "pose_um", POSE_COMPONENTS, POSE_UNITS, "Pose residuals, measured − twin (µm, µrad)"
     )
 
 
@@ -128,14 +129,14 @@ def legs_time_figure(result: DiagnosisResult) -> Figure:
         "legs_um",
         LEG_NAMES,
         ("um",) * 6,
-        "Leg-space residuals, IGM(measured) - IGM(twin) (um)",
+        "Leg-space residuals, IGM(measured) − IGM(twin) (µm)",
     )
 
 
 def centre_rms_figure(result: DiagnosisResult) -> Figure:
     """Centre RMS of every step vs time, before and after, and the mean leg temperature.
 
-    The first axes hold the lines labelled ``"before: RMS .. um"`` (and ``"after: .."``)
+    The first axes hold the lines labelled ``"before: RMS .. µm"`` (and ``"after: .."``)
     in time order;
     the second (right) axis the line ``"mean leg temperature"``. Reference and
     origin steps are marked by hollow squares / a diamond on the residual lines.
@@ -170,7 +171,7 @@ def centre_rms_figure(result: DiagnosisResult) -> Figure:
                     label=f"_{kind} {state}",
                 )
     ax.set_xlabel("time since start (h)", fontsize=9)
-    ax.set_ylabel("centre RMS of the step (um)", fontsize=9)
+    ax.set_ylabel("centre RMS of the step (µm)", fontsize=9)
     ax.set_ylim(bottom=0.0)
     ax.grid(True, linewidth=0.3)
     temp_ax = ax.twinx()
@@ -183,7 +184,7 @@ def centre_rms_figure(result: DiagnosisResult) -> Figure:
         linewidth=1.0,
         label="mean leg temperature",
     )
-    temp_ax.set_ylabel("mean leg temperature (degC)", fontsize=9, color=TEMPERATURE_COLOUR)
+    temp_ax.set_ylabel("mean leg temperature (°C)", fontsize=9, color=TEMPERATURE_COLOUR)
     handles, labels = ax.get_legend_handles_labels()
     more, more_labels = temp_ax.get_legend_handles_labels()
     ax.legend(handles + more, labels + more_labels, fontsize=8, loc="upper left")
@@ -219,9 +220,9 @@ def temperature_figure(result: DiagnosisResult) -> Figure:
         ax.grid(True, linewidth=0.3)
         ax.tick_params(labelsize=8)
         ax.set_title(POSE_COMPONENTS[j], fontsize=10)
-        ax.set_ylabel(f"{POSE_COMPONENTS[j]} ({POSE_UNITS[j]})", fontsize=9)
+        ax.set_ylabel(f"{POSE_COMPONENTS[j]} ({unit_text(POSE_UNITS[j])})", fontsize=9)
         if j >= 3:
-            ax.set_xlabel("mean leg temperature (degC)", fontsize=9)
+            ax.set_xlabel("mean leg temperature (°C)", fontsize=9)
     _legend_below(fig, axes.flat[0])
     fig.suptitle("Pose residuals vs mean leg temperature (measured - twin)", fontsize=11)
     return fig

@@ -6,19 +6,15 @@ The headline (the adequacy verdict first), the story's sections, the files.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from hexatherm.core.diagnosis import Diagnosis
-from hexatherm.workflows.diagnose.report.figures import report_figures
 from hexatherm.workflows.diagnose.report.tables import (
     _HOUR_S,
     FIGURE_CAPTIONS,
-    FIGURE_DPI,
     FIGURE_FILES,
-    REPORT_FILE,
     Table,
     _num,
     candidate_tables,
@@ -277,21 +273,3 @@ def report_markdown(result: DiagnosisResult, figure_names: Mapping[str, str] | N
     for table in structure_tables(before, pair_after):
         md += [render_markdown(table), ""]
     return "\n".join(md).rstrip("\n") + "\n"
-
-
-def write_report_files(
-    result: DiagnosisResult, out_dir: Path, *, dpi: int = FIGURE_DPI
-) -> list[Path]:
-    """Write ``report.md`` and its PNG figures (:data:`FIGURE_FILES`) into the folder ``out_dir``.
-
-    The folder must exist; files of the same names are replaced. Returns the
-    paths written, ``report.md`` first.
-    """
-    out_dir = Path(out_dir)
-    written = [out_dir / REPORT_FILE]
-    for key, fig in report_figures(result).items():
-        path = out_dir / FIGURE_FILES[key]
-        fig.savefig(path, format="png", dpi=dpi, metadata={"Software": None})
-        written.append(path)
-    written[0].write_text(report_markdown(result, FIGURE_FILES), encoding="utf-8")
-    return written
