@@ -174,3 +174,21 @@ def test_numbers_text():
         "-16.441",
     ]
     assert float(exact(0.1 + 0.2)) == 0.1 + 0.2  # shortest text that reads back
+
+
+@pytest.mark.parametrize("k", [2.0, 3.0])
+def test_the_common_and_own_parts_are_those_of_poses_csv_times_k(hidden, k):
+    result, uncertainty, quality = hidden
+    page = report_html(result, uncertainty, quality, coverage_factor=k)
+    poses = expected("poses.csv")
+    start = page.rindex("<table", 0, page.index("part of U"))
+    table = page[start : page.index("</table>", start)]
+    for part, row_name in (("common", "common to all targets"), ("own", "own (the target")):
+        row = table[table.index(row_name) :]
+        cells = re.findall(r'<td class="num">([^<]*)</td>', row)[:6]
+        for j, name in enumerate(T_NAMES + R_NAMES):
+            unit = "um" if name in T_NAMES else "urad"
+            column = poses[f"u_{part}_d{name}_corr_{unit}"].to_numpy()
+            rms = k * float(np.sqrt(np.mean(column**2)))
+            assert cells[j] == fixed(rms, unit), (part, name, cells[j], rms)
+    assert f"(k = {exact(k)})" in table

@@ -33,6 +33,7 @@ from hexatherm.workflows.report.tables import (
     poses_table_html,
     quality_summary_html,
     quality_table_html,
+    shared_parts_table_html,
 )
 from hexatherm.workflows.report.text import exact, fixed, unit_text
 from hexatherm.workflows.report.verdict import Extreme, Verdict, verdict
@@ -262,6 +263,8 @@ def report_html(
         poses_table_html(result, uncertainty, "conventional", coverage_factor, failing),
         poses_table_html(result, uncertainty, "corrected", coverage_factor, failing),
     ]
+    if uncertainty is not None:
+        parts.append(shared_parts_table_html(uncertainty, coverage_factor))
     if uncertainty is not None:
         parts.append(
             f'<p class="note">Uncertainty: {_e(summary.basis)}; ball centres: '

@@ -240,3 +240,42 @@ def quality_summary_html(quality: QualityReport) -> str:
     table = html_table(header, rows, numeric_from=1, row_classes=classes)
     # the status is text: left-aligned, wrapping
     return re.sub(r'<td class="num">([^<]*)</td></tr>', r'<td class="wrap">\1</td></tr>', table)
+
+
+def shared_parts_table_html(uncertainty: PoseUncertainty, coverage_factor: float = 2.0) -> str:
+    """The expanded uncertainty of the corrected poses split into the part common to every
+    target and the part of its own (RMS over the targets, µm and µrad), with what each
+    means: the table every reader of the pose tables needs once."""
+    if uncertainty.common_u is None or uncertainty.own_u is None:
+        return ""
+    common = coverage_factor * to_um_urad(uncertainty.common_u[:, 6:])
+    own = coverage_factor * to_um_urad(uncertainty.own_u[:, 6:])
+    total = coverage_factor * to_um_urad(uncertainty.corrected_u)
+
+    def rms(values: FloatArray) -> FloatArray:
+        return np.asarray(np.sqrt(np.mean(values**2, axis=0)), float)
+
+    rows: list[list[Cell]] = [
+        [name, *(fixed(v, DEVIATION_UNITS[j]) for j, v in enumerate(rms(values)))]
+        for name, values in (
+            ("common to all targets (O, R0)", common),
+            ("own (the target, its references)", own),
+            ("total", total),
+        )
+    ]
+    header = [
+        [
+            ("part of U", 1),
+            *[(head(n, u), 1) for n, u in zip(POSE_NAMES, DEVIATION_UNITS, strict=True)],
+        ]
+    ]
+    caption = (
+        f"Expanded uncertainty (k = {exact(coverage_factor)}) of the corrected poses, RMS over "
+        "the targets. Every corrected pose rests on the one measurement of frame O and of "
+        "R0: their error moves all targets together (a common offset that reads as a bias "
+        "shared by every target, not scatter between them; poses.csv u_common_*, and "
+        "covariance.csv between targets). The own part is independent from target to "
+        "target: it is what differences between targets carry. Total = "
+        "sqrt(common\u00b2 + own\u00b2)."
+    )
+    return html_table(header, rows, caption=caption)
