@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import re
 import socket
-import socketserver
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -44,6 +43,7 @@ from hexatherm.core.hexapod import Hexapod
 from hexatherm.devices.controller import LineBuffer, convert_pose, stroke_violations
 from hexatherm.devices.pi import AXES
 from hexatherm.devices.symetrie import pose_from_wire, pose_to_wire
+from hexatherm.devices.tcpservice import TcpService
 from hexatherm.typing import FloatArray
 
 #: points along a move's path where the stroke is checked
@@ -257,12 +257,7 @@ class _Drop(Exception):
     """Raised by a dialect to close the connection (fault injection)."""
 
 
-class _Server(socketserver.ThreadingTCPServer):
-    daemon_threads = True
-    allow_reuse_address = True
-
-
-class SimulatedController:
+class SimulatedController(TcpService):
     """A threaded TCP server of one dialect around a :class:`SimulatedHexapod`.
 
     Use as a context manager, or call :meth:`close`. ``received`` lists every command
@@ -276,21 +271,8 @@ class SimulatedController:
     def __init__(self, model: SimulatedHexapod, host: str = "127.0.0.1", port: int = 0) -> None:
         self.model = model
         self.received: list[str] = []
-        self.connections = 0
-        self._live: set[socket.socket] = set()
-        self._lock = threading.Lock()
         self._chunks = np.random.default_rng(12345)
-        outer = self
-
-        class Handler(socketserver.BaseRequestHandler):
-            def handle(self) -> None:
-                outer._serve(self.request)
-
-        self._server = _Server((host, port), Handler)
-        self._thread = threading.Thread(
-            target=self._server.serve_forever, kwargs={"poll_interval": 0.02}, daemon=True
-        )
-        self._thread.start()
+        self._start(host, port)
 
     @property
     def faults(self) -> Faults:
@@ -298,38 +280,12 @@ class SimulatedController:
         return self.model.faults
 
     @property
-    def port(self) -> int:
-        """The TCP port the server listens on."""
-        return int(self._server.server_address[1])
-
-    @property
     def url(self) -> str:
         """``SCHEME://HOST:PORT``, for :func:`~hexatherm.devices.controller.controller_from_url`."""
         return f"{self.scheme}://{self.host}:{self.port}"
 
-    @property
-    def host(self) -> str:
-        """The address the server listens on."""
-        return str(self._server.server_address[0])
-
-    def close(self) -> None:
-        """Stop serving and drop every connection (as a controller that goes away)."""
-        self._server.shutdown()
-        self._server.server_close()
-        with self._lock:
-            live = list(self._live)
-        for sock in live:
-            try:
-                sock.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
-        self._thread.join(timeout=10)
-
     def __enter__(self) -> SimulatedController:
         return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     # -------------------------------------------------------------- plumbing
     def _wire_pose(self) -> FloatArray:
@@ -352,10 +308,7 @@ class SimulatedController:
             time.sleep(0.0002)  # pacing only, so that the chunks travel apart
 
     def _serve(self, sock: socket.socket) -> None:
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        with self._lock:
-            self.connections += 1
-            self._live.add(sock)
+        self._accepted(sock)
         buffer = LineBuffer()
         try:
             self._write(sock, self.greeting())
@@ -373,13 +326,7 @@ class SimulatedController:
         except (_Drop, OSError):
             return
         finally:
-            with self._lock:
-                self._live.discard(sock)
-            try:
-                sock.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
-            sock.close()
+            self._finished(sock)
 
     def _drop_if_moving(self) -> None:
         if self.faults.drop_mid_move and self.model.moving():

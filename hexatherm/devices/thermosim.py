@@ -20,10 +20,11 @@ from __future__ import annotations
 
 import math
 import socket
-import socketserver
 import threading
 import time
 from collections.abc import Callable, Sequence
+
+from hexatherm.devices.tcpservice import TcpService
 
 __all__ = ["SentSample", "ThermocoupleSimulator", "format_sample"]
 
@@ -40,12 +41,7 @@ def format_sample(values: Sequence[float]) -> bytes:
     return (", ".join(f"{float(v):.3f}" for v in values) + "\r\n").encode("ascii")
 
 
-class _Server(socketserver.ThreadingTCPServer):
-    daemon_threads = True
-    allow_reuse_address = True
-
-
-class ThermocoupleSimulator:
+class ThermocoupleSimulator(TcpService):
     """A threaded TCP server that streams samples of ``sample(t_s)`` to each client.
 
     Parameters
@@ -97,28 +93,10 @@ class ThermocoupleSimulator:
         self.sample, self.clock = sample, clock
         self.period_s, self.poll_s = float(period_s), float(poll_s)
         self.sent: list[SentSample] = []
-        self.connections = 0
-        self._lock = threading.Lock()
-        self._live: set[socket.socket] = set()
         self._closing = threading.Event()
         self._start_s = float(clock())
-        outer = self
-
-        class Handler(socketserver.BaseRequestHandler):
-            def handle(self) -> None:
-                outer._serve(self.request)
-
         self._host = host
-        self._server = _Server((host, port), Handler)
-        self._thread = threading.Thread(
-            target=self._server.serve_forever, kwargs={"poll_interval": 0.02}, daemon=True
-        )
-        self._thread.start()
-
-    @property
-    def port(self) -> int:
-        """The TCP port the server listens on."""
-        return int(self._server.server_address[1])
+        self._start(host, port)
 
     @property
     def url(self) -> str:
@@ -126,11 +104,7 @@ class ThermocoupleSimulator:
         return f"socket://{self._host}:{self.port}"
 
     def _serve(self, sock: socket.socket) -> None:
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        with self._lock:
-            self.connections += 1
-            number = self.connections
-            self._live.add(sock)
+        number = self._accepted(sock)
         try:
             due = self._start_s
             while not self._closing.is_set():
@@ -151,41 +125,12 @@ class ThermocoupleSimulator:
         except OSError:
             return
         finally:
-            with self._lock:
-                self._live.discard(sock)
-            try:
-                sock.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
-            sock.close()
-
-    def drop(self) -> int:
-        """Drop every connection, and go on listening (a pulled cable); returns how many."""
-        with self._lock:
-            live = list(self._live)
-        for sock in live:
-            try:
-                sock.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
-        return len(live)
+            self._finished(sock)
 
     def close(self) -> None:
         """Stop serving and drop every connection (a logger switched off)."""
         self._closing.set()
-        self._server.shutdown()
-        self._server.server_close()
-        with self._lock:
-            live = list(self._live)
-        for sock in live:
-            try:
-                sock.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
-        self._thread.join(timeout=10)
+        super().close()
 
     def __enter__(self) -> ThermocoupleSimulator:
         return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
