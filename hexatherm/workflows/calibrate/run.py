@@ -15,7 +15,7 @@ measured, thermal drift included: for comparison).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
@@ -193,7 +193,6 @@ class Calibration:
     residuals_before_um_urad: FloatArray
     residuals_after_um_urad: FloatArray
     heldout: bool
-    notes: list[str] = field(default_factory=list)
 
 
 def calibrate(campaign: Campaign, level: str = "auto", residuals: str = "pose") -> Calibration:
