@@ -33,7 +33,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from hexatherm.core.calibration import CalibrationModel, fit_calibration  # noqa: E402
-from hexatherm.io.config import read_hexapod  # noqa: E402
+from hexatherm.core.planning import build_plan  # noqa: E402
+from hexatherm.io.config import plan_to_yaml, read_hexapod  # noqa: E402
 from hexatherm.io.scenario import read_scenario  # noqa: E402
 from hexatherm.workflows.calibrate.run import Campaign, read_campaign  # noqa: E402
 from hexatherm.workflows.simulate.run import simulate  # noqa: E402
@@ -53,19 +54,24 @@ HEATING = {
 }
 
 
-def scenario_text(seed: int, heating: str) -> str:
+def scenario_text(seed: int, heating: str, plan_file: str | None = None) -> str:
     targets = np.random.default_rng(seed).uniform(-1, 1, (30, 6)) * SPAN
     rows = "\n".join(f"    - [{', '.join(f'{v:.4f}' for v in t)}]" for t in targets)
+    plan = (
+        f"plan: {plan_file}"
+        if plan_file
+        else f"""plan:
+  reference_pose: [0, 0, -40, 0, 0, 0]
+  points_per_ball: 12
+  targets:
+{rows}"""
+    )
     return f"""format: hexatherm-scenario/1
 name: calibration-{seed}
 hexapod: {ROOT / "configs" / "symetrie-like.yaml"}
 balls: {ROOT / "configs" / "balls-3.yaml"}
 seed: {seed}
-plan:
-  reference_pose: [0, 0, -40, 0, 0, 0]
-  points_per_ball: 12
-  targets:
-{rows}
+{plan}
 timing: {{seconds_per_point: 2.0, seconds_per_move: 20}}
 cmm: {{point_noise_um: 0.3, cap_angle_deg: 70}}
 thermocouples: {{period_s: 30, noise_C: 0.02}}
@@ -73,12 +79,28 @@ geometry_errors: {{seed: {seed + 1000}, joint_sigma_um: 50, offset_sigma_um: 30}
 {heating}"""
 
 
-def campaign_folder(root: Path, seed: int, heating: str) -> tuple[Path, np.ndarray]:
-    """Simulate the campaign; its folder and the true parameters."""
-    path = root / f"scenario-{seed}-{heating.replace(' ', '')}.yaml"
-    path.write_text(scenario_text(seed, HEATING[heating]))
+def campaign_folder(
+    root: Path, seed: int, heating: str, repeats: int = 1
+) -> tuple[Path, np.ndarray]:
+    """Simulate the campaign (O and R0 measured ``repeats`` times); its folder and the true
+    parameters."""
+    tag = f"{seed}-{heating.replace(' ', '')}-{repeats}"
+    plan_file = None
+    if repeats > 1:
+        targets = np.random.default_rng(seed).uniform(-1, 1, (30, 6)) * SPAN
+        plan = build_plan(
+            targets.round(4),
+            [0, 0, -40, 0, 0, 0],
+            points_per_ball=12,
+            origin_repeats=repeats,
+            reference0_repeats=repeats,
+        )
+        (root / f"plan-{tag}.yaml").write_text(plan_to_yaml(plan))
+        plan_file = f"plan-{tag}.yaml"
+    path = root / f"scenario-{tag}.yaml"
+    path.write_text(scenario_text(seed, HEATING[heating], plan_file))
     scenario = read_scenario(path)
-    folder = root / f"s-{seed}-{heating.replace(' ', '')}"
+    folder = root / f"s-{tag}"
     write_files(simulate(scenario).files, folder)
     assert scenario.true_parameters is not None
     return folder, scenario.true_parameters
@@ -115,12 +137,14 @@ def main() -> None:
                 folder = free if heating == "none" else campaign_folder(root, seed, heating)[0]
                 cells = rows[heating]
                 cells.setdefault("drift-free", []).append(drift_free)
-                for name, poses, interpolation in (
-                    ("conventional", "conventional", "linear"),
-                    ("decoupled", "corrected", "linear"),
-                    ("decoupled, smooth", "corrected", "smooth"),
+                repeated = campaign_folder(root, seed, heating, repeats=4)[0]
+                for name, poses, interpolation, where in (
+                    ("conventional", "conventional", "linear", folder),
+                    ("decoupled", "corrected", "linear", folder),
+                    ("decoupled, smooth", "corrected", "smooth", folder),
+                    ("smooth, O/R0 x4", "corrected", "smooth", repeated),
                 ):
-                    campaign = read_campaign([folder], poses, interpolation=interpolation)  # type: ignore[arg-type]
+                    campaign = read_campaign([where], poses, interpolation=interpolation)  # type: ignore[arg-type]
                     growth = campaign.results[0].correction
                     cells.setdefault(name, []).append(heldout_error_um(campaign, truth, held))
                 drift = np.abs((growth.conventional - growth.corrected)[:, :3]).max() * 1e3
@@ -136,19 +160,21 @@ def main() -> None:
         "conventional",
         "decoupled",
         "decoupled, smooth",
+        "smooth, O/R0 x4",
         "largest thermal error of a pose (um)",
     ]
     print(
         f"{'heating':8} "
         + " ".join(f"{c[:18]:>18}" for c in columns)
-        + f" {'dec/free':>9} {'conv/dec':>9}"
+        + f" {'dec/free':>9} {'x4/free':>9} {'conv/dec':>9}"
     )
     for heating, cells in rows.items():
         values = [rms(cells[c]) for c in columns]
         print(
             f"{heating:8} "
             + " ".join(f"{v:18.3f}" for v in values)
-            + f" {values[2] / values[0]:9.2f} {values[1] / values[2]:9.2f}"
+            + f" {values[2] / values[0]:9.2f} {values[4] / values[0]:9.2f}"
+            + f" {values[1] / values[2]:9.2f}"
         )
 
 
