@@ -110,7 +110,7 @@ def command(
     echo_err(
         f"calibrated from {len(run.campaign.labels)} {poses} poses of {len(sessions)} session(s)"
     )
-    files = output_files(run)
+    files = output_files(run, inputs, out)
     with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
         for name, text in files.items():
             (tmp / name).write_text(text, encoding="utf-8")

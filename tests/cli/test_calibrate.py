@@ -6,6 +6,7 @@ reads back."""
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -144,3 +145,22 @@ def test_bad_campaigns_are_refused_naming_why(tmp_path: Path) -> None:
     states = run("calibrate", moved, warm, "-o", tmp_path / "out", "--level", "offsets")
     assert states.exit_code == 1 and "another thermal state" in states.output
     assert not (tmp_path / "out").exists()
+
+
+def test_the_report_prints_the_parameters_with_k_times_u_and_the_stroke_map(calibrated) -> None:
+    _, out, _ = calibrated
+    page = (out / "report.html").read_text()
+    params = pd.read_csv(out / "parameters.csv")
+    for row in params.itertuples():
+        u_um = row.u_ppm if row.unit != "mm" else row.u_um
+        cells = re.search(rf"<td>{re.escape(row.parameter)}</td>(.*?)</tr>", page)
+        assert cells is not None, row.parameter
+        values = re.findall(r'<td class="num">([^<]*)</td>', cells.group(1))
+        assert f"{2 * u_um:.3f}" in values, (row.parameter, values)
+    doc = json.loads((out / "calibration.json").read_text())
+    worst = doc["predicted_sigma_over_stroke_um_urad"]["worst"]
+    at_targets = doc["predicted_sigma_at_targets_um_urad"]["worst"]
+    # the span holds the targets: its worst is at least the targets' worst, same order
+    assert all(worst[c] >= 0.999 * at_targets[c] for c in worst)
+    assert all(worst[c] < 10 * at_targets[c] for c in worst)
+    assert page.count("data:image/png;base64,") == 2 and "Provenance" in page

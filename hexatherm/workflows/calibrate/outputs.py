@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -29,6 +31,7 @@ from hexatherm import __version__
 from hexatherm.core.calibration import PARAMETER_NAMES, PARAMETER_UNITS
 from hexatherm.io.config import hexapod_to_yaml
 from hexatherm.io.provenance import now_iso
+from hexatherm.workflows.calibrate.report import StrokeMap, report_html, stroke_map
 from hexatherm.workflows.calibrate.run import Calibration, rms
 from hexatherm.workflows.process.outputs import to_csv_text
 
@@ -93,8 +96,9 @@ def _finite(value: float) -> float | None:
     return float(value) if math.isfinite(value) else None
 
 
-def calibration_json(run: Calibration) -> str:
-    """``calibration.json`` (see the module text)."""
+def calibration_json(run: Calibration, stroke: StrokeMap | None = None) -> str:
+    """``calibration.json`` (see the module text); with ``stroke``, the predicted
+    uncertainty over the campaign's span too."""
     fit = run.fit
     obs = fit.observability
     sigma = fit.predicted_sigma_um_urad(run.campaign.commanded)
@@ -148,17 +152,32 @@ def calibration_json(run: Calibration) -> str:
             "calibrated_heldout": run.heldout,
         },
     }
+    if stroke is not None:
+        doc["predicted_sigma_over_stroke_um_urad"] = {
+            "worst": dict(zip(COMPONENTS, map(float, stroke.worst_um_urad), strict=True)),
+            "n_poses": len(stroke.poses),
+            "span_lower": [float(v) for v in stroke.lower],
+            "span_upper": [float(v) for v in stroke.upper],
+        }
     return json.dumps(doc, indent=1, allow_nan=False) + "\n"
 
 
-def output_files(run: Calibration) -> dict[str, str]:
-    """Every file of the output folder, name -> text."""
-    return {
+def output_files(
+    run: Calibration, inputs: Sequence[Path] | None = None, folder: Path | None = None
+) -> dict[str, str]:
+    """Every file of the output folder, name -> text; with ``inputs`` (the files the run
+    read) the report too, and the predicted uncertainty over the stroke (``folder``: the
+    output folder, for the report's relative paths)."""
+    stroke = None if inputs is None else stroke_map(run)
+    files = {
         "hexapod.yaml": calibrated_hexapod_yaml(run),
         "parameters.csv": to_csv_text(parameters_frame(run)),
         "residuals.csv": to_csv_text(residuals_frame(run)),
-        "calibration.json": calibration_json(run),
+        "calibration.json": calibration_json(run, stroke),
     }
+    if stroke is not None and inputs is not None:
+        files["report.html"] = report_html(run, stroke, inputs, folder or Path("."))
+    return files
 
 
 def summary_lines(run: Calibration) -> list[str]:

@@ -1,0 +1,284 @@
+"""The calibration's report (``OUT/report.html``), in the style of ``report`` and
+``diagnose`` (:mod:`hexatherm.workflows.report.page`), and the predicted-pose
+uncertainty over the stroke.
+
+The page holds: the verdict (level, poses, chi-square per degree of freedom, residuals
+before and after, the worst predicted uncertainty over the stroke); how the level was
+chosen; the parameters with their expanded uncertainty ``U = k u`` (k = 2) and their
+largest correlation, pairs above 0.9 flagged; the observability (singular values,
+condition number, O1..O5); the map of the predicted uncertainty of a calibrated pose
+over Tx, Ty (the other components at zero) and its worst value over the poses the
+campaign spans; the residuals of every target before and after; the provenance.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from hexatherm.core.calibration import PARAMETER_UNITS
+from hexatherm.io.provenance import current_run, now_iso
+from hexatherm.typing import FloatArray
+from hexatherm.workflows.calibrate.run import Calibration, rms
+from hexatherm.workflows.report.page import (
+    Cell,
+    figure_html,
+    html_table,
+    page_html,
+    provenance_html,
+)
+from hexatherm.workflows.report.text import exact, fixed, unit_text
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+#: the coverage factor of the expanded uncertainties the report prints
+COVERAGE_FACTOR = 2.0
+#: poses drawn over the campaign's span for the worst predicted uncertainty
+N_STROKE_POSES = 2000
+#: grid of the map over Tx, Ty
+N_MAP = 31
+COMPONENTS = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
+UNITS = ("um",) * 3 + ("urad",) * 3
+
+
+@dataclass(frozen=True)
+class StrokeMap:
+    """The predicted standard uncertainty of a calibrated pose over the stroke.
+
+    Attributes
+    ----------
+    lower, upper : ndarray, shape (6,)
+        The span of the campaign's commanded poses (mm, deg): where the map and the
+        draws lie.
+    poses : ndarray, shape (M, 6)
+        Poses drawn uniformly in the span, inside the stroke (seeded, reproducible).
+    sigma_um_urad : ndarray, shape (M, 6)
+        Their predicted standard uncertainties (um, urad).
+    tx, ty : ndarray, shape (N_MAP,)
+        The map's grid (mm); the other components at zero (clipped to the span).
+    map_um : ndarray, shape (N_MAP, N_MAP)
+        The largest of sigma(Tx), sigma(Ty), sigma(Tz) on the grid (um; NaN out of
+        the stroke), ``map_um[i, j]`` at ``ty[i], tx[j]``.
+    """
+
+    lower: FloatArray
+    upper: FloatArray
+    poses: FloatArray
+    sigma_um_urad: FloatArray
+    tx: FloatArray
+    ty: FloatArray
+    map_um: FloatArray
+
+    @property
+    def worst_um_urad(self) -> FloatArray:
+        """The largest predicted sigma (6,) over the drawn poses, um and urad."""
+        return np.asarray(self.sigma_um_urad.max(axis=0), float)
+
+
+def stroke_map(run: Calibration, seed: int = 0) -> StrokeMap:
+    """The predicted uncertainty over the poses the campaign spans (see :class:`StrokeMap`)."""
+    fit = run.fit
+    nominal = run.campaign.nominal
+    commanded = run.campaign.commanded
+    lower, upper = commanded.min(axis=0), commanded.max(axis=0)
+    draws = np.random.default_rng(seed).uniform(lower, upper, (N_STROKE_POSES, 6))
+    inside = ~nominal.check_stroke(nominal.igm(draws)).any(axis=1)
+    poses = draws[inside]
+    sigma = fit.predicted_sigma_um_urad(poses)
+    tx = np.linspace(lower[0], upper[0], N_MAP)
+    ty = np.linspace(lower[1], upper[1], N_MAP)
+    grid = np.zeros((N_MAP * N_MAP, 6))
+    grid[:, 0] = np.tile(tx, N_MAP)
+    grid[:, 1] = np.repeat(ty, N_MAP)
+    grid[:, 2:] = np.clip(0.0, lower[2:], upper[2:])
+    on = ~nominal.check_stroke(nominal.igm(grid)).any(axis=1)
+    values = np.full(grid.shape[0], np.nan)
+    if on.any():
+        values[on] = fit.predicted_sigma_um_urad(grid[on])[:, :3].max(axis=1)
+    return StrokeMap(lower, upper, poses, sigma, tx, ty, values.reshape(N_MAP, N_MAP))
+
+
+def _map_figure(stroke: StrokeMap, commanded: FloatArray) -> Figure:
+    from hexatherm.workflows.report.figures import _new_figure
+
+    fig = _new_figure(6.0, 4.6, left=0.11, right=0.9, bottom=0.12, top=0.9)
+    ax = fig.add_subplot(1, 1, 1)
+    image = ax.pcolormesh(stroke.tx, stroke.ty, stroke.map_um, shading="nearest", cmap="viridis")
+    fig.colorbar(image, ax=ax, label="largest σ of Tx, Ty, Tz (µm)")
+    ax.plot(commanded[:, 0], commanded[:, 1], "w+", markersize=6, label="campaign targets")
+    ax.set_xlabel("Tx (mm)")
+    ax.set_ylabel("Ty (mm)")
+    ax.set_title("Predicted uncertainty of a calibrated pose (Tz, Rx, Ry, Rz at 0)", fontsize=9)
+    ax.legend(fontsize=8, loc="upper right")
+    return fig
+
+
+def _residual_figure(run: Calibration) -> Figure:
+    from hexatherm.workflows.report.figures import _new_figure
+
+    fig = _new_figure(7.0, 3.4, left=0.09, right=0.98, bottom=0.16, top=0.88)
+    ax = fig.add_subplot(1, 1, 1)
+    n = len(run.campaign.labels)
+    before = np.linalg.norm(run.residuals_before_um_urad[:, :3], axis=1)
+    after = np.linalg.norm(run.residuals_after_um_urad[:, :3], axis=1)
+    ax.semilogy(np.arange(1, n + 1), before, "o--", color="#c44e52", label="nominal geometry")
+    label = "calibrated (held out)" if run.heldout else "calibrated"
+    ax.semilogy(np.arange(1, n + 1), after, "s-", color="#4c72b0", label=label)
+    ax.set_xlabel("target")
+    ax.set_ylabel("|measured − predicted| translation (µm)")
+    ax.legend(fontsize=8)
+    ax.set_title("Residual of every target, before and after", fontsize=9)
+    return fig
+
+
+def report_html(run: Calibration, stroke: StrokeMap, inputs: Sequence[Path], folder: Path) -> str:
+    """The calibration's report page (see the module text)."""
+    fit = run.fit
+    obs = fit.observability
+    k = COVERAGE_FACTOR
+    before, after = rms(run.residuals_before_um_urad), rms(run.residuals_after_um_urad)
+    worst = stroke.worst_um_urad
+    how = "chosen by BIC and held-out folds" if run.choice is not None else "forced"
+    verdict = [
+        f"Level {fit.level} ({how}): {obs.n_parameters} parameters ({obs.n_gauge} fixed by "
+        f"the gauge) from {len(run.campaign.labels)} {run.campaign.poses} poses of "
+        f"{len(run.campaign.results)} session(s).",
+        f"chi²/dof {fit.chi_square_per_dof:.2f} (1: the residuals are as large as the poses' "
+        "uncertainty says).",
+        "RMS residual Tx, Ty, Tz: nominal "
+        + ", ".join(fixed(v, "um") for v in before[:3])
+        + " µm; calibrated "
+        + ", ".join(fixed(v, "um") for v in after[:3])
+        + f" µm ({'held out' if run.heldout else 'in sample'}).",
+        f"Worst predicted uncertainty of a calibrated pose over the campaign's span "
+        f"(U, k = {exact(k)}): "
+        + ", ".join(
+            f"{c} {fixed(k * v, u)} {'µm' if u == 'um' else 'µrad'}"
+            for c, v, u in zip(COMPONENTS, worst, UNITS, strict=True)
+        )
+        + f" ({len(stroke.poses)} poses inside the stroke).",
+    ]
+    pairs = fit.high_correlations()
+    if pairs:
+        verdict.append(
+            f"{len(pairs)} pair(s) of parameters correlated beyond |ρ| = 0.9 (flagged below)."
+        )
+    parts = ["<h2>Verdict</h2><ul>" + "".join(f"<li>{_esc(v)}</li>" for v in verdict) + "</ul>"]
+    if run.choice is not None:
+        rows: list[list[Cell]] = []
+        for score in run.choice.scores:
+            rows.append(
+                [
+                    score.level + (" (chosen)" if score.level == fit.level else ""),
+                    "" if score.fit is None else f"{score.bic:.1f}",
+                    "" if score.fit is None else f"{score.heldout_rms_w:.2f}",
+                    score.note,
+                ]
+            )
+        parts.append("<h2>Level</h2>")
+        parts.append(
+            html_table(
+                [[("level", 1), ("BIC", 1), ("held-out RMS (whitened)", 1), ("note", 1)]],
+                rows,
+                align="lrrl",
+                caption="The next larger level is chosen when its BIC is lower by more than "
+                "10 and its held-out RMS is lower.",
+            )
+        )
+    flagged = {a for a, _, _ in pairs} | {b for _, b, _ in pairs}
+    names = fit.names
+    index = [i for i, m in enumerate(fit.model.mask) if m]
+    rho = np.abs(np.nan_to_num(fit.correlation))
+    np.fill_diagonal(rho, 0.0)
+    prows: list[list[Cell]] = []
+    classes = []
+    for name, i in zip(names, index, strict=True):
+        gain = PARAMETER_UNITS[i] != "mm"
+        scale, unit = (1e6, "ppm") if gain else (1e3, "um")
+        prows.append(
+            [
+                name,
+                exact(fit.model.theta0[i]),
+                repr(float(fit.parameters[i])),
+                fixed((fit.parameters[i] - fit.model.theta0[i]) * scale, "um"),
+                fixed(k * fit.std_errors[i] * scale, "um"),
+                unit_text(unit),
+                f"{rho[i].max():.3f}",
+            ]
+        )
+        classes.append("fail" if name in flagged else "")
+    parts.append("<h2>Parameters</h2>")
+    parts.append(
+        html_table(
+            [
+                [
+                    ("parameter", 1),
+                    ("nominal", 1),
+                    ("calibrated", 1),
+                    ("change", 1),
+                    (f"U (k = {exact(k)})", 1),
+                    ("unit of change, U", 1),
+                    ("max |ρ|", 1),
+                ]
+            ],
+            prows,
+            row_classes=classes,
+            caption="mm for joints and offsets, mm/mm for gains; changes and U in µm (ppm "
+            "for gains). Highlighted: correlated beyond |ρ| = 0.9 with another parameter. "
+            "Base joints in the fit's gauge (the least-squares rigid fit of the fitted base "
+            "onto the nominal one); hexapod.yaml holds them in frame O.",
+        )
+    )
+    indices = obs.indices()
+    parts.append("<h2>Observability</h2>")
+    parts.append(
+        html_table(
+            [[("figure", 1), ("value", 1)]],
+            [[name, f"{value:.4g}"] for name, value in indices.items()]
+            + [["rank", f"{obs.rank} of {obs.n_parameters}"]],
+        )
+    )
+    parts.append(
+        '<p class="note">Singular values of the whitened Jacobian: '
+        + _esc(", ".join(f"{v:.3g}" for v in obs.singular_values))
+        + "</p>"
+    )
+    parts.append("<h2>Predicted uncertainty over the stroke</h2>")
+    parts.append(
+        figure_html(
+            _map_figure(stroke, run.campaign.commanded),
+            "predicted uncertainty map",
+            "Largest predicted standard uncertainty (k = 1) of Tx, Ty, Tz of a pose the "
+            "calibrated model predicts, over Tx and Ty with the other components at zero; "
+            "blank: out of the stroke. Crosses: the campaign's targets (all components).",
+        )
+    )
+    parts.append("<h2>Residuals</h2>")
+    parts.append(
+        figure_html(
+            _residual_figure(run),
+            "residuals before and after",
+            "Translation residual of every target: measured minus the nominal geometry's "
+            "prediction (the commanded pose), and minus the calibrated model's.",
+        )
+    )
+    parts.append(
+        provenance_html(
+            current_run(),
+            inputs,
+            folder,
+            now_iso(),
+        )
+    )
+    return page_html("hexatherm calibration", parts)
+
+
+def _esc(text: str) -> str:
+    from hexatherm.workflows.report.page import escape
+
+    return escape(text)
