@@ -1,0 +1,64 @@
+"""The calibration's uncertainty is honest over 20 independently simulated campaigns
+(issue 15, acceptance): simulate (a true geometry, probing noise, warming legs) ->
+process -> calibrate the corrected poses. The parameter error's Mahalanobis distance in
+the 36 free coordinates follows its chi-square (mean within 15 % of 36), and the
+calibrated model's error on held-out poses is within 1.2x its predicted sigma."""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from hexatherm.core.calibration import CalibrationModel
+from hexatherm.io.scenario import read_scenario
+from hexatherm.workflows.calibrate.run import calibrate, read_campaign
+from hexatherm.workflows.simulate.run import simulate
+from hexatherm.workflows.simulate.twinsession import write_files
+
+ROOT = Path(__file__).resolve().parents[2]
+SPAN = np.array([20.0, 20.0, 15.0, 4.0, 4.0, 8.0])
+N_SEEDS = 20
+
+
+def scenario(seed: int) -> str:
+    targets = np.random.default_rng(seed).uniform(-1, 1, (30, 6)) * SPAN
+    mats = ", ".join(["{gain_C: 1.0, tau_s: 3600, power: [[0, null]]}"] * 6)
+    return f"""format: hexatherm-scenario/1
+hexapod: {ROOT / "configs" / "symetrie-like.yaml"}
+balls: {ROOT / "configs" / "balls-3.yaml"}
+seed: {seed}
+plan: {{targets: {targets.round(4).tolist()}, reference_pose: [0, 0, -40, 0, 0, 0],
+        points_per_ball: 8}}
+cmm: {{point_noise_um: 0.3}}
+thermocouples: {{noise_C: 0.02}}
+heating: {{mats: [{mats}]}}
+geometry_errors: {{seed: {seed + 500}, joint_sigma_um: 50, offset_sigma_um: 30}}
+"""
+
+
+def test_parameter_errors_follow_their_covariance_over_20_campaigns() -> None:
+    held = np.random.default_rng(77).uniform(-1, 1, (100, 6)) * SPAN
+    distances, normalized = [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in range(N_SEEDS):
+            path = Path(tmp) / f"s{seed}.yaml"
+            path.write_text(scenario(seed))
+            read = read_scenario(path)
+            folder = Path(tmp) / f"s{seed}"
+            write_files(simulate(read).files, folder)
+            run = calibrate(read_campaign([folder]), level="joints")
+            fit, model = run.fit, run.fit.model
+            assert read.true_parameters is not None
+            error = model.coordinates(fit.parameters) - model.coordinates(read.true_parameters)
+            distances.append(float(error @ np.linalg.solve(fit.covariance_free, error)))
+            truth_model = CalibrationModel(model.nominal, "joints+gains")
+            true_poses, _ = truth_model.predict(read.true_parameters, held)
+            predicted_error = (fit.predict(held) - true_poses) * np.array([1e3] * 3 + [1.0] * 3)
+            sigma = fit.predicted_sigma_um_urad(held)
+            normalized.append(predicted_error[:, :3] / sigma[:, :3])
+    mean = float(np.mean(distances))
+    assert abs(mean / 36.0 - 1.0) < 0.15, (mean, distances)
+    ratio = float(np.sqrt(np.mean(np.square(normalized))))
+    assert ratio < 1.2, ratio
