@@ -44,6 +44,9 @@ class StepCentres:
     cov_mm2 : ndarray, shape (N, k, 3, 3), optional
         Covariance of each centre from its sphere fit (NaN for centres given as
         such); None when not gathered.
+    time_aware : bool or None
+        ISO times: whether the files gave a UTC offset (then every time written out
+        carries one, :func:`time_text`); None for seconds.
     """
 
     centres_mm: FloatArray
@@ -52,6 +55,16 @@ class StepCentres:
     u_um: FloatArray
     cov_mm2: FloatArray | None = None
     count: npt.NDArray[np.intp] | None = None
+    time_aware: bool | None = None
+
+    def time_text(self, seconds: float) -> str:
+        """A time as the outputs write it: ISO 8601 in UTC with ``+00:00`` when the
+        files gave offsets (never a UTC time that reads as local), as given (no offset
+        known) when they did not; for a seconds time base the number itself."""
+        if self.time_kind != "iso":
+            return repr(float(seconds))
+        text = seconds_to_iso(seconds)
+        return text + "+00:00" if self.time_aware else text
 
     @property
     def measurements(self) -> npt.NDArray[np.intp]:
@@ -240,7 +253,15 @@ def assemble_centres(records: list[Records], session: Session) -> StepCentres:
     if np.any(missing_ball):
         i, j = np.argwhere(missing_ball)[0]
         raise PlanError(f"step {plan.labels[i]}: ball {balls.names[j]} not measured")
-    return StepCentres(sums, ball_time.mean(axis=1), kinds.pop() if kinds else "seconds", u_um, cov)
+    aware = {r.time_aware for r in records} - {None}
+    return StepCentres(
+        sums,
+        ball_time.mean(axis=1),
+        kinds.pop() if kinds else "seconds",
+        u_um,
+        cov,
+        time_aware=aware.pop() if aware else None,
+    )
 
 
 def registration_weights(u_um: FloatArray, floor_um: float = 1e-3) -> FloatArray | None:

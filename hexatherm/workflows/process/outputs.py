@@ -41,7 +41,6 @@ import pandas as pd
 
 from hexatherm.core.geometry import to_um_urad
 from hexatherm.io.outputs import output_dir
-from hexatherm.io.records import seconds_to_iso
 from hexatherm.workflows.process.measured import nominal_fit_diameter_mm
 from hexatherm.workflows.process.pipeline import ProcessResult
 
@@ -71,7 +70,7 @@ CONTRACT_COLUMNS = ["label", "time", *pose_columns("conv"), *pose_columns("corr"
 
 def _times(result: ProcessResult, seconds: np.ndarray) -> list[str] | np.ndarray:
     if result.centres.time_kind == "iso":
-        return [seconds_to_iso(s) for s in seconds]
+        return [result.centres.time_text(s) for s in seconds]
     return seconds
 
 

@@ -258,6 +258,7 @@ def average_repeats(
         u[keep],
         None if cov is None else cov[keep],
         count[keep],
+        centres.time_aware,
     )
     return dataclasses.replace(session, plan=reduced), averaged, tuple(groups)
 

@@ -1,0 +1,42 @@
+"""Times with a UTC offset in the inputs come out with one (issue 16, item 2): never as a
+UTC time without an offset, which reads as local time (2 h off for +02:00 inputs)."""
+
+from __future__ import annotations
+
+import re
+import shutil
+from pathlib import Path
+
+import pandas as pd
+from click.testing import CliRunner
+
+from hexatherm.cli import main
+
+ROOT = Path(__file__).resolve().parents[2]
+STAMP = re.compile(r"(\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d(?:\.\d+)?)")
+
+
+def test_offsets_survive_processing_and_naive_times_stay_naive(tmp_path: Path) -> None:
+    naive = tmp_path / "naive"
+    shutil.copytree(
+        ROOT / "sessions" / "paper-zero-pose", naive, ignore=shutil.ignore_patterns("results")
+    )
+    aware = tmp_path / "aware"
+    shutil.copytree(naive, aware)
+    for name in ("centres.csv", "temperatures.csv"):
+        text = (aware / name).read_text()
+        (aware / name).write_text(STAMP.sub(r"\1+02:00", text))
+    for session in (naive, aware):
+        result = CliRunner().invoke(main, ["process", str(session)])
+        assert result.exit_code == 0, result.output
+    plain = pd.read_csv(naive / "results" / "poses.csv")
+    zoned = pd.read_csv(aware / "results" / "poses.csv")
+    assert not plain["time"].str.contains(r"[+Z]").any()  # no offset was known: none made up
+    assert zoned["time"].str.endswith("+00:00").all()
+    # the same instants: a clock reading at +02:00 is two hours earlier in UTC
+    shifted = pd.to_datetime(plain["time"]) - pd.Timedelta(hours=2)
+    instants = pd.to_datetime(zoned["time"], utc=True).dt.tz_localize(None)
+    assert (instants == shifted).all()
+    assert pd.to_datetime(zoned["time"]).dt.tz is not None  # opens tz-aware in pandas
+    legs = pd.read_csv(aware / "results" / "legs.csv")
+    assert legs["time"].str.endswith("+00:00").all()
