@@ -91,6 +91,13 @@ QUALITY_EXIT = 3
     help=f"Exit with status {QUALITY_EXIT} when a quality check fails (the results "
     "are still written); without it a failed check is a warning.",
 )
+@click.option(
+    "--covariance/--no-covariance",
+    "between",
+    default=None,
+    help="Write covariance.csv, the covariance between every pair of targets "
+    "[default: up to 200 targets; a 1000-target campaign makes it 120 MB].",
+)
 @reading_options
 @clean_errors
 def command(
@@ -109,6 +116,7 @@ def command(
     methods: tuple[str, ...],
     hexapod_path: Path | None,
     strict: bool,
+    between: bool | None,
     reading: ReadOptions,
 ) -> None:
     """Process SESSION (a folder with session.yaml, or the file itself).
@@ -174,7 +182,9 @@ def command(
             f"{np.sqrt(np.mean(gap**2)):.3f} um over the targets' translations"
         )
     with ProgressBars() as bars:
-        uncertainty = pose_uncertainty(result, mc=mc, seed=seed, progress=bars.draws)
+        uncertainty = pose_uncertainty(
+            result, mc=mc, seed=seed, progress=bars.draws, between=between
+        )
     quality = quality_checks(result, session_thresholds(result.session, overrides))
     written = write_results(
         result, out_dir, overwrite=overwrite, uncertainty=uncertainty, quality=quality, twin=twin
@@ -286,5 +296,12 @@ def shared_summary(uncertainty: PoseUncertainty) -> list[str]:
     for name, cols in (("conventional", slice(0, 6)), ("corrected", slice(6, 12))):
         lines.append(f"    {name:12} common {rms(common[:, cols])}")
         lines.append(f"    {'':12} own    {rms(own[:, cols])}")
-    lines.append("  covariance between targets: covariance.csv")
+    if uncertainty.between_covariance is not None:
+        lines.append("  covariance between targets: covariance.csv")
+    else:
+        m = len(common)
+        lines.append(
+            f"  covariance between targets: not written for {m} targets "
+            f"({m * (m + 1) // 2:,} pairs); --covariance writes covariance.csv"
+        )
     return lines

@@ -118,10 +118,10 @@ class PoseUncertainty:
         carries, and the part of its own (its own step and its references);
         ``u^2 = common^2 + own^2``. By linear propagation; with Monte Carlo the linear
         shares of the variance applied to the Monte Carlo u.
-    between_covariance : ndarray, shape (12, M, M)
+    between_covariance : ndarray, shape (12, M, M), or None
         Covariance of each output between every pair of targets (mm^2, deg^2): the
         linear one; with Monte Carlo the linear correlations times the Monte Carlo u.
-        Its diagonal is ``u^2``.
+        Its diagonal is ``u^2``. None when not computed (``between``).
     repeats : tuple of RepeatCheck
         The scatter of repeated O and R0 against their claimed uncertainty.
     """
@@ -417,11 +417,17 @@ def pose_chain(result: ProcessResult) -> PoseChain:
     )
 
 
+#: the most targets whose covariance between every pair is computed (and written to
+#: covariance.csv) unless asked for: M (M + 1) / 2 rows
+BETWEEN_MAX_TARGETS = 200
+
+
 def pose_uncertainty(
     result: ProcessResult,
     mc: int = 0,
     seed: int = 0,
     progress: Callable[[int, int], None] | None = None,
+    between: bool | None = None,
 ) -> PoseUncertainty:
     """Standard uncertainties of the conventional and corrected poses of every target.
 
@@ -436,6 +442,9 @@ def pose_uncertainty(
         Seed of the Monte Carlo generator (``numpy.random.default_rng``).
     progress : callable, optional
         ``progress(draws_done, draws)`` during the Monte Carlo draws.
+    between : bool, optional
+        Whether to compute the covariance between every pair of targets (M^2: 120 MB
+        of CSV for 1000 targets); default: up to :data:`BETWEEN_MAX_TARGETS` targets.
 
     Returns
     -------
@@ -460,7 +469,9 @@ def pose_uncertainty(
         method, draws = "monte-carlo", int(mc)
         drawn = "centres" if sampler is None else "points"
     u = np.sqrt(np.clip(np.diagonal(covariance, axis1=1, axis2=2), 0.0, None))
-    common_u, own_u, between = shared_parts(jacobian, centres.cov_mm2, u)
+    if between is None:
+        between = len(result.correction.target_index) <= BETWEEN_MAX_TARGETS
+    common_u, own_u, pairs = shared_parts(jacobian, centres.cov_mm2, u, linear, between)
     return PoseUncertainty(
         conventional_u=u[:, :6],
         corrected_u=u[:, 6:],
@@ -473,7 +484,7 @@ def pose_uncertainty(
         drawn=drawn,
         common_u=common_u,
         own_u=own_u,
-        between_covariance=between,
+        between_covariance=pairs,
         repeats=repeat_checks(result, centres.cov_mm2),
     )
 
@@ -488,10 +499,16 @@ def joint_pose_covariance(result: ProcessResult, corrected: bool = True) -> Floa
 
 
 def shared_parts(
-    jacobian: TargetJacobian, centre_cov_mm2: FloatArray, u: FloatArray
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Common and own parts of the standard uncertainties ``u`` (M, 12), and the
-    covariance (12, M, M) of each output between the targets.
+    jacobian: TargetJacobian,
+    centre_cov_mm2: FloatArray,
+    u: FloatArray,
+    linear: FloatArray | None = None,
+    between: bool = True,
+) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+    """Common and own parts of the standard uncertainties ``u`` (M, 12), and (with
+    ``between``) the covariance (12, M, M) of each output between the targets.
+
+    ``linear`` is ``jacobian.covariance(centre_cov_mm2)`` when the caller has it.
 
     The linear propagation splits each variance by source: O and R0, measured once
     and carried by every target (common), and the target's own step and references
@@ -499,8 +516,9 @@ def shared_parts(
     linear u unless ``u`` comes from Monte Carlo), and so are the linear correlations
     between targets: ``common^2 + own^2 = u^2`` and the covariance's diagonal is ``u^2``.
     """
-    between = jacobian.between_targets(centre_cov_mm2)  # (12, M, M)
-    total = np.diagonal(between, axis1=1, axis2=2).T  # (M, 12)
+    if linear is None:
+        linear = jacobian.covariance(centre_cov_mm2)
+    total = np.diagonal(linear, axis1=1, axis2=2)  # (M, 12)
     common = np.diagonal(
         jacobian.covariance(centre_cov_mm2, jacobian.common_parts), axis1=1, axis2=2
     )
@@ -509,5 +527,7 @@ def shared_parts(
     lin_u = np.sqrt(np.clip(total.T, 0.0, None))  # (12, M)
     with np.errstate(invalid="ignore", divide="ignore"):
         scale = np.where(lin_u > 0, u.T / np.where(lin_u > 0, lin_u, 1.0), 0.0)
-    between = between * scale[:, :, None] * scale[:, None, :]
-    return u * np.sqrt(share), u * np.sqrt(1.0 - share), between
+    pairs = None
+    if between:
+        pairs = jacobian.between_targets(centre_cov_mm2) * scale[:, :, None] * scale[:, None, :]
+    return u * np.sqrt(share), u * np.sqrt(1.0 - share), pairs

@@ -1,0 +1,60 @@
+"""``process`` against its floor (a script, not a test; issue 16, item 5).
+
+Run with ``.venv/bin/python bench/floor.py [--targets 1000] [--pairs 7]``. The floor is
+what any script that processes the session must do anyway: start Python, import numpy
+and pandas, and read the measurement file with ``pandas.read_csv``. On the simulated
+points session of ``bench/speed.py`` (``--targets`` targets, 25 points per ball, cached
+in ``bench/.cache/``) it times, in alternating pairs (the machine's load moves both
+alike), the floor and ``hexatherm process DIR -o OUT --overwrite`` (reading, sphere
+fits, registration, correction, uncertainty, quality checks, writing, provenance), and
+prints every pair's ratio and their median. The issue's target is 1.5x.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from speed import CACHE, hexatherm_script, session  # noqa: E402
+
+
+def timed(command: list[str]) -> float:
+    start = time.perf_counter()
+    subprocess.run(command, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    return time.perf_counter() - start
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--targets", type=int, default=1000)
+    parser.add_argument("--pairs", type=int, default=7)
+    args = parser.parse_args()
+    folder = session(args.targets, "points")
+    measurement = [p for p in folder.glob("*.csv") if p.name != "temperatures.csv"]
+    assert measurement, f"no measurement CSV in {folder}"
+    points = measurement[0]
+    floor = [sys.executable, "-c", f"import numpy, pandas; pandas.read_csv({str(points)!r})"]
+    ours = [*hexatherm_script(), "process", str(folder), "-o", str(CACHE / "floor-out")]
+    ours.append("--overwrite")
+    timed(ours)  # warm the file cache and write the output once
+    pairs = []
+    for _ in range(args.pairs):
+        t_floor, t_ours = timed(floor), timed(ours)
+        pairs.append((t_floor, t_ours))
+    print(f"process against its floor, {args.targets} targets ({points.name}), {len(pairs)} pairs")
+    print(f"{'floor (s)':>10} {'process (s)':>12} {'ratio':>7}")
+    for t_floor, t_ours in pairs:
+        print(f"{t_floor:10.3f} {t_ours:12.3f} {t_ours / t_floor:7.2f}")
+    ratios = [b / a for a, b in pairs]
+    median = statistics.median(ratios)
+    print(f"median ratio {median:.2f} (min {min(ratios):.2f}, max {max(ratios):.2f})")
+
+
+if __name__ == "__main__":
+    main()
