@@ -85,7 +85,7 @@ def command(
     from hexatherm.io.outputs import check_output_settled, write_output_file
     from hexatherm.workflows.process.pipeline import Checks, process_session
     from hexatherm.workflows.process.quality import parse_threshold, session_thresholds
-    from hexatherm.workflows.report import build_report
+    from hexatherm.workflows.report import Verdict, build_report, verdict_items
 
     check_draws(mc)
     overrides = dict(parse_threshold(t) for t in quality_thresholds)
@@ -104,6 +104,7 @@ def command(
         )
     for warning in result.warnings:
         echo_err(f"warning: {warning}")
+    verdicts: list[Verdict] = []
     with ProgressBars() as bars:
         page = build_report(
             result,
@@ -112,6 +113,10 @@ def command(
             session_thresholds(result.session, overrides),
             progress=bars.draws,
             coverage_factor=coverage_factor,
+            on_verdict=verdicts.append,
         )
     write_output_file(out_file, page, inputs=inputs, overwrite=overwrite)
+    for summary in verdicts:  # the page's verdict, on the screen too
+        for head, text in verdict_items(summary):
+            click.echo(f"{head}{'' if text.startswith('(') else ':'} {text}")
     echo_err(f"wrote {out_file}")

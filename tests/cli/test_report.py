@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import base64
+import html
 import re
 import shutil
 from pathlib import Path
@@ -66,7 +67,7 @@ def test_report_refuses_to_overwrite_unless_asked(session, tmp_path, monkeypatch
     # that the options reach the report
     calls = []
 
-    def fake_report(result, mc, seed, thresholds, progress=None, coverage_factor=2.0):
+    def fake_report(result, mc, seed, thresholds, progress=None, coverage_factor=2.0, **_):
         calls.append(
             (result.interpolation, mc, seed, thresholds.registration_rms_um, coverage_factor)
         )
@@ -128,3 +129,14 @@ def test_report_is_listed_by_help():
     result = run("--help")
     assert result.exit_code == 0 and "report" in result.output
     assert "Write an HTML report of a session with figures." in result.output
+
+
+def test_report_prints_the_pages_verdict(session, tmp_path):
+    result = run("report", session, "-o", tmp_path / "r.html")
+    assert result.exit_code == 0, result.output
+    page = (tmp_path / "r.html").read_text(encoding="utf-8")
+    lines = result.stdout.splitlines()
+    assert lines[0].startswith("Targets: 10;")
+    deviation = next(line for line in lines if line.startswith("Largest corrected deviation"))
+    text = deviation.split(": ", 1)[1]
+    assert html.escape(text) in page  # the same words as the page's verdict block

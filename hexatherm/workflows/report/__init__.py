@@ -62,6 +62,7 @@ from hexatherm.workflows.report.html import (
     provenance_block,
     report_html,
     verdict_html,
+    verdict_items,
 )
 from hexatherm.workflows.report.page import (
     STYLE,
@@ -99,6 +100,7 @@ __all__ = [
     "unit_text",
     "verdict",
     "verdict_html",
+    "verdict_items",
     "CONVENTIONAL_COLOUR",
     "CORRECTED_COLOUR",
     "DEVIATION_UNITS",

@@ -113,8 +113,9 @@ def _steps_text(steps: list[tuple[str, str]]) -> str:
     return "; ".join(f"{label} ({checks})" for label, checks in steps)
 
 
-def verdict_html(summary: Verdict) -> str:
-    """The verdict block (see :class:`~hexatherm.workflows.report.verdict.Verdict`)."""
+def verdict_items(summary: Verdict) -> list[tuple[str, str]]:
+    """The verdict as ``(heading, text)`` items, plain text: the page prints them in its
+    verdict block, ``report`` on the screen."""
     k = summary.coverage_factor
     n_fail = len(summary.failing_targets)
     if not summary.quality_ran:
@@ -127,28 +128,42 @@ def verdict_html(summary: Verdict) -> str:
             f"(marked {FAIL_MARK.strip()} in every table, shaded in the pose figure): "
             + _steps_text(summary.failing_targets)
         )
-    items = [
-        f"<b>Targets:</b> {summary.targets}; {_e(checks)}.",
-    ]
+    items = [("Targets", f"{summary.targets}; {checks}.")]
     if summary.failing_other:
         items.append(
-            "<b>Origin and references failing a check:</b> "
-            + _e(_steps_text(summary.failing_other))
-            + "."
+            ("Origin and references failing a check", _steps_text(summary.failing_other) + ".")
         )
     items += [
-        "<b>Largest corrected deviation from the commanded pose:</b> translation "
-        + _e(_extreme_text(summary.deviation_um, "um", k))
-        + "; rotation "
-        + _e(_extreme_text(summary.deviation_urad, "urad", k))
-        + ".",
-        "<b>Thermal correction</b> (largest |corrected \u2212 conventional|): translation "
-        + _e(_extreme_text(summary.correction_um, "um", k))
-        + "; rotation "
-        + _e(_extreme_text(summary.correction_urad, "urad", k))
-        + ".",
-        f"<b>Uncertainty:</b> {_e(summary.basis)}; expanded uncertainty U = k\u00b7u with "
-        f"coverage factor k = {_e(exact(k))} wherever U or error bars appear.",
+        (
+            "Largest corrected deviation from the commanded pose",
+            "translation "
+            + _extreme_text(summary.deviation_um, "um", k)
+            + "; rotation "
+            + _extreme_text(summary.deviation_urad, "urad", k)
+            + ".",
+        ),
+        (
+            "Thermal correction",
+            "(largest |corrected \u2212 conventional|): translation "
+            + _extreme_text(summary.correction_um, "um", k)
+            + "; rotation "
+            + _extreme_text(summary.correction_urad, "urad", k)
+            + ".",
+        ),
+        (
+            "Uncertainty",
+            f"{summary.basis}; expanded uncertainty U = k\u00b7u with coverage factor "
+            f"k = {exact(k)} wherever U or error bars appear.",
+        ),
+    ]
+    return items
+
+
+def verdict_html(summary: Verdict) -> str:
+    """The verdict block (see :class:`~hexatherm.workflows.report.verdict.Verdict`)."""
+    items = [
+        f"<b>{_e(head)}{'' if text.startswith('(') else ':'}</b> {_e(text)}"
+        for head, text in verdict_items(summary)
     ]
     cls = "verdict failed" if summary.failing_targets or summary.failing_other else "verdict"
     return (
@@ -200,6 +215,7 @@ def report_html(
     coverage_factor: float = 2.0,
     facts: RunFacts | None = None,
     generated: str | None = None,
+    on_verdict: Callable[[Verdict], None] | None = None,
 ) -> str:
     """The report page of a processed session (see the package's docstring).
 
@@ -218,6 +234,8 @@ def report_html(
         outside the command line: the page says "not run from the command line").
     generated : str, optional
         Generation time, ISO 8601 with UTC offset (default: now).
+    on_verdict : callable, optional
+        Called with the page's verdict (the command line prints it).
 
     Returns
     -------
@@ -229,6 +247,8 @@ def report_html(
     if facts is None:
         facts = current_run()
     summary = verdict(result, uncertainty, quality, coverage_factor)
+    if on_verdict is not None:
+        on_verdict(summary)
     failing = dict(summary.failing_targets + summary.failing_other)
     k_text = exact(coverage_factor)
     name = result.session.name
@@ -333,6 +353,7 @@ def build_report(
     thresholds: QualityLimits | None = None,
     progress: Callable[[int, int], None] | None = None,
     coverage_factor: float = 2.0,
+    on_verdict: Callable[[Verdict], None] | None = None,
 ) -> str:
     """The report page of ``result`` with its pose uncertainty and quality checks.
 
@@ -349,6 +370,8 @@ def build_report(
         ``progress(draws_done, draws)`` during Monte Carlo draws.
     coverage_factor : float
         ``k`` of the expanded uncertainties (> 0).
+    on_verdict : callable, optional
+        As :func:`report_html`.
     """
     from hexatherm.workflows.process.quality import quality_checks
     from hexatherm.workflows.process.uncertainty import pose_uncertainty
@@ -358,4 +381,5 @@ def build_report(
         uncertainty=pose_uncertainty(result, mc=mc, seed=seed, progress=progress),
         quality=quality_checks(result, thresholds),
         coverage_factor=coverage_factor,
+        on_verdict=on_verdict,
     )
