@@ -73,6 +73,11 @@ class CmmNoise:
     cap_angle_deg: float = 70.0
 
 
+#: quality limit names of earlier versions -> (the name now, the factor to it): a radius
+#: deviation limit is half the diameter deviation limit
+QUALITY_ALIASES: dict[str, tuple[str, float]] = {"radius_dev_um": ("diameter_dev_um", 2.0)}
+
+
 @dataclass(frozen=True)
 class QualityLimits:
     """Limits of the quality checks (``--quality-threshold NAME=VALUE`` overrides one).
@@ -82,9 +87,11 @@ class QualityLimits:
     form_um : float
         Largest sphere form error (max - min residual) of a ball: about 4 sigma of
         the probing noise for 25 points, so 10 um holds CMMs of up to 2.5 um noise.
-    radius_dev_um : float
-        Largest deviation of a fitted radius from the nominal one (a wrong ball,
-        a missed probe compensation, a bad fit).
+    diameter_dev_um : float
+        Largest deviation of a fitted diameter from the nominal one (a wrong ball,
+        a missed probe compensation, a bad fit), as ``fits.csv``'s ``diameter_dev_um``.
+        The name ``radius_dev_um`` of earlier versions is read as half of it
+        (:data:`QUALITY_ALIASES`).
     distance_dev_um : float
         Largest deviation of an inter-ball distance from the balls file (``process``
         refuses a step beyond ``--distance-tolerance-um``, 50 um; this flags less).
@@ -101,7 +108,7 @@ class QualityLimits:
     """
 
     form_um: float = 10.0
-    radius_dev_um: float = 10.0
+    diameter_dev_um: float = 20.0
     distance_dev_um: float = 10.0
     registration_rms_um: float = 5.0
     time_gap_s: float = 600.0

@@ -45,7 +45,7 @@ quality_threshold_option = click.option(
     multiple=True,
     metavar="NAME=VALUE",
     help="Change a quality check's limit (repeatable; over the session file's quality: "
-    "mapping): form_um, radius_dev_um, distance_dev_um, registration_rms_um, time_gap_s, "
+    "mapping): form_um, diameter_dev_um, distance_dev_um, registration_rms_um, time_gap_s, "
     "temperature_change_C, min_rcond; inf (0 for min_rcond) disables a check.",
 )
 #: the largest number of Monte Carlo draws (the draws of every centre are held at once)

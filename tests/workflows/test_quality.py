@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 
 from hexatherm.core.plan import Plan
-from hexatherm.errors import HexathermError, InputError
+from hexatherm.errors import HexathermError, InputError, InputWarning
 from hexatherm.io.config import read_session
 from hexatherm.session import QualityLimits
 from hexatherm.workflows.process.pipeline import process_session
@@ -81,7 +81,7 @@ def test_good_session_passes_every_check(tmp_path):
     # every value is there: points (form, radius), temperatures, targets
     targets = frame["kind"] == "target"
     assert (
-        frame[["form_um", "radius_dev_um", "distance_dev_um", "registration_rms_um"]]
+        frame[["form_um", "diameter_dev_um", "distance_dev_um", "registration_rms_um"]]
         .notna()
         .all()
         .all()
@@ -102,10 +102,24 @@ def test_form_error(tmp_path):
     assert failing(s) == {"form": ["S2"]}
 
 
-def test_radius_deviation(tmp_path):
+def test_diameter_deviation(tmp_path):
     s = session(tmp_path / "s")
-    replace_in(s / "balls.yaml", "diameter: 25.4", "diameter: 25.45")  # a 25 um wrong radius
-    assert failing(s) == {"radius": ["O", "R0", "S1", "R1", "S2", "R2", "S3", "R3"]}
+    replace_in(s / "balls.yaml", "diameter: 25.4", "diameter: 25.45")  # a 50 um wrong diameter
+    assert failing(s) == {"diameter": ["O", "R0", "S1", "R1", "S2", "R2", "S3", "R3"]}
+    # the check reads as fits.csv: fitted minus nominal diameter, not half of it
+    frame = quality_checks(process_session(s)).frame
+    assert frame["diameter_dev_um"].abs().min() > 40.0
+
+
+def test_a_radius_limit_of_old_is_read_as_the_diameter_limit(tmp_path):
+    s = session(tmp_path / "s")
+    text = (s / "session.yaml").read_text()
+    (s / "session.yaml").write_text(text + "quality: {radius_dev_um: 7}\n")
+    with pytest.warns(InputWarning, match="read as diameter_dev_um: 14"):
+        thresholds = session_thresholds(process_session(s).session)
+    assert thresholds.diameter_dev_um == 14.0
+    with pytest.warns(InputWarning, match="diameter_dev_um=10"):
+        assert parse_threshold("radius_dev_um=5") == ("diameter_dev_um", 10.0)
 
 
 def test_inter_ball_distance_and_registration(tmp_path):
@@ -155,8 +169,8 @@ def test_fgm_conditioning(tmp_path):
 
 def test_centres_session_skips_the_sphere_checks(tmp_path):
     frame = quality_checks(process_session(session(tmp_path / "s", output="centres"))).frame
-    assert frame["form_um"].isna().all() and frame["radius_dev_um"].isna().all()
-    assert (frame["ok_form"] == "na").all() and (frame["ok_radius"] == "na").all()
+    assert frame["form_um"].isna().all() and frame["diameter_dev_um"].isna().all()
+    assert (frame["ok_form"] == "na").all() and (frame["ok_diameter"] == "na").all()
 
 
 def test_thresholds_parse_and_refuse():

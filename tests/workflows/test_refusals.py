@@ -445,7 +445,7 @@ def test_a_check_that_could_not_run_says_na(session):
     assert any("no thermocouple log in the session" in w for w in result.warnings)
     report = quality_checks(result)
     frame = report.frame
-    for check in ("form", "radius", "temperature"):  # centres file, no log
+    for check in ("form", "diameter", "temperature"):  # centres file, no log
         assert (frame[f"ok_{check}"] == "na").all(), check
         assert not report.ran(check).any() and not report.failing(check).any()
     targets = frame["kind"] == "target"

@@ -4,15 +4,17 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import warnings
 from pathlib import Path
 from typing import Any
 
+from hexatherm.errors import InputWarning
 from hexatherm.io.config.balls import read_balls
 from hexatherm.io.config.hexapod import read_hexapod
 from hexatherm.io.config.plan import read_plan
 from hexatherm.io.config.yamlout import _dump
 from hexatherm.io.yamlfile import YamlDoc
-from hexatherm.session import CmmNoise, QualityLimits, Session
+from hexatherm.session import QUALITY_ALIASES, CmmNoise, QualityLimits, Session
 
 SESSION_FORMAT = "hexatherm-session/1"
 
@@ -117,7 +119,8 @@ def _read_quality(doc: YamlDoc) -> dict[str, float]:
     ``.inf`` turns a check off, as does 0 for ``min_rcond``)."""
     if doc.get("quality", default=None) is None:
         return {}
-    doc.check_keys([f.name for f in dataclasses.fields(QualityLimits)], "quality")
+    names = [f.name for f in dataclasses.fields(QualityLimits)]
+    doc.check_keys([*names, *QUALITY_ALIASES], "quality")
     limits = {}
     for name in doc.get("quality"):
         value = doc.get("quality", name)
@@ -125,6 +128,20 @@ def _read_quality(doc: YamlDoc) -> dict[str, float]:
             raise doc.error(
                 f"expected a number >= 0 (.inf turns the check off), got {value!r}", "quality", name
             )
+        if name in QUALITY_ALIASES:
+            new, factor = QUALITY_ALIASES[name]
+            if new in doc.get("quality"):
+                raise doc.error(
+                    f"give {new} or {name} (its half, of old), not both", "quality", name
+                )
+            warnings.warn(
+                InputWarning(
+                    f"{doc.path}:{doc.line('quality', name)}: quality.{name} is a radius limit; "
+                    f"read as {new}: {float(value) * factor:g} (the check compares diameters now)"
+                ),
+                stacklevel=2,
+            )
+            name, value = new, float(value) * factor
         limits[name] = float(value)
     return limits
 

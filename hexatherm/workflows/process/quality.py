@@ -11,8 +11,8 @@ check           value                      fails when
 ==============  =========================  ===============================================
 form            ``form_um``                largest sphere form error (max - min residual)
                                            of the step's balls > ``form_um``
-radius          ``radius_dev_um``          fitted radius - nominal (the ball of largest
-                                           deviation, signed), ``|.|`` > ``radius_dev_um``
+diameter        ``diameter_dev_um``        fitted diameter - nominal (the ball of largest
+                                           deviation, signed), ``|.|`` > ``diameter_dev_um``
 distance        ``distance_dev_um``        measured - nominal inter-ball distance (the
                                            worst pair, signed), ``|.|`` > ``distance_dev_um``
 registration    ``registration_rms_um``    registration RMS residual > ``registration_rms_um``
@@ -28,6 +28,7 @@ conditioning    ``jacobian_rcond``         reciprocal condition number of the Ja
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -35,8 +36,8 @@ import numpy as np
 import pandas as pd
 
 from hexatherm.core.registration import check_distances
-from hexatherm.errors import HexathermError
-from hexatherm.session import QualityLimits, Session
+from hexatherm.errors import HexathermError, InputWarning
+from hexatherm.session import QUALITY_ALIASES, QualityLimits, Session
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.measured import check_log_span, nominal_fit_diameter_mm
 from hexatherm.workflows.process.pipeline import ProcessResult
@@ -50,7 +51,7 @@ NA = "na"
 #: check name -> (value column, threshold field, value must be at least the threshold)
 CHECKS: dict[str, tuple[str, str, bool]] = {
     "form": ("form_um", "form_um", False),
-    "radius": ("radius_dev_um", "radius_dev_um", False),
+    "diameter": ("diameter_dev_um", "diameter_dev_um", False),
     "distance": ("distance_dev_um", "distance_dev_um", False),
     "registration": ("registration_rms_um", "registration_rms_um", False),
     "time_gap": ("time_gap_s", "time_gap_s", False),
@@ -137,7 +138,7 @@ def _why_not(check: str, frame: pd.DataFrame) -> str:
         return "no target"
     reasons = {
         "form": "no probed points, centres given as such",
-        "radius": "no fitted diameters, centres given as such",
+        "diameter": "no fitted diameters, centres given as such",
         "temperature": "no thermocouple log in the session",
     }
     return reasons.get(check, "no value")
@@ -156,6 +157,9 @@ def parse_threshold(text: str) -> tuple[str, float]:
     names = [f.name for f in dataclasses.fields(QualityLimits)]
     name, sep, value = text.partition("=")
     name = name.strip()
+    factor = 1.0
+    if name in QUALITY_ALIASES:
+        name, factor = QUALITY_ALIASES[name]
     if not sep:
         raise HexathermError(
             f"--quality-threshold {text!r}: expected NAME=VALUE, NAME one of {', '.join(names)}"
@@ -175,7 +179,15 @@ def parse_threshold(text: str) -> tuple[str, float]:
         raise HexathermError(
             f"--quality-threshold {text!r}: must be a number >= 0 (inf disables a limit)"
         )
-    return name, number
+    if factor != 1.0:
+        warnings.warn(
+            InputWarning(
+                f"--quality-threshold {text!r}: a radius limit; read as {name}="
+                f"{number * factor:g} (the check compares diameters now)"
+            ),
+            stacklevel=2,
+        )
+    return name, number * factor
 
 
 def _signed_worst(values: FloatArray) -> FloatArray:
@@ -192,7 +204,7 @@ def _row_max(values: FloatArray) -> FloatArray:
 
 
 def _ball_values(result: ProcessResult) -> tuple[FloatArray, FloatArray]:
-    """Form error (um) and radius deviation (um) of every step and ball (NaN: unknown)."""
+    """Form error (um) and diameter deviation (um) of every step and ball (NaN: unknown)."""
     plan, balls = result.session.plan, result.session.balls
     step_index = {label: i for i, label in enumerate(plan.labels)}
     # a repeated O or R0 (averaged into one step): the worst of its measurements
@@ -200,7 +212,7 @@ def _ball_values(result: ProcessResult) -> tuple[FloatArray, FloatArray]:
     ball_index = {name: j for j, name in enumerate(balls.names)}
     nominal_mm = nominal_fit_diameter_mm(balls)
     shape = (len(plan.labels), len(balls.names))
-    form, radius = np.full(shape, np.nan), np.full(shape, np.nan)
+    form, diameter = np.full(shape, np.nan), np.full(shape, np.nan)
     for rec in result.records:
         si = np.array([step_index[s] for s in rec.label], dtype=np.intp)
         bi = np.array([ball_index[b] for b in rec.ball], dtype=np.intp)
@@ -208,11 +220,11 @@ def _ball_values(result: ProcessResult) -> tuple[FloatArray, FloatArray]:
             values = pd.to_numeric(pd.Series(rec.extra["form_um"]), errors="coerce").to_numpy()
             np.fmax.at(form, (si, bi), values)
         if rec.diameter_mm is not None:
-            dev = (rec.diameter_mm - nominal_mm[bi]) / 2 * 1e3
+            dev = (rec.diameter_mm - nominal_mm[bi]) * 1e3
             for i, j, value in zip(si, bi, dev, strict=True):
-                if not abs(radius[i, j]) >= abs(value):  # NaN or smaller: the worse one
-                    radius[i, j] = value
-    return form, radius
+                if not abs(diameter[i, j]) >= abs(value):  # NaN or smaller: the worse one
+                    diameter[i, j] = value
+    return form, diameter
 
 
 def _leg_temperatures(result: ProcessResult) -> FloatArray | None:
@@ -243,11 +255,11 @@ def quality_checks(result: ProcessResult, thresholds: QualityLimits | None = Non
     plan, balls, corr = session.plan, session.balls, result.correction
     n = len(plan.labels)
     targets = corr.target_index
-    form, radius = _ball_values(result)
+    form, diameter = _ball_values(result)
     distances = check_distances(result.centres.centres_mm, balls.centres_mm, balls.names)
     values: dict[str, FloatArray] = {
         "form_um": _row_max(form),
-        "radius_dev_um": _signed_worst(radius),
+        "diameter_dev_um": _signed_worst(diameter),
         "distance_dev_um": _signed_worst(distances.deviation_mm * 1e3),
         "registration_rms_um": np.asarray(result.registration.rms_um, dtype=float),
     }

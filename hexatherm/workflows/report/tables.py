@@ -43,7 +43,7 @@ FAIL_MARK = " \u2717"
 #: the quality checks' columns as the report heads them, with their unit
 QUALITY_HEADS = {
     "form_um": ("form", "um"),
-    "radius_dev_um": ("radius deviation", "um"),
+    "diameter_dev_um": ("diameter deviation", "um"),
     "distance_dev_um": ("distance deviation", "um"),
     "registration_rms_um": ("registration RMS", "um"),
     "time_gap_s": ("time gap", "s"),
