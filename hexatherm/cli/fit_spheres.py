@@ -29,10 +29,22 @@ from hexatherm.io.files import ReadOptions
     help="Centres CSV to write [default: standard output].",
 )
 @click.option(
-    "--fixed-diameter",
+    "--diameter-mm",
+    "fixed_diameter",
     type=CheckedFloat(min=0, min_open=True),
     default=None,
-    help="Fix the sphere diameter (mm) instead of fitting it: better on small caps.",
+    metavar="MM",
+    help="Fix the sphere diameter to MM instead of fitting it: better on small caps "
+    "(elsewhere --fixed-diameter is a flag that takes the balls file's diameters; "
+    "fit-spheres has no balls file).",
+)
+@click.option(
+    "--fixed-diameter",
+    "old_fixed_diameter",
+    type=CheckedFloat(min=0, min_open=True),
+    default=None,
+    hidden=True,
+    help="The earlier name of --diameter-mm.",
 )
 @overwrite_option
 @reading_options
@@ -41,6 +53,7 @@ def command(
     points: tuple[Path, ...],
     out: Path | None,
     fixed_diameter: float | None,
+    old_fixed_diameter: float | None,
     overwrite: bool,
     reading: ReadOptions,
 ) -> None:
@@ -50,6 +63,11 @@ def command(
     then diameter, form_um (max-min residual), n and u_um (standard uncertainty
     of the centre from the residuals).
     """
+    if old_fixed_diameter is not None:
+        if fixed_diameter is not None:
+            raise click.UsageError("give --diameter-mm (the name of --fixed-diameter now) once")
+        echo_err("warning: fit-spheres --fixed-diameter MM is now --diameter-mm MM")
+        fixed_diameter = old_fixed_diameter
     import numpy as np
 
     from hexatherm.io.csvfile import centres_to_csv

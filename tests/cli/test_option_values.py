@@ -77,7 +77,7 @@ PLAN = [
         [
             "fit-spheres",
             ROOT / "sessions" / "paper-zero-pose-dmis" / "points.dmo",
-            "--fixed-diameter",
+            "--diameter-mm",
             "nan",
         ],
         ["report", SESSION, "--mc", "1"],

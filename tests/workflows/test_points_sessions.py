@@ -79,7 +79,7 @@ def test_uncompensated_points_fit_ball_plus_tip(tmp_path):
 
 def test_fit_spheres_fixed_diameter_and_stdout(tmp_path):
     make_session(tmp_path / "s", output="points", n_targets=1, point_noise_mm=1e-3)
-    result = run("fit-spheres", tmp_path / "s" / "points.csv", "--fixed-diameter", "25.4")
+    result = run("fit-spheres", tmp_path / "s" / "points.csv", "--diameter-mm", "25.4")
     assert result.exit_code == 0
     table = pd.read_csv(__import__("io").StringIO(result.stdout))
     assert list(table.columns) == [
@@ -216,3 +216,20 @@ def test_fit_spheres_shows_a_progress_bar_on_the_general_dmis_reader(tmp_path):
     slow = run("fit-spheres", dmo, "-o", tmp_path / "slow.csv")
     assert slow.exit_code == 0 and "reading points.dmo" in slow.stderr
     assert (tmp_path / "slow.csv").read_text() == (tmp_path / "fast.csv").read_text()
+
+
+def test_fit_spheres_old_option_name_still_reads_with_a_warning(tmp_path):
+    make_session(tmp_path / "s", output="points", n_targets=1, point_noise_mm=1e-3)
+    new = run("fit-spheres", tmp_path / "s" / "points.csv", "--diameter-mm", "25.4")
+    old = run("fit-spheres", tmp_path / "s" / "points.csv", "--fixed-diameter", "25.4")
+    assert old.exit_code == 0 and "now --diameter-mm" in old.output
+    assert old.stdout == new.stdout
+    both = run(
+        "fit-spheres",
+        tmp_path / "s" / "points.csv",
+        "--diameter-mm",
+        "25.4",
+        "--fixed-diameter",
+        "25.4",
+    )
+    assert both.exit_code == 2
