@@ -144,6 +144,9 @@ class Session:
         the session (names of :class:`hexatherm.workflows.process.quality.QualityLimits`).
     config_files : tuple of Path
         The hexapod, balls and plan files the session file names.
+    utc_offset_s : float or None
+        The optional ``utc_offset:`` (seconds east of UTC) of the times that the
+        measurement and temperature files give without an offset (a CMM's local clock).
     """
 
     path: Path
@@ -156,6 +159,7 @@ class Session:
     cmm: CmmNoise | None = None
     quality: dict[str, float] = dataclasses.field(default_factory=dict)
     config_files: tuple[Path, ...] = ()
+    utc_offset_s: float | None = None
 
     def input_files(self) -> list[Path]:
         """Every file a run on this session reads: the session file, the hexapod, balls

@@ -40,3 +40,26 @@ def test_offsets_survive_processing_and_naive_times_stay_naive(tmp_path: Path) -
     assert pd.to_datetime(zoned["time"]).dt.tz is not None  # opens tz-aware in pandas
     legs = pd.read_csv(aware / "results" / "legs.csv")
     assert legs["time"].str.endswith("+00:00").all()
+
+
+def test_a_session_can_say_where_its_naive_times_were_taken(tmp_path: Path) -> None:
+    naive = tmp_path / "naive"
+    shutil.copytree(
+        ROOT / "sessions" / "paper-zero-pose", naive, ignore=shutil.ignore_patterns("results")
+    )
+    local = tmp_path / "local"
+    shutil.copytree(naive, local)
+    text = (local / "session.yaml").read_text()
+    (local / "session.yaml").write_text(text + 'utc_offset: "+01:00"\n')
+    for session in (naive, local):
+        result = CliRunner().invoke(main, ["process", str(session)])
+        assert result.exit_code == 0, result.output
+    plain = pd.read_csv(naive / "results" / "poses.csv")
+    zoned = pd.read_csv(local / "results" / "poses.csv")
+    instants = pd.to_datetime(zoned["time"], utc=True).dt.tz_localize(None)
+    assert (instants == pd.to_datetime(plain["time"]) - pd.Timedelta(hours=1)).all()
+    numbers = [c for c in plain.columns if c.endswith(("_mm", "_deg", "_um", "_urad"))]
+    pd.testing.assert_frame_equal(zoned[numbers], plain[numbers])  # one shift of every clock
+    (local / "session.yaml").write_text(text + "utc_offset: 1\n")
+    bad = CliRunner().invoke(main, ["process", str(local), "--overwrite"])
+    assert bad.exit_code == 1 and "field 'utc_offset'" in bad.output

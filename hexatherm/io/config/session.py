@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
 import warnings
 from pathlib import Path
 from typing import Any
@@ -38,6 +39,7 @@ def read_session(path: str | os.PathLike[str]) -> Session:
             "cmm",
             "quality",
             "pose_check",
+            "utc_offset",
         ]
     )
     name = doc.string("name", default=path.parent.name)
@@ -74,6 +76,7 @@ def read_session(path: str | os.PathLike[str]) -> Session:
         _read_cmm(doc),
         _read_quality(doc),
         config_files,
+        _read_utc_offset(doc),
     )
 
 
@@ -112,6 +115,28 @@ def _read_pose_check(doc: YamlDoc) -> dict[str, Any] | None:
     if doc.get("pose_check", "offset", default=None) is not None:
         found["offset"] = doc.vector("pose_check", "offset", size=6)
     return found
+
+
+#: ``utc_offset:``: ``+HH:MM``, ``-HH:MM`` or ``Z``
+_UTC_OFFSET = re.compile(r"(?:Z|([+-])(\d\d):(\d\d))")
+
+
+def _read_utc_offset(doc: YamlDoc) -> float | None:
+    """The optional ``utc_offset:`` of a session file, in seconds east of UTC."""
+    value = doc.get("utc_offset", default=None)
+    if value is None:
+        return None
+    match = _UTC_OFFSET.fullmatch(value) if isinstance(value, str) else None
+    if match is None:
+        raise doc.error(
+            f"expected an offset as +HH:MM, -HH:MM or Z (quoted), got {value!r}", "utc_offset"
+        )
+    if match.group(1) is None:
+        return 0.0
+    hours, minutes = int(match.group(2)), int(match.group(3))
+    if hours > 14 or minutes > 59:
+        raise doc.error(f"no place on Earth is {value} from UTC", "utc_offset")
+    return (1.0 if match.group(1) == "+" else -1.0) * (hours * 3600 + minutes * 60)
 
 
 def _read_quality(doc: YamlDoc) -> dict[str, float]:

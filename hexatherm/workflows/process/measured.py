@@ -8,6 +8,7 @@ import dataclasses
 import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -278,6 +279,16 @@ def registration_weights(u_um: FloatArray, floor_um: float = 1e-3) -> FloatArray
     return weights
 
 
+_Timed = TypeVar("_Timed", Records, Temperatures)
+
+
+def _in_utc(source: _Timed, offset_s: float) -> _Timed:
+    """``source`` with its naive ISO times, read at ``offset_s`` east of UTC, made UTC."""
+    if source.time_kind != "iso" or source.time_aware is not False:
+        return source
+    return dataclasses.replace(source, time_s=source.time_s - offset_s, time_aware=True)
+
+
 def read_measured(
     session: Session,
     fixed_diameter_mm: float | None = None,
@@ -312,12 +323,17 @@ def read_measured(
                 rec if rec.kind == "centres" else fit_points(rec, session.balls, fixed_diameter_mm)
             )
             points.append(None if rec.kind == "centres" else rec)
+    if session.utc_offset_s is not None:  # the files' naive times are local: make them UTC
+        records = [_in_utc(r, session.utc_offset_s) for r in records]
+        points = [None if p is None else _in_utc(p, session.utc_offset_s) for p in points]
     centres = assemble_centres(records, session)
     temperatures = None
     if session.temperatures is not None:
         temperatures = read_temperatures(
             session.temperatures, allow_truncated=reading.allow_truncated
         )
+        if session.utc_offset_s is not None:
+            temperatures = _in_utc(temperatures, session.utc_offset_s)
         if temperatures.time_kind != centres.time_kind:
             raise InputError(
                 f"times are {temperatures.time_kind} here but "
