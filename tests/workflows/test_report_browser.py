@@ -58,11 +58,15 @@ def poppler(tool: str) -> str:
 @pytest.fixture(scope="module")
 def printed(tmp_path_factory):
     """(page HTML, [(width, height, [(x0, y0, x1, y1, word)])] per PDF page, pdfimages list)."""
+    return print_report(SESSION, tmp_path_factory.mktemp("browser"))
+
+
+def print_report(session: Path, folder: Path):
+    """The report of ``session`` printed by Chromium: as :func:`printed`."""
     chromium = browser()
     if chromium is None:
         pytest.skip("no Chromium (apt-get install -y chromium poppler-utils)")
-    folder = tmp_path_factory.mktemp("browser")
-    page = build_report(process_session(SESSION))
+    page = build_report(process_session(session))
     (folder / "report.html").write_text(page, encoding="utf-8")
     pdf = folder / "report.pdf"
     subprocess.run(
@@ -171,3 +175,29 @@ def test_every_figure_is_embedded_with_data_and_printed(printed):
     rows = [line.split() for line in images.splitlines()[2:] if line.strip()]
     printed_sizes = [(int(r[3]), int(r[4])) for r in rows if r[2] == "image"]
     assert sorted(printed_sizes) == sorted(sizes)
+
+
+OTHER_SESSIONS = sorted(
+    p.parent.name for p in (ROOT / "sessions").glob("*/expected") if p.parent.name != SESSION.name
+)
+
+
+@pytest.mark.parametrize("name", OTHER_SESSIONS)
+def test_every_shipped_sessions_report_prints_its_pose_columns_on_a4(name, tmp_path):
+    """The other shipped sessions, lighter: A4, nothing off the paper, every pose column
+    head of both tables and every corrected Tx of poses.csv in the PDF's text."""
+    _, pages, _ = print_report(ROOT / "sessions" / name, tmp_path)
+    words = [w[4] for _, _, page in pages for w in page]
+    for width, height, page_words in pages:
+        assert (width, height) == pytest.approx(A4_PT, abs=1.0)
+        for x0, y0, x1, y1, word in page_words:
+            assert 0 <= x0 and x1 <= width and 0 <= y0 and y1 <= height, word
+    text = " ".join(words)
+    for which in ("conventional", "corrected"):
+        assert f"{which} − commanded" in text
+    for axis in ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz"):
+        assert words.count(axis) >= 2, axis  # a deviation column in each table
+    poses = pd.read_csv(ROOT / "sessions" / name / "expected" / "poses.csv")
+    texts = [f"{v:.3f}" for v in poses["dTx_corr_um"]]
+    texts = [t[1:] if t.startswith("-") and float(t) == 0 else t for t in texts]
+    assert not [t for t in texts if t not in set(words)]
