@@ -325,8 +325,13 @@ class ResidualSummary:
         return self.tests[6:]
 
 
-def _rms(x: FloatArray, axis: int | None = None) -> FloatArray:
-    return np.sqrt(np.mean(np.square(x), axis=axis))
+def rms(x: npt.ArrayLike, axis: int | None = None) -> FloatArray:
+    """Root mean square of ``x`` (over ``axis``; all of it by default).
+
+    >>> rms([[3.0, 1.0], [4.0, 1.0]], axis=0).tolist()
+    [3.5355339059327378, 1.0]
+    """
+    return np.asarray(np.sqrt(np.mean(np.square(np.asarray(x, dtype=float)), axis=axis)))
 
 
 def summarize(
@@ -387,7 +392,7 @@ def summarize(
     for kind in [*STEP_KINDS, *sorted(set(kinds) - set(STEP_KINDS))]:
         sel = np.array([k == kind for k in kinds], dtype=bool)
         if sel.any():
-            kind_rms[kind] = float(_rms(step_rms[sel]))
+            kind_rms[kind] = float(rms(step_rms[sel]))
             kind_count[kind] = int(sel.sum())
 
     blocks = time_blocks(times, TIME_PARTS)
@@ -396,7 +401,7 @@ def summarize(
     for b in range(TIME_PARTS):
         sel = blocks == b
         if sel.any():
-            part_rms[b] = _rms(step_rms[sel])
+            part_rms[b] = rms(step_rms[sel])
             part_span[b] = times[sel].min(), times[sel].max()
 
     order_worst = np.argsort(-step_rms, kind="stable")[: max(0, n_worst)]
@@ -423,10 +428,10 @@ def summarize(
 
     return ResidualSummary(
         n_steps=n,
-        centre_rms_um=float(_rms(step_rms)) if n else float("nan"),
-        component_rms=_rms(pose, axis=0),
+        centre_rms_um=float(rms(step_rms)) if n else float("nan"),
+        component_rms=rms(pose, axis=0),
         component_mean=pose.mean(axis=0),
-        leg_rms_um=_rms(legs, axis=0),
+        leg_rms_um=rms(legs, axis=0),
         leg_mean_um=legs.mean(axis=0),
         kind_rms_um=kind_rms,
         kind_count=kind_count,

@@ -29,10 +29,11 @@ import pandas as pd
 
 from hexatherm import __version__
 from hexatherm.core.calibration import PARAMETER_NAMES, PARAMETER_UNITS
+from hexatherm.core.residuals import rms
 from hexatherm.io.config import hexapod_to_yaml
 from hexatherm.io.provenance import now_iso
 from hexatherm.workflows.calibrate.report import StrokeMap, report_html, stroke_map
-from hexatherm.workflows.calibrate.run import Calibration, rms
+from hexatherm.workflows.calibrate.run import Calibration
 from hexatherm.workflows.process.outputs import to_csv_text
 
 COMPONENTS = ("dTx_um", "dTy_um", "dTz_um", "dRx_urad", "dRy_urad", "dRz_urad")
@@ -140,14 +141,14 @@ def calibration_json(run: Calibration, stroke: StrokeMap | None = None) -> str:
         ],
         "predicted_sigma_at_targets_um_urad": {
             "worst": dict(zip(COMPONENTS, map(float, sigma.max(axis=0)), strict=True)),
-            "rms": dict(zip(COMPONENTS, map(float, rms(sigma)), strict=True)),
+            "rms": dict(zip(COMPONENTS, map(float, rms(sigma, axis=0)), strict=True)),
         },
         "residual_rms_um_urad": {
             "nominal": dict(
-                zip(COMPONENTS, map(float, rms(run.residuals_before_um_urad)), strict=True)
+                zip(COMPONENTS, map(float, rms(run.residuals_before_um_urad, axis=0)), strict=True)
             ),
             "calibrated": dict(
-                zip(COMPONENTS, map(float, rms(run.residuals_after_um_urad)), strict=True)
+                zip(COMPONENTS, map(float, rms(run.residuals_after_um_urad, axis=0)), strict=True)
             ),
             "calibrated_heldout": run.heldout,
         },
@@ -202,11 +203,12 @@ def summary_lines(run: Calibration) -> list[str]:
     after = "held out" if run.heldout else "in sample"
     lines.append(f"{'RMS':10} " + " ".join(f"{c:>9}" for c in COMPONENTS))
     lines.append(
-        f"{'nominal':10} " + " ".join(f"{v:9.3f}" for v in rms(run.residuals_before_um_urad))
+        f"{'nominal':10} "
+        + " ".join(f"{v:9.3f}" for v in rms(run.residuals_before_um_urad, axis=0))
     )
     lines.append(
         f"{'calibrated':10} "
-        + " ".join(f"{v:9.3f}" for v in rms(run.residuals_after_um_urad))
+        + " ".join(f"{v:9.3f}" for v in rms(run.residuals_after_um_urad, axis=0))
         + f"   ({after})"
     )
     for a, b, rho in fit.high_correlations()[:5]:

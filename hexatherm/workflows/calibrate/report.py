@@ -21,9 +21,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from hexatherm.core.calibration import PARAMETER_UNITS
+from hexatherm.core.residuals import rms
 from hexatherm.io.provenance import current_run, now_iso
 from hexatherm.typing import FloatArray
-from hexatherm.workflows.calibrate.run import Calibration, rms
+from hexatherm.workflows.calibrate.run import Calibration
 from hexatherm.workflows.report.page import (
     Cell,
     figure_html,
@@ -141,7 +142,10 @@ def report_html(run: Calibration, stroke: StrokeMap, inputs: Sequence[Path], fol
     fit = run.fit
     obs = fit.observability
     k = COVERAGE_FACTOR
-    before, after = rms(run.residuals_before_um_urad), rms(run.residuals_after_um_urad)
+    before, after = (
+        rms(run.residuals_before_um_urad, axis=0),
+        rms(run.residuals_after_um_urad, axis=0),
+    )
     worst = stroke.worst_um_urad
     how = "chosen by BIC and held-out folds" if run.choice is not None else "forced"
     verdict = [

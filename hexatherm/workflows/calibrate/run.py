@@ -258,8 +258,3 @@ def calibrate_iterated(
         f"--iterate: the parameters still moved {moves[-1] * 1e3:.3g} um after {MAX_ROUNDS} "
         "rounds (expected: a fraction of a micrometre after the first)"
     )
-
-
-def rms(values: FloatArray) -> FloatArray:
-    """RMS per column."""
-    return np.asarray(np.sqrt(np.mean(np.asarray(values, float) ** 2, axis=0)), float)

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 
 from hexatherm.core.geometry import to_um_urad
+from hexatherm.core.residuals import rms
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.pipeline import ProcessResult
 from hexatherm.workflows.report.figures import (
@@ -252,11 +253,8 @@ def shared_parts_table_html(uncertainty: PoseUncertainty, coverage_factor: float
     own = coverage_factor * to_um_urad(uncertainty.own_u[:, 6:])
     total = coverage_factor * to_um_urad(uncertainty.corrected_u)
 
-    def rms(values: FloatArray) -> FloatArray:
-        return np.asarray(np.sqrt(np.mean(values**2, axis=0)), float)
-
     rows: list[list[Cell]] = [
-        [name, *(fixed(v, DEVIATION_UNITS[j]) for j, v in enumerate(rms(values)))]
+        [name, *(fixed(v, DEVIATION_UNITS[j]) for j, v in enumerate(rms(values, axis=0)))]
         for name, values in (
             ("common to all targets (O, R0)", common),
             ("own (the target, its references)", own),
