@@ -25,7 +25,7 @@ from hexatherm.cli.options import CheckedFloat, clean_errors, echo_err
 @click.option(
     "--tol-mm",
     type=CheckedFloat(min=0),
-    default=1e-7,
+    default=1.5e-7,
     show_default=True,
     help="Tolerance of columns in mm.",
 )
@@ -40,8 +40,9 @@ from hexatherm.cli.options import CheckedFloat, clean_errors, echo_err
 def command(sessions_dir: Path, update: bool, tol_mm: float, tol_deg: float) -> None:
     """Re-process every session of SESSIONS_DIR that has an expected/ folder.
 
-    Each output column is compared with expected/ (mm and deg as set, um and urad
-    1e-4, s 1e-6, others relative 1e-9). Prints one line per session with the
+    Each output column is compared with expected/ (mm and deg as set, um 1.5e-4,
+    urad 1.5e-3, C 1.5e-4, s 1e-6, others relative 1e-9: at least 1.5 steps of the
+    resolution the files are written at). Prints one line per session with the
     worst deviation per unit; exits 1 on any mismatch, naming session, file, row
     and column.
     """

@@ -43,6 +43,7 @@ import pandas as pd
 
 from hexatherm.core.plan import NAME_PATTERN
 from hexatherm.errors import InputError
+from hexatherm.io.csvout import csv_text
 from hexatherm.io.csvtext import complete_lines, csv_frame, read_text
 from hexatherm.io.records import RecordKind, Records, TimeKind, check_groups, seconds_to_iso
 
@@ -452,7 +453,8 @@ def _fast_measurement_csv(text: str, path: str, kind: RecordKind | None) -> Reco
 
 def centres_to_csv(records: Records) -> str:
     """Centres CSV text: the contract columns, then ``diameter`` and, when known, the
-    extension columns ``form_um``, ``n``, ``u_um`` (written by ``fit-spheres``)."""
+    extension columns ``form_um``, ``n``, ``u_um`` (written by ``fit-spheres``), at
+    the resolution of their unit (:mod:`hexatherm.io.csvout`)."""
     if records.time_kind == "iso":
         times: object = [seconds_to_iso(t) for t in records.time_s]
     else:
@@ -470,6 +472,4 @@ def centres_to_csv(records: Records) -> str:
     for column in ("form_um", "n", "u_um"):
         if column in records.extra:
             data[column] = records.extra[column]
-    buffer = io.StringIO()
-    pd.DataFrame(data).to_csv(buffer, index=False, lineterminator="\n")
-    return buffer.getvalue()
+    return csv_text(pd.DataFrame(data))

@@ -3,8 +3,9 @@
 Every session folder that holds an ``expected/`` folder is processed again with
 the default options; each CSV of ``expected/`` is compared with the new one:
 same columns, same rows, text cells equal, numbers within a tolerance chosen by
-the column's unit suffix (``_mm``, ``_deg``, ``_um``, ``_urad``, ``_s``; others
-relative 1e-9).
+the column's unit (:func:`~hexatherm.io.csvout.column_unit`: ``_mm``, ``_deg``,
+``_um``, ``_urad``, ``_um2``, ``_urad2``, ``_ppm``, ``_C``, ``_s``; others relative
+1e-9), at least 1.5 steps of the resolution the files are written at.
 """
 
 from __future__ import annotations
@@ -16,13 +17,31 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from hexatherm.io.csvout import column_unit
 from hexatherm.workflows.calibrate.outputs import output_files
 from hexatherm.workflows.calibrate.run import calibrate, read_campaign
 from hexatherm.workflows.process.outputs import write_results
 from hexatherm.workflows.process.pipeline import process_session
 from hexatherm.workflows.process.quality import quality_checks
 
-DEFAULT_TOLERANCES = {"mm": 1e-7, "deg": 1e-6, "um": 1e-4, "urad": 1e-4, "s": 1e-6}
+#: absolute tolerance per unit (:func:`~hexatherm.io.csvout.column_unit`). Result files
+#: are written at a resolution per unit (:data:`~hexatherm.io.csvout.RESOLUTION`): a
+#: value sitting on a rounding boundary flips by one step for the tiniest change (another
+#: BLAS, another CPU), so each tolerance is at least 1.5 steps (one step plus half a
+#: step's margin); deg keeps its older, wider 1e-6 (10 steps) and seconds, written
+#: exactly, 1e-6 s.
+DEFAULT_TOLERANCES = {
+    "mm": 1.5e-7,
+    "deg": 1e-6,
+    "um": 1.5e-4,
+    "urad": 1.5e-3,
+    "um2": 1.5e-6,
+    "urad2": 1.5e-6,
+    "ppm": 1.5e-4,
+    "C": 1.5e-4,
+    "degC": 1.5e-4,
+    "s": 1e-6,
+}
 
 
 @dataclass
@@ -43,7 +62,7 @@ class Comparison:
 
 def tolerance_for(column: str, tolerances: dict[str, float]) -> tuple[str, float]:
     """Unit and absolute tolerance of a column (unit ``rel`` means relative 1e-9)."""
-    unit = column.rsplit("_", 1)[-1] if "_" in column else ""
+    unit = column_unit(column)
     if unit in tolerances:
         return unit, tolerances[unit]
     return "rel", 1e-9

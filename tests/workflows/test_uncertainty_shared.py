@@ -17,7 +17,12 @@ import pytest
 
 from hexatherm.core import propagation
 from hexatherm.core.propagation import TargetJacobian, output_difference, target_jacobian
-from hexatherm.workflows.process.outputs import deviation_columns, write_results
+from hexatherm.workflows.process.outputs import (
+    covariance_frame,
+    deviation_columns,
+    poses_frame,
+    write_results,
+)
 from hexatherm.workflows.process.pipeline import ProcessResult, process_session
 from hexatherm.workflows.process.uncertainty import centre_covariance, pose_chain, pose_uncertainty
 from tests.workflows.test_uncertainty import points_session
@@ -95,8 +100,15 @@ def test_poses_and_covariance_files_carry_the_parts(
 ) -> None:
     u = pose_uncertainty(one_sided)
     write_results(one_sided, tmp_path / "out", uncertainty=u)
-    poses = pd.read_csv(tmp_path / "out" / "poses.csv")
-    cov = pd.read_csv(tmp_path / "out" / "covariance.csv")
+    written = pd.read_csv(tmp_path / "out" / "poses.csv")
+    assert (
+        len(pd.read_csv(tmp_path / "out" / "covariance.csv"))
+        == len(written) * (len(written) + 1) // 2
+    )
+    # the identities in memory, to 1e-12 (the files hold the same at their resolution,
+    # tests/workflows/test_resolution.py)
+    poses, cov = poses_frame(one_sided, u), covariance_frame(one_sided, u)
+    assert list(poses.columns) == list(written.columns)
     m = len(poses)
     assert len(cov) == m * (m + 1) // 2
     names = [*deviation_columns("conv"), *deviation_columns("corr")]

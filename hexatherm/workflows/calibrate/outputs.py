@@ -31,10 +31,10 @@ from hexatherm import __version__
 from hexatherm.core.calibration import PARAMETER_NAMES, PARAMETER_UNITS
 from hexatherm.core.residuals import rms
 from hexatherm.io.config import hexapod_to_yaml
+from hexatherm.io.csvout import csv_text
 from hexatherm.io.provenance import now_iso
 from hexatherm.workflows.calibrate.report import StrokeMap, report_html, stroke_map
 from hexatherm.workflows.calibrate.run import Calibration
-from hexatherm.workflows.process.outputs import to_csv_text
 
 COMPONENTS = ("dTx_um", "dTy_um", "dTz_um", "dRx_urad", "dRy_urad", "dRz_urad")
 
@@ -172,8 +172,8 @@ def output_files(
     stroke = None if inputs is None else stroke_map(run)
     files = {
         "hexapod.yaml": calibrated_hexapod_yaml(run),
-        "parameters.csv": to_csv_text(parameters_frame(run)),
-        "residuals.csv": to_csv_text(residuals_frame(run)),
+        "parameters.csv": csv_text(parameters_frame(run)),
+        "residuals.csv": csv_text(residuals_frame(run)),
         "calibration.json": calibration_json(run, stroke),
     }
     if stroke is not None and inputs is not None:

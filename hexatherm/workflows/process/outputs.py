@@ -19,6 +19,8 @@ process"), then these extensions, documented in the README:
   standard uncertainty ``u_dTx_conv_um`` and its parts common to all targets (from O
   and R0) and of its own, ``u_common_dTx_conv_um`` and ``u_own_dTx_conv_um``.
 
+Numbers are written at the resolution of their unit (:mod:`hexatherm.io.csvout`).
+
 ``covariance.csv`` has the covariance of every deviation between every pair of
 targets (:func:`covariance_frame`).
 
@@ -32,7 +34,6 @@ reference steps, the growth since R0 ``dq_leg1_um`` ..
 
 from __future__ import annotations
 
-import io
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -40,6 +41,7 @@ import numpy as np
 import pandas as pd
 
 from hexatherm.core.geometry import to_um_urad
+from hexatherm.io.csvout import csv_text
 from hexatherm.io.outputs import output_dir
 from hexatherm.workflows.process.measured import nominal_fit_diameter_mm
 from hexatherm.workflows.process.pipeline import ProcessResult
@@ -233,13 +235,6 @@ def fits_frame(result: ProcessResult) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True)
 
 
-def to_csv_text(frame: pd.DataFrame) -> str:
-    """CSV text with numbers written to round-trip exactly (shortest repr)."""
-    buffer = io.StringIO()
-    frame.to_csv(buffer, index=False, lineterminator="\n", float_format=None)
-    return buffer.getvalue()
-
-
 def write_results(
     result: ProcessResult,
     out: str | Path,
@@ -269,7 +264,7 @@ def write_results(
         tables["covariance.csv"] = covariance_frame(result, uncertainty)
     if quality is not None:
         tables["quality.csv"] = quality.frame
-    texts = {name: to_csv_text(frame) for name, frame in tables.items()}
+    texts = {name: csv_text(frame) for name, frame in tables.items()}
     with output_dir(out, inputs=session_inputs(result), overwrite=overwrite) as tmp:
         for name, text in texts.items():
             (tmp / name).write_text(text, encoding="utf-8", newline="")

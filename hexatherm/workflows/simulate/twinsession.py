@@ -59,12 +59,13 @@ from hexatherm.core.twin import (
     probe_points,
 )
 from hexatherm.io.config import balls_to_yaml, plan_to_yaml, read_hexapod_text, session_to_yaml
+from hexatherm.io.csvout import csv_text
 from hexatherm.io.dmisout import dmis_output
 from hexatherm.io.outputs import output_dir
 from hexatherm.io.records import iso_to_seconds, seconds_to_iso
 from hexatherm.session import Balls
 from hexatherm.typing import FloatArray
-from hexatherm.workflows.process.outputs import pose_columns, to_csv_text
+from hexatherm.workflows.process.outputs import pose_columns
 
 OUTPUTS = ("centres", "points", "dmis", "serial")
 
@@ -246,7 +247,7 @@ def simulate_session(spec: TwinSessionSpec) -> SimulatedSession:
             "temperatures.csv",
         ),
         measurement_name: measurement_text,
-        "temperatures.csv": to_csv_text(temps_frame),
+        "temperatures.csv": csv_text(temps_frame, rounded=False),
         **_truth_files(
             spec,
             truth,
@@ -352,9 +353,9 @@ def _truth_files(
         "effects": [e.as_dict() for e in spec.effects],
     }
     files = {
-        "truth/steps.csv": to_csv_text(pd.DataFrame(steps)),
-        "truth/legs.csv": to_csv_text(pd.DataFrame(legs)),
-        "truth/temperatures.csv": to_csv_text(pd.DataFrame(temps)),
+        "truth/steps.csv": csv_text(pd.DataFrame(steps), rounded=False),
+        "truth/legs.csv": csv_text(pd.DataFrame(legs), rounded=False),
+        "truth/temperatures.csv": csv_text(pd.DataFrame(temps), rounded=False),
         "truth/effects.yaml": yaml.safe_dump(
             effects_doc, sort_keys=False, default_flow_style=None, width=100
         ),
@@ -381,7 +382,7 @@ def _geometry_csv(spec: TwinSessionSpec) -> str:
             "error_ppm": np.where(gain, error * 1e6, np.nan),
         }
     )
-    return to_csv_text(frame)
+    return csv_text(frame, rounded=False)
 
 
 def _measurements(
@@ -412,7 +413,7 @@ def _measurements(
                 "time": [seconds_to_iso(t0 + t) for t in ball_t.ravel()],
             }
         )
-        return "centres.csv", to_csv_text(frame)
+        return "centres.csv", csv_text(frame, rounded=False)
     m = spec.points_per_ball
     radius = np.array(
         [
@@ -438,7 +439,7 @@ def _measurements(
                 "time": [seconds_to_iso(t0 + t) for t in ball_t.ravel()],
             }
         )
-        return "centres.csv", to_csv_text(frame)
+        return "centres.csv", csv_text(frame, rounded=False)
     ijk = np.broadcast_to(-dirs, points.shape).reshape(-1, 3)
     point_labels = np.repeat(labels, m)
     point_balls = np.repeat(names, m)
@@ -459,7 +460,7 @@ def _measurements(
                 "k": ijk[:, 2],
             }
         )
-        return "points.csv", to_csv_text(frame)
+        return "points.csv", csv_text(frame, rounded=False)
     numbers = np.tile(np.arange(1, m + 1), n * k).astype(str)
     feature = np.char.add(
         np.char.add(np.char.add(np.char.add(point_labels, "_"), point_balls), "_"), numbers

@@ -1,0 +1,80 @@
+"""The shared writer of result CSVs: fixed decimals per unit, checked against Decimal."""
+
+from __future__ import annotations
+
+from decimal import ROUND_HALF_EVEN, Decimal
+
+import numpy as np
+import pandas as pd
+
+from hexatherm.io.csvfile import centres_to_csv
+from hexatherm.io.csvout import RESOLUTION, csv_text, fixed_text
+from hexatherm.io.records import Records
+from hexatherm.workflows.replay import DEFAULT_TOLERANCES
+
+
+def test_fixed_text_rounds_as_decimal_arithmetic_does() -> None:
+    # a second method: the exact binary value rounded by Decimal; a true tie (0.0625
+    # at 1e-3 is exact in binary) goes to the even neighbour in both
+    rng = np.random.default_rng(3)
+    values = np.concatenate(
+        [
+            rng.normal(0, 1, 2000) * 10.0 ** rng.integers(-9, 4, 2000),
+            [0.0, -0.0, 5e-8, -5e-8, 0.0625, -0.0625],
+        ]
+    )
+    for step in (1e-7, 1e-4, 1e-3, 1e-6):
+        quantum = Decimal(1).scaleb(round(np.log10(step)))
+        expected = [
+            format(Decimal(v).quantize(quantum, ROUND_HALF_EVEN), "f") for v in values.tolist()
+        ]
+        zero = format(Decimal(0).quantize(quantum), "f")
+        expected = [zero if Decimal(e) == 0 else e for e in expected]
+        assert fixed_text(values, step) == expected
+
+
+def test_nan_is_empty_and_inf_as_pandas_writes_it() -> None:
+    assert fixed_text(np.array([np.nan, np.inf, -np.inf]), 1e-3) == ["", "inf", "-inf"]
+
+
+def test_only_float_columns_with_a_unit_are_rounded_and_rounded_false_is_exact() -> None:
+    frame = pd.DataFrame(
+        {
+            "label": ["S1", "S2"],
+            "Tx_mm": [1 / 3, -1e-9],
+            "n": [25, 3],
+            "weight_after": [1 / 3, 0.5],
+            "dt_before_s": [1 / 3, np.nan],
+            "ok_form": [True, False],
+        }
+    )
+    assert csv_text(frame).splitlines() == [
+        "label,Tx_mm,n,weight_after,dt_before_s,ok_form",
+        "S1,0.3333333,25,0.3333333333333333,0.3333333333333333,True",
+        "S2,0.0000000,3,0.5,,False",
+    ]
+    exact = pd.read_csv(__import__("io").StringIO(csv_text(frame, rounded=False)))
+    assert exact["Tx_mm"].tolist() == [1 / 3, -1e-9]
+
+
+def test_fit_spheres_centres_are_written_at_the_mm_and_um_resolutions() -> None:
+    rec = Records(
+        path="p.csv",
+        kind="centres",
+        label=np.array(["O"]),
+        ball=np.array(["B1"]),
+        xyz_mm=np.array([[1 / 3, -2 / 3, 1e-12]]),
+        time_s=np.array([0.0]),
+        time_kind="seconds",
+        line=np.array([2]),
+        diameter_mm=np.array([25.4 + 1e-9]),
+        extra={"form_um": np.array([1 / 7]), "n": np.array([25]), "u_um": np.array([0.25])},
+    )
+    header, row = centres_to_csv(rec).splitlines()
+    assert header == "label,ball,x,y,z,time,diameter,form_um,n,u_um"
+    assert row == "O,B1,0.3333333,-0.6666667,0.0000000,0.0,25.4000000,0.1429,25,0.2500"
+
+
+def test_replay_tolerates_a_value_flipping_one_step() -> None:
+    for unit, step in RESOLUTION.items():
+        assert DEFAULT_TOLERANCES[unit] >= 1.5 * step * (1 - 1e-12), unit
