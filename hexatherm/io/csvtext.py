@@ -49,11 +49,17 @@ def semicolons_to_commas(text: str) -> str:
     >>> semicolons_to_commas("label,ball,x\\nO,B1,1.5\\n")  # a comma file: as it is
     'label,ball,x\\nO,B1,1.5\\n'
     """
-    for line in text.splitlines():
-        if line.strip() and not line.lstrip().startswith("#"):
-            if ";" in line and "," not in line:
-                return text.replace(",", ".").replace(";", ",")
-            return text
+    start = 0
+    while start < len(text):
+        # from the top, a piece at a time, not the whole text (a 20 MB file) split
+        ends = [i for i in (text.find("\n", start), text.find("\r", start)) if i >= 0]
+        end = min(ends, default=len(text))
+        for line in text[start:end].splitlines():
+            if line.strip() and not line.lstrip().startswith("#"):
+                if ";" in line and "," not in line:
+                    return text.replace(",", ".").replace(";", ",")
+                return text
+        start = end + 1
     return text
 
 
