@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 
 from hexatherm.io.csvfile import centres_to_csv
-from hexatherm.io.csvout import RESOLUTION, csv_text, fixed_text
+from hexatherm.io.csvout import RESOLUTION, csv_text, fixed_text, resolution_of
 from hexatherm.io.records import Records
 from hexatherm.workflows.replay import DEFAULT_TOLERANCES
 
@@ -78,3 +78,40 @@ def test_fit_spheres_centres_are_written_at_the_mm_and_um_resolutions() -> None:
 def test_replay_tolerates_a_value_flipping_one_step() -> None:
     for unit, step in RESOLUTION.items():
         assert DEFAULT_TOLERANCES[unit] >= 1.5 * step * (1 - 1e-12), unit
+
+
+def _pandas_text(frame: pd.DataFrame, rounded: bool) -> str:
+    """The second method: pandas' to_csv on the frame with its rounded columns as text."""
+    frame = frame.copy()
+    for column in frame.columns:
+        step = resolution_of(column) if rounded else None
+        if step is not None and frame[column].dtype == np.float64:
+            frame[column] = fixed_text(frame[column].to_numpy(), step)
+    return frame.to_csv(index=False, lineterminator="\n")
+
+
+def test_the_joined_text_is_what_pandas_writes() -> None:
+    rng = np.random.default_rng(5)
+    n = 200
+    floats = rng.normal(0, 1, n) * 10.0 ** rng.integers(-12, 17, n)
+    floats[::17] = np.nan
+    floats[5], floats[6] = np.inf, -0.0
+    base = {
+        "label": [f"S{i}" for i in range(n)],
+        "Tx_mm": floats,
+        "weight_after": floats[::-1].copy(),
+        "n": rng.integers(-5, 5000, n),
+        "ok_form": rng.random(n) > 0.5,
+        "ok_time_gap": [True, False, ""] * (n // 3) + [True] * (n % 3),
+        "failed": ["form;diameter", ""] * (n // 2),
+    }
+    frames = [
+        pd.DataFrame(base),
+        pd.DataFrame({**base, "file": ["a,b.csv"] * n}),  # quotes: pandas writes it
+        pd.DataFrame({**base, "failed": [None, "form"] * (n // 2)}),  # a missing text
+        pd.DataFrame({"Tx_mm": floats}),  # one column
+        pd.DataFrame({"label": [], "Tx_mm": []}),  # no rows
+    ]
+    for frame in frames:
+        for rounded in (True, False):
+            assert csv_text(frame, rounded) == _pandas_text(frame, rounded)
