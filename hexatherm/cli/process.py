@@ -151,8 +151,10 @@ def command(
     out_dir = Path(out) if out is not None else folder / "results"
     # before any work: never into, around or onto the session's files (checked again under
     # the output's lock when the results are written)
-    inputs = read_session(session).input_files()
-    check_output_settled(out_dir, kind="folder", inputs=inputs, overwrite=overwrite)
+    session_file = read_session(session)
+    check_output_settled(
+        out_dir, kind="folder", inputs=session_file.input_files(), overwrite=overwrite
+    )
     checks = Checks(
         distance_tolerance_um, registration_tolerance_um, strict_registration, pose_tolerance
     )
@@ -164,6 +166,7 @@ def command(
             checks,
             bars.reading,
             reading,
+            session=session_file,
         )
     for warning in result.warnings:
         echo_err(f"warning: {warning}")

@@ -360,7 +360,7 @@ def _check_centre_columns(
 
 
 #: the ASCII characters that ``str.strip`` takes off, but for the line breaks
-_ASCII_BLANKS = " \t\x0b\x0c\x1c\x1d\x1e\x1f"
+ASCII_BLANKS = " \t\x0b\x0c\x1c\x1d\x1e\x1f"
 
 
 def _fast_measurement_csv(text: str, path: str, kind: RecordKind | None) -> Records | None:
@@ -388,7 +388,7 @@ def _fast_measurement_csv(text: str, path: str, kind: RecordKind | None) -> Reco
         return None
     numeric = [c for c in columns if c not in ("label", "ball", "time")]
     # no value can hold a blank to strip: the parser need not look for them
-    blank_free = text.isascii() and not any(c in text for c in _ASCII_BLANKS)
+    blank_free = text.isascii() and not any(c in text for c in ASCII_BLANKS)
     try:
         frame = pd.read_csv(
             # bytes: a StringIO of a 20 MB text costs half as much as the parsing

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import os
 from dataclasses import dataclass
 
@@ -10,7 +11,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from hexatherm.errors import InputError
-from hexatherm.io.csvfile import column_numbers, column_times, drop_blank_rows
+from hexatherm.io.csvfile import ASCII_BLANKS, column_numbers, column_times, drop_blank_rows
 from hexatherm.io.csvtext import complete_lines, csv_frame, read_text
 from hexatherm.io.records import TimeKind
 
@@ -71,7 +72,11 @@ def read_temperatures(
     writing), with an :class:`InputWarning`, instead of refusing the file.
     """
     path = os.fspath(path)
-    frame = csv_frame(complete_lines(read_text(path), path, allow_truncated), path)
+    text = complete_lines(read_text(path), path, allow_truncated)
+    fast = _fast_temperatures(text, path)
+    if fast is not None:
+        return fast
+    frame = csv_frame(text, path)
     columns = list(frame.columns)
     expected = ("time",) + LEG_COLUMNS
     if tuple(columns[:7]) != expected:
@@ -91,3 +96,51 @@ def read_temperatures(
     legs = np.column_stack([_temperatures(frame, c, path) for c in LEG_COLUMNS])
     others = {c: _temperatures(frame, c, path) for c in columns[7:]}
     return Temperatures(path, time, kind, legs, others, aware)
+
+
+def _fast_temperatures(text: str, path: str) -> Temperatures | None:
+    """:func:`read_temperatures` for a clean log, or None: then the general reader must.
+
+    Clean: ASCII without a blank or a quote, a header of distinct names starting with
+    ``time,leg1..leg6``, every line with all its fields, every temperature a finite
+    number in range, times that :func:`column_times` takes, never going backwards. The
+    numbers are parsed by pandas' C parser straight to floats (as ``pd.to_numeric``
+    does), instead of stripped strings converted column by column. Anything else is
+    left to the general reader, so that results and errors are the same.
+    """
+    if not text.isascii() or '"' in text or "\r" in text:
+        return None
+    if any(c in text for c in ASCII_BLANKS):
+        return None
+    columns = text[: text.find("\n")].split(",")
+    if tuple(columns[:7]) != ("time", *LEG_COLUMNS) or len(set(columns)) != len(columns):
+        return None
+    if "" in columns or text.count(",") != (len(columns) - 1) * text.count("\n"):
+        return None  # a nameless column, or a line with too few or too many fields
+    numeric = columns[1:]
+    try:
+        frame = pd.read_csv(
+            io.BytesIO(text.encode("ascii")),
+            dtype={"time": object, **dict.fromkeys(numeric, float)},
+            keep_default_na=False,
+            na_values=dict.fromkeys(numeric, [""]),
+            skip_blank_lines=False,
+            engine="c",
+        )
+    except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError):
+        return None
+    if frame.empty or list(frame.columns) != columns or frame["time"].isna().any():
+        return None
+    values = frame[numeric].to_numpy(dtype=np.float64)
+    low, high = TEMPERATURE_RANGE_C
+    if not (np.isfinite(values).all() and (values >= low).all() and (values <= high).all()):
+        return None
+    frame.index = np.arange(len(frame)) + 2
+    try:
+        time, kind, aware = column_times(frame, path)
+    except InputError:
+        return None
+    if np.any(np.diff(time) < 0):
+        return None
+    others = {c: values[:, j + 6] for j, c in enumerate(columns[7:])}
+    return Temperatures(path, time, kind, values[:, :6].copy(), others, aware)

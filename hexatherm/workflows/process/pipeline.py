@@ -271,15 +271,18 @@ def process_session(
     progress: FileProgress | None = None,
     reading: ReadOptions = STRICT,
     hexapod: Hexapod | None = None,
+    session: Session | None = None,
 ) -> ProcessResult:
     """Read a session and compute conventional and corrected poses of every target.
 
     ``progress`` reports the reading of the measurement files and ``reading`` says what
     the readers may read past (see :func:`read_measured`). ``hexapod`` replaces the
     session's hexapod file for the IGM and FGM of the correction (a calibrated
-    geometry; the commanded poses stay as planned).
+    geometry; the commanded poses stay as planned). ``session`` is the session file of
+    ``path`` already read (``hexatherm process`` reads it first, to check the output
+    folder against its inputs), so that its YAML files are read once.
     """
-    session = read_session(path)
+    session = read_session(path) if session is None else session
     if hexapod is not None:
         session = dataclasses.replace(session, hexapod=hexapod)
     records, points, centres, temperatures = read_measured(
