@@ -107,12 +107,16 @@ def _iso_layout(values: npt.NDArray[np.object_]) -> bool | None:
 
 
 def _iso_seconds(
-    text: pd.Series, lines: npt.NDArray[np.int64], path: str
+    text: pd.Series, lines: npt.NDArray[np.int64], path: str, layout: bool | None = None
 ) -> tuple[npt.NDArray[np.float64], bool]:
     """POSIX seconds of strict ISO times (naive ones taken as UTC) and whether they have
-    an offset; InputError for a time off the layout, mixed offsets or an invalid date."""
+    an offset; InputError for a time off the layout, mixed offsets or an invalid date.
+    ``layout``: :func:`_iso_layout` of the times when the caller has it."""
     values = text.to_numpy(dtype=object)
-    aware = _iso_layout(values) if values.size else False
+    if layout is not None:
+        aware: bool | None = layout
+    else:
+        aware = _iso_layout(values) if values.size else False
     if aware is None:  # check one by one, in order, for the first bad one
         first_aware: bool | None = None
         for row, value in enumerate(values.tolist()):
@@ -169,6 +173,12 @@ def column_times(
     """The ``time`` column: seconds, its kind, and (ISO) whether it has UTC offsets."""
     text = frame["time"]
     lines = frame.index.to_numpy(dtype=np.int64)
+    values = text.to_numpy(dtype=object)
+    layout = _iso_layout(values) if values.size else None
+    if layout is not None:
+        # every time of one ISO layout (the common case): none is empty or a number
+        seconds, aware = _iso_seconds(text, lines, path, layout)
+        return seconds, "iso", aware
     empty = (text == "").to_numpy()
     if np.any(empty):
         row = int(np.argmax(empty))
@@ -411,10 +421,13 @@ def _fast_measurement_csv(text: str, path: str, kind: RecordKind | None) -> Reco
     if frame.empty or list(frame.columns) != columns:
         return None
     frame.index = np.arange(len(frame)) + 2
+    named: dict[str, npt.NDArray[np.str_]] = {}
     for column in ("label", "ball"):
-        names = pd.unique(frame[column].to_numpy())
+        codes, names = pd.factorize(frame[column].to_numpy())
         if not all(isinstance(v, str) and NAME_PATTERN.fullmatch(v) for v in names):
             return None
+        # each name converted once, then spread (not 150,000 conversions)
+        named[column] = np.asarray(names, dtype=str)[codes]
     if frame["time"].isna().any():
         return None  # a short row
     if not blank_free:
@@ -430,7 +443,7 @@ def _fast_measurement_csv(text: str, path: str, kind: RecordKind | None) -> Reco
     extras = CENTRE_EXTRA if kind == "centres" else POINT_EXTRA
     if any(c not in extras for c in columns[6:]):
         return None
-    label, ball = frame["label"].to_numpy(dtype=str), frame["ball"].to_numpy(dtype=str)
+    label, ball = named["label"], named["ball"]
     lines = frame.index.to_numpy(dtype=np.int64)
     try:
         time, time_kind, aware = column_times(frame, path)
