@@ -24,6 +24,12 @@ def test_fixed_text_rounds_as_decimal_arithmetic_does() -> None:
         ]
     )
     for step in (1e-7, 1e-4, 1e-3, 1e-6):
+        # and values on and about the half steps, where the scaled product may mislead,
+        # and beyond 2^50 steps, where the vectorized digits give way to format
+        halves = (np.arange(-300, 300) + 0.5) * step
+        values = np.concatenate(
+            [values, halves, np.nextafter(halves, 0), 2.0**55 * step * np.array([1, -3])]
+        )
         quantum = Decimal(1).scaleb(round(np.log10(step)))
         expected = [
             format(Decimal(v).quantize(quantum, ROUND_HALF_EVEN), "f") for v in values.tolist()
