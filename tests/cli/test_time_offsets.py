@@ -17,11 +17,19 @@ ROOT = Path(__file__).resolve().parents[2]
 STAMP = re.compile(r"(\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d(?:\.\d+)?)")
 
 
-def test_offsets_survive_processing_and_naive_times_stay_naive(tmp_path: Path) -> None:
-    naive = tmp_path / "naive"
+def naive_copy(folder: Path) -> Path:
+    """paper-zero-pose without its ``utc_offset:``: its times as a CMM's clock gives them."""
     shutil.copytree(
-        ROOT / "sessions" / "paper-zero-pose", naive, ignore=shutil.ignore_patterns("results")
+        ROOT / "sessions" / "paper-zero-pose", folder, ignore=shutil.ignore_patterns("results")
     )
+    text = (folder / "session.yaml").read_text()
+    assert 'utc_offset: "+00:00"\n' in text
+    (folder / "session.yaml").write_text(text.replace('utc_offset: "+00:00"\n', ""))
+    return folder
+
+
+def test_offsets_survive_processing_and_naive_times_stay_naive(tmp_path: Path) -> None:
+    naive = naive_copy(tmp_path / "naive")
     aware = tmp_path / "aware"
     shutil.copytree(naive, aware)
     for name in ("centres.csv", "temperatures.csv"):
@@ -44,10 +52,7 @@ def test_offsets_survive_processing_and_naive_times_stay_naive(tmp_path: Path) -
 
 
 def test_a_session_can_say_where_its_naive_times_were_taken(tmp_path: Path) -> None:
-    naive = tmp_path / "naive"
-    shutil.copytree(
-        ROOT / "sessions" / "paper-zero-pose", naive, ignore=shutil.ignore_patterns("results")
-    )
+    naive = naive_copy(tmp_path / "naive")
     local = tmp_path / "local"
     shutil.copytree(naive, local)
     text = (local / "session.yaml").read_text()
