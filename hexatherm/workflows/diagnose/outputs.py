@@ -11,7 +11,8 @@ these extensions, documented in the README:
   ``parameters_when_added`` are the values of the round that added it;
 * in each ``added`` entry: ``alternatives``, the other passing candidates that
   explain the same residual (``effect``, ``delta_bic``, ``similarity``: the cosine
-  of their fitted residual changes), and ``note`` (e.g. a parameter at a bound);
+  of their fitted residual changes), and ``note`` (e.g. a parameter at a bound, or
+  one these data do not see: not identifiable, kept at its start value);
 * ``baseline_heldout_rms_um``, ``final_heldout_rms_um``;
 * ``rounds``: every candidate of every round (``effect``, ``parameters``,
   ``std_errors``, ``delta_bic``, ``rms_um``, ``heldout_rms_um``, ``passes``,
