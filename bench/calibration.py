@@ -16,6 +16,10 @@ held-out poses in the reference thermal state, against the truth, from:
 - ``decoupled, smooth``: the corrected poses with ``--interpolation smooth``.
 
 - ``smooth, O/R0 x4``: the same, from a campaign whose O and R0 are measured 4 times.
+- ``twin``: each measured pose corrected by the twin from the thermocouples alone
+  (``--poses twin``), the twin's model being the scenario's true thermal model
+  (:func:`hexatherm.workflows.calibrate.run.simulated_twin_campaign`): what a perfectly
+  diagnosed twin gives.
 
 Heating: ``none``; ``1 K`` (mats raising the legs about 1 K, a few um of growth); ``mats``
 (about 10 K, tens of um: the paper's heating mats, switched on at minute 5, while a
@@ -48,7 +52,11 @@ from hexatherm.core.hexapod import Hexapod  # noqa: E402
 from hexatherm.core.planning import build_plan  # noqa: E402
 from hexatherm.io.config import plan_to_yaml, read_hexapod  # noqa: E402
 from hexatherm.io.scenario import read_scenario  # noqa: E402
-from hexatherm.workflows.calibrate.run import Campaign, read_campaign  # noqa: E402
+from hexatherm.workflows.calibrate.run import (  # noqa: E402
+    Campaign,
+    read_campaign,
+    simulated_twin_campaign,
+)
 from hexatherm.workflows.simulate.run import simulate  # noqa: E402
 from hexatherm.workflows.simulate.twinsession import write_files  # noqa: E402
 
@@ -184,6 +192,8 @@ def main() -> None:
                     campaign = read_campaign([where], poses, interpolation=interpolation)  # type: ignore[arg-type]
                     growth = campaign.results[0].correction
                     cells.setdefault(name, []).append(heldout_error_um(campaign, truth, held))
+                twin = simulated_twin_campaign(folder)
+                cells.setdefault("twin", []).append(heldout_error_um(twin, truth, held))
                 drift = np.abs((growth.conventional - growth.corrected)[:, :3]).max() * 1e3
                 cells.setdefault("largest thermal error of a pose (um)", []).append(drift)
             print(f"seed {seed} done", file=sys.stderr, flush=True)
@@ -199,12 +209,13 @@ def main() -> None:
         "decoupled",
         "decoupled, smooth",
         "smooth, O/R0 x4",
+        "twin",
         "largest thermal error of a pose (um)",
     ]
     print(
         f"{'heating':8} "
         + " ".join(f"{c[:18]:>18}" for c in columns)
-        + f" {'dec/free':>9} {'x4/free':>9} {'conv/dec':>9}"
+        + f" {'dec/free':>9} {'x4/free':>9} {'twin/free':>9} {'conv/dec':>9}"
     )
     for heating, cells in rows.items():
         values = [rms(cells[c]) for c in columns]
@@ -212,6 +223,7 @@ def main() -> None:
             f"{heating:8} "
             + " ".join(f"{v:18.3f}" for v in values)
             + f" {values[2] / values[0]:9.2f} {values[4] / values[0]:9.2f}"
+            + f" {values[5] / values[0]:9.2f}"
             + f" {values[1] / values[2]:9.2f}"
         )
 
