@@ -31,6 +31,7 @@ from hexatherm.workflows.calibrate.run import (
     read_campaign,
     simulated_twin_campaign,
 )
+from tests.sessions import calibration_scenario, calibration_targets
 
 ROOT = Path(__file__).resolve().parents[2]
 SPAN = np.array([20.0, 20.0, 15.0, 4.0, 4.0, 8.0])
@@ -44,18 +45,16 @@ HOT = (
 
 
 def scenario(heating: str) -> str:
-    targets = np.random.default_rng(3).uniform(-1, 1, (30, 6)) * SPAN
-    return f"""format: hexatherm-scenario/1
-hexapod: {ROOT / "configs" / "symetrie-like.yaml"}
-balls: {ROOT / "configs" / "balls-3.yaml"}
-seed: 3
-plan: {{targets: {targets.round(3).tolist()}, reference_pose: [0, 0, -40, 0, 0, 0], \
-points_per_ball: 8}}
-cmm: {{point_noise_um: 0.3}}
-thermocouples: {{period_s: 30, noise_C: 0.02}}
-timing: {{seconds_per_point: 2.0, seconds_per_move: 20}}
-geometry_errors: {{seed: 5, joint_sigma_um: 50, offset_sigma_um: 30}}
-{heating}"""
+    return calibration_scenario(
+        calibration_targets(3, decimals=3),
+        geometry_seed=5,
+        seed=3,
+        points_per_ball=8,
+        cmm={"point_noise_um": 0.3},
+        thermocouples={"period_s": 30, "noise_C": 0.02},
+        timing={"seconds_per_point": 2.0, "seconds_per_move": 20},
+        extra=heating,
+    )
 
 
 def run(*args: object):
