@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from hexatherm.core.plan import Plan
 from hexatherm.session import Balls
@@ -55,3 +56,45 @@ def make_session(
         point_noise_mm=point_noise_mm,
     )
     return write_twin_session(spec, folder)
+
+
+#: the calibration campaigns' workspace: +-20/+-20/+-15 mm, +-4/+-4/+-8 deg (issue 15)
+CALIBRATION_SPAN = np.array([20.0, 20.0, 15.0, 4.0, 4.0, 8.0])
+
+
+def calibration_targets(seed: int, n: int = 30, decimals: int = 4) -> np.ndarray:
+    """``n`` targets drawn uniformly in :data:`CALIBRATION_SPAN`, rounded as a plan writes
+    them."""
+    targets = np.random.default_rng(seed).uniform(-1, 1, (n, 6)) * CALIBRATION_SPAN
+    return targets.round(decimals)
+
+
+def calibration_scenario(
+    targets: np.ndarray,
+    *,
+    geometry_seed: int,
+    extra: str = "",
+    **sections: object,
+) -> str:
+    """A ``simulate`` scenario of the Symetrie-like hexapod whose true geometry differs
+    from its file (joints sigma 50 um, leg offsets sigma 30 um, ``geometry_errors:``
+    drawn with ``geometry_seed``), measuring ``targets`` with R = [0, 0, -40, 0, 0, 0]
+    around each.
+
+    ``sections`` are further top-level keys (``seed``, ``name``, ``cmm``, ``timing``,
+    ``thermocouples``, ...) and ``points_per_ball`` (in the plan); ``extra`` is YAML text
+    appended as it is (heating, hidden effects).
+    """
+    plan: dict[str, object] = {"reference_pose": REFERENCE}
+    if "points_per_ball" in sections:
+        plan["points_per_ball"] = sections.pop("points_per_ball")
+    plan["targets"] = np.asarray(targets, dtype=float).tolist()
+    doc: dict[str, object] = {
+        "format": "hexatherm-scenario/1",
+        "hexapod": str(ROOT / "configs" / "symetrie-like.yaml"),
+        "balls": str(ROOT / "configs" / "balls-3.yaml"),
+        "plan": plan,
+        **sections,
+        "geometry_errors": {"seed": geometry_seed, "joint_sigma_um": 50, "offset_sigma_um": 30},
+    }
+    return yaml.safe_dump(doc, sort_keys=False) + extra

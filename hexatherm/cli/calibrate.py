@@ -28,11 +28,20 @@ from hexatherm.io.files import ReadOptions
 )
 @click.option(
     "--poses",
-    type=click.Choice(["corrected", "conventional"]),
+    type=click.Choice(["corrected", "conventional", "twin"]),
     default="corrected",
     show_default=True,
-    help="Fit the thermally corrected poses (the thermal state of each session's R0) or "
-    "the conventional ones (drift included, for comparison).",
+    help="Fit the thermally corrected poses (the thermal state of each session's R0), "
+    "the conventional ones (drift included, for comparison), or the poses the twin "
+    "corrects from the thermocouples alone (needs --twin-model).",
+)
+@click.option(
+    "--twin-model",
+    "twin_model",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    default=None,
+    help="The twin's model for --poses twin: a hexapod file with thermal_model effects "
+    "(e.g. the hexapod.yaml of hexatherm diagnose). Only with --poses twin.",
 )
 @click.option(
     "--level",
@@ -63,6 +72,7 @@ def command(
     sessions: tuple[Path, ...],
     out: Path,
     poses: str,
+    twin_model: Path | None,
     level: str,
     residuals: str,
     iterate: bool,
@@ -83,12 +93,22 @@ def command(
     from hexatherm.io.outputs import check_output_settled, output_dir
     from hexatherm.workflows.calibrate.outputs import output_files, summary_lines
     from hexatherm.workflows.calibrate.run import (
+        TwinModel,
         calibrate,
         calibrate_iterated,
         read_campaign,
     )
 
+    if poses == "twin" and twin_model is None:
+        raise click.UsageError("--poses twin needs the twin's model: give --twin-model FILE")
+    if poses != "twin" and twin_model is not None:
+        raise click.UsageError(
+            f"--twin-model is the twin's model for --poses twin, not for --poses {poses}"
+        )
     inputs = [f for s in sessions for f in read_session(s).input_files()]
+    if twin_model is not None:
+        inputs.append(twin_model)
+    twin = None if twin_model is None else TwinModel.read(twin_model)
     check_output_settled(out, kind="folder", inputs=inputs, overwrite=overwrite)
     if iterate:
         run, moves = calibrate_iterated(
@@ -98,6 +118,7 @@ def command(
             interpolation,  # type: ignore[arg-type]
             level,
             residuals,
+            twin,
         )
         for k, move in enumerate(moves, 2):
             echo_err(
@@ -105,10 +126,18 @@ def command(
                 f"moved at most {move * 1e3:.3g} um"
             )
     else:
-        campaign = read_campaign(sessions, poses, reading, interpolation)  # type: ignore[arg-type]
+        campaign = read_campaign(
+            sessions,
+            poses,  # type: ignore[arg-type]
+            reading,
+            interpolation,  # type: ignore[arg-type]
+            twin=twin,
+        )
         run = calibrate(campaign, level, residuals)
+    model = "" if twin_model is None else f" (twin model {twin_model})"
     echo_err(
-        f"calibrated from {len(run.campaign.labels)} {poses} poses of {len(sessions)} session(s)"
+        f"calibrated from {len(run.campaign.labels)} {poses} poses{model} of "
+        f"{len(sessions)} session(s)"
     )
     files = output_files(run, inputs, out)
     with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:

@@ -365,6 +365,13 @@ def command(
             f"uncertainty of a calibrated pose at most {chosen.worst_sigma_um:.2f} um, "
             f"{chosen.worst_sigma_urad:.2f} urad (1 um / 5 urad per measured pose)"
         )
+        if origin_repeats == 1 or reference0_repeats == 1:
+            echo_err(
+                "note: O and R0 are measured once: their error is common to every corrected "
+                "pose, so it does not average out in the calibration; --origin-repeats 4 "
+                "--reference0-repeats 4, measured before the legs warm, remove most of it "
+                "(README, 'The paper's claim, measured')"
+            )
     for gap in made.gaps:
         echo_err(
             f"warning: {gap.target} and its reference {gap.reference} are expected "

@@ -44,7 +44,6 @@ from hexatherm.io.config import plan_to_yaml, read_balls, read_session
 from hexatherm.io.csvfile import read_measurement_csv
 from hexatherm.io.seriallog import POINTS_HEADER, MemorySink, entry, escape_bytes, parse_log
 from hexatherm.workflows.acquire.recorder import FitChecks, Recorder
-from hexatherm.workflows.process import pipeline
 
 ROOT = Path(__file__).resolve().parents[2]
 HEXAPOD = ROOT / "configs" / "symetrie-like.yaml"
@@ -260,10 +259,9 @@ def test_loop_session_is_a_session_that_processes(loop_session, tmp_path):
     assert plan_to_yaml(session.plan) == plan_to_yaml(PLAN)
     assert [p.name for p in session.measurements] == ["points.csv"]
     assert session.temperatures is not None and session.temperatures.name == "temperatures.csv"
+    assert session.utc_offset_s is None  # a logger's file came in: its clock is unknown
     for name in ("plan.yaml", "hexapod.yaml", "balls.yaml"):
         assert (folder / "s" / name).is_file()
-    if not hasattr(pipeline, "fit_points"):  # process does not take points yet
-        pytest.skip("hexatherm process does not fit points yet")
     out = tmp_path / "results"
     result = CliRunner().invoke(main, ["process", str(folder / "s"), "-o", str(out)])
     assert result.exit_code == 0, result.output
@@ -355,10 +353,12 @@ def test_pty_split_lines_timeout_mid_line_garbage_and_temperature_port(tmp_path)
 
     thread = threading.Thread(target=device, daemon=True)
     thread.start()
+    started = time.time()
     try:
         result = CliRunner().invoke(
             main, acquire_args(plan, session, path, "--temperature-port", t_path)
         )
+        ended = time.time()
     finally:
         thread.join(5)
         for fd in (master, slave, t_master, t_slave):
@@ -380,6 +380,12 @@ def test_pty_split_lines_timeout_mid_line_garbage_and_temperature_port(tmp_path)
     assert temps.iloc[0, 1:].tolist() == [20.5, 20.6, 20.7, 20.8, 20.9, 21.0, 19.5]
     assert len(temps) >= 2
     assert read_session(session).temperatures.name == "temperatures.csv"
+    # every time is this computer's clock in UTC, and the session says so
+    assert read_session(session).utc_offset_s == 0.0
+    for name in ("points.csv", "temperatures.csv"):
+        stamps = pd.to_datetime(pd.read_csv(session / name)["time"]).dt.tz_localize("UTC")
+        posix = np.array([stamp.timestamp() for stamp in stamps])
+        assert (posix >= started - 1).all() and (posix <= ended + 1).all(), name
 
 
 def test_pty_port_disappears_and_is_reopened(tmp_path):

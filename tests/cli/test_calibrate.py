@@ -18,27 +18,21 @@ from click.testing import CliRunner
 from hexatherm.cli import main
 from hexatherm.core.calibration import gauge_fixed
 from hexatherm.io.config import read_hexapod
+from tests.sessions import calibration_scenario, calibration_targets
 
 ROOT = Path(__file__).resolve().parents[2]
 SPAN = np.array([20.0, 20.0, 15.0, 4.0, 4.0, 8.0])
 
 
 def scenario(seed: int) -> str:
-    targets = np.random.default_rng(seed).uniform(-1, 1, (36, 6)) * SPAN
-    rows = "\n".join(f"    - [{', '.join(f'{v:.4f}' for v in t)}]" for t in targets)
-    return f"""format: hexatherm-scenario/1
-name: calibration-{seed}
-hexapod: {ROOT / "configs" / "symetrie-like.yaml"}
-balls: {ROOT / "configs" / "balls-3.yaml"}
-seed: {seed}
-plan:
-  reference_pose: [0, 0, -40, 0, 0, 0]
-  points_per_ball: 12
-  targets:
-{rows}
-cmm: {{point_noise_um: 0.3, cap_angle_deg: 70}}
-geometry_errors: {{seed: 5, joint_sigma_um: 50, offset_sigma_um: 30}}
-"""
+    return calibration_scenario(
+        calibration_targets(seed, 36),
+        geometry_seed=5,
+        name=f"calibration-{seed}",
+        seed=seed,
+        points_per_ball=12,
+        cmm={"point_noise_um": 0.3, "cap_angle_deg": 70},
+    )
 
 
 def run(*args: object):
@@ -101,14 +95,10 @@ def test_sessions_of_two_hexapods_are_refused(calibrated, tmp_path: Path) -> Non
     assert not (tmp_path / "out").exists()
 
 
-def small_scenario(targets: str, extra: str = "") -> str:
-    return f"""format: hexatherm-scenario/1
-hexapod: {ROOT / "configs" / "symetrie-like.yaml"}
-balls: {ROOT / "configs" / "balls-3.yaml"}
-plan: {{targets: {targets}, reference_pose: [0, 0, -40, 0, 0, 0], points_per_ball: 8}}
-cmm: {{point_noise_um: 0.3}}
-geometry_errors: {{seed: 5, joint_sigma_um: 50, offset_sigma_um: 30}}
-{extra}"""
+def small_scenario(targets: np.ndarray, extra: str = "") -> str:
+    return calibration_scenario(
+        targets, geometry_seed=5, points_per_ball=8, cmm={"point_noise_um": 0.3}, extra=extra
+    )
 
 
 def simulated(tmp_path: Path, name: str, text: str) -> Path:
@@ -121,7 +111,7 @@ def simulated(tmp_path: Path, name: str, text: str) -> Path:
 def test_iterate_converges_in_a_few_rounds(tmp_path: Path) -> None:
     mats = ", ".join(["{gain_C: 10, tau_s: 2400, power: [[0, null]]}"] * 6)
     targets = np.random.default_rng(2).uniform(-1, 1, (30, 6)) * SPAN
-    text = small_scenario(str(targets.round(3).tolist()), f"heating: {{mats: [{mats}]}}\n")
+    text = small_scenario(targets.round(3), f"heating: {{mats: [{mats}]}}\n")
     session = simulated(tmp_path, "heated", text)
     result = run("calibrate", session, "-o", tmp_path / "cal", "--iterate", "--level", "joints")
     assert result.exit_code == 0, result.output
@@ -131,17 +121,17 @@ def test_iterate_converges_in_a_few_rounds(tmp_path: Path) -> None:
 
 
 def test_bad_campaigns_are_refused_naming_why(tmp_path: Path) -> None:
-    few = simulated(tmp_path, "few", small_scenario("[[5, 0, 0, 0, 0, 0], [0, 5, 0, 0, 0, 0]]"))
+    few = simulated(
+        tmp_path, "few", small_scenario(np.array([[5, 0, 0, 0, 0, 0], [0, 5, 0, 0, 0, 0]]))
+    )
     refused = run("calibrate", few, "-o", tmp_path / "out")
     assert refused.exit_code == 1 and "at least 4" in refused.output
     translations = np.random.default_rng(4).uniform(-1, 1, (30, 3)) * SPAN[:3]
     flat = np.hstack([translations, np.zeros((30, 3))])
-    moved = simulated(tmp_path, "moved", small_scenario(str(flat.round(3).tolist())))
+    moved = simulated(tmp_path, "moved", small_scenario(flat.round(3)))
     rank = run("calibrate", moved, "-o", tmp_path / "out", "--level", "joints")
     assert rank.exit_code == 1 and "rank" in rank.output and "Rx, Ry, Rz" in rank.output
-    warm = simulated(
-        tmp_path, "warm", small_scenario(str(flat.round(3).tolist()), "heating: {air_C: 23}\n")
-    )
+    warm = simulated(tmp_path, "warm", small_scenario(flat.round(3), "heating: {air_C: 23}\n"))
     states = run("calibrate", moved, warm, "-o", tmp_path / "out", "--level", "offsets")
     assert states.exit_code == 1 and "another thermal state" in states.output
     assert not (tmp_path / "out").exists()

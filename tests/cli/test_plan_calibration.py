@@ -46,6 +46,14 @@ def test_the_chosen_targets_beat_random_ones(tmp_path: Path) -> None:
     random_worst = predicted_sigma(nominal, pool[:30], pool)[:, :3].max()
     assert random_worst / worst >= 1.5
     assert f"at most {worst:.2f} um" in chosen.stderr
+    # one O and one R0 limit a calibration from corrected poses: the user is told
+    assert "note: O and R0 are measured once" in chosen.stderr
+    repeats = ["--origin-repeats", "4", "--reference0-repeats", "4"]
+    out = tmp_path / "r.yaml"
+    repeated = CliRunner().invoke(main, [*args, "--calibration", "30", *repeats, "-o", str(out)])
+    assert repeated.exit_code == 0, repeated.output
+    assert "measured once" not in repeated.stderr
+    assert read_plan(out).labels.count("R0-4") == 1
 
 
 def test_translation_only_candidates_are_refused_with_the_reason(tmp_path: Path) -> None:

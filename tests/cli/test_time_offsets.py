@@ -8,6 +8,7 @@ import shutil
 from pathlib import Path
 
 import pandas as pd
+import yaml
 from click.testing import CliRunner
 
 from hexatherm.cli import main
@@ -16,11 +17,19 @@ ROOT = Path(__file__).resolve().parents[2]
 STAMP = re.compile(r"(\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d(?:\.\d+)?)")
 
 
-def test_offsets_survive_processing_and_naive_times_stay_naive(tmp_path: Path) -> None:
-    naive = tmp_path / "naive"
+def naive_copy(folder: Path) -> Path:
+    """paper-zero-pose without its ``utc_offset:``: its times as a CMM's clock gives them."""
     shutil.copytree(
-        ROOT / "sessions" / "paper-zero-pose", naive, ignore=shutil.ignore_patterns("results")
+        ROOT / "sessions" / "paper-zero-pose", folder, ignore=shutil.ignore_patterns("results")
     )
+    text = (folder / "session.yaml").read_text()
+    assert 'utc_offset: "+00:00"\n' in text
+    (folder / "session.yaml").write_text(text.replace('utc_offset: "+00:00"\n', ""))
+    return folder
+
+
+def test_offsets_survive_processing_and_naive_times_stay_naive(tmp_path: Path) -> None:
+    naive = naive_copy(tmp_path / "naive")
     aware = tmp_path / "aware"
     shutil.copytree(naive, aware)
     for name in ("centres.csv", "temperatures.csv"):
@@ -43,10 +52,7 @@ def test_offsets_survive_processing_and_naive_times_stay_naive(tmp_path: Path) -
 
 
 def test_a_session_can_say_where_its_naive_times_were_taken(tmp_path: Path) -> None:
-    naive = tmp_path / "naive"
-    shutil.copytree(
-        ROOT / "sessions" / "paper-zero-pose", naive, ignore=shutil.ignore_patterns("results")
-    )
+    naive = naive_copy(tmp_path / "naive")
     local = tmp_path / "local"
     shutil.copytree(naive, local)
     text = (local / "session.yaml").read_text()
@@ -63,3 +69,24 @@ def test_a_session_can_say_where_its_naive_times_were_taken(tmp_path: Path) -> N
     (local / "session.yaml").write_text(text + "utc_offset: 1\n")
     bad = CliRunner().invoke(main, ["process", str(local), "--overwrite"])
     assert bad.exit_code == 1 and "field 'utc_offset'" in bad.output
+
+
+def test_a_simulated_session_declares_its_clock_and_its_times_open_tz_aware(
+    tmp_path: Path,
+) -> None:
+    """The twin's clock is UTC: simulate says so, so process's times carry +00:00 and
+    are the twin's own step times (truth/steps.csv, written naive) as instants."""
+    scenario = ROOT / "configs" / "scenarios" / "calibration-campaign.yaml"
+    session = tmp_path / "twin"
+    runner = CliRunner()
+    result = runner.invoke(main, ["simulate", str(scenario), "-o", str(session)])
+    assert result.exit_code == 0, result.output
+    assert yaml.safe_load((session / "session.yaml").read_text())["utc_offset"] == "+00:00"
+    result = runner.invoke(main, ["process", str(session), "-o", str(tmp_path / "out")])
+    assert result.exit_code == 0, result.output
+    poses = pd.read_csv(tmp_path / "out" / "poses.csv")
+    times = pd.to_datetime(poses["time"])
+    assert times.dt.tz is not None
+    truth = pd.read_csv(session / "truth" / "steps.csv").set_index("label")
+    expected = pd.to_datetime(truth.loc[poses["label"], "time"]).dt.tz_localize("UTC")
+    assert (times.to_numpy() == expected.to_numpy()).all()

@@ -16,6 +16,7 @@ from hexatherm.io.scenario import read_scenario
 from hexatherm.workflows.calibrate.run import calibrate, read_campaign
 from hexatherm.workflows.simulate.run import simulate
 from hexatherm.workflows.simulate.twinsession import write_files
+from tests.sessions import calibration_scenario, calibration_targets
 
 ROOT = Path(__file__).resolve().parents[2]
 SPAN = np.array([20.0, 20.0, 15.0, 4.0, 4.0, 8.0])
@@ -23,19 +24,16 @@ N_SEEDS = 20
 
 
 def scenario(seed: int) -> str:
-    targets = np.random.default_rng(seed).uniform(-1, 1, (30, 6)) * SPAN
     mats = ", ".join(["{gain_C: 1.0, tau_s: 3600, power: [[0, null]]}"] * 6)
-    return f"""format: hexatherm-scenario/1
-hexapod: {ROOT / "configs" / "symetrie-like.yaml"}
-balls: {ROOT / "configs" / "balls-3.yaml"}
-seed: {seed}
-plan: {{targets: {targets.round(4).tolist()}, reference_pose: [0, 0, -40, 0, 0, 0],
-        points_per_ball: 8}}
-cmm: {{point_noise_um: 0.3}}
-thermocouples: {{noise_C: 0.02}}
-heating: {{mats: [{mats}]}}
-geometry_errors: {{seed: {seed + 500}, joint_sigma_um: 50, offset_sigma_um: 30}}
-"""
+    return calibration_scenario(
+        calibration_targets(seed),
+        geometry_seed=seed + 500,
+        seed=seed,
+        points_per_ball=8,
+        cmm={"point_noise_um": 0.3},
+        thermocouples={"noise_C": 0.02},
+        extra=f"heating: {{mats: [{mats}]}}\n",
+    )
 
 
 def test_parameter_errors_follow_their_covariance_over_20_campaigns() -> None:

@@ -17,6 +17,7 @@ from hexatherm.core.calibration import fit_calibration, gauge_fixed, pose_covari
 from hexatherm.core.calibration.model import PARAMETER_NAMES
 from hexatherm.io.config import read_hexapod
 from hexatherm.workflows.process.pipeline import process_session
+from tests.sessions import calibration_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 SPAN = np.array([20.0, 20.0, 15.0, 4.0, 4.0, 8.0])
@@ -25,17 +26,7 @@ UNITS = ["mm"] * 3 + ["deg"] * 3
 
 
 def scenario(targets: np.ndarray) -> str:
-    rows = "\n".join(f"    - [{', '.join(f'{v:.4f}' for v in t)}]" for t in targets)
-    return f"""format: hexatherm-scenario/1
-name: geometry
-hexapod: {ROOT / "configs" / "symetrie-like.yaml"}
-balls: {ROOT / "configs" / "balls-3.yaml"}
-plan:
-  reference_pose: [0, 0, -40, 0, 0, 0]
-  targets:
-{rows}
-geometry_errors: {{seed: 11, joint_sigma_um: 50, offset_sigma_um: 30}}
-"""
+    return calibration_scenario(targets.round(4), geometry_seed=11, name="geometry")
 
 
 @pytest.fixture(scope="module")

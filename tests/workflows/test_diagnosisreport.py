@@ -251,3 +251,24 @@ def test_nothing_added(result: DiagnosisResult, tmp_path: Path) -> None:
         _line(fig.axes[2], "before").get_ydata(), result.before.pose_um[_hours(result)[0], 2]
     )
     assert "after" not in dr.terminal_tables(nothing, tests=False)
+
+
+def test_the_candidates_table_lines_up_with_long_effect_names() -> None:
+    from hexatherm.core.diagnosis.model import Candidate
+    from hexatherm.workflows.diagnose.outputs import candidates_table
+
+    rows = [
+        Candidate("ball_plate_expansion", None, -6.6, 6.089, 6.101, False, "a note"),
+        Candidate("leg_offset", None, 4248.2, 0.341, 0.353, True),
+    ]
+    lines = candidates_table(tuple(rows)).splitlines()
+    # every column ends where the header's does, whatever the names' lengths
+    expected = {
+        "dBIC": ["4248.2", "-6.6"],
+        "RMS_um": ["0.341", "6.089"],
+        "heldout_um": ["0.353", "6.101"],
+    }
+    for title, values in expected.items():
+        end = lines[0].index(title) + len(title)
+        assert [line[:end].split()[-1] for line in lines[1:]] == values, title
+        assert all(line[end] == " " for line in lines[1:]), title

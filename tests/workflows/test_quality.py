@@ -204,16 +204,16 @@ def test_session_file_limits_apply_and_the_command_line_overrides_them(tmp_path)
 BAD_QUALITY = {
     "unknown": (
         "quality: {form: 5}",
-        r":8: field 'quality.form': unknown key; expected one of: "
+        r":{first}: field 'quality.form': unknown key; expected one of: "
         "form_um, ",
     ),
     "negative": (
         "quality: {time_gap_s: -1}",
-        r":8: field 'quality.time_gap_s': expected a "
+        r":{first}: field 'quality.time_gap_s': expected a "
         r"number >= 0 \(.inf turns the check off\), got -1",
     ),
-    "text": ("quality:\n  form_um: five", r":9: field 'quality.form_um': expected a number"),
-    "list": ("quality: [form_um]", r":8: field 'quality': expected a mapping"),
+    "text": ("quality:\n  form_um: five", r":{second}: field 'quality.form_um': expected a number"),
+    "list": ("quality: [form_um]", r":{first}: field 'quality': expected a mapping"),
 }
 
 
@@ -221,7 +221,9 @@ BAD_QUALITY = {
 def test_bad_quality_mapping_names_file_line_and_field(tmp_path, case):
     s = session(tmp_path / "s", noise_mm=0.0)
     text, pattern = BAD_QUALITY[case]
+    first = len((s / "session.yaml").read_text().splitlines()) + 1  # the appended line
     with (s / "session.yaml").open("a") as f:
         f.write(text + "\n")
+    pattern = pattern.replace("{first}", str(first)).replace("{second}", str(first + 1))
     with pytest.raises(InputError, match=r"session\.yaml" + pattern):
         read_session(s)

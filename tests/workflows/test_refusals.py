@@ -233,33 +233,33 @@ CASES = {
     "pose_check tolerance NaN": (
         append("session.yaml", "pose_check: {tolerance_mm: .nan}\n"),
         InputError,
-        r"session\.yaml:8: field 'pose_check\.tolerance_mm': expected a number > 0 "
+        r"session\.yaml:9: field 'pose_check\.tolerance_mm': expected a number > 0 "
         r"\(\.inf turns the check off\), got nan$",
     ),
     "pose_check tolerance negative": (
         append("session.yaml", "pose_check: {tolerance_deg: -1}\n"),
         InputError,
-        r"session\.yaml:8: field 'pose_check\.tolerance_deg': expected a number > 0",
+        r"session\.yaml:9: field 'pose_check\.tolerance_deg': expected a number > 0",
     ),
     "pose_check tolerance text": (
         append("session.yaml", "pose_check: {tolerance_mm: two}\n"),
         InputError,
-        r"session\.yaml:8: field 'pose_check\.tolerance_mm': expected a number > 0 .*'two'",
+        r"session\.yaml:9: field 'pose_check\.tolerance_mm': expected a number > 0 .*'two'",
     ),
     "pose_check offset of two numbers": (
         append("session.yaml", "pose_check: {offset: [1, 2]}\n"),
         InputError,
-        r"session\.yaml:8: field 'pose_check\.offset': expected a list of 6 numbers",
+        r"session\.yaml:9: field 'pose_check\.offset': expected a list of 6 numbers",
     ),
     "pose_check offset NaN": (
         append("session.yaml", "pose_check: {offset: [0, 0, .nan, 0, 0, 0]}\n"),
         InputError,
-        r"session\.yaml:8: field 'pose_check\.offset\[2\]': expected a finite number",
+        r"session\.yaml:9: field 'pose_check\.offset\[2\]': expected a finite number",
     ),
     "pose_check unknown key": (
         append("session.yaml", "pose_check: {tolerance: 2}\n"),
         InputError,
-        r"session\.yaml:8: field 'pose_check\.tolerance': unknown key; expected one of: "
+        r"session\.yaml:9: field 'pose_check\.tolerance': unknown key; expected one of: "
         r"tolerance_mm, tolerance_deg, offset$",
     ),
     # item 6: temperatures outside the log
@@ -313,7 +313,7 @@ CASES = {
     "quality limit NaN": (
         append("session.yaml", "quality: {distance_dev_um: .nan}\n"),
         InputError,
-        r"session\.yaml:8: field 'quality\.distance_dev_um': expected a number >= 0",
+        r"session\.yaml:9: field 'quality\.distance_dev_um': expected a number >= 0",
     ),
 }
 

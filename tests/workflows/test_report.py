@@ -146,7 +146,7 @@ def test_pose_figure_error_bars_are_the_expanded_uncertainties(paper):
 
 def test_temperature_figure_plots_the_log(hidden):
     log = pd.read_csv(SESSIONS / "with-hidden-effect" / "temperatures.csv")
-    stamps = pd.to_datetime(log["time"])
+    stamps = pd.to_datetime(log["time"]).dt.tz_localize("UTC")  # session: utc_offset "+00:00"
     # the log starts before the first step here, so the x origin is its first sample
     assert stamps[0] <= pd.to_datetime(expected("with-hidden-effect", "legs.csv")["time"]).min()
     hours = (stamps - stamps[0]).dt.total_seconds().to_numpy() / 3600

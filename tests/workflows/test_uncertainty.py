@@ -160,13 +160,13 @@ def test_centre_covariance_sources(tmp_path, noisy):
 BAD_CMM = {
     "both": (
         "cmm: {mpe_um: 2.0, point_noise_um: 1.0}",
-        r":8: field 'cmm.mpe_um': give point_noise_um or mpe_um",
+        r":9: field 'cmm.mpe_um': give point_noise_um or mpe_um",
     ),
-    "none": ("cmm: {cap_angle_deg: 60}", r":8: field 'cmm': give point_noise_um or mpe_um"),
-    "negative": ("cmm: {mpe_um: -1}", r":8: field 'cmm.mpe_um': must be positive"),
-    "unknown": ("cmm: {sigma: 1}", r":8: field 'cmm.sigma': unknown key"),
-    "points": ("cmm: {mpe_um: 1, points_per_ball: 2}", r":8: field 'cmm.points_per_ball'"),
-    "text": ("cmm:\n  point_noise_um: abc", r":9: field 'cmm.point_noise_um': expected a number"),
+    "none": ("cmm: {cap_angle_deg: 60}", r":9: field 'cmm': give point_noise_um or mpe_um"),
+    "negative": ("cmm: {mpe_um: -1}", r":9: field 'cmm.mpe_um': must be positive"),
+    "unknown": ("cmm: {sigma: 1}", r":9: field 'cmm.sigma': unknown key"),
+    "points": ("cmm: {mpe_um: 1, points_per_ball: 2}", r":9: field 'cmm.points_per_ball'"),
+    "text": ("cmm:\n  point_noise_um: abc", r":10: field 'cmm.point_noise_um': expected a number"),
 }
 
 

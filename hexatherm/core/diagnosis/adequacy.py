@@ -5,6 +5,7 @@ The noise floor, chi-square per degree of freedom, structure tests, where the re
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -384,18 +385,31 @@ def adequacy(hexapod: Hexapod, obs: Observations, fit: Fit) -> Adequacy:
     )
 
 
-def bound_flags(effect: Effect) -> tuple[str, ...]:
-    """Parameters of a fitted effect at a bound of their range, or outside it."""
-    flags = [f"{p}: {why}" for p, why in effect.out_of_range().items()]
-    note = _bound_note(effect)
+def bound_flags(effect: Effect, unseen: Sequence[str] = ()) -> tuple[str, ...]:
+    """Parameters of a fitted effect at a bound of their range, or outside it.
+
+    ``unseen`` (a :class:`Fit`'s ``unseen`` of the effect) are the parameters the data
+    do not see: they kept their start value, wherever that lies, and are not flagged.
+    """
+    flags = [f"{p}: {why}" for p, why in effect.out_of_range().items() if p not in unseen]
+    note = _bound_note(effect, unseen, blind_note=False)
     return tuple(flags + ([note] if note else []))
 
 
-def _bound_note(effect: Effect) -> str:
+def _bound_note(effect: Effect, unseen: Sequence[str] = (), blind_note: bool = True) -> str:
+    """What is noteworthy of a fitted effect's parameters: those at a bound of their
+    range, and (with ``blind_note``) the ``unseen`` ones, which have no effect on these
+    data and kept their start value (not identifiable: not a bound)."""
     notes = []
     for p, (lo, hi) in zip(effect.parameters, effect.ranges, strict=True):
         value = effect.values[p]
         span = hi - lo
-        if value <= lo + 1e-6 * span or value >= hi - 1e-6 * span:
+        if p in unseen:
+            if blind_note:
+                notes.append(
+                    f"{p} has no effect on these data (not identifiable: kept at its start "
+                    f"value {value:g})"
+                )
+        elif value <= lo + 1e-6 * span or value >= hi - 1e-6 * span:
             notes.append(f"{p} at the bound of its range [{lo:g}, {hi:g}]")
     return "; ".join(notes)

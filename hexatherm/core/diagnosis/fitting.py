@@ -156,10 +156,12 @@ class _Problem:
         costs = [float(np.sum(self.weighted(c, mask) ** 2)) for c in combos]
         return combos[int(np.argmin(costs))]
 
-    def solve(self, theta0: FloatArray, mask: BoolArray) -> FloatArray:
-        """Least squares from ``theta0`` within the ranges (trust region, scaled)."""
+    def solve(self, theta0: FloatArray, mask: BoolArray) -> tuple[FloatArray, BoolArray]:
+        """Least squares from ``theta0`` within the ranges (trust region, scaled); the
+        solution, and which parameters move a prediction on these steps (the others,
+        zero columns of the Jacobian, keep their start)."""
         if theta0.size == 0:
-            return theta0
+            return theta0, np.zeros(0, dtype=bool)
         # z = 1 + (theta - theta0) / scale: starting at z = 1 gives the trust region
         # a unit first radius (least_squares sizes it by |z0|, tiny near zero)
         z_lo, z_hi = 1 + (self.lo - theta0) / self.scale, 1 + (self.hi - theta0) / self.scale
@@ -171,7 +173,7 @@ class _Problem:
         # zero column (NaN steps)
         seen = np.linalg.norm(self.jacobian(theta0, mask), axis=0) > 0
         if not seen.any():
-            return np.clip(theta0, self.lo, self.hi)
+            return np.clip(theta0, self.lo, self.hi), seen
 
         def theta_of(z: FloatArray) -> FloatArray:
             full = np.ones(theta0.size)
@@ -190,7 +192,7 @@ class _Problem:
             ftol=1e-8,
             gtol=None,
         )
-        return np.clip(theta_of(solution.x), self.lo, self.hi)
+        return np.clip(theta_of(solution.x), self.lo, self.hi), seen
 
     def refit(self, theta_hat: FloatArray, mask: BoolArray, iterations: int = 3) -> FloatArray:
         """Refit from a nearby solution with its Jacobian kept (chord iterations).
@@ -208,21 +210,30 @@ class _Problem:
             theta = np.clip(theta + dz * self.scale, self.lo, self.hi)
         return theta
 
-    def fit(self, theta: FloatArray, mask: BoolArray) -> Fit:
-        """The :class:`Fit` at ``theta`` (standard errors from the Jacobian there)."""
+    def fit(self, theta: FloatArray, mask: BoolArray, seen: BoolArray | None = None) -> Fit:
+        """The :class:`Fit` at ``theta`` (standard errors from the Jacobian there);
+        ``seen`` (from :meth:`solve`, default all) marks the parameters the data see:
+        the others are the fit's ``unseen``, their standard errors NaN."""
         origin2cmm, predicted, residual = self.evaluate(theta, mask)
         rss = float(np.sum((residual * self.sqrt_w)[mask] ** 2))
         n = int(residual[mask].size)
         p = 6 + int(theta.size)
         errors: list[dict[str, float]] = []
+        unseen: list[tuple[str, ...]] = []
         covariance = np.zeros((theta.size, theta.size))
         if theta.size:
+            blind = np.zeros(theta.size, dtype=bool) if seen is None else ~np.asarray(seen)
             covariance = self.covariance(theta, mask)
+            covariance[blind, :] = np.nan
+            covariance[:, blind] = np.nan
             se = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
             i = 0
             for cls, size in zip(self.free, self.sizes, strict=True):
                 errors.append(
                     dict(zip(cls.parameters, (float(v) for v in se[i : i + size]), strict=True))
+                )
+                unseen.append(
+                    tuple(q for q, b in zip(cls.parameters, blind[i : i + size], strict=True) if b)
                 )
                 i += size
         return Fit(
@@ -235,6 +246,7 @@ class _Problem:
             n,
             p,
             covariance,
+            tuple(unseen) if any(unseen) else (),
         )
 
     def covariance(self, theta: FloatArray, mask: BoolArray) -> FloatArray:
@@ -287,8 +299,8 @@ def fit_model(
     problem = _Problem(hexapod, obs, fixed, free)
     mask = np.ones(obs.n_steps, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
     starts = list(start) + [None] * (len(problem.free) - len(start))
-    theta = problem.solve(problem.start(starts, mask), mask)
-    return problem.fit(theta, mask)
+    theta, seen = problem.solve(problem.start(starts, mask), mask)
+    return problem.fit(theta, mask, seen)
 
 
 def heldout_rms_um(problem: _Problem, theta_hat: FloatArray, blocks: npt.NDArray[np.intp]) -> float:
@@ -319,8 +331,8 @@ def _fit_and_hold_out(
     problem = _Problem(hexapod, obs, fixed, free)
     everything = np.ones(obs.n_steps, dtype=bool)
     starts = list(start) + [None] * (len(problem.free) - len(start))
-    theta = problem.solve(problem.start(starts, everything), everything)
-    return problem.fit(theta, everything), heldout_rms_um(problem, theta, blocks)
+    theta, seen = problem.solve(problem.start(starts, everything), everything)
+    return problem.fit(theta, everything, seen), heldout_rms_um(problem, theta, blocks)
 
 
 def _change(before: Fit, after: Fit, obs: Observations) -> FloatArray:
@@ -388,7 +400,7 @@ def diagnose(
             free = [*added_classes, cls]
             fit, held = _fit_and_hold_out(hexapod, obs, current, free, starts, blocks)
             delta = model.bic - fit.bic
-            note = _bound_note(fit.effects[-1])
+            note = _bound_note(fit.effects[-1], fit.unseen_of(len(fit.effects) - 1))
             tried.append(
                 Candidate(
                     name,
@@ -443,8 +455,8 @@ def diagnose(
         # the joint refit of everything added so far is ``best.fit`` itself
     # the flags are those of the final joint fit (the values written to hexapod.yaml)
     added = [
-        replace(a, flags=bound_flags(effect))
-        for a, effect in zip(added, model.effects, strict=True)
+        replace(a, flags=bound_flags(effect, model.unseen_of(k)))
+        for k, (a, effect) in enumerate(zip(added, model.effects, strict=True))
     ]
     return Diagnosis(
         baseline,

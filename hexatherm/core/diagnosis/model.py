@@ -122,7 +122,13 @@ class Fit:
         Number of parameters (6 for the nuisance plus the effects').
     covariance : ndarray, shape (P, P)
         Covariance of the fitted effects' parameters, in their units, in the
-        order of ``effects`` and their ``parameters``.
+        order of ``effects`` and their ``parameters`` (NaN rows and columns for the
+        ``unseen`` ones, whose standard errors are NaN too).
+    unseen : tuple of tuple of str
+        Per fitted effect (aligned with ``effects``; empty: none), its parameters
+        that move no prediction on the fitted steps (a zero column of the Jacobian,
+        e.g. an air-driven effect when the air is constant): not identifiable from
+        these data, kept at their start value.
     """
 
     effects: tuple[Effect, ...]
@@ -134,6 +140,11 @@ class Fit:
     n: int
     p: int
     covariance: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
+    unseen: tuple[tuple[str, ...], ...] = ()
+
+    def unseen_of(self, index: int) -> tuple[str, ...]:
+        """The ``unseen`` parameters of ``effects[index]`` (see above)."""
+        return self.unseen[index] if self.unseen else ()
 
     @property
     def bic(self) -> float:
@@ -156,7 +167,8 @@ class Candidate:
     passes : bool
         ΔBIC above the threshold and held-out RMS lower than the current model's.
     note : str
-        Why it was skipped, or what is noteworthy (a parameter at its bound).
+        Why it was skipped, or what is noteworthy (a parameter at its bound, or one
+        these data do not see).
     """
 
     name: str

@@ -195,6 +195,8 @@ CALIBRATION_KEYS = {
     "poses": "text",
     "sessions": "texts",
     "n_poses": "whole",
+    "twin_model": "text",
+    "twin_model_sha256": "text",
     "leg_offsets_mm": "six",
     "leg_gains": "six",
     "chi_square_per_dof": "number",

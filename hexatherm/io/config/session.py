@@ -203,10 +203,12 @@ def session_to_yaml(
     measurements: list[str],
     temperatures: str | None = None,
     cmm: dict[str, float] | None = None,
+    utc_offset: str | None = None,
 ) -> str:
     """The session file text (paths relative to the session file).
 
-    ``cmm`` is the optional ``cmm:`` mapping, e.g. ``{"mpe_um": 1.0}``.
+    ``cmm`` is the optional ``cmm:`` mapping, e.g. ``{"mpe_um": 1.0}``; ``utc_offset``
+    the optional offset of the files' naive times, e.g. ``"+00:00"``.
     """
     doc: dict[str, Any] = {
         "format": SESSION_FORMAT,
@@ -218,6 +220,8 @@ def session_to_yaml(
     }
     if temperatures is not None:
         doc["temperatures"] = temperatures
+    if utc_offset is not None:
+        doc["utc_offset"] = utc_offset
     if cmm:
         doc["cmm"] = dict(cmm)
     return _dump(doc)

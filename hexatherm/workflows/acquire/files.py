@@ -97,7 +97,9 @@ def finish_session(folder: Path, notify: Notify, temperatures_file: Path | None 
 
     A thermocouple log (``temperatures_file`` copied in, or the one recorded
     from a second port) is attached when it reads as a temperatures file with
-    ISO times like the points; otherwise a warning says why it was left out.
+    ISO times like the points; otherwise a warning says why it was left out. The
+    session declares ``utc_offset: "+00:00"`` (the points' and a recorded log's times are
+    this computer's clock in UTC) unless ``temperatures_file`` came from elsewhere.
     """
     from hexatherm.io.config import session_to_yaml
     from hexatherm.io.temperatures import read_temperatures
@@ -128,11 +130,20 @@ def finish_session(folder: Path, notify: Notify, temperatures_file: Path | None 
                 )
             else:
                 temperatures = TEMPERATURES_NAME
+    # every time in the folder is hexatherm's own clock (UTC, written naive) unless a
+    # logger's file was copied in: its naive times may be local, so nothing is declared
+    utc_offset = "+00:00" if temperatures_file is None else None
     path = folder / "session.yaml"
     atomic_write_text(
         path,
         session_to_yaml(
-            folder.name, "hexapod.yaml", "balls.yaml", "plan.yaml", [POINTS_NAME], temperatures
+            folder.name,
+            "hexapod.yaml",
+            "balls.yaml",
+            "plan.yaml",
+            [POINTS_NAME],
+            temperatures,
+            utc_offset=utc_offset,
         ),
     )
     return path

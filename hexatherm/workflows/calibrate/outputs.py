@@ -2,7 +2,8 @@
 
 - ``hexapod.yaml``: the calibrated geometry in the hexapod file contract (base joints in
   frame O, as ``process`` needs them; stroke, legs and effects of the nominal file),
-  with a ``calibration:`` record: level, poses, sessions, the actuators' leg offsets and
+  with a ``calibration:`` record: level, poses (and the twin's model file with its
+  SHA-256 for ``twin`` poses), sessions, the actuators' leg offsets and
   gains (for the controller), chi-square per degree of freedom, version, time.
 - ``parameters.csv``: every parameter of the level: ``parameter,unit,nominal,calibrated,
   u,change_um,change_ppm,u_um,u_ppm,max_abs_correlation`` (the base joints in the fit's
@@ -47,6 +48,7 @@ def calibrated_hexapod_yaml(run: Calibration) -> str:
         "poses": run.campaign.poses,
         "sessions": [str(r.session.path) for r in run.campaign.results],
         "n_poses": len(run.campaign.labels),
+        **twin_record(run),
         "leg_offsets_mm": [float(v) for v in fit.leg_offsets_mm],
         "leg_gains": [float(v) for v in fit.leg_gains],
         "chi_square_per_dof": float(fit.chi_square_per_dof),
@@ -54,6 +56,18 @@ def calibrated_hexapod_yaml(run: Calibration) -> str:
         "written": now_iso(),
     }
     return hexapod_to_yaml(fit.hexapod(), record)
+
+
+def twin_record(run: Calibration) -> dict[str, str]:
+    """``twin_model`` (and ``twin_model_sha256`` when read from a file) of the record for
+    ``twin`` poses; nothing otherwise."""
+    twin = run.campaign.twin
+    if twin is None:
+        return {}
+    record = {"twin_model": twin.path}
+    if twin.sha256 is not None:
+        record["twin_model_sha256"] = twin.sha256
+    return record
 
 
 def parameters_frame(run: Calibration) -> pd.DataFrame:

@@ -8,12 +8,23 @@ held-out folds) or forced. The sessions must share one hexapod file (the geometr
 their controller commanded with).
 
 ``poses`` chooses what is fitted: ``corrected`` (the thermal state of each session's
-first reference R0, the default: the point of the method), or ``conventional`` (as
-measured, thermal drift included: for comparison).
+first reference R0, the default: the point of the method), ``conventional`` (as
+measured, thermal drift included: for comparison), or ``twin`` (each measured pose
+corrected to R0's thermal state by the deflection a twin model predicts from the
+thermocouple log alone, as ``process --method twin``; no reference measurement used).
+
+The twin-corrected poses are weighted with the covariance of the measured
+(conventional) poses they correct: the twin adds no measurement noise (its
+correction depends on the thermocouples and the model, not on the CMM's centres,
+but for the registered origin frame, a second-order term that is left out). Its
+model error (a missing or mis-fitted effect, thermocouple noise, the twin's nominal
+geometry) is not in that covariance: it shows as a chi-square per degree of
+freedom above 1, and as parameters off by more than their uncertainty.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,16 +44,92 @@ from hexatherm.core.correction import Interpolation
 from hexatherm.core.geometry import to_um_urad
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.errors import CalibrationError, InputError
-from hexatherm.io.config import read_session
+from hexatherm.io.config import hexapod_to_yaml, read_hexapod, read_hexapod_text, read_session
 from hexatherm.io.files import STRICT, ReadOptions
+from hexatherm.io.manifest import sha256_file
+from hexatherm.io.yamlfile import YamlDoc
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.pipeline import ProcessResult, process_session
+from hexatherm.workflows.process.twin import twin_poses
 from hexatherm.workflows.process.uncertainty import joint_pose_covariance
 
-PoseKind = Literal["corrected", "conventional"]
-POSE_KINDS: tuple[PoseKind, ...] = ("corrected", "conventional")
+PoseKind = Literal["corrected", "conventional", "twin"]
+POSE_KINDS: tuple[PoseKind, ...] = ("corrected", "conventional", "twin")
 #: the fewest target poses calibrate takes (the offsets level alone has 6 parameters)
 MIN_POSES = 4
+
+
+@dataclass(frozen=True)
+class TwinModel:
+    """The twin's model for ``poses="twin"``: a hexapod file whose ``thermal_model``
+    effects (and leg model) predict the thermal deflection from the thermocouples.
+
+    Attributes
+    ----------
+    hexapod : Hexapod
+        Geometry, legs and effects of the model.
+    path : str
+        Where it came from (the file, or what it was built from), for messages and the
+        calibration record.
+    sha256 : str or None
+        SHA-256 of the file (None when it was not read from one file).
+    """
+
+    hexapod: Hexapod
+    path: str
+    sha256: str | None = None
+
+    @classmethod
+    def read(cls, path: str | Path) -> TwinModel:
+        """The model of the hexapod file ``path`` (InputError naming it when invalid)."""
+        return cls(read_hexapod(path), str(path), sha256_file(Path(path)))
+
+    def with_geometry(self, geometry: Hexapod | None) -> Hexapod:
+        """The model's hexapod with the joints of ``geometry`` (a calibrated one; legs and
+        effects stay the model's), or as it is."""
+        if geometry is None:
+            return self.hexapod
+        return dataclasses.replace(
+            self.hexapod,
+            base_joints_mm=geometry.base_joints_mm,
+            platform_joints_mm=geometry.platform_joints_mm,
+        )
+
+
+def truth_twin_model(session: str | Path) -> TwinModel:
+    """The twin model equal to a simulated session's true thermal model: the session's
+    hexapod file (the nominal geometry and legs) with the effects of its
+    ``truth/effects.yaml`` (what ``simulate`` applied) as ``thermal_model``.
+
+    Parameters
+    ----------
+    session : str or Path
+        A folder written by ``hexatherm simulate`` (or its ``session.yaml``).
+
+    Returns
+    -------
+    TwinModel
+        Named by the ``truth/effects.yaml`` it was built from, no SHA-256.
+    """
+    spec = read_session(session)
+    path = spec.path.parent / "truth" / "effects.yaml"
+    doc = YamlDoc.load(path)
+    effects = doc.get("effects")
+    if not isinstance(effects, list):
+        raise doc.error("expected a list of effects", "effects")
+    text = hexapod_to_yaml(dataclasses.replace(spec.hexapod, effects=tuple(effects)))
+    return TwinModel(read_hexapod_text(text, str(path)), str(path))
+
+
+def simulated_twin_campaign(
+    session: str | Path, interpolation: Interpolation = "linear"
+) -> Campaign:
+    """The twin-corrected campaign of one simulated session, the twin's model being its
+    true thermal model (:func:`truth_twin_model`): ``read_campaign([session], "twin",
+    twin=truth_twin_model(session))``."""
+    return read_campaign(
+        [session], "twin", interpolation=interpolation, twin=truth_twin_model(session)
+    )
 
 
 @dataclass(frozen=True)
@@ -62,8 +149,11 @@ class Campaign:
     covariance : ndarray, shape (6N, 6N)
         Of the measured poses together (linear propagation), mm and deg: the terms
         between targets of one session (its one frame O and reference R0 move every
-        pose) included, sessions independent.
-    poses : {"corrected", "conventional"}
+        pose) included, sessions independent; for ``twin`` poses, the measured
+        (conventional) poses' covariance (see the module text).
+    poses : {"corrected", "conventional", "twin"}
+    twin : TwinModel or None
+        The twin's model (``twin`` poses only).
     """
 
     results: list[ProcessResult]
@@ -73,6 +163,7 @@ class Campaign:
     measured: FloatArray
     covariance: FloatArray
     poses: PoseKind
+    twin: TwinModel | None = None
 
 
 def read_campaign(
@@ -81,14 +172,18 @@ def read_campaign(
     reading: ReadOptions = STRICT,
     interpolation: Interpolation = "linear",
     geometry: Hexapod | None = None,
+    twin: TwinModel | None = None,
 ) -> Campaign:
     """Process every session of ``paths`` (``interpolation`` of the growth at the
     references as in ``process``; ``geometry``, a calibrated hexapod, for the
-    correction's IGM and FGM instead of the sessions' file) and pool their targets (see
-    the module text). The nominal geometry, the one the controller commanded with,
-    stays the sessions' hexapod file."""
+    correction's IGM and FGM instead of the sessions' file, and for the twin's joints)
+    and pool their targets (see the module text). The nominal geometry, the one the
+    controller commanded with, stays the sessions' hexapod file. ``twin`` is the twin's
+    model, required with ``poses="twin"`` and refused otherwise (ValueError)."""
     if poses not in POSE_KINDS:
         raise ValueError(f"poses must be one of {', '.join(POSE_KINDS)}, got {poses!r}")
+    if (poses == "twin") != (twin is not None):
+        raise ValueError("a twin model is required with poses='twin' and only with it")
     if not paths:
         raise ValueError("calibrate needs at least one session")
     results = [
@@ -116,7 +211,10 @@ def read_campaign(
         targets = corr.target_index
         labels += [f"{result.session.name}:{result.session.plan.labels[i]}" for i in targets]
         commanded.append(result.session.plan.poses[targets])
-        measured.append(corr.corrected if poses == "corrected" else corr.conventional)
+        if twin is not None:
+            measured.append(twin_poses(result, twin.with_geometry(geometry), twin.path))
+        else:
+            measured.append(corr.corrected if poses == "corrected" else corr.conventional)
         covariance.append(joint_pose_covariance(result, corrected=poses == "corrected"))
     n = len(labels)
     if n < MIN_POSES:
@@ -133,6 +231,7 @@ def read_campaign(
         np.concatenate(measured),
         block_diag(*covariance),
         poses,
+        twin,
     )
 
 
@@ -239,15 +338,18 @@ def calibrate_iterated(
     interpolation: Interpolation = "linear",
     level: str = "auto",
     residuals: str = "pose",
+    twin: TwinModel | None = None,
 ) -> tuple[Calibration, list[float]]:
     """Calibrate, reprocess the sessions with the calibrated geometry (the correction's
     IGM and FGM), calibrate again, until no parameter moves more than
     :data:`ITERATE_TOL_MM`; returns the last calibration and each round's largest move
-    (mm). CalibrationError after :data:`MAX_ROUNDS` rounds without convergence."""
-    run = calibrate(read_campaign(paths, poses, reading, interpolation), level, residuals)
+    (mm). CalibrationError after :data:`MAX_ROUNDS` rounds without convergence. With
+    ``twin``, the twin's joints are the calibrated ones too from the second round."""
+    campaign = read_campaign(paths, poses, reading, interpolation, twin=twin)
+    run = calibrate(campaign, level, residuals)
     moves: list[float] = []
     while len(moves) < MAX_ROUNDS:
-        campaign = read_campaign(paths, poses, reading, interpolation, run.fit.hexapod())
+        campaign = read_campaign(paths, poses, reading, interpolation, run.fit.hexapod(), twin)
         again = calibrate(campaign, level, residuals)
         scale = np.where(np.array(PARAMETER_UNITS) == "mm", 1.0, 1000.0)
         moves.append(float(np.max(np.abs(again.fit.parameters - run.fit.parameters) * scale)))

@@ -11,7 +11,8 @@ these extensions, documented in the README:
   ``parameters_when_added`` are the values of the round that added it;
 * in each ``added`` entry: ``alternatives``, the other passing candidates that
   explain the same residual (``effect``, ``delta_bic``, ``similarity``: the cosine
-  of their fitted residual changes), and ``note`` (e.g. a parameter at a bound);
+  of their fitted residual changes), and ``note`` (e.g. a parameter at a bound, or
+  one these data do not see: not identifiable, kept at its start value);
 * ``baseline_heldout_rms_um``, ``final_heldout_rms_um``;
 * ``rounds``: every candidate of every round (``effect``, ``parameters``,
   ``std_errors``, ``delta_bic``, ``rms_um``, ``heldout_rms_um``, ``passes``,
@@ -199,11 +200,12 @@ def _format_effect(
 
 
 def candidates_table(round_: tuple[Candidate, ...]) -> str:
-    """One round's candidates as a fixed-width table."""
-    lines = [f"  {'effect':<16} {'dBIC':>9} {'RMS_um':>8} {'heldout_um':>10}  passes  note"]
+    """One round's candidates as a fixed-width table (as wide as its longest name)."""
+    w = max([len("effect"), *(len(c.name) for c in round_)])
+    lines = [f"  {'effect':<{w}} {'dBIC':>9} {'RMS_um':>8} {'heldout_um':>10}  passes  note"]
     for c in sorted(round_, key=lambda c: -c.delta_bic if math.isfinite(c.delta_bic) else 0):
         lines.append(
-            f"  {c.name:<16} {c.delta_bic:9.1f} {c.rms_um:8.3f} "
+            f"  {c.name:<{w}} {c.delta_bic:9.1f} {c.rms_um:8.3f} "
             f"{c.heldout_rms_um:10.3f}  {'yes' if c.passes else 'no ':<6}  {c.note}"
         )
     return "\n".join(lines)

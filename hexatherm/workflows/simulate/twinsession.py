@@ -68,6 +68,9 @@ from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.outputs import pose_columns
 
 OUTPUTS = ("centres", "points", "dmis", "serial")
+#: the twin's clock is UTC: its naive times (from the scenario's ``start``) are declared so
+#: in ``session.yaml``, and every time ``process`` writes carries ``+00:00``
+TWIN_UTC_OFFSET = "+00:00"
 
 __all__ = [
     "Heating",
@@ -245,6 +248,7 @@ def simulate_session(spec: TwinSessionSpec) -> SimulatedSession:
             "plan.yaml",
             [measurement_name],
             "temperatures.csv",
+            utc_offset=TWIN_UTC_OFFSET,
         ),
         measurement_name: measurement_text,
         "temperatures.csv": csv_text(temps_frame, rounded=False),
