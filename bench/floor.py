@@ -9,6 +9,12 @@ alike), the floor and ``hexatherm process DIR -o OUT --overwrite`` (reading, sph
 fits, registration, correction, uncertainty, quality checks, writing, provenance), and
 prints every pair's ratio and their median, of wall time and of CPU time (user +
 system: it moves less when other work shares the machine). The issue's target is 1.5x.
+
+The second figure, paired the same way (``--plain-pairs``, default 3; 0 leaves it out):
+``bench/straightforward.py`` (the same job done the straightforward way: the file read
+line by line, one ``least_squares`` per sphere, one ``align_vectors`` per step, one
+``root`` per pose; no uncertainty, no quality checks) against ``process``, alternating,
+and the median of ``straightforward / process``.
 """
 
 from __future__ import annotations
@@ -41,6 +47,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--targets", type=int, default=1000)
     parser.add_argument("--pairs", type=int, default=7)
+    parser.add_argument("--plain-pairs", type=int, default=3)
     args = parser.parse_args()
     folder = session(args.targets, "points")
     measurement = [p for p in folder.glob("*.csv") if p.name != "temperatures.csv"]
@@ -68,6 +75,29 @@ def main() -> None:
         ratios = [b[k] / a[k] for a, b in pairs]
         median = statistics.median(ratios)
         print(f"{what}: median ratio {median:.2f} (min {min(ratios):.2f}, max {max(ratios):.2f})")
+    if args.plain_pairs > 0:
+        straightforward(folder, ours, args.plain_pairs)
+
+
+def straightforward(folder: Path, ours: list[str], n_pairs: int) -> None:
+    """Print ``bench/straightforward.py`` against ``process``, alternating pairs."""
+    plain = [
+        sys.executable,
+        str(Path(__file__).resolve().parent / "straightforward.py"),
+        str(folder),
+        "-o",
+        str(CACHE / "floor-plain"),
+    ]
+    pairs = [(timed(plain), timed(ours)) for _ in range(n_pairs)]
+    print(f"straightforward script against process, {n_pairs} pairs")
+    print(f"{'plain (s)':>10} {'process (s)':>12} {'ratio':>7}")
+    for (w_plain, _), (w_ours, _) in pairs:
+        print(f"{w_plain:10.3f} {w_ours:12.3f} {w_plain / w_ours:7.2f}")
+    ratios = [a[0] / b[0] for a, b in pairs]
+    print(
+        f"wall: median ratio straightforward / process {statistics.median(ratios):.2f} "
+        f"(min {min(ratios):.2f}, max {max(ratios):.2f})"
+    )
 
 
 if __name__ == "__main__":

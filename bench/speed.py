@@ -50,8 +50,9 @@ import straightforward  # noqa: E402
 
 from hexatherm.core.registration import register  # noqa: E402
 from hexatherm.core.spherefit import fit_spheres  # noqa: E402
-from hexatherm.io import csvfile, dmis, measurements, temperatures  # noqa: E402
+from hexatherm.io import csvfile, dmis, temperatures  # noqa: E402
 from hexatherm.io.config import read_hexapod, read_session  # noqa: E402
+from hexatherm.io.measurements import read_measurements  # noqa: E402
 from hexatherm.workflows.process.measured import (  # noqa: E402
     assemble_centres,
     fit_points,
@@ -177,7 +178,7 @@ def phase_times(folder: Path, repeat: int) -> dict[str, float]:
     state: dict[str, Any] = {}
 
     def measurements() -> None:
-        state["records"] = [r for f in sess.measurements for r in measurements.read_measurements(f)]
+        state["records"] = [r for f in sess.measurements for r in read_measurements(f)]
 
     def fits() -> None:
         state["centres"] = assemble_centres(
@@ -306,7 +307,7 @@ def main() -> None:
         from hexatherm.workflows.process.uncertainty import pose_uncertainty
 
         t_unc = best(lambda r=result: pose_uncertainty(r), rep)
-        records = [r for file in sess.measurements for r in measurements.read_measurements(file)]
+        records = [r for file in sess.measurements for r in read_measurements(file)]
         n_points = sum(len(r) for r in records)
         end_to_end.append(
             [
@@ -416,7 +417,7 @@ def main() -> None:
         ("DMIS", sessions["DMIS"], "dmis"),
     ):
         file = read_session(folder).measurements[0]
-        t_fast = best(lambda f=file: measurements.read_measurements(f), rep)
+        t_fast = best(lambda f=file: read_measurements(f), rep)
         t_general = best(lambda f=file, k=kind: general(k)(f), slow)
         readers.append(
             [
