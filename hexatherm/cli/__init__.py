@@ -13,7 +13,8 @@ code  meaning
 1     refused: bad input, an output that would touch an input, a failed
       computation (one line on stderr naming file, line and field, or the step)
 2     usage error: a bad option or argument (click's message)
-3     ``process --strict``: results written, but a quality check failed
+3     ``--strict``: results written, but a check failed (``process``: a quality
+      check; ``calibrate``: the model does not explain the poses)
 130   interrupted (Ctrl-C); outputs are whole or absent, a hexapod is stopped
 ====  ==========================================================================
 """
@@ -32,7 +33,7 @@ EXIT_CODES = {
     0: "done",
     1: "refused: bad input or a failed computation (one line naming file, line and field)",
     2: "usage error: a bad option or argument",
-    3: "process --strict: results written, but a quality check failed",
+    3: "--strict: results written, but a check failed (process: quality; calibrate: chi-square)",
     130: "interrupted (Ctrl-C)",
 }
 #: the exit status of an interrupted command (128 + SIGINT, as shells report it)

@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from hexatherm.cli.options import (
+    CHECK_FAILED_EXIT,
     clean_errors,
     echo_err,
     interpolation_option,
@@ -44,6 +45,12 @@ from hexatherm.io.files import ReadOptions
     "(e.g. the hexapod.yaml of hexatherm diagnose). Only with --poses twin.",
 )
 @click.option(
+    "--strict",
+    is_flag=True,
+    help=f"Exit with status {CHECK_FAILED_EXIT} when the model does not explain the poses "
+    "(chi-square test at p = 0.001; the outputs are still written); without it, a warning.",
+)
+@click.option(
     "--level",
     type=click.Choice(["auto", "offsets", "joints", "joints+gains"]),
     default="auto",
@@ -73,6 +80,7 @@ def command(
     out: Path,
     poses: str,
     twin_model: Path | None,
+    strict: bool,
     level: str,
     residuals: str,
     iterate: bool,
@@ -147,3 +155,9 @@ def command(
         click.echo(line)
     for name in files:
         echo_err(f"wrote {out / name}")
+    if strict and not run.fit.explains_poses:
+        echo_err(
+            "error: the model does not explain the poses (chi-square test); "
+            f"exit status {CHECK_FAILED_EXIT} (--strict)"
+        )
+        raise SystemExit(CHECK_FAILED_EXIT)

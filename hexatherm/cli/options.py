@@ -48,6 +48,8 @@ quality_threshold_option = click.option(
     "mapping): form_um, diameter_dev_um, distance_dev_um, registration_rms_um, time_gap_s, "
     "temperature_change_C, min_rcond; inf (0 for min_rcond) disables a check.",
 )
+#: exit status of ``--strict`` when a check fails (the outputs are still written)
+CHECK_FAILED_EXIT = 3
 #: the largest number of Monte Carlo draws (the draws of every centre are held at once)
 MAX_DRAWS = 100_000
 #: seeds accepted (numpy's SeedSequence takes any integer >= 0; 64 bits are plenty)

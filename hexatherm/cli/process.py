@@ -9,6 +9,7 @@ import click
 import numpy as np
 
 from hexatherm.cli.options import (
+    CHECK_FAILED_EXIT,
     CheckedFloat,
     ProgressBars,
     check_draws,
@@ -29,7 +30,7 @@ if TYPE_CHECKING:
     from hexatherm.workflows.process.uncertainty import PoseUncertainty
 
 #: exit status of ``process --strict`` when a quality check fails
-QUALITY_EXIT = 3
+QUALITY_EXIT = CHECK_FAILED_EXIT
 
 
 @click.command("process")

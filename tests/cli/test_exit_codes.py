@@ -1,8 +1,10 @@
 """Every command's exit status follows one table (issue 16, item 3): 0 done, 1 refused,
-2 usage error, 3 ``process --strict`` with a failed check, 130 interrupted."""
+2 usage error, 3 ``process --strict``/``calibrate --strict`` with a failed check, 130
+interrupted."""
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
@@ -104,6 +106,21 @@ def test_done_is_0_and_a_failed_check_with_strict_is_3(tmp_path: Path) -> None:
     strict = run("process", session, "-o", tmp_path / "b", "--strict")
     assert strict.exit_code == 3, strict.output
     assert (tmp_path / "b" / "poses.csv").is_file()  # the results are still written
+
+
+def test_calibrate_strict_is_3_when_the_model_does_not_explain_the_poses(tmp_path: Path) -> None:
+    # the shipped heated campaign: corrected poses are explained by the calibrated model,
+    # conventional ones (tens of um of drift in them) are not
+    session = ROOT / "sessions" / "calibration-geometry"
+    good = run("calibrate", session, "-o", tmp_path / "a", "--strict")
+    assert good.exit_code == 0, good.output
+    assert json.loads((tmp_path / "a" / "calibration.json").read_text())["explains_poses"]
+    bad = run("calibrate", session, "-o", tmp_path / "b", "--poses", "conventional", "--strict")
+    assert bad.exit_code == 3, bad.output
+    assert "the model does not explain these poses" in bad.output
+    facts = json.loads((tmp_path / "b" / "calibration.json").read_text())  # still written
+    assert not facts["explains_poses"] and facts["chi_square_p"] < 1e-3
+    assert facts["chi_square_per_dof"] > 100
 
 
 def interrupt(*args: object, **kwargs: object) -> None:

@@ -38,7 +38,7 @@ def scenario(seed: int) -> str:
 
 def test_parameter_errors_follow_their_covariance_over_20_campaigns() -> None:
     held = np.random.default_rng(77).uniform(-1, 1, (100, 6)) * SPAN
-    distances, normalized = [], []
+    distances, normalized, p_values = [], [], []
     with tempfile.TemporaryDirectory() as tmp:
         for seed in range(N_SEEDS):
             path = Path(tmp) / f"s{seed}.yaml"
@@ -48,6 +48,7 @@ def test_parameter_errors_follow_their_covariance_over_20_campaigns() -> None:
             write_files(simulate(read).files, folder)
             run = calibrate(read_campaign([folder]), level="joints")
             fit, model = run.fit, run.fit.model
+            p_values.append(fit.chi_square_p)
             assert read.true_parameters is not None
             error = model.coordinates(fit.parameters) - model.coordinates(read.true_parameters)
             distances.append(float(error @ np.linalg.solve(fit.covariance_free, error)))
@@ -60,3 +61,7 @@ def test_parameter_errors_follow_their_covariance_over_20_campaigns() -> None:
     assert abs(mean / 36.0 - 1.0) < 0.15, (mean, distances)
     ratio = float(np.sqrt(np.mean(np.square(normalized))))
     assert ratio < 1.2, ratio
+    # the chi-square test: a right model with an honest covariance passes it (p uniform:
+    # two of 20 below 0.001 would happen once in 5000; not piled at either end)
+    assert sum(p < 1e-3 for p in p_values) <= 1, p_values
+    assert 0.2 < float(np.mean(p_values)) < 0.8, p_values

@@ -12,6 +12,7 @@ from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
+from scipy import stats
 from scipy.optimize import least_squares
 
 from hexatherm.core.calibration.model import (
@@ -44,6 +45,9 @@ _FLAT = 1e-9
 #: most rounds of the leg-space fit's reweighting
 _LEG_ROUNDS = 5
 _COMPONENTS = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
+#: significance of the chi-square test of a calibration: a chi-square that chance alone
+#: exceeds less often than this says the model does not explain the poses
+EXPLAINED_P = 1e-3
 
 
 # ---------------------------------------------------------------------- observability
@@ -293,6 +297,23 @@ class CalibrationFit:
     @property
     def chi_square_per_dof(self) -> float:
         return self.chi_square / self.dof
+
+    @property
+    def chi_square_p(self) -> float:
+        """Probability that the chi-square is this large or larger by chance alone, the
+        model right and the poses' covariance honest (chi-square with ``dof``)."""
+        return float(stats.chi2.sf(self.chi_square, self.dof)) if self.dof > 0 else 1.0
+
+    @property
+    def explains_poses(self) -> bool:
+        """Whether the fitted model explains the poses within their covariance: the
+        chi-square test passes at :data:`EXPLAINED_P` (with no degree of freedom left,
+        nothing can be told, and it is taken to)."""
+        return self.chi_square_p >= EXPLAINED_P
+
+    def chi_square_limit_per_dof(self) -> float:
+        """The chi2/dof above which :attr:`explains_poses` fails."""
+        return float(stats.chi2.isf(EXPLAINED_P, self.dof)) / self.dof if self.dof > 0 else np.inf
 
     @property
     def leg_offsets_mm(self) -> FloatArray:

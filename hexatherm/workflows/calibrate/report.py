@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from hexatherm.core.calibration import PARAMETER_UNITS
+from hexatherm.core.calibration.fit import EXPLAINED_P
 from hexatherm.core.residuals import rms
 from hexatherm.io.provenance import current_run, now_iso
 from hexatherm.typing import FloatArray
@@ -153,7 +154,14 @@ def report_html(run: Calibration, stroke: StrokeMap, inputs: Sequence[Path], fol
         f"the gauge) from {len(run.campaign.labels)} {run.campaign.poses} poses of "
         f"{len(run.campaign.results)} session(s).",
         f"chi²/dof {fit.chi_square_per_dof:.2f} (1: the residuals are as large as the poses' "
-        "uncertainty says).",
+        "uncertainty says): "
+        + (
+            f"the model explains the poses (chi-square test, p = {fit.chi_square_p:.2g})."
+            if fit.explains_poses
+            else f"NOT EXPLAINED: chance alone exceeds {fit.chi_square_limit_per_dof():.2f} "
+            f"once in {1 / EXPLAINED_P:.0f} (p = {fit.chi_square_p:.2g}); the parameters' "
+            "uncertainties assume the model is right."
+        ),
         "RMS residual Tx, Ty, Tz: nominal "
         + ", ".join(fixed(v, "um") for v in before[:3])
         + " µm; calibrated "
