@@ -7,14 +7,16 @@ from pathlib import Path
 
 import click
 
-from hexatherm.cli.options import clean_errors, echo_err
+from hexatherm.cli.options import clean_errors, echo_err, reading_options
+from hexatherm.io.files import ReadOptions
 
 
 @click.command("inspect")
 @click.argument("file", type=click.Path(path_type=Path))
 @click.option("--csv", "as_csv", is_flag=True, help="Write the table as CSV instead of text.")
+@reading_options
 @clean_errors
-def command(file: Path, as_csv: bool) -> None:
+def command(file: Path, as_csv: bool, reading: ReadOptions) -> None:
     """List the actual features of FILE (DMIS output, centres or points CSV).
 
     One row per feature: line, label, type, x, y, z (mm), size (diameter, mm)
@@ -23,7 +25,7 @@ def command(file: Path, as_csv: bool) -> None:
     """
     from hexatherm.workflows.inspect import feature_table
 
-    table = feature_table(file)
+    table = feature_table(file, reading)
     if as_csv:
         table.to_csv(sys.stdout, index=False, lineterminator="\n")
     else:

@@ -10,19 +10,21 @@ import pandas as pd
 
 from hexatherm.io.csvfile import read_measurement_csv, read_text
 from hexatherm.io.dmis import DMIS_SUFFIXES, looks_like_dmis, read_dmis_features
+from hexatherm.io.files import STRICT, ReadOptions
 from hexatherm.io.records import seconds_to_iso
 
 COLUMNS = ["line", "label", "type", "x_mm", "y_mm", "z_mm", "size_mm", "time"]
 
 
-def feature_table(path: str | os.PathLike[str]) -> pd.DataFrame:
-    """Every feature of a DMIS output or a centres/points CSV, one row each."""
+def feature_table(path: str | os.PathLike[str], reading: ReadOptions = STRICT) -> pd.DataFrame:
+    """Every feature of a DMIS output or a centres/points CSV, one row each (``reading``:
+    a file cut short, a ball probed twice in one step, as the other commands read it)."""
     path = Path(path)
     if path.suffix.lower() in DMIS_SUFFIXES or (
         path.suffix.lower() != ".csv" and looks_like_dmis(read_text(path)[:4096])
     ):
         rows = []
-        for feat in read_dmis_features(path):
+        for feat in read_dmis_features(path, allow_truncated=reading.allow_truncated):
             xyz = feat.xyz_mm if feat.xyz_mm is not None else (np.nan,) * 3
             rows.append(
                 [
@@ -35,7 +37,9 @@ def feature_table(path: str | os.PathLike[str]) -> pd.DataFrame:
                 ]
             )
         return pd.DataFrame(rows, columns=COLUMNS)
-    rec = read_measurement_csv(path)
+    rec = read_measurement_csv(
+        path, allow_truncated=reading.allow_truncated, keep_later=reading.keep_later
+    )
     times = [seconds_to_iso(t) for t in rec.time_s] if rec.time_kind == "iso" else rec.time_s
     return pd.DataFrame(
         {

@@ -86,3 +86,29 @@ def test_a_temperature_log_cut_short(tmp_path: Path, command: str) -> None:
     allowed = run(command, cut, "--allow-truncated")
     assert allowed.exit_code == 0, allowed.output
     assert "warning: " in allowed.output and "temperatures.csv" in allowed.output
+
+
+def test_inspect_lists_a_cut_file_only_when_asked(tmp_path: Path) -> None:
+    lines = (ROOT / "sessions" / "paper-zero-pose-dmis" / "points.dmo").read_text()
+    cut = tmp_path / "points.dmo"
+    cut.write_text("".join(lines.splitlines(keepends=True)[:-2]))  # no ENDFIL
+    refused = run("inspect", cut)
+    assert refused.exit_code == 1 and "--allow-truncated" in refused.output
+    listed = run("inspect", cut, "--allow-truncated", "--csv")
+    assert listed.exit_code == 0, listed.output
+    assert "warning: " in listed.output
+    # the truth: the whole file's features but the last (the cut one)
+    whole = run("inspect", ROOT / "sessions" / "paper-zero-pose-dmis" / "points.dmo", "--csv")
+    assert whole.exit_code == 0, whole.output
+    assert listed.stdout.splitlines() == whole.stdout.splitlines()[:-1]
+    # a centres file with a ball measured twice: the later row when asked
+    text = (ROOT / "sessions" / "paper-zero-pose" / "centres.csv").read_text()
+    twice = tmp_path / "centres.csv"
+    first = text.splitlines()[1]
+    twice.write_text(text + first + "\n")
+    assert run("inspect", twice).exit_code == 1
+    kept = run("inspect", twice, "--keep-later", "--csv")
+    assert kept.exit_code == 0, kept.output
+    rows = [r for r in kept.stdout.splitlines() if r.startswith(f"{len(text.splitlines()) + 1},")]
+    assert len(rows) == 1 and rows[0].split(",")[1] == "O_B1"
+    assert not any(r.startswith("2,") for r in kept.stdout.splitlines())  # the earlier one
