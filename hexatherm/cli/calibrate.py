@@ -25,7 +25,8 @@ from hexatherm.io.files import ReadOptions
     "out",
     required=True,
     type=click.Path(file_okay=False, path_type=Path),
-    help="Output folder: hexapod.yaml, parameters.csv, residuals.csv, calibration.json.",
+    help="Output folder: hexapod.yaml, parameters.csv, residuals.csv, calibration.json, "
+    "report.html, provenance.json.",
 )
 @click.option(
     "--poses",
