@@ -7,7 +7,9 @@ import re
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
+import pytest
 import yaml
 from click.testing import CliRunner
 
@@ -90,3 +92,28 @@ def test_a_simulated_session_declares_its_clock_and_its_times_open_tz_aware(
     truth = pd.read_csv(session / "truth" / "steps.csv").set_index("label")
     expected = pd.to_datetime(truth.loc[poses["label"], "time"]).dt.tz_localize("UTC")
     assert (times.to_numpy() == expected.to_numpy()).all()
+
+
+@pytest.mark.parametrize(
+    "session", sorted(p.parent.parent.name for p in ROOT.glob("sessions/*/expected/poses.csv"))
+)
+def test_every_shipped_poses_file_opens_with_floats_and_tz_aware_times(session: str) -> None:
+    """What ``process`` writes for the shipped sessions (``expected/``, which replay holds
+    equal to it) opens in pandas as it should: every number with a unit as float64, the
+    deviation columns equal (pose - commanded) to the file's resolution, times tz-aware."""
+    poses = pd.read_csv(ROOT / "sessions" / session / "expected" / "poses.csv")
+    with_unit = [c for c in poses.columns if c.rsplit("_", 1)[-1] in ("mm", "deg", "um", "urad")]
+    assert len(with_unit) > 30
+    assert all(poses[c].dtype == "float64" for c in with_unit), poses.dtypes[with_unit]
+    assert poses["label"].map(type).eq(str).all()
+    times = pd.to_datetime(poses["time"])
+    assert str(times.dt.tz) == "UTC"
+    for kind in ("conv", "corr"):
+        # half a step of the pose (1e-7 mm or deg) and of the deviation (1e-4 um, 1e-3 urad)
+        for axis, unit, scale, tolerance in (
+            ("Tx", "mm", 1e3, 0.5e-4 + 0.5e-4),
+            ("Rz", "deg", np.pi / 180 * 1e6, 0.5e-7 * np.pi / 180 * 1e6 + 0.5e-3),
+        ):
+            pose = poses[f"{axis}_{kind}_{unit}"] - poses[f"{axis}_cmd_{unit}"]
+            deviation = poses[f"d{axis}_{kind}_{'um' if unit == 'mm' else 'urad'}"]
+            assert (pose * scale - deviation).abs().max() <= tolerance * 1.001
