@@ -30,12 +30,16 @@ import pandas as pd
 
 from hexatherm import __version__
 from hexatherm.core.calibration import PARAMETER_NAMES, PARAMETER_UNITS
-from hexatherm.core.calibration.fit import EXPLAINED_P
 from hexatherm.core.residuals import rms
 from hexatherm.io.config import hexapod_to_yaml
 from hexatherm.io.csvout import csv_text
 from hexatherm.io.provenance import now_iso
-from hexatherm.workflows.calibrate.report import StrokeMap, report_html, stroke_map
+from hexatherm.workflows.calibrate.report import (
+    StrokeMap,
+    not_explained,
+    report_html,
+    stroke_map,
+)
 from hexatherm.workflows.calibrate.run import Calibration
 
 COMPONENTS = ("dTx_um", "dTy_um", "dTz_um", "dRx_urad", "dRy_urad", "dRz_urad")
@@ -233,22 +237,3 @@ def summary_lines(run: Calibration) -> list[str]:
     for a, b, rho in fit.high_correlations()[:5]:
         lines.append(f"warning: {a} and {b} are correlated (rho = {rho:+.3f})")
     return lines
-
-
-def not_explained(run: Calibration) -> str:
-    """Why a calibration whose chi-square test fails is not to be trusted, in words."""
-    fit = run.fit
-    hint = (
-        " (conventional poses carry the legs' drift: --poses corrected)"
-        if run.campaign.poses == "conventional"
-        else ""
-    )
-    return (
-        f"the model does not explain these poses: chi2/dof {fit.chi_square_per_dof:.2f} for "
-        f"{fit.dof} degrees of freedom, where chance alone exceeds "
-        f"{fit.chi_square_limit_per_dof():.2f} once in {1 / EXPLAINED_P:.0f} "
-        f"(p = {fit.chi_square_p:.2g}); the residuals are larger than the poses' "
-        f"uncertainty says: a thermal error left in the poses{hint}, an effect the level "
-        "does not model, or uncertainties stated too small. The parameters' uncertainties "
-        "assume the model is right"
-    )

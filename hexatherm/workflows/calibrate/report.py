@@ -138,6 +138,25 @@ def _residual_figure(run: Calibration) -> Figure:
     return fig
 
 
+def not_explained(run: Calibration) -> str:
+    """Why a calibration whose chi-square test fails is not to be trusted, in words."""
+    fit = run.fit
+    hint = (
+        " (conventional poses carry the legs' drift: --poses corrected)"
+        if run.campaign.poses == "conventional"
+        else ""
+    )
+    return (
+        f"the model does not explain these poses: chi2/dof {fit.chi_square_per_dof:.2f} for "
+        f"{fit.dof} degrees of freedom, where chance alone exceeds "
+        f"{fit.chi_square_limit_per_dof():.2f} once in {1 / EXPLAINED_P:.0f} "
+        f"(p = {fit.chi_square_p:.2g}); the residuals are larger than the poses' "
+        f"uncertainty says: a thermal error left in the poses{hint}, an effect the level "
+        "does not model, or uncertainties stated too small. The parameters' uncertainties "
+        "assume the model is right"
+    )
+
+
 def report_html(run: Calibration, stroke: StrokeMap, inputs: Sequence[Path], folder: Path) -> str:
     """The calibration's report page (see the module text)."""
     fit = run.fit
@@ -158,9 +177,7 @@ def report_html(run: Calibration, stroke: StrokeMap, inputs: Sequence[Path], fol
         + (
             f"the model explains the poses (chi-square test, p = {fit.chi_square_p:.2g})."
             if fit.explains_poses
-            else f"NOT EXPLAINED: chance alone exceeds {fit.chi_square_limit_per_dof():.2f} "
-            f"once in {1 / EXPLAINED_P:.0f} (p = {fit.chi_square_p:.2g}); the parameters' "
-            "uncertainties assume the model is right."
+            else f"NOT EXPLAINED: {not_explained(run)}."
         ),
         "RMS residual Tx, Ty, Tz: nominal "
         + ", ".join(fixed(v, "um") for v in before[:3])
