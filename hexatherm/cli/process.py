@@ -29,9 +29,6 @@ from hexatherm.io.files import ReadOptions
 if TYPE_CHECKING:
     from hexatherm.workflows.process.uncertainty import PoseUncertainty
 
-#: exit status of ``process --strict`` when a quality check fails
-QUALITY_EXIT = CHECK_FAILED_EXIT
-
 
 @click.command("process")
 @click.argument("session", type=click.Path(exists=True, path_type=Path))
@@ -89,7 +86,7 @@ QUALITY_EXIT = CHECK_FAILED_EXIT
 @click.option(
     "--strict",
     is_flag=True,
-    help=f"Exit with status {QUALITY_EXIT} when a quality check fails (the results "
+    help=f"Exit with status {CHECK_FAILED_EXIT} when a quality check fails (the results "
     "are still written); without it a failed check is a warning.",
 )
 @click.option(
@@ -224,8 +221,8 @@ def command(
             + ")"
         )
         if strict:
-            echo_err(f"error: {what}; exit status {QUALITY_EXIT} (--strict)")
-            raise SystemExit(QUALITY_EXIT)
+            echo_err(f"error: {what}; exit status {CHECK_FAILED_EXIT} (--strict)")
+            raise SystemExit(CHECK_FAILED_EXIT)
         echo_err(f"warning: {what}")
 
 
