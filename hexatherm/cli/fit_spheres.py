@@ -60,8 +60,9 @@ def command(
     """Fit a sphere to every (label, ball) group of the POINTS files.
 
     Writes a centres file: label,ball,x,y,z,time (time: mean of the points),
-    then diameter, form_um (max-min residual), n and u_um (standard uncertainty
-    of the centre from the residuals).
+    then diameter, form_um (max-min residual), n, u_um (standard uncertainty
+    of the centre from the residuals, sqrt(tr C / 3)) and the centre's covariance C:
+    u_x_um, u_y_um, u_z_um and the correlations r_xy, r_xz, r_yz.
     """
     if old_fixed_diameter is not None:
         if fixed_diameter is not None:

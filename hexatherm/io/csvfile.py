@@ -48,9 +48,16 @@ from hexatherm.io.csvtext import complete_lines, csv_frame, read_text
 from hexatherm.io.records import RecordKind, Records, TimeKind, check_groups, seconds_to_iso
 
 BASE_COLUMNS = ("label", "ball", "x", "y", "z", "time")
-CENTRE_EXTRA = ("diameter", "form_um", "n", "u_um")  # all but diameter: extensions
+#: a centre's covariance, CMM frame: standard uncertainties per axis (um) and correlations
+CENTRE_COVARIANCE = ("u_x_um", "u_y_um", "u_z_um", "r_xy", "r_xz", "r_yz")
+CENTRE_EXTRA = ("diameter", "form_um", "n", "u_um", *CENTRE_COVARIANCE)  # but diameter: extensions
 POINT_EXTRA = ("i", "j", "k")
 
+
+#: Decimals of the correlations ``r_*`` a centres file is written with, and how far below
+#: zero the smallest eigenvalue of a file's correlation matrix may be (that rounding)
+CORRELATION_DECIMALS = 6
+CORRELATION_SLACK = 1e-5
 
 #: The largest standard uncertainty ``u_um`` of a centre accepted, um
 U_UM_MAX = 1000.0
@@ -311,7 +318,7 @@ def read_measurement_csv(
                 checked[column] = column_numbers(frame, column, path, allow_empty=True)
         _check_centre_columns(checked, lines, path, frame)
         diameter = checked.pop("diameter", None)
-        extra.update(checked)
+        extra = _centre_extra({c: v for c, v in checked.items() if v is not None}, lines, path)
     elif all(c in frame.columns for c in POINT_EXTRA):
         ijk = np.column_stack(
             [column_numbers(frame, c, path, allow_empty=True) for c in POINT_EXTRA]
@@ -340,11 +347,87 @@ _CENTRE_RULES: dict[str, tuple[Callable[[npt.NDArray[np.float64]], npt.NDArray[n
     "diameter": (lambda v: v > 0, "a diameter must be > 0 mm"),
     "form_um": (lambda v: v >= 0, "a form error must be >= 0 um"),
     "n": (lambda v: (v >= 1) & (v == np.round(v)), "a point count must be a whole number >= 1"),
-    "u_um": (
-        lambda v: (v > 0) & (v <= U_UM_MAX),
-        f"a standard uncertainty must be > 0 and <= {U_UM_MAX:g} um",
+    **dict.fromkeys(
+        ("u_um", "u_x_um", "u_y_um", "u_z_um"),
+        (
+            lambda v: (v > 0) & (v <= U_UM_MAX),
+            f"a standard uncertainty must be > 0 and <= {U_UM_MAX:g} um",
+        ),
+    ),
+    **dict.fromkeys(
+        ("r_xy", "r_xz", "r_yz"),
+        (lambda v: np.abs(v) <= 1, "a correlation must be within [-1, 1]"),
     ),
 }
+
+
+def _centre_extra(
+    values: dict[str, npt.NDArray[np.float64]], lines: npt.NDArray[np.int64], path: str
+) -> dict[str, object]:
+    """The ``extra`` of a centres file's records from its checked extension columns:
+    ``form_um``, ``n``, ``u_um`` as given; the covariance columns as ``cov_centre_mm2``
+    (N, 3, 3), NaN for a row without them, and ``cov_from_file`` (N,) where given.
+
+    The three ``u_*_um`` come together; the correlations (all three or none) only with
+    them, and zero when left out. A row fills all of them or none, and its correlations
+    must make a positive semi-definite matrix: InputError naming line and field."""
+    extra: dict[str, object] = {c: values[c] for c in ("form_um", "n", "u_um") if c in values}
+    given = [c for c in CENTRE_COVARIANCE if c in values]
+    if not given:
+        return extra
+    axes, correlations = CENTRE_COVARIANCE[:3], CENTRE_COVARIANCE[3:]
+    for group in (axes, correlations):
+        if any(c in values for c in group) and not all(c in values for c in group):
+            missing = next(c for c in group if c not in values)
+            raise InputError(
+                f"give {', '.join(group)} together (the covariance of a centre)",
+                path=path,
+                line=1,
+                field=missing,
+            )
+    if correlations[0] in values and axes[0] not in values:
+        raise InputError(
+            f"correlations need the standard uncertainties {', '.join(axes)}",
+            path=path,
+            line=1,
+            field=correlations[0],
+        )
+    table = np.column_stack([values[c] for c in given])
+    present = ~np.isnan(table)
+    partial = present.any(axis=1) & ~present.all(axis=1)
+    if np.any(partial):
+        row = int(np.argmax(partial))
+        field = given[int(np.argmax(~present[row]))]
+        raise InputError(
+            f"{field} is empty where other covariance columns are given: give all of "
+            f"{', '.join(given)} or none",
+            path=path,
+            line=int(lines[row]),
+            field=field,
+        )
+    n = len(table)
+    rho = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+    if correlations[0] in values:
+        for (a, b), column in zip(((0, 1), (0, 2), (1, 2)), correlations, strict=True):
+            rho[:, a, b] = rho[:, b, a] = values[column]
+    rows = present.all(axis=1)
+    with np.errstate(invalid="ignore"):
+        smallest = np.full(n, np.nan)
+        if rows.any():
+            smallest[rows] = np.linalg.eigvalsh(rho[rows])[:, 0]
+    invalid = rows & (smallest < -CORRELATION_SLACK)
+    if np.any(invalid):
+        row = int(np.argmax(invalid))
+        raise InputError(
+            "r_xy, r_xz, r_yz make no correlation matrix (not positive semi-definite)",
+            path=path,
+            line=int(lines[row]),
+            field="r_xy",
+        )
+    u_mm = np.column_stack([values[c] for c in axes]) * 1e-3
+    extra["cov_centre_mm2"] = u_mm[:, :, None] * rho * u_mm[:, None, :]
+    extra["cov_from_file"] = rows
+    return extra
 
 
 def _check_centre_columns(
@@ -456,7 +539,7 @@ def _fast_measurement_csv(text: str, path: str, kind: RecordKind | None) -> Reco
     if kind == "centres":
         if "diameter" in values:
             diameter = values["diameter"]
-        extra = {c: values[c] for c in ("form_um", "n", "u_um") if c in values}
+        extra = _centre_extra(values, lines, path)
     elif all(c in values for c in POINT_EXTRA):
         ijk = np.column_stack([values[c] for c in POINT_EXTRA])
     elif any(c in values for c in POINT_EXTRA):
@@ -499,4 +582,14 @@ def centres_to_csv(records: Records) -> str:
     for column in ("form_um", "n", "u_um"):
         if column in records.extra:
             data[column] = records.extra[column]
+    if "cov_centre_mm2" in records.extra:
+        cov = np.asarray(records.extra["cov_centre_mm2"], dtype=float)
+        u_um = np.sqrt(np.diagonal(cov, axis1=1, axis2=2)) * 1e3
+        with np.errstate(invalid="ignore", divide="ignore"):
+            rho = cov / (u_um[:, :, None] * u_um[:, None, :] * 1e-6)
+        for j, column in enumerate(CENTRE_COVARIANCE[:3]):
+            data[column] = np.where(u_um[:, j] > 0, u_um[:, j], np.nan)
+        for (a, b), column in zip(((0, 1), (0, 2), (1, 2)), CENTRE_COVARIANCE[3:], strict=True):
+            r = np.round(np.clip(rho[:, a, b], -1, 1), CORRELATION_DECIMALS)
+            data[column] = np.where(np.isfinite(r), r, np.nan)
     return csv_text(pd.DataFrame(data))

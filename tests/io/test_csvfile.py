@@ -61,6 +61,45 @@ def test_centres_round_trip_with_extension_columns(tmp_path):
     np.testing.assert_array_equal(again.extra["u_um"], [0.1, 0.2])
 
 
+def test_centre_covariance_round_trip(tmp_path):
+    """A centre's full covariance written per axis and correlation, read back to the
+    rounding of its columns (u 1e-4 um, r 1e-6), on both readers (clean file, blanks)."""
+    rec = read_measurement_csv(write(tmp_path, "c.csv", CENTRES))
+    a = np.array([[0.3, 0.05, -0.1], [0.0, 0.4, 0.2], [0.0, 0.0, 0.9]]) * 1e-3
+    cov = np.stack([a @ a.T, 4 * a.T @ a])
+    rec.extra.update({"cov_centre_mm2": cov, "u_um": np.array([0.5, 0.6])})
+    text = centres_to_csv(rec)
+    assert text.splitlines()[0].endswith(",u_um,u_x_um,u_y_um,u_z_um,r_xy,r_xz,r_yz")
+    for name, body in (("a.csv", text), ("b.csv", text.replace(",", ", "))):
+        again = read_measurement_csv(write(tmp_path, name, body))
+        np.testing.assert_allclose(again.extra["cov_centre_mm2"], cov, rtol=0, atol=3e-10)
+        assert again.extra["cov_from_file"].tolist() == [True, True]
+
+
+@pytest.mark.parametrize(
+    ("columns", "row", "pattern"),
+    [
+        ("u_x_um,u_y_um", "0.1,0.2", r"c.csv:1: field 'u_z_um': give u_x_um, u_y_um, u_z_um"),
+        ("u_x_um,u_y_um,u_z_um,r_xy", "1,1,1,0", r"c.csv:1: field 'r_xz': give r_xy, r_xz"),
+        ("r_xy,r_xz,r_yz", "0,0,0", r"c.csv:1: field 'r_xy': correlations need"),
+        ("u_x_um,u_y_um,u_z_um", "0.1,,0.2", r"c.csv:3: field 'u_y_um': u_y_um is empty"),
+        ("u_x_um,u_y_um,u_z_um,r_xy,r_xz,r_yz", "1,1,1,1.5,0,0", r"c.csv:3: field 'r_xy': a corr"),
+        (
+            "u_x_um,u_y_um,u_z_um,r_xy,r_xz,r_yz",
+            "1,1,1,0.9,0.9,-0.9",
+            r"c.csv:3: field 'r_xy': .*"
+            "no correlation matrix",
+        ),
+        ("u_x_um,u_y_um,u_z_um", "1,0,1", r"c.csv:3: field 'u_y_um': a standard uncertainty"),
+    ],
+)
+def test_centre_covariance_columns_refused(tmp_path, columns, row, pattern):
+    first = ",".join(["1"] * len(columns.split(",")))
+    text = f"label,ball,x,y,z,time,{columns}\nO,B1,1,2,3,0,{first}\nO,B2,1,2,3,1,{row}\n"
+    with pytest.raises(InputError, match=pattern):
+        read_measurement_csv(write(tmp_path, "c.csv", text))
+
+
 @pytest.mark.parametrize(
     ("text", "pattern"),
     [

@@ -97,8 +97,17 @@ def test_fit_spheres_fixed_diameter_and_stdout(tmp_path):
         "form_um",
         "n",
         "u_um",
+        "u_x_um",
+        "u_y_um",
+        "u_z_um",
+        "r_xy",
+        "r_xz",
+        "r_yz",
     ]
     assert (table["diameter"] == 25.4).all() and len(table) == 4 * 3
+    # u_um is the per-axis u's root mean square (to the 1e-4 um they are written at)
+    axes = table[["u_x_um", "u_y_um", "u_z_um"]].to_numpy()
+    np.testing.assert_allclose(table["u_um"], np.sqrt((axes**2).mean(axis=1)), atol=2e-4)
 
 
 def test_fit_spheres_refuses_to_overwrite(tmp_path):

@@ -43,8 +43,8 @@ class StepCentres:
     u_um : ndarray, shape (N, k)
         Standard uncertainty of each centre (NaN when the file gave none).
     cov_mm2 : ndarray, shape (N, k, 3, 3), optional
-        Covariance of each centre from its sphere fit (NaN for centres given as
-        such); None when not gathered.
+        Covariance of each centre from its sphere fit, or from the covariance columns
+        of a centres file (NaN for centres given without them); None when not gathered.
     time_aware : bool or None
         ISO times: whether the files gave a UTC offset (then every time written out
         carries one, :func:`time_text`); None for seconds.
@@ -57,6 +57,8 @@ class StepCentres:
     cov_mm2: FloatArray | None = None
     count: npt.NDArray[np.intp] | None = None
     time_aware: bool | None = None
+    #: (N, k): which of ``cov_mm2`` a centres file gave (the others are sphere fits)
+    cov_from_file: npt.NDArray[np.bool_] | None = None
 
     def time_text(self, seconds: float) -> str:
         """A time as the outputs write it: ISO 8601 in UTC with ``+00:00`` when the
@@ -194,6 +196,7 @@ def assemble_centres(records: list[Records], session: Session) -> StepCentres:
     ball_time = np.zeros((n, k))
     u_um = np.full((n, k), np.nan)
     cov = np.full((n, k, 3, 3), np.nan)
+    cov_from_file = np.zeros((n, k), dtype=bool)
     kinds = {r.time_kind for r in records}
     if len(kinds) > 1:
         iso = next(r for r in records if r.time_kind == "iso")
@@ -243,6 +246,8 @@ def assemble_centres(records: list[Records], session: Session) -> StepCentres:
             u_um[si, bi] = np.asarray(rec.extra["u_um"], dtype=float)
         if "cov_centre_mm2" in rec.extra:
             cov[si, bi] = np.asarray(rec.extra["cov_centre_mm2"], dtype=float)
+        if "cov_from_file" in rec.extra:
+            cov_from_file[si, bi] = np.asarray(rec.extra["cov_from_file"], dtype=bool)
     missing_step = counts.sum(axis=1) == 0
     if np.any(missing_step):
         i = int(np.argmax(missing_step))
@@ -262,6 +267,7 @@ def assemble_centres(records: list[Records], session: Session) -> StepCentres:
         u_um,
         cov,
         time_aware=aware.pop() if aware else None,
+        cov_from_file=cov_from_file,
     )
 
 

@@ -259,6 +259,7 @@ def average_repeats(
         None if cov is None else cov[keep],
         count[keep],
         centres.time_aware,
+        None if centres.cov_from_file is None else centres.cov_from_file[keep],
     )
     return dataclasses.replace(session, plan=reduced), averaged, tuple(groups)
 

@@ -6,7 +6,9 @@ from, in this order of preference:
 
 1. the sphere fit of its probed points (``s^2 (J^T J)^-1``, the full 3x3
    covariance from the fit residuals);
-2. the ``u_um`` column of a centres file (isotropic: ``u^2 I``);
+2. the ``u_x_um``, ``u_y_um``, ``u_z_um``, ``r_xy``, ``r_xz``, ``r_yz`` columns of a
+   centres file (its covariance, as ``fit-spheres`` writes it), else its ``u_um`` column
+   (isotropic: ``u^2 I``, as other software's scalar means);
 3. the session's ``cmm:`` mapping (point noise, or MPE / 2): the covariance of
    a free-radius fit to ``points_per_ball`` points over a cap of
    ``cap_angle_deg`` around the CMM's +Z;
@@ -156,20 +158,31 @@ def centre_covariance(result: ProcessResult) -> CentreCovariance:
     source = np.full((n, k), "", dtype=object)
     parts = []
     if centres.cov_mm2 is not None:
-        fit = np.isfinite(centres.cov_mm2).all(axis=(-2, -1))
-        cov[fit] = centres.cov_mm2[fit]
-        source[fit] = "fit"
-        if fit.any():
-            u = np.sqrt(np.trace(cov[fit], axis1=-2, axis2=-1) / 3) * 1e3
-            parts.append(
-                f"sphere fits of the probed points ({int(fit.sum())} centres, "
-                f"u {np.median(u):.3g} um median per coordinate)"
-            )
+        given = np.isfinite(centres.cov_mm2).all(axis=(-2, -1))
+        cov[given] = centres.cov_mm2[given]
+        in_file = np.zeros((n, k), dtype=bool)
+        if centres.cov_from_file is not None:
+            in_file = given & centres.cov_from_file
+        for mask, name, what in (
+            (given & ~in_file, "fit", "sphere fits of the probed points"),
+            (in_file, "file covariance", "u_x_um .. r_yz of the centres file"),
+        ):
+            source[mask] = name
+            if mask.any():
+                u_xyz = np.sqrt(np.median(np.diagonal(cov[mask], axis1=-2, axis2=-1), 0)) * 1e3
+                parts.append(
+                    f"{what} ({int(mask.sum())} centres, u {u_xyz[0]:.3g}, {u_xyz[1]:.3g}, "
+                    f"{u_xyz[2]:.3g} um median in x, y, z)"
+                )
     file = (source == "") & np.isfinite(centres.u_um)
     if file.any():
         cov[file] = (centres.u_um[file] * 1e-3)[:, None, None] ** 2 * np.eye(3)
         source[file] = "file"
-        parts.append(f"u_um of the centres file ({int(file.sum())} centres)")
+        parts.append(
+            f"u_um of the centres file ({int(file.sum())} centres), read as isotropic "
+            "(u^2 in x, y and z: a cap fit's centre is less certain along the cap's axis; "
+            "u_x_um .. r_yz columns state it)"
+        )
     rest = source == ""
     cmm = result.session.cmm
     # steps averaging repeated measurements (O, R0): 1/n of one measurement's covariance
