@@ -634,3 +634,39 @@ def residual_scale(
     scale = float((r**2).sum()) / expected
     isotropic = (3 * k - 6) / (3 * k) * float(np.trace(sigma, axis1=1, axis2=2).sum())
     return scale, expected / isotropic
+
+
+def reference_scatter(
+    times_s: npt.ArrayLike, values: npt.ArrayLike, weights: npt.ArrayLike | None = None
+) -> tuple[float, int]:
+    """Type A variance of repeated measurements that drift smoothly: ``(s^2, dof)``.
+
+    Each inner measurement is compared with the straight line in time through its two
+    neighbours (the linear interpolation the correction itself relies on):
+    ``e_i = v_i - ((1 - f) v_(i-1) + f v_(i+1))``, ``f`` the time fraction. For noise of
+    variance ``s^2 / w`` (``w`` the weights: a measurement averaging n repeats weighs
+    n), ``E e_i^2 = s^2 (1/w_i + (1 - f)^2 / w_(i-1) + f^2 / w_(i+1))``; ``s^2`` is the
+    mean of ``e_i^2`` over that factor, pooled over the columns of ``values``, with
+    ``dof = (n - 2) * columns`` (neighbouring differences share measurements: unbiased,
+    with somewhat fewer effective degrees of freedom). A drift that bends between two
+    neighbours adds to ``s^2``: the estimate errs on the safe side. ``(nan, 0)`` for
+    fewer than 3 measurements.
+
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(1)
+    >>> t = np.sort(rng.uniform(0, 3600, 400))
+    >>> v = 5e-3 * np.sin(t / 3600)[:, None] + rng.normal(scale=1e-3, size=(400, 3))
+    >>> s2, dof = reference_scatter(t, v)
+    >>> bool(abs(np.sqrt(s2) * 1e3 - 1.0) < 0.05), dof
+    (True, 1194)
+    """
+    t = np.asarray(times_s, dtype=float)
+    v = np.asarray(values, dtype=float)
+    v = v.reshape(len(t), -1)
+    w = np.ones(len(t)) if weights is None else np.asarray(weights, dtype=float)
+    if len(t) < 3:
+        return float("nan"), 0
+    f = (t[1:-1] - t[:-2]) / (t[2:] - t[:-2])
+    e = v[1:-1] - ((1 - f)[:, None] * v[:-2] + f[:, None] * v[2:])
+    factor = 1 / w[1:-1] + (1 - f) ** 2 / w[:-2] + f**2 / w[2:]
+    return float((e**2 / factor[:, None]).mean()), int(e.size)

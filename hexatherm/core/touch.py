@@ -49,6 +49,34 @@ def cap_directions(n: int, cap_half_angle_deg: float = DEFAULT_CAP_HALF_ANGLE_DE
     return np.column_stack([sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t])
 
 
+def polar_uniform_directions(n: int, polar_min_deg: float, polar_max_deg: float) -> FloatArray:
+    """``n`` unit vectors with polar angles spread uniformly over ``[min, max]`` degrees.
+
+    Another CMM program's touch pattern (equal steps in polar angle, azimuth ``k`` times
+    the golden angle): denser near the pole than :func:`cap_directions`' equal areas, so
+    a sphere fit's centre has another covariance shape. The twin probes with it when told
+    to, to check what ``process`` assumes about patterns it was not given.
+
+    >>> u = polar_uniform_directions(25, 5.0, 80.0)
+    >>> bool(np.allclose(np.linalg.norm(u, axis=1), 1.0))
+    True
+    >>> [round(float(np.degrees(np.arccos(u[i, 2]))), 1) for i in (0, -1)]
+    [6.5, 78.5]
+    """
+    if n < 1:
+        raise PlanError(f"the number of points per ball must be at least 1, got {n}")
+    if not 0 <= polar_min_deg < polar_max_deg <= 180:
+        raise PlanError(
+            f"the polar angles must satisfy 0 <= min < max <= 180 degrees, got "
+            f"{polar_min_deg}, {polar_max_deg}"
+        )
+    theta = np.radians(polar_min_deg + (polar_max_deg - polar_min_deg) * (np.arange(n) + 0.5) / n)
+    phi = np.arange(n) * _GOLDEN_ANGLE
+    return np.column_stack(
+        [np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)]
+    )
+
+
 @dataclass(frozen=True)
 class TouchPoints:
     """Nominal ball centres and touch points of every step, in the CMM frame.

@@ -47,7 +47,7 @@ from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
 from hexatherm.core.registration import register
 from hexatherm.core.thermal import LegThermalModel
-from hexatherm.core.touch import cap_directions
+from hexatherm.core.touch import cap_directions, polar_uniform_directions
 from hexatherm.typing import FloatArray
 
 
@@ -398,6 +398,7 @@ def probe_points(
     cap_half_angle_deg: float,
     noise_mm: float = 0.0,
     rng: np.random.Generator | None = None,
+    polar_range_deg: tuple[float, float] | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """Surface points probed on the upper caps (CMM +Z) of balls, with normal noise.
 
@@ -412,6 +413,10 @@ def probe_points(
         Points per ball and the half-angle of the probed cap.
     noise_mm : float
         Standard deviation of the probing error along the surface normal.
+    polar_range_deg : (float, float), optional
+        Probe with polar angles uniform over this range
+        (:func:`~hexatherm.core.touch.polar_uniform_directions`) instead of the equal-area
+        spiral over ``cap_half_angle_deg``.
 
     Returns
     -------
@@ -422,7 +427,10 @@ def probe_points(
     rng = rng or np.random.default_rng(0)
     centres = np.asarray(centres_mm, dtype=float)
     radius = np.broadcast_to(np.asarray(radius_mm, dtype=float), centres.shape[:-1])
-    dirs = cap_directions(n_points, cap_half_angle_deg)
+    if polar_range_deg is None:
+        dirs = cap_directions(n_points, cap_half_angle_deg)
+    else:
+        dirs = polar_uniform_directions(n_points, *polar_range_deg)
     noise = rng.normal(scale=noise_mm, size=centres.shape[:-1] + (n_points,)) if noise_mm else 0.0
     dist = radius[..., None] + noise
     return centres[..., None, :] + dist[..., None] * dirs, dirs

@@ -123,9 +123,45 @@ def test_centres_without_u_are_honest_in_every_component(
     ratio, coverage = claimed_over_observed(poses, claimed)
     assert np.all((ratio > 0.85) & (ratio < 1.15)), ratio.round(3)
     assert 0.92 <= coverage <= 0.98, coverage
-    # the screen says what it rests on, and that Tz, Rx, Ry are not seen by the residuals
+    # the screen says what it rests on: the cap's shape, its z part from the references
     assert "shape of a free-radius fit to 25 points over a 70 deg cap" in description
-    assert "warning: the residuals see" in description
+    assert "to the scatter of the 5 references' ball heights (Type A" in description
+    assert "warning" not in description
+
+
+def test_centres_without_u_of_another_touch_pattern_are_honest(tmp_path: Path) -> None:
+    """A CMM program that spreads its points uniformly in polar angle from 5 to 80 deg (not
+    the assumed equal-area 70 deg cap): the centres' error along z is smaller than the
+    assumed shape's, and the references' heights say by how much (issue 24: Tz, Rx, Ry
+    were claimed 1.38-1.46x the observed from the assumed shape alone)."""
+    poses, claimed, description = replicas(
+        tmp_path, output="centres", fit_centres=True, touch_polar_deg=(5.0, 80.0)
+    )
+    ratio, coverage = claimed_over_observed(poses, claimed)
+    assert np.all((ratio > 0.85) & (ratio < 1.15)), ratio.round(3)
+    assert 0.92 <= coverage <= 0.98, coverage
+    assert "(Type A: second differences in time, 9 degrees of freedom)" in description
+
+
+def test_too_few_references_keep_the_assumed_cap_and_say_so(tmp_path: Path) -> None:
+    """Two targets, one reference each: 3 references, 3 degrees of freedom in their
+    heights, too few for a Type A evaluation: the assumed cap stands, with the warning."""
+    folder = tmp_path / "s"
+    session = TwinSessionSpec(
+        name="s",
+        hexapod_text=HEXAPOD_TEXT,
+        balls=BALLS,
+        plan=small_plan(2, 1),
+        heating=Heating(on_s=0.0, tau_s=2400.0, gain_C=GAIN),
+        point_noise_mm=1e-3,
+        output="centres",
+        fit_centres=True,
+    )
+    write_files(simulate_session(session).files, folder)
+    description = centre_covariance(process_session(folder)).description
+    assert "3 references, 3 degrees of freedom in their heights: too few" in description
+    assert "the uncertainty of Tz, Rx, Ry rests on the assumed cap" in description
+    assert "Type A" not in description
 
 
 def test_the_old_isotropic_pool_was_half_the_truth_out_of_plane(

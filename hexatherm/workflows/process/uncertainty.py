@@ -17,8 +17,11 @@ from, in this order of preference:
    ball over a 70 deg cap (unit noise), ``c`` such that the expected residuals
    ``c * sum tr(P C)`` (``P`` the projector off the rigid motions) equal the observed
    ones. Three coplanar balls leave residuals in their plane only, so a centre's error
-   along the normal (the cap fit's largest, into Tz, Rx, Ry) is not seen by them: it
-   rests on the assumed shape, and the description says so.
+   along the normal (the cap fit's largest, into Tz, Rx, Ry) is not seen by them. The
+   references, measured again and again, see it: the z part of the shape is scaled to
+   the scatter of their ball heights (:func:`reference_height_scale`, a Type A
+   evaluation) when they have the degrees of freedom; else it rests on the assumed
+   shape. The description says which.
 
 It is then propagated through registration, IGM, correction and FGM, by the
 linear law (GUM) or by Monte Carlo (GUM Supplement 1). Monte Carlo draws the
@@ -49,6 +52,7 @@ from hexatherm.core.propagation import (
 )
 from hexatherm.core.spherefit import fit_spheres, refine_spheres
 from hexatherm.typing import FloatArray
+from hexatherm.workflows.process.heights import reference_height_scale
 from hexatherm.workflows.process.measured import fit_radii, point_groups, registration_weights
 from hexatherm.workflows.process.pipeline import ProcessResult
 
@@ -206,21 +210,28 @@ def centre_covariance(result: ProcessResult) -> CentreCovariance:
         scale, seen = residual_scale(
             result.registration.residuals_mm, centres.centres_mm, step_shape
         )
+        # along the cap's axis (z) the residuals see nothing: the references' heights,
+        # measured again and again over the session, do (a Type A evaluation)
+        height = reference_height_scale(result, scale * shape[2, 2])
+        if height.used:
+            axis_scale = np.array([1.0, 1.0, np.sqrt(height.ratio)])
+            shape = shape * np.outer(axis_scale, axis_scale)
+            step_shape = per_step[:, :, None, None] * shape
         cov[rest] = scale * step_shape[rest]
         source[rest] = "registration"
         u_xyz = np.sqrt(np.diag(scale * shape)) * 1e3
         parts.append(
             "registration residuals pooled over "
             f"{n} steps ({int(rest.sum())} centres), with the covariance shape of a "
-            f"free-radius fit to {points} points over a {DEFAULT_CAP_ANGLE_DEG:g} deg cap: "
-            f"u {u_xyz[0]:.3g}, {u_xyz[1]:.3g}, {u_xyz[2]:.3g} um in x, y, z"
+            f"free-radius fit to {points} points over a {DEFAULT_CAP_ANGLE_DEG:g} deg cap"
+            f"{height.text}: u {u_xyz[0]:.3g}, {u_xyz[1]:.3g}, {u_xyz[2]:.3g} um in x, y, z"
         )
-        if seen < 0.9:
+        if seen < 0.9 and not height.used:
             parts.append(
-                f"warning: the residuals see {seen:.0%} of that shape (none of a centre's "
-                "error normal to the balls' plane): the uncertainty of Tz, Rx, Ry rests on "
-                "the assumed cap; give cmm: in session.yaml or u_um in the centres file to "
-                "state the CMM's noise"
+                f"warning: {height.why}; the residuals see {seen:.0%} of that shape (none "
+                "of a centre's error normal to the balls' plane): the uncertainty of Tz, Rx, "
+                "Ry rests on the assumed cap; give cmm: in session.yaml or u_um in the "
+                "centres file to state the CMM's noise"
             )
     return CentreCovariance(cov, source.astype(str), "; ".join(parts))
 

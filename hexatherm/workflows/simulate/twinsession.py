@@ -118,6 +118,9 @@ class TwinSessionSpec:
     output : {"centres", "points", "dmis"}
     points_per_ball, cap_half_angle_deg : int, float
         Probed points per ball, spread over the ball's upper cap.
+    touch_polar_deg : (float, float), optional
+        Probe with polar angles uniform over this range (another CMM program's pattern)
+        instead of the equal-area spiral over ``cap_half_angle_deg``.
     point_noise_mm : float
         Standard deviation of each probed point along the surface normal.
     effects : tuple of Effect
@@ -151,6 +154,7 @@ class TwinSessionSpec:
     output: str = "centres"  # centres | points | dmis
     points_per_ball: int = 25
     cap_half_angle_deg: float = 70.0
+    touch_polar_deg: tuple[float, float] | None = None
     point_noise_mm: float = 0.0
     effects: tuple[Effect, ...] = ()
     repeatability_mm: float = 0.0
@@ -426,7 +430,13 @@ def _measurements(
         ]
     )
     true_points, dirs = probe_points(
-        centres, radius[None, :], m, spec.cap_half_angle_deg, spec.point_noise_mm, rng
+        centres,
+        radius[None, :],
+        m,
+        spec.cap_half_angle_deg,
+        spec.point_noise_mm,
+        rng,
+        polar_range_deg=spec.touch_polar_deg,
     )
     offsets = (np.arange(m) - (m - 1) / 2) * (spec.seconds_per_ball / m)  # mean: the ball's time
     points = cmm_readings(true_points, ball_t[..., None] + offsets, log, spec.effects)
