@@ -10,7 +10,33 @@ from hexatherm.cli.options import MAX_SEED, clean_errors, echo_err, overwrite_op
 
 
 @click.command("simulate")
-@click.argument("scenario", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument(
+    "scenario", required=False, type=click.Path(exists=True, dir_okay=False, path_type=Path)
+)
+@click.option(
+    "--plan",
+    "plan_path",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    default=None,
+    help="Simulate this plan file (as 'hexatherm plan' writes it) as a typical session, "
+    "instead of a SCENARIO: legs warmed 3 K by mats from 5 min on, 0.5 um CMM noise, "
+    "0.02 K thermocouple noise (OUT/truth/scenario.yaml holds it, to edit and rerun). "
+    "Needs --hexapod and --balls.",
+)
+@click.option(
+    "--hexapod",
+    "hexapod_path",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    default=None,
+    help="Hexapod file of --plan.",
+)
+@click.option(
+    "--balls",
+    "balls_path",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    default=None,
+    help="Balls file of --plan.",
+)
 @click.option(
     "-o",
     "--out",
@@ -27,8 +53,16 @@ from hexatherm.cli.options import MAX_SEED, clean_errors, echo_err, overwrite_op
 )
 @overwrite_option
 @clean_errors
-def command(scenario: Path, out: Path, seed: int | None, overwrite: bool) -> None:
-    """Simulate SCENARIO with the hexapod twin and write a session folder OUT.
+def command(
+    scenario: Path | None,
+    plan_path: Path | None,
+    hexapod_path: Path | None,
+    balls_path: Path | None,
+    out: Path,
+    seed: int | None,
+    overwrite: bool,
+) -> None:
+    """Simulate SCENARIO (or --plan) with the hexapod twin and write a session folder OUT.
 
     OUT holds the files a real session has (session.yaml, hexapod, balls and
     plan files, the CMM's measurements, temperatures.csv), ready for
@@ -41,10 +75,24 @@ def command(scenario: Path, out: Path, seed: int | None, overwrite: bool) -> Non
     import numpy as np
 
     from hexatherm.io.outputs import check_output_settled
+    from hexatherm.io.scenario import Scenario, plan_scenario
     from hexatherm.workflows.simulate.run import simulate_file
 
-    check_output_settled(out, kind="folder", inputs=[scenario], overwrite=overwrite)
-    read, simulated, written = simulate_file(scenario, out, seed, overwrite)
+    source: Path | Scenario
+    if (scenario is None) == (plan_path is None):
+        raise click.UsageError("give a SCENARIO file or --plan PLAN, one of them")
+    if plan_path is None:
+        if hexapod_path is not None or balls_path is not None:
+            raise click.UsageError("--hexapod and --balls go with --plan (a scenario names them)")
+        assert scenario is not None
+        inputs, source = [scenario], scenario
+    else:
+        if hexapod_path is None or balls_path is None:
+            raise click.UsageError("--plan needs --hexapod and --balls")
+        inputs = [plan_path, hexapod_path, balls_path]
+        source = plan_scenario(plan_path, hexapod_path, balls_path, out.name, seed or 0)
+    check_output_settled(out, kind="folder", inputs=inputs, overwrite=overwrite)
+    read, simulated, written = simulate_file(source, out, seed, overwrite)
     plan, truth = read.plan, simulated.truth
     duration_h = float(simulated.step_times_s[-1]) / 3600.0
     effects = ", ".join(e.name for e in read.effects) or "none"

@@ -164,9 +164,67 @@ class Scenario:
         return self.model_effects + self.hidden_effects
 
 
+#: what ``simulate --plan`` assumes beside the plan: a typical session (the scenario's
+#: defaults for the rest); written to the session's ``truth/scenario.yaml``, whose paths
+#: name the session's own copies of the hexapod, balls and plan files
+PLAN_SCENARIO = """\
+format: hexatherm-scenario/1
+name: {name}
+hexapod: {hexapod}
+balls: {balls}
+plan: {plan}
+seed: {seed}
+heating:
+  mats:
+{mats}
+thermocouples: {{period_s: 30, noise_C: 0.02}}
+cmm: {{point_noise_um: 0.5}}
+output: centres
+"""
+PLAN_SCENARIO_MAT = "    - {gain_C: 3.0, tau_s: 2400, power: [[300, null]]}"
+
+
+def plan_scenario(
+    plan: str | os.PathLike[str],
+    hexapod: str | os.PathLike[str],
+    balls: str | os.PathLike[str],
+    name: str,
+    seed: int = 0,
+) -> Scenario:
+    """The scenario of ``simulate --plan``: a plan file measured as a typical session.
+
+    Heating mats warm every leg by 3 K (time constant 2400 s) from 5 minutes after the
+    start; 0.5 um CMM point noise, 0.02 K thermocouple noise; the scenario's defaults
+    for the rest (:data:`PLAN_SCENARIO`). The files are read and checked as a scenario's
+    would be (errors name them). The scenario's ``text`` is the same scenario with the
+    paths of the session's own copies (``../hexapod.yaml``, ``../balls.yaml``,
+    ``../plan.yaml`` from its ``truth/``): simulating it again gives the same session.
+    """
+    fields = {"name": _yaml_string(name), "seed": seed, "mats": "\n".join([PLAN_SCENARIO_MAT] * 6)}
+    given = {
+        "hexapod": _yaml_string(str(Path(hexapod).resolve())),
+        "balls": _yaml_string(str(Path(balls).resolve())),
+        "plan": _yaml_string(str(Path(plan).resolve())),
+    }
+    doc = YamlDoc.from_text(PLAN_SCENARIO.format(**fields, **given), os.fspath(plan))
+    scenario = _scenario(doc, doc_text=None)
+    own = {"hexapod": "../hexapod.yaml", "balls": "../balls.yaml", "plan": "../plan.yaml"}
+    return replace(scenario, text=PLAN_SCENARIO.format(**fields, **own))
+
+
+def _yaml_string(text: str) -> str:
+    """``text`` as a YAML double-quoted scalar (any path or name survives)."""
+    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
 def read_scenario(path: str | os.PathLike[str]) -> Scenario:
     """Read and validate a scenario file; InputError naming file, line and field."""
     doc = YamlDoc.load(path)
+    return _scenario(doc, Path(doc.path).read_bytes().decode("utf-8-sig"))
+
+
+def _scenario(doc: YamlDoc, doc_text: str | None) -> Scenario:
+    """The scenario ``doc`` (its file's text ``doc_text``; None: not from a file)."""
     doc.check_format(SCENARIO_FORMAT)
     doc.check_keys(
         [
@@ -189,7 +247,7 @@ def read_scenario(path: str | os.PathLike[str]) -> Scenario:
             "readme",
         ]
     )
-    text = Path(doc.path).read_bytes().decode("utf-8-sig")
+    text = doc_text or ""
     name = doc.string("name", default=Path(doc.path).stem)
 
     hexapod_path = _existing(doc, "hexapod")
@@ -198,7 +256,7 @@ def read_scenario(path: str | os.PathLike[str]) -> Scenario:
     balls_path = _existing(doc, "balls")
     balls = read_balls(balls_path)
     plan = _plan(doc)
-    inputs = [Path(doc.path), hexapod_path, balls_path]
+    inputs = ([Path(doc.path)] if doc_text is not None else []) + [hexapod_path, balls_path]
     if isinstance(doc.get("plan"), str):
         inputs.append(_existing(doc, "plan"))
     _check_stroke(doc, hexapod, plan)

@@ -389,3 +389,84 @@ def test_bad_scenario_names_file_line_and_field_and_writes_nothing(
     assert message in result.output
     assert not (tmp_path / "out").exists()
     assert [p.name for p in tmp_path.iterdir()] == ["scenario.yaml"]  # no temporary folder
+
+
+# ------------------------------------------------------------ simulate --plan
+HEXAPOD, BALLS_FILE = ROOT / "configs" / "symetrie-like.yaml", ROOT / "configs" / "balls-3.yaml"
+
+
+def planned(tmp_path: Path) -> Path:
+    plan = tmp_path / "plan.yaml"
+    made = run(
+        "plan", "--hexapod", HEXAPOD, "--balls", BALLS_FILE, "--random", "4", "--seed", "3",
+        "--box", "Tx=-10:10", "--box", "Rz=-2:2", "-o", plan,
+    )  # fmt: skip
+    assert made.exit_code == 0, made.output
+    return plan
+
+
+def test_a_plan_simulates_as_a_typical_session_and_its_scenario_reproduces_it(tmp_path):
+    """plan -> simulate --plan -> process, a lab's first steps without writing a scenario:
+    the corrected poses are the truth's within the CMM noise, the conventional ones carry
+    the mats' heating; the scenario kept in truth/ gives the same session, byte for byte."""
+    plan = planned(tmp_path)
+    inputs = {p: p.read_bytes() for p in (plan, HEXAPOD, BALLS_FILE)}
+    first = tmp_path / "first"
+    result = run(
+        "simulate", "--plan", plan, "--hexapod", HEXAPOD, "--balls", BALLS_FILE, "-o", first
+    )
+    assert result.exit_code == 0, result.output
+    assert all(p.read_bytes() == text for p, text in inputs.items())
+    poses, truth = process(first)
+    d_t, d_r = worst(poses, truth, "corr", "truecorr")
+    assert d_t < 3.0 and d_r < 15.0, (d_t, d_r)  # 0.5 um point noise
+    d_t, _ = worst(poses, truth, "conv", "truecorr")
+    assert d_t > 3.0  # 3 K of mats: micrometres of thermal error
+    scenario = yaml.safe_load((first / "truth" / "scenario.yaml").read_text())
+    assert scenario["cmm"] == {"point_noise_um": 0.5} and scenario["plan"] == "../plan.yaml"
+    again = tmp_path / "again"
+    result = run("simulate", first / "truth" / "scenario.yaml", "-o", again)
+    assert result.exit_code == 0, result.output
+    session_files = {k: v for k, v in files_of(first).items() if not k.startswith("results")}
+    assert files_of(again) == session_files
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["SCENARIO", "--plan", "PLAN"], "give a SCENARIO file or --plan PLAN, one of them"),
+        ([], "give a SCENARIO file or --plan PLAN, one of them"),
+        (["--plan", "PLAN", "--hexapod", "HEXAPOD"], "--plan needs --hexapod and --balls"),
+        (["SCENARIO", "--balls", "BALLS"], "--hexapod and --balls go with --plan"),
+    ],
+)
+def test_simulate_plan_options_are_usage_errors_when_mixed(tmp_path, args, message):
+    plan = planned(tmp_path)
+    names = {
+        "SCENARIO": write_scenario(tmp_path, scenario_text()),
+        "PLAN": plan,
+        "HEXAPOD": HEXAPOD,
+        "BALLS": BALLS_FILE,
+    }
+    result = run("simulate", *[names.get(a, a) for a in args], "-o", tmp_path / "out")
+    assert result.exit_code == 2 and message in result.output, result.output
+    assert not (tmp_path / "out").exists()
+
+
+def test_simulate_plan_names_a_bad_plan_file(tmp_path):
+    plan = planned(tmp_path)
+    plan.write_text(plan.read_text().replace("kind: target", "kind: targte", 1))
+    result = run(
+        "simulate",
+        "--plan",
+        plan,
+        "--hexapod",
+        HEXAPOD,
+        "--balls",
+        BALLS_FILE,
+        "-o",
+        tmp_path / "o",
+    )
+    assert result.exit_code == 1, result.output
+    assert f"{plan}:" in result.output and "targte" in result.output
+    assert not (tmp_path / "o").exists()

@@ -70,17 +70,18 @@ def simulate(scenario: Scenario, seed: int | None = None) -> SimulatedSession:
 
 
 def simulate_file(
-    path: str | os.PathLike[str],
+    path: str | os.PathLike[str] | Scenario,
     out: str | os.PathLike[str],
     seed: int | None = None,
     overwrite: bool = False,
 ) -> tuple[Scenario, SimulatedSession, list[Path]]:
-    """Read the scenario ``path``, simulate it and write the session folder ``out``.
+    """Read the scenario ``path`` (or take it), simulate it and write the session folder
+    ``out``.
 
     Nothing is written when the scenario is invalid or the simulation fails;
     ``out`` is replaced only with ``overwrite``.
     """
-    scenario = read_scenario(path)
+    scenario = path if isinstance(path, Scenario) else read_scenario(path)
     simulated = simulate(scenario, seed)
     written = write_files(simulated.files, out, overwrite, scenario.input_files)
     return scenario, simulated, written
