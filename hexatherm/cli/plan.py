@@ -230,8 +230,17 @@ def parse_levels(text: str) -> list[int]:
     default=None,
     metavar="N",
     help="Plan a calibration campaign: of the targets, grid or random poses given "
-    "(candidates), keep the N that best identify the geometry (greedy D-optimal); "
+    "(candidates), keep the N that best identify the geometry (--calibration-criterion); "
     "refused when they cannot identify it, naming why.",
+)
+@click.option(
+    "--calibration-criterion",
+    type=click.Choice(["d-optimal", "g-optimal", "i-optimal"]),
+    default="d-optimal",
+    show_default=True,
+    help="How --calibration chooses: d-optimal (the parameters' joint uncertainty), "
+    "g-optimal (the worst predicted uncertainty of a calibrated pose over the candidates) "
+    "or i-optimal (its mean over them).",
 )
 @click.option(
     "--calibration-level",
@@ -279,6 +288,7 @@ def command(
     clearance: float,
     calibration_poses: int | None,
     calibration_level: str,
+    calibration_criterion: str,
     checklist_path: Path | None,
     out: Path | None,
     overwrite: bool,
@@ -348,6 +358,7 @@ def command(
         checklist=checklist_path is not None,
         calibration_poses=calibration_poses,
         calibration_level=calibration_level,
+        calibration_criterion=calibration_criterion,
     )
     inputs = [p for p in (hexapod_path, balls_path, targets_path) if p is not None]
     for path in outputs:
@@ -364,6 +375,15 @@ def command(
             f"{'; refused: ' + refused if refused else ''}); predicted standard "
             f"uncertainty of a calibrated pose at most {chosen.worst_sigma_um:.2f} um, "
             f"{chosen.worst_sigma_urad:.2f} urad (1 um / 5 urad per measured pose)"
+        )
+        random_worst, random_rms = chosen.random_sigma_um
+        echo_err(
+            f"design ({chosen.criterion}): over the candidates a calibrated pose's Tx, Ty, "
+            f"Tz uncertainty is at most {chosen.worst_sigma_um:.2f} um, "
+            f"{chosen.mean_sigma_um:.2f} um RMS; {len(chosen.indices)} random candidates "
+            f"(median of 20 draws): {random_worst:.2f} um, {random_rms:.2f} um RMS "
+            f"({random_worst / chosen.worst_sigma_um:.2f}x, "
+            f"{random_rms / chosen.mean_sigma_um:.2f}x; predicted, before measuring)"
         )
         if origin_repeats == 1 or reference0_repeats == 1:
             echo_err(

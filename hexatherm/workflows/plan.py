@@ -38,6 +38,9 @@ from hexatherm.io.config import plan_to_yaml, read_balls, read_hexapod
 from hexatherm.io.csvfile import read_text
 from hexatherm.io.dmisprog import dmis_program
 
+#: random choices of as many candidates that ``plan --calibration`` compares its design with
+RANDOM_DESIGN_DRAWS = 20
+
 
 @dataclass(frozen=True)
 class PlanRequest:
@@ -73,6 +76,7 @@ class PlanRequest:
     checklist: bool = False
     calibration_poses: int | None = None
     calibration_level: str = "joints"
+    calibration_criterion: str = "d-optimal"
 
 
 @dataclass(frozen=True)
@@ -150,9 +154,11 @@ def make_plan(request: PlanRequest) -> PlanTexts:
             targets,
             request.calibration_poses,
             level=request.calibration_level,
+            criterion=request.calibration_criterion,
             box_lower=request.box_lower,
             box_upper=request.box_upper,
             min_rcond=rcond,
+            random_draws=RANDOM_DESIGN_DRAWS,
         )
         targets = selection.poses
         target_sources = [target_sources[int(k)] for k in selection.indices]

@@ -63,3 +63,27 @@ def test_translation_only_candidates_are_refused_with_the_reason(tmp_path: Path)
     assert result.exit_code == 1, result.output
     assert "rank 24 of 42" in result.output and "Rx, Ry, Rz" in result.output
     assert not out.exists()
+
+
+def test_the_criterion_is_the_users_and_the_gain_over_random_is_printed(tmp_path: Path) -> None:
+    args = [*BASE, "--random", "120", "--seed", "5", *BOX, *ROT, "--calibration", "12"]
+    out = tmp_path / "i.yaml"
+    result = CliRunner().invoke(
+        main, [*args, "--calibration-criterion", "i-optimal", "-o", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    everything = tmp_path / "all.yaml"
+    assert CliRunner().invoke(main, [*BASE, "--random", "120", "--seed", "5", *BOX, *ROT,
+                                     "-o", str(everything)]).exit_code == 0  # fmt: skip
+    plan, pool_plan = read_plan(out), read_plan(everything)
+    pool = pool_plan.poses[pool_plan.target_indices]
+    sigma = predicted_sigma(read_hexapod(HEXAPOD), plan.poses[plan.target_indices], pool)
+    worst, rms = sigma[:, :3].max(), np.sqrt(np.mean(sigma[:, :3] ** 2))
+    line = re.search(r"design \(i-optimal\): .* at most ([\d.]+) um, ([\d.]+) um RMS; "
+                     r"12 random candidates \(median of 20 draws\): ([\d.]+) um, ([\d.]+) um RMS "
+                     r"\(([\d.]+)x, ([\d.]+)x", result.stderr)  # fmt: skip
+    assert line is not None, result.stderr
+    assert float(line.group(1)) == round(worst, 2) and float(line.group(2)) == round(rms, 2)
+    assert float(line.group(6)) > 1.0  # the design beats random choices on the mean
+    bad = CliRunner().invoke(main, [*args, "--calibration-criterion", "a-optimal"])
+    assert bad.exit_code == 2

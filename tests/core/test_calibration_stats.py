@@ -234,6 +234,38 @@ def test_sigma_criterion_is_no_worse_than_d_optimal(nominal, candidates):
     assert sigma.worst_sigma_um <= d_opt.worst_sigma_um * (1 + 1e-9)
 
 
+def test_i_and_g_criteria_lower_what_they_promise(nominal, candidates):
+    """i-optimal lowers the mean predicted variance over the candidates, g-optimal (the
+    earlier 'sigma') the worst; each starts from the D-optimal choice, so it is no worse
+    there, and the figures are predicted_sigma's (a second path)."""
+    some = candidates[:120]
+    d_opt = select_poses(nominal, some, 10, criterion="d-optimal")
+    i_opt = select_poses(nominal, some, 10, criterion="i-optimal")
+    g_opt = select_poses(nominal, some, 10, criterion="g-optimal")
+    assert i_opt.mean_sigma_um <= d_opt.mean_sigma_um * (1 + 1e-9)
+    assert g_opt.worst_sigma_um <= d_opt.worst_sigma_um * (1 + 1e-9)
+    assert i_opt.mean_sigma_um < g_opt.mean_sigma_um and g_opt.criterion == "g-optimal"
+    sigma = predicted_sigma(nominal, i_opt.poses, some)[:, :3]
+    assert i_opt.mean_sigma_um == pytest.approx(np.sqrt(np.mean(sigma**2)), rel=1e-9)
+    alias = select_poses(nominal, some, 10, criterion="sigma")
+    np.testing.assert_array_equal(alias.indices, g_opt.indices)
+
+
+def test_the_random_baseline_is_random_choices_median(nominal, candidates):
+    """What plan --calibration compares its design with: the median worst and RMS sigma
+    of 20 seeded random choices of as many candidates, recomputed by predicted_sigma."""
+    chosen = select_poses(nominal, candidates, 30, random_draws=20)
+    rng = np.random.default_rng(0)
+    figures = []
+    for _ in range(20):
+        sigma = predicted_sigma(
+            nominal, candidates[rng.choice(len(candidates), 30, replace=False)], candidates
+        )[:, :3]
+        figures.append((sigma.max(), np.sqrt(np.mean(sigma**2))))
+    np.testing.assert_allclose(chosen.random_sigma_um, np.median(figures, axis=0), rtol=1e-9)
+    assert chosen.random_sigma_um[0] / chosen.worst_sigma_um > 1.5  # measured 1.8-2.1
+
+
 def test_pose_selection_refusals(nominal, candidates):
     flat = candidates.copy()
     flat[:, 3:] = 0.0

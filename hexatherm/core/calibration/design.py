@@ -30,8 +30,8 @@ from hexatherm.typing import BoolArray, FloatArray, IntArray
 DELTA_BIC_THRESHOLD = 10.0
 #: default reciprocal condition number of ``dq/dX`` below which a candidate is refused
 DEFAULT_MIN_RCOND = 0.01
-#: design criteria of :func:`select_poses`
-CRITERIA = ("d-optimal", "sigma")
+#: design criteria of :func:`select_poses` (``sigma``: the earlier name of ``g-optimal``)
+CRITERIA = ("d-optimal", "g-optimal", "i-optimal", "sigma")
 #: the prior information of the greedy design, relative to one pose's mean
 _PRIOR = 1e-8
 
@@ -200,12 +200,19 @@ class PoseSelection:
         Into the candidates given, in the order chosen.
     poses : ndarray, shape (n, 6)
         The chosen commanded poses (mm, deg).
-    criterion : {"d-optimal", "sigma"}
+    criterion : {"d-optimal", "g-optimal", "i-optimal"}
     worst_sigma_um : float
         Largest standard uncertainty of Tx, Ty, Tz predicted by a calibration from
         these poses, over the evaluation poses (um).
     worst_sigma_urad : float
         The same for Rx, Ry, Rz (urad).
+    mean_sigma_um : float
+        Root mean square of the predicted standard uncertainties of Tx, Ty, Tz over the
+        evaluation poses (um): what ``i-optimal`` lowers.
+    random_sigma_um : (float, float)
+        The worst and RMS figures of as many poses drawn at random from the feasible
+        candidates (the medians over ``random_draws`` draws; NaN when none asked): what
+        the design gains, at the design stage.
     observability : Observability
         Of the chosen poses.
     refused : dict of str to int
@@ -219,6 +226,17 @@ class PoseSelection:
     worst_sigma_urad: float
     observability: Observability
     refused: dict[str, int] = field(default_factory=dict)
+    mean_sigma_um: float = float("nan")
+    random_sigma_um: tuple[float, float] = (float("nan"), float("nan"))
+
+
+def _translation_figures(eval_plain: FloatArray, rows: FloatArray) -> tuple[float, float]:
+    """Worst and RMS predicted sigma of Tx, Ty, Tz (um) at the evaluation Jacobians
+    ``eval_plain`` (E, 6, p) of a design whose whitened rows are ``rows``."""
+    cov_z = np.linalg.inv(rows.T @ rows)
+    t = eval_plain[:, :3]
+    sigma = np.sqrt(np.einsum("eip,pq,eiq->ei", t, cov_z, t)) * 1e3
+    return float(sigma.max()), float(np.sqrt(np.mean(sigma**2)))
 
 
 def feasible_candidates(
@@ -315,6 +333,7 @@ def select_poses(
     min_rcond: float = DEFAULT_MIN_RCOND,
     evaluation_poses: npt.ArrayLike | None = None,
     parameters: npt.ArrayLike | None = None,
+    random_draws: int = 0,
 ) -> PoseSelection:
     """Choose ``n_poses`` commanded poses from candidates, greedily, for a calibration.
 
@@ -323,11 +342,12 @@ def select_poses(
     (``J_k`` the Jacobian of its predicted pose by the free coordinates at the
     nominal parameters, ``C_k`` the pose covariance from the two sigmas). The greedy
     step adds the candidate that most increases ``log det`` of the summed
-    information (``d-optimal``: O1), or, with ``sigma``, that most lowers the worst
-    predicted standard uncertainty of Tx, Ty, Tz over the evaluation poses (default:
-    the feasible candidates), once the chosen poses identify the level (until then
-    the D-optimal step). A tiny prior (1e-8 of a pose's mean information) keeps the
-    first steps defined; the result is checked without it.
+    information (``d-optimal``: O1). ``g-optimal`` (``sigma``, its earlier name) then
+    exchanges poses (Fedorov) to lower the worst predicted standard uncertainty of Tx,
+    Ty, Tz over the evaluation poses (default: the feasible candidates, the stroke the
+    user asked for), ``i-optimal`` their mean predicted variance: what a user of the
+    calibrated hexapod meets at a new pose. A tiny prior (1e-8 of a pose's mean
+    information) keeps the first steps defined; the result is checked without it.
 
     Parameters
     ----------
@@ -336,7 +356,7 @@ def select_poses(
         Candidate commanded poses relative to O, mm and deg.
     n_poses : int
     level : {"offsets", "joints", "joints+gains"}
-    criterion : {"d-optimal", "sigma"}
+    criterion : {"d-optimal", "g-optimal", "i-optimal"}
     sigma_translation_um, sigma_rotation_urad : float
         Standard uncertainty of the measured poses' components.
     box_lower, box_upper : array_like, shape (6,), optional
@@ -345,6 +365,10 @@ def select_poses(
     evaluation_poses : array_like, shape (E, 6), optional
     parameters : array_like, shape (48,), optional
         Where to linearize (default nominal).
+    random_draws : int
+        Also evaluate this many random choices of ``n_poses`` feasible candidates
+        (seeded: the same figures every time; draws that do not identify the level are
+        drawn again) for :attr:`PoseSelection.random_sigma_um`.
 
     Returns
     -------
@@ -397,14 +421,30 @@ def select_poses(
     cov_z = np.linalg.inv(rows.T @ rows)
     var = np.einsum("eip,pq,eiq->ei", eval_plain, cov_z, eval_plain)
     sigma = to_um_urad(np.sqrt(var))
+    baseline = (float("nan"), float("nan"))
+    if random_draws > 0:
+        rng = np.random.default_rng(0)
+        draws: list[tuple[float, float]] = []
+        for _ in range(20 * random_draws):
+            pick = rng.choice(feasible.size, n_poses, replace=False)
+            drawn = white[pick].reshape(-1, model.n_free)
+            if np.linalg.matrix_rank(drawn) == model.n_free:
+                draws.append(_translation_figures(eval_plain, drawn))
+            if len(draws) == random_draws:
+                break
+        if draws:
+            worst_median, rms_median = np.median(np.array(draws), axis=0)
+            baseline = (float(worst_median), float(rms_median))
     return PoseSelection(
         indices=np.asarray(feasible[chosen], dtype=np.int64),
         poses=x[feasible[chosen]],
-        criterion=criterion,
+        criterion="g-optimal" if criterion == "sigma" else criterion,
         worst_sigma_um=float(sigma[:, :3].max()),
         worst_sigma_urad=float(sigma[:, 3:].max()),
         observability=obs,
         refused=refused,
+        mean_sigma_um=float(np.sqrt(np.mean(sigma[:, :3] ** 2))),
+        random_sigma_um=baseline,
     )
 
 
@@ -428,15 +468,21 @@ def _greedy(white: FloatArray, targets: FloatArray, n_poses: int, criterion: str
         chosen.append(best)
         available[best] = False
         information = information + white[best].T @ white[best]
-    if criterion == "sigma":
-        chosen = _exchange(white, targets.reshape(-1, p), chosen, prior)
+    if criterion in ("sigma", "g-optimal", "i-optimal"):
+        worst = criterion != "i-optimal"
+        chosen = _exchange(white, targets.reshape(-1, p), chosen, prior, worst=worst)
     return np.asarray(chosen, dtype=np.int64)
 
 
 def _worst_after(
-    white: FloatArray, rows: FloatArray, information: FloatArray, cand: IntArray
+    white: FloatArray,
+    rows: FloatArray,
+    information: FloatArray,
+    cand: IntArray,
+    worst: bool = True,
 ) -> FloatArray:
-    """Worst predicted variance (over ``rows``) once each candidate is added, (len(cand),).
+    """Worst (or, not ``worst``, mean) predicted variance over ``rows`` once each
+    candidate is added, (len(cand),).
 
     With ``C`` the covariance of ``information`` and ``J`` a candidate's whitened
     Jacobian, ``var_e' = var_e - b^T (I + J C J^T)^-1 b``, ``b = J C g_e``.
@@ -449,15 +495,22 @@ def _worst_after(
     b = (factor @ proj).reshape(-1, proj.shape[2]) @ rows.T  # (M * 6, E)
     reduced = np.sum((b * b).reshape(len(cand), 6, -1), axis=1)
     var = np.einsum("ep,pq,eq->e", rows, cov, rows)
-    return np.asarray(np.max(var[None, :] - reduced, axis=1), float)
+    after = var[None, :] - reduced
+    return np.asarray(np.max(after, axis=1) if worst else np.mean(after, axis=1), float)
 
 
 def _exchange(
-    white: FloatArray, rows: FloatArray, chosen: list[int], prior: FloatArray, passes: int = 2
+    white: FloatArray,
+    rows: FloatArray,
+    chosen: list[int],
+    prior: FloatArray,
+    passes: int = 2,
+    worst: bool = True,
 ) -> list[int]:
-    """Exchange passes on the worst predicted variance: each chosen pose in turn is
-    replaced by the candidate (itself included) that leaves the smallest worst variance,
-    until a pass changes nothing (Fedorov's exchange, minimax criterion)."""
+    """Exchange passes on the worst (or, not ``worst``, the mean) predicted variance: each
+    chosen pose in turn is replaced by the candidate (itself included) that leaves the
+    smallest criterion, until a pass changes nothing (Fedorov's exchange: minimax,
+    G-optimal; or average, I-optimal)."""
     chosen = list(chosen)
     for _ in range(passes):
         changed = False
@@ -467,10 +520,10 @@ def _exchange(
             available = np.ones(white.shape[0], dtype=bool)
             available[others] = False
             cand = np.flatnonzero(available)
-            worst = _worst_after(white, rows, information, cand)
-            current = worst[int(np.searchsorted(cand, chosen[position]))]
-            best = int(np.argmin(worst))
-            if worst[best] < current * (1.0 - 1e-9):
+            after = _worst_after(white, rows, information, cand, worst)
+            current = after[int(np.searchsorted(cand, chosen[position]))]
+            best = int(np.argmin(after))
+            if after[best] < current * (1.0 - 1e-9):
                 chosen[position] = int(cand[best])
                 changed = True
         if not changed:
