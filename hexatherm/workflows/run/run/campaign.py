@@ -78,7 +78,14 @@ from hexatherm.workflows.run.resume import (
     write_run_settings,
 )
 from hexatherm.workflows.run.run.options import BallResult, Notify, RunOptions, RunResult
-from hexatherm.workflows.run.run.support import _Geometry, _Thermocouples, _travel_z, _validate_plan
+from hexatherm.workflows.run.run.support import (
+    _Geometry,
+    _Thermocouples,
+    _travel_z,
+    _validate_plan,
+    check_cmm_coordinates,
+    check_probed,
+)
 
 
 # ------------------------------------------------------------------------ the run
@@ -416,6 +423,7 @@ class _Campaign:
         """Probe straight up to ``z_mm`` (if below)."""
         assert self.cmm is not None
         x, y, z = self.cmm.get_position()
+        check_cmm_coordinates("Get(X(), Y(), Z())", (x, y, z))
         if z < z_mm:
             self.cmm.goto(x, y, z_mm)
 
@@ -557,6 +565,11 @@ class _Campaign:
                     raise
                 self._reconnect_cmm(str(exc))
                 continue
+            except IppDmeError:
+                self.tlog.note(f"abandon {label} {name} error")
+                raise
+            try:
+                check_probed(measured.probed)
             except IppDmeError:
                 self.tlog.note(f"abandon {label} {name} error")
                 raise
