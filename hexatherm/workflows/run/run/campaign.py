@@ -42,6 +42,7 @@ from hexatherm.errors import (
     IppTimeout,
     PoseError,
     PoseRefusedError,
+    Terminated,
 )
 from hexatherm.io.atomic import atomic_write_text
 from hexatherm.io.seriallog import (
@@ -290,8 +291,8 @@ class _Campaign:
             completed = True
             self.tlog.note("end complete")
             self.clog.note("end complete")
-        except KeyboardInterrupt:
-            self._stop("interrupted (Ctrl-C)")
+        except KeyboardInterrupt as exc:  # Ctrl-C, or a terminating signal (Terminated)
+            self._stop(f"interrupted ({exc.name if isinstance(exc, Terminated) else 'Ctrl-C'})")
             raise
         except HexathermError as exc:
             self._stop(f"{type(exc).__name__}: {exc}")
