@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from hexatherm.cli.options import CheckedFloat, clean_errors, echo_err
+from hexatherm.cli.options import CHECK_FAILED_EXIT, CheckedFloat, clean_errors, echo_err
 from hexatherm.cli.signals import signals_interrupt
 from hexatherm.errors import Terminated
 
@@ -335,3 +335,14 @@ def command(
         echo_err(f"measured again (gap): {', '.join(result.remeasured)}")
     echo_err(f"{result.n_points} points in {result.session / 'points.csv'}")
     echo_err(f"wrote {result.session_file}")
+    if result.failed:
+        first = result.failed[0]
+        n_balls = len(files.plan.labels) * len(files.balls.names)
+        echo_err(
+            f"error: {len(result.failed)} of {n_balls} balls still fail their checks after "
+            f"probing them again: {', '.join(f'{b.label} {b.ball}' for b in result.failed)} "
+            f"(first: {first.label} {first.ball}: {'; '.join(first.problems)}); the session is "
+            "recorded, but check the balls file, the CMM's tool and the plan before processing "
+            f"it (exit status {CHECK_FAILED_EXIT})"
+        )
+        sys.exit(CHECK_FAILED_EXIT)

@@ -324,7 +324,24 @@ class _Campaign:
             tuple(self.results),
             tuple(self.remeasured),
             session_file,
+            self._failed(),
         )
+
+    def _failed(self) -> tuple[BallResult, ...]:
+        """The accepted balls whose kept probing fails a check, in plan order."""
+        last = {(r.label, r.ball): r for r in self.results}
+        out = []
+        for label in self.plan.labels:
+            for name in self.balls.names:
+                ball = self.state.accepted.get((label, name))
+                if ball is None:
+                    continue
+                result = last.get((label, name))
+                if result is None:  # accepted before a resume: checked again around its fit
+                    result = self._check(label, name, ball.xyz_mm, self.fits[(label, name)], 0)
+                if result.problems:
+                    out.append(result)
+        return tuple(out)
 
     def _n_points(self) -> int:
         return sum(len(b.points) for b in self.state.accepted.values())
