@@ -22,6 +22,7 @@ from hexatherm.errors import IncompleteSession
 from hexatherm.workflows.run.run import run_campaign
 from hexatherm.workflows.serve import AcceleratedClock, TwinMachines, TwinWorld
 from tests.sessions import ROOT
+from tests.waiting import SAFETY_S, wait_for
 from tests.workflows.test_run import (
     HEATING,
     NOMINAL_ORIGIN,
@@ -76,14 +77,14 @@ def test_sigkill_of_run_at_random_points_then_resume(tmp_path: Path) -> None:
             target = _lines(transcript) + int(rng.integers(150, 600))
             args = command + (["--resume"] if round_ else [])
             proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-            deadline = time.monotonic() + 120.0
-            while proc.poll() is None and _lines(transcript) < target:
-                assert time.monotonic() < deadline, "the run made no progress"
-                time.sleep(0.005)
+            wait_for(
+                lambda: proc.poll() is not None or _lines(transcript) >= target,  # noqa: B023
+                "the run's progress",
+            )
             if proc.poll() is None:
                 os.kill(proc.pid, signal.SIGKILL)
                 killed += 1
-            _, err = proc.communicate(timeout=60)
+            _, err = proc.communicate(timeout=SAFETY_S)
             assert proc.returncode in (0, -signal.SIGKILL), err.decode()
         assert killed >= 1
         # the last resume in process, on the wall clock like the killed runs
@@ -161,8 +162,7 @@ def _serve(b: Bench, clock: _WallClock, ports: tuple[int, int], pipe: Connection
     )
     machines = TwinMachines(world, cmm_port=ports[0], controller_port=ports[1])
     pipe.send((machines.cmm.port, machines.controller.port))
-    while True:
-        time.sleep(1.0)
+    threading.Event().wait()  # serves until the test kills the process
 
 
 def test_sigkill_of_the_server_process_then_resume(tmp_path: Path) -> None:
@@ -181,7 +181,7 @@ def test_sigkill_of_the_server_process_then_resume(tmp_path: Path) -> None:
         parent, child = context.Pipe()
         proc = context.Process(target=_serve, args=(b, clock, ports, child), daemon=True)
         proc.start()
-        assert parent.poll(60), "the server did not start"
+        assert parent.poll(SAFETY_S), "the server did not start"
         return proc, parent.recv()
 
     server, ports = start((0, 0))
@@ -202,13 +202,12 @@ def test_sigkill_of_the_server_process_then_resume(tmp_path: Path) -> None:
         thread = threading.Thread(target=first_run)
         thread.start()
         target = int(np.random.default_rng(7).integers(150, 600))
-        deadline = time.monotonic() + 120.0
-        while thread.is_alive() and _lines(transcript) < target:
-            assert time.monotonic() < deadline, "the run made no progress"
-            time.sleep(0.002)
+        wait_for(
+            lambda: not thread.is_alive() or _lines(transcript) >= target, "the run's progress"
+        )
         os.kill(server.pid, signal.SIGKILL)
-        server.join(timeout=30)
-        thread.join(timeout=120)
+        server.join(timeout=SAFETY_S)
+        thread.join(timeout=SAFETY_S)
         assert len(failure) == 1 and isinstance(failure[0], IncompleteSession), failure
         before = pd.read_csv(b.session / "points.csv")
         assert 0 < len(before) < 4 * 3 * 6
@@ -222,4 +221,4 @@ def test_sigkill_of_the_server_process_then_resume(tmp_path: Path) -> None:
     finally:
         if server.is_alive():
             os.kill(server.pid, signal.SIGKILL)
-            server.join(timeout=30)
+            server.join(timeout=SAFETY_S)
