@@ -367,9 +367,11 @@ class _Campaign:
             return
         try:
             controller.stop()
-            self.notify("warn", f"hexapod stopped ({why})")
+            said = f"hexapod stopped ({why})"
         except HexathermError as exc:
-            self.notify("warn", f"could not stop the hexapod: {exc}")
+            said = f"could not stop the hexapod: {exc}"
+        with contextlib.suppress(OSError):  # SIGHUP: the terminal may be gone
+            self.notify("warn", said)
 
     # ------------------------------------------------------------- machines
     def _controller_log(self, direction: str, line: str) -> None:
