@@ -160,3 +160,14 @@ def test_resume_refuses_a_step_the_plan_does_not_know(stopped) -> None:
         handle.write("S9" + ",0" * 10 + "\n")
     line = _one_line_error(CliRunner().invoke(main, args))
     assert f"{session / 'steps.csv'}:3: field 'label': step 'S9' is not in the plan" in line
+
+
+def test_a_bad_fixed_radius_is_said_plainly() -> None:
+    import numpy as np
+
+    from hexatherm.core.spherefit import fit_spheres
+    from hexatherm.errors import FitError
+
+    with pytest.raises(FitError) as caught:
+        fit_spheres(np.eye(3)[[0, 1, 2, 0, 1, 2]] * 5.0, radius_mm=np.array([-842.001]))
+    assert str(caught.value).endswith("got -842.001") and "np.float64" not in str(caught.value)
