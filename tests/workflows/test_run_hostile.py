@@ -118,6 +118,8 @@ def _hostile(path: Path, kind: str) -> str:
     path.unlink()
     if kind == "fifo":
         os.mkfifo(path)
+        if path.name == ".run.lock":  # opened for writing: no reader, refused at once
+            return "cannot lock"
         return "named pipe (FIFO), expected a regular file"
     if kind == "dev-zero":
         path.symlink_to("/dev/zero")
@@ -144,6 +146,7 @@ def _hostile(path: Path, kind: str) -> str:
         ("steps.csv", "dev-zero"),
         ("controller.log", "fifo"),
         ("points.csv", "fifo"),
+        (".run.lock", "fifo"),
     ],
 )
 def test_resume_refuses_a_hostile_session_file_in_one_line(stopped, name: str, kind: str) -> None:

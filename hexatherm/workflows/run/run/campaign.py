@@ -8,6 +8,8 @@ from __future__ import annotations
 import collections
 import contextlib
 import math
+import os
+import stat
 import time
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
@@ -98,12 +100,22 @@ def _session_lock(folder: Path) -> Iterator[None]:
     except ImportError:  # pragma: no cover - Windows
         yield
         return
-    with open(folder / ".run.lock", "a") as handle:
+    path = folder / ".run.lock"
+    flags = os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0)
+    try:  # never blocks: a FIFO put there is refused, not waited on
+        fd = os.open(path, flags, 0o644)
+    except OSError as exc:
+        raise AcquisitionError(f"cannot lock {path}: {exc.strerror}") from None
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise AcquisitionError(f"cannot lock {path}: not a regular file")
         try:
-            fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
             raise AcquisitionError(f"another hexatherm run is recording {folder}") from None
         yield
+    finally:
+        os.close(fd)
 
 
 def run_campaign(
