@@ -268,3 +268,23 @@ class RankDeficientError(CalibrationError):
 class InputWarning(UserWarning):
     """Input that a reader read past or dropped because it was asked to (``allow_truncated``,
     ``keep_later``); the message names the file and the line."""
+
+
+class Terminated(KeyboardInterrupt):
+    """A terminating signal other than Ctrl-C (SIGTERM, SIGHUP, SIGQUIT, ...) caught by a
+    command that drives a machine: a :class:`KeyboardInterrupt`, so that it takes the path
+    of Ctrl-C exactly (the hexapod is stopped, the session left resumable).
+
+    >>> str(Terminated(15)), Terminated(15).name
+    ('SIGTERM', 'SIGTERM')
+    """
+
+    def __init__(self, signum: int) -> None:
+        import signal
+
+        self.signum = int(signum)
+        try:
+            self.name = signal.Signals(self.signum).name
+        except ValueError:
+            self.name = f"signal {self.signum}"
+        super().__init__(self.name)

@@ -14,7 +14,8 @@ code  meaning
       computation (one line on stderr naming file, line and field, or the step)
 2     usage error: a bad option or argument (click's message)
 3     ``--strict``: results written, but a check failed (``process``: a quality
-      check; ``calibrate``: the model does not explain the poses)
+      check; ``calibrate``: the model does not explain the poses); ``run``: the
+      session recorded, but balls fail their checks after the re-probe
 130   interrupted (Ctrl-C); outputs are whole or absent, a hexapod is stopped
 ====  ==========================================================================
 """
@@ -33,7 +34,8 @@ EXIT_CODES = {
     0: "done",
     1: "refused: bad input or a failed computation (one line naming file, line and field)",
     2: "usage error: a bad option or argument",
-    3: "--strict: results written, but a check failed (process: quality; calibrate: chi-square)",
+    3: "--strict: results written, but a check failed (process: quality; calibrate: chi-square;"
+    " run, always: balls that fail their checks after the re-probe)",
     130: "interrupted (Ctrl-C)",
 }
 #: the exit status of an interrupted command (128 + SIGINT, as shells report it)

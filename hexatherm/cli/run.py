@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import contextlib
 import sys
 from pathlib import Path
 
 import click
 
-from hexatherm.cli.options import CheckedFloat, clean_errors, echo_err
+from hexatherm.cli.options import CHECK_FAILED_EXIT, CheckedFloat, clean_errors, echo_err
+from hexatherm.cli.signals import signals_interrupt
+from hexatherm.errors import Terminated
 
 #: the largest coordinate (mm) or angle (deg) an option of run or serve-twin takes
 LARGEST_MM = 1e5
@@ -244,8 +247,9 @@ def command(
     probed again once) and measures a reference (or a target with its references) again
     when a delay breaks --max-gap. SESSION gets the I++ transcript, the controller log,
     steps.csv and points.csv as it goes (with --temperature-port also serial.log and
-    temperatures.csv), and session.yaml at the end (then: hexatherm process SESSION). Ctrl-C or an
-    error stops the hexapod; --resume continues. The balls' fits go to standard output.
+    temperatures.csv), and session.yaml at the end (then: hexatherm process SESSION). Ctrl-C, a
+    terminating signal (SIGTERM, SIGHUP, SIGQUIT, ...: exit status 130) or an error stops the
+    hexapod; --resume continues. The balls' fits go to standard output.
     """
     from hexatherm.devices.controller import InPositionCriteria
     from hexatherm.devices.serialport import PortSettings
@@ -301,16 +305,20 @@ def command(
     def notify(level: str, message: str) -> None:
         echo_err(("warning: " if level == "warn" else "") + message)
 
-    if dry_run:
-        check_plan(files, hexapod, options, notify)
-        return
     try:
-        result = run_campaign(files, hexapod, options, notify)
-    except KeyboardInterrupt:
-        echo_err(
-            f"interrupted: the hexapod was sent STOP; everything measured is in {session}; "
-            "continue with --resume"
-        )
+        # SIGTERM, SIGHUP, SIGQUIT, ... take Ctrl-C's path: the hexapod is sent STOP
+        with signals_interrupt():
+            if dry_run:
+                check_plan(files, hexapod, options, notify)
+                return
+            result = run_campaign(files, hexapod, options, notify)
+    except KeyboardInterrupt as exc:
+        how = exc.name if isinstance(exc, Terminated) else "Ctrl-C"
+        with contextlib.suppress(OSError):  # SIGHUP: the terminal may be gone
+            echo_err(
+                f"interrupted ({how}): the hexapod was sent STOP; everything measured is in "
+                f"{session}; continue with --resume"
+            )
         sys.exit(130)
     lines = ["label,ball,n,x,y,z,radius_mm,form_um,rms_um,attempts,problems"]
     for b in result.balls:
@@ -327,3 +335,14 @@ def command(
         echo_err(f"measured again (gap): {', '.join(result.remeasured)}")
     echo_err(f"{result.n_points} points in {result.session / 'points.csv'}")
     echo_err(f"wrote {result.session_file}")
+    if result.failed:
+        first = result.failed[0]
+        n_balls = len(files.plan.labels) * len(files.balls.names)
+        echo_err(
+            f"error: {len(result.failed)} of {n_balls} balls still fail their checks after "
+            f"probing them again: {', '.join(f'{b.label} {b.ball}' for b in result.failed)} "
+            f"(first: {first.label} {first.ball}: {'; '.join(first.problems)}); the session is "
+            "recorded, but check the balls file, the CMM's tool and the plan before processing "
+            f"it (exit status {CHECK_FAILED_EXIT})"
+        )
+        sys.exit(CHECK_FAILED_EXIT)

@@ -651,7 +651,7 @@ def fit_spheres(
         _raise_first(
             ~(np.isfinite(rad) & (rad > 0)),
             "sphere",
-            lambda k: f"the fixed radius must be finite and positive, got {rad[k]!r}",
+            lambda k: f"the fixed radius must be finite and positive, got {float(rad[k])!r}",
         )
         radius = rad.copy()
 

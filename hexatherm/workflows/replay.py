@@ -106,7 +106,8 @@ def compare_tables(
                 i = int(np.argmax(bad))
                 result.mismatches.append(
                     f"{result.session}/{name}: {row_name(i)}, column {column}: "
-                    f"expected {x[i]!r}, got {y[i]!r} (|diff| {diff[i]:.3g} > {tol:g})"
+                    f"expected {float(x[i])!r}, got {float(y[i])!r} "
+                    f"(|diff| {diff[i]:.3g} > {tol:g})"
                 )
         else:
             sa, sb = a.fillna("").astype(str), b.fillna("").astype(str)

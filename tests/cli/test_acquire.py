@@ -44,6 +44,7 @@ from hexatherm.io.config import plan_to_yaml, read_balls, read_session
 from hexatherm.io.csvfile import read_measurement_csv
 from hexatherm.io.seriallog import POINTS_HEADER, MemorySink, entry, escape_bytes, parse_log
 from hexatherm.workflows.acquire.recorder import FitChecks, Recorder
+from tests.waiting import SAFETY_S, wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
 HEXAPOD = ROOT / "configs" / "symetrie-like.yaml"
@@ -137,22 +138,14 @@ def acquire_args(plan: Path, session: Path, port: str, *extra):
         "--session",
         str(session),
         "--auto",
-        "--idle-timeout",
-        "10",
+        "--idle-timeout",  # a safety net: every passing run ends with its plan
+        str(SAFETY_S),
         "--read-timeout",
         "0.05",
         "--reopen-interval",
         "0.05",
         *[str(e) for e in extra],
     ]
-
-
-def wait_for(predicate, timeout: float = 15.0, what: str = "condition") -> None:
-    end = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > end:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(0.005)
 
 
 def log_text(session: Path) -> str:
@@ -331,7 +324,6 @@ def test_pty_split_lines_timeout_mid_line_garbage_and_temperature_port(tmp_path)
     session = tmp_path / "s"
     master, slave, path = raw_pty()
     t_master, t_slave, t_path = raw_pty()
-    pause = 0.25  # five read timeouts
     split_line = LINES[7]
 
     def device():
@@ -340,14 +332,15 @@ def test_pty_split_lines_timeout_mid_line_garbage_and_temperature_port(tmp_path)
         os.write(t_master, b"20.5,20.6,20.7,20.8,20.9,21.0,19.5\r\n")
         os.write(master, b"\x00\xff%3 garbage\r\n" + b"\r\n".join(LINES[:7]) + b"\r\n")
         os.write(master, split_line[:13])  # a timeout in the middle of a line
-        time.sleep(pause)
+        wait_for(  # read and logged alone: the rest comes in a later read
+            lambda: escape_bytes(split_line[:13]) + '"' in log_text(session),
+            what="the first part of the split line to be logged",
+        )
         os.write(master, split_line[13:] + b"\r\n")
         rng = np.random.default_rng(2)
         for k, line in enumerate(LINES[8:], start=8):
             for chunk in random_chunks(line + (b"\n" if k % 2 else b"\r\n"), rng, 9):
                 os.write(master, chunk)
-            if k % PLAN.points_per_ball == 0:
-                time.sleep(0.003)
             if k % 30 == 0:
                 os.write(t_master, b"21.5 21.6 21.7 21.8 21.9 22.0 19.6\n")
 
@@ -360,7 +353,7 @@ def test_pty_split_lines_timeout_mid_line_garbage_and_temperature_port(tmp_path)
         )
         ended = time.time()
     finally:
-        thread.join(5)
+        thread.join(SAFETY_S)
         for fd in (master, slave, t_master, t_slave):
             os.close(fd)
     assert result.exit_code == 0, result.output
@@ -420,7 +413,7 @@ def test_pty_port_disappears_and_is_reopened(tmp_path):
     try:
         result = CliRunner().invoke(main, acquire_args(plan, session, str(link)))
     finally:
-        thread.join(5)
+        thread.join(SAFETY_S)
         for fd in fds:
             with contextlib.suppress(OSError):
                 os.close(fd)
@@ -449,7 +442,7 @@ def test_socket_connection_lost_and_reconnected(tmp_path):
             with second:
                 wait_for(lambda: " reopen probe " in log_text(session), what="the reconnection")
                 second.sendall(b"\n".join(LINES[third:]) + b"\n")
-                done.wait(10)
+                done.wait(SAFETY_S)
 
     thread = threading.Thread(target=device, daemon=True)
     thread.start()
@@ -459,7 +452,7 @@ def test_socket_connection_lost_and_reconnected(tmp_path):
         )
     finally:
         done.set()
-        thread.join(5)
+        thread.join(SAFETY_S)
     assert result.exit_code == 0, result.output
     assert "probe port lost (read failed: socket disconnected)" in result.stderr
     assert_points_are_the_ones_sent(session)
@@ -481,7 +474,7 @@ def test_sigkill_halfway_then_resume_loses_and_doubles_nothing(tmp_path):
             what="the first run's points",
         )
         first.send_signal(signal.SIGKILL)
-        first.wait(10)
+        first.wait(SAFETY_S)
         assert first.returncode == -signal.SIGKILL
         assert not (session / "session.yaml").exists()
 
@@ -493,7 +486,7 @@ def test_sigkill_halfway_then_resume_loses_and_doubles_nothing(tmp_path):
         )
         # the point whose line was cut by the kill is probed again
         os.write(master, b"\r\n".join(LINES[cut:]) + b"\r\n")
-        _, err = second.communicate(timeout=30)
+        _, err = second.communicate(timeout=SAFETY_S)
     finally:
         os.close(master)
         os.close(slave)
@@ -526,13 +519,19 @@ def test_resume_restores_points_logged_but_not_yet_written(tmp_path):
     plan = write_configs(tmp_path)
     session = tmp_path / "s"
     half = 50
-    with loop_device(lambda port: port.write(b"\r\n".join(LINES[:half]) + b"\r\n")):
-        stopped = CliRunner().invoke(
-            main, acquire_args(plan, session, "loop://")[:-6] + ["--idle-timeout", "0.3"]
-        )
-    assert stopped.exit_code == 1
-    assert "continue with --resume" in stopped.stderr
-    assert n_rows(session) == half
+    master, slave, path = raw_pty()
+    command = [sys.executable, "-m", "hexatherm", *acquire_args(plan, session, path)]
+    try:  # killed once the points are written (an event, not an idle time that load stretches)
+        first = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        wait_for(lambda: " open probe " in log_text(session), what="the run to open")
+        os.write(master, b"\r\n".join(LINES[:half]) + b"\r\n")
+        wait_for(lambda: n_rows(session) == half, what="the first half's points")
+        first.send_signal(signal.SIGKILL)
+        first.wait(SAFETY_S)
+    finally:
+        os.close(master)
+        os.close(slave)
+    assert first.returncode == -signal.SIGKILL
     points = (session / "points.csv").read_bytes()
     (session / "points.csv").write_bytes(
         points[: points.rstrip(b"\n").rsplit(b"\n", 3)[0].__len__() + 1]

@@ -16,6 +16,7 @@ from hexatherm.devices.serialport import PortSettings
 from hexatherm.devices.urls import controller_from_url
 from hexatherm.io.config import read_hexapod
 from tests.sessions import ROOT
+from tests.waiting import SAFETY_S
 
 HEXAPOD = ROOT / "configs" / "symetrie-like.yaml"
 BALLS = ROOT / "configs" / "balls-3.yaml"
@@ -39,7 +40,7 @@ def test_serve_twin_prints_its_urls_serves_and_stops_on_ctrl_c() -> None:
         assert thermo_line.startswith("thermocouples: socket://127.0.0.1:"), thermo_line
         # the logger, opened as run --temperature-port opens it (pyserial), sends lines that
         # acquire's parser reads as six legs and the air, the mats' heating on the legs
-        port = PortSettings(thermo_line.split()[1], timeout_s=10.0).open()
+        port = PortSettings(thermo_line.split()[1], timeout_s=SAFETY_S).open()
         try:
             port.readline()  # the first line may be cut by pyserial's flush at open
             samples = [parse_numbers(port.readline()) for _ in range(2)]
@@ -49,7 +50,7 @@ def test_serve_twin_prints_its_urls_serves_and_stops_on_ctrl_c() -> None:
             assert sample is not None and len(sample) == 7
             assert all(15.0 < v < 40.0 for v in sample) and sample[6] == 20.0
         host, port = parse_ipp_url(cmm_line.split()[1])
-        with IppClient(host, port, timeout_s=30) as cmm:
+        with IppClient(host, port, timeout_s=SAFETY_S) as cmm:
             cmm.start_session()
             assert cmm.is_homed() is False  # after the injected error, cleared and retried
             cmm.home()
@@ -61,7 +62,7 @@ def test_serve_twin_prints_its_urls_serves_and_stops_on_ctrl_c() -> None:
             assert temperatures.shape == (6,) and (temperatures > 15).all()
             assert abs(controller.read_pose()).max() < 1e-3
         proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=30)
+        _, err = proc.communicate(timeout=SAFETY_S)
         assert proc.returncode == 0, err
         assert "stopped" in err and "hexatherm run PLAN --cmm ipp://127.0.0.1:" in err
     finally:

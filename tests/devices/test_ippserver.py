@@ -4,6 +4,7 @@ against independent computations, and each fault it injects."""
 from __future__ import annotations
 
 import socket
+import threading
 import time
 
 import numpy as np
@@ -25,6 +26,7 @@ from hexatherm.devices.ippserver import (
 from hexatherm.errors import (
     IppDmeError,
 )
+from tests.waiting import SAFETY_S
 
 R_MM = 12.7
 TIP_MM = 1.0  # radius of the 2 mm tip
@@ -35,7 +37,7 @@ class Raw:
     """A bare TCP client: send command lines, read response lines."""
 
     def __init__(self, port: int) -> None:
-        self.sock = socket.create_connection(("127.0.0.1", port), timeout=10)
+        self.sock = socket.create_connection(("127.0.0.1", port), timeout=SAFETY_S)
         self.buffer = LineBuffer()
         self.lines: list[str] = []
 
@@ -205,7 +207,7 @@ def test_noise_is_seeded_and_has_the_requested_spread():
     def touches(seed, n=300):
         with (
             _server(noise_um=2.0, seed=seed) as server,
-            IppClient("127.0.0.1", server.port, timeout_s=30) as cmm,
+            IppClient("127.0.0.1", server.port, timeout_s=SAFETY_S) as cmm,
         ):
             cmm.start_session()
             cmm.home()
@@ -233,7 +235,7 @@ def test_time_dependent_backend():
 
     clock = [0.0]
     with IppSimServer(Rising(), time_s=lambda: clock[0]) as server:
-        with IppClient("127.0.0.1", server.port, timeout_s=30) as cmm:
+        with IppClient("127.0.0.1", server.port, timeout_s=SAFETY_S) as cmm:
             cmm.start_session()
             cmm.home()
             cmm.change_tool("Probe1")
@@ -416,7 +418,7 @@ def test_fault_events_are_interleaved_with_the_data():
 def test_fault_split_sends_the_same_bytes_in_pieces():
     def response(faults):
         with _server(faults=faults) as server:
-            sock = socket.create_connection(("127.0.0.1", server.port), timeout=10)
+            sock = socket.create_connection(("127.0.0.1", server.port), timeout=SAFETY_S)
             sock.sendall(b"00001 StartSession()\r\n00002 GetDMEVersion()\r\n")
             data = b""
             while not data.endswith(b"00002 %\r\n"):
@@ -452,15 +454,17 @@ def test_fault_delay_holds_the_rest_of_the_response():
         assert raw.read_line() == "00001 %"
         assert time.monotonic() - t0 >= 0.3
         raw.close()
-    # a long delay does not hold up closing the server
-    server = _server(faults=[Fault("delay", nth=1, delay_s=600)])
+    # a long delay does not hold up closing the server: the close ends (an event) long
+    # before the delay would (the join's limit is a safety net, not a timing assumption)
+    server = _server(faults=[Fault("delay", nth=1, delay_s=100 * SAFETY_S)])
     raw = Raw(server.port)
     raw.send("00001 StartSession()")
     assert raw.read_line() == "00001 &"
-    t0 = time.monotonic()
-    server.close()
+    closing = threading.Thread(target=server.close)
+    closing.start()
+    closing.join(SAFETY_S)
     raw.close()
-    assert time.monotonic() - t0 < 10
+    assert not closing.is_alive(), "closing the server waited for the delay"
 
 
 def test_faults_fire_once_on_the_nth_command_counted_as_asked():

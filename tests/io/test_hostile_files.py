@@ -32,8 +32,9 @@ from hexatherm.io.measurements import read_measurements
 from hexatherm.io.records import Records, check_time_zones
 from hexatherm.io.temperatures import read_temperatures
 from hexatherm.io.yamlfile import YamlDoc
+from tests.waiting import SAFETY_S
 
-TIMEOUT_S = 30.0
+TIMEOUT_S = SAFETY_S  # a safety net against a hang, never what decides a pass
 
 
 def call_with_timeout(function: Callable[[], Any], timeout: float = TIMEOUT_S) -> Any:

@@ -22,6 +22,7 @@ from hexatherm.io.atomic import output_lock, recover_output
 from hexatherm.io.manifest import MANIFEST_NAME, foreign_entries
 from hexatherm.io.outputs import output_dir, write_output_file
 from tests.io.test_output_safety import leftovers, snapshot
+from tests.waiting import SAFETY_S
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals and flock")
 
@@ -85,7 +86,7 @@ def child(
     *,
     kill_at: str = "never",
     kind: str = "folder",
-    timeout_s: float = 60.0,
+    timeout_s: float = SAFETY_S,
     overwrite: bool = True,
 ) -> subprocess.Popen[str]:
     args = [kill_at, kind, str(out), content, str(timeout_s), "1" if overwrite else "0"]
@@ -99,11 +100,11 @@ def child(
 
 
 def finish(proc: subprocess.Popen[str]) -> tuple[int, str, str]:
-    out, err = proc.communicate(timeout=120)
+    out, err = proc.communicate(timeout=SAFETY_S)
     return proc.returncode, out, err
 
 
-def read_line(proc: subprocess.Popen[str], timeout_s: float = 120.0) -> str:
+def read_line(proc: subprocess.Popen[str], timeout_s: float = SAFETY_S) -> str:
     """The child's next line of standard output (fails after a generous timeout)."""
     assert proc.stdout is not None
     ready, _, _ = select.select([proc.stdout], [], [], timeout_s)
@@ -216,7 +217,7 @@ def test_a_busy_output_is_refused_cleanly_without_waiting(results):
 def test_a_second_run_waits_for_the_first(results):
     session = results.parent
     with output_lock(results):
-        proc = child(results, "v2", timeout_s=120.0)
+        proc = child(results, "v2", timeout_s=SAFETY_S)
         assert read_line(proc) == "waiting"
         assert complete(results, "v1")  # it cannot swap while the lock is held
     rc, out, err = finish(proc)

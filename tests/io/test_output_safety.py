@@ -39,6 +39,7 @@ from hexatherm.io.atomic import (
 )
 from hexatherm.io.manifest import MANIFEST_NAME, foreign_entries, read_manifest
 from hexatherm.io.outputs import check_not_input, check_output, output_dir, write_output_file
+from tests.waiting import SAFETY_S
 
 SESSION_FILES = {
     "session.yaml": b"format: hexatherm-session/1\nname: s\n",
@@ -563,7 +564,7 @@ def test_a_file_size_limit_is_a_one_line_error(tmp_path):
             capture_output=True,
             text=True,
             env=env,
-            timeout=60,
+            timeout=SAFETY_S,
         )
         assert done.returncode == 1, done.stderr
         lines = done.stderr.strip().splitlines()

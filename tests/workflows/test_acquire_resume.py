@@ -22,7 +22,6 @@ import re
 import signal
 import subprocess
 import sys
-import time
 import tty
 from pathlib import Path
 
@@ -32,6 +31,7 @@ import pytest
 from hexatherm.core.planning import build_plan
 from hexatherm.io.config import plan_to_yaml
 from hexatherm.io.seriallog import parse_log
+from tests.waiting import SAFETY_S, wait_for
 from tests.workflows.test_acquire_assign import BALLS, BALLS_FILE, HEXAPOD_FILE, Probe, Touch
 
 N = 5
@@ -40,14 +40,6 @@ PLAN = build_plan(
 )
 SLOTS = [(label, ball) for label in PLAN.labels for ball in BALLS.names]
 KILLS = 3
-
-
-def wait_for(predicate, what: str, timeout: float = 60.0) -> None:
-    end = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > end:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(0.005)
 
 
 def logged(session: Path) -> tuple[int, int]:
@@ -91,8 +83,8 @@ class Operator:
             "--session",
             str(self.session),
             "--auto",
-            "--idle-timeout",
-            "60",
+            "--idle-timeout",  # a safety net: a passing run ends with its plan
+            str(SAFETY_S),
             "--read-timeout",
             "0.05",
         ]
@@ -120,7 +112,7 @@ class Operator:
         assert self.process is not None
         wait_for(lambda: logged(self.session)[0] == self.sent, "the bytes sent to be logged")
         self.process.send_signal(signal.SIGKILL)
-        self.process.wait(30)
+        self.process.wait(SAFETY_S)
         assert self.process.returncode == -signal.SIGKILL
         assert self.process.stderr is not None
         self.told.append(self.process.stderr.read().decode())
@@ -130,7 +122,7 @@ class Operator:
     def finish(self) -> str:
         """Wait for the last run to complete the plan; everything every run told."""
         assert self.process is not None
-        _, err = self.process.communicate(timeout=60)
+        _, err = self.process.communicate(timeout=SAFETY_S)
         os.close(self.master)
         os.close(self.slave)
         assert self.process.returncode == 0, err.decode()

@@ -30,6 +30,7 @@ import pytest
 from hexatherm.io.csvout import RESOLUTION
 from hexatherm.workflows.process.pipeline import process_session
 from hexatherm.workflows.report import build_report
+from tests.waiting import SAFETY_S
 
 ROOT = Path(__file__).resolve().parents[2]
 SESSION = ROOT / "sessions" / "with-hidden-effect"
@@ -83,7 +84,7 @@ def print_report(session: Path, folder: Path):
         ],
         check=True,
         capture_output=True,
-        timeout=120,
+        timeout=SAFETY_S,
     )
     text = subprocess.run(
         [poppler("pdftotext"), "-bbox", str(pdf), "-"], check=True, capture_output=True

@@ -17,19 +17,24 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from hexatherm.core.heating import Mat, MatHeating
 from hexatherm.devices.controller import InPositionCriteria
 from hexatherm.errors import IncompleteSession
 from hexatherm.workflows.run.run import run_campaign
 from hexatherm.workflows.serve import AcceleratedClock, TwinMachines, TwinWorld
 from tests.sessions import ROOT
+from tests.waiting import SAFETY_S, wait_for
 from tests.workflows.test_run import (
-    HEATING,
     NOMINAL_ORIGIN,
     TRUE_ORIGIN,
     Bench,
     check_complete,
     make_bench,
 )
+
+#: mats off: on the wall clock (killed processes need real time) the balls must not drift
+#: while a loaded machine probes them slowly, or load would decide the fits' agreement
+STILL = MatHeating(tuple(Mat(0.0, 2400.0, ((0.0, float("inf")),)) for _ in range(6)))
 
 SHORT = {"targets": [[5.0, -3.0, 4.0, 1.0, -2.0, 3.0]], "points_per_ball": 6}
 
@@ -52,7 +57,7 @@ def test_sigkill_of_run_at_random_points_then_resume(tmp_path: Path) -> None:
     b.world = TwinWorld(
         b.world.hexapod,
         b.files.balls,
-        heating=HEATING,
+        heating=STILL,
         origin_on_cmm=TRUE_ORIGIN,
         clock=clock,
         sleep=clock.sleep,
@@ -76,14 +81,14 @@ def test_sigkill_of_run_at_random_points_then_resume(tmp_path: Path) -> None:
             target = _lines(transcript) + int(rng.integers(150, 600))
             args = command + (["--resume"] if round_ else [])
             proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-            deadline = time.monotonic() + 120.0
-            while proc.poll() is None and _lines(transcript) < target:
-                assert time.monotonic() < deadline, "the run made no progress"
-                time.sleep(0.005)
+            wait_for(
+                lambda: proc.poll() is not None or _lines(transcript) >= target,  # noqa: B023
+                "the run's progress",
+            )
             if proc.poll() is None:
                 os.kill(proc.pid, signal.SIGKILL)
                 killed += 1
-            _, err = proc.communicate(timeout=60)
+            _, err = proc.communicate(timeout=SAFETY_S)
             assert proc.returncode in (0, -signal.SIGKILL), err.decode()
         assert killed >= 1
         # the last resume in process, on the wall clock like the killed runs
@@ -92,7 +97,7 @@ def test_sigkill_of_run_at_random_points_then_resume(tmp_path: Path) -> None:
         run_campaign(b.files, b.world.hexapod, options, b.notify)
         text = transcript.read_text()
         assert text.count("run resume") == 2 and text.count("run start") == 1
-        check_complete(b, max_rms_um=3.0)
+        check_complete(b)
     finally:
         b.machines.close()
 
@@ -152,7 +157,7 @@ def _serve(b: Bench, clock: _WallClock, ports: tuple[int, int], pipe: Connection
     world = TwinWorld(
         b.world.hexapod,
         b.files.balls,
-        heating=HEATING,
+        heating=STILL,
         origin_on_cmm=TRUE_ORIGIN,
         clock=clock,
         sleep=clock.sleep,
@@ -161,8 +166,7 @@ def _serve(b: Bench, clock: _WallClock, ports: tuple[int, int], pipe: Connection
     )
     machines = TwinMachines(world, cmm_port=ports[0], controller_port=ports[1])
     pipe.send((machines.cmm.port, machines.controller.port))
-    while True:
-        time.sleep(1.0)
+    threading.Event().wait()  # serves until the test kills the process
 
 
 def test_sigkill_of_the_server_process_then_resume(tmp_path: Path) -> None:
@@ -181,7 +185,7 @@ def test_sigkill_of_the_server_process_then_resume(tmp_path: Path) -> None:
         parent, child = context.Pipe()
         proc = context.Process(target=_serve, args=(b, clock, ports, child), daemon=True)
         proc.start()
-        assert parent.poll(60), "the server did not start"
+        assert parent.poll(SAFETY_S), "the server did not start"
         return proc, parent.recv()
 
     server, ports = start((0, 0))
@@ -202,13 +206,12 @@ def test_sigkill_of_the_server_process_then_resume(tmp_path: Path) -> None:
         thread = threading.Thread(target=first_run)
         thread.start()
         target = int(np.random.default_rng(7).integers(150, 600))
-        deadline = time.monotonic() + 120.0
-        while thread.is_alive() and _lines(transcript) < target:
-            assert time.monotonic() < deadline, "the run made no progress"
-            time.sleep(0.002)
+        wait_for(
+            lambda: not thread.is_alive() or _lines(transcript) >= target, "the run's progress"
+        )
         os.kill(server.pid, signal.SIGKILL)
-        server.join(timeout=30)
-        thread.join(timeout=120)
+        server.join(timeout=SAFETY_S)
+        thread.join(timeout=SAFETY_S)
         assert len(failure) == 1 and isinstance(failure[0], IncompleteSession), failure
         before = pd.read_csv(b.session / "points.csv")
         assert 0 < len(before) < 4 * 3 * 6
@@ -216,10 +219,10 @@ def test_sigkill_of_the_server_process_then_resume(tmp_path: Path) -> None:
         assert again == ports
         run_campaign(b.files, b.world.hexapod, b.options(resume=True, criteria=criteria, **urls),
                      b.notify)  # fmt: skip
-        after = check_complete(b, max_rms_um=3.0)
+        after = check_complete(b)
         pd.testing.assert_frame_equal(after.iloc[: len(before)], before)
         assert transcript.read_text().count("run resume") == 1
     finally:
         if server.is_alive():
             os.kill(server.pid, signal.SIGKILL)
-            server.join(timeout=30)
+            server.join(timeout=SAFETY_S)

@@ -53,6 +53,17 @@ distance between set-aside touches, as a DMIS program or any repeated touch patt
 does), the ball is being probed again whole and the set-aside points stay aside;
 otherwise the ball is being continued and the set-aside points are taken back, before
 the new ones. Both give the ball the plan's points, all on it.
+
+Whether the interrupted ball's last points reached ``serial.log`` before the kill must not
+matter, and it does not: points the probe sent before the kill that the killed process
+never read stay in the port's buffer and arrive *after* the resume, where they look like a
+continuation (a new touch). So, for the ball interrupted by the resume (with points set
+aside or none logged at all), a point that re-touches the ball's first point (the same
+rule) restarts the ball as a whole: every point it has (taken back, or read after the
+resume) is set aside and the ball is the re-probe's alone. The set-aside points of a ball
+probed again whole say so (``rejected.csv``: ``set-aside``, "probed before an
+interruption; the ball was probed again from its first touch point"), however the kill
+fell. A touch pattern that continues a ball never re-touches its first point.
 """
 
 from __future__ import annotations
@@ -96,6 +107,9 @@ OPERATOR_EVENTS = ("next", "redo", "quit")
 #: a new point within this distance of the first set-aside point (and within half the
 #: distance between set-aside touches) re-touches it: the ball is probed again whole, mm
 RETOUCH_MM = 1.0
+
+#: why the points of an interrupted ball probed again whole are set aside (rejected.csv)
+REPROBED = "probed before an interruption; the ball was probed again from its first touch point"
 
 
 Level = Literal["info", "warn", "progress"]
@@ -254,6 +268,8 @@ class Recorder:
         #: what the last resume set aside (for the log's note), or ""
         self.last_set_aside = ""
         self._decision: dict[int, Literal["again", "continue"]] = {}
+        #: the ball that was being probed when the last resume came (None: none was)
+        self._resumed: int | None = None
         self._rejects_written = False
         self._splitters = {PROBE: LineSplitter(), TEMPERATURE: LineSplitter()}
         self._pending: list[str] = []
@@ -576,6 +592,8 @@ class Recorder:
         if aside and slot not in self._decision and not self.points[slot]:
             if _retouches(np.array(point.xyz), aside):
                 self._decision[slot] = "again"
+                self._mark_reprobed(slot)
+                self._rewrite_rejects()
                 self.notify(
                     "info",
                     f"{self._name(slot)} is probed again whole (the first point re-touches "
@@ -595,6 +613,12 @@ class Recorder:
                     f"{self._name(slot)} is continued (the first point is a new touch): the "
                     f"{len(aside)} set-aside point(s) are taken back",
                 )
+        elif (
+            slot == self._resumed
+            and self.points[slot]
+            and _retouches(np.array(point.xyz), self.points[slot])
+        ):
+            self._restart(slot)
         x, y, z = (format_number(v) for v in point.xyz)
         point.line = f"{self.plan.labels[i]},{self.balls.names[j]},{x},{y},{z},{point.time}"
         self.points[slot].append(point)
@@ -615,6 +639,34 @@ class Recorder:
                     "Enter (or 'next'): next ball; 'redo': probe this ball "
                     "again; 'quit': stop (continue later with --resume)",
                 )
+
+    def _restart(self, slot: int) -> None:
+        """The interrupted ball is probed again from its first touch point: every point it
+        has since the resume (taken back from the set-aside ones, or sent before the kill
+        and read only after it) is set aside as a whole (see the module docstring)."""
+        old = self.points[slot]
+        self.points[slot] = []
+        self.fits.pop(slot, None)
+        self.set_aside.setdefault(slot, []).extend(old)
+        for point in old:
+            self.rejects.append(_Reject(slot, point, "set-aside", REPROBED))
+        self._decision[slot] = "again"
+        self._mark_reprobed(slot)
+        self._pending = []
+        self.points_sink.rewrite(self.point_lines)
+        self._rewrite_rejects()
+        self.notify(
+            "warn",
+            f"{self._name(slot)} is probed again from its first touch point (a point "
+            f"re-touches its first one): its {len(old)} earlier point(s) are set aside (kept "
+            "in serial.log and rejected.csv, not fitted)",
+        )
+
+    def _mark_reprobed(self, slot: int) -> None:
+        """The set-aside points of a ball probed again whole say so in ``rejected.csv``."""
+        for reject in self.rejects:
+            if reject.slot == slot and reject.status == "set-aside":
+                reject.reason = REPROBED
 
     def _close(self, why: str) -> None:
         """Close the current ball before it is full (or before the operator's ``next``)."""
@@ -669,11 +721,14 @@ class Recorder:
     def _set_aside_partial(self) -> None:
         """On resume: set the interrupted ball's points aside (see the module docstring)."""
         self.last_set_aside = ""
+        self._resumed = None
         if self.done:
             return
         slot = self.cursor
         partial = self.points[slot]
         n = self.plan.points_per_ball
+        if len(partial) < n:  # begun (or about to be): its re-probe replaces it as a whole
+            self._resumed = slot
         if not partial or len(partial) >= n:
             return  # nothing probed yet, or complete and waiting for the operator's next
         decision = self._decision.pop(slot, None)

@@ -12,14 +12,16 @@ from __future__ import annotations
 import collections
 import math
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 import yaml
 
 from hexatherm.core.plan import Plan
-from hexatherm.errors import AcquisitionError
+from hexatherm.errors import AcquisitionError, InputError
 from hexatherm.io.atomic import atomic_write_text
+from hexatherm.io.files import read_bytes, refusal
+from hexatherm.io.yamlfile import YamlDoc
 from hexatherm.session import Balls
 from hexatherm.workflows.run.files import (
     CONTROLLER_LOG_NAME,
@@ -30,6 +32,7 @@ from hexatherm.workflows.run.files import (
     AcceptedBall,
     accepted_balls,
     points_lines,
+    step_header,
     truncate_partial_line,
 )
 
@@ -89,18 +92,27 @@ def write_run_settings(folder: Path, settings: RunSettings) -> None:
 
 
 def read_run_settings(folder: Path) -> RunSettings:
-    """Read ``run.yaml`` of a session started by ``hexatherm run``."""
-    path = folder / RUN_NAME
+    """Read ``run.yaml`` of a session started by ``hexatherm run``.
+
+    Through the strict YAML reader of every other input (:class:`~hexatherm.io.yamlfile.YamlDoc`):
+    a FIFO, a device, an oversized or deeply nested file, a non-finite number are each one
+    :class:`~hexatherm.errors.InputError` naming the file, the line and the field.
+    """
+    doc = YamlDoc.load(folder / RUN_NAME)
+    doc.check_keys(["format", "origin_on_cmm", "probe"])
+    doc.check_format(RUN_FORMAT)
+    origin = tuple(doc.vector("origin_on_cmm", size=6))
+    doc.check_keys([f.name for f in fields(ProbeSettings)], "probe")
+    values: dict[str, str | float] = {}
+    for f in fields(ProbeSettings):
+        if f.name == "tool":
+            values[f.name] = doc.string("probe", f.name, default=f.default)
+        else:
+            values[f.name] = doc.number("probe", f.name, default=f.default)
     try:
-        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
-        if not isinstance(doc, dict) or doc.get("format") != RUN_FORMAT:
-            raise ValueError(f"format must be {RUN_FORMAT}")
-        origin = tuple(float(v) for v in doc["origin_on_cmm"])
-        if len(origin) != 6:
-            raise ValueError("origin_on_cmm needs 6 numbers")
-        probe = ProbeSettings(**doc["probe"])
-    except (OSError, ValueError, KeyError, TypeError, yaml.YAMLError) as exc:
-        raise AcquisitionError(f"cannot read the run's settings {path}: {exc}") from None
+        probe = ProbeSettings(**values)  # type: ignore[arg-type]
+    except AcquisitionError as exc:
+        raise doc.error(str(exc), "probe") from None
     return RunSettings(origin, probe)
 
 
@@ -127,11 +139,17 @@ def rebuild_state(
 
     Unfinished last lines of the logs (a writer killed mid-line) are cut first.
     """
-    for name in (TRANSCRIPT_NAME, CONTROLLER_LOG_NAME, STEPS_NAME, POINTS_NAME):
+    names = (TRANSCRIPT_NAME, CONTROLLER_LOG_NAME, STEPS_NAME, POINTS_NAME)
+    for name in names:  # what is there must be a regular file: a FIFO would block the run
+        path = folder / name
+        refused = refusal(path) if path.exists() or path.is_symlink() else None
+        if refused is not None:
+            raise refused
+    for name in names:
         cut = truncate_partial_line(folder / name)
         if cut:
             notify("warn", f"{name}: an unfinished last line ({cut} bytes) cut")
-    text = (folder / TRANSCRIPT_NAME).read_text(encoding="ascii", errors="replace")
+    text = _text(folder / TRANSCRIPT_NAME, "ascii", "replace")
     accepted = accepted_balls(text)
     unknown = [k for k in accepted if k[0] not in plan.labels or k[1] not in balls.names]
     if unknown:
@@ -140,7 +158,7 @@ def rebuild_state(
         )
     expected = "".join(line + "\n" for line in points_lines(plan, balls, accepted))
     points = folder / POINTS_NAME
-    current = points.read_text(encoding="utf-8") if points.is_file() else ""
+    current = _text(points) if points.exists() or points.is_symlink() else ""
     if current != expected:
         if expected.startswith(current):
             missing = expected.count("\n") - current.count("\n")
@@ -148,10 +166,35 @@ def rebuild_state(
         else:
             notify("warn", f"{POINTS_NAME} did not match the transcript: rewritten from it")
         atomic_write_text(points, expected)
-    positionings: collections.Counter[str] = collections.Counter()
-    steps = folder / STEPS_NAME
-    if steps.is_file():
-        for line in steps.read_text(encoding="utf-8").splitlines()[1:]:
-            if line:
-                positionings[line.split(",", 1)[0]] += 1
-    return RunState(accepted, positionings)
+    return RunState(accepted, _positionings(folder / STEPS_NAME, plan))
+
+
+def _text(path: Path, encoding: str = "utf-8", errors: str = "strict") -> str:
+    """A file of the session as text, through the strict reader (a FIFO, a device, an
+    oversized file: one InputError naming it, never a hang)."""
+    raw = read_bytes(path)
+    try:
+        return raw.decode(encoding, errors)
+    except UnicodeDecodeError as exc:
+        line = raw[: exc.start].count(b"\n") + 1
+        raise InputError(f"not {encoding} text ({exc.reason})", path=path, line=line) from None
+
+
+def _positionings(path: Path, plan: Plan) -> collections.Counter[str]:
+    """How often each step was brought in position, by ``steps.csv``'s rows."""
+    out: collections.Counter[str] = collections.Counter()
+    if not (path.exists() or path.is_symlink()):
+        return out
+    lines = _text(path).splitlines()
+    if not lines or lines[0] != step_header():
+        raise InputError("not the run's steps.csv (its header differs)", path=path, line=1)
+    for number, line in enumerate(lines[1:], start=2):
+        if not line:
+            continue
+        label = line.split(",", 1)[0]
+        if label not in plan.labels:
+            raise InputError(
+                f"step {label[:40]!r} is not in the plan", path=path, line=number, field="label"
+            )
+        out[label] += 1
+    return out

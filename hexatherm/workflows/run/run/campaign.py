@@ -8,6 +8,8 @@ from __future__ import annotations
 import collections
 import contextlib
 import math
+import os
+import stat
 import time
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
@@ -42,6 +44,7 @@ from hexatherm.errors import (
     IppTimeout,
     PoseError,
     PoseRefusedError,
+    Terminated,
 )
 from hexatherm.io.atomic import atomic_write_text
 from hexatherm.io.seriallog import (
@@ -78,7 +81,14 @@ from hexatherm.workflows.run.resume import (
     write_run_settings,
 )
 from hexatherm.workflows.run.run.options import BallResult, Notify, RunOptions, RunResult
-from hexatherm.workflows.run.run.support import _Geometry, _Thermocouples, _travel_z, _validate_plan
+from hexatherm.workflows.run.run.support import (
+    _Geometry,
+    _Thermocouples,
+    _travel_z,
+    _validate_plan,
+    check_cmm_coordinates,
+    check_probed,
+)
 
 
 # ------------------------------------------------------------------------ the run
@@ -90,12 +100,22 @@ def _session_lock(folder: Path) -> Iterator[None]:
     except ImportError:  # pragma: no cover - Windows
         yield
         return
-    with open(folder / ".run.lock", "a") as handle:
+    path = folder / ".run.lock"
+    flags = os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0)
+    try:  # never blocks: a FIFO put there is refused, not waited on
+        fd = os.open(path, flags, 0o644)
+    except OSError as exc:
+        raise AcquisitionError(f"cannot lock {path}: {exc.strerror}") from None
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise AcquisitionError(f"cannot lock {path}: not a regular file")
         try:
-            fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
             raise AcquisitionError(f"another hexatherm run is recording {folder}") from None
         yield
+    finally:
+        os.close(fd)
 
 
 def run_campaign(
@@ -283,8 +303,8 @@ class _Campaign:
             completed = True
             self.tlog.note("end complete")
             self.clog.note("end complete")
-        except KeyboardInterrupt:
-            self._stop("interrupted (Ctrl-C)")
+        except KeyboardInterrupt as exc:  # Ctrl-C, or a terminating signal (Terminated)
+            self._stop(f"interrupted ({exc.name if isinstance(exc, Terminated) else 'Ctrl-C'})")
             raise
         except HexathermError as exc:
             self._stop(f"{type(exc).__name__}: {exc}")
@@ -316,7 +336,24 @@ class _Campaign:
             tuple(self.results),
             tuple(self.remeasured),
             session_file,
+            self._failed(),
         )
+
+    def _failed(self) -> tuple[BallResult, ...]:
+        """The accepted balls whose kept probing fails a check, in plan order."""
+        last = {(r.label, r.ball): r for r in self.results}
+        out = []
+        for label in self.plan.labels:
+            for name in self.balls.names:
+                ball = self.state.accepted.get((label, name))
+                if ball is None:
+                    continue
+                result = last.get((label, name))
+                if result is None:  # accepted before a resume: checked again around its fit
+                    result = self._check(label, name, ball.xyz_mm, self.fits[(label, name)], 0)
+                if result.problems:
+                    out.append(result)
+        return tuple(out)
 
     def _n_points(self) -> int:
         return sum(len(b.points) for b in self.state.accepted.values())
@@ -342,9 +379,11 @@ class _Campaign:
             return
         try:
             controller.stop()
-            self.notify("warn", f"hexapod stopped ({why})")
+            said = f"hexapod stopped ({why})"
         except HexathermError as exc:
-            self.notify("warn", f"could not stop the hexapod: {exc}")
+            said = f"could not stop the hexapod: {exc}"
+        with contextlib.suppress(OSError):  # SIGHUP: the terminal may be gone
+            self.notify("warn", said)
 
     # ------------------------------------------------------------- machines
     def _controller_log(self, direction: str, line: str) -> None:
@@ -416,6 +455,7 @@ class _Campaign:
         """Probe straight up to ``z_mm`` (if below)."""
         assert self.cmm is not None
         x, y, z = self.cmm.get_position()
+        check_cmm_coordinates("Get(X(), Y(), Z())", (x, y, z))
         if z < z_mm:
             self.cmm.goto(x, y, z_mm)
 
@@ -557,6 +597,11 @@ class _Campaign:
                     raise
                 self._reconnect_cmm(str(exc))
                 continue
+            except IppDmeError:
+                self.tlog.note(f"abandon {label} {name} error")
+                raise
+            try:
+                check_probed(measured.probed)
             except IppDmeError:
                 self.tlog.note(f"abandon {label} {name} error")
                 raise

@@ -134,3 +134,6 @@ class RunResult:
     balls: tuple[BallResult, ...]
     remeasured: tuple[str, ...]
     session_file: Path
+    #: balls kept although their probing still fails a check after the re-probe (plan order;
+    #: on a resume, the balls accepted before it are checked again: radius, form, RMS)
+    failed: tuple[BallResult, ...] = ()

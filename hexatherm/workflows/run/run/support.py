@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import queue
 import threading
 import time
@@ -16,13 +17,16 @@ from hexatherm.core.hexapod import Hexapod
 from hexatherm.devices.controller import SocketController
 from hexatherm.devices.ipp import (
     IppClient,
+    ProbedPoint,
     cap_touch_plan,
     parse_ipp_url,
 )
+from hexatherm.devices.probestream import format_number
 from hexatherm.devices.serialport import PortReader, PortSettings
 from hexatherm.devices.urls import controller_from_url
 from hexatherm.errors import (
     AcquisitionError,
+    IppProtocolError,
     PoseError,
     PoseRefusedError,
 )
@@ -50,8 +54,40 @@ from hexatherm.workflows.run.resume import (
 )
 from hexatherm.workflows.run.run.options import Notify, RunOptions
 
-
 # ----------------------------------------------------------------------- helpers
+#: the largest coordinate a CMM can answer, mm (100 m: no CMM's travel comes near it)
+LARGEST_CMM_MM = 1e5
+
+
+def check_cmm_coordinates(what: str, xyz_mm: tuple[float, ...] | FloatArray) -> None:
+    """Refuse a CMM's answer whose coordinates are not finite or beyond :data:`LARGEST_CMM_MM`.
+
+    ``what`` names the command and its tag (``PtMeas 00012``). Such numbers are no
+    measurement (``X(1e308)`` would overflow the sphere fit): one line naming the command
+    and the answer, never a fit of them.
+
+    >>> check_cmm_coordinates("Get 00003", (1.5, 2.0, 3.0))
+    >>> check_cmm_coordinates("PtMeas 00012", (1e308, 2.0, 3.0))
+    Traceback (most recent call last):
+    hexatherm.errors.IppProtocolError: the CMM answered PtMeas 00012 with X(1e+308), Y(2.0), \
+Z(3.0): not a finite coordinate within 100000 mm (no CMM reaches it)
+    """
+    values = [float(v) for v in xyz_mm]
+    if all(math.isfinite(v) and abs(v) <= LARGEST_CMM_MM for v in values):
+        return
+    answer = ", ".join(f"{a}({format_number(v)})" for a, v in zip("XYZ", values, strict=False))
+    raise IppProtocolError(
+        f"the CMM answered {what} with {answer}: not a finite coordinate within "
+        f"{LARGEST_CMM_MM:g} mm (no CMM reaches it)"
+    )
+
+
+def check_probed(points: list[ProbedPoint] | tuple[ProbedPoint, ...]) -> None:
+    """:func:`check_cmm_coordinates` for every point of a ball's ``PtMeas`` answers."""
+    for p in points:
+        check_cmm_coordinates(f"PtMeas {p.tag}", p.point_mm)
+
+
 def _pose_problems(controller: SocketController, poses: FloatArray) -> list[tuple[int, str]]:
     """``(step index, why)`` for every pose the hexapod model or the controller refuses."""
     problems = []

@@ -1,0 +1,85 @@
+"""Every catchable terminating signal stops the hexapod like Ctrl-C (issue 22, item 7).
+
+``hexatherm run`` runs as a separate process against the twin's machines (in this
+process, on accelerated time). Once it says its first step is in position (the twin
+has moved), it gets the signal; it must send STOP to the controller, exit with status
+130 naming the signal, and leave a session that ``--resume`` completes. Nothing here
+waits on the wall clock: the test reads the run's lines and waits for its end (the
+timeouts are a safety net of 600 s that no passing run comes near).
+"""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+
+from hexatherm.cli import main
+from hexatherm.cli.signals import TERMINATING
+from hexatherm.workflows.serve import TwinMachines
+from tests.cli.test_run import base, machines, write_plan  # noqa: F401  (the fixture)
+
+#: a safety net against a hung process, never what decides a pass
+SAFETY_S = 600.0
+
+NAMES = ["SIGINT", "SIGTERM", "SIGHUP", "SIGQUIT", "SIGUSR1", "SIGUSR2", "SIGALRM", "SIGXCPU"]
+
+
+def test_every_terminating_signal_is_handled() -> None:
+    for name in ("SIGTERM", "SIGHUP", "SIGQUIT", "SIGUSR1", "SIGUSR2", "SIGALRM", "SIGXCPU"):
+        assert getattr(signal, name) in TERMINATING
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_a_signal_stops_the_hexapod_and_resume_completes(
+    tmp_path: Path,
+    machines: TwinMachines,  # noqa: F811
+    name: str,
+) -> None:
+    plan = write_plan(tmp_path, [[5.0, -3.0, 4.0, 1.0, -2.0, 3.0]])
+    session = tmp_path / "s"
+    args = [str(a) for a in base(plan, machines, session)]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "hexatherm", *args],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert proc.stderr is not None
+        seen = []
+        for line in proc.stderr:  # until the first step is in position: the hexapod moved
+            seen.append(line)
+            if line.startswith("step 1/"):
+                break
+        assert seen and seen[-1].startswith("step 1/"), "".join(seen)
+        before = machines.controller.received.count("STOP")
+        proc.send_signal(getattr(signal, name))
+        _, err = proc.communicate(timeout=SAFETY_S)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    err = "".join(seen) + err
+    assert proc.returncode == 130, err
+    assert machines.controller.received.count("STOP") == before + 1, err
+    how = "Ctrl-C" if name == "SIGINT" else name
+    assert f"hexapod stopped (interrupted ({how}))" in err
+    assert f"interrupted ({how}): the hexapod was sent STOP" in err and "--resume" in err
+    assert "Traceback" not in err
+    transcript = (session / "ipp.transcript").read_text()
+    assert f"run stopped interrupted ({how})" in transcript
+    assert not (session / "session.yaml").exists()
+    # resumable: --resume completes the campaign, every ball of every step once
+    result = CliRunner().invoke(main, [*args, "--resume"])
+    assert result.exit_code == 0, result.output
+    points = pd.read_csv(session / "points.csv")
+    counts = points.groupby(["label", "ball"]).size()
+    assert len(counts) == 4 * 3 and (counts == 6).all()
+    assert (session / "session.yaml").is_file()
