@@ -3,7 +3,7 @@
 The rehearsal of an unattended campaign (``hexatherm run``): an I++ DME server
 (:class:`~hexatherm.devices.ippserver.IppSimServer`), a controller server
 (:class:`~hexatherm.devices.controllersim.SymetrieSimulator` or
-:class:`~hexatherm.devices.controllersim.PISimulator`) and a thermocouple logger
+:class:`~hexatherm.devices.pisim.PISimulator`) and a thermocouple logger
 (:class:`~hexatherm.devices.thermosim.ThermocoupleSimulator`, for ``run
 --temperature-port socket://127.0.0.1:PORT``) on 127.0.0.1, all backed by one
 :class:`TwinWorld`:
@@ -48,12 +48,12 @@ from hexatherm.core.plan import Plan
 from hexatherm.core.twin import TwinSteps, predict
 from hexatherm.devices.controllersim import (
     Faults,
-    PISimulator,
     SimulatedController,
     SimulatedHexapod,
     SymetrieSimulator,
 )
 from hexatherm.devices.ippserver import Fault, IppSimServer
+from hexatherm.devices.pisim import PISimulator
 from hexatherm.devices.thermosim import ThermocoupleSimulator
 from hexatherm.errors import HexathermError, InputError
 from hexatherm.session import Balls
