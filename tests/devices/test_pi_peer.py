@@ -225,7 +225,7 @@ def test_unknown_commands_and_bad_arguments_set_gcs_errors() -> None:
 def test_serve_twin_speaks_to_pipython(tmp_path: Path) -> None:
     """``hexatherm serve-twin --dialect pi`` as a lab runs it, pipython as its client."""
     command = [sys.executable, "-c", "from hexatherm.cli import main; main()", "serve-twin"]
-    command += ["--dialect", "pi", "--time-scale", "1000"]
+    command += ["--dialect", "pi", "--time-scale", "1000", "--fault", "pi-unreferenced"]
     command += ["--hexapod", str(ROOT / "configs" / "symetrie-like.yaml")]
     command += ["--balls", str(ROOT / "configs" / "balls-3.yaml")]
     proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
@@ -235,6 +235,10 @@ def test_serve_twin_speaks_to_pipython(tmp_path: Path) -> None:
         host, port = urls["controller"].removeprefix("pi://").rsplit(":", 1)
         with pipython_on(host, int(port)) as device:
             assert device.devname == "C-887"
+            assert device.qFRF() == dict.fromkeys(AXES, False)  # --fault pi-unreferenced
+            device.FRF()
+            pitools.waitonreferencing(device, timeout=300)
+            assert device.qFRF() == dict.fromkeys(AXES, True)
             device.MOV(["X", "W"], [0.5, 0.25])
             pitools.waitontarget(device, timeout=300)
             position = device.qPOS(["X", "W"])

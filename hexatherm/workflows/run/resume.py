@@ -104,6 +104,26 @@ def read_run_settings(folder: Path) -> RunSettings:
     return RunSettings(origin, probe)
 
 
+def record_controller(
+    folder: Path, at: str, url: str, info: dict[str, str], checks: dict[str, str]
+) -> None:
+    """Append one connection's controller record to ``run.yaml`` (atomically).
+
+    ``run.yaml``'s ``controller`` list gets ``{at, url, identification..., checks}`` at
+    every connection (start, resume, reconnection): what the controller said it was and
+    what :meth:`~hexatherm.devices.controller.SocketController.check_ready` found before
+    the run moved it. The settings above it are kept as they were.
+    """
+    path = folder / RUN_NAME
+    doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+    entry: dict[str, object] = {"at": at, "url": url}
+    entry.update({k: v for k, v in info.items() if k != "error_at_stop"})
+    entry["checks"] = dict(checks)
+    records = doc.get("controller")
+    doc["controller"] = [*(records if isinstance(records, list) else []), entry]
+    atomic_write_text(path, yaml.safe_dump(doc, sort_keys=False))
+
+
 @dataclass
 class RunState:
     """What a run has done so far.
