@@ -58,6 +58,7 @@ class Peer:
 def pipython_on(host: str, port: int) -> Iterator[Any]:
     with PISocket(host, port) as gateway:
         messages = GCSMessages(gateway)
+        messages.timeout = 120_000  # ms: a loaded machine, not a timed assertion
         with GCSCommands(messages) as device:
             yield device
 

@@ -72,7 +72,9 @@ def test_referenced_by_pi_software_then_resumed(tmp_path: Path) -> None:
             b.run()
         sim = b.machines.controller
         with PISocket(sim.host, sim.port) as gateway:
-            device = GCSCommands(GCSMessages(gateway))
+            messages = GCSMessages(gateway)
+            messages.timeout = 120_000  # ms: a loaded machine, not a timed assertion
+            device = GCSCommands(messages)
             device.FRF()
             while not device.IsControllerReady():  # the reference move, simulated time
                 b.clock.sleep(1.0)
