@@ -52,7 +52,8 @@ from hexatherm.cli.options import CheckedFloat, clean_errors, echo_err
     "ipp-event:method=PtMeas,nth=2; ipp-drop:method=PtMeas,nth=5; "
     "ipp-split:method=PtMeas,nth=1; late-in-position:seconds=30; controller-drop; "
     "controller-split; controller-error:command=MOVE#ABS,code=-104; "
-    "refuse:axis=Tz,max=5.",
+    "refuse:axis=Tz,max=5; pi-servo-off; pi-unreferenced; pi-busy; "
+    "pi-coordinate-system:name=SAMPLE.",
 )
 @click.option(
     "--origin-on-cmm",
@@ -220,6 +221,7 @@ def command(
         controller_port=controller_port,
         thermocouple_port=thermocouple_port,
         thermocouple_period_s=thermocouple_period,
+        pi_start=injected.pi,
     ) as machines:
         click.echo(f"cmm: {machines.cmm_url}")
         click.echo(f"controller: {machines.controller_url}")

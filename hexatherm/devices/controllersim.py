@@ -1,4 +1,5 @@
-"""Simulated hexapod controllers: TCP servers speaking the Symétrie and PI dialects.
+"""Simulated hexapod controllers: TCP servers speaking the Symétrie and PI dialects
+(the PI one: :mod:`hexatherm.devices.pisim`).
 
 Both servers run on 127.0.0.1 (port 0: a free port, see ``.port`` and ``.url``), one
 thread per connection, and speak exactly what :mod:`hexatherm.devices.symetrie` and
@@ -41,7 +42,6 @@ import numpy.typing as npt
 from hexatherm.core.geometry import Convention
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.devices.controller import LineBuffer, convert_pose, stroke_violations
-from hexatherm.devices.pi import AXES
 from hexatherm.devices.symetrie import pose_from_wire, pose_to_wire
 from hexatherm.devices.tcpservice import TcpService
 from hexatherm.typing import FloatArray
@@ -296,7 +296,7 @@ class SimulatedController(TcpService):
         return convert_pose(native, self.native_convention, self.model.convention)
 
     def _write(self, sock: socket.socket, lines: list[str]) -> None:
-        data = "".join(line + self.line_end for line in lines).encode("ascii")
+        data = "".join(line + self.line_end for line in lines).encode("latin-1")
         if not self.faults.split_writes:
             sock.sendall(data)
             return
@@ -432,84 +432,3 @@ class SymetrieSimulator(SimulatedController):
             m.stop()
             return [f"{short}:1", f"{short}:2"]
         return [f"{short}:-6"]
-
-
-class PISimulator(SimulatedController):
-    """A simulated PI GCS hexapod controller (as in :mod:`hexatherm.devices.pi`)."""
-
-    scheme = "pi"
-    native_convention: Convention = "pi"
-    line_end = "\n"
-
-    def __init__(self, model: SimulatedHexapod, host: str = "127.0.0.1", port: int = 0) -> None:
-        self.error_code = 0
-        super().__init__(model, host, port)
-
-    @staticmethod
-    def _answer(pairs: list[tuple[str, str]]) -> list[str]:
-        lines = [f"{k}={v}" for k, v in pairs]
-        return [line + " " for line in lines[:-1]] + lines[-1:]
-
-    def _set_error(self, code: int) -> list[str]:
-        if self.error_code == 0:  # GCS keeps the first error until ERR? reads it
-            self.error_code = code
-        return []
-
-    def _axes_pose(self, tokens: list[str]) -> FloatArray | None:
-        """The pose of ``AXIS value`` pairs (missing axes: the current target)."""
-        if len(tokens) % 2:
-            return None
-        native = convert_pose(self.model.target, self.model.convention, "pi")
-        for axis, value in zip(tokens[::2], tokens[1::2], strict=True):
-            if axis.upper() not in AXES:
-                return None
-            try:
-                native[AXES.index(axis.upper())] = float(value)
-            except ValueError:
-                return None
-        return native if np.all(np.isfinite(native)) else None
-
-    def respond(self, line: str) -> list[str]:
-        tokens = line.split()
-        cmd = tokens[0].upper()
-        if cmd == "ERR?":
-            code, self.error_code = self.error_code, 0
-            return [str(code)]
-        injected = self.faults.take_error(cmd)
-        if injected is not None:
-            return self._set_error(injected)
-        m = self.model
-        if cmd == "*IDN?":
-            return ["hexatherm simulated PI GCS hexapod controller (C-887 dialect)"]
-        if cmd == "ONT?":
-            self._drop_if_moving()
-            flag = "1" if m.in_position() else "0"
-            return self._answer([(a, flag) for a in AXES])
-        if cmd == "POS?":
-            pose = self._wire_pose()
-            return self._answer([(a, repr(float(v))) for a, v in zip(AXES, pose, strict=True)])
-        if cmd == "STR?":
-            if not m.report_actuators:
-                return self._set_error(2)
-            q = m.actuators_mm()
-            return self._answer([(str(i + 1), repr(float(v))) for i, v in enumerate(q)])
-        if cmd == "TEM?":
-            temps = m.temperatures()
-            if temps is None:
-                return self._set_error(2)
-            return self._answer([(str(i + 1), repr(float(v))) for i, v in enumerate(temps)])
-        if cmd in ("MOV", "VMO?"):
-            native = self._axes_pose(tokens[1:])
-            if native is None:
-                return self._set_error(1)
-            stroke_ok, rule_ok = m.check(self._model_pose(native))
-            if cmd == "VMO?":
-                return ["1" if stroke_ok and rule_ok else "0"]
-            if not (stroke_ok and rule_ok):
-                return self._set_error(7)
-            m.start_move(self._model_pose(native))
-            return []
-        if cmd == "STP":
-            m.stop()
-            return self._set_error(10)
-        return self._set_error(2)

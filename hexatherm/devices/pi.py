@@ -14,7 +14,14 @@ choose, it says *choice*, and the simulator speaks exactly this):
 * An unknown query does not answer either (it sets error 2), so queries are sent
   together with ``ERR?``: the answer lines ``KEY=VALUE`` come first, then the bare
   integer of ``ERR?``.
-* ``*IDN?``: the identification, read on connection into ``info``.
+* ``*IDN?``: the identification, read on connection into ``info``
+  (``manufacturer, model, serial, firmware`` when it has the four fields).
+* Before moving (and in a dry run), :meth:`PIController.check_ready` asks ``SVO?`` (servo
+  on, all six axes), ``FRF?`` (referenced, all six), ``#7`` (the byte 0x07; ready is the
+  answer byte 0xB1, busy 0xB0) and ``KEN?`` (the enabled coordinate system must be
+  ``ZERO``, the default: a pose commanded in a user system lands elsewhere), each with
+  ``ERR?``. A controller that does not know ``#7`` or ``KEN?`` (error 2) has no such
+  state: recorded as unknown, not refused.
 * ``VMO? X x Y y Z z U u V v W w``: ``1`` when the move is allowed, ``0`` when not (the
   controller's check; nothing moves). A controller that does not know it leaves
   hexatherm's stroke check, which then requires the hexapod geometry.
@@ -24,7 +31,8 @@ choose, it says *choice*, and the simulator speaks exactly this):
 * ``STR?`` (*choice*): the six actuator (strut) lengths ``1=..`` to ``6=..`` in mm;
   ``TEM?`` (*choice*): temperature channels ``1=..`` ... in deg C. A controller that does
   not know them (error 2) has no such reading (NaN lengths, no temperatures).
-* ``STP``: stops every axis (the controller then reports error 10, expected).
+* Stop: ``#24`` (the byte 0x18, PI's StopAll, acted on even mid-line), then ``STP``
+  (the command), then ``ERR?`` (error 10, stopped by command, expected).
 
 >>> parse_answer(["X=1.5 ", "Y=-2 ", "W=0.25"])
 {'X': '1.5', 'Y': '-2', 'W': '0.25'}
@@ -43,6 +51,7 @@ from hexatherm.devices.controller import (
     format_pose,
 )
 from hexatherm.errors import (
+    ControllerConnectionError,
     ControllerError,
     ControllerReplyError,
     PoseRefusedError,
@@ -71,6 +80,11 @@ ERROR_CODES: dict[int, str] = {
 UNKNOWN_COMMAND = 2
 POSITION_OUT_OF_LIMITS = 7
 STOPPED_BY_COMMAND = 10
+#: the answer bytes of ``#7`` (ready, busy) and the one-byte commands hexatherm sends
+READY_BYTE, BUSY_BYTE = "\xb1", "\xb0"
+REQUEST_READY, STOP_ALL = 7, 24
+#: the default coordinate system of a C-887
+ZERO_SYSTEM = "ZERO"
 
 
 def describe_error(code: int) -> str:
@@ -165,6 +179,10 @@ class PIController(SocketController):
         self._has_temperatures: bool | None = None
         self._send("*IDN?")
         self.info["identification"] = " ".join(s.strip() for s in self._answer("*IDN?"))
+        fields = [f.strip() for f in self.info["identification"].split(",")]
+        if len(fields) == 4:
+            keys = ("manufacturer", "model", "serial", "firmware")
+            self.info.update(zip(keys, fields, strict=True))
         code = self._error_code()
         if code:
             self.info["error_at_connection"] = describe_error(code)
@@ -191,6 +209,20 @@ class PIController(SocketController):
             command=command,
         )
 
+    def _send_byte(self, code: int) -> None:
+        """Send a one-byte command (``#7``, ``#24``): the byte alone, no line end."""
+        conn = self._require()
+        if self.log is not None:
+            self.log("tx", f"#{code}")
+        try:
+            conn.sock.sendall(bytes([code]))
+        except OSError as exc:
+            self._drop()
+            raise ControllerConnectionError(
+                f"connection to the {self.dialect} controller at {self.url} lost while "
+                f"sending #{code}: {exc}"
+            ) from exc
+
     def _command(self, command: str) -> int:
         """Send a command, then ERR?; the error code (0: none)."""
         self._send(command)
@@ -214,6 +246,75 @@ class PIController(SocketController):
             self._raise(query, code)
         assert answer is not None
         return answer
+
+    # ---------------------------------------------------------------- checks
+    def check_ready(self) -> None:
+        """Servo on, referenced, ready and the default coordinate system, or refuse.
+
+        Every state found goes in :attr:`readiness` (``servo``, ``referenced``,
+        ``ready``, ``coordinate_system``), then :class:`ControllerError` names every
+        problem. Nothing moves.
+        """
+        with self._lock:
+            found: dict[str, str] = {}
+            problems: list[str] = []
+            for query, key, what, fix in (
+                ("SVO?", "servo", "servo off", "switch the servo on (SVO)"),
+                ("FRF?", "referenced", "not referenced", "reference the hexapod (FRF)"),
+            ):
+                answer = self._keyed_required(query)
+                off = [a for a in AXES if answer.get(a, "").strip() != "1"]
+                found[key] = (
+                    f"{'no' if off else 'yes'} ({query} "
+                    + " ".join(f"{a}={answer.get(a, '-')}" for a in AXES)
+                    + ")"
+                )
+                if off:
+                    problems.append(f"{what} on {' '.join(off)}: {fix} first")
+            found["ready"] = self._ready_state(problems)
+            found["coordinate_system"] = self._coordinate_system(problems)
+            self.readiness = found
+        if problems:
+            raise ControllerError(
+                f"the PI controller at {self.url} is not ready to move: "
+                + "; ".join(problems)
+                + ". Nothing was moved"
+            )
+
+    def _ready_state(self, problems: list[str]) -> str:
+        self._send_byte(REQUEST_READY)
+        self._send("ERR?")
+        first = self._answer("#7")
+        text = "".join(first)
+        if text in (READY_BYTE, BUSY_BYTE):
+            code = parse_error(self._answer("ERR?"))
+            if code:
+                self._raise("#7", code)
+            if text == BUSY_BYTE:
+                problems.append("busy (#7 answers 0xB0: referencing or another motion)")
+                return "no (#7 0xB0)"
+            return "yes (#7 0xB1)"
+        if _is_integer(first) and parse_error(first) == UNKNOWN_COMMAND:
+            return "unknown (#7 not known)"
+        if _is_integer(first):
+            self._raise("#7", parse_error(first))
+        raise ControllerError(f"unexpected answer to #7: {text!r} (expected 0xB1 or 0xB0)")
+
+    def _coordinate_system(self, problems: list[str]) -> str:
+        answer, code = self._keyed("KEN?")
+        if answer is None and code == UNKNOWN_COMMAND:
+            return "unknown (KEN? not known)"
+        if code or answer is None:
+            self._raise("KEN?", code)
+        assert answer is not None
+        enabled = " ".join(f"{name}={kind}" for name, kind in answer.items())
+        others = [name for name in answer if name.upper() != ZERO_SYSTEM]
+        if others or not answer:
+            problems.append(
+                f"coordinate system {', '.join(others) or '(none)'} enabled (KEN? {enabled}): "
+                f"poses would be commanded in it; enable {ZERO_SYSTEM} first (KEN {ZERO_SYSTEM})"
+            )
+        return enabled
 
     # ---------------------------------------------------------------- dialect
     def _validate_wire(self, native: FloatArray, pose: FloatArray) -> None:
@@ -304,6 +405,7 @@ class PIController(SocketController):
         return keyed_floats(answer, keys, "TEM?")
 
     def _stop_wire(self) -> None:
+        self._send_byte(STOP_ALL)
         self._send("STP")
         self._send("ERR?")
         # Answers of a transaction cut short (Ctrl-C) may still arrive before ERR?'s:

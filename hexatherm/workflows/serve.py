@@ -3,7 +3,7 @@
 The rehearsal of an unattended campaign (``hexatherm run``): an I++ DME server
 (:class:`~hexatherm.devices.ippserver.IppSimServer`), a controller server
 (:class:`~hexatherm.devices.controllersim.SymetrieSimulator` or
-:class:`~hexatherm.devices.controllersim.PISimulator`) and a thermocouple logger
+:class:`~hexatherm.devices.pisim.PISimulator`) and a thermocouple logger
 (:class:`~hexatherm.devices.thermosim.ThermocoupleSimulator`, for ``run
 --temperature-port socket://127.0.0.1:PORT``) on 127.0.0.1, all backed by one
 :class:`TwinWorld`:
@@ -48,12 +48,12 @@ from hexatherm.core.plan import Plan
 from hexatherm.core.twin import TwinSteps, predict
 from hexatherm.devices.controllersim import (
     Faults,
-    PISimulator,
     SimulatedController,
     SimulatedHexapod,
     SymetrieSimulator,
 )
 from hexatherm.devices.ippserver import Fault, IppSimServer
+from hexatherm.devices.pisim import PISimulator, PIStart
 from hexatherm.devices.thermosim import ThermocoupleSimulator
 from hexatherm.errors import HexathermError, InputError
 from hexatherm.session import Balls
@@ -261,6 +261,7 @@ class ServeFaults:
 
     ipp: list[Fault] = field(default_factory=list)
     controller: Faults = field(default_factory=Faults)
+    pi: PIStart = field(default_factory=PIStart)
 
 
 _FAULT_KEYS = {
@@ -273,6 +274,10 @@ _FAULT_KEYS = {
     "controller-split": set(),
     "controller-error": {"command", "code"},
     "refuse": {"axis", "min", "max"},
+    "pi-servo-off": set(),
+    "pi-unreferenced": set(),
+    "pi-busy": set(),
+    "pi-coordinate-system": {"name"},
 }
 
 
@@ -294,7 +299,11 @@ def parse_fault(text: str, into: ServeFaults | None = None) -> ServeFaults:
     - ``controller-error:command=MOVE#ABS,code=-104``: the next such command answered with
       that error code (PI: ``command=MOV,code=7``);
     - ``refuse:axis=Tz[,min=-5][,max=5]``: poses with that component outside [min, max]
-      (mm, deg) refused by the controller (a user limit).
+      (mm, deg) refused by the controller (a user limit);
+    - ``pi-servo-off``, ``pi-unreferenced``, ``pi-busy``: the PI controller starts with the
+      servo off, not referenced, or busy (``#7``);
+    - ``pi-coordinate-system[:name=SAMPLE]``: the PI controller starts with a user
+      coordinate system (type KSD, offset Z 10 mm, W 1 deg) enabled.
 
     >>> f = parse_fault("ipp-error:severity=3,method=GoTo,nth=4")
     >>> f.ipp[0].severity, f.ipp[0].method, f.ipp[0].nth
@@ -367,6 +376,17 @@ def parse_fault(text: str, into: ServeFaults | None = None) -> ServeFaults:
             out.controller.drop_mid_move = True
         elif kind == "controller-split":
             out.controller.split_writes = True
+        elif kind == "pi-servo-off":
+            out.pi.servo_on = False
+        elif kind == "pi-unreferenced":
+            out.pi.referenced = False
+        elif kind == "pi-busy":
+            out.pi.busy = True
+        elif kind == "pi-coordinate-system":
+            name = values.get("name", "SAMPLE").upper()
+            if not name.isalnum() or name == "ZERO":
+                raise InputError(f"fault {kind}: name must be letters and digits, not ZERO")
+            out.pi.coordinate_system = name
         elif kind == "controller-error":
             command = values.get("command")
             if not command:
@@ -413,6 +433,8 @@ class TwinMachines:
         Sampling period of the thermocouple logger, on the world's clock, s.
     cmm_limits_mm : pair of 3 floats
         The CMM's travel box.
+    pi_start : PIStart, optional
+        The state the PI controller starts in (``dialect="pi"``).
 
     Attributes
     ----------
@@ -438,6 +460,7 @@ class TwinMachines:
             (-2000.0, -2000.0, -2000.0),
             (2000.0, 2000.0, 2000.0),
         ),
+        pi_start: PIStart | None = None,
     ) -> None:
         if dialect not in ("symetrie", "pi"):
             raise InputError(f"dialect must be symetrie or pi, got {dialect!r}")
@@ -457,9 +480,12 @@ class TwinMachines:
             home_mm=tuple(float(v) for v in home),
             limits_mm=cmm_limits_mm,
         )
-        kind = SymetrieSimulator if dialect == "symetrie" else PISimulator
         try:
-            self.controller: SimulatedController = kind(world.model, port=controller_port)
+            self.controller: SimulatedController = (
+                SymetrieSimulator(world.model, port=controller_port)
+                if dialect == "symetrie"
+                else PISimulator(world.model, port=controller_port, start=pi_start)
+            )
         except BaseException:
             self.cmm.close()
             raise

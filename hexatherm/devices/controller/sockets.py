@@ -114,6 +114,8 @@ class SocketController:
         self.url = f"{self.scheme}://{host}:{port}"
         self.commanded_pose_mm_deg: FloatArray | None = None
         self.info: dict[str, str] = {}
+        #: what :meth:`check_ready` found (name -> state in words), for the run's record
+        self.readiness: dict[str, str] = {}
         self._conn: _Connection | None = None
         self._lock = threading.RLock()
 
@@ -252,6 +254,15 @@ class SocketController:
         return pose
 
     # -------------------------------------------------------------- protocol
+    def check_ready(self) -> None:
+        """Check that the controller will move as commanded; never moves.
+
+        What was checked goes in :attr:`readiness`; raises :class:`ControllerError`
+        naming every problem found. The base class has nothing to check (a dialect
+        overrides it).
+        """
+        self.readiness = {}
+
     def validate(self, pose_mm_deg: npt.ArrayLike) -> None:
         """Raise :class:`PoseRefusedError` unless the pose can be reached; never moves.
 

@@ -99,7 +99,7 @@ def read_run_settings(folder: Path) -> RunSettings:
     :class:`~hexatherm.errors.InputError` naming the file, the line and the field.
     """
     doc = YamlDoc.load(folder / RUN_NAME)
-    doc.check_keys(["format", "origin_on_cmm", "probe"])
+    doc.check_keys(["format", "origin_on_cmm", "probe", "controller"])
     doc.check_format(RUN_FORMAT)
     origin = tuple(doc.vector("origin_on_cmm", size=6))
     doc.check_keys([f.name for f in fields(ProbeSettings)], "probe")
@@ -114,6 +114,26 @@ def read_run_settings(folder: Path) -> RunSettings:
     except AcquisitionError as exc:
         raise doc.error(str(exc), "probe") from None
     return RunSettings(origin, probe)
+
+
+def record_controller(
+    folder: Path, at: str, url: str, info: dict[str, str], checks: dict[str, str]
+) -> None:
+    """Append one connection's controller record to ``run.yaml`` (atomically).
+
+    ``run.yaml``'s ``controller`` list gets ``{at, url, identification..., checks}`` at
+    every connection (start, resume, reconnection): what the controller said it was and
+    what :meth:`~hexatherm.devices.controller.SocketController.check_ready` found before
+    the run moved it. The settings above it are kept as they were.
+    """
+    path = folder / RUN_NAME
+    doc = dict(YamlDoc.load(path).data)  # the strict reader, as a resume reads it
+    entry: dict[str, object] = {"at": at, "url": url}
+    entry.update({k: v for k, v in info.items() if k != "error_at_stop"})
+    entry["checks"] = dict(checks)
+    records = doc.get("controller")
+    doc["controller"] = [*(records if isinstance(records, list) else []), entry]
+    atomic_write_text(path, yaml.safe_dump(doc, sort_keys=False))
 
 
 @dataclass

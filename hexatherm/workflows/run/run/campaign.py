@@ -78,6 +78,7 @@ from hexatherm.workflows.run.resume import (
     RunState,
     read_run_settings,
     rebuild_state,
+    record_controller,
     write_run_settings,
 )
 from hexatherm.workflows.run.run.options import BallResult, Notify, RunOptions, RunResult
@@ -404,6 +405,7 @@ class _Campaign:
         assert self.clog is not None
         self.clog.note(f"connect {controller.url}")
         controller.connect()
+        self._check_controller()
 
     def _reconnect_controller(self, why: str) -> None:
         assert self.controller is not None and self.clog is not None
@@ -411,6 +413,23 @@ class _Campaign:
         self.clog.note(f"reconnect after {why}")
         self.sleep(self.options.reconnect_wait_s)
         self.controller.connect()
+        self._check_controller()
+
+    def _check_controller(self) -> None:
+        """Servo, referencing, readiness, coordinate system (PI): checked before any move
+        and recorded in run.yaml, whatever the outcome."""
+        controller = self.controller
+        assert controller is not None
+        try:
+            controller.check_ready()
+        finally:
+            record_controller(
+                self.folder,
+                iso_stamp(self.clock()),
+                controller.url,
+                controller.info,
+                controller.readiness,
+            )
 
     def _on_event(self, event: IppEvent) -> None:
         self.notify("warn", f"CMM event: {event.line}")

@@ -203,7 +203,9 @@ def dry_run(
     Every pose goes through the controller's validation (the hexapod model's stroke, then
     the controller's own check), every probe position of every step (touch points,
     clearance and travel positions around the nominal prediction) through the CMM's travel
-    box when one is given; the CMM is asked whether it knows the tool. Nothing moves.
+    box when one is given; the CMM is asked whether it knows the tool; the controller's
+    state is checked as before a move (PI: servo, referencing, ready, coordinate system).
+    Nothing moves.
 
     Returns
     -------
@@ -228,6 +230,13 @@ def dry_run(
     )
     controller.connect()
     try:
+        controller.check_ready()
+        if controller.readiness:
+            notify(
+                "info",
+                "controller: "
+                + ", ".join(f"{key} {value}" for key, value in controller.readiness.items()),
+            )
         _validate_plan(
             files,
             hexapod,
