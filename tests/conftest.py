@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 import pytest
 
@@ -10,6 +12,18 @@ from hexatherm.core.plan import Plan
 from hexatherm.core.thermal import LegThermalModel
 
 REFERENCE_POSE = [0.0, 0.0, -40.0, 0.0, 0.0, 0.0]
+
+
+@pytest.fixture(autouse=True)
+def _forget_pipython_callbacks():
+    """pipython keeps every GCSCommands' connection callback in a list on its gateway
+    class until that GCSCommands is closed; one left open by a test makes the next
+    connection, in any later test, call it on its closed socket (OSError, EBADF). Each
+    test starts with the list as pipython ships it: empty."""
+    yield
+    gateway = sys.modules.get("pipython.pidevice.interfaces.pigateway")
+    if gateway is not None:
+        gateway.PIGateway._connection_status_changed_callbacks.clear()
 
 
 def make_hexapod(convention: str = "symetrie") -> Hexapod:

@@ -74,11 +74,11 @@ def test_referenced_by_pi_software_then_resumed(tmp_path: Path) -> None:
         with PISocket(sim.host, sim.port) as gateway:
             messages = GCSMessages(gateway)
             messages.timeout = 120_000  # ms: a loaded machine, not a timed assertion
-            device = GCSCommands(messages)
-            device.FRF()
-            while not device.IsControllerReady():  # the reference move, simulated time
-                b.clock.sleep(1.0)
-            assert all(device.qFRF().values())
+            with GCSCommands(messages) as device:  # unregisters pipython's callback
+                device.FRF()
+                while not device.IsControllerReady():  # the reference move, simulated time
+                    b.clock.sleep(1.0)
+                assert all(device.qFRF().values())
         b.run(resume=True)
         check_complete(b)
         first, second = controller_records(b.session)
