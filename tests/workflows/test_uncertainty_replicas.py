@@ -55,6 +55,7 @@ def replicas(
     tmp_path: Path,
     edit: Callable[[Path], None] | None = None,
     parts: Parts | None = None,
+    count: int = REPLICAS,
     **spec: object,
 ) -> tuple[np.ndarray, np.ndarray, str]:
     """Poses (R, M, 12) and claimed u (R, M, 12) of noise replicas, and the source line.
@@ -63,7 +64,7 @@ def replicas(
     collects the common and own parts and the between-target covariance."""
     poses, claimed = [], []
     description = ""
-    for seed in range(REPLICAS):
+    for seed in range(count):
         folder = tmp_path / f"r{seed}"
         session = TwinSessionSpec(
             name=folder.name,
@@ -340,8 +341,8 @@ def test_a_scalar_u_um_is_read_as_isotropic_and_said_so(tmp_path: Path) -> None:
     u^2 I, which a cap fit is not; the screen says what was assumed, and the claim is too
     small along the cap's axis (Tz, Rx, Ry) - what the covariance columns are for."""
     poses, claimed, description = replicas(
-        tmp_path, fit_spheres_round_trip(("u_um",)), output="points"
-    )
+        tmp_path, fit_spheres_round_trip(("u_um",)), count=40, output="points"
+    )  # 40 replicas: the ratios found (0.59-0.73) are far below the 0.85 asserted
     ratio, _ = claimed_over_observed(poses, claimed)
     assert "read as isotropic" in description
     assert np.all(ratio[[2, 3, 4]] < 0.85), ratio.round(3)
