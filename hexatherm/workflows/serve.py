@@ -54,6 +54,7 @@ from hexatherm.devices.controllersim import (
     SymetrieSimulator,
 )
 from hexatherm.devices.ippserver import Fault, IppSimServer
+from hexatherm.devices.pmacsim import SymetriePmacSimulator
 from hexatherm.devices.thermosim import ThermocoupleSimulator
 from hexatherm.errors import HexathermError, InputError
 from hexatherm.session import Balls
@@ -399,7 +400,7 @@ class TwinMachines:
     Parameters
     ----------
     world : TwinWorld
-    dialect : {"symetrie", "pi"}
+    dialect : {"symetrie", "pi", "symetrie-pmac"}
     tool : str
         Name of the CMM's tool (tip diameter: the balls file's).
     point_noise_um : float
@@ -439,8 +440,8 @@ class TwinMachines:
             (2000.0, 2000.0, 2000.0),
         ),
     ) -> None:
-        if dialect not in ("symetrie", "pi"):
-            raise InputError(f"dialect must be symetrie or pi, got {dialect!r}")
+        if dialect not in ("symetrie", "pi", "symetrie-pmac"):
+            raise InputError(f"dialect must be symetrie, pi or symetrie-pmac, got {dialect!r}")
         balls = world.balls
         tip = balls.tip_diameter_mm if balls.tip_diameter_mm > 0 else 2.0
         home = world.ball_centres_mm(world.clock()).max(axis=0) + [0.0, 0.0, 150.0]
@@ -457,7 +458,11 @@ class TwinMachines:
             home_mm=tuple(float(v) for v in home),
             limits_mm=cmm_limits_mm,
         )
-        kind = SymetrieSimulator if dialect == "symetrie" else PISimulator
+        kind: type[SimulatedController] = (
+            SymetrieSimulator if dialect == "symetrie" else PISimulator
+        )
+        if dialect == "symetrie-pmac":  # Symetrie's Power PMAC gpascii over telnet
+            kind = SymetriePmacSimulator
         try:
             self.controller: SimulatedController = kind(world.model, port=controller_port)
         except BaseException:
