@@ -9,9 +9,10 @@ The session, as CGSE's ``AlphaPlusTelnetInterface`` (MIT, read to learn it) driv
    the user name, asks ``Password: ``, and on ``root`` / ``deltatau`` (the Power PMAC's
    factory login; ``credentials`` to change) gives the prompt ``ppmac# ``; a wrong pair:
    ``Login incorrect`` and the login prompt again;
-2. ``gpascii -2`` starts the command interpreter: ``STDIN Open for ASCII Input`` then
-   the acknowledge line ``\\x06``; ``echo7`` makes answers bare values (before it:
-   ``name=value``);
+2. ``gpascii -2`` starts the command interpreter: ``STDIN Open for ASCII Input``, no
+   acknowledge (CGSE's ZONDA interface sends ``gpascii -2`` and ``echo7`` together and
+   reads up to the first ``\\x06``: the one of ``echo7``); ``echo7`` makes answers bare
+   values (before it: ``name=value``);
 3. every line received is echoed (the terminal's echo), then its answers, one value a
    line, then ``\\x06`` (CR LF after every line). A line holds statements separated by
    blanks: ``name=value`` (a number or a ``C_*`` command constant), ``name`` or
@@ -205,7 +206,7 @@ class SymetriePmacSimulator(SimulatedController):
         elif session.phase == "shell":
             if line == "gpascii -2":
                 session.phase = "gpascii"
-                self._write(sock, [line, "STDIN Open for ASCII Input", ACK])
+                self._write(sock, [line, "STDIN Open for ASCII Input"])  # no acknowledge
             elif line in ("exit", "logout"):
                 self._raw(sock, f"{line}\r\n")
                 return False

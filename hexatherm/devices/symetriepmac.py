@@ -6,8 +6,8 @@ read, nothing copied) drives these controllers, port 23:
 * telnet: telnet option requests are refused (``DO`` -> ``WONT``, ``WILL`` -> ``DONT``)
   and stripped; at ``login: `` the user (``root``), at ``Password: `` the password
   (``deltatau``, the Power PMAC's factory login), then at the ``# `` prompt
-  ``gpascii -2`` (the command interpreter; its start ends with the acknowledge line
-  ``\\x06``) and ``echo7`` (bare values in answers, no names). ``Login incorrect``
+  ``gpascii -2`` (the command interpreter) and ``echo7`` (bare values in answers, no
+  names), read up to the acknowledge line ``\\x06`` after the echo of ``echo7``. ``Login incorrect``
   refuses the connection.
 * Every line sent ends with CR LF; the controller echoes it, answers one value a line,
   and ends with a line ``\\x06``. An answer holding ``error #`` is an error of the
@@ -229,8 +229,12 @@ class SymetriePmacController(SocketController):
             raise ControllerConnectionError(
                 f"the controller at {self.url} refused the login {self.user!r}"
             )
-        self._query("gpascii -2")
-        self._query("echo7")
+        # gpascii's start may or may not end with an acknowledge: read up to echo7's
+        self._send("gpascii -2")
+        self._send("echo7")
+        seen_echo = False
+        while not ((text := self._readline("echo7")) == "\x06" and seen_echo):
+            seen_echo = seen_echo or text.strip() == "echo7"
         version = self._get("VERSION", 12)
         self.info["software_version"] = ".".join(f"{v:g}" for v in version[1:5])
         self.info["api_version"] = ".".join(f"{v:g}" for v in version[5:9])

@@ -153,7 +153,7 @@ def test_wrong_login_is_refused() -> None:
 
 def test_wire_as_cgse_reads_it() -> None:
     """The twin's bytes, read as CGSE's AlphaPlusTelnetInterface reads them: telnet
-    login, ``gpascii -2`` and ``echo7`` each ending with ``\\x06\\r\\n``; an answer is the
+    login, ``gpascii -2`` and ``echo7`` answered up to one ``\\x06\\r\\n``; an answer is the
     echoed command, its values, one a line, then ``\\x06\\r\\n``."""
     clock = ManualClock()
     sim = SymetriePmacSimulator(SimulatedHexapod(make_hexapod(), clock=clock))
@@ -176,9 +176,9 @@ def test_wire_as_cgse_reads_it() -> None:
         until(b"Password: ")
         sock.sendall(b"deltatau\r\n")
         until(b"ppmac# ")
-        for line in (b"gpascii -2", b"echo7"):
-            sock.sendall(line + b"\r\n")
-            assert until(b"\x06\r\n").startswith(line + b"\r\n")
+        sock.sendall(b"gpascii -2\r\necho7\r\n")  # together, as CGSE's ZONDA sends them
+        started = until(b"\x06\r\n")
+        assert started.startswith(b"gpascii -2\r\n") and started.endswith(b"echo7\r\n\x06\r\n")
         sock.sendall(b"c_cmd\r\n")
         assert until(b"\x06\r\n") == b"c_cmd\r\n0\r\n\x06\r\n"
         sock.sendall(b"c_par(0)=1 c_par(1)=0 c_par(2)=0 c_par(3)=0 c_par(4)=90 ")
