@@ -10,7 +10,8 @@ read, nothing copied) drives these controllers, port 23:
   names), read up to the acknowledge line ``\\x06`` after the echo of ``echo7``. ``Login incorrect``
   refuses the connection.
 * Every line sent ends with CR LF; the controller echoes it, answers one value a line,
-  and ends with a line ``\\x06``. An answer holding ``error #`` is an error of the
+  and ends with a line ``\\x06``; lines before the echo (the answer of a query left
+  unread, after Ctrl-C) are skipped. An answer holding ``error #`` is an error of the
   interpreter (an unknown variable, a malformed statement).
 * A command: ``c_par(0)=... c_par(1)=... c_cmd=C_NAME`` (``c_cfg=0`` before a
   configuration "get", ``1`` before a "set"); then ``c_cmd`` is read until it is 0
@@ -246,11 +247,11 @@ class SymetriePmacController(SocketController):
     def _query(self, line: str) -> list[str]:
         """Send one gpascii line; its answer lines (echo and acknowledge removed)."""
         self._send(line)
+        while self._readline(line).strip() != line:  # a stale answer before the echo
+            pass
         answer: list[str] = []
         while (text := self._readline(line)) != "\x06":
             answer.append(text)
-        if answer and answer[0].strip() == line:
-            answer.pop(0)
         for text in answer:
             if "error #" in text:
                 match = re.search(r"error #(\d+)", text)

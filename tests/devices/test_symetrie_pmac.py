@@ -201,3 +201,43 @@ def test_wire_as_cgse_reads_it() -> None:
     finally:
         sock.close()
         sim.close()
+
+
+FAST = InPositionCriteria(settle_s=1.0, poll_s=0.5, timeout_s=900.0)
+
+
+def test_late_flag_and_replies_in_pieces(rig: Callable[..., Rig]) -> None:
+    r = rig()
+    r.model.faults.late_in_position_s = 20.0
+    r.model.faults.split_writes = True
+    r.driver.move_absolute(POSE)
+    record = r.driver.wait_in_position(FAST)
+    assert record.flag_after_s >= 20.0 + r.model.settle_s
+    np.testing.assert_allclose(record.pose_mm_deg, r.model.true_pose(), atol=1e-9)
+
+
+def test_dropped_connection_mid_move_then_stop(rig: Callable[..., Rig]) -> None:
+    r = rig()
+    r.model.faults.drop_mid_move = True
+    r.driver.move_absolute(POSE)
+    with pytest.raises(ControllerConnectionError):
+        r.driver.wait_in_position(FAST)
+    assert not r.driver.connected and r.model.moving()
+    r.clock.sleep(1.0)
+    r.driver.stop()  # a new telnet login to deliver C_STOP
+    assert r.sim.connections == 2 and not r.model.moving()
+    np.testing.assert_allclose(r.driver.read_pose(), r.model.true_pose(), atol=1e-9)
+
+
+def test_stop_after_an_interrupted_query(rig: Callable[..., Rig]) -> None:
+    """Ctrl-C between a query and its answer: the stop skips the stale answer."""
+    r = rig()
+    r.driver.move_absolute(POSE)
+    r.clock.sleep(1.0)
+    r.driver._send("s_uto_tx,6,1")  # never read
+    r.driver.stop()
+    assert not r.model.moving()
+    here = r.model.true_pose()
+    np.testing.assert_allclose(r.driver.read_pose(), here, atol=1e-9)
+    # 1 s of a 3 s move, and the 10 ms poll of c_cmd while C_STOP ran
+    np.testing.assert_allclose(here, POSE * 1.01 / 3, atol=1e-9)
