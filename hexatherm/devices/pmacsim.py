@@ -155,6 +155,7 @@ class SymetriePmacSimulator(SimulatedController):
         self.control_on = True
         self.homed = True
         self.error = False
+        self.emergency_stop = False
         self.speeds = np.array([1.0, 1.0, 0.01, 0.01, 5.0, 5.0])
         self._state_lock = threading.RLock()
         super().__init__(model, host, port)
@@ -221,11 +222,19 @@ class SymetriePmacSimulator(SimulatedController):
         return True
 
     # ------------------------------------------------------------ variables
+    def press_emergency_stop(self) -> None:
+        """The operator's emergency stop: the motion stops, error and e-stop bits set."""
+        with self._state_lock:
+            self.emergency_stop = True
+            self.model.stop()
+
     def _status_word(self) -> int:
         m = self.model
         bits = {1, 8, 11, 12, 13}  # initialised, phase found, power on
-        if self.error:
+        if self.error or self.emergency_stop:
             bits.add(0)
+        if self.emergency_stop:
+            bits.add(14)
         if self.control_on:
             bits.add(2)
         if self.homed:
@@ -382,6 +391,8 @@ class SymetriePmacSimulator(SimulatedController):
         if name == "MOVE_PTP":
             if p[0] != 0:
                 return -10  # only absolute moves are served by the twin
+            if self.emergency_stop:
+                return -37
             if self.error:
                 return -44
             if not self.homed:

@@ -241,3 +241,18 @@ def test_stop_after_an_interrupted_query(rig: Callable[..., Rig]) -> None:
     np.testing.assert_allclose(r.driver.read_pose(), here, atol=1e-9)
     # 1 s of a 3 s move, and the 10 ms poll of c_cmd while C_STOP ran
     np.testing.assert_allclose(here, POSE * 1.01 / 3, atol=1e-9)
+
+
+def test_emergency_stop_while_moving_is_an_error(rig: Callable[..., Rig]) -> None:
+    r = rig()
+    sim = r.sim
+    assert isinstance(sim, SymetriePmacSimulator)
+    r.driver.move_absolute(POSE)
+    r.clock.sleep(1.0)
+    sim.press_emergency_stop()
+    with pytest.raises(ControllerError, match="reports an error .*emergency stop"):
+        r.driver.wait_in_position(FAST)
+    r.driver.stop()  # still delivered
+    with pytest.raises(ControllerError, match="in error or its emergency stop is pressed"):
+        r.driver.move_absolute(np.zeros(6))
+    assert r.model.moves == 1
