@@ -223,8 +223,13 @@ class SymetriePmacController(SocketController):
         self._read_until((b"login: ",), "login: ")
         self._send(self.user)
         self._read_until((b"Password: ",), "Password: ")
-        conn = self._require()
-        conn.sock.sendall(self.password.encode("ascii") + self.terminator)  # never logged
+        try:  # the password is never logged
+            self._require().sock.sendall(self.password.encode("ascii") + self.terminator)
+        except OSError as exc:
+            self._drop()
+            raise ControllerConnectionError(
+                f"connection to the controller at {self.url} lost at its login: {exc}"
+            ) from exc
         seen = self._read_until((b"# ", b"incorrect"), "the shell prompt")
         if b"incorrect" in seen:
             raise ControllerConnectionError(
