@@ -40,7 +40,8 @@ def _numbers(text: str | None, n: int, what: str) -> tuple[float, ...] | None:
     "--controller",
     "controller_url",
     required=True,
-    help="The hexapod controller: symetrie://HOST:61559 or pi://HOST:50000.",
+    help="The hexapod controller: symetrie://HOST:61559, pi://HOST:50000 or "
+    "symetrie-pmac://HOST:23.",
 )
 @click.option(
     "--session",

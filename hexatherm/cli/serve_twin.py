@@ -31,10 +31,11 @@ from hexatherm.cli.options import CheckedFloat, clean_errors, echo_err
 )
 @click.option(
     "--dialect",
-    type=click.Choice(["symetrie", "pi"]),
+    type=click.Choice(["symetrie", "pi", "symetrie-pmac"]),
     default="symetrie",
     show_default=True,
-    help="The controller's dialect.",
+    help="The controller's dialect (symetrie-pmac: Symetrie's Power PMAC gpascii over "
+    "telnet, as ZONDA/JORAN/PUNA+ controllers).",
 )
 @click.option(
     "--time-scale",

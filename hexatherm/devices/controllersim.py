@@ -398,8 +398,8 @@ class SymetrieSimulator(SimulatedController):
         if name == "STA#HEXAPOD?":
             self._drop_if_moving()
             pose = pose_to_wire(self._wire_pose())
-            data = [float(self._status_word()), *pose, *pose]
-            return [f"{short}:2," + ",".join(repr(float(v)) for v in data)]
+            values = ",".join(repr(float(v)) for v in [*pose, *pose])
+            return [f"{short}:2,{self._status_word()},{values}"]  # an integer word
         if name == "STA#AXES?":
             if not m.report_actuators:
                 return [f"{short}:-6"]
@@ -408,11 +408,13 @@ class SymetrieSimulator(SimulatedController):
             return [f"{short}:2," + ",".join(data)]
         if name == "STA#TEMP?":
             temps = m.temperatures()
-            if temps is None:
-                return [f"{short}:-6"]
+            if temps is None:  # not a command of the API: Panel_UnknownStaCmd
+                return [f"{short}:-23"]
             return [f"{short}:2,{temps.size}" + "".join(f",{v!r}" for v in temps.tolist())]
-        if name == "CFG#CS?":
-            return [f"{short}:1", f"{short}:2," + ",".join(["0"] * 12)]
+        if name == "CFG#CS?":  # CFG#CS?CS: that CS first, then user and object frames
+            if not re.fullmatch(r"\d+", args):
+                return [f"{short}:-9"]
+            return [f"{short}:1", f"{short}:2,{int(args)}," + ",".join(["0"] * 12)]
         if name in ("VALID#PTP?", "MOVE#ABS"):
             wire = _floats(args, 6)
             if wire is None:

@@ -21,19 +21,23 @@ silent, hexatherm's choice is marked *choice* and the simulator speaks exactly t
   launched or when it ends, the wait is ``wait_in_position``'s.
 * ``STA#HEXAPOD?``: ``status,`` then the object pose in the user frame (6 values, m and
   rad: what ``MOVE#ABS`` commands and :meth:`~SymetrieController.read_pose` returns),
-  then the platform pose in the machine frame (6). ``status`` is a bit field
-  (:data:`STATUS_BITS`): bit 0 error, 4 in position, 5 moving, ...
+  then the platform pose in the machine frame (6). ``status`` is an integer bit field
+  (:data:`STATUS_BITS`): bit 0 error, 4 in position, 5 moving, ...; ``858.0`` is
+  refused, as BLISS's ``int()`` refuses it.
 * ``STA#AXES?``: ``n,`` then ``n`` actuator status words, then ``n`` actuator lengths in
   m.
-* ``CFG#CS?``: the user frame in the machine frame and the object frame in the
-  platform frame (6 + 6 values, m and rad), read once on connection into ``info``.
+* ``CFG#CS?3``: ``3,`` (the coordinate system asked, as ESRF's BLISS asks and parses
+  it) then the user frame in the machine frame and the object frame in the platform
+  frame (6 + 6 values, m and rad), read once on connection into ``info``.
 * ``VALID#PTP?`` + the 6 values of a pose (*choice*: the controller's check of a
   point-to-point move without moving): ``VALID#PTP:2,BITS``, 0 when the pose can be
   reached, else the limits it breaks (:data:`VALIDATION_BITS`). A controller that
   does not know the command (unknown-command codes) leaves only hexatherm's stroke
   check, which then requires the hexapod geometry.
-* ``STA#TEMP?`` (*choice*): ``k,`` then ``k`` temperatures in deg C; a controller that
-  does not know it has no temperatures (an empty reading).
+* ``STA#TEMP?`` (*choice*, optional, not a command of the public API): ``k,`` then
+  ``k`` temperatures in deg C; a real controller answers ``STA#TEMP:-23`` (unknown
+  status query), and then, as for any unknown-command code, the controller has no
+  temperatures (an empty reading) and the run goes on.
 * ``STOP``: ``STOP:1``, ``STOP:2``.
 
 >>> pose_to_wire([1.0, 0, 0, 180.0, 0, 0]).round(8).tolist()
@@ -109,6 +113,7 @@ ERROR_CODES: dict[int, str] = {
     -9: "wrong number of arguments",
     -10: "wrong group or axis number",
     -12: "the command is already running",
+    -23: "unknown status query",
     -47: "user level restriction",
     -48: "wrong argument value",
     -49: "wrong number of parameters",
@@ -138,8 +143,10 @@ ERROR_CODES: dict[int, str] = {
     -312: "command not allowed",
     -313: "no command matching",
 }
-#: codes meaning "this controller does not know the command"
-UNSUPPORTED_CODES = frozenset({-6, -310, -311, -313})
+#: codes meaning "this controller does not know the command" (-23: an unknown STA# query)
+UNSUPPORTED_CODES = frozenset({-6, -23, -310, -311, -313})
+#: the coordinate system asked of ``CFG#CS?`` (as BLISS asks: user and object frames)
+CS_USER_OBJECT = 3
 #: codes meaning "this pose cannot be reached" (a refusal, nothing moved)
 REFUSAL_CODES = frozenset({-103, -104, -105, -106, -126, -273, -274, -288, -289})
 
@@ -238,8 +245,13 @@ class SymetrieController(SocketController):
                 f"'Waiting for commands' within {self.max_greeting_lines} lines: is it a "
                 "Symetrie API v2 controller?"
             )
-        frames = parse_numbers(self._transact("CFG#CS?"), "CFG#CS?", 12)
-        mm_deg = pose_from_wire(frames.reshape(2, 6))
+        data = parse_numbers(self._transact("CFG#CS?", str(CS_USER_OBJECT)), "CFG#CS?", 13)
+        if data[0] != CS_USER_OBJECT:
+            raise ControllerError(
+                f"malformed reply to CFG#CS?{CS_USER_OBJECT}: its leading field is "
+                f"{data[0]:g}, not the coordinate system asked ({CS_USER_OBJECT})"
+            )
+        mm_deg = pose_from_wire(data[1:].reshape(2, 6))
         self.info["user_frame_in_machine"] = format_pose(mm_deg[0])
         self.info["object_frame_in_platform"] = format_pose(mm_deg[1])
 
@@ -320,10 +332,11 @@ class SymetrieController(SocketController):
             raise
 
     def _status(self) -> tuple[int, FloatArray]:
-        data = parse_numbers(self._transact("STA#HEXAPOD?"), "STA#HEXAPOD?", 13)
-        if data[0] != int(data[0]) or data[0] < 0:
-            raise ControllerError(f"malformed status word in STA#HEXAPOD?: {data[0]!r}")
-        return int(data[0]), pose_from_wire(data[1:7])
+        word, _, rest = self._transact("STA#HEXAPOD?").partition(",")
+        if not re.fullmatch(r"\+?\d+", word.strip()):  # an integer, as clients int() it
+            raise ControllerError(f"malformed status word in STA#HEXAPOD?: {word!r}")
+        data = parse_numbers(rest, "STA#HEXAPOD?", 12)
+        return int(word), pose_from_wire(data[:6])
 
     def _state(self) -> ControllerState:
         status, _ = self._status()

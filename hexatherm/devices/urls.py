@@ -1,4 +1,5 @@
-"""Device URLs: ``symetrie://HOST[:PORT]`` and ``pi://HOST[:PORT]`` to a controller driver.
+"""Device URLs: ``symetrie://HOST[:PORT]``, ``pi://HOST[:PORT]`` and
+``symetrie-pmac://HOST[:PORT]`` (Symétrie's gpascii over telnet) to a controller driver.
 
 A module of its own so that the protocol (:mod:`hexatherm.devices.controller`) does not
 import its drivers, which import it.
@@ -14,6 +15,7 @@ from hexatherm.core.hexapod import Hexapod
 from hexatherm.devices.controller import LogCallback, SocketController
 from hexatherm.devices.pi import PIController
 from hexatherm.devices.symetrie import SymetrieController
+from hexatherm.devices.symetriepmac import SymetriePmacController
 from hexatherm.errors import ControllerError
 
 
@@ -36,6 +38,8 @@ def controller_from_url(
     'pi://192.168.0.10:50000'
     >>> controller_from_url("symetrie://hexa:61559").dialect
     'Symetrie API v2'
+    >>> controller_from_url("symetrie-pmac://zonda").url
+    'symetrie-pmac://zonda:23'
     >>> controller_from_url("modbus://hexa")  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
@@ -44,13 +48,14 @@ def controller_from_url(
     drivers: dict[str, type[SocketController]] = {
         SymetrieController.scheme: SymetrieController,
         PIController.scheme: PIController,
+        SymetriePmacController.scheme: SymetriePmacController,
     }
     parts = urlsplit(url)
     scheme = parts.scheme.lower()
     if scheme not in drivers:
         raise ControllerError(
             f"unknown controller URL scheme {parts.scheme!r} in {url!r}; expected "
-            "symetrie://HOST:61559 or pi://HOST:50000"
+            "symetrie://HOST:61559, pi://HOST:50000 or symetrie-pmac://HOST:23"
         )
     if parts.path not in ("", "/") or parts.query or parts.fragment or parts.username:
         raise ControllerError(f"controller URL {url!r} must be SCHEME://HOST[:PORT], no more")

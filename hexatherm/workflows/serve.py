@@ -54,6 +54,7 @@ from hexatherm.devices.controllersim import (
 )
 from hexatherm.devices.ippserver import Fault, IppSimServer
 from hexatherm.devices.pisim import PISimulator, PIStart
+from hexatherm.devices.pmacsim import SymetriePmacSimulator
 from hexatherm.devices.thermosim import ThermocoupleSimulator
 from hexatherm.errors import HexathermError, InputError
 from hexatherm.session import Balls
@@ -419,7 +420,7 @@ class TwinMachines:
     Parameters
     ----------
     world : TwinWorld
-    dialect : {"symetrie", "pi"}
+    dialect : {"symetrie", "pi", "symetrie-pmac"}
     tool : str
         Name of the CMM's tool (tip diameter: the balls file's).
     point_noise_um : float
@@ -462,8 +463,8 @@ class TwinMachines:
         ),
         pi_start: PIStart | None = None,
     ) -> None:
-        if dialect not in ("symetrie", "pi"):
-            raise InputError(f"dialect must be symetrie or pi, got {dialect!r}")
+        if dialect not in ("symetrie", "pi", "symetrie-pmac"):
+            raise InputError(f"dialect must be symetrie, pi or symetrie-pmac, got {dialect!r}")
         balls = world.balls
         tip = balls.tip_diameter_mm if balls.tip_diameter_mm > 0 else 2.0
         home = world.ball_centres_mm(world.clock()).max(axis=0) + [0.0, 0.0, 150.0]
@@ -484,6 +485,9 @@ class TwinMachines:
             self.controller: SimulatedController = (
                 SymetrieSimulator(world.model, port=controller_port)
                 if dialect == "symetrie"
+                # Symetrie's Power PMAC gpascii over telnet
+                else SymetriePmacSimulator(world.model, port=controller_port)
+                if dialect == "symetrie-pmac"
                 else PISimulator(world.model, port=controller_port, start=pi_start)
             )
         except BaseException:

@@ -446,7 +446,7 @@ class ScriptedServer:
 
 
 GREETING = ["SYMETRIE controller", "API version: 2.7.1", "Project: lab", "Waiting for commands..."]
-CS = "CFG#CS:2," + ",".join(["0"] * 12)
+CS = "CFG#CS:2,3," + ",".join(["0"] * 12)  # the CS asked, then the two frames
 
 
 def status_line(bits: int, pose_m_rad: list[float]) -> str:
@@ -501,7 +501,7 @@ def test_symetrie_replies_from_hand_written_lines(
         if line == "STA#AXES?":
             return ["STA#AXES:2,6," + ",".join(["0"] * 6) + ",0.25,0.26,0.27,0.28,0.29,0.3"]
         if line == "STA#TEMP?":
-            return ["STA#TEMP:-6"]
+            return ["STA#TEMP:-23"]
         return [f"{line.rstrip('?')}:-6"]
 
     driver = scripted(script)
@@ -617,3 +617,33 @@ def test_criteria_are_checked() -> None:
         InPositionCriteria(poll_s=0.0)
     with pytest.raises(ValueError, match="tolerance_um"):
         InPositionCriteria(tolerance_um=-1.0)
+
+
+def test_symetrie_speaks_api_v2_as_bliss_parses_it(
+    scripted: Callable[..., SymetrieController],
+) -> None:
+    """CFG#CS? takes the CS (3) and answers it first; an unknown STA# query (-23) is no
+    end of the run; the status word is an integer (what BLISS's client sends and parses)."""
+    word = {"text": "18"}  # ready, in position
+
+    def script(line: str) -> list[str]:
+        if line.startswith("CFG#CS?"):
+            if line != "CFG#CS?3":
+                return ["CFG#CS:-9"]  # wrong number of arguments
+            return ["CFG#CS:1", "CFG#CS:2,3,0.001,0,0,0,0,0,0,0,0.5,0,0,0.0174532925199"]
+        if line == "STA#HEXAPOD?":
+            return [f"STA#HEXAPOD:2,{word['text']}," + ",".join(["0"] * 12)]
+        if line == "STA#TEMP?":
+            return ["STA#TEMP:-23"]  # Panel_UnknownStaCmd
+        return [f"{line.split('?')[0]}:-6"]
+
+    driver = scripted(script)
+    assert driver.info["user_frame_in_machine"].startswith("[1.0000, 0.0000, 0.0000] mm")
+    assert driver.info["object_frame_in_platform"] == (
+        "[0.0000, 0.0000, 500.0000] mm, [0.00000, 0.00000, 1.00000] deg"
+    )
+    assert driver.read_temperatures().shape == (0,)
+    assert driver.state().in_position
+    word["text"] = "18.0"  # what BLISS's int() refuses
+    with pytest.raises(ControllerError, match="malformed status word .*'18.0'"):
+        driver.state()

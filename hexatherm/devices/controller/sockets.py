@@ -189,36 +189,45 @@ class SocketController:
 
     terminator = b"\n"
 
+    def _received(self, data: bytes) -> bytes:
+        """What a dialect keeps of received bytes before they are cut into lines (all)."""
+        return data
+
     def _readline(self, waiting_for: str) -> str:
         """The next received line; raises on a dropped or silent connection."""
         conn = self._require()
         while not conn.lines:
-            try:
-                conn.sock.settimeout(self.reply_timeout_s)
-                data = conn.sock.recv(4096)
-            except TimeoutError as exc:
-                self._drop()
-                raise ControllerTimeoutError(
-                    f"no reply from the {self.dialect} controller at {self.url} to "
-                    f"{waiting_for!r} within {self.reply_timeout_s:g} s"
-                ) from exc
-            except OSError as exc:
-                self._drop()
-                raise ControllerConnectionError(
-                    f"connection to the {self.dialect} controller at {self.url} lost "
-                    f"waiting for the reply to {waiting_for!r}: {exc}"
-                ) from exc
-            if not data:
-                self._drop()
-                raise ControllerConnectionError(
-                    f"the {self.dialect} controller at {self.url} closed the connection "
-                    f"while hexatherm waited for the reply to {waiting_for!r}"
-                )
-            conn.lines.extend(conn.buffer.feed(data))
+            conn.lines.extend(conn.buffer.feed(self._received(self._recv(waiting_for))))
         line = conn.lines.pop(0)
         if self.log is not None:
             self.log("rx", line)
         return line
+
+    def _recv(self, waiting_for: str) -> bytes:
+        """The next bytes received; raises on a dropped or silent connection."""
+        conn = self._require()
+        try:
+            conn.sock.settimeout(self.reply_timeout_s)
+            data = conn.sock.recv(4096)
+        except TimeoutError as exc:
+            self._drop()
+            raise ControllerTimeoutError(
+                f"no reply from the {self.dialect} controller at {self.url} to "
+                f"{waiting_for!r} within {self.reply_timeout_s:g} s"
+            ) from exc
+        except OSError as exc:
+            self._drop()
+            raise ControllerConnectionError(
+                f"connection to the {self.dialect} controller at {self.url} lost "
+                f"waiting for the reply to {waiting_for!r}: {exc}"
+            ) from exc
+        if not data:
+            self._drop()
+            raise ControllerConnectionError(
+                f"the {self.dialect} controller at {self.url} closed the connection "
+                f"while hexatherm waited for the reply to {waiting_for!r}"
+            )
+        return data
 
     def _discard_pending(self) -> None:
         """Drop whatever has been received and not read (before a stop)."""

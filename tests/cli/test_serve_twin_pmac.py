@@ -1,0 +1,52 @@
+"""``hexatherm serve-twin --dialect symetrie-pmac``: the gpascii controller over telnet."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+
+import numpy as np
+
+from hexatherm.devices.symetriepmac import SymetriePmacController
+from hexatherm.devices.urls import controller_from_url
+from hexatherm.io.config import read_hexapod
+from tests.sessions import ROOT
+
+HEXAPOD = ROOT / "configs" / "symetrie-like.yaml"
+BALLS = ROOT / "configs" / "balls-3.yaml"
+
+
+def test_serve_twin_serves_the_gpascii_dialect() -> None:
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "hexatherm", "serve-twin", "--hexapod", str(HEXAPOD),
+         "--balls", str(BALLS), "--dialect", "symetrie-pmac"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )  # fmt: skip
+    try:
+        assert proc.stdout is not None
+        proc.stdout.readline()
+        controller_line = proc.stdout.readline()
+        assert controller_line.startswith("controller: symetrie-pmac://127.0.0.1:")
+        hexapod = read_hexapod(HEXAPOD)
+        with controller_from_url(
+            controller_line.split()[1], hexapod=hexapod, reply_timeout_s=30
+        ) as controller:
+            assert isinstance(controller, SymetriePmacController)
+            state = controller.state()
+            assert state.ready and state.in_position and not state.error
+            assert np.abs(controller.read_pose()).max() < 1e-3
+            np.testing.assert_allclose(
+                controller.read_actuators(), hexapod.igm(np.zeros(6))[0], atol=1e-6
+            )
+            controller.stop()
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+        assert proc.returncode == 0, err
+        assert "--controller symetrie-pmac://127.0.0.1:" in err
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()

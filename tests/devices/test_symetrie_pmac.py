@@ -1,0 +1,258 @@
+"""Symétrie's Power PMAC gpascii dialect: hexatherm's driver and the twin's server.
+
+Everything runs on 127.0.0.1 on a ManualClock shared by driver and twin (no wall-clock
+waits). Truths: the twin's model (true pose, its own IGM), and, for the wire, the
+exchanges CGSE's ``symetrie-hexapod`` documents (written here by hand from its reading).
+"""
+
+from __future__ import annotations
+
+import socket
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+
+from hexatherm.core.hexapod import Hexapod
+from hexatherm.devices.controller import InPositionCriteria
+from hexatherm.devices.controllersim import Faults, ManualClock, SimulatedHexapod
+from hexatherm.devices.pmacsim import SymetriePmacSimulator, strip_telnet
+from hexatherm.devices.symetriepmac import SymetriePmacController
+from hexatherm.devices.urls import controller_from_url
+from hexatherm.errors import (
+    ControllerConnectionError,
+    ControllerError,
+    ControllerReplyError,
+    PoseRefusedError,
+)
+
+CONFIG = Path(__file__).resolve().parents[2] / "configs" / "symetrie-like.yaml"
+POSE = np.array([1.2, -2.5, 3.0, 0.4, -0.3, 1.5])
+OUT_OF_STROKE = np.array([0.0, 0.0, 80.0, 0.0, 0.0, 0.0])
+
+
+def make_hexapod() -> Hexapod:
+    data = yaml.safe_load(CONFIG.read_text())
+    return Hexapod(
+        name=data["name"],
+        convention="symetrie",
+        base_joints_mm=np.array(data["base_joints"], dtype=float),
+        platform_joints_mm=np.array(data["platform_joints"], dtype=float),
+        stroke_mm=np.array(data["stroke"], dtype=float),
+    )
+
+
+class Rig:
+    def __init__(self, **model: Any) -> None:
+        self.clock = ManualClock(500.0)
+        self.model = SimulatedHexapod(make_hexapod(), clock=self.clock, **model)
+        self.sim = SymetriePmacSimulator(self.model)
+        self.lines: list[tuple[str, str]] = []
+        self.driver = controller_from_url(
+            self.sim.url,
+            clock=self.clock,
+            sleep=self.clock.sleep,
+            log=lambda d, line: self.lines.append((d, line)),
+        )
+
+    def close(self) -> None:
+        self.driver.close()
+        self.sim.close()
+
+
+@pytest.fixture
+def rig() -> Iterator[Callable[..., Rig]]:
+    rigs: list[Rig] = []
+
+    def make(**model: Any) -> Rig:
+        r = Rig(**model)
+        rigs.append(r)
+        r.driver.connect()
+        return r
+
+    yield make
+    for r in rigs:
+        r.close()
+
+
+def test_driver_moves_the_twin_and_reads_its_truth(rig: Callable[..., Rig]) -> None:
+    r = rig(noise_um=0.02, noise_urad=0.1, seed=4)
+    assert isinstance(r.driver, SymetriePmacController)
+    assert r.driver.info["api_version"] == "2.7.1.0"
+    assert r.driver.info["user_frame_in_machine"].startswith("[0.0000, 0.0000, 0.0000] mm")
+    r.driver.move_absolute(POSE)
+    sent = [line for d, line in r.lines if d == "tx"]
+    move = next(line for line in sent if line.endswith("c_cmd=C_MOVE_PTP"))
+    assert move.startswith("c_par(0)=0 c_par(1)=1.200000000000 c_par(2)=-2.500000000000 ")
+    # the state was checked and the pose validated before the move
+    assert sent.index("s_hexa") < sent.index(move)
+    assert any(line.endswith("c_cmd=C_VALID_PTP") for line in sent[: sent.index(move)])
+    record = r.driver.wait_in_position(InPositionCriteria(settle_s=1.0, poll_s=0.5))
+    truth = r.model.true_pose()
+    np.testing.assert_allclose(truth, POSE, atol=1e-12)
+    dev_um = (record.pose_mm_deg[:3] - truth[:3]) * 1e3
+    dev_urad = np.deg2rad(record.pose_mm_deg[3:] - truth[3:]) * 1e6
+    assert np.abs(dev_um).max() < 0.1 and np.abs(dev_urad).max() < 0.5  # noise, not bias
+    np.testing.assert_allclose(record.actuators_mm, r.model.hexapod.igm(POSE)[0], atol=1e-8)
+    assert record.temperatures_C.shape == (0,)
+    r.driver.move_absolute(np.zeros(6))
+    r.clock.sleep(1.0)
+    r.driver.stop()
+    assert not r.model.moving() and ("tx", "c_cmd=C_STOP") in r.lines
+    stopped = r.model.true_pose()
+    assert 0 < np.abs(stopped).max() < np.abs(POSE).max()
+
+
+def test_refusals_name_the_limits_and_move_nothing(rig: Callable[..., Rig]) -> None:
+    r = rig(faults=Faults(refuse=lambda p: p[2] > 2.0))
+    with pytest.raises(PoseRefusedError, match="actuator limits"):
+        r.driver.move_absolute(OUT_OF_STROKE)
+    with pytest.raises(PoseRefusedError, match="user workspace limits"):
+        r.driver.move_absolute(POSE)  # Tz 3 mm: the user limit
+    assert r.model.moves == 0
+    assert not any("C_MOVE_PTP" in line for line in r.sim.received)
+    r.model.faults.errors["MOVE_PTP"] = [-40]
+    with pytest.raises(PoseRefusedError, match=r"requested move not feasible \(-40\)"):
+        r.driver.move_absolute([0.5, 0, 0, 0, 0, 0])
+    r.model.faults.errors["MOVE_PTP"] = [-35]
+    with pytest.raises(ControllerReplyError, match=r"control on \(-35\)"):
+        r.driver.move_absolute([0.5, 0, 0, 0, 0, 0])
+    assert r.model.moves == 0
+
+
+def test_status_is_checked_before_moving(rig: Callable[..., Rig]) -> None:
+    r = rig()
+    sim = r.sim
+    assert isinstance(sim, SymetriePmacSimulator)
+    sim.control_on, sim.error = False, True
+    with pytest.raises(ControllerError, match="in error .*control loop is off"):
+        r.driver.validate(POSE)  # what --dry-run calls: nothing moved
+    state = r.driver.state()
+    assert state.error and not state.ready and "error" in state.message
+    assert r.model.moves == 0 and not any("C_MOVE_PTP" in c for c in sim.received)
+    sim.control_on, sim.error = True, False
+    r.driver.move_absolute(POSE)
+    assert r.model.moves == 1
+
+
+def test_wrong_login_is_refused() -> None:
+    clock = ManualClock()
+    sim = SymetriePmacSimulator(SimulatedHexapod(make_hexapod(), clock=clock))
+    driver = SymetriePmacController("127.0.0.1", sim.port, clock=clock, sleep=clock.sleep)
+    driver.password = "wrong"
+    try:
+        with pytest.raises(ControllerConnectionError, match="refused the login 'root'"):
+            driver.connect()
+        assert not driver.connected
+    finally:
+        sim.close()
+
+
+def test_wire_as_cgse_reads_it() -> None:
+    """The twin's bytes, read as CGSE's AlphaPlusTelnetInterface reads them: telnet
+    login, ``gpascii -2`` and ``echo7`` answered up to one ``\\x06\\r\\n``; an answer is the
+    echoed command, its values, one a line, then ``\\x06\\r\\n``."""
+    clock = ManualClock()
+    sim = SymetriePmacSimulator(SimulatedHexapod(make_hexapod(), clock=clock))
+    sock = socket.create_connection(("127.0.0.1", sim.port), timeout=10)
+    received = b""
+
+    def until(marker: bytes) -> bytes:
+        nonlocal received
+        while marker not in received:
+            data = sock.recv(4096)
+            assert data, f"closed before {marker!r}"
+            received += data
+        end = received.index(marker) + len(marker)
+        head, received = received[:end], received[end:]
+        return strip_telnet(head)[0]
+
+    try:
+        assert until(b"login: ").endswith(b"ppmac login: ")
+        sock.sendall(b"root\r\n")
+        until(b"Password: ")
+        sock.sendall(b"deltatau\r\n")
+        until(b"ppmac# ")
+        sock.sendall(b"gpascii -2\r\necho7\r\n")  # together, as CGSE's ZONDA sends them
+        started = until(b"\x06\r\n")
+        assert started.startswith(b"gpascii -2\r\n") and started.endswith(b"echo7\r\n\x06\r\n")
+        sock.sendall(b"c_cmd\r\n")
+        assert until(b"\x06\r\n") == b"c_cmd\r\n0\r\n\x06\r\n"
+        sock.sendall(b"c_par(0)=1 c_par(1)=0 c_par(2)=0 c_par(3)=0 c_par(4)=90 ")
+        sock.sendall(b"c_par(5)=0 c_par(6)=0 c_par(7)=0 c_cmd=C_VALID_PTP\r\n")
+        until(b"\x06\r\n")
+        codes = []
+        while not codes or codes[-1] > 0:
+            sock.sendall(b"c_cmd\r\n")
+            codes.append(int(until(b"\x06\r\n").split(b"\r\n")[1]))
+        assert codes == [1, 0]  # running once, then done
+        sock.sendall(b"c_par(0)\r\n")
+        assert until(b"\x06\r\n") == b"c_par(0)\r\n8\r\n\x06\r\n"  # bit 3: actuator limits
+        sock.sendall(b"s_uto_tx,6,1\r\n")
+        assert until(b"\x06\r\n") == b"s_uto_tx,6,1\r\n" + b"0\r\n" * 6 + b"\x06\r\n"
+        sock.sendall(b"s_hexa\r\n")
+        word = int(until(b"\x06\r\n").split(b"\r\n")[1])
+        assert word & 0b1001100 == 0b1001100  # control on, in position, home complete
+        sock.sendall(b"no_such_variable\r\n")
+        assert b"error #" in until(b"\x06\r\n")
+    finally:
+        sock.close()
+        sim.close()
+
+
+FAST = InPositionCriteria(settle_s=1.0, poll_s=0.5, timeout_s=900.0)
+
+
+def test_late_flag_and_replies_in_pieces(rig: Callable[..., Rig]) -> None:
+    r = rig()
+    r.model.faults.late_in_position_s = 20.0
+    r.model.faults.split_writes = True
+    r.driver.move_absolute(POSE)
+    record = r.driver.wait_in_position(FAST)
+    assert record.flag_after_s >= 20.0 + r.model.settle_s
+    np.testing.assert_allclose(record.pose_mm_deg, r.model.true_pose(), atol=1e-9)
+
+
+def test_dropped_connection_mid_move_then_stop(rig: Callable[..., Rig]) -> None:
+    r = rig()
+    r.model.faults.drop_mid_move = True
+    r.driver.move_absolute(POSE)
+    with pytest.raises(ControllerConnectionError):
+        r.driver.wait_in_position(FAST)
+    assert not r.driver.connected and r.model.moving()
+    r.clock.sleep(1.0)
+    r.driver.stop()  # a new telnet login to deliver C_STOP
+    assert r.sim.connections == 2 and not r.model.moving()
+    np.testing.assert_allclose(r.driver.read_pose(), r.model.true_pose(), atol=1e-9)
+
+
+def test_stop_after_an_interrupted_query(rig: Callable[..., Rig]) -> None:
+    """Ctrl-C between a query and its answer: the stop skips the stale answer."""
+    r = rig()
+    r.driver.move_absolute(POSE)
+    r.clock.sleep(1.0)
+    r.driver._send("s_uto_tx,6,1")  # never read
+    r.driver.stop()
+    assert not r.model.moving()
+    here = r.model.true_pose()
+    np.testing.assert_allclose(r.driver.read_pose(), here, atol=1e-9)
+    # 1 s of a 3 s move, and the 10 ms poll of c_cmd while C_STOP ran
+    np.testing.assert_allclose(here, POSE * 1.01 / 3, atol=1e-9)
+
+
+def test_emergency_stop_while_moving_is_an_error(rig: Callable[..., Rig]) -> None:
+    r = rig()
+    sim = r.sim
+    assert isinstance(sim, SymetriePmacSimulator)
+    r.driver.move_absolute(POSE)
+    r.clock.sleep(1.0)
+    sim.press_emergency_stop()
+    with pytest.raises(ControllerError, match="reports an error .*emergency stop"):
+        r.driver.wait_in_position(FAST)
+    r.driver.stop()  # still delivered
+    with pytest.raises(ControllerError, match="in error or its emergency stop is pressed"):
+        r.driver.move_absolute(np.zeros(6))
+    assert r.model.moves == 1
