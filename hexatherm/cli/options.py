@@ -46,7 +46,8 @@ quality_threshold_option = click.option(
     metavar="NAME=VALUE",
     help="Change a quality check's limit (repeatable; over the session file's quality: "
     "mapping): form_um, diameter_dev_um, distance_dev_um, registration_rms_um, time_gap_s, "
-    "temperature_change_C, min_rcond; inf (0 for min_rcond) disables a check.",
+    "temperature_change_C, min_rcond, growth_margin_C, max_warming_C; inf (0 for min_rcond) "
+    "disables a check.",
 )
 #: exit status of ``--strict`` when a check fails (the outputs are still written)
 CHECK_FAILED_EXIT = 3

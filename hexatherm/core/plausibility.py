@@ -8,6 +8,11 @@ a mistake that no other check sees: swapped step labels, a mirrored measurement 
 columns swapped: with three balls a mirror image registers with zero residual) or a plan
 in other units. This module compares the two and names the likeliest cause.
 
+The thermal growth the method reads at the references is bounded by physics too: a leg
+whose length changed since R0 by more than its segments' expansion allows for the
+temperatures its thermocouple logged is not a thermal error but a reference measured
+away from its commanded pose (:func:`implied_warming_K`, :func:`temperature_span_K`).
+
 Conventions: poses are ``[Tx, Ty, Tz, Rx, Ry, Rz]`` (mm, deg) in the hexapod's
 convention (see :mod:`hexatherm.core.geometry`). The commanded pose of step S relative
 to O is ``inv(T(O_cmd)) @ T(S_cmd)`` (the plan's poses less O's; exactly that when O is
@@ -30,6 +35,7 @@ from hexatherm.core.geometry import (
     pose_from_transform,
     transform_from_pose,
 )
+from hexatherm.core.thermal import LegThermalModel
 from hexatherm.typing import BoolArray, FloatArray
 
 __all__ = [
@@ -40,9 +46,11 @@ __all__ = [
     "UNIT_SCALES",
     "commanded_relative",
     "default_pose_tolerance",
+    "implied_warming_K",
     "likeliest_cause",
     "mirrored",
     "pose_deviations",
+    "temperature_span_K",
 ]
 
 #: default translation tolerance as a fraction of the leg stroke (max - min leg length)
@@ -380,3 +388,83 @@ def likeliest_cause(
         "the step was measured at another pose than the plan commands (a wrong plan or "
         "session, a move that did not happen, or a known offset to declare)"
     )
+
+
+def implied_warming_K(
+    legs: LegThermalModel, q_mm: npt.ArrayLike, growth_mm: npt.ArrayLike
+) -> FloatArray:
+    """The smallest temperature change that explains each leg's growth, K.
+
+    A leg of segments (length ``L_s``, expansion coefficient ``cte_s``) whose segments
+    all changed temperature by at most ``dT`` (either way) changed length by at most
+    ``dT * sum_s |cte_s| L_s`` (:meth:`~hexatherm.core.thermal.LegThermalModel.
+    bound_sensitivity_mm_per_K`, the variable segment at leg length ``q``). So a growth
+    ``g`` needs ``|g| / sum_s |cte_s| L_s`` kelvin at least somewhere along the leg.
+
+    Parameters
+    ----------
+    legs : LegThermalModel
+    q_mm : array_like, shape (..., 6)
+        Leg lengths (they set the variable segment's length).
+    growth_mm : array_like, shape (..., 6)
+        Change of each leg's length, mm.
+
+    Returns
+    -------
+    ndarray, shape (..., 6)
+        K, >= 0.
+
+    Examples
+    --------
+    >>> model = LegThermalModel.uniform(
+    ...     [("body", "aluminium", 23.1e-6, 160.0), ("screw", "steel", 11.5e-6, None)])
+    >>> q = np.full(6, 268.0)  # 160 mm of aluminium, 108 mm of steel: 4.938 um/K
+    >>> implied_warming_K(model, q, np.full(6, 0.004938)).round(6).tolist()[:2]
+    [1.0, 1.0]
+    >>> implied_warming_K(model, q, [0.5, 0, 0, 0, 0, -0.5]).round(1).tolist()
+    [101.3, 0.0, 0.0, 0.0, 0.0, 101.3]
+    """
+    bound = legs.bound_sensitivity_mm_per_K(q_mm)
+    growth = np.abs(np.asarray(growth_mm, dtype=float))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(growth > 0, growth / bound, 0.0)
+
+
+def temperature_span_K(
+    log_times_s: npt.ArrayLike, log_C: npt.ArrayLike, times_s: npt.ArrayLike
+) -> FloatArray:
+    """How far each channel's logged temperature ranged from the log's start up to each
+    time: ``max - min`` over the log's rows up to it and its value interpolated there, K.
+
+    A leg lags its thermocouple (its mass, the screw inside the body): its temperature
+    at any time lies within the range its thermocouple went through before, so the
+    change of the leg's temperature between two times up to ``t`` is at most this span.
+
+    Parameters
+    ----------
+    log_times_s : array_like, shape (m,)
+        The log's times, increasing.
+    log_C : array_like, shape (m, c)
+        Temperatures of each channel, degC.
+    times_s : array_like, shape (n,)
+        Times within the log.
+
+    Returns
+    -------
+    ndarray, shape (n, c)
+
+    Examples
+    --------
+    >>> t = [0.0, 10.0, 20.0, 30.0]
+    >>> temps = np.array([[20.0], [25.0], [21.0], [22.0]])
+    >>> temperature_span_K(t, temps, [5.0, 10.0, 30.0]).ravel().tolist()
+    [2.5, 5.0, 5.0]
+    """
+    lt = np.asarray(log_times_s, dtype=float)
+    lc = np.asarray(log_C, dtype=float)
+    t = np.asarray(times_s, dtype=float)
+    upto = np.clip(np.searchsorted(lt, t, side="right") - 1, 0, lt.size - 1)
+    high = np.maximum.accumulate(lc, axis=0)[upto]
+    low = np.minimum.accumulate(lc, axis=0)[upto]
+    now = np.column_stack([np.interp(t, lt, lc[:, j]) for j in range(lc.shape[1])])
+    return np.maximum(high, now) - np.minimum(low, now)
