@@ -43,6 +43,7 @@ __all__ = [
     "MIN_TOLERANCE_MM",
     "PoseCheck",
     "PoseDeviations",
+    "SOLID_FRACTION",
     "UNIT_SCALES",
     "commanded_relative",
     "default_pose_tolerance",
@@ -255,17 +256,28 @@ def pose_deviations(
     return PoseDeviations(deviation, translation, rotation, failing)
 
 
+#: balls span a solid (their handedness is their own) when the smallest singular value
+#: of their centred positions is at least this share of the largest
+SOLID_FRACTION = 0.05
+
+
 def mirrored(centres_mm: npt.ArrayLike, balls_mm: npt.ArrayLike) -> BoolArray:
     """Whether each step's measured balls are a mirror image of the balls file's.
 
-    Three balls register with zero residual on their mirror image, so the handedness
-    is read against the one direction both frames share: up. The balls' polygon
-    normal (Newell's method, in the balls file's order) points to the platform's +Z
-    in the balls file; measured on a hexapod that stands on the CMM's table and is
-    probed from above (as ``plan``'s DMIS program probes), it points to the CMM's
-    +Z. A step whose measured normal points down while the file's points up (each
-    more than 30 deg from horizontal) is mirrored: x and y columns swapped, or one
-    axis' sign flipped.
+    A reflection is never a rotation, however small the motion: its determinant is -1.
+    With four or more balls that span a solid (the smallest singular value of their
+    centred positions at least :data:`SOLID_FRACTION` of the largest), the handedness is
+    their own: a step is mirrored when the cross-covariance ``sum (b - b0)(c - c0)^T`` of
+    the file's and the measured positions has a negative determinant (the best
+    orthogonal map between them is a reflection). Three balls (or coplanar ones)
+    register with zero residual on their mirror image, so the handedness is read
+    against the one direction both frames share: up. The balls' polygon normal
+    (Newell's method, in the balls file's order) points to the platform's +Z in the
+    balls file; measured on a hexapod that stands on the CMM's table and is probed from
+    above (as ``plan``'s DMIS program and ``run`` probe), it points to the CMM's +Z. A
+    step whose measured normal points down while the file's points up (each more than
+    30 deg from horizontal) is mirrored: x and y columns swapped, or one axis' sign
+    flipped.
 
     Parameters
     ----------
@@ -284,11 +296,24 @@ def mirrored(centres_mm: npt.ArrayLike, balls_mm: npt.ArrayLike) -> BoolArray:
     >>> steps = np.stack([balls + [400, 300, 200], balls[:, [1, 0, 2]] + [400, 300, 200]])
     >>> mirrored(steps, balls).tolist()
     [False, True]
+
+    Four balls on a solid: upside down is a rotation, a swap of x and y is not.
+
+    >>> solid = np.vstack([balls, [0.0, 0.0, 60.0]])
+    >>> flip = np.diag([1.0, -1.0, -1.0])  # 180 deg about x
+    >>> mirrored(np.stack([solid @ flip.T, solid[:, [1, 0, 2]]]), solid).tolist()
+    [False, True]
     """
     c = np.asarray(centres_mm, dtype=float)
     b = np.asarray(balls_mm, dtype=float)
     if c.ndim != 3 or c.shape[1:] != b.shape or b.ndim != 2 or b.shape[1] != 3:
         raise ValueError("centres_mm must be (N, k, 3) and balls_mm (k, 3)")
+    rel_b = b - b.mean(axis=0)
+    if b.shape[0] >= 4:
+        sv = np.linalg.svd(rel_b, compute_uv=False)
+        if sv[2] >= SOLID_FRACTION * sv[0]:
+            rel_c = c - c.mean(axis=1, keepdims=True)
+            return np.asarray(np.linalg.det(np.einsum("ki,nkj->nij", rel_b, rel_c)) < 0)
 
     def unit_normal(points: FloatArray) -> FloatArray:
         rel = points - points.mean(axis=-2, keepdims=True)

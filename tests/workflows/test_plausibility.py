@@ -5,6 +5,9 @@
    now bounded by its segments' expansion and its thermocouple's temperatures (the growth
    check), or without a log by a plausible warming (the warming check).
 
+4. Mirrored centres (x and y exchanged) of a small-motion session passed: the mirror test
+   ran only after the pose tolerance failed. It runs always now.
+
 The truth the checks are held to: the twin's (what the corrected poses should be) and the
 known displacement put into the measurement (which leg it lengthens most, and by how much).
 """
@@ -20,13 +23,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from scipy.spatial.transform import Rotation
 
 from hexatherm.cli import main
 from hexatherm.core.geometry import pose_from_transform
+from hexatherm.core.plan import Plan
+from hexatherm.core.plausibility import mirrored
 from hexatherm.devices.serialport import PortSettings
-from hexatherm.workflows.process.pipeline import process_session
+from hexatherm.errors import PlanError
+from hexatherm.workflows.process.pipeline import Checks, process_session
 from hexatherm.workflows.process.quality import quality_checks
-from tests.sessions import REFERENCE, ROOT, make_session
+from hexatherm.workflows.simulate.twinsession import Heating, TwinSessionSpec, write_twin_session
+from tests.sessions import BALLS, REFERENCE, ROOT, make_session
 from tests.workflows.test_run import make_bench
 
 #: the displacement of the reference's balls on the CMM, mm
@@ -239,3 +247,112 @@ def test_run_with_a_controller_that_settles_1mm_away_fails_a_growth_check(tmp_pa
     assert quality.failing(check).tolist() == [label == "R1" for label in plan.labels]
     # R2, where the platform is back at the commanded pose, passes
     assert quality.frame.set_index("label").loc["R2", f"ok_{check}"] is True
+
+
+# ------------------------------------------------------------------ item 4
+#: a small-motion plan: every pose within 2 mm and 1 deg of O (Tz, Rx and Ry within half
+#: the pose tolerance: a mirror reverses them)
+SMALL_REFERENCE = [0.0, 0.0, -0.9, 0.0, 0.0, 0.0]
+SMALL_TARGETS = (
+    [1.5, -1.0, 0.5, 0.4, -0.3, 0.6],
+    [-1.2, 1.4, -0.8, -0.3, 0.45, -0.9],
+    [0.7, 1.1, 0.9, 0.45, 0.35, 1.0],
+)
+
+
+def swap_xy(row):
+    row["x"], row["y"] = row["y"], row["x"]
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("small") / "s"
+    steps = [("O", "origin", [0.0] * 6), ("R0", "reference", SMALL_REFERENCE)]
+    for i, pose in enumerate(SMALL_TARGETS, 1):
+        steps += [(f"S{i}", "target", list(pose)), (f"R{i}", "reference", SMALL_REFERENCE)]
+    spec = TwinSessionSpec(
+        name="small",
+        hexapod_text=(ROOT / "configs" / "symetrie-like.yaml").read_text(),
+        balls=BALLS,
+        plan=Plan.from_steps(steps, reference_pose=SMALL_REFERENCE),
+        heating=Heating(on_s=0.0, tau_s=2400.0, gain_C=(3.0, 7.0, 2.0, 3.0, 9.0, 3.5)),
+        seed=4,
+    )
+    truth = write_twin_session(spec, folder)
+    return folder, truth
+
+
+def test_mirrored_centres_of_a_small_motion_session_are_refused(small, tmp_path):
+    folder, truth = small
+    session = tmp_path / "s"
+    shutil.copytree(folder, session)
+    clean = process_session(session)  # the session itself passes
+    assert np.abs(clean.steps.pose - clean.session.plan.poses).max() < 0.05
+    edit_centres(session, swap_xy)
+    # what the refusal prevents: within the pose tolerance, corrected poses up to a
+    # millimetre and tenths of a degree from the twin's truth
+    unchecked = process_session(session, checks=Checks(pose_tolerance=(np.inf, np.inf)))
+    idx = unchecked.correction.target_index
+    err = unchecked.correction.corrected - truth.corrected_pose[idx]
+    assert np.abs(err[:, :3]).max() > 0.5 and np.abs(err[:, 3:]).max() > 0.2
+    cmd = unchecked.session.plan.poses
+    assert np.linalg.norm(unchecked.steps.pose[:, :3] - cmd[:, :3], axis=1).max() < 2.0
+    assert np.abs(unchecked.steps.pose[:, 3:] - cmd[:, 3:]).max() < 1.04
+    with pytest.raises(PlanError) as caught:
+        process_session(session)
+    message = str(caught.value)
+    assert re.fullmatch(
+        r"step O: the measured balls are a mirror image of the balls file's \(a reflection, "
+        r"never a rotation: x and y columns swapped, or an axis' sign flipped\?\) in "
+        r".*centres\.csv:2 \(7 more step\(s\) too\); the pose check is off with "
+        r"--pose-tolerance inf",
+        message,
+    ), message
+
+
+def test_a_flipped_axis_is_refused_and_a_rotation_is_not(small, tmp_path):
+    """x -> -x is a reflection too; the same balls turned 90 deg about the CMM's z (a
+    rotation, however large) pass."""
+    session = tmp_path / "s"
+    shutil.copytree(small[0], session)
+
+    def flip_x(row):
+        row["x"] = repr(-float(row["x"]))
+
+    edit_centres(session, flip_x)
+    with pytest.raises(PlanError, match=r"^step O: the measured balls are a mirror image"):
+        process_session(session)
+    edit_centres(session, flip_x)  # back
+    edit_centres(session, lambda row: swap_xy(row) or flip_x(row))  # (y, -x): 90 deg about z
+    turned = process_session(session)
+    assert np.abs(turned.steps.pose - turned.session.plan.poses).max() < 0.05
+
+
+def test_the_cli_refuses_mirrored_centres_and_writes_nothing(small, tmp_path):
+    session = tmp_path / "s"
+    shutil.copytree(small[0], session)
+    edit_centres(session, swap_xy)
+    result = CliRunner().invoke(main, ["process", str(session)])
+    assert result.exit_code == 1, result.output
+    assert re.search(r"^Error: step O: the measured balls are a mirror image", result.output, re.M)
+    assert not (session / "results").exists()
+
+
+def test_four_balls_on_a_solid_carry_their_own_handedness():
+    """With a fourth ball off the plane the determinant decides, whatever the orientation
+    (a hexapod hanging upside down is not mirrored); with three the up direction does."""
+    rng = np.random.default_rng(5)
+    solid = np.vstack([BALLS.centres_mm, [0.0, 0.0, 80.0]])
+    turns = Rotation.random(200, random_state=rng).as_matrix()  # any orientation
+    shifts = rng.uniform(-500, 500, (200, 1, 3))
+    noise = rng.normal(0, 0.002, (200, 4, 3))
+    proper = np.einsum("nij,kj->nki", turns, solid) + shifts + noise
+    reflected = proper * [1.0, -1.0, 1.0]  # y -> -y on the CMM
+    assert not mirrored(proper, solid).any()
+    assert mirrored(reflected, solid).all()
+    assert mirrored(proper[:, :, [1, 0, 2]], solid).all()
+    # three balls: turned upright ones pass, a swap of x and y is caught
+    upright = Rotation.from_euler("z", rng.uniform(0, 360, (50, 1)), degrees=True).as_matrix()
+    three = np.einsum("nij,kj->nki", upright, BALLS.centres_mm) + shifts[:50]
+    assert not mirrored(three, BALLS.centres_mm).any()
+    assert mirrored(three[:, :, [1, 0, 2]], BALLS.centres_mm).all()

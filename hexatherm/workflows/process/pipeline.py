@@ -9,6 +9,8 @@ writes nothing: :mod:`hexatherm.workflows.process.outputs` does.
 from __future__ import annotations
 
 import dataclasses
+import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -157,24 +159,46 @@ def session_pose_check(session: Session, checks: Checks | None = None) -> PoseCh
     return PoseCheck(float(tol_mm), float(tol_deg), offset)
 
 
-def check_poses(session: Session, centres: StepCentres, steps: StepPoses, check: PoseCheck) -> None:
-    """Refuse a step whose measured pose relative to O is not its commanded one.
+def check_poses(
+    session: Session,
+    centres: StepCentres,
+    steps: StepPoses,
+    check: PoseCheck,
+    records: Sequence[Records] = (),
+) -> None:
+    """Refuse a step whose measured pose relative to O is not its commanded one, or
+    whose measured balls are a mirror image of the balls file's.
 
     Thermal errors are micrometres; millimetres or degrees are a mistake in the data
     that registers without a residual: swapped step labels, a mirrored measurement
     (x and y columns swapped), a plan in other units. PlanError (a StepError) naming
     the first failing step, its deviation, the tolerance and the likeliest cause
-    (:func:`hexatherm.core.plausibility.likeliest_cause`).
+    (:func:`hexatherm.core.plausibility.likeliest_cause`). A mirror image is refused
+    even within the tolerance (a small motion mirrors into a small deviation; a
+    reflection is never a rotation: :func:`hexatherm.core.plausibility.mirrored`),
+    naming the step and the file and line of its first measurement in ``records``.
     """
     if not check.enabled:
         return
     plan = session.plan
     commanded = commanded_relative(plan.poses, plan.origin_index, session.hexapod.convention)
     dev = pose_deviations(steps.pose, commanded, check, plan.origin_index)
+    flipped = mirrored(centres.centres_mm, session.balls.centres_mm)
     if not np.any(dev.failing):
+        if np.any(flipped):
+            i = int(np.argmax(flipped))
+            more = int(flipped.sum()) - 1
+            raise StepError(
+                "the measured balls are a mirror image of the balls file's (a reflection, "
+                "never a rotation: x and y columns swapped, or an axis' sign flipped?)"
+                + where_measured(records, plan.labels[i])
+                + (f" ({more} more step(s) too)" if more else "")
+                + "; the pose check is off with --pose-tolerance inf",
+                step=plan.labels[i],
+                index=i,
+            )
         return
     i = int(np.argmax(dev.failing))
-    flipped = mirrored(centres.centres_mm, session.balls.centres_mm)
     cause = likeliest_cause(
         i, steps.pose, commanded, check, plan.labels, flipped, plan.origin_index
     )
@@ -194,6 +218,17 @@ def check_poses(session: Session, centres: StepCentres, steps: StepPoses, check:
         step=plan.labels[i],
         index=i,
     )
+
+
+def where_measured(records: Sequence[Records], label: str) -> str:
+    """`` in FILE:LINE`` of the first row of step ``label`` in ``records`` (its repeats'
+    labels ``O-2`` ... too), or ``""``."""
+    pattern = re.compile(re.escape(label) + r"(-[0-9]+)?")
+    for rec in records:
+        rows = np.flatnonzero([pattern.fullmatch(str(x)) is not None for x in rec.label])
+        if rows.size:
+            return f" in {rec.path}:{int(rec.line[rows[0]])}"
+    return ""
 
 
 def average_repeats(
@@ -325,6 +360,7 @@ def process_session(
         centres,
         step_poses(session.hexapod, registration.platform2cmm, plan.origin_index),
         session_pose_check(session, checks),
+        records,
     )
     q_steps = session.hexapod.igm(plan.poses)
     outside = np.flatnonzero(session.hexapod.check_stroke(q_steps).any(axis=1))
