@@ -19,6 +19,13 @@ to O is ``inv(T(O_cmd)) @ T(S_cmd)`` (the plan's poses less O's; exactly that wh
 the zero pose). The deviation of a step is ``measured - commanded - offset``, per
 component, angles wrapped to (-180, 180] deg; its translation is the norm of the first
 three components (mm), its rotation the largest absolute angle (deg).
+
+The rotation tolerance of the default check is scaled to the commanded motion
+(:meth:`PoseCheck.rotation_tolerance_deg`): :data:`ROTATION_FLOOR_DEG` plus
+:data:`ROTATION_FRACTION` of the step's largest commanded angle relative to O. A plan in
+another rotation convention than the hexapod's (Symetrie's fixed axes for PI's mobile
+ones) moves the platform by the second-order difference of the two, 6.8 % of the
+commanded angle at 8 deg (7.5 mrad): within the stroke-sized 1.04 deg, beyond this.
 """
 
 from __future__ import annotations
@@ -43,6 +50,8 @@ __all__ = [
     "MIN_TOLERANCE_MM",
     "PoseCheck",
     "PoseDeviations",
+    "ROTATION_FLOOR_DEG",
+    "ROTATION_FRACTION",
     "SOLID_FRACTION",
     "UNIT_SCALES",
     "commanded_relative",
@@ -58,6 +67,14 @@ __all__ = [
 DEFAULT_TOLERANCE_FRACTION = 0.02
 #: smallest default translation tolerance, mm (also the default without a stroke: 2 mm)
 MIN_TOLERANCE_MM = 2.0
+#: absolute part of the default rotation tolerance, deg (0.87 mrad): ten times the largest
+#: rotation deviation of the shipped sessions at a commanded rotation of zero (0.0052 deg,
+#: the legs' thermal tilt), and far above a positioning hexapod's accuracy (tens of urad)
+ROTATION_FLOOR_DEG = 0.05
+#: relative part of the default rotation tolerance, of the step's largest commanded angle:
+#: three times the largest relative deviation of the shipped sessions (0.31 %, a geometry
+#: 50 um off its file); a convention mix-up deviates by 6.8 % at 8 deg
+ROTATION_FRACTION = 0.01
 #: scale factors of unit mix-ups, (factor, what it looks like): measured = factor x commanded
 UNIT_SCALES: tuple[tuple[float, str, str], ...] = (
     (25.4, "translations", "the plan's translations in inches, the measurements in mm?"),
@@ -83,11 +100,18 @@ class PoseCheck:
     offset : ndarray, shape (6,)
         A known, constant deviation of every step but O from its commanded pose
         relative to O (mm, deg), subtracted before comparing.
+    rotation_floor_deg, rotation_fraction : float or None, float
+        With a floor, a step's rotation tolerance is scaled to its commanded motion:
+        ``min(tolerance_deg, rotation_floor_deg + rotation_fraction * max|angle|)``
+        (:meth:`rotation_tolerance_deg`); None: ``tolerance_deg`` for every step.
 
     Examples
     --------
     >>> PoseCheck(2.0, 1.0).offset.tolist()
     [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    >>> scaled = PoseCheck(2.0, 1.0, rotation_floor_deg=0.05, rotation_fraction=0.01)
+    >>> scaled.rotation_tolerance_deg([[0, 0, 0, 0, 0, 0], [1, 0, 0, 3, -8, 2]]).tolist()
+    [0.05, 0.13]
     >>> PoseCheck(float("nan"), 1.0)
     Traceback (most recent call last):
     ...
@@ -97,9 +121,21 @@ class PoseCheck:
     tolerance_mm: float
     tolerance_deg: float
     offset: FloatArray = field(default_factory=lambda: np.zeros(6))
+    rotation_floor_deg: float | None = None
+    rotation_fraction: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("tolerance_mm", "tolerance_deg"):
+        fraction = self.rotation_fraction
+        if (
+            isinstance(fraction, bool)
+            or not isinstance(fraction, int | float)
+            or not (0 <= fraction < np.inf)
+        ):
+            raise ValueError(f"pose rotation_fraction must be a number >= 0, got {fraction!r}")
+        names = ["tolerance_mm", "tolerance_deg"]
+        if self.rotation_floor_deg is not None:
+            names.append("rotation_floor_deg")
+        for name in names:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | float) or not value > 0:
                 raise ValueError(
@@ -114,6 +150,22 @@ class PoseCheck:
     def enabled(self) -> bool:
         """Whether any tolerance is finite."""
         return bool(np.isfinite(self.tolerance_mm) or np.isfinite(self.tolerance_deg))
+
+    @property
+    def scaled(self) -> bool:
+        """Whether the rotation tolerance is scaled to the commanded motion."""
+        return self.rotation_floor_deg is not None and bool(np.isfinite(self.tolerance_deg))
+
+    def rotation_tolerance_deg(self, commanded: npt.ArrayLike) -> FloatArray:
+        """The rotation tolerance of each step, deg, from its commanded pose relative to O
+        (N, 6): ``tolerance_deg``, or scaled (see the class)."""
+        c = np.atleast_2d(np.asarray(commanded, dtype=float))
+        tol = np.full(c.shape[0], float(self.tolerance_deg))
+        if self.scaled:
+            assert self.rotation_floor_deg is not None
+            angle = np.abs(_wrap_deg(c[:, 3:])).max(axis=1, initial=0.0)
+            tol = np.minimum(tol, self.rotation_floor_deg + self.rotation_fraction * angle)
+        return tol
 
 
 def default_pose_tolerance(
@@ -209,12 +261,15 @@ class PoseDeviations:
         Largest absolute angle deviation.
     failing : ndarray of bool, shape (N,)
         Beyond either tolerance.
+    tolerance_deg : ndarray, shape (N,)
+        Each step's rotation tolerance (:meth:`PoseCheck.rotation_tolerance_deg`).
     """
 
     deviation: FloatArray
     translation_mm: FloatArray
     rotation_deg: FloatArray
     failing: BoolArray
+    tolerance_deg: FloatArray
 
 
 def pose_deviations(
@@ -252,8 +307,9 @@ def pose_deviations(
     deviation[:, 3:] = _wrap_deg(deviation[:, 3:])
     translation = np.linalg.norm(deviation[:, :3], axis=1)
     rotation = np.abs(deviation[:, 3:]).max(axis=1, initial=0.0)
-    failing = (translation > check.tolerance_mm) | (rotation > check.tolerance_deg)
-    return PoseDeviations(deviation, translation, rotation, failing)
+    tolerance = check.rotation_tolerance_deg(c)
+    failing = (translation > check.tolerance_mm) | (rotation > tolerance)
+    return PoseDeviations(deviation, translation, rotation, failing, tolerance)
 
 
 #: balls span a solid (their handedness is their own) when the smallest singular value

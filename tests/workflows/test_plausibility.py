@@ -7,6 +7,9 @@
 
 4. Mirrored centres (x and y exchanged) of a small-motion session passed: the mirror test
    ran only after the pose tolerance failed. It runs always now.
+5. A hexapod file in another rotation convention than the controller's deviated by 7.5
+   mrad at 8 deg, inside the rotation tolerance of 1.04 deg. That tolerance is scaled to
+   the commanded motion now: 0.05 deg + 1 % of the step's largest commanded angle.
 
 The truth the checks are held to: the twin's (what the corrected poses should be) and the
 known displacement put into the measurement (which leg it lengthens most, and by how much).
@@ -28,7 +31,7 @@ from scipy.spatial.transform import Rotation
 from hexatherm.cli import main
 from hexatherm.core.geometry import pose_from_transform
 from hexatherm.core.plan import Plan
-from hexatherm.core.plausibility import mirrored
+from hexatherm.core.plausibility import PoseCheck, mirrored, pose_deviations
 from hexatherm.devices.serialport import PortSettings
 from hexatherm.errors import PlanError
 from hexatherm.workflows.process.pipeline import Checks, process_session
@@ -250,13 +253,14 @@ def test_run_with_a_controller_that_settles_1mm_away_fails_a_growth_check(tmp_pa
 
 
 # ------------------------------------------------------------------ item 4
-#: a small-motion plan: every pose within 2 mm and 1 deg of O (Tz, Rx and Ry within half
-#: the pose tolerance: a mirror reverses them)
+#: a small-motion plan: every pose within 2 mm and 1 deg of O, turned about z only: the
+#: mirror image of a swap of x and y reverses Tz (Rx and Ry too, which the rotation
+#: tolerance, scaled to the motion, would see), so this one deviates by 1.8 mm at most
 SMALL_REFERENCE = [0.0, 0.0, -0.9, 0.0, 0.0, 0.0]
 SMALL_TARGETS = (
-    [1.5, -1.0, 0.5, 0.4, -0.3, 0.6],
-    [-1.2, 1.4, -0.8, -0.3, 0.45, -0.9],
-    [0.7, 1.1, 0.9, 0.45, 0.35, 1.0],
+    [1.5, -1.0, 0.5, 0.0, 0.0, 0.6],
+    [-1.2, 1.4, -0.8, 0.0, 0.0, -0.9],
+    [0.7, 1.1, 0.9, 0.0, 0.0, 1.0],
 )
 
 
@@ -289,15 +293,15 @@ def test_mirrored_centres_of_a_small_motion_session_are_refused(small, tmp_path)
     clean = process_session(session)  # the session itself passes
     assert np.abs(clean.steps.pose - clean.session.plan.poses).max() < 0.05
     edit_centres(session, swap_xy)
-    # what the refusal prevents: within the pose tolerance, corrected poses up to a
-    # millimetre and tenths of a degree from the twin's truth
+    # what the refusal prevents: within the pose tolerance, corrected poses over a
+    # millimetre from the twin's truth
     unchecked = process_session(session, checks=Checks(pose_tolerance=(np.inf, np.inf)))
     idx = unchecked.correction.target_index
     err = unchecked.correction.corrected - truth.corrected_pose[idx]
-    assert np.abs(err[:, :3]).max() > 0.5 and np.abs(err[:, 3:]).max() > 0.2
+    assert np.abs(err[:, :3]).max() > 1.0
     cmd = unchecked.session.plan.poses
     assert np.linalg.norm(unchecked.steps.pose[:, :3] - cmd[:, :3], axis=1).max() < 2.0
-    assert np.abs(unchecked.steps.pose[:, 3:] - cmd[:, 3:]).max() < 1.04
+    assert np.abs(unchecked.steps.pose[:, 3:] - cmd[:, 3:]).max() < 0.05
     with pytest.raises(PlanError) as caught:
         process_session(session)
     message = str(caught.value)
@@ -356,3 +360,109 @@ def test_four_balls_on_a_solid_carry_their_own_handedness():
     three = np.einsum("nij,kj->nki", upright, BALLS.centres_mm) + shifts[:50]
     assert not mirrored(three, BALLS.centres_mm).any()
     assert mirrored(three[:, :, [1, 0, 2]], BALLS.centres_mm).all()
+
+
+# ------------------------------------------------------------------ item 5
+#: targets of the calibration campaigns' size (up to 8 deg), every angle non-zero
+WIDE_TARGETS = (
+    [5.0, -3.0, 2.0, 4.0, -6.0, 8.0],
+    [-4.0, 6.0, -3.0, -5.0, 3.0, -7.0],
+    [3.0, 3.0, 4.0, 3.0, 5.0, -6.0],
+)
+
+
+def convention_session(folder: Path, convention: str) -> Path:
+    """A twin session whose controller (the twin) moves in ``convention``."""
+    text = (ROOT / "configs" / "symetrie-like.yaml").read_text()
+    text = text.replace("convention: symetrie", f"convention: {convention}")
+    steps = [("O", "origin", [0.0] * 6), ("R0", "reference", REFERENCE)]
+    for i, pose in enumerate(WIDE_TARGETS, 1):
+        steps += [(f"S{i}", "target", list(pose)), (f"R{i}", "reference", REFERENCE)]
+    spec = TwinSessionSpec(
+        name=folder.name,
+        hexapod_text=text,
+        balls=BALLS,
+        plan=Plan.from_steps(steps, reference_pose=REFERENCE),
+        heating=Heating(on_s=0.0, tau_s=2400.0, gain_C=(3.0, 7.0, 2.0, 3.0, 9.0, 3.5)),
+        seed=6,
+    )
+    write_twin_session(spec, folder)
+    return folder
+
+
+@pytest.mark.parametrize(("moved", "file"), [("pi", "symetrie"), ("symetrie", "pi")])
+def test_a_hexapod_file_in_the_other_convention_fails_the_pose_check(tmp_path, moved, file):
+    session = convention_session(tmp_path / "s", moved)
+    right = process_session(session)  # the file the controller moved by: passes
+    cmd = right.session.plan.poses
+    assert np.abs(right.steps.pose[:, 3:] - cmd[:, 3:]).max() < 0.01
+    hexapod = session / "hexapod.yaml"
+    hexapod.write_text(hexapod.read_text().replace(f"convention: {moved}", f"convention: {file}"))
+    # the truth of the mix-up: the commanded rotation read in the other convention, as
+    # scipy composes it (fixed axes "xyz", mobile axes "XYZ")
+    axes = {"symetrie": "xyz", "pi": "XYZ"}
+    moved_as = Rotation.from_euler(axes[moved], np.array(WIDE_TARGETS)[:, 3:], degrees=True)
+    read_as = moved_as.as_euler(axes[file], degrees=True)
+    expected = np.abs(read_as - np.array(WIDE_TARGETS)[:, 3:]).max(axis=1)
+    assert 0.5 < expected.max() < 1.04  # 9 to 15 mrad: inside the stroke-sized tolerance
+    with pytest.raises(PlanError) as caught:
+        process_session(session)
+    message = str(caught.value)
+    tolerance = 0.05 + 0.01 * np.abs(np.array(WIDE_TARGETS)[:, 3:]).max(axis=1)
+    assert (expected > 2 * tolerance).all()  # every target fails, by a factor over 2
+    first = int(np.argmax(expected > tolerance))
+    found = re.match(
+        r"step S(\d): measured pose relative to O \[.*\] is \d\.\d{3} mm, (\d\.\d{3}) deg from "
+        r"the commanded \[.*\] \(tolerance 2 mm, (\d\.\d+) deg = 0\.05 deg \+ 1% of the "
+        r"commanded \d deg: ",
+        message,
+    )
+    assert found, message
+    step = int(found.group(1)) - 1
+    assert step == first
+    assert float(found.group(2)) == pytest.approx(expected[step], abs=0.002)
+    assert float(found.group(3)) == pytest.approx(
+        0.05 + 0.01 * np.abs(WIDE_TARGETS[step][3:]).max()
+    )
+    # declared as it is, the old tolerance lets it through
+    unchecked = process_session(session, checks=Checks(pose_tolerance=(2.0, 1.04)))
+    assert np.abs(unchecked.steps.pose[:, 3:] - cmd[:, 3:]).max() == pytest.approx(
+        expected.max(), abs=0.002
+    )
+
+
+def test_the_rotation_tolerance_scales_with_the_commanded_angle():
+    check = PoseCheck(2.0, 1.0, rotation_floor_deg=0.05, rotation_fraction=0.01)
+    commanded = np.array(
+        [[0.0] * 6, [0, 0, 0, 8.0, -3, 1], [0, 0, 0, 0, 0, 89.5], [0, 0, 0, 0, 0, 179]]
+    )
+    assert check.rotation_tolerance_deg(commanded) == pytest.approx([0.05, 0.13, 0.945, 1.0])
+    measured = commanded + [0, 0, 0, 0.1, 0, 0]
+    assert pose_deviations(measured, commanded, check).failing.tolist() == [
+        True,
+        False,
+        False,
+        False,
+    ]
+    # a declared tolerance is the same for every step
+    assert PoseCheck(2.0, 1.0).rotation_tolerance_deg(commanded).tolist() == [1.0] * 4
+
+
+def test_the_shipped_campaign_read_in_the_other_convention_is_refused(tmp_path):
+    """The issue's case: calibration-campaign (up to 8 deg) with a PI hexapod file deviated
+    by 7.5 mrad (0.427 deg) with no check failing."""
+    session = tmp_path / "s"
+    shutil.copytree(
+        ROOT / "sessions" / "calibration-campaign",
+        session,
+        ignore=shutil.ignore_patterns("expected", "truth", "results"),
+    )
+    hexapod = session / "hexapod.yaml"
+    hexapod.write_text(hexapod.read_text().replace("convention: symetrie", "convention: pi"))
+    unchecked = process_session(session, checks=Checks(pose_tolerance=(2.0, 1.04)))
+    cmd = unchecked.session.plan.poses
+    assert np.deg2rad(np.abs(unchecked.steps.pose[:, 3:] - cmd[:, 3:]).max()) == pytest.approx(
+        7.5e-3, abs=0.1e-3
+    )
+    with pytest.raises(PlanError, match=r"^step S\d+: .* deg = 0\.05 deg \+ 1% of the commanded"):
+        process_session(session)

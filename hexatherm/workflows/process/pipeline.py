@@ -20,6 +20,8 @@ from hexatherm.core.correction import Correction, Interpolation, StepPoses, corr
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import find_repeats, without_repeats
 from hexatherm.core.plausibility import (
+    ROTATION_FLOOR_DEG,
+    ROTATION_FRACTION,
     PoseCheck,
     commanded_relative,
     default_pose_tolerance,
@@ -149,14 +151,18 @@ def session_pose_check(session: Session, checks: Checks | None = None) -> PoseCh
         session.hexapod.stroke_mm, session.hexapod.platform_joints_mm
     )
     offset = np.zeros(6)
+    # the default rotation tolerance is scaled to the commanded motion (a convention
+    # mix-up is second order in the angles); a declared one is taken as it is
+    floor: float | None = ROTATION_FLOOR_DEG
     declared = read_pose_check(session.path)
     if declared is not None:
         tol_mm = declared.get("tolerance_mm", tol_mm)
-        tol_deg = declared.get("tolerance_deg", tol_deg)
+        if "tolerance_deg" in declared:
+            tol_deg, floor = declared["tolerance_deg"], None
         offset = np.asarray(declared.get("offset", offset), dtype=float)
     if checks is not None and checks.pose_tolerance is not None:
-        tol_mm, tol_deg = checks.pose_tolerance
-    return PoseCheck(float(tol_mm), float(tol_deg), offset)
+        (tol_mm, tol_deg), floor = checks.pose_tolerance, None
+    return PoseCheck(float(tol_mm), float(tol_deg), offset, floor, ROTATION_FRACTION)
 
 
 def check_poses(
@@ -208,10 +214,17 @@ def check_poses(
         return "[" + ", ".join(f"{v:.4f}" for v in p) + "]"
 
     offset = " less the declared offset" if np.any(check.offset) else ""
+    scaled = ""
+    if check.scaled and dev.tolerance_deg[i] < check.tolerance_deg:
+        angle = np.abs(commanded[i, 3:]).max()
+        scaled = (
+            f" = {check.rotation_floor_deg:g} deg + {check.rotation_fraction:.0%} of the "
+            f"commanded {angle:.3g} deg"
+        )
     raise StepError(
         f"measured pose relative to O {pose(steps.pose[i])} is {dev.translation_mm[i]:.3f} mm, "
         f"{dev.rotation_deg[i]:.3f} deg from the commanded {pose(commanded[i])}{offset} "
-        f"(tolerance {check.tolerance_mm:g} mm, {check.tolerance_deg:.3g} deg: "
+        f"(tolerance {check.tolerance_mm:g} mm, {dev.tolerance_deg[i]:.3g} deg{scaled}: "
         "--pose-tolerance MM,DEG or the session file's pose_check:)"
         + (f" ({more} more step(s) too)" if more else "")
         + f"; likeliest cause: {cause}",
