@@ -105,6 +105,17 @@ class QualityLimits:
         the correction's model and interpolation to carry over).
     min_rcond : float
         Smallest reciprocal condition number of the Jacobian at a target (as ``plan``).
+    growth_margin_C : float
+        With a thermocouple log: how much more a leg's growth since R0 at a reference may
+        need (as the smallest temperature change that explains it) than the span of the
+        leg's logged temperatures up to that reference. It covers the thermocouple's
+        error, gradients along the leg and the leg length's noise (about 1 um, 0.2 K on
+        the Symetrie-like legs); the shipped sessions need at most 0.7 K.
+    max_warming_C : float
+        Without a log: the largest temperature change since R0 that a leg's growth at a
+        reference may need. Twice the largest leg warming of the shipped and simulated
+        campaigns (10.7 K, heating mats on the legs): motors and a CMM room at 20 +- 1 K
+        do not warm a hexapod's legs by more; 20 K is 91 um on the Symetrie-like legs.
     """
 
     form_um: float = 10.0
@@ -114,6 +125,8 @@ class QualityLimits:
     time_gap_s: float = 600.0
     temperature_change_C: float = 1.0
     min_rcond: float = DEFAULT_MIN_RCOND
+    growth_margin_C: float = 2.0
+    max_warming_C: float = 20.0
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):

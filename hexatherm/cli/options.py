@@ -46,7 +46,8 @@ quality_threshold_option = click.option(
     metavar="NAME=VALUE",
     help="Change a quality check's limit (repeatable; over the session file's quality: "
     "mapping): form_um, diameter_dev_um, distance_dev_um, registration_rms_um, time_gap_s, "
-    "temperature_change_C, min_rcond; inf (0 for min_rcond) disables a check.",
+    "temperature_change_C, min_rcond, growth_margin_C, max_warming_C; inf (0 for min_rcond) "
+    "disables a check.",
 )
 #: exit status of ``--strict`` when a check fails (the outputs are still written)
 CHECK_FAILED_EXIT = 3
@@ -136,8 +137,10 @@ pose_tolerance_option = click.option(
     default=None,
     help="Refuse a step whose measured pose relative to O deviates more from its commanded "
     "pose relative to O (translation mm, rotation deg; inf: no check) [default: the session "
-    "file's pose_check:, else 2 % of the leg stroke, at least 2 mm, and the angle that "
-    "moves the platform's joints as much].",
+    "file's pose_check:, else 2 % of the leg stroke, at least 2 mm, and in rotation 0.05 "
+    "deg + 1 % of the step's largest commanded angle, at most the angle that moves the "
+    "platform's joints as much; a given DEG holds for every step; a mirror image is "
+    "refused too].",
 )
 mc_option = click.option(
     "--mc",

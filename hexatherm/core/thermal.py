@@ -139,6 +139,12 @@ class LegThermalModel:
         """Growth per kelvin of each leg with all its segments equally heated, (..., 6)."""
         return (self.cte_per_K * self.segment_lengths_mm(q_mm)).sum(axis=-1)
 
+    def bound_sensitivity_mm_per_K(self, q_mm: npt.ArrayLike) -> FloatArray:
+        """``sum_s |cte_s| L_s`` of each leg, (..., 6): the largest ``|growth|`` per kelvin
+        when no segment's temperature changes by more than 1 K, either way (equal to
+        :meth:`sensitivity_mm_per_K` when every CTE is positive)."""
+        return (np.abs(self.cte_per_K) * self.segment_lengths_mm(q_mm)).sum(axis=-1)
+
     def growth_mm(
         self, q_mm: npt.ArrayLike, temperature_C: npt.ArrayLike, *, per_segment: bool = False
     ) -> FloatArray:

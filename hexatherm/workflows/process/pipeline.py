@@ -9,6 +9,8 @@ writes nothing: :mod:`hexatherm.workflows.process.outputs` does.
 from __future__ import annotations
 
 import dataclasses
+import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,6 +20,8 @@ from hexatherm.core.correction import Correction, Interpolation, StepPoses, corr
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import find_repeats, without_repeats
 from hexatherm.core.plausibility import (
+    ROTATION_FLOOR_DEG,
+    ROTATION_FRACTION,
     PoseCheck,
     commanded_relative,
     default_pose_tolerance,
@@ -147,34 +151,60 @@ def session_pose_check(session: Session, checks: Checks | None = None) -> PoseCh
         session.hexapod.stroke_mm, session.hexapod.platform_joints_mm
     )
     offset = np.zeros(6)
+    # the default rotation tolerance is scaled to the commanded motion (a convention
+    # mix-up is second order in the angles); a declared one is taken as it is
+    floor: float | None = ROTATION_FLOOR_DEG
     declared = read_pose_check(session.path)
     if declared is not None:
         tol_mm = declared.get("tolerance_mm", tol_mm)
-        tol_deg = declared.get("tolerance_deg", tol_deg)
+        if "tolerance_deg" in declared:
+            tol_deg, floor = declared["tolerance_deg"], None
         offset = np.asarray(declared.get("offset", offset), dtype=float)
     if checks is not None and checks.pose_tolerance is not None:
-        tol_mm, tol_deg = checks.pose_tolerance
-    return PoseCheck(float(tol_mm), float(tol_deg), offset)
+        (tol_mm, tol_deg), floor = checks.pose_tolerance, None
+    return PoseCheck(float(tol_mm), float(tol_deg), offset, floor, ROTATION_FRACTION)
 
 
-def check_poses(session: Session, centres: StepCentres, steps: StepPoses, check: PoseCheck) -> None:
-    """Refuse a step whose measured pose relative to O is not its commanded one.
+def check_poses(
+    session: Session,
+    centres: StepCentres,
+    steps: StepPoses,
+    check: PoseCheck,
+    records: Sequence[Records] = (),
+) -> None:
+    """Refuse a step whose measured pose relative to O is not its commanded one, or
+    whose measured balls are a mirror image of the balls file's.
 
     Thermal errors are micrometres; millimetres or degrees are a mistake in the data
     that registers without a residual: swapped step labels, a mirrored measurement
     (x and y columns swapped), a plan in other units. PlanError (a StepError) naming
     the first failing step, its deviation, the tolerance and the likeliest cause
-    (:func:`hexatherm.core.plausibility.likeliest_cause`).
+    (:func:`hexatherm.core.plausibility.likeliest_cause`). A mirror image is refused
+    even within the tolerance (a small motion mirrors into a small deviation; a
+    reflection is never a rotation: :func:`hexatherm.core.plausibility.mirrored`),
+    naming the step and the file and line of its first measurement in ``records``.
     """
     if not check.enabled:
         return
     plan = session.plan
     commanded = commanded_relative(plan.poses, plan.origin_index, session.hexapod.convention)
     dev = pose_deviations(steps.pose, commanded, check, plan.origin_index)
+    flipped = mirrored(centres.centres_mm, session.balls.centres_mm)
     if not np.any(dev.failing):
+        if np.any(flipped):
+            i = int(np.argmax(flipped))
+            more = int(flipped.sum()) - 1
+            raise StepError(
+                "the measured balls are a mirror image of the balls file's (a reflection, "
+                "never a rotation: x and y columns swapped, or an axis' sign flipped?)"
+                + where_measured(records, plan.labels[i])
+                + (f" ({more} more step(s) too)" if more else "")
+                + "; the pose check is off with --pose-tolerance inf",
+                step=plan.labels[i],
+                index=i,
+            )
         return
     i = int(np.argmax(dev.failing))
-    flipped = mirrored(centres.centres_mm, session.balls.centres_mm)
     cause = likeliest_cause(
         i, steps.pose, commanded, check, plan.labels, flipped, plan.origin_index
     )
@@ -184,16 +214,34 @@ def check_poses(session: Session, centres: StepCentres, steps: StepPoses, check:
         return "[" + ", ".join(f"{v:.4f}" for v in p) + "]"
 
     offset = " less the declared offset" if np.any(check.offset) else ""
+    scaled = ""
+    if check.scaled and dev.tolerance_deg[i] < check.tolerance_deg:
+        angle = np.abs(commanded[i, 3:]).max()
+        scaled = (
+            f" = {check.rotation_floor_deg:g} deg + {check.rotation_fraction:.0%} of the "
+            f"commanded {angle:.3g} deg"
+        )
     raise StepError(
         f"measured pose relative to O {pose(steps.pose[i])} is {dev.translation_mm[i]:.3f} mm, "
         f"{dev.rotation_deg[i]:.3f} deg from the commanded {pose(commanded[i])}{offset} "
-        f"(tolerance {check.tolerance_mm:g} mm, {check.tolerance_deg:.3g} deg: "
+        f"(tolerance {check.tolerance_mm:g} mm, {dev.tolerance_deg[i]:.3g} deg{scaled}: "
         "--pose-tolerance MM,DEG or the session file's pose_check:)"
         + (f" ({more} more step(s) too)" if more else "")
         + f"; likeliest cause: {cause}",
         step=plan.labels[i],
         index=i,
     )
+
+
+def where_measured(records: Sequence[Records], label: str) -> str:
+    """`` in FILE:LINE`` of the first row of step ``label`` in ``records`` (its repeats'
+    labels ``O-2`` ... too), or ``""``."""
+    pattern = re.compile(re.escape(label) + r"(-[0-9]+)?")
+    for rec in records:
+        rows = np.flatnonzero([pattern.fullmatch(str(x)) is not None for x in rec.label])
+        if rows.size:
+            return f" in {rec.path}:{int(rec.line[rows[0]])}"
+    return ""
 
 
 def average_repeats(
@@ -325,6 +373,7 @@ def process_session(
         centres,
         step_poses(session.hexapod, registration.platform2cmm, plan.origin_index),
         session_pose_check(session, checks),
+        records,
     )
     q_steps = session.hexapod.igm(plan.poses)
     outside = np.flatnonzero(session.hexapod.check_stroke(q_steps).any(axis=1))

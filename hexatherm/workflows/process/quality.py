@@ -22,7 +22,20 @@ temperature     ``temperature_change_C``   a target's largest leg temperature ch
                                            reference it uses > ``temperature_change_C``
 conditioning    ``jacobian_rcond``         reciprocal condition number of the Jacobian at a
                                            target's corrected pose (the FGM) < ``min_rcond``
+growth          ``growth_excess_C``        with a temperature log, at a reference after R0:
+                                           the largest temperature change a leg's growth
+                                           since R0 needs beyond the span of the leg's
+                                           logged temperatures (0 within it) >
+                                           ``growth_margin_C``
+warming         ``growth_warming_C``       at a reference after R0: the largest
+                                           temperature change a leg's growth since R0
+                                           needs > ``max_warming_C``
 ==============  =========================  ===============================================
+
+The growth and warming checks name the leg in ``growth_leg`` and ``warming_leg`` (1 to
+6): thermal growth is micrometres per kelvin
+(:func:`hexatherm.core.plausibility.implied_warming_K`), so a reference measured a
+millimetre away from its commanded pose reads as tens of kelvin.
 """
 
 from __future__ import annotations
@@ -35,6 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from hexatherm.core.plausibility import implied_warming_K, temperature_span_K
 from hexatherm.core.registration import check_distances
 from hexatherm.errors import HexathermError, InputWarning
 from hexatherm.session import QUALITY_ALIASES, QualityLimits, Session
@@ -57,6 +71,14 @@ CHECKS: dict[str, tuple[str, str, bool]] = {
     "time_gap": ("time_gap_s", "time_gap_s", False),
     "temperature": ("temperature_change_C", "temperature_change_C", False),
     "conditioning": ("jacobian_rcond", "min_rcond", True),
+    "growth": ("growth_excess_C", "growth_margin_C", False),
+    "warming": ("growth_warming_C", "max_warming_C", False),
+}
+
+#: check name -> the column that names where on the step it failed, and how
+DETAILS: dict[str, tuple[str, str]] = {
+    "growth": ("growth_leg", "leg {}"),
+    "warming": ("warming_leg", "leg {}"),
 }
 
 
@@ -96,6 +118,19 @@ class QualityReport:
         """Whether any check failed on any step."""
         return bool((self.frame["failed"] != "").any())
 
+    def failing_texts(self, check: str) -> list[str]:
+        """Labels of the steps that failed ``check``, with where on the step
+        (:data:`DETAILS`: ``R3 (leg 2)``)."""
+        rows = self.frame.loc[self.failing(check)]
+        labels = rows["label"].astype(str).tolist()
+        if check not in DETAILS:
+            return labels
+        column, text = DETAILS[check]
+        return [
+            f"{label} ({text.format(where)})" if where != "" else label
+            for label, where in zip(labels, rows[column].tolist(), strict=True)
+        ]
+
     def summary(self) -> list[str]:
         """Screen lines: per check the worst value, its limit and the failing steps."""
         lines = []
@@ -108,7 +143,7 @@ class QualityReport:
             else:
                 worst = np.nanmin(shown) if at_least else np.nanmax(shown)
                 worst_text = f"{worst:.4g}"
-            failing = self.frame.loc[self.failing(check), "label"].tolist()
+            failing = self.failing_texts(check)
             ran = self.ran(check)
             status = (
                 "n/a (could not run: " + _why_not(check, self.frame) + ")"
@@ -136,10 +171,13 @@ def _why_not(check: str, frame: pd.DataFrame) -> str:
         and not (frame["kind"] == "target").any()
     ):
         return "no target"
+    if check in ("growth", "warming") and (frame["kind"] == "reference").sum() < 2:
+        return "no reference after R0"
     reasons = {
         "form": "no probed points, centres given as such",
         "diameter": "no fitted diameters, centres given as such",
         "temperature": "no thermocouple log in the session",
+        "growth": "no thermocouple log in the session",
     }
     return reasons.get(check, "no value")
 
@@ -237,6 +275,51 @@ def _leg_temperatures(result: ProcessResult) -> FloatArray | None:
     return np.column_stack([np.interp(t, temps.time_s, temps.legs_C[:, i]) for i in range(6)])
 
 
+def growth_values(result: ProcessResult) -> dict[str, FloatArray | list[str]]:
+    """The growth and warming checks' values of every step, and the legs they name.
+
+    At every reference after R0 the growth of each leg since R0, ``q_R - q_R0`` (the
+    correction's step 2), needs a temperature change of at least
+    :func:`~hexatherm.core.plausibility.implied_warming_K`; ``growth_warming_C`` is the
+    largest over the legs. With a thermocouple log the leg's temperature can have changed
+    by at most the span of its logged temperatures from the log's start to the reference
+    (:func:`~hexatherm.core.plausibility.temperature_span_K`: a leg lags its
+    thermocouple but stays within what it went through): ``growth_excess_C`` is the
+    largest need beyond that span (0 within it; NaN without a log). ``growth_leg`` and
+    ``warming_leg`` name the leg (1 to 6) of each, ``""`` where a check does not apply
+    (O, R0, targets, no log).
+    """
+    session = result.session
+    plan, legs = session.plan, session.hexapod.legs
+    n = len(plan.labels)
+    excess, warming = np.full(n, np.nan), np.full(n, np.nan)
+    growth_leg, warming_leg = [""] * n, [""] * n
+    out: dict[str, FloatArray | list[str]] = {
+        "growth_excess_C": excess,
+        "growth_warming_C": warming,
+        "growth_leg": growth_leg,
+        "warming_leg": warming_leg,
+    }
+    refs = plan.reference_indices
+    if legs is None or refs.size < 2:
+        return out
+    q = result.steps.q_mm
+    later = refs[1:]
+    needed = implied_warming_K(legs, q[later], q[later] - q[refs[0]])  # (n_refs - 1, 6)
+    warming[later] = needed.max(axis=1)
+    for i, j in zip(later, np.argmax(needed, axis=1), strict=True):
+        warming_leg[i] = str(int(j) + 1)
+    temps = result.temperatures
+    if temps is not None:
+        t = result.centres.times_s[later]
+        check_log_span(t, [plan.labels[i] for i in later], temps)
+        beyond = needed - temperature_span_K(temps.time_s, temps.legs_C, t)
+        excess[later] = np.maximum(beyond.max(axis=1), 0.0)
+        for i, j in zip(later, np.argmax(beyond, axis=1), strict=True):
+            growth_leg[i] = str(int(j) + 1)
+    return out
+
+
 def session_thresholds(
     session: Session, overrides: Mapping[str, float] | None = None
 ) -> QualityLimits:
@@ -280,8 +363,12 @@ def quality_checks(result: ProcessResult, thresholds: QualityLimits | None = Non
         sv = np.linalg.svd(session.hexapod.jacobian(corr.corrected), compute_uv=False)
         rcond[targets] = sv[:, -1] / sv[:, 0]
     values["jacobian_rcond"] = rcond
+    growth = growth_values(result)
+    values["growth_excess_C"] = np.asarray(growth["growth_excess_C"])
+    values["growth_warming_C"] = np.asarray(growth["growth_warming_C"])
 
-    frame = pd.DataFrame({"label": list(plan.labels), "kind": list(plan.kinds), **values})
+    legs = {name: growth[name] for name in ("growth_leg", "warming_leg")}
+    frame = pd.DataFrame({"label": list(plan.labels), "kind": list(plan.kinds), **values, **legs})
     failed = [[] for _ in range(n)]  # type: list[list[str]]
     for check, (column, field, at_least) in CHECKS.items():
         value, limit = values[column], getattr(thresholds, field)

@@ -50,6 +50,8 @@ QUALITY_HEADS = {
     "time_gap_s": ("time gap", "s"),
     "temperature_change_C": ("temperature change", "degC"),
     "jacobian_rcond": ("Jacobian rcond", ""),
+    "growth_excess_C": ("growth beyond the log", "degC"),
+    "growth_warming_C": ("warming for the growth", "degC"),
 }
 
 
