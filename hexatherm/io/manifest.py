@@ -57,6 +57,10 @@ class Manifest:
         Sub-folders hexatherm created (relative paths).
     version : str
         hexatherm's version that wrote the manifest last.
+    recorder : str or None
+        The recording command (``run``, ``acquire``) whose session folder this is
+        (JSON ``recorded_by``); ``None`` for a folder written whole by
+        :func:`hexatherm.io.outputs.output_dir`. See :mod:`hexatherm.io.recording`.
     """
 
     files: dict[str, tuple[str, ...]] = field(default_factory=dict)
@@ -64,6 +68,7 @@ class Manifest:
     times: dict[str, str] = field(default_factory=dict)
     folders: tuple[str, ...] = ()
     version: str = __version__
+    recorder: str | None = None
 
     def to_json(self) -> bytes:
         """The manifest file's content (JSON, UTF-8)."""
@@ -85,6 +90,8 @@ class Manifest:
             "files": files,
             "folders": sorted(self.folders),
         }
+        if self.recorder is not None:
+            doc["recorded_by"] = self.recorder
         return (json.dumps(doc, indent=1) + "\n").encode("utf-8")
 
     @classmethod
@@ -97,7 +104,10 @@ class Manifest:
         raw_folders = doc.get("folders", [])
         if not isinstance(raw_files, dict) or not isinstance(raw_folders, list):
             raise ValueError("'files' must be a mapping and 'folders' a list")
-        manifest = cls(version=str(doc.get("hexatherm", "")))
+        recorder = doc.get("recorded_by")
+        if recorder is not None and not isinstance(recorder, str):
+            raise ValueError("'recorded_by' must be a command's name")
+        manifest = cls(version=str(doc.get("hexatherm", "")), recorder=recorder)
         for name, entry in raw_files.items():
             if not isinstance(entry, dict) or not isinstance(entry.get("sha256"), str):
                 raise ValueError(f"entry {name!r} has no sha256")

@@ -8,6 +8,7 @@ before any work, and the whole tree of inputs is byte for byte as it was.
 
 from __future__ import annotations
 
+import hashlib
 import shutil
 from pathlib import Path
 
@@ -125,3 +126,137 @@ def test_a_single_file_output_is_replaced_only_while_hexatherm_vouches_for_it(la
     edited = CliRunner().invoke(main, [*run, "--overwrite"])
     assert edited.exit_code == 1 and "changed since hexatherm wrote it" in edited.output
     assert out.read_bytes().endswith(b"# checked by J. Doe\n")
+
+
+# ---------------------------------------------------------------- recording commands
+# Issue 22, item 1: ``run --session`` and ``acquire --session`` wrote into an existing
+# recorded session (plan.yaml and balls.yaml replaced even when no machine answered).
+
+HEXAPOD = ROOT / "configs" / "symetrie-like.yaml"
+BALLS = ROOT / "configs" / "balls-3.yaml"
+
+
+def checksums(folder: Path) -> dict[str, str]:
+    """Every entry under ``folder`` (hidden ones too): SHA-256 of files, "folder" for folders."""
+    return {
+        str(p.relative_to(folder)): "folder"
+        if p.is_dir()
+        else hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(folder.rglob("*"))
+    }
+
+
+def record(command: str, plan: Path, session: Path, *extra: object) -> list[str]:
+    """``run`` with no machine answering, or ``acquire`` on a port where nothing comes."""
+    if command == "run":
+        args: list[object] = [
+            "run", plan, "--cmm", "ipp://127.0.0.1:1", "--controller", "symetrie://127.0.0.1:1",
+            "--session", session, "--hexapod", HEXAPOD, "--balls", BALLS,
+            "--origin-on-cmm", "450,320,210,0,0,15", "--no-fsync", "--reconnects", "0",
+        ]  # fmt: skip
+    else:
+        args = [
+            "acquire", plan, "--hexapod", HEXAPOD, "--balls", BALLS, "--port", "loop://",
+            "--session", session, "--auto", "--idle-timeout", "0.2", "--read-timeout", "0.05",
+        ]  # fmt: skip
+    return [str(a) for a in [*args, *extra]]
+
+
+@pytest.fixture
+def recorded(lab: Path) -> Path:
+    """A copy of sessions/paper-zero-pose, and its plan outside of it."""
+    shutil.copy(lab / "s" / "plan.yaml", lab / "plan.yaml")
+    return lab / "s"
+
+
+@pytest.mark.parametrize("command", ["run", "acquire"])
+def test_a_recording_command_refuses_a_recorded_session(
+    lab: Path, recorded: Path, command: str
+) -> None:
+    before = checksums(lab)
+    result = CliRunner().invoke(main, record(command, lab / "plan.yaml", recorded))
+    assert result.exit_code == 1, result.output
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in result.output, result.output
+    assert f"--session {recorded}: {command} records only into a new or empty folder" in lines[0]
+    assert "session.yaml (a session)" in lines[0] and "nothing was written" in lines[0]
+    assert checksums(lab) == before
+
+
+@pytest.mark.parametrize("command", ["run", "acquire"])
+def test_a_recording_command_refuses_a_simulated_session_its_manifest_vouches_for(
+    lab: Path, recorded: Path, command: str
+) -> None:
+    sim = lab / "sim"
+    made = CliRunner().invoke(main, ["simulate", str(lab / "scenario.yaml"), "-o", str(sim)])
+    assert made.exit_code == 0, made.output
+    before = checksums(lab)
+    result = CliRunner().invoke(main, record(command, lab / "plan.yaml", sim))
+    assert result.exit_code == 1, result.output
+    assert "session.yaml (a session)" in result.output
+    assert f"written by hexatherm as an output, not by {command}" in result.output
+    assert checksums(lab) == before
+
+
+@pytest.mark.parametrize("command", ["run", "acquire"])
+def test_a_recording_command_refuses_a_folder_with_a_foreign_file(
+    lab: Path, recorded: Path, command: str
+) -> None:
+    folder = lab / "new"
+    folder.mkdir()
+    (folder / "notes.txt").write_text("cell 3, operator J. Doe\n")
+    before = checksums(lab)
+    result = CliRunner().invoke(main, record(command, lab / "plan.yaml", folder))
+    assert result.exit_code == 1, result.output
+    assert f"notes.txt (not recorded by hexatherm {command})" in result.output
+    assert checksums(lab) == before
+    # --session around its own plan: the output guard's first rule
+    (folder / "notes.txt").unlink()
+    shutil.copy(lab / "plan.yaml", folder / "plan.yaml")
+    before = checksums(lab)
+    around = CliRunner().invoke(main, record(command, folder / "plan.yaml", folder))
+    assert around.exit_code == 1 and "contains the input" in around.output, around.output
+    assert checksums(lab) == before
+
+
+def test_run_starts_again_only_in_a_folder_it_recorded_unchanged(lab: Path, recorded: Path) -> None:
+    """A run refused before anything was probed can be started again in its folder (and
+    writes its manifest); a file added there, or one of its files edited, is refused."""
+    folder = lab / "new"
+    first = CliRunner().invoke(main, record("run", lab / "plan.yaml", folder))
+    assert first.exit_code == 1 and "Connection refused" in first.output, first.output
+    manifest = read_manifest(folder)
+    assert manifest is not None and manifest.recorder == "run"
+    assert {"plan.yaml", "balls.yaml", "ipp.transcript", "run.yaml"} <= set(manifest.files)
+    again = CliRunner().invoke(main, record("run", lab / "plan.yaml", folder))
+    assert again.exit_code == 1 and "Connection refused" in again.output, again.output
+    (folder / "notes.txt").write_text("mine\n")
+    before = checksums(lab)
+    refused = CliRunner().invoke(main, record("run", lab / "plan.yaml", folder))
+    assert refused.exit_code == 1 and "notes.txt (not written by hexatherm)" in refused.output
+    assert checksums(lab) == before
+    (folder / "notes.txt").unlink()
+    with open(folder / "run.yaml", "a") as handle:
+        handle.write("# checked\n")
+    before = checksums(lab)
+    edited = CliRunner().invoke(main, record("run", lab / "plan.yaml", folder))
+    assert edited.exit_code == 1 and "run.yaml (changed since hexatherm wrote it)" in edited.output
+    assert checksums(lab) == before
+
+
+def test_resume_continues_only_a_folder_the_same_command_recorded(
+    lab: Path, recorded: Path
+) -> None:
+    """A run whose thermocouple port did not open left serial.log (the file acquire
+    resumes from): ``acquire --resume`` must not take that folder for its own."""
+    folder = lab / "new"
+    args = record("run", lab / "plan.yaml", folder, "--temperature-port", "socket://127.0.0.1:1")
+    first = CliRunner().invoke(main, args)
+    assert first.exit_code == 1, first.output
+    assert (folder / "serial.log").is_file()
+    before = checksums(lab)
+    resumed = CliRunner().invoke(main, record("acquire", lab / "plan.yaml", folder, "--resume"))
+    assert resumed.exit_code == 1, resumed.output
+    assert "--resume continues a folder hexatherm acquire recorded" in resumed.output
+    assert "written by hexatherm run" in resumed.output
+    assert checksums(lab) == before
