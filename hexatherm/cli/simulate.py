@@ -43,7 +43,7 @@ def command(scenario: Path, out: Path, seed: int | None, overwrite: bool) -> Non
     from hexatherm.io.outputs import check_output_settled
     from hexatherm.workflows.simulate.run import simulate_file
 
-    check_output_settled(out, kind="folder", inputs=[scenario], overwrite=overwrite)
+    check_output_settled(out, kind="folder", inputs=[scenario], overwrite=overwrite, sessions=True)
     read, simulated, written = simulate_file(scenario, out, seed, overwrite)
     plan, truth = read.plan, simulated.truth
     duration_h = float(simulated.step_times_s[-1]) / 3600.0

@@ -187,7 +187,8 @@ def foreign_entries(folder: PathLike) -> list[tuple[str, str]]:
     list of (str, str)
         ``(relative path, reason)``, sorted; empty when replacing ``folder`` loses
         nothing but hexatherm's own unchanged output. A sub-folder is foreign unless
-        the manifest lists it or it has a manifest of its own that vouches for all of it.
+        the manifest lists it (then each of its entries is checked); one with a manifest
+        of its own is another output, written there by another run, and foreign too.
     """
     top = Path(folder)
     manifest = read_manifest(top)
@@ -216,10 +217,10 @@ def _foreign_walk(
             sub = Path(entry.path)
             if manifest is not None and rel in manifest.folders:
                 _foreign_walk(sub, rel + "/", manifest, found)
-            elif (own := read_manifest(sub)) is not None:
-                nested: list[tuple[str, str]] = []
-                _foreign_walk(sub, "", own, nested)
-                found.extend((f"{rel}/{name}", why) for name, why in nested)
+            elif read_manifest(sub) is not None:
+                # another output (results/smooth, an older results folder moved in):
+                # its own manifest vouches for it, not for replacing it with this folder
+                found.append((rel + "/", "another output, not listed by this folder's manifest"))
             else:
                 why = no_manifest if manifest is None else "a folder hexatherm did not write"
                 found.append((rel + "/", why))

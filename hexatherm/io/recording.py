@@ -45,44 +45,18 @@ from hexatherm.io.manifest import (
     read_manifest,
     sha256_file,
 )
-from hexatherm.io.outputs import check_not_input
+from hexatherm.io.outputs import SESSION_FILE, check_not_input, session_entries
 
 __all__ = [
-    "SESSION_FILE",
     "check_new_recording",
     "check_resume",
     "recording_manifest",
-    "session_entries",
 ]
 
-#: the file that makes a folder a session
-SESSION_FILE = "session.yaml"
 #: how many entries a message names
 _NAMED = 5
 
 PathLike = str | os.PathLike[str]
-
-
-def session_entries(folder: PathLike) -> list[tuple[str, str]]:
-    """The ``session.yaml`` files in ``folder``'s tree (links not followed), as foreign entries.
-
-    A folder that holds a session holds recorded data: only a command that writes
-    sessions (``simulate``) may replace it, and no recording command writes into it.
-
-    >>> import tempfile
-    >>> top = Path(tempfile.mkdtemp())
-    >>> (top / "a").mkdir(); _ = (top / "a" / "session.yaml").write_text("name: a\\n")
-    >>> session_entries(top)
-    [('a/session.yaml', 'a session')]
-    """
-    top = Path(folder)
-    found = []
-    for where, dirs, files in os.walk(top):
-        dirs.sort()
-        if SESSION_FILE in files and not os.path.islink(os.path.join(where, SESSION_FILE)):
-            rel = Path(where, SESSION_FILE).relative_to(top).as_posix()
-            found.append((rel, "a session"))
-    return sorted(found)
 
 
 def _message(option: str, folder: str, command: str, entries: list[tuple[str, str]]) -> str:
@@ -138,7 +112,7 @@ def check_new_recording(
             if manifest is None
             else f"written by hexatherm {manifest.recorder or 'as an output'}, not by {command}"
         )
-        entries += [e for e in _top_entries(path, why) if e[0] != "session.yaml"]
+        entries += [e for e in _top_entries(path, why) if e[0] != SESSION_FILE]
     else:
         entries += [e for e in foreign_entries(path) if e[0] != SESSION_FILE]
     if entries:

@@ -13,7 +13,7 @@ import shutil
 from pathlib import Path
 
 import pytest
-from click.testing import CliRunner
+from click.testing import CliRunner, Result
 
 from hexatherm.cli import main
 from hexatherm.io.manifest import read_manifest
@@ -260,3 +260,62 @@ def test_resume_continues_only_a_folder_the_same_command_recorded(
     assert "--resume continues a folder hexatherm acquire recorded" in resumed.output
     assert "written by hexatherm run" in resumed.output
     assert checksums(lab) == before
+
+
+# ---------------------------------------------------------------- nested and linked outputs
+# Issue 22, item 2: ``process --overwrite`` deleted outputs nested in results/ and
+# replaced a simulated session that results/ was a link to.
+
+
+def process(*args: object) -> Result:
+    return CliRunner().invoke(main, ["process", *[str(a) for a in args]])
+
+
+def test_process_overwrite_never_deletes_an_output_nested_in_its_results(lab: Path) -> None:
+    s = lab / "s"
+    assert process(s).exit_code == 0
+    smooth = process(s, "-o", s / "results" / "smooth", "--interpolation", "smooth")
+    assert smooth.exit_code == 0, smooth.output
+    before = checksums(lab)
+    refused = process(s, "--overwrite")
+    assert refused.exit_code == 1, refused.output
+    assert "smooth/ (another output, not listed by this folder's manifest)" in refused.output
+    assert checksums(lab) == before
+    # an older results folder moved inside the new one
+    (s / "results" / "smooth").rename(lab / "smooth")
+    (s / "results").rename(s / "old")
+    assert process(s).exit_code == 0
+    (s / "old").rename(s / "results" / "old")
+    before = checksums(lab)
+    refused = process(s, "--overwrite")
+    assert refused.exit_code == 1 and "old/ (another output" in refused.output, refused.output
+    assert checksums(lab) == before
+    # moved away, the results are hexatherm's alone and replaced
+    (s / "results" / "old").rename(lab / "old")
+    kept = checksums(lab / "old")
+    replaced = process(s, "--overwrite")
+    assert replaced.exit_code == 0, replaced.output
+    assert checksums(lab / "old") == kept
+    assert (s / "results" / "poses.csv").read_bytes() == (lab / "old" / "poses.csv").read_bytes()
+
+
+def test_process_overwrite_never_replaces_a_simulated_session_results_links_to(lab: Path) -> None:
+    sim = lab / "sim"
+    made = CliRunner().invoke(main, ["simulate", str(lab / "scenario.yaml"), "-o", str(sim)])
+    assert made.exit_code == 0, made.output
+    assert read_manifest(sim) is not None and (sim / "session.yaml").is_file()
+    s = lab / "s"
+    (s / "results").symlink_to(sim, target_is_directory=True)
+    before, session = checksums(lab), checksums(sim)
+    for args in ([s, "--overwrite"], [s, "-o", sim, "--overwrite"]):
+        refused = process(*args)
+        assert refused.exit_code == 1, refused.output
+        assert "session.yaml (a session)" in refused.output, refused.output
+        assert checksums(lab) == before and checksums(sim) == session
+    assert (s / "results").is_symlink()
+    # simulate itself still replaces its own session
+    again = CliRunner().invoke(
+        main, ["simulate", str(lab / "scenario.yaml"), "-o", str(sim), "--overwrite"]
+    )
+    assert again.exit_code == 0, again.output
+    assert checksums(sim).keys() == session.keys()
