@@ -61,6 +61,9 @@ class Manifest:
         The recording command (``run``, ``acquire``) whose session folder this is
         (JSON ``recorded_by``); ``None`` for a folder written whole by
         :func:`hexatherm.io.outputs.output_dir`. See :mod:`hexatherm.io.recording`.
+    recorded : tuple of str
+        The files the recording command wrote (JSON ``recorded_files``): measured data,
+        which no ``--overwrite`` replaces.
     """
 
     files: dict[str, tuple[str, ...]] = field(default_factory=dict)
@@ -69,6 +72,7 @@ class Manifest:
     folders: tuple[str, ...] = ()
     version: str = __version__
     recorder: str | None = None
+    recorded: tuple[str, ...] = ()
 
     def to_json(self) -> bytes:
         """The manifest file's content (JSON, UTF-8)."""
@@ -92,6 +96,7 @@ class Manifest:
         }
         if self.recorder is not None:
             doc["recorded_by"] = self.recorder
+            doc["recorded_files"] = sorted(self.recorded)
         return (json.dumps(doc, indent=1) + "\n").encode("utf-8")
 
     @classmethod
@@ -107,7 +112,12 @@ class Manifest:
         recorder = doc.get("recorded_by")
         if recorder is not None and not isinstance(recorder, str):
             raise ValueError("'recorded_by' must be a command's name")
-        manifest = cls(version=str(doc.get("hexatherm", "")), recorder=recorder)
+        recorded = doc.get("recorded_files", [])
+        if not isinstance(recorded, list) or not all(isinstance(n, str) for n in recorded):
+            raise ValueError("'recorded_files' must be a list of names")
+        manifest = cls(
+            version=str(doc.get("hexatherm", "")), recorder=recorder, recorded=tuple(recorded)
+        )
         for name, entry in raw_files.items():
             if not isinstance(entry, dict) or not isinstance(entry.get("sha256"), str):
                 raise ValueError(f"entry {name!r} has no sha256")

@@ -202,11 +202,16 @@ def session_entries(folder: PathLike) -> list[tuple[str, str]]:
 
 
 def _replace_entries(target: Path, sessions: bool) -> list[tuple[str, str]]:
-    """What keeps ``--overwrite`` from replacing the folder ``target``."""
-    entries = foreign_entries(target)
+    """What keeps ``--overwrite`` from replacing the folder ``target``: foreign entries,
+    a session (unless the output is one), the files a recording command recorded there."""
+    found = set(foreign_entries(target))
     if not sessions:
-        entries = sorted({*entries, *session_entries(target)})
-    return entries
+        found |= set(session_entries(target))
+    manifest = read_manifest(target)
+    if manifest is not None and manifest.recorder is not None:
+        why = f"recorded by hexatherm {manifest.recorder}"
+        found |= {(name, why) for name in manifest.recorded} or {(MANIFEST_NAME, why)}
+    return sorted(found)
 
 
 def _foreign_message(option: str, output: str, entries: list[tuple[str, str]]) -> str:
@@ -231,6 +236,8 @@ def _file_foreign(path: Path) -> str | None:
     hashes = manifest.files.get(path.name)
     if hashes is None:
         return "not written by hexatherm"
+    if manifest.recorder is not None and path.name in manifest.recorded:
+        return f"recorded by hexatherm {manifest.recorder}"
     if sha256_file(path) not in hashes:
         return "changed since hexatherm wrote it"
     return None

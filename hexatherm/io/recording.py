@@ -115,6 +115,8 @@ def check_new_recording(
         entries += [e for e in _top_entries(path, why) if e[0] != SESSION_FILE]
     else:
         entries += [e for e in foreign_entries(path) if e[0] != SESSION_FILE]
+        why = f"written by hexatherm as an output, not recorded by {command}"
+        entries += [(n, why) for n in sorted(manifest.files) if n not in manifest.recorded]
     if entries:
         raise ForeignFilesError(_message(option, given, command, entries), entries=entries)
 
@@ -138,14 +140,19 @@ def _record(folder: Path, command: str, names: Iterable[str]) -> None:
     """List in ``folder``'s manifest the files of ``names`` that are there, as they are now."""
     old = read_manifest(folder)
     manifest = Manifest(recorder=command)
-    listed = set(names)
+    recorded = set(names)
+    others: set[str] = set()  # files an output command wrote there since (a report)
     if old is not None and old.recorder == command:
-        listed |= {n for n in old.files if "/" not in n}
-    for name in sorted(listed):
+        recorded |= set(old.recorded)
+        others = {n for n in old.files if "/" not in n} - recorded
+    present = []
+    for name in sorted(recorded | others):
         path = folder / name
         digest = sha256_file(path)
         if digest is not None:
             manifest.record(name, digest, path.lstat().st_size)
+            present.append(name)
+    manifest.recorded = tuple(n for n in present if n in recorded)
     atomic_write_bytes(folder / MANIFEST_NAME, manifest.to_json())
 
 

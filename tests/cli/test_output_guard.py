@@ -319,3 +319,36 @@ def test_process_overwrite_never_replaces_a_simulated_session_results_links_to(l
     )
     assert again.exit_code == 0, again.output
     assert checksums(sim).keys() == session.keys()
+
+
+def test_overwrite_never_replaces_what_a_recording_command_recorded(
+    lab: Path, recorded: Path
+) -> None:
+    """A run's folder lists its files in its manifest: that makes them the run's, not an
+    output --overwrite may replace (a whole folder, or one of its logs)."""
+    folder = lab / "new"
+    first = CliRunner().invoke(main, record("run", lab / "plan.yaml", folder))
+    assert first.exit_code == 1 and "Connection refused" in first.output, first.output
+    before = checksums(lab)
+    simulate = ["simulate", lab / "scenario.yaml", "-o", folder, "--overwrite"]
+    refused = CliRunner().invoke(main, [str(a) for a in simulate])
+    assert refused.exit_code == 1 and "(recorded by hexatherm run)" in refused.output
+    fit = ["fit-spheres", lab / "d" / "points.dmo", "-o", folder / "steps.csv", "--overwrite"]
+    refused = CliRunner().invoke(main, [str(a) for a in fit])
+    assert refused.exit_code == 1, refused.output
+    assert "steps.csv (recorded by hexatherm run)" in refused.output
+    assert checksums(lab) == before
+    # an output written beside the recording is the output's: replaced by --overwrite,
+    # and something a new recording did not create
+    beside = ["fit-spheres", lab / "d" / "points.dmo", "-o", folder / "centres.csv"]
+    assert CliRunner().invoke(main, [str(a) for a in beside]).exit_code == 0
+    manifest = read_manifest(folder)
+    assert manifest is not None and manifest.recorder == "run" and "centres.csv" in manifest.files
+    assert "centres.csv" not in manifest.recorded and "steps.csv" in manifest.recorded
+    replaced = CliRunner().invoke(main, [str(a) for a in [*beside, "--overwrite"]])
+    assert replaced.exit_code == 0, replaced.output
+    before = checksums(lab)
+    again = CliRunner().invoke(main, record("run", lab / "plan.yaml", folder))
+    assert again.exit_code == 1, again.output
+    assert "centres.csv (written by hexatherm as an output, not recorded by run)" in again.output
+    assert checksums(lab) == before
