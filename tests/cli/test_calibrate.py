@@ -181,7 +181,7 @@ def calibrate_offsets(tmp_path: Path, *sessions: object):
     return run("calibrate", *sessions, "-o", tmp_path / "out", "--level", "offsets")
 
 
-@pytest.mark.parametrize("how", ["same path", "session.yaml", "copy", "symlink"])
+@pytest.mark.parametrize("how", ["same path", "session.yaml", "copy", "symlink", "file link"])
 def test_the_same_session_twice_is_refused_by_content(
     pair: tuple[Path, Path], tmp_path: Path, how: str
 ) -> None:
@@ -193,6 +193,11 @@ def test_the_same_session_twice_is_refused_by_content(
     elif how == "copy":
         again = tmp_path / "copy"
         shutil.copytree(a, again)
+    elif how == "file link":  # another folder whose measurements are a link to a's
+        again = tmp_path / "linked"
+        shutil.copytree(a, again)
+        (again / "centres.csv").unlink()
+        (again / "centres.csv").symlink_to(a / "centres.csv")
     else:
         again = tmp_path / "link"
         again.symlink_to(a, target_is_directory=True)
@@ -200,7 +205,8 @@ def test_the_same_session_twice_is_refused_by_content(
     assert refused.exit_code == 1, refused.output
     assert len(refused.output.strip().splitlines()) == 1, refused.output
     assert "centres.csv and centres.csv have one SHA-256" in refused.output
-    same = "is the same session as" if how != "copy" else "holds the same measurements as"
+    copies = ("copy", "file link")
+    same = "holds the same measurements as" if how in copies else "is the same session as"
     assert same in refused.output and "give each session once" in refused.output
     assert not (tmp_path / "out").exists()
 

@@ -20,6 +20,7 @@
 
 from __future__ import annotations
 
+import os
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
@@ -50,9 +51,9 @@ def check_distinct_sessions(specs: Sequence[Session]) -> None:
     seen: dict[str, tuple[Session, Path]] = {}
     for spec in specs:
         for path in spec.measurements:
-            digest = sha256_file(Path(path))
+            digest = sha256_file(Path(os.path.realpath(path)))  # a live link is its file
             if digest is None:
-                raise InputError("cannot be read as a regular file", path=str(path))
+                continue  # not a regular file: the measurement reader names why
             if digest in seen:
                 first, where = seen[digest]
                 same = (
