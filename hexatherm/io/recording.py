@@ -71,7 +71,11 @@ def _message(option: str, folder: str, command: str, entries: list[tuple[str, st
 
 def _top_entries(folder: Path, why: str) -> list[tuple[str, str]]:
     out = []
-    for entry in sorted(os.scandir(folder), key=lambda e: e.name):
+    try:
+        listed = sorted(os.scandir(folder), key=lambda e: e.name)
+    except OSError as exc:
+        return [(".", f"cannot be listed ({exc.strerror})")]
+    for entry in listed:
         is_dir = entry.is_dir(follow_symlinks=False)
         out.append((entry.name + ("/" if is_dir else ""), why))
     return out
