@@ -158,6 +158,7 @@ def command(
     from hexatherm.cli.run import _numbers
     from hexatherm.core.effects import Effect
     from hexatherm.core.heating import HeatingModel
+    from hexatherm.errors import HexathermError
     from hexatherm.io.config import read_balls, read_hexapod
     from hexatherm.io.scenario import read_scenario
     from hexatherm.workflows.serve import (
@@ -192,7 +193,10 @@ def command(
     the_seed = the_seed if seed is None else seed
     injected = ServeFaults()
     for text in faults:
-        parse_fault(text, injected)
+        try:
+            parse_fault(text, injected)
+        except HexathermError as exc:  # an option's value: a usage error
+            raise click.BadParameter(f"{text!r}: {exc}", param_hint="--fault") from None
     clock = AcceleratedClock(time_scale)
     world = TwinWorld(
         hexapod,

@@ -91,7 +91,7 @@ def command(
             raise click.UsageError("--plan needs --hexapod and --balls")
         inputs = [plan_path, hexapod_path, balls_path]
         source = plan_scenario(plan_path, hexapod_path, balls_path, out.name, seed or 0)
-    check_output_settled(out, kind="folder", inputs=inputs, overwrite=overwrite)
+    check_output_settled(out, kind="folder", inputs=inputs, overwrite=overwrite, sessions=True)
     read, simulated, written = simulate_file(source, out, seed, overwrite)
     plan, truth = read.plan, simulated.truth
     duration_h = float(simulated.step_times_s[-1]) / 3600.0

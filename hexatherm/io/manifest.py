@@ -57,6 +57,13 @@ class Manifest:
         Sub-folders hexatherm created (relative paths).
     version : str
         hexatherm's version that wrote the manifest last.
+    recorder : str or None
+        The recording command (``run``, ``acquire``) whose session folder this is
+        (JSON ``recorded_by``); ``None`` for a folder written whole by
+        :func:`hexatherm.io.outputs.output_dir`. See :mod:`hexatherm.io.recording`.
+    recorded : tuple of str
+        The files the recording command wrote (JSON ``recorded_files``): measured data,
+        which no ``--overwrite`` replaces.
     """
 
     files: dict[str, tuple[str, ...]] = field(default_factory=dict)
@@ -64,6 +71,8 @@ class Manifest:
     times: dict[str, str] = field(default_factory=dict)
     folders: tuple[str, ...] = ()
     version: str = __version__
+    recorder: str | None = None
+    recorded: tuple[str, ...] = ()
 
     def to_json(self) -> bytes:
         """The manifest file's content (JSON, UTF-8)."""
@@ -85,6 +94,9 @@ class Manifest:
             "files": files,
             "folders": sorted(self.folders),
         }
+        if self.recorder is not None:
+            doc["recorded_by"] = self.recorder
+            doc["recorded_files"] = sorted(self.recorded)
         return (json.dumps(doc, indent=1) + "\n").encode("utf-8")
 
     @classmethod
@@ -97,7 +109,15 @@ class Manifest:
         raw_folders = doc.get("folders", [])
         if not isinstance(raw_files, dict) or not isinstance(raw_folders, list):
             raise ValueError("'files' must be a mapping and 'folders' a list")
-        manifest = cls(version=str(doc.get("hexatherm", "")))
+        recorder = doc.get("recorded_by")
+        if recorder is not None and not isinstance(recorder, str):
+            raise ValueError("'recorded_by' must be a command's name")
+        recorded = doc.get("recorded_files", [])
+        if not isinstance(recorded, list) or not all(isinstance(n, str) for n in recorded):
+            raise ValueError("'recorded_files' must be a list of names")
+        manifest = cls(
+            version=str(doc.get("hexatherm", "")), recorder=recorder, recorded=tuple(recorded)
+        )
         for name, entry in raw_files.items():
             if not isinstance(entry, dict) or not isinstance(entry.get("sha256"), str):
                 raise ValueError(f"entry {name!r} has no sha256")
@@ -177,7 +197,8 @@ def foreign_entries(folder: PathLike) -> list[tuple[str, str]]:
     list of (str, str)
         ``(relative path, reason)``, sorted; empty when replacing ``folder`` loses
         nothing but hexatherm's own unchanged output. A sub-folder is foreign unless
-        the manifest lists it or it has a manifest of its own that vouches for all of it.
+        the manifest lists it (then each of its entries is checked); one with a manifest
+        of its own is another output, written there by another run, and foreign too.
     """
     top = Path(folder)
     manifest = read_manifest(top)
@@ -206,10 +227,10 @@ def _foreign_walk(
             sub = Path(entry.path)
             if manifest is not None and rel in manifest.folders:
                 _foreign_walk(sub, rel + "/", manifest, found)
-            elif (own := read_manifest(sub)) is not None:
-                nested: list[tuple[str, str]] = []
-                _foreign_walk(sub, "", own, nested)
-                found.extend((f"{rel}/{name}", why) for name, why in nested)
+            elif read_manifest(sub) is not None:
+                # another output (results/smooth, an older results folder moved in):
+                # its own manifest vouches for it, not for replacing it with this folder
+                found.append((rel + "/", "another output, not listed by this folder's manifest"))
             else:
                 why = no_manifest if manifest is None else "a folder hexatherm did not write"
                 found.append((rel + "/", why))

@@ -10,8 +10,10 @@ Three rules, for every output of every command:
    writes into holds a manifest, ``.hexatherm-manifest.json``, listing the files it
    wrote there (relative path, SHA-256, size, time) and the hexatherm version. A folder
    output is replaced only when every entry in it is a file of its manifest, unchanged
-   since, or a sub-folder the manifest lists or whose own manifest vouches for all of
-   it (:func:`foreign_entries`). A single-file output is replaced only when the
+   since, or a sub-folder the manifest lists, whole (:func:`foreign_entries`; a nested
+   folder with a manifest of its own is another output, and foreign), and when it holds
+   no session (``session.yaml`` anywhere in it: only ``simulate``, whose outputs are
+   sessions, replaces one; :func:`session_entries`). A single-file output is replaced only when the
    manifest of its folder lists it with its current SHA-256. Anything else is refused
    with :class:`ForeignFilesError`, naming the files.
 
@@ -100,10 +102,12 @@ from hexatherm.io.manifest import (
 from hexatherm.io.provenance import PROVENANCE_NAME, current_run, provenance_json
 
 __all__ = [
+    "SESSION_FILE",
     "check_not_input",
     "check_output",
     "check_output_settled",
     "output_dir",
+    "session_entries",
     "write_output_file",
 ]
 
@@ -171,6 +175,45 @@ def check_not_input(output: PathLike, inputs: Iterable[PathLike], *, option: str
         )
 
 
+#: the file that makes a folder a session
+SESSION_FILE = "session.yaml"
+
+
+def session_entries(folder: PathLike) -> list[tuple[str, str]]:
+    """The ``session.yaml`` files in ``folder``'s tree (links not followed), as foreign entries.
+
+    A folder that holds a session holds recorded data: only a command whose output is a
+    session (``simulate``) may replace it, and no recording command writes into it.
+
+    >>> import tempfile
+    >>> top = Path(tempfile.mkdtemp())
+    >>> (top / "a").mkdir(); _ = (top / "a" / "session.yaml").write_text("name: a\\n")
+    >>> session_entries(top)
+    [('a/session.yaml', 'a session')]
+    """
+    top = Path(folder)
+    found = []
+    for where, dirs, files in os.walk(top):
+        dirs.sort()
+        if SESSION_FILE in files and not os.path.islink(os.path.join(where, SESSION_FILE)):
+            rel = Path(where, SESSION_FILE).relative_to(top).as_posix()
+            found.append((rel, "a session"))
+    return sorted(found)
+
+
+def _replace_entries(target: Path, sessions: bool) -> list[tuple[str, str]]:
+    """What keeps ``--overwrite`` from replacing the folder ``target``: foreign entries,
+    a session (unless the output is one), the files a recording command recorded there."""
+    found = set(foreign_entries(target))
+    if not sessions:
+        found |= set(session_entries(target))
+    manifest = read_manifest(target)
+    if manifest is not None and manifest.recorder is not None:
+        why = f"recorded by hexatherm {manifest.recorder}"
+        found |= {(name, why) for name in manifest.recorded} or {(MANIFEST_NAME, why)}
+    return sorted(found)
+
+
 def _foreign_message(option: str, output: str, entries: list[tuple[str, str]]) -> str:
     named = ", ".join(f"{name} ({why})" for name, why in entries[:_NAMED])
     more = f" and {len(entries) - _NAMED} more" if len(entries) > _NAMED else ""
@@ -193,6 +236,8 @@ def _file_foreign(path: Path) -> str | None:
     hashes = manifest.files.get(path.name)
     if hashes is None:
         return "not written by hexatherm"
+    if manifest.recorder is not None and path.name in manifest.recorded:
+        return f"recorded by hexatherm {manifest.recorder}"
     if sha256_file(path) not in hashes:
         return "changed since hexatherm wrote it"
     return None
@@ -205,6 +250,7 @@ def check_output(
     inputs: Iterable[PathLike] = (),
     overwrite: bool = False,
     option: str = "-o",
+    sessions: bool = False,
 ) -> Path:
     """Every check of an output, before any work is done.
 
@@ -220,6 +266,9 @@ def check_output(
         ``--overwrite`` was given.
     option : str
         The option the output came from, for messages.
+    sessions : bool
+        The output is a session (``simulate``): ``--overwrite`` may replace a folder
+        that holds one (when its manifest vouches for it).
 
     Returns
     -------
@@ -258,7 +307,7 @@ def check_output(
     if kind == "folder":
         if not target.is_dir():
             raise OutputExistsError(f"{given} exists and is not a folder")
-        entries = foreign_entries(target)
+        entries = _replace_entries(target, sessions)
     else:
         if target.is_dir():
             raise OutputExistsError(f"{given} exists and is a folder")
@@ -281,6 +330,7 @@ def check_output_settled(
     option: str = "-o",
     lock_timeout_s: float = DEFAULT_LOCK_TIMEOUT_S,
     on_wait: Callable[[Path], None] | None = None,
+    sessions: bool = False,
 ) -> Path:
     """:func:`check_output`, looked at again under the output's lock when it finds foreign files.
 
@@ -290,15 +340,19 @@ def check_output_settled(
     that look stands.
     """
     inputs = list(inputs)
+
+    def check() -> Path:
+        return check_output(
+            output, kind=kind, inputs=inputs, overwrite=overwrite, option=option, sessions=sessions
+        )
+
     try:
-        return check_output(output, kind=kind, inputs=inputs, overwrite=overwrite, option=option)
+        return check()
     except ForeignFilesError:
         if not Path(os.path.abspath(output)).parent.is_dir():
             raise
         with output_lock(output, timeout_s=lock_timeout_s, on_wait=on_wait):
-            return check_output(
-                output, kind=kind, inputs=inputs, overwrite=overwrite, option=option
-            )
+            return check()
 
 
 @contextlib.contextmanager
@@ -310,6 +364,7 @@ def output_dir(
     option: str = "-o",
     lock_timeout_s: float = DEFAULT_LOCK_TIMEOUT_S,
     on_wait: Callable[[Path], None] | None = None,
+    sessions: bool = False,
 ) -> Iterator[Path]:
     """Yield a temporary folder that becomes the output folder ``output`` if the block succeeds.
 
@@ -322,7 +377,7 @@ def output_dir(
 
     Parameters
     ----------
-    output, inputs, overwrite, option
+    output, inputs, overwrite, option, sessions
         As :func:`check_output`.
     lock_timeout_s : float
         How long to wait for another run writing in the same folder.
@@ -339,12 +394,13 @@ def output_dir(
         option=option,
         lock_timeout_s=lock_timeout_s,
         on_wait=on_wait,
+        sessions=sessions,
     )
 
     def under_lock(target: Path, tmp: Path) -> None:
         check_not_input(target, inputs, option=option)
         if target.is_dir():
-            entries = foreign_entries(target)
+            entries = _replace_entries(target, sessions)
             if entries:
                 raise ForeignFilesError(_foreign_message(option, given, entries), entries=entries)
         facts = current_run()

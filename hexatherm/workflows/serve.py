@@ -399,6 +399,11 @@ def parse_fault(text: str, into: ServeFaults | None = None) -> ServeFaults:
                 raise InputError(f"fault refuse: axis must be one of {', '.join(AXES)}")
             k = AXES.index(axis)
             low, high = number("min", -np.inf), number("max", np.inf)
+            if low > high:
+                raise InputError(
+                    f"fault refuse: min={values['min']} is above max={values['max']}: an empty "
+                    "interval, every pose would be refused"
+                )
             previous = out.controller.refuse
 
             def refuse(pose: FloatArray) -> bool:

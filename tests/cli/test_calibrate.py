@@ -154,3 +154,126 @@ def test_the_report_prints_the_parameters_with_k_times_u_and_the_stroke_map(cali
     assert all(worst[c] >= 0.999 * at_targets[c] for c in worst)
     assert all(worst[c] < 10 * at_targets[c] for c in worst)
     assert page.count("data:image/png;base64,") == 2 and "Provenance" in page
+
+
+# ------------------------------------------------------------------ issue 22, item 6
+# calibrate took the same session twice (u shrank by sqrt(2)), hexapod files differing
+# in the legs' CTE or the stroke, and reference states that differ leg by leg but not on
+# the legs' mean; a session without temperatures went unchecked without a word.
+
+
+@pytest.fixture(scope="module")
+def pair(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """Two simulated sessions of one hexapod (8 targets each, legs at 20 degC throughout)."""
+    root = tmp_path_factory.mktemp("pair")
+    targets = np.random.default_rng(7).uniform(-1, 1, (16, 6)) * SPAN
+    made = []
+    for name, seed, rows in (("a", 11, targets[:8]), ("b", 12, targets[8:])):
+        text = calibration_scenario(
+            rows.round(3), geometry_seed=5, points_per_ball=8, seed=seed, name=name,
+            cmm={"point_noise_um": 0.3},
+        )  # fmt: skip
+        made.append(simulated(root, name, text))
+    return made[0], made[1]
+
+
+def calibrate_offsets(tmp_path: Path, *sessions: object):
+    return run("calibrate", *sessions, "-o", tmp_path / "out", "--level", "offsets")
+
+
+@pytest.mark.parametrize("how", ["same path", "session.yaml", "copy", "symlink", "file link"])
+def test_the_same_session_twice_is_refused_by_content(
+    pair: tuple[Path, Path], tmp_path: Path, how: str
+) -> None:
+    a, _ = pair
+    if how == "same path":
+        again = a
+    elif how == "session.yaml":
+        again = a / "session.yaml"
+    elif how == "copy":
+        again = tmp_path / "copy"
+        shutil.copytree(a, again)
+    elif how == "file link":  # another folder whose measurements are a link to a's
+        again = tmp_path / "linked"
+        shutil.copytree(a, again)
+        (again / "centres.csv").unlink()
+        (again / "centres.csv").symlink_to(a / "centres.csv")
+    else:
+        again = tmp_path / "link"
+        again.symlink_to(a, target_is_directory=True)
+    refused = calibrate_offsets(tmp_path, a, again)
+    assert refused.exit_code == 1, refused.output
+    assert len(refused.output.strip().splitlines()) == 1, refused.output
+    assert "centres.csv and centres.csv have one SHA-256" in refused.output
+    copies = ("copy", "file link")
+    same = "holds the same measurements as" if how in copies else "is the same session as"
+    assert same in refused.output and "give each session once" in refused.output
+    assert not (tmp_path / "out").exists()
+
+
+def edited_copy(session: Path, to: Path, file: str, old: str, new: str) -> Path:
+    shutil.copytree(session, to)
+    text = (to / file).read_text()
+    assert old in text
+    (to / file).write_text(text.replace(old, new))
+    return to
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "field"),
+    [
+        ("cte: 2.31e-05", "cte: 2.4e-05", "legs: cte"),
+        ("stroke: [220.0, 310.0]", "stroke: [220.0, 300.0]", "stroke"),
+    ],
+)
+def test_hexapod_files_that_differ_are_refused_naming_the_field(
+    pair: tuple[Path, Path], tmp_path: Path, old: str, new: str, field: str
+) -> None:
+    a, b = pair
+    other = edited_copy(b, tmp_path / "other", "hexapod.yaml", old, new)
+    refused = calibrate_offsets(tmp_path, a, other)
+    assert refused.exit_code == 1, refused.output
+    assert f"its hexapod file differs from {a / 'session.yaml'}'s in {field}" in refused.output
+    assert not (tmp_path / "out").exists()
+
+
+def with_legs_at(session: Path, to: Path, legs_C: list[float]) -> Path:
+    """A copy of ``session`` whose thermocouples read ``legs_C`` throughout."""
+    shutil.copytree(session, to)
+    frame = pd.read_csv(to / "temperatures.csv")
+    for k, value in enumerate(legs_C, 1):
+        frame[f"leg{k}"] = value
+    frame.to_csv(to / "temperatures.csv", index=False)
+    return to
+
+
+def test_each_legs_reference_state_is_checked_not_their_mean(
+    pair: tuple[Path, Path], tmp_path: Path
+) -> None:
+    a, b = pair
+    assert np.allclose(pd.read_csv(a / "temperatures.csv").filter(like="leg"), 20.0)
+    opposed = with_legs_at(b, tmp_path / "opposed", [21.0, 21.0, 21.0, 19.0, 19.0, 19.0])
+    refused = calibrate_offsets(tmp_path, a, opposed)
+    assert refused.exit_code == 1, refused.output
+    assert "leg 1 was at 21.00 degC at its R0 and at 20.00 degC" in refused.output
+    assert "(+1.00 K)" in refused.output and "another thermal state" in refused.output
+    assert not (tmp_path / "out").exists()
+    close = with_legs_at(b, tmp_path / "close", [20.3, 20.3, 20.3, 19.7, 19.7, 19.7])
+    accepted = calibrate_offsets(tmp_path, a, close)
+    assert accepted.exit_code == 0, accepted.output
+    assert "warning" not in accepted.stderr
+
+
+def test_a_session_without_temperatures_is_said_unchecked(
+    pair: tuple[Path, Path], tmp_path: Path
+) -> None:
+    a, b = pair
+    bare = edited_copy(b, tmp_path / "bare", "session.yaml", "temperatures: temperatures.csv\n", "")
+    (bare / "temperatures.csv").unlink()
+    result = calibrate_offsets(tmp_path, a, bare)
+    assert result.exit_code == 0, result.output
+    warnings = [line for line in result.stderr.splitlines() if line.startswith("warning:")]
+    assert warnings == [
+        f"warning: {bare / 'session.yaml'}: no temperatures, so the thermal state of its R0 "
+        "(which its corrected poses refer to) cannot be checked against the other sessions'"
+    ]

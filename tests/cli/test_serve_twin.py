@@ -76,7 +76,7 @@ def test_a_bad_fault_is_refused() -> None:
         main, ["serve-twin", "--hexapod", str(HEXAPOD), "--balls", str(BALLS),
                "--fault", "ipp-error:colour=red"]
     )  # fmt: skip
-    assert result.exit_code == 1 and "bad setting 'colour=red'" in result.output
+    assert result.exit_code == 2 and "bad setting 'colour=red'" in result.output
     result = CliRunner().invoke(main, ["serve-twin", "--hexapod", str(HEXAPOD)])
     assert result.exit_code == 2 and "--balls" in result.output
 
@@ -95,11 +95,13 @@ def test_a_bad_fault_is_refused() -> None:
         (["--thermocouple-period", "nan"], 2, "'nan' is not a number"),
         (["--seed", "-1"], 2, "not in the range"),
         (["--origin-on-cmm", "0,0,0,0,0,inf"], 2, "expected 6 finite numbers"),
-        (["--fault", "late-in-position:seconds=nan"], 1, "must be a finite number"),
-        (["--fault", "late-in-position:seconds=-3"], 1, "seconds must be >= 0"),
-        (["--fault", "refuse:axis=Tz,max=nan"], 1, "must be a finite number"),
-        (["--fault", "ipp-error:severity=2,nth=inf"], 1, "must be a finite number"),
-        (["--fault", "ipp-error:severity=12"], 1, "severity must be 0..9"),
+        (["--fault", "late-in-position:seconds=nan"], 2, "must be a finite number"),
+        (["--fault", "late-in-position:seconds=-3"], 2, "seconds must be >= 0"),
+        (["--fault", "refuse:axis=Tz,max=nan"], 2, "must be a finite number"),
+        (["--fault", "ipp-error:severity=2,nth=inf"], 2, "must be a finite number"),
+        (["--fault", "ipp-error:severity=12"], 2, "severity must be 0..9"),
+        # issue 22, "Also": an empty interval refused every pose and was accepted
+        (["--fault", "refuse:axis=Tz,min=5,max=-5"], 2, "min=5 is above max=-5"),
     ],
 )
 def test_hostile_values_are_one_line_errors(args: list[str], code: int, message: str) -> None:
@@ -111,3 +113,15 @@ def test_hostile_values_are_one_line_errors(args: list[str], code: int, message:
     assert result.exception is None or isinstance(result.exception, SystemExit)
     assert message in result.output
     assert "Traceback" not in result.output and "serving" not in result.output
+
+
+def test_an_empty_refuse_interval_is_refused_and_a_point_interval_kept() -> None:
+    """Issue 22, "Also": min above max refused every pose, silently."""
+    from hexatherm.errors import InputError
+    from hexatherm.workflows.serve import parse_fault
+
+    with pytest.raises(InputError, match=r"min=5 is above max=-5: an empty interval"):
+        parse_fault("refuse:axis=Tz,min=5,max=-5")
+    refuse = parse_fault("refuse:axis=Tz,min=5,max=5").controller.refuse
+    assert refuse is not None
+    assert not refuse([0, 0, 5.0, 0, 0, 0]) and refuse([0, 0, 4.999, 0, 0, 0])

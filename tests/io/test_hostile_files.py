@@ -25,6 +25,7 @@ import pytest
 
 from hexatherm.errors import HexathermError, InputError, InputWarning
 from hexatherm.io import files
+from hexatherm.io.config import read_hexapod
 from hexatherm.io.csvfile import read_measurement_csv
 from hexatherm.io.dmis import read_dmis, read_dmis_features
 from hexatherm.io.files import MAX_MEASUREMENT_BYTES, MAX_YAML_BYTES
@@ -196,6 +197,15 @@ def case(
 ) -> Case:
     data = text.encode("utf-8") if isinstance(text, str) else text
     return Case(id, name, data, read, line, field, message)
+
+
+HEXAPOD_TEXT = (Path(__file__).resolve().parents[2] / "configs" / "symetrie-like.yaml").read_text()
+#: the line of the calibration record's (one) entry
+CALIBRATION_LINE = len(HEXAPOD_TEXT.splitlines()) + 2
+
+
+def calibrated_hexapod(entry: str) -> str:
+    return HEXAPOD_TEXT + f"calibration:\n  {entry}\n"
 
 
 LAUGHS = "a: &a [lol, lol, lol, lol, lol, lol, lol, lol, lol, lol]\n" + "".join(
@@ -589,6 +599,52 @@ CASES: list[Case] = [
     ),
     case("dmis-features-no-endfil", "r.dmo", dmis_points(), read_dmis_features, 14, "k", "ENDFIL"),
     case("dmis-by-content", "run.txt", dmis_points(), measurements, 14, "k", "ENDFIL"),
+    # a hexapod file's calibration record (issue 22, "Also")
+    case(
+        "calibration-level-bogus",
+        "h.yaml",
+        calibrated_hexapod("level: bogus"),
+        read_hexapod,
+        CALIBRATION_LINE,
+        "calibration.level",
+        "expected one of offsets, joints, joints+gains, got 'bogus'",
+    ),
+    case(
+        "calibration-written-yesterday",
+        "h.yaml",
+        calibrated_hexapod("written: yesterday"),
+        read_hexapod,
+        CALIBRATION_LINE,
+        "calibration.written",
+        "expected an ISO 8601 time with its UTC offset",
+    ),
+    case(
+        "calibration-written-month-13",
+        "h.yaml",
+        calibrated_hexapod('written: "2026-13-01T10:00:00+01:00"'),
+        read_hexapod,
+        CALIBRATION_LINE,
+        "calibration.written",
+        "not a valid date and time",
+    ),
+    case(
+        "calibration-poses-bogus",
+        "h.yaml",
+        calibrated_hexapod("poses: measured"),
+        read_hexapod,
+        CALIBRATION_LINE,
+        "calibration.poses",
+        "expected one of corrected, conventional, twin, got 'measured'",
+    ),
+    case(
+        "calibration-sha256-not-hex",
+        "h.yaml",
+        calibrated_hexapod("twin_model_sha256: abc"),
+        read_hexapod,
+        CALIBRATION_LINE,
+        "calibration.twin_model_sha256",
+        "expected a SHA-256: 64 hexadecimal digits",
+    ),
 ]
 
 
@@ -878,3 +934,12 @@ def test_concat_refuses_mixed_time_zones(tmp_path: Path) -> None:
         concat_records([read_measurement_csv(a), read_measurement_csv(b)])
     joined = concat_records([read_measurement_csv(a), read_measurement_csv(a)])
     assert joined.time_aware is False and isinstance(joined, Records)
+
+
+def test_calibration_record_choices_are_calibrates() -> None:
+    """The hexapod reader's levels and poses are the ones calibrate writes."""
+    from hexatherm.core.calibration import LEVELS
+    from hexatherm.io.config.hexapod import CALIBRATION_LEVELS, CALIBRATION_POSES
+    from hexatherm.workflows.calibrate.run import POSE_KINDS
+
+    assert CALIBRATION_LEVELS == LEVELS and CALIBRATION_POSES == POSE_KINDS

@@ -284,7 +284,8 @@ def test_the_message_names_five_foreign_entries_and_counts_the_rest(tmp_path):
     assert len(caught.value.entries) == 8
 
 
-def test_an_empty_folder_and_a_nested_hexatherm_output_may_be_replaced(tree):
+def test_an_empty_folder_may_be_replaced_but_never_a_nested_output(tree):
+    """A nested output (its own manifest) is another run's: foreign (issue 22, item 2)."""
     root, before = tree
     out = root / "sA" / "results"
     out.mkdir()
@@ -294,8 +295,15 @@ def test_an_empty_folder_and_a_nested_hexatherm_output_may_be_replaced(tree):
     with output_dir(out / "deep" / "run", overwrite=True) as tmp:
         (tmp / "sub").mkdir()
         (tmp / "sub" / "a.csv").write_text("a\n")
-    assert foreign_entries(out) == [("deep/", "a folder hexatherm did not write")]
+    assert foreign_entries(out) == [
+        ("deep/", "a folder hexatherm did not write"),
+        ("sim/", "another output, not listed by this folder's manifest"),
+    ]
+    with pytest.raises(ForeignFilesError, match="sim/"):
+        write_results(out, "2", overwrite=True)
+    assert (out / "sim" / "poses.csv").read_text() == "Tx_mm\n9\n"
     shutil.rmtree(out / "deep")
+    shutil.rmtree(out / "sim")
     write_results(out, "2", overwrite=True)
     assert sorted(p.name for p in out.iterdir()) == [MANIFEST_NAME, "legs.csv", "poses.csv"]
     assert_kept(root, before)

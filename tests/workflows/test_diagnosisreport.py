@@ -272,3 +272,72 @@ def test_the_candidates_table_lines_up_with_long_effect_names() -> None:
         end = lines[0].index(title) + len(title)
         assert [line[:end].split()[-1] for line in lines[1:]] == values, title
         assert all(line[end] == " " for line in lines[1:]), title
+
+
+# ------------------------------------------------------------------ hostile names
+# Issue 22, "Also": report.md copied the session's name raw into Markdown (``<script>``,
+# ``</table>``: HTML for any Markdown viewer). Checked with an independent CommonMark
+# parser (markdown-it-py): no raw HTML, and the text read back is the name as it is.
+HOSTILE = "x <script>alert(1)</script></table> | **b** `c` _d_ [e](f) &amp; ~g~ \\ #"
+
+
+def _hostile(result: DiagnosisResult, path: Path | None = None) -> DiagnosisResult:
+    data = result.data
+    session = dataclasses.replace(data.session, name=HOSTILE, path=path or data.session.path)
+    hexapod = dataclasses.replace(data.hexapod, name=HOSTILE)
+    data = dataclasses.replace(data, session=session, hexapod=hexapod, hexapod_source=HOSTILE)
+    return dataclasses.replace(result, data=data)
+
+
+def _commonmark_text(inline: object) -> str:
+    """The text a CommonMark viewer shows for an inline token; raw HTML refused."""
+    out = []
+    for child in inline.children:  # type: ignore[attr-defined]
+        assert child.type not in ("html_inline", "html_block"), child
+        if child.type in ("text", "code_inline"):
+            out.append(child.content)
+        elif child.type == "softbreak":
+            out.append("\n")
+    return "".join(out)
+
+
+def test_report_md_escapes_the_sessions_name_path_and_hexapod(
+    result: DiagnosisResult, tmp_path: Path
+) -> None:
+    from markdown_it import MarkdownIt
+
+    path = tmp_path / "a`b <i>c</i>" / "session.yaml"
+    md = dr.report_markdown(_hostile(result, path))
+    tokens = MarkdownIt("commonmark").enable("table").parse(md)
+    assert not [t for t in tokens if t.type == "html_block"]
+    texts = [_commonmark_text(t) for t in tokens if t.type == "inline"]
+    assert texts[0] == f"Diagnosis of {HOSTILE}"
+    assert f"session: {path}" in texts
+    assert f"hexapod: {HOSTILE} ({HOSTILE})" in texts
+    heading = [t.tag for t in tokens if t.type == "heading_open"]
+    assert heading.count("h1") == 1  # the name did not make or end a heading
+
+
+def test_report_html_escapes_them_too(result: DiagnosisResult) -> None:
+    import html
+
+    page = dr.report_html(_hostile(result), {}, generated="2026-01-01T00:00:00+00:00")
+    assert "<script>" not in page and page.count("</table>") == page.count("<table")
+    title = html.escape(f"Diagnosis of {HOSTILE}", quote=True)
+    assert f"<title>{title}</title>" in page and f"<h1>{title}</h1>" in page
+    item = next(li for li in page.split("<li>") if li.startswith("hexapod: "))
+    shown = html.unescape(re.sub(r"<[^>]+>", "", item))
+    assert shown.strip() == f"hexapod: {HOSTILE} ({HOSTILE})"
+
+
+def test_a_table_cell_is_text_too() -> None:
+    """A step label or ball name in a table: no HTML, no cell boundary, as it is."""
+    from markdown_it import MarkdownIt
+
+    cell = "S1 <script>x</script> | `y` *z* & \\"
+    md = dr.render_markdown(dr.Table("T", ("label",), ((cell,),), "l"))
+    tokens = MarkdownIt("commonmark").enable("table").parse(md)
+    cells = [_commonmark_text(t) for t in tokens if t.type == "inline"][1:]
+    assert cells == ["label", cell]
+    html = dr.markdown_html(md, {})[-1]
+    assert "<script>" not in html and "&lt;script&gt;x&lt;/script&gt; | `y` *z* &amp; \\" in html

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import re
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
@@ -13,6 +15,7 @@ from hexatherm.core.geometry import CONVENTIONS
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.thermal import LegThermalModel, SegmentSpec
 from hexatherm.io.config.yamlout import _dump
+from hexatherm.io.csvfile import ISO_TIME
 from hexatherm.io.temperatures import TEMPERATURE_RANGE_C
 from hexatherm.io.yamlfile import YamlDoc
 
@@ -191,18 +194,24 @@ def _read_effects(doc: YamlDoc) -> tuple[dict[str, Any], ...]:
 
 #: the keys of a hexapod file's ``calibration:`` record (an extension) and their kinds
 CALIBRATION_KEYS = {
-    "level": "text",
-    "poses": "text",
+    "level": "level",
+    "poses": "poses",
     "sessions": "texts",
     "n_poses": "whole",
     "twin_model": "text",
-    "twin_model_sha256": "text",
+    "twin_model_sha256": "sha256",
     "leg_offsets_mm": "six",
     "leg_gains": "six",
     "chi_square_per_dof": "number",
     "hexatherm": "text",
-    "written": "text",
+    "written": "time",
 }
+#: what a calibration record's ``level`` may be: :data:`hexatherm.core.calibration.LEVELS`
+#: (not imported: the calibration package's import costs seconds; a test checks they agree)
+CALIBRATION_LEVELS = ("offsets", "joints", "joints+gains")
+#: what a calibration record's ``poses`` may be (``hexatherm calibrate --poses``)
+CALIBRATION_POSES = ("corrected", "conventional", "twin")
+_SHA256 = re.compile(r"[0-9a-f]{64}")
 
 
 def _check_calibration(doc: YamlDoc) -> None:
@@ -219,6 +228,15 @@ def _check_calibration(doc: YamlDoc) -> None:
             continue
         if kind == "text":
             doc.string(key, name)
+        elif kind == "level":
+            doc.string(key, name, choices=CALIBRATION_LEVELS)
+        elif kind == "poses":
+            doc.string(key, name, choices=CALIBRATION_POSES)
+        elif kind == "sha256":
+            if not _SHA256.fullmatch(doc.string(key, name)):
+                raise doc.error("expected a SHA-256: 64 hexadecimal digits", key, name)
+        elif kind == "time":
+            _check_written(doc, key, name)
         elif kind == "texts":
             items = doc.get(key, name)
             if not isinstance(items, list) or not all(isinstance(i, str) for i in items):
@@ -231,6 +249,23 @@ def _check_calibration(doc: YamlDoc) -> None:
                 raise doc.error(f"expected a whole number >= 1, got {value:g}", key, name)
         elif doc.number(key, name) < 0:
             raise doc.error("must not be negative", key, name)
+
+
+def _check_written(doc: YamlDoc, *keys: str) -> None:
+    """An ISO 8601 time with its UTC offset (as ``calibrate`` writes it), a valid date."""
+    value = doc.get(*keys)
+    text = value.isoformat() if isinstance(value, datetime) else value
+    match = ISO_TIME.fullmatch(text) if isinstance(text, str) else None
+    if match is None or match.group("offset") is None:
+        raise doc.error(
+            "expected an ISO 8601 time with its UTC offset (YYYY-MM-DDTHH:MM[:SS[.ffffff]]"
+            f"+HH:MM), got {value!r}",
+            *keys,
+        )
+    try:
+        datetime.fromisoformat(text)
+    except ValueError as exc:
+        raise doc.error(f"not a valid date and time: {value!r} ({exc})", *keys) from None
 
 
 def hexapod_to_yaml(hexapod: Hexapod, calibration: dict[str, Any] | None = None) -> str:

@@ -32,6 +32,8 @@ class SessionFiles:
         The files' text, copied into the session folder.
     convention : {"symetrie", "pi"}
         Rotation convention of the plan's poses (the hexapod file's).
+    paths : tuple of Path
+        The files read (plan, hexapod, balls): the session folder may not hold them.
     """
 
     plan: Plan
@@ -40,6 +42,7 @@ class SessionFiles:
     hexapod_text: str
     balls_text: str
     convention: str = "symetrie"
+    paths: tuple[Path, ...] = ()
 
 
 def load_files(plan_path: Path, hexapod_path: Path, balls_path: Path) -> SessionFiles:
@@ -57,6 +60,7 @@ def load_files(plan_path: Path, hexapod_path: Path, balls_path: Path) -> Session
         read_text(hexapod_path),
         read_text(balls_path),
         hexapod.convention,
+        (Path(plan_path), Path(hexapod_path), Path(balls_path)),
     )
 
 

@@ -54,6 +54,7 @@ from hexatherm.errors import (
     InputError,
 )
 from hexatherm.io.atomic import atomic_write_text
+from hexatherm.io.recording import check_new_recording, check_resume, recording_manifest
 from hexatherm.io.seriallog import (
     LOG_NAME,
     POINTS_HEADER,
@@ -78,6 +79,19 @@ from hexatherm.workflows.acquire.files import (
     write_copies,
 )
 from hexatherm.workflows.acquire.recorder import BallFit, FitChecks, Notify, Recorder, quiet
+
+#: every file acquire writes in its session folder (its manifest lists only these)
+ACQUIRE_FILES = (
+    "plan.yaml",
+    "hexapod.yaml",
+    "balls.yaml",
+    LOG_NAME,
+    POINTS_NAME,
+    TEMPERATURES_NAME,
+    REJECTED_NAME,
+    "session.yaml",
+    ".acquire.lock",
+)
 
 
 class InputReader(threading.Thread):
@@ -204,13 +218,15 @@ def acquire(
     if options.resume:
         if not log_path.is_file():
             raise AcquisitionError(f"nothing to resume: {log_path} does not exist")
+        check_resume(folder, command="acquire")
     elif log_path.exists():
         raise AcquisitionError(
             f"{folder} already holds a recording ({LOG_NAME}); continue it "
             "with --resume, or choose another --session"
         )
-    elif folder.exists() and not folder.is_dir():
-        raise AcquisitionError(f"{folder} exists and is not a folder")
+    else:
+        inputs = [*files.paths, *([options.temperatures_file] if options.temperatures_file else [])]
+        check_new_recording(folder, command="acquire", inputs=inputs)
     if options.temperature_port is not None and options.temperatures_file is not None:
         raise AcquisitionError("give --temperatures or --temperature-port, not both")
 
@@ -220,7 +236,7 @@ def acquire(
         if options.temperature_port is not None:
             temperature_port = options.temperature_port.open()
         folder.mkdir(parents=True, exist_ok=True)
-        with session_lock(folder):
+        with session_lock(folder), recording_manifest(folder, "acquire", ACQUIRE_FILES):
             return _run(files, options, notify, operator_lines, probe_port, temperature_port)
     finally:
         for port in (probe_port, temperature_port):

@@ -49,6 +49,11 @@ from hexatherm.io.files import STRICT, ReadOptions
 from hexatherm.io.manifest import sha256_file
 from hexatherm.io.yamlfile import YamlDoc
 from hexatherm.typing import FloatArray
+from hexatherm.workflows.calibrate.checks import (
+    check_distinct_sessions,
+    check_one_hexapod,
+    check_reference_states,
+)
 from hexatherm.workflows.process.pipeline import ProcessResult, process_session
 from hexatherm.workflows.process.twin import twin_poses
 from hexatherm.workflows.process.uncertainty import joint_pose_covariance
@@ -186,24 +191,14 @@ def read_campaign(
         raise ValueError("a twin model is required with poses='twin' and only with it")
     if not paths:
         raise ValueError("calibrate needs at least one session")
+    specs = [read_session(path) for path in paths]
+    check_distinct_sessions(specs)
+    check_one_hexapod(specs)
     results = [
         process_session(path, interpolation, reading=reading, hexapod=geometry) for path in paths
     ]
-    nominal = read_session(paths[0]).hexapod
-    for path, result in zip(paths[1:], results[1:], strict=True):
-        other = read_session(path).hexapod
-        same = other.convention == nominal.convention and all(
-            np.array_equal(getattr(other, name), getattr(nominal, name))
-            for name in ("base_joints_mm", "platform_joints_mm")
-        )
-        if not same:
-            raise InputError(
-                f"its hexapod file's geometry differs from {results[0].session.path}'s: the "
-                "sessions of one calibration must be commanded with one geometry",
-                path=str(result.session.path),
-                field="hexapod",
-            )
-    check_reference_states(results)
+    nominal = specs[0].hexapod
+    check_reference_states(results, warn=geometry is None)  # --iterate's rounds: said once
     labels: list[str] = []
     commanded, measured, covariance = [], [], []
     for result in results:
@@ -233,37 +228,6 @@ def read_campaign(
         poses,
         twin,
     )
-
-
-#: the largest difference of the legs' mean temperature at R0 between the sessions of
-#: one calibration, K (each session's corrected poses refer to its own R0)
-MAX_REFERENCE_STATE_K = 0.5
-
-
-def check_reference_states(results: Sequence[ProcessResult]) -> None:
-    """Refuse sessions whose reference states (the legs' temperature at each R0, where
-    logged) differ by more than :data:`MAX_REFERENCE_STATE_K`."""
-    states = []
-    for result in results:
-        temps = result.temperatures
-        if temps is None:
-            continue
-        r0 = int(result.session.plan.reference_indices[0])
-        t = float(result.centres.times_s[r0])
-        legs = np.array([np.interp(t, temps.time_s, temps.legs_C[:, k]) for k in range(6)])
-        states.append((result, float(legs.mean())))
-    if len(states) < 2:
-        return
-    first, base = states[0]
-    for result, mean in states[1:]:
-        if abs(mean - base) > MAX_REFERENCE_STATE_K:
-            raise InputError(
-                f"the legs were at {mean:.2f} degC at its R0 and at {base:.2f} degC at "
-                f"{first.session.path}'s: its corrected poses refer to another thermal state "
-                f"(more than {MAX_REFERENCE_STATE_K} K apart); calibrate them apart",
-                path=str(result.session.path),
-                field="temperatures",
-            )
 
 
 @dataclass(frozen=True)

@@ -287,7 +287,7 @@ def write_files(
     through the output guard (:func:`~hexatherm.io.outputs.output_dir`: never into or
     around ``inputs``; ``overwrite`` replaces only a folder hexatherm wrote)."""
     written = []
-    with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
+    with output_dir(out, inputs=inputs, overwrite=overwrite, sessions=True) as tmp:
         for rel, text in files.items():
             target = tmp / rel
             target.parent.mkdir(parents=True, exist_ok=True)

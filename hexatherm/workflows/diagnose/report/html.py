@@ -56,19 +56,37 @@ def units(text: str) -> str:
     return text
 
 
+#: a code span, or a backslash escape (CommonMark: ASCII punctuation made literal)
+_LITERAL = re.compile(r"`([^`]+)`|\\([!-/:-@\[-`{-~])")
+#: where a literal stands while the rest is formatted (private-use characters)
+_SLOT = re.compile("\ue000([0-9]+)\ue001")
+
+
 def inline(text: str) -> str:
-    """One line of Markdown text as escaped HTML: ``**bold**``, ```code```, units.
+    r"""One line of Markdown text as escaped HTML: ``**bold**``, ```code```, units, and
+    backslash escapes (``\<`` is ``<``, text: how :func:`~.tables.md_text` writes a
+    user's name).
 
     >>> inline("**NOT adequate** <1 um> in `a|b`")
     '<b>NOT adequate</b> &lt;1 µm&gt; in <code>a|b</code>'
+    >>> inline(r"of \<i\>\*x\*\</i\>")
+    'of &lt;i&gt;*x*&lt;/i&gt;'
     """
-    out = escape(units(text))
+    literals: list[str] = []
+
+    def keep(match: re.Match[str]) -> str:
+        code, char = match[1], match[2]
+        literals.append(f"<code>{escape(units(code))}</code>" if code else escape(char))
+        return f"\ue000{len(literals) - 1}\ue001"
+
+    out = escape(units(_LITERAL.sub(keep, text)))
     out = re.sub(r"\*\*(.+?)\*\*", r"<b>\1</b>", out)
-    return re.sub(r"`([^`]+)`", r"<code>\1</code>", out)
+    return _SLOT.sub(lambda m: literals[int(m[1])], out)
 
 
 def _cells(line: str) -> list[str]:
-    return [c.strip().replace("\\|", "|") for c in _PIPE.split(line.strip())[1:-1]]
+    unescape = re.compile(r"\\([!-/:-@\[-`{-~])")
+    return [unescape.sub(r"\1", c.strip()) for c in _PIPE.split(line.strip())[1:-1]]
 
 
 def _table(lines: list[str]) -> str:

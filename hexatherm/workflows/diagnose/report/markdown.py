@@ -20,6 +20,8 @@ from hexatherm.workflows.diagnose.report.tables import (
     candidate_tables,
     changed,
     format_value,
+    md_code,
+    md_text,
     render_markdown,
     start_time_s,
     structure_tables,
@@ -157,12 +159,12 @@ def report_markdown(result: DiagnosisResult, figure_names: Mapping[str, str] | N
     span_h = (float(np.max(obs.times_s)) - t0) / _HOUR_S
     counts = ", ".join(f"{n} {k}" for k, n in before.kind_count.items())
 
-    md = [f"# Diagnosis of {data.session.name}", "", headline(result), ""]
+    md = [f"# Diagnosis of {md_text(data.session.name)}", "", headline(result), ""]
     md += [
         "## Session",
         "",
-        f"- session: `{data.session.path}`",
-        f"- hexapod: {data.hexapod_source} (`{data.hexapod.name}`)",
+        f"- session: {md_code(data.session.path)}",
+        f"- hexapod: {md_text(data.hexapod_source)} ({md_code(data.hexapod.name)})",
         f"- steps: {obs.n_steps} ({counts}), over {span_h:.2f} h",
         f"- centres' uncertainties: {data.uncertainty_source}",
         f"- current model: {_effects_text(data.current)}",

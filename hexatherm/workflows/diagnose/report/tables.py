@@ -5,6 +5,7 @@ Residuals by component, leg, step kind and time, the worst steps, structure test
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -136,8 +137,44 @@ def render_text(table: Table) -> str:
     return "\n".join(out)
 
 
+#: what Markdown would read as markup in a user's text: HTML and entities (``<``, ``&``),
+#: emphasis, code, links, table cells, a heading's closing ``#``, strike-through, and ``_``
+#: where it can open or close emphasis (not inside a word: ``leg_thermal_lag`` stays)
+_MD_SPECIAL = re.compile(r"[\\`*\[\]<>&|#~!]|(?<![A-Za-z0-9])_|_(?![A-Za-z0-9])")
+
+
+def md_text(value: object) -> str:
+    r"""A user's text (a session's name, a path) as Markdown that shows it as it is.
+
+    Line breaks become spaces; every character Markdown could read as markup is
+    backslash-escaped (CommonMark: a backslash before ASCII punctuation makes it literal),
+    so that ``<script>`` or ``</table>`` is text, not HTML.
+
+    >>> print(md_text("a <b>*c*</b> | d_e _f_"))
+    a \<b\>\*c\*\</b\> \| d_e \_f\_
+    """
+    text = " ".join(str(value).splitlines())
+    return _MD_SPECIAL.sub(lambda m: "\\" + m[0], text)
+
+
+def md_code(value: object) -> str:
+    r"""A user's text as a Markdown code span (literal), or as :func:`md_text` when it
+    holds a backtick (which would end the span).
+
+    >>> print(md_code("s/session.yaml"), md_code("a`b"))
+    `s/session.yaml` a\`b
+    """
+    text = " ".join(str(value).splitlines())
+    return md_text(text) if "`" in text else f"`{text}`"
+
+
+#: in a table cell (numbers, ranges ``[0, 3e-05]``, step labels): what would end the cell
+#: or make HTML, code or emphasis; brackets and ``#`` are left as they read
+_CELL_SPECIAL = re.compile(r"[\\`*<>&|]")
+
+
 def _md_cell(text: str) -> str:
-    return text.replace("|", "\\|").replace("\n", " ")
+    return _CELL_SPECIAL.sub(lambda m: "\\" + m[0], " ".join(text.splitlines()))
 
 
 def render_markdown(table: Table, heading: str = "###") -> str:

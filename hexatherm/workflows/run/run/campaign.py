@@ -47,8 +47,11 @@ from hexatherm.errors import (
     Terminated,
 )
 from hexatherm.io.atomic import atomic_write_text
+from hexatherm.io.recording import check_new_recording, check_resume, recording_manifest
 from hexatherm.io.seriallog import (
+    LOG_NAME,
     POINTS_HEADER,
+    TEMPERATURES_NAME,
 )
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.acquire.files import (
@@ -61,6 +64,7 @@ from hexatherm.workflows.run.files import (
     CONTROLLER_LOG_MAGIC,
     CONTROLLER_LOG_NAME,
     POINTS_NAME,
+    RUN_NAME,
     STEPS_NAME,
     TRANSCRIPT_NAME,
     AcceptedBall,
@@ -91,8 +95,24 @@ from hexatherm.workflows.run.run.support import (
     check_probed,
 )
 
-
 # ------------------------------------------------------------------------ the run
+#: every file a run writes in its session folder (its manifest lists only these)
+RUN_FILES = (
+    "plan.yaml",
+    "hexapod.yaml",
+    "balls.yaml",
+    RUN_NAME,
+    POINTS_NAME,
+    STEPS_NAME,
+    TRANSCRIPT_NAME,
+    CONTROLLER_LOG_NAME,
+    LOG_NAME,
+    TEMPERATURES_NAME,
+    "session.yaml",
+    ".run.lock",
+)
+
+
 @contextlib.contextmanager
 def _session_lock(folder: Path) -> Iterator[None]:
     """An exclusive lock on the session folder (POSIX; released if the process dies)."""
@@ -161,15 +181,16 @@ def run_campaign(
     if options.resume:
         if not transcript.is_file():
             raise AcquisitionError(f"nothing to resume: {transcript} does not exist")
+        check_resume(folder, command="run")
     elif not transcript_is_new(transcript):
         raise AcquisitionError(
             f"{folder} already holds a run ({TRANSCRIPT_NAME}); continue it with --resume, "
             "or choose another --session"
         )
-    elif folder.exists() and not folder.is_dir():
-        raise AcquisitionError(f"{folder} exists and is not a folder")
+    else:
+        check_new_recording(folder, command="run", inputs=files.paths)
     folder.mkdir(parents=True, exist_ok=True)
-    with _session_lock(folder):
+    with _session_lock(folder), recording_manifest(folder, "run", RUN_FILES):
         if options.resume:
             check_same_files(files, folder)
             settings = read_run_settings(folder)

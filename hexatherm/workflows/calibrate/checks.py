@@ -1,0 +1,172 @@
+"""What ``calibrate`` checks of its sessions before pooling them (issue 22, item 6).
+
+1. **Each session once** (:func:`check_distinct_sessions`): a session given twice (the
+   same path, a copy, a symbolic link, ``DIR`` and ``DIR/session.yaml``) would count its
+   poses twice and shrink every parameter's uncertainty by sqrt(2). Sessions are compared
+   by content: the SHA-256 of their measurement files (centres, points, DMIS), not their
+   paths; one measurement file in two sessions is refused, naming both. (A temperatures
+   log may be shared: one long log can cover several sessions.)
+2. **One hexapod file** (:func:`check_one_hexapod`): every number a session's poses rest
+   on must be the same in every session's hexapod file: the convention, the base and
+   platform joints, the stroke, and the legs' thermal model (segments, lengths, CTE,
+   reference temperature). The first field that differs is named.
+3. **One reference state** (:func:`check_reference_states`): each session's corrected
+   poses refer to the thermal state of its first reference R0; each leg's temperature at
+   R0 (interpolated in the session's thermocouple log) must be within
+   :data:`MAX_REFERENCE_STATE_K` of the first logged session's, leg by leg (a mean would
+   let +1 K on three legs and -1 K on the others pass). A session without temperatures
+   cannot be checked: a ``warning:`` says so (an :class:`~hexatherm.errors.InputWarning`).
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from hexatherm.core.hexapod import Hexapod
+from hexatherm.errors import InputError, InputWarning
+from hexatherm.io.manifest import sha256_file
+from hexatherm.session import Session
+from hexatherm.workflows.process.pipeline import ProcessResult
+
+__all__ = [
+    "MAX_REFERENCE_STATE_K",
+    "check_distinct_sessions",
+    "check_one_hexapod",
+    "check_reference_states",
+    "hexapod_difference",
+]
+
+#: the largest difference of any leg's temperature at R0 between the sessions of one
+#: calibration, K (each session's corrected poses refer to its own R0)
+MAX_REFERENCE_STATE_K = 0.5
+
+
+def check_distinct_sessions(specs: Sequence[Session]) -> None:
+    """Refuse a measurement file (by SHA-256) that two of the sessions hold."""
+    seen: dict[str, tuple[Session, Path]] = {}
+    for spec in specs:
+        for path in spec.measurements:
+            digest = sha256_file(Path(os.path.realpath(path)))  # a live link is its file
+            if digest is None:
+                continue  # not a regular file: the measurement reader names why
+            if digest in seen:
+                first, where = seen[digest]
+                same = (
+                    "is the same session as"
+                    if Path(first.path).resolve() == Path(spec.path).resolve()
+                    else "holds the same measurements as"
+                )
+                raise InputError(
+                    f"{same} {first.path} (its {where.name} and {Path(path).name} have one "
+                    f"SHA-256, {digest[:12]}...): a session given twice counts its poses "
+                    "twice; give each session once",
+                    path=str(spec.path),
+                    field="measurements",
+                )
+            seen[digest] = (spec, Path(path))
+
+
+def _same(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+    if a is None or b is None:
+        return a is None and b is None
+    return bool(np.shape(a) == np.shape(b) and np.array_equal(a, b))
+
+
+def hexapod_difference(a: Hexapod, b: Hexapod) -> str | None:
+    """The first field in which two hexapod models differ (what the poses rest on), or None.
+
+    >>> from hexatherm.core.hexapod import Hexapod
+    >>> h = Hexapod.symmetric(base_radius_mm=180, platform_radius_mm=110, base_half_angle_deg=10,
+    ...                       platform_half_angle_deg=10, height_mm=240, stroke_mm=(220, 310))
+    >>> import dataclasses
+    >>> hexapod_difference(h, dataclasses.replace(h, stroke_mm=np.array([220.0, 300.0])))
+    'stroke'
+    >>> hexapod_difference(h, h) is None
+    True
+    """
+    if a.convention != b.convention:
+        return "convention"
+    for name, label in (
+        ("base_joints_mm", "base_joints"),
+        ("platform_joints_mm", "platform_joints"),
+        ("stroke_mm", "stroke"),
+    ):
+        if not _same(getattr(a, name), getattr(b, name)):
+            return label
+    if (a.legs is None) != (b.legs is None):
+        return "legs"
+    if a.legs is not None and b.legs is not None:
+        la, lb = a.legs, b.legs
+        if la.variable.shape != lb.variable.shape or not np.array_equal(la.variable, lb.variable):
+            return "legs: segments"
+        if not _same(la.fixed_length_mm, lb.fixed_length_mm):
+            return "legs: segment lengths"
+        if not _same(la.cte_per_K, lb.cte_per_K):
+            return "legs: cte"
+        if la.reference_temperature_C != lb.reference_temperature_C:
+            return "legs: reference_temperature"
+    return None
+
+
+def check_one_hexapod(specs: Sequence[Session]) -> None:
+    """Refuse sessions whose hexapod files differ in anything their poses rest on."""
+    first = specs[0]
+    for spec in specs[1:]:
+        field = hexapod_difference(first.hexapod, spec.hexapod)
+        if field is not None:
+            raise InputError(
+                f"its hexapod file differs from {first.path}'s in {field}: the sessions of "
+                "one calibration must share one hexapod file",
+                path=str(spec.path),
+                field=f"hexapod: {field}",
+            )
+
+
+def _legs_at_r0(result: ProcessResult) -> np.ndarray | None:
+    """Each leg's temperature at the session's R0 (degC), or None without temperatures."""
+    temps = result.temperatures
+    if temps is None:
+        return None
+    r0 = int(result.session.plan.reference_indices[0])
+    t = float(result.centres.times_s[r0])
+    return np.array([np.interp(t, temps.time_s, temps.legs_C[:, k]) for k in range(6)])
+
+
+def check_reference_states(results: Sequence[ProcessResult], *, warn: bool = True) -> None:
+    """Refuse sessions whose legs' temperatures at R0 differ, leg by leg, by more than
+    :data:`MAX_REFERENCE_STATE_K`; warn (when ``warn``) for each session that has no
+    temperatures."""
+    if len(results) < 2:
+        return
+    states = [(result, _legs_at_r0(result)) for result in results]
+    logged = [(result, legs) for result, legs in states if legs is not None]
+    for result, legs in states:
+        if legs is None and warn:
+            warnings.warn(
+                InputWarning(
+                    f"{result.session.path}: no temperatures, so the thermal state of its "
+                    "R0 (which its corrected poses refer to) cannot be checked against the "
+                    "other sessions'"
+                ),
+                stacklevel=2,
+            )
+    if len(logged) < 2:
+        return
+    first, base = logged[0]
+    for result, legs in logged[1:]:
+        diff = legs - base
+        k = int(np.argmax(np.abs(diff)))
+        if abs(diff[k]) > MAX_REFERENCE_STATE_K:
+            raise InputError(
+                f"leg {k + 1} was at {legs[k]:.2f} degC at its R0 and at {base[k]:.2f} degC "
+                f"at {first.session.path}'s ({diff[k]:+.2f} K): its corrected poses refer to "
+                f"another thermal state (more than {MAX_REFERENCE_STATE_K} K apart on a "
+                "leg); calibrate them apart",
+                path=str(result.session.path),
+                field="temperatures",
+            )
