@@ -318,7 +318,7 @@ def test_a_report_that_does_not_match_the_request_gives_no_point():
         ("<", "00003 %"),
         (">", "00004 PtMeas(X(1), Y(2), Z(3), IJK(0, 0, 1))"),
         ("<", "00004 &"),
-        ("<", "00004 # X(1), Z(3), Y(2), IJK(0,0,1)"),  # order
+        ("<", "00004 # X(1), Z(3), Y(2), Y(2), IJK(0,0,1)"),  # Y doubled
         ("<", "00004 %"),
         (">", "00005 PtMeas(X(1), Y(2), Z(3), IJK(0, 0, 1))"),
         ("<", "00005 &"),
@@ -340,6 +340,31 @@ def test_a_report_that_does_not_match_the_request_gives_no_point():
     bad = {r.tag: r.protocol_error for r in replay.results}
     assert all(bad[t] for t in ("00003", "00004", "00005", "00006"))
     assert replay.events[0].response is None and replay.events[0].problem
+
+
+def test_a_report_is_read_by_field_name_in_any_order():
+    # the NIST I++ DME server answers ER, IJK, X, Y, Z whatever OnPtMeasReport listed
+    # (every field is named, spec 6.1.3): the point is read by name
+    rows = [
+        (">", "00002 OnPtMeasReport(X(), Y(), Z(), IJK(), ER())"),
+        ("<", "00002 &"),
+        ("<", "00002 %"),
+        (">", "00003 PtMeas(X(100), Y(100), Z(50), IJK(0, 0, 1))"),
+        ("<", "00003 &"),
+        ("<", "00003 # ER(3.00000), IJK(0.00000,0.60000,0.80000), X(100.5), Y(-7.25), Z(53)"),
+        ("<", "00003 %"),
+        (">", "00004 PtMeas(X(100), Y(100), Z(50), IJK(0, 0, 1))"),
+        ("<", "00004 &"),
+        ("<", "00004 # Z(1), IJK(0,0,1), ER(3), Y(2)"),  # X missing
+        ("<", "00004 %"),
+    ]
+    replay = replay_transcript(_transcript(rows))
+    assert [p.tag for p in replay.points] == ["00003"]
+    point = replay.points[0]
+    assert point.point_mm == (100.5, -7.25, 53.0)
+    assert point.ijk == (0.0, 0.6, 0.8) and point.er_mm == 3.0
+    bad = {r.tag: r.protocol_error for r in replay.results}
+    assert bad["00004"] is not None and "X" in bad["00004"]
 
 
 def test_transcript_escapes_and_refuses_garbage(tmp_path):
