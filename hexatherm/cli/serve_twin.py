@@ -37,6 +37,15 @@ from hexatherm.cli.options import CheckedFloat, clean_errors, echo_err
     help="The controller's dialect.",
 )
 @click.option(
+    "--cmm-dialect",
+    type=click.Choice(["dme-1.4.3", "dme-1.4"]),
+    default="dme-1.4.3",
+    show_default=True,
+    help="How the CMM speaks I++: dme-1.4 is a plain DME 1.4 server (no Tool.AvrRadius, "
+    "PtMeas fields in its own order ER, IJK, X, Y, Z, a lax FindTool, the session kept "
+    "across connections), as the NIST I++ DME Test Suite's server.",
+)
+@click.option(
     "--time-scale",
     type=CheckedFloat(min=1e-3, max=1e6),
     default=60.0,
@@ -127,6 +136,7 @@ def command(
     balls_path: Path | None,
     scenario: Path | None,
     dialect: str,
+    cmm_dialect: str,
     time_scale: float,
     faults: tuple[str, ...],
     origin_on_cmm: str | None,
@@ -220,6 +230,7 @@ def command(
         controller_port=controller_port,
         thermocouple_port=thermocouple_port,
         thermocouple_period_s=thermocouple_period,
+        cmm_dialect=cmm_dialect,
     ) as machines:
         click.echo(f"cmm: {machines.cmm_url}")
         click.echo(f"controller: {machines.controller_url}")

@@ -413,6 +413,9 @@ class TwinMachines:
         Sampling period of the thermocouple logger, on the world's clock, s.
     cmm_limits_mm : pair of 3 floats
         The CMM's travel box.
+    cmm_dialect : {"dme-1.4.3", "dme-1.4"}
+        How the simulated CMM speaks (``dme-1.4``: a plain DME 1.4 server, see
+        :data:`~hexatherm.devices.ippserver.CMM_DIALECTS`).
 
     Attributes
     ----------
@@ -438,6 +441,7 @@ class TwinMachines:
             (-2000.0, -2000.0, -2000.0),
             (2000.0, 2000.0, 2000.0),
         ),
+        cmm_dialect: str = "dme-1.4.3",
     ) -> None:
         if dialect not in ("symetrie", "pi"):
             raise InputError(f"dialect must be symetrie or pi, got {dialect!r}")
@@ -456,6 +460,7 @@ class TwinMachines:
             time_s=world.cmm_time_s,
             home_mm=tuple(float(v) for v in home),
             limits_mm=cmm_limits_mm,
+            dialect=cmm_dialect,
         )
         kind = SymetrieSimulator if dialect == "symetrie" else PISimulator
         try:
