@@ -36,10 +36,11 @@ REPORT_ARITY = {"X": 1, "Y": 1, "Z": 1, "IJK": 3, "ER": 1, "Q": 1, "R": 1}
 
 
 ALLOWED_IN_ERROR = frozenset(
-    {"ClearAllErrors", "GetErrStatusE", "GetXtdErrStatus", "StartSession", "EndSession", "AbortE"}
+    {"ClearAllErrors", "GetErrStatusE", "GetXtdErrStatus", "StartSession", "AbortE"}
 )
 """Methods the client still sends while the server is in an error state (6.2.5; a new
-session clears the errors, 6.3.1.1)."""
+session clears the errors, 6.3.1.1). Not ``EndSession``: 6.2.5 does not allow it, and the
+NIST server refuses it (0514); :meth:`IppClient.end_session` clears the errors first."""
 
 
 Direction = Literal[">", "<", "*"]
