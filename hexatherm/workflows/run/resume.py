@@ -88,6 +88,16 @@ def write_run_settings(folder: Path, settings: RunSettings) -> None:
     atomic_write_text(folder / RUN_NAME, yaml.safe_dump(doc, sort_keys=False))
 
 
+def record_cmm_facts(folder: Path, facts: dict[str, object]) -> None:
+    """Keep what the CMM said of itself in ``run.yaml`` under ``cmm`` (the last connection's):
+    ``dme_version``, ``tool_avr_radius_mm`` (``unknown`` when not asked or refused) and
+    ``unknown`` (why). The settings a resume reads are left as they are."""
+    path = folder / RUN_NAME
+    doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+    doc["cmm"] = facts
+    atomic_write_text(path, yaml.safe_dump(doc, sort_keys=False))
+
+
 def read_run_settings(folder: Path) -> RunSettings:
     """Read ``run.yaml`` of a session started by ``hexatherm run``."""
     path = folder / RUN_NAME
