@@ -41,9 +41,9 @@ from hexatherm.cli.options import CheckedFloat, clean_errors, echo_err
     type=click.Choice(["dme-1.4.3", "dme-1.4"]),
     default="dme-1.4.3",
     show_default=True,
-    help="How the CMM speaks I++: dme-1.4 is a plain DME 1.4 server (no Tool.AvrRadius, "
-    "PtMeas fields in its own order ER, IJK, X, Y, Z, a lax FindTool, the session kept "
-    "across connections), as the NIST I++ DME Test Suite's server.",
+    help="How the CMM speaks I++: dme-1.4 is a plain DME 1.4 server as the NIST I++ DME "
+    "Test Suite's (no Tool.AvrRadius, PtMeas fields in its own order ER, IJK, X, Y, Z, a "
+    "lax FindTool) that also keeps its session across connections.",
 )
 @click.option(
     "--time-scale",

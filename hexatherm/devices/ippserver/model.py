@@ -80,8 +80,10 @@ CMM_DIALECTS = ("dme-1.4.3", "dme-1.4")
 report in the order asked, ``FindTool`` refuses an unknown tool, one session per
 connection) or ``dme-1.4``, a plain DME 1.4 server as the NIST I++ DME Test Suite's
 (``DMEVersion("1.4")``, no ``AvrRadius``, ``PtMeas`` fields in its own order ``ER, IJK, X,
-Y, Z``, a lax ``FindTool`` that leaves ``FoundTool`` unchanged, the session kept across
-connections, a second ``StartSession`` refused with error 0507)."""
+Y, Z``, a lax ``FindTool`` that leaves ``FoundTool`` unchanged, a second ``StartSession``
+refused with error 0507), and one that keeps its session across connections (the NIST
+server's own code ends the session, and un-homes, when the client goes; other servers
+keep it, and a reconnecting client must end it first)."""
 
 
 class CmmBackend(Protocol):
