@@ -38,6 +38,15 @@ from hexatherm.cli.options import CheckedFloat, clean_errors, echo_err
     "telnet, as ZONDA/JORAN/PUNA+ controllers).",
 )
 @click.option(
+    "--cmm-dialect",
+    type=click.Choice(["dme-1.4.3", "dme-1.4"]),
+    default="dme-1.4.3",
+    show_default=True,
+    help="How the CMM speaks I++: dme-1.4 is a plain DME 1.4 server as the NIST I++ DME "
+    "Test Suite's (no Tool.AvrRadius, PtMeas fields in its own order ER, IJK, X, Y, Z, a "
+    "lax FindTool) that also keeps its session across connections.",
+)
+@click.option(
     "--time-scale",
     type=CheckedFloat(min=1e-3, max=1e6),
     default=60.0,
@@ -129,6 +138,7 @@ def command(
     balls_path: Path | None,
     scenario: Path | None,
     dialect: str,
+    cmm_dialect: str,
     time_scale: float,
     faults: tuple[str, ...],
     origin_on_cmm: str | None,
@@ -227,6 +237,7 @@ def command(
         thermocouple_port=thermocouple_port,
         thermocouple_period_s=thermocouple_period,
         pi_start=injected.pi,
+        cmm_dialect=cmm_dialect,
     ) as machines:
         click.echo(f"cmm: {machines.cmm_url}")
         click.echo(f"controller: {machines.controller_url}")

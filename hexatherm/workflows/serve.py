@@ -441,6 +441,9 @@ class TwinMachines:
         The CMM's travel box.
     pi_start : PIStart, optional
         The state the PI controller starts in (``dialect="pi"``).
+    cmm_dialect : {"dme-1.4.3", "dme-1.4"}
+        How the simulated CMM speaks (``dme-1.4``: a plain DME 1.4 server, see
+        :data:`~hexatherm.devices.ippserver.CMM_DIALECTS`).
 
     Attributes
     ----------
@@ -467,6 +470,7 @@ class TwinMachines:
             (2000.0, 2000.0, 2000.0),
         ),
         pi_start: PIStart | None = None,
+        cmm_dialect: str = "dme-1.4.3",
     ) -> None:
         if dialect not in ("symetrie", "pi", "symetrie-pmac"):
             raise InputError(f"dialect must be symetrie, pi or symetrie-pmac, got {dialect!r}")
@@ -485,6 +489,7 @@ class TwinMachines:
             time_s=world.cmm_time_s,
             home_mm=tuple(float(v) for v in home),
             limits_mm=cmm_limits_mm,
+            dialect=cmm_dialect,
         )
         try:
             self.controller: SimulatedController = (

@@ -71,6 +71,33 @@ def test_serve_twin_prints_its_urls_serves_and_stops_on_ctrl_c() -> None:
             proc.communicate()
 
 
+def test_serve_twin_cmm_dialect_dme_1_4() -> None:
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "hexatherm", "serve-twin", "--hexapod", str(HEXAPOD),
+         "--balls", str(BALLS), "--cmm-dialect", "dme-1.4", "--time-scale", "100"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )  # fmt: skip
+    try:
+        assert proc.stdout is not None
+        cmm_line = proc.stdout.readline()
+        host, port = parse_ipp_url(cmm_line.split()[1])
+        with IppClient(host, port, timeout_s=30) as cmm:
+            assert cmm.start_session() is False
+            assert cmm.dme_version() == ("1.4", (1, 4))
+        with IppClient(host, port, timeout_s=30) as cmm:  # the session was kept
+            assert cmm.start_session() is True
+            cmm.end_session()
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+        assert proc.returncode == 0, err
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+
+
 def test_a_bad_fault_is_refused() -> None:
     result = CliRunner().invoke(
         main, ["serve-twin", "--hexapod", str(HEXAPOD), "--balls", str(BALLS),

@@ -318,7 +318,7 @@ def test_a_report_that_does_not_match_the_request_gives_no_point():
         ("<", "00003 %"),
         (">", "00004 PtMeas(X(1), Y(2), Z(3), IJK(0, 0, 1))"),
         ("<", "00004 &"),
-        ("<", "00004 # X(1), Z(3), Y(2), IJK(0,0,1)"),  # order
+        ("<", "00004 # X(1), Z(3), Y(2), Y(2), IJK(0,0,1)"),  # Y doubled
         ("<", "00004 %"),
         (">", "00005 PtMeas(X(1), Y(2), Z(3), IJK(0, 0, 1))"),
         ("<", "00005 &"),
@@ -340,6 +340,31 @@ def test_a_report_that_does_not_match_the_request_gives_no_point():
     bad = {r.tag: r.protocol_error for r in replay.results}
     assert all(bad[t] for t in ("00003", "00004", "00005", "00006"))
     assert replay.events[0].response is None and replay.events[0].problem
+
+
+def test_a_report_is_read_by_field_name_in_any_order():
+    # the NIST I++ DME server answers ER, IJK, X, Y, Z whatever OnPtMeasReport listed
+    # (every field is named, spec 6.1.3): the point is read by name
+    rows = [
+        (">", "00002 OnPtMeasReport(X(), Y(), Z(), IJK(), ER())"),
+        ("<", "00002 &"),
+        ("<", "00002 %"),
+        (">", "00003 PtMeas(X(100), Y(100), Z(50), IJK(0, 0, 1))"),
+        ("<", "00003 &"),
+        ("<", "00003 # ER(3.00000), IJK(0.00000,0.60000,0.80000), X(100.5), Y(-7.25), Z(53)"),
+        ("<", "00003 %"),
+        (">", "00004 PtMeas(X(100), Y(100), Z(50), IJK(0, 0, 1))"),
+        ("<", "00004 &"),
+        ("<", "00004 # Z(1), IJK(0,0,1), ER(3), Y(2)"),  # X missing
+        ("<", "00004 %"),
+    ]
+    replay = replay_transcript(_transcript(rows))
+    assert [p.tag for p in replay.points] == ["00003"]
+    point = replay.points[0]
+    assert point.point_mm == (100.5, -7.25, 53.0)
+    assert point.ijk == (0.0, 0.6, 0.8) and point.er_mm == 3.0
+    bad = {r.tag: r.protocol_error for r in replay.results}
+    assert bad["00004"] is not None and "X" in bad["00004"]
 
 
 def test_transcript_escapes_and_refuses_garbage(tmp_path):
@@ -728,3 +753,71 @@ def test_a_raising_callback_or_transcript_is_not_swallowed():
             ):
                 cmm.home()  # >, < (the ack), then the '%' cannot be recorded
     assert len(lines) == 6 and lines[-1].endswith('< "00002 &"\n')
+
+
+# ------------------------------------------------- servers of other dialects (issue 23)
+def test_client_against_a_plain_dme_1_4_server():
+    """Version first, optional queries cleared, points read by name, a stale session ended."""
+    with _server(dialect="dme-1.4") as server:
+        with IppClient("127.0.0.1", server.port, timeout_s=30) as cmm:
+            _prepare(cmm)
+            assert cmm.dme_version() == ("1.4", (1, 4))
+            result, error = cmm.optional("GetProp(Tool.AvrRadius())")
+            assert result is None and error is not None and error.number == 502
+            assert cmm.error_state is None and server.commands[-1].endswith("ClearAllErrors()")
+            assert cmm.enum_tools() == ["NoTool", "Probe1"]
+            top = CENTRES_MM[0] + [0, 0, 12.7]
+            cmm.goto(*(top + [0, 0, 8]))
+            point = cmm.pt_meas(*top, 0, 0, 1)  # answered ER, IJK, X, Y, Z
+            np.testing.assert_allclose(point.point_mm, top, atol=1e-9)
+            assert point.er_mm == 0.5 * TIP_DIAMETER_MM
+        # the session outlived that connection: the next client ends it and starts anew
+        with IppClient("127.0.0.1", server.port, timeout_s=30) as cmm:
+            assert cmm.start_session() is True
+            assert cmm.error_state is None
+            tail = [c[6:] for c in server.commands[-4:]]
+            assert tail == ["StartSession()", "ClearAllErrors()", "EndSession()", "StartSession()"]
+            assert cmm.dme_version() == ("1.4", (1, 4))
+    with _server() as server, IppClient("127.0.0.1", server.port, timeout_s=30) as cmm:
+        assert cmm.start_session() is False
+        assert cmm.dme_version() == ("1.4.3", (1, 4, 3))
+
+
+def test_end_session_is_not_sent_in_an_error_state():
+    faults = [Fault("error", nth=1, method="GoTo", severity=3)]
+    with _server(faults=faults) as server, IppClient("127.0.0.1", server.port, timeout_s=30) as cmm:
+        _prepare(cmm)
+        with pytest.raises(IppCommandError):
+            cmm.goto(*(CENTRES_MM[0] + [0, 0, 20]))
+        assert cmm.error_state is not None
+        cmm.end_session()  # clears first: 6.2.5 allows no EndSession in an error state
+        assert [c[6:] for c in server.commands[-2:]] == ["ClearAllErrors()", "EndSession()"]
+        assert cmm.error_state is None
+        assert all(r.failure is None for r in cmm.recorder.results[-2:])
+
+
+def test_warnings_are_said_not_dropped():
+    faults = [
+        Fault("error", nth=1, method=m, severity=s, number=n)
+        for m, s, n in (("SetProp", 0, 1), ("GoTo", 1, 1005), ("PtMeas", 1, 1005))
+    ]
+    said = []
+    lines = []
+    with (
+        _server(faults=faults) as server,
+        IppClient(
+            "127.0.0.1",
+            server.port,
+            timeout_s=30,
+            transcript=lines.append,
+            on_warning=lambda r, w: said.append((r.method, w.severity, w.number)),
+        ) as cmm,
+    ):
+        _prepare(cmm)
+        cmm.set_prop({"Tool.PtMeasPar.Approach": 2.0})
+        cmm.goto(*(CENTRES_MM[0] + [0, 0, 20]))
+        top = CENTRES_MM[0] + [0, 0, 12.7]
+        point = cmm.pt_meas(*top, 0, 0, 1)
+        np.testing.assert_allclose(point.point_mm, top, atol=1e-9)
+    assert said == [("SetProp", 0, 1), ("GoTo", 1, 1005), ("PtMeas", 1, 1005)]
+    assert sum(" ! Error(1, 1005" in line for line in lines) == 2

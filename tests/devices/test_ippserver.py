@@ -385,11 +385,17 @@ def test_protocol_rules():
             raw.cmd("00032", "GetDMEVersion()")[1]
             == '00032 ! Error(2, 0514, "GetDMEVersion", "Use ClearAllErrors to continue")'
         )
-        assert raw.cmd("00033", "EndSession()") == ["00033 &", "00033 %"]
-        assert raw.cmd("00034", "StartSession()") == ["00034 &", "00034 %"]  # clears the errors
+        # 6.2.5: in an error state only ClearAllErrors, GetErrStatusE, GetXtdErrStatus
+        assert (
+            raw.cmd("00033", "EndSession()")[1]
+            == '00033 ! Error(2, 0514, "EndSession", "Use ClearAllErrors to continue")'
+        )
+        raw.cmd("00036", "ClearAllErrors()")
+        assert raw.cmd("00037", "EndSession()") == ["00037 &", "00037 %"]
+        assert raw.cmd("00034", "StartSession()") == ["00034 &", "00034 %"]
         assert raw.cmd("00035", "GetDMEVersion()")[1] == '00035 # DMEVersion("1.4.3")'
         raw.close()
-    assert server.commands[0] == "00001 Home()" and len(server.commands) == 36
+    assert server.commands[0] == "00001 Home()" and len(server.commands) == 38
 
 
 # ------------------------------------------------------------------- faults
@@ -537,3 +543,57 @@ def test_backend_and_server_preconditions():
         IppSimServer(balls, tools={"P": 0.0})
     with IppSimServer(balls) as server:
         assert server.url == f"ipp://127.0.0.1:{server.port}" and server.port > 0
+
+
+# ------------------------------------------------------------------- dialects
+def test_dme_1_4_dialect_speaks_as_the_nist_server():
+    """What the NIST I++ DME Test Suite's server (DME 1.4) answered, line for line in kind."""
+    with _server(dialect="dme-1.4") as server:
+        raw = Raw(server.port)
+        _ready(raw)
+        assert raw.cmd("00005", "GetDMEVersion()")[1] == '00005 # DMEVersion("1.4")'
+        assert raw.cmd("00006", "GetProp(Tool.AvrRadius())")[1] == (
+            '00006 ! Error(3, 0502, "GetProp", "Incorrect arguments")'
+        )
+        raw.cmd("00007", "ClearAllErrors()")
+        raw.cmd("00008", "GoTo(X(10), Y(20), Z(60))")
+        lines = raw.cmd("00009", "PtMeas(X(10), Y(20), Z(43), IJK(0, 0, 1))")
+        body = lines[1].split(" # ")[1]
+        assert [x.split("(")[0] for x in body.split("), ")] == ["ER", "IJK", "X", "Y", "Z"]
+        assert _data(lines)["Z"][0] == pytest.approx(CENTRE[2] + R_MM)
+        # FindTool is lax: no error, FoundTool as it was
+        assert raw.cmd("00010", 'FindTool("Probe1")') == ["00010 &", "00010 %"]
+        assert raw.cmd("00011", 'FindTool("Probe9")') == ["00011 &", "00011 %"]
+        assert (
+            raw.cmd("00012", "GetProp(FoundTool.Name())")[1] == '00012 # FoundTool.Name("Probe1")'
+        )
+        raw.close()
+        # the session outlives the connection: a new StartSession is refused
+        raw = Raw(server.port)
+        assert raw.cmd("00001", "StartSession()")[1] == (
+            '00001 ! Error(3, 0507, "StartSession", "Illegal command")'
+        )
+        assert raw.cmd("00002", "EndSession()")[1].startswith("00002 ! Error(2, 0514")
+        raw.cmd("00003", "ClearAllErrors()")
+        assert raw.cmd("00004", "EndSession()") == ["00004 &", "00004 %"]
+        assert raw.cmd("00005", "StartSession()") == ["00005 &", "00005 %"]
+        raw.close()
+    with _server() as server:  # the default: one session per connection
+        for _ in range(2):
+            raw = Raw(server.port)
+            assert raw.cmd("00001", "StartSession()") == ["00001 &", "00001 %"]
+            raw.close()
+    with pytest.raises(IppDmeError, match="dialect"):
+        _server(dialect="dme-2")
+
+
+def test_a_warning_fault_comes_with_the_answer():
+    fault = Fault("error", nth=1, method="PtMeas", severity=1, number=1005)
+    with _server(faults=[fault]) as server:
+        raw = Raw(server.port)
+        _ready(raw)
+        raw.cmd("00005", "GoTo(X(10), Y(20), Z(60))")
+        lines = raw.cmd("00006", "PtMeas(X(10), Y(20), Z(43), IJK(0, 0, 1))")
+        assert lines[1].startswith('00006 ! Error(1, 1005, "PtMeas"')
+        assert _data(lines)["Z"][0] == pytest.approx(CENTRE[2] + R_MM)
+        raw.close()

@@ -111,6 +111,7 @@ def make_bench(
     faults: Faults | None = None,
     noise_um: float = 0.0,
     backend: Callable[[TwinWorld], object] | None = None,
+    cmm_dialect: str = "dme-1.4.3",
 ) -> Bench:
     plan = build_plan(targets, (0.0, 0.0, -40.0, 0.0, 0.0, 0.0), points_per_ball=points_per_ball)
     tmp.mkdir(parents=True, exist_ok=True)
@@ -128,7 +129,9 @@ def make_bench(
         start_s=START - 1200.0,
         faults=faults,
     )
-    machines = TwinMachines(world, ipp_faults=ipp_faults, point_noise_um=noise_um, seed=3)
+    machines = TwinMachines(
+        world, ipp_faults=ipp_faults, point_noise_um=noise_um, seed=3, cmm_dialect=cmm_dialect
+    )
     return Bench(tmp, files, world, clock, machines)
 
 

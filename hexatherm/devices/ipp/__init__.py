@@ -65,10 +65,7 @@ ErrorReport(severity=3, number=2500, method='GoTo', text='Machine limit encounte
 from __future__ import annotations
 
 from hexatherm.devices.ipp.client import (
-    ClearAndRetry,
     IppClient,
-    RecoveryPolicy,
-    parse_ipp_url,
 )
 from hexatherm.devices.ipp.protocol import (
     ALLOWED_IN_ERROR,
@@ -78,10 +75,12 @@ from hexatherm.devices.ipp.protocol import (
     REPORT_ARITY,
     TRANSCRIPT_MAGIC,
     Call,
+    ClearAndRetry,
     Decision,
     Direction,
     ErrorReport,
     LineBuffer,
+    RecoveryPolicy,
     Response,
     Value,
     Word,
@@ -90,6 +89,7 @@ from hexatherm.devices.ipp.protocol import (
     format_value,
     parse_command,
     parse_data,
+    parse_ipp_url,
     parse_response,
 )
 from hexatherm.devices.ipp.touch import (

@@ -8,18 +8,17 @@ import re
 import socket
 import threading
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
-from typing import Protocol
 
 from hexatherm.devices.ipp.protocol import (
     ALLOWED_IN_ERROR,
     DEFAULT_PORT,
     REPORT_ARITY,
     Call,
-    Decision,
+    ClearAndRetry,
     Direction,
     ErrorReport,
     LineBuffer,
+    RecoveryPolicy,
     Value,
     fields,
     format_number,
@@ -42,42 +41,6 @@ from hexatherm.errors import (
     IppProtocolError,
     IppTimeout,
 )
-
-
-# ------------------------------------------------------------------------ policy
-class RecoveryPolicy(Protocol):
-    """Decides what the client does about an error of severity >= 2."""
-
-    def decide(self, error: ErrorReport, command: str, attempt: int) -> Decision:
-        """``"retry"`` (send ``ClearAllErrors()`` then the command again) or ``"raise"``.
-
-        ``attempt`` is the number of recoveries already made for this command.
-        """
-        ...
-
-
-@dataclass(frozen=True)
-class ClearAndRetry:
-    """Clear and retry errors up to ``max_severity`` at most ``retries`` times; raise others.
-
-    The default (severity 2 once) repairs what the spec calls errors the client can repair
-    (a lost touch, a transaction aborted) and stops on everything needing the operator
-    (severity 3: collision, emergency stop, machine limits) or fatal (9).
-
-    >>> p = ClearAndRetry()
-    >>> e2, e3 = ErrorReport(2, 1006, "PtMeas", "x"), ErrorReport(3, 2504, "GoTo", "x")
-    >>> p.decide(e2, "PtMeas()", 0), p.decide(e2, "PtMeas()", 1), p.decide(e3, "GoTo()", 0)
-    ('retry', 'raise', 'raise')
-    """
-
-    retries: int = 1
-    max_severity: int = 2
-
-    def decide(self, error: ErrorReport, command: str, attempt: int) -> Decision:
-        """See :class:`RecoveryPolicy`."""
-        if error.severity <= self.max_severity and attempt < self.retries:
-            return "retry"
-        return "raise"
 
 
 class _Waiter:
@@ -115,6 +78,9 @@ class IppClient:
         What to do about errors of severity >= 2 (default :class:`ClearAndRetry`).
     clock : callable, optional
         Timestamps (default :func:`now_iso`).
+    on_warning : callable, optional
+        Called with the transaction and each error of severity 0 or 1 it carried (the
+        command succeeded; the lines are in the transcript like every other).
 
     Notes
     -----
@@ -135,6 +101,7 @@ class IppClient:
         on_event: Callable[[IppEvent], object] | None = None,
         policy: RecoveryPolicy | None = None,
         clock: Callable[[], str] = now_iso,
+        on_warning: Callable[[TransactionResult, ErrorReport], object] | None = None,
     ) -> None:
         if not (isinstance(port, int) and 0 < port < 65536):
             raise IppDmeError(f"port must be an integer in 1..65535, got {port!r}")
@@ -145,6 +112,7 @@ class IppClient:
         self.policy: RecoveryPolicy = policy if policy is not None else ClearAndRetry()
         self.events: queue.SimpleQueue[IppEvent] = queue.SimpleQueue()
         self._on_event = on_event
+        self._on_warning = on_warning
         self._clock = clock
         self._sink = transcript
         self._lock = threading.Lock()
@@ -396,6 +364,9 @@ class IppClient:
                 raise IppProtocolError(f"{result.tag} {command}: {result.protocol_error}")
             failure = result.failure
             if failure is None:
+                if self._on_warning is not None:
+                    for warning in result.warnings:
+                        self._on_warning(result, warning)
                 return result
             if self.policy.decide(failure, command, attempt) != "retry":
                 raise IppCommandError(
@@ -407,14 +378,79 @@ class IppClient:
             self.clear_all_errors()
             attempt += 1
 
+    def optional(self, command: str) -> tuple[TransactionResult | None, ErrorReport | None]:
+        """Send a command whose refusal is not the end of anything (an optional query).
+
+        Returns
+        -------
+        (result, None) or (None, error)
+            On a refusal the server's error state, if any, is cleared (``ClearAllErrors()``)
+            and the error returned.
+        """
+        result = self.transact(command)
+        if result.protocol_error is not None:
+            raise IppProtocolError(f"{result.tag} {command}: {result.protocol_error}")
+        failure = result.failure
+        if failure is None:
+            if self._on_warning is not None:
+                for warning in result.warnings:
+                    self._on_warning(result, warning)
+            return result, None
+        if self.error_state is not None:
+            self.clear_all_errors()
+        return None, failure
+
     # -- commands
-    def start_session(self) -> None:
-        """``StartSession()`` (resets the report to ``X(), Y(), Z()`` and clears errors)."""
+    def start_session(self) -> bool:
+        """``StartSession()`` (resets the report to ``X(), Y(), Z()`` and clears errors).
+
+        A server that keeps its session across connections refuses a new one while the
+        session of a connection gone (a run stopped, a dropped link) is open: that stale
+        session is ended (``ClearAllErrors()``, ``EndSession()``) and a new one started.
+
+        Returns
+        -------
+        bool
+            True when a stale session was ended first.
+        """
+        result = self.transact("StartSession()")
+        if result.protocol_error is not None:
+            raise IppProtocolError(f"{result.tag} StartSession(): {result.protocol_error}")
+        if result.failure is None:
+            return False
+        self.clear_all_errors()
+        self.call("EndSession()")
         self.call("StartSession()")
+        return True
 
     def end_session(self) -> None:
-        """``EndSession()``."""
+        """``EndSession()``, after ``ClearAllErrors()`` if the server is in an error state
+        (6.2.5 allows only ClearAllErrors, GetErrStatusE and GetXtdErrStatus there)."""
+        if self.error_state is not None:
+            self.clear_all_errors()
         self.call("EndSession()")
+
+    def dme_version(self) -> tuple[str, tuple[int, ...]] | None:
+        """``GetDMEVersion()``: ``(text, numbers)``, e.g. ``("1.4.3", (1, 4, 3))``; None when
+        the server refuses it (cleared) or answers something that is not a version."""
+        result, _ = self.optional("GetDMEVersion()")
+        if result is None:
+            return None
+        for _, values in result.data:
+            for item in values:
+                if isinstance(item, Call) and item.name == "DMEVersion" and len(item.args) == 1:
+                    text = item.args[0]
+                    if isinstance(text, str) and re.fullmatch(r"[0-9]+(\.[0-9]+)*", text):
+                        return text, tuple(int(x) for x in text.split("."))
+        return None
+
+    def enum_tools(self) -> list[str] | None:
+        """``EnumTools()``: the tools' names, or None when the server refuses it (cleared)."""
+        result, _ = self.optional("EnumTools()")
+        if result is None:
+            return None
+        names = [v for _, values in result.data for v in values if isinstance(v, str)]
+        return [str(n) for n in names]
 
     def clear_all_errors(self) -> None:
         """``ClearAllErrors()``, sent whatever the state; raises if it fails."""
@@ -547,18 +583,3 @@ def _check_name(name: str) -> str:
     if not re.fullmatch(r"[A-Za-z][A-Za-z0-9]*(\.[A-Za-z][A-Za-z0-9]*)*", name):
         raise IppDmeError(f"not a valid I++ property name: {name!r}")
     return name
-
-
-def parse_ipp_url(url: str) -> tuple[str, int]:
-    """``ipp://HOST[:PORT]`` -> ``(host, port)`` (port 1294 by default).
-
-    >>> parse_ipp_url("ipp://127.0.0.1:4711"), parse_ipp_url("ipp://cmm-lab")
-    (('127.0.0.1', 4711), ('cmm-lab', 1294))
-    """
-    match = re.fullmatch(r"ipp://(\[[0-9A-Fa-f:.]+\]|[^:/\s]+)(?::([0-9]{1,5}))?/?", url.strip())
-    if match is None:
-        raise IppDmeError(f"not an I++ address: {url!r} (expected ipp://HOST:PORT)")
-    port = int(match.group(2)) if match.group(2) else DEFAULT_PORT
-    if not 0 < port < 65536:
-        raise IppDmeError(f"port out of range in {url!r}")
-    return match.group(1).strip("[]"), port

@@ -9,9 +9,10 @@ import math
 import re
 from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, Protocol
 
 from hexatherm.errors import (
+    IppDmeError,
     IppProtocolError,
 )
 
@@ -36,10 +37,11 @@ REPORT_ARITY = {"X": 1, "Y": 1, "Z": 1, "IJK": 3, "ER": 1, "Q": 1, "R": 1}
 
 
 ALLOWED_IN_ERROR = frozenset(
-    {"ClearAllErrors", "GetErrStatusE", "GetXtdErrStatus", "StartSession", "EndSession", "AbortE"}
+    {"ClearAllErrors", "GetErrStatusE", "GetXtdErrStatus", "StartSession", "AbortE"}
 )
 """Methods the client still sends while the server is in an error state (6.2.5; a new
-session clears the errors, 6.3.1.1)."""
+session clears the errors, 6.3.1.1). Not ``EndSession``: 6.2.5 does not allow it, and the
+NIST server refuses it (0514); :meth:`IppClient.end_session` clears the errors first."""
 
 
 Direction = Literal[">", "<", "*"]
@@ -444,3 +446,54 @@ class LineBuffer:
                 raise IppProtocolError(f"line longer than {self.max_line} characters")
             out.append(line)
         return out
+
+
+# ------------------------------------------------------------------------ policy
+class RecoveryPolicy(Protocol):
+    """Decides what the client does about an error of severity >= 2."""
+
+    def decide(self, error: ErrorReport, command: str, attempt: int) -> Decision:
+        """``"retry"`` (send ``ClearAllErrors()`` then the command again) or ``"raise"``.
+
+        ``attempt`` is the number of recoveries already made for this command.
+        """
+        ...
+
+
+@dataclass(frozen=True)
+class ClearAndRetry:
+    """Clear and retry errors up to ``max_severity`` at most ``retries`` times; raise others.
+
+    The default (severity 2 once) repairs what the spec calls errors the client can repair
+    (a lost touch, a transaction aborted) and stops on everything needing the operator
+    (severity 3: collision, emergency stop, machine limits) or fatal (9).
+
+    >>> p = ClearAndRetry()
+    >>> e2, e3 = ErrorReport(2, 1006, "PtMeas", "x"), ErrorReport(3, 2504, "GoTo", "x")
+    >>> p.decide(e2, "PtMeas()", 0), p.decide(e2, "PtMeas()", 1), p.decide(e3, "GoTo()", 0)
+    ('retry', 'raise', 'raise')
+    """
+
+    retries: int = 1
+    max_severity: int = 2
+
+    def decide(self, error: ErrorReport, command: str, attempt: int) -> Decision:
+        """See :class:`RecoveryPolicy`."""
+        if error.severity <= self.max_severity and attempt < self.retries:
+            return "retry"
+        return "raise"
+
+
+def parse_ipp_url(url: str) -> tuple[str, int]:
+    """``ipp://HOST[:PORT]`` -> ``(host, port)`` (port 1294 by default).
+
+    >>> parse_ipp_url("ipp://127.0.0.1:4711"), parse_ipp_url("ipp://cmm-lab")
+    (('127.0.0.1', 4711), ('cmm-lab', 1294))
+    """
+    match = re.fullmatch(r"ipp://(\[[0-9A-Fa-f:.]+\]|[^:/\s]+)(?::([0-9]{1,5}))?/?", url.strip())
+    if match is None:
+        raise IppDmeError(f"not an I++ address: {url!r} (expected ipp://HOST:PORT)")
+    port = int(match.group(2)) if match.group(2) else DEFAULT_PORT
+    if not 0 < port < 65536:
+        raise IppDmeError(f"port out of range in {url!r}")
+    return match.group(1).strip("[]"), port

@@ -26,7 +26,6 @@ from hexatherm.devices.ipp.protocol import (
     Response,
     Value,
     fields,
-    format_value,
     parse_data,
     parse_response,
 )
@@ -271,14 +270,18 @@ def _method_of(command: str) -> str:
 def _point_from(
     result: TransactionResult, command: Call | None, stamp: str, values: tuple[Value, ...]
 ) -> ProbedPoint:
-    items = list(values)
-    names = [item.name if isinstance(item, Call) else format_value(item) for item in items]
-    if tuple(names) != result.report:
+    # every field is named (spec 6.1.3): read them by name, in any order (the NIST server
+    # answers ER, IJK, X, Y, Z whatever was asked); a field given twice (fields() refuses
+    # it) or one asked for and missing is refused, one not asked for is kept
+    got = fields(values)
+    missing = [name for name in result.report if name not in got]
+    if missing:
         raise IppProtocolError(
-            f"PtMeas report {', '.join(names)} does not match OnPtMeasReport "
-            f"{', '.join(result.report)}"
+            f"PtMeas report {', '.join(got)} lacks {', '.join(missing)} "
+            f"(OnPtMeasReport asked for {', '.join(result.report)})"
         )
-    got = fields(items)
+    if not {"X", "Y", "Z"} <= set(got):
+        raise IppProtocolError(f"PtMeas report {', '.join(got)} lacks X, Y or Z")
     for name, numbers in got.items():
         if len(numbers) != REPORT_ARITY.get(name, len(numbers)):
             raise IppProtocolError(f"{name} must carry {REPORT_ARITY[name]} number(s)")

@@ -56,6 +56,7 @@ from hexatherm.devices.ippserver.contact import (
     segment_hits,
 )
 from hexatherm.devices.ippserver.model import (
+    CMM_DIALECTS,
     DEFAULT_EVENTS,
     DEFAULT_FAULT_NUMBER,
     ERROR_TEXTS,
@@ -70,6 +71,7 @@ from hexatherm.devices.ippserver.server import (
 )
 
 __all__ = [
+    "CMM_DIALECTS",
     "CmmBackend",
     "DEFAULT_EVENTS",
     "DEFAULT_FAULT_NUMBER",

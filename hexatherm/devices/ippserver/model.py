@@ -37,6 +37,7 @@ ERROR_TEXTS = {
     501: "Unsupported command",
     502: "Incorrect arguments",
     504: "Argument out of range",
+    507: "Illegal command",
     508: "Bad context",
     510: "Bad property",
     511: "Error processing method",
@@ -70,8 +71,19 @@ PROPERTY_DEFAULTS = {
 
 
 _IN_ERROR_OK = frozenset(
-    {"ClearAllErrors", "GetErrStatusE", "GetXtdErrStatus", "StartSession", "EndSession", "AbortE"}
+    {"ClearAllErrors", "GetErrStatusE", "GetXtdErrStatus", "StartSession", "AbortE"}
 )
+"""Methods served in an error state (6.2.5; a new session clears it; not EndSession)."""
+
+CMM_DIALECTS = ("dme-1.4.3", "dme-1.4")
+"""How the simulated CMM speaks: ``dme-1.4.3`` (the default: ``Tool.AvrRadius``, the
+report in the order asked, ``FindTool`` refuses an unknown tool, one session per
+connection) or ``dme-1.4``, a plain DME 1.4 server as the NIST I++ DME Test Suite's
+(``DMEVersion("1.4")``, no ``AvrRadius``, ``PtMeas`` fields in its own order ``ER, IJK, X,
+Y, Z``, a lax ``FindTool`` that leaves ``FoundTool`` unchanged, a second ``StartSession``
+refused with error 0507), and one that keeps its session across connections (the NIST
+server's own code ends the session, and un-homes, when the client goes; other servers
+keep it, and a reconnecting client must end it first)."""
 
 
 class CmmBackend(Protocol):

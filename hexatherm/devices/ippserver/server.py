@@ -26,6 +26,7 @@ from hexatherm.devices.ippserver.contact import _calls, first_contact, segment_h
 from hexatherm.devices.ippserver.model import (
     _IN_ERROR_OK,
     _TAG,
+    CMM_DIALECTS,
     ERROR_TEXTS,
     CmmBackend,
     Fault,
@@ -70,6 +71,8 @@ class IppSimServer:
         Tool-centre position after ``Home()``, mm.
     limits_mm : pair of sequences of 3 float
         Lower and upper corners of the travel box, mm.
+    dialect : {"dme-1.4.3", "dme-1.4"}
+        How the server speaks (see :data:`CMM_DIALECTS`).
 
     Attributes
     ----------
@@ -94,7 +97,15 @@ class IppSimServer:
         time_s: Callable[[], float] | None = None,
         home_mm: Sequence[float] = (0.0, 0.0, 500.0),
         limits_mm: tuple[Sequence[float], Sequence[float]] = ((-1e3, -1e3, -1e3), (1e3, 1e3, 1e3)),
+        dialect: str = "dme-1.4.3",
     ) -> None:
+        if dialect not in CMM_DIALECTS:
+            raise IppDmeError(
+                f"CMM dialect must be one of {', '.join(CMM_DIALECTS)}, got {dialect!r}"
+            )
+        self.dialect = dialect
+        # a plain DME 1.4 server keeps its session when the client goes away
+        self._kept_session = _Session() if dialect == "dme-1.4" else None
         if not (math.isfinite(noise_um) and noise_um >= 0):
             raise IppDmeError(f"noise_um must be >= 0, got {noise_um!r}")
         table = {"Probe1": 2.0} if tools is None else dict(tools)
@@ -176,7 +187,7 @@ class IppSimServer:
             thread.start()
 
     def _serve(self, conn: socket.socket) -> None:
-        session = _Session()
+        session = self._kept_session if self._kept_session is not None else _Session()
         buffer = LineBuffer()
         try:
             while not self._stop.is_set():
@@ -215,9 +226,12 @@ class IppSimServer:
             fault = self._fault_for(call.name)
             if fault is not None and fault.kind == "error":
                 report = fault.error(call.name)
+                warning = [f"{tag} ! {report.format()}"]
                 if report.severity >= 2:
                     session.error = report
-                lines = [f"{tag} &", f"{tag} ! {report.format()}", f"{tag} %"]
+                    lines = [f"{tag} &", *warning, f"{tag} %"]
+                else:  # a warning: the command is carried out all the same
+                    lines = [f"{tag} &", *warning, *self._execute(tag, session, call), f"{tag} %"]
             else:
                 lines = [f"{tag} &", *self._execute(tag, session, call), f"{tag} %"]
         return self._send(conn, lines, fault)
@@ -292,7 +306,7 @@ class IppSimServer:
 
     def _do_StartSession(self, session: _Session, call: Call) -> list[str]:  # noqa: N802
         if session.active:
-            raise _Refusal(3, 8, "StartSession")
+            raise _Refusal(3, 507 if self.dialect == "dme-1.4" else 8, "StartSession")
         session.active, session.error, session.report = True, None, DEFAULT_REPORT
         return []
 
@@ -312,7 +326,7 @@ class IppSimServer:
         return [f"ErrStatus({int(session.error is not None)})"]
 
     def _do_GetDMEVersion(self, session: _Session, call: Call) -> list[str]:  # noqa: N802
-        return ['DMEVersion("1.4.3")']
+        return ['DMEVersion("1.4")' if self.dialect == "dme-1.4" else 'DMEVersion("1.4.3")']
 
     def _do_Home(self, session: _Session, call: Call) -> list[str]:  # noqa: N802
         self.position_mm = self.home_mm.copy()
@@ -343,7 +357,12 @@ class IppSimServer:
     _do_SetTool = _do_ChangeTool
 
     def _do_FindTool(self, session: _Session, call: Call) -> list[str]:  # noqa: N802
-        self.found_tool = self._tool_arg(call)
+        try:
+            self.found_tool = self._tool_arg(call)
+        except _Refusal:
+            if self.dialect != "dme-1.4":
+                raise
+            # the lax FindTool of the NIST server: no error, FoundTool left as it was
         return []
 
     def _property(self, name: str, method: str) -> tuple[_Tool, str]:
@@ -356,6 +375,8 @@ class IppSimServer:
             tool = self._tools[self.found_tool]
         else:
             raise _Refusal(3, 510, method)
+        if rest == "AvrRadius" and self.dialect == "dme-1.4":
+            raise _Refusal(3, 502, method)  # AvrRadius came with 1.4.2
         if rest not in tool.props and rest not in ("Name", "AvrRadius"):
             raise _Refusal(3, 510, method)
         return tool, rest
@@ -475,7 +496,8 @@ class IppSimServer:
             "ER": (r,),
             "Q": (0.0,),
         }
-        items = [
-            f"{n}({', '.join(self._num(float(v)) for v in values[n])})" for n in session.report
-        ]
+        order = session.report
+        if self.dialect == "dme-1.4":  # its own order, whatever was asked
+            order = tuple(n for n in ("ER", "IJK", "X", "Y", "Z", "Q") if n in session.report)
+        items = [f"{n}({', '.join(self._num(float(v)) for v in values[n])})" for n in order]
         return [", ".join(items)]

@@ -14,6 +14,7 @@ import math
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
+from typing import Any
 
 import yaml
 
@@ -91,6 +92,22 @@ def write_run_settings(folder: Path, settings: RunSettings) -> None:
     atomic_write_text(folder / RUN_NAME, yaml.safe_dump(doc, sort_keys=False))
 
 
+def record_cmm_facts(folder: Path, facts: dict[str, object]) -> None:
+    """Keep what the CMM said of itself in ``run.yaml`` under ``cmm`` (the last connection's):
+    ``dme_version``, ``tool_avr_radius_mm`` (``unknown`` when not asked or refused) and
+    ``unknown`` (why). The settings a resume reads are left as they are."""
+    _update_run_yaml(folder, lambda doc: doc.update(cmm=facts))
+
+
+def _update_run_yaml(folder: Path, change: Callable[[dict[str, Any]], None]) -> None:
+    """``change`` the document of ``run.yaml`` (read by the strict reader a resume uses,
+    written atomically); what it leaves is kept as it was."""
+    path = folder / RUN_NAME
+    doc = dict(YamlDoc.load(path).data)
+    change(doc)
+    atomic_write_text(path, yaml.safe_dump(doc, sort_keys=False))
+
+
 def read_run_settings(folder: Path) -> RunSettings:
     """Read ``run.yaml`` of a session started by ``hexatherm run``.
 
@@ -99,7 +116,7 @@ def read_run_settings(folder: Path) -> RunSettings:
     :class:`~hexatherm.errors.InputError` naming the file, the line and the field.
     """
     doc = YamlDoc.load(folder / RUN_NAME)
-    doc.check_keys(["format", "origin_on_cmm", "probe", "controller"])
+    doc.check_keys(["format", "origin_on_cmm", "probe", "controller", "cmm"])
     doc.check_format(RUN_FORMAT)
     origin = tuple(doc.vector("origin_on_cmm", size=6))
     doc.check_keys([f.name for f in fields(ProbeSettings)], "probe")
@@ -126,14 +143,15 @@ def record_controller(
     what :meth:`~hexatherm.devices.controller.SocketController.check_ready` found before
     the run moved it. The settings above it are kept as they were.
     """
-    path = folder / RUN_NAME
-    doc = dict(YamlDoc.load(path).data)  # the strict reader, as a resume reads it
     entry: dict[str, object] = {"at": at, "url": url}
     entry.update({k: v for k, v in info.items() if k != "error_at_stop"})
     entry["checks"] = dict(checks)
-    records = doc.get("controller")
-    doc["controller"] = [*(records if isinstance(records, list) else []), entry]
-    atomic_write_text(path, yaml.safe_dump(doc, sort_keys=False))
+
+    def append(doc: dict[str, Any]) -> None:
+        records = doc.get("controller")
+        doc["controller"] = [*(records if isinstance(records, list) else []), entry]
+
+    _update_run_yaml(folder, append)
 
 
 @dataclass

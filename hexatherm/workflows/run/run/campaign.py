@@ -24,9 +24,11 @@ from hexatherm.core.spherefit import fit_spheres, probe_radius_mm
 from hexatherm.devices.controller import SocketController, format_pose
 from hexatherm.devices.ipp import (
     TRANSCRIPT_MAGIC,
+    ErrorReport,
     IppClient,
     IppEvent,
     ProbedPoint,
+    TransactionResult,
     cap_touch_plan,
     parse_ipp_url,
     probe_cap,
@@ -82,9 +84,11 @@ from hexatherm.workflows.run.resume import (
     RunState,
     read_run_settings,
     rebuild_state,
+    record_cmm_facts,
     record_controller,
     write_run_settings,
 )
+from hexatherm.workflows.run.run.cmmfacts import dme_version, tip_radius
 from hexatherm.workflows.run.run.options import BallResult, Notify, RunOptions, RunResult
 from hexatherm.workflows.run.run.support import (
     _Geometry,
@@ -466,22 +470,23 @@ class _Campaign:
             transcript=self.tlog,
             on_event=self._on_event,
             clock=lambda: iso_stamp(clock()),
+            on_warning=self._on_warning,
         )
         cmm = self.cmm
-        cmm.start_session()
+        if cmm.start_session():
+            self.notify("warn", "the CMM still had a session open (a connection gone): ended it")
+        facts = dme_version(cmm, self.notify)
         if not cmm.is_homed():
             self.notify("info", "homing the CMM")
             cmm.home()
         cmm.change_tool(self.settings.probe.tool)
         cmm.on_pt_meas_report("X", "Y", "Z", "IJK", "ER")
-        radius = cmm.get_prop("Tool.AvrRadius")["Tool.AvrRadius"]
-        tip = 0.5 * self.balls.tip_diameter_mm
-        if radius and isinstance(radius[0], float) and abs(radius[0] - tip) > 1e-3:
-            self.notify(
-                "warn",
-                f"the CMM's tool {self.settings.probe.tool} has a tip radius of {radius[0]:g} mm, "
-                f"the balls file says {tip:g} mm",
-            )
+        tool, tip = self.settings.probe.tool, self.balls.tip_diameter_mm
+        tip_radius(cmm, facts, tool, tip, self.notify)
+        record_cmm_facts(self.folder, facts)
+
+    def _on_warning(self, result: TransactionResult, warning: ErrorReport) -> None:
+        self.notify("warn", f"CMM warning on {result.tag} {result.command}: {warning}")
 
     def _reconnect_cmm(self, why: str) -> None:
         self.notify("warn", f"CMM connection lost ({why}); reconnecting")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 import queue
 import threading
@@ -26,6 +27,7 @@ from hexatherm.devices.serialport import PortReader, PortSettings
 from hexatherm.devices.urls import controller_from_url
 from hexatherm.errors import (
     AcquisitionError,
+    HexathermError,
     IppProtocolError,
     PoseError,
     PoseRefusedError,
@@ -52,6 +54,7 @@ from hexatherm.workflows.acquire.recorder import Recorder as StreamRecorder
 from hexatherm.workflows.run.resume import (
     ProbeSettings,
 )
+from hexatherm.workflows.run.run.cmmfacts import check_tool
 from hexatherm.workflows.run.run.options import Notify, RunOptions
 
 # ----------------------------------------------------------------------- helpers
@@ -249,10 +252,20 @@ def dry_run(
     finally:
         controller.close()
     host, port = parse_ipp_url(options.cmm_url)
-    with IppClient(host, port, timeout_s=options.ipp_timeout_s) as cmm:
-        cmm.start_session()
-        cmm.find_tool(options.probe.tool)
-        cmm.end_session()
+    # no transcript: a dry run leaves nothing behind (nothing in the session folder)
+    with IppClient(
+        host,
+        port,
+        timeout_s=options.ipp_timeout_s,
+        on_warning=lambda r, w: notify("warn", f"CMM warning on {r.tag} {r.command}: {w}"),
+    ) as cmm:
+        if cmm.start_session():
+            notify("warn", "the CMM still had a session open (a connection gone): ended it")
+        try:
+            check_tool(cmm, options.probe.tool)
+        finally:
+            with contextlib.suppress(HexathermError):
+                cmm.end_session()
     if options.cmm_limits_mm is None:
         notify("warn", "no --cmm-limits: the probe positions were not checked against the CMM")
     notify("info", f"dry run: {len(files.plan.labels)} steps can be measured; nothing moved")
