@@ -11,6 +11,7 @@ from hexatherm.cli.options import (
     clean_errors,
     echo_err,
     interpolation_option,
+    lab_option,
     overwrite_option,
     reading_options,
 )
@@ -74,6 +75,7 @@ from hexatherm.io.files import ReadOptions
 )
 @interpolation_option
 @overwrite_option
+@lab_option
 @reading_options
 @clean_errors
 def command(
@@ -87,6 +89,7 @@ def command(
     iterate: bool,
     interpolation: str,
     overwrite: bool,
+    lab: Path | None,
     reading: ReadOptions,
 ) -> None:
     """Calibrate the geometry of the hexapod of SESSIONS from their measured poses.
@@ -114,7 +117,12 @@ def command(
         raise click.UsageError(
             f"--twin-model is the twin's model for --poses twin, not for --poses {poses}"
         )
+    from hexatherm.io.config.identity import read_lab
+
+    lab_fields = read_lab(lab)[0] if lab is not None else {}
     inputs = [f for s in sessions for f in read_session(s).input_files()]
+    if lab is not None:
+        inputs.append(lab)
     if twin_model is not None:
         inputs.append(twin_model)
     twin = None if twin_model is None else TwinModel.read(twin_model)
@@ -148,7 +156,7 @@ def command(
         f"calibrated from {len(run.campaign.labels)} {poses} poses{model} of "
         f"{len(sessions)} session(s)"
     )
-    files = output_files(run, inputs, out)
+    files = output_files(run, inputs, out, lab_fields)
     with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
         for name, text in files.items():
             (tmp / name).write_text(text, encoding="utf-8")

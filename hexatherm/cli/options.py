@@ -8,6 +8,7 @@ import os
 import sys
 import warnings
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any, TypeVar
 
 import click
@@ -280,3 +281,14 @@ class ProgressBars:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+lab_option = click.option(
+    "--lab",
+    "lab",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    default=None,
+    help="A lab file (format: hexatherm-lab/1): lab, customer, operator, report number, "
+    "CMM, hexapod, ambient conditions, signatories, tolerances, printed in the header of "
+    "every page; a session file's identification: and tolerances: win key by key.",
+)

@@ -12,6 +12,11 @@ from typing import Any
 from hexatherm.errors import InputWarning
 from hexatherm.io.config.balls import read_balls
 from hexatherm.io.config.hexapod import read_hexapod
+from hexatherm.io.config.identity import (
+    IDENTIFICATION_KEYS,
+    read_identification,
+    read_tolerances,
+)
 from hexatherm.io.config.plan import read_plan
 from hexatherm.io.config.yamlout import _dump
 from hexatherm.io.yamlfile import YamlDoc
@@ -40,6 +45,8 @@ def read_session(path: str | os.PathLike[str]) -> Session:
             "quality",
             "pose_check",
             "utc_offset",
+            "identification",
+            "tolerances",
         ]
     )
     name = doc.string("name", default=path.parent.name)
@@ -65,6 +72,13 @@ def read_session(path: str | os.PathLike[str]) -> Session:
     temperatures = None
     if doc.get("temperatures", default=None) is not None:
         temperatures = existing("temperatures")
+    ident: dict[str, Any] = {}
+    if doc.get("identification", default=None) is not None:
+        doc.check_keys(list(IDENTIFICATION_KEYS), "identification")
+        ident = read_identification(doc, "identification")
+    tolerances: dict[str, float] = {}
+    if doc.get("tolerances", default=None) is not None:
+        tolerances = read_tolerances(doc, "tolerances")
     return Session(
         path,
         name,
@@ -77,6 +91,8 @@ def read_session(path: str | os.PathLike[str]) -> Session:
         _read_quality(doc),
         config_files,
         _read_utc_offset(doc),
+        ident,
+        tolerances,
     )
 
 

@@ -185,11 +185,15 @@ def calibration_json(run: Calibration, stroke: StrokeMap | None = None) -> str:
 
 
 def output_files(
-    run: Calibration, inputs: Sequence[Path] | None = None, folder: Path | None = None
+    run: Calibration,
+    inputs: Sequence[Path] | None = None,
+    folder: Path | None = None,
+    lab_fields: dict[str, object] | None = None,
 ) -> dict[str, str]:
     """Every file of the output folder, name -> text; with ``inputs`` (the files the run
     read) the report too, and the predicted uncertainty over the stroke (``folder``: the
-    output folder, for the report's relative paths)."""
+    output folder, for the report's relative paths; ``lab_fields``: a lab file's
+    identification for the report's header)."""
     stroke = None if inputs is None else stroke_map(run)
     files = {
         "hexapod.yaml": calibrated_hexapod_yaml(run),
@@ -198,7 +202,7 @@ def output_files(
         "calibration.json": calibration_json(run, stroke),
     }
     if stroke is not None and inputs is not None:
-        files["report.html"] = report_html(run, stroke, inputs, folder or Path("."))
+        files["report.html"] = report_html(run, stroke, inputs, folder or Path("."), lab_fields)
     return files
 
 

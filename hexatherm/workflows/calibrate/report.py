@@ -32,6 +32,8 @@ from hexatherm.workflows.report.page import (
     html_table,
     page_html,
     provenance_html,
+    running_header_html,
+    signature_html,
 )
 from hexatherm.workflows.report.text import exact, fixed, unit_text
 
@@ -157,8 +159,28 @@ def not_explained(run: Calibration) -> str:
     )
 
 
-def report_html(run: Calibration, stroke: StrokeMap, inputs: Sequence[Path], folder: Path) -> str:
-    """The calibration's report page (see the module text)."""
+def sessions_text(run: Calibration) -> tuple[str, str]:
+    """The hexapod (its name and file) and every session with the dates it was measured."""
+    from hexatherm.workflows.report.html import session_dates
+
+    results = run.campaign.results
+    hexapod = f"{run.campaign.nominal.name} ({results[0].session.config_files[0].name})"
+    sessions = "; ".join(f"{r.session.name} ({session_dates(r)})" for r in results)
+    return hexapod, sessions
+
+
+def report_html(
+    run: Calibration,
+    stroke: StrokeMap,
+    inputs: Sequence[Path],
+    folder: Path,
+    lab_fields: dict[str, object] | None = None,
+) -> str:
+    """The calibration's report page (see the module text); ``lab_fields``: a lab file's
+    identification (the sessions' own ``identification:`` over it, in the order given)."""
+    from hexatherm.io.config.identity import identification
+    from hexatherm.workflows.report.html import header_rows
+
     fit = run.fit
     obs = fit.observability
     k = COVERAGE_FACTOR
@@ -168,7 +190,9 @@ def report_html(run: Calibration, stroke: StrokeMap, inputs: Sequence[Path], fol
     )
     worst = stroke.worst_um_urad
     how = "chosen by BIC and held-out folds" if run.choice is not None else "forced"
+    hexapod, sessions = sessions_text(run)
     verdict = [
+        f"Hexapod {hexapod}; sessions {sessions}.",
         f"Level {fit.level} ({how}): {obs.n_parameters} parameters ({obs.n_gauge} fixed by "
         f"the gauge) from {len(run.campaign.labels)} {run.campaign.poses} poses of "
         f"{len(run.campaign.results)} session(s).",
@@ -304,7 +328,14 @@ def report_html(run: Calibration, stroke: StrokeMap, inputs: Sequence[Path], fol
             now_iso(),
         )
     )
-    return page_html("hexatherm calibration", parts)
+    merged: dict[str, object] = {}
+    for result in run.campaign.results:
+        merged.update(result.session.identification)
+    ident = identification(merged, lab_fields)
+    parts.append(signature_html(ident.signatures))
+    title = "hexatherm calibration"
+    header = running_header_html(header_rows(title, ident, sessions, hexapod))
+    return page_html(title, parts, header=header)
 
 
 def _esc(text: str) -> str:

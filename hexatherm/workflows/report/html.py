@@ -24,6 +24,8 @@ from hexatherm.workflows.report.page import (
     html_table,
     page_html,
     provenance_html,
+    running_header_html,
+    signature_html,
 )
 from hexatherm.workflows.report.tables import (
     FAIL_MARK,
@@ -44,7 +46,7 @@ __all__ = ["STYLE", "build_report", "metadata_rows", "provenance_block", "report
 
 if TYPE_CHECKING:
     from hexatherm.io.provenance import RunFacts
-    from hexatherm.session import QualityLimits
+    from hexatherm.session import Identification, QualityLimits
     from hexatherm.workflows.process.quality import QualityReport
     from hexatherm.workflows.process.uncertainty import PoseUncertainty
 
@@ -96,6 +98,29 @@ def metadata_rows(result: ProcessResult) -> list[tuple[str, str]]:
         ("interpolation", result.interpolation),
         ("hexatherm", __version__),
     ]
+
+
+def session_dates(result: ProcessResult) -> str:
+    """The dates of the session's measurements: first and last step."""
+    times = result.centres.times_s
+    first, last = _time_text(result, float(np.min(times))), _time_text(result, float(np.max(times)))
+    return first if first == last else f"{first} to {last}"
+
+
+def header_rows(
+    title: str, ident: Identification | None, dates: str, hexapod: str
+) -> list[tuple[str, str]]:
+    """The running header's ``(name, text)`` rows: the report, every identification field
+    given, the hexapod file's name, the sessions' dates and the signatories."""
+    rows = [("Report", title)]
+    if ident is None or not (ident.fields or ident.signatures):
+        rows.append(("Identification", "none given (session.yaml identification:, --lab)"))
+    else:
+        rows += ident.rows()
+    rows += [("Hexapod", hexapod), ("Measured", dates)]
+    if ident is not None and ident.signatures:
+        rows.append(("Signed by", ", ".join(f"{name} ({role})" for role, name in ident.signatures)))
+    return rows
 
 
 def _extreme_text(extreme: Extreme, unit: str, k: float) -> str:
@@ -216,6 +241,7 @@ def report_html(
     facts: RunFacts | None = None,
     generated: str | None = None,
     on_verdict: Callable[[Verdict], None] | None = None,
+    identification: Identification | None = None,
 ) -> str:
     """The report page of a processed session (see the package's docstring).
 
@@ -236,6 +262,9 @@ def report_html(
         Generation time, ISO 8601 with UTC offset (default: now).
     on_verdict : callable, optional
         Called with the page's verdict (the command line prints it).
+    identification : Identification, optional
+        Lab, customer, CMM, hexapod ... (:func:`hexatherm.io.config.identity.identification`):
+        printed in the header every printed page repeats, and the signature block.
 
     Returns
     -------
@@ -343,7 +372,12 @@ def report_html(
         ),
         provenance_block(result, quality, facts, generated or now_iso()),
     ]
-    return page_html(f"hexatherm report: {name}", parts)
+    if identification is not None:
+        parts.append(signature_html(identification.signatures))
+    title = f"hexatherm report: {name}"
+    hexapod = f"{result.session.hexapod.name} ({_session_files(result)['hexapod']})"
+    header = running_header_html(header_rows(title, identification, session_dates(result), hexapod))
+    return page_html(title, parts, header=header)
 
 
 def build_report(
@@ -354,6 +388,7 @@ def build_report(
     progress: Callable[[int, int], None] | None = None,
     coverage_factor: float = 2.0,
     on_verdict: Callable[[Verdict], None] | None = None,
+    lab_fields: dict[str, object] | None = None,
 ) -> str:
     """The report page of ``result`` with its pose uncertainty and quality checks.
 
@@ -372,7 +407,11 @@ def build_report(
         ``k`` of the expanded uncertainties (> 0).
     on_verdict : callable, optional
         As :func:`report_html`.
+    lab_fields : dict, optional
+        A lab file's identification fields (:func:`hexatherm.io.config.identity.read_lab`);
+        the session's own ``identification:`` wins key by key.
     """
+    from hexatherm.io.config.identity import identification
     from hexatherm.workflows.process.quality import quality_checks
     from hexatherm.workflows.process.uncertainty import pose_uncertainty
 
@@ -382,4 +421,5 @@ def build_report(
         quality=quality_checks(result, thresholds),
         coverage_factor=coverage_factor,
         on_verdict=on_verdict,
+        identification=identification(result.session.identification, lab_fields),
     )
