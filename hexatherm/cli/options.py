@@ -292,3 +292,28 @@ lab_option = click.option(
     "CMM, hexapod, ambient conditions, signatories, tolerances, printed in the header of "
     "every page; a session file's identification: and tolerances: win key by key.",
 )
+
+
+def _tolerances(ctx: click.Context, param: click.Parameter, values: tuple[str, ...]) -> dict:
+    from hexatherm.workflows.process.conformity import parse_tolerances
+
+    found: dict[str, float] = {}
+    for value in values:
+        try:
+            found.update(parse_tolerances(value))
+        except ValueError as exc:
+            raise click.BadParameter(str(exc), ctx=ctx, param=param) from None
+    return found
+
+
+tolerance_option = click.option(
+    "--tolerance",
+    "tolerances",
+    multiple=True,
+    metavar="Tx=2um,Rx=10urad,...",
+    callback=_tolerances,
+    help="Tolerance zone |corrected - commanded| <= T of a pose component (Tx..Tz in um, "
+    "mm or nm; Rx..Rz in urad, mrad or deg; repeatable): each target is judged conforms / "
+    "does not conform / not decidable under ISO 14253-1 (U = k u as a guard band). Over "
+    "the session's tolerances: mapping (and a --lab file's).",
+)

@@ -20,6 +20,7 @@ from hexatherm.cli.options import (
     quality_threshold_option,
     reading_options,
     seed_option,
+    tolerance_option,
 )
 from hexatherm.io.files import ReadOptions
 
@@ -57,6 +58,7 @@ from hexatherm.io.files import ReadOptions
     "tables and the verdict (2, as calibration certificates use; > 0).",
 )
 @lab_option
+@tolerance_option
 @reading_options
 @clean_errors
 def command(
@@ -71,6 +73,7 @@ def command(
     quality_thresholds: tuple[str, ...],
     coverage_factor: float,
     lab: Path | None,
+    tolerances: dict[str, float],
     reading: ReadOptions,
 ) -> None:
     """Process SESSION (a folder with session.yaml, or the file itself) and write its report.
@@ -122,6 +125,7 @@ def command(
             coverage_factor=coverage_factor,
             on_verdict=verdicts.append,
             lab_fields=lab_fields,
+            tolerances={**lab_tolerances, **result.session.tolerances, **tolerances},
         )
     write_output_file(out_file, page, inputs=inputs, overwrite=overwrite)
     for summary in verdicts:  # the page's verdict, on the screen too

@@ -41,6 +41,7 @@ identification:
   operator: K. Lee
   hexapod: {model: H-850 demo, serial: "SN-0042"}
   ambient: {temperature_C: 20.1, humidity_percent: 45}
+tolerances: {Tx_um: 5, Ty_um: 5, Tz_um: 5, Rx_urad: 50, Ry_urad: 50, Rz_urad: 50}
 """
 
 #: every text the header must carry, on every page (operator: the session's wins)
@@ -92,10 +93,14 @@ def pdf_pages(page: Path, folder: Path) -> list[str]:
     text = subprocess.run(
         [poppler("pdftotext"), "-bbox", str(pdf), "-"], check=True, capture_output=True
     ).stdout.decode("utf-8")
-    return [
-        " ".join(html.unescape(w[4]) for w in WORD.findall(body))
-        for _, _, body in PAGE.findall(text)
-    ]
+    pages = []
+    for width, height, body in PAGE.findall(text):
+        words = WORD.findall(body)
+        for x0, y0, x1, y1, word in words:  # nothing off the paper
+            assert 0 <= float(x0) and float(x1) <= float(width), word
+            assert 0 <= float(y0) and float(y1) <= float(height), word
+        pages.append(" ".join(html.unescape(w[4]) for w in words))
+    return pages
 
 
 def check_every_page(pages: list[str], expected: list[str]) -> None:
@@ -124,6 +129,9 @@ def test_process_report_prints_identification_on_every_page(tmp_path):
     assert "Signatures" in pages[-1] or "Signatures" in pages[-2]
     # the session's operator wins over the lab's
     assert "Operator: K. Lee" in pages[0] and "Operator: J. Doe" not in pages[0]
+    # the conformity statement, in the verdict on the first page, and its table
+    assert "Conformity:" in pages[0]
+    assert "Rz: T = 50 µrad" in " ".join(pages)
 
 
 def test_identification_fields_are_read_strictly(tmp_path):

@@ -47,6 +47,7 @@ from hexatherm.workflows.process.measured import nominal_fit_diameter_mm
 from hexatherm.workflows.process.pipeline import ProcessResult
 
 if TYPE_CHECKING:
+    from hexatherm.workflows.process.conformity import Conformity
     from hexatherm.workflows.process.quality import QualityReport
     from hexatherm.workflows.process.uncertainty import PoseUncertainty
 
@@ -80,11 +81,13 @@ def poses_frame(
     result: ProcessResult,
     uncertainty: PoseUncertainty | None = None,
     twin: np.ndarray | None = None,
+    conformity: Conformity | None = None,
 ) -> pd.DataFrame:
     """The ``poses.csv`` table, one row per target.
 
     ``u_*`` columns with ``uncertainty``; ``*_twin_*`` columns (after the contract
-    columns) with ``twin``, the twin-corrected poses (M, 6).
+    columns) with ``twin``, the twin-corrected poses (M, 6); the conformity columns
+    (:meth:`Conformity.columns`, last) with ``conformity``.
     """
     corr = result.correction
     plan = result.session.plan
@@ -147,6 +150,8 @@ def poses_frame(
             if tag in parts_of:
                 data[f"u_common_{col}"] = parts_of[tag][0][:, j]
                 data[f"u_own_{col}"] = parts_of[tag][1][:, j]
+    if conformity is not None:
+        data.update(conformity.columns())
     return pd.DataFrame(data)
 
 
@@ -242,6 +247,7 @@ def write_results(
     uncertainty: PoseUncertainty | None = None,
     quality: QualityReport | None = None,
     twin: np.ndarray | None = None,
+    conformity: Conformity | None = None,
 ) -> list[Path]:
     """Write ``poses.csv``, ``legs.csv``, ``fits.csv``, ``covariance.csv`` (and
     ``quality.csv``) into ``out``.
@@ -249,14 +255,15 @@ def write_results(
     The folder is replaced atomically. ``uncertainty`` defaults to linear
     propagation (:func:`hexatherm.workflows.process.uncertainty.pose_uncertainty`); ``quality.csv``
     is written when ``quality`` is given (``hexatherm process`` always gives it);
-    ``twin`` (M, 6) adds the twin-corrected poses (``process --method twin``).
+    ``twin`` (M, 6) adds the twin-corrected poses (``process --method twin``);
+    ``conformity`` the conformity columns (``process --tolerance``).
     """
     if uncertainty is None:
         from hexatherm.workflows.process.uncertainty import pose_uncertainty
 
         uncertainty = pose_uncertainty(result)
     tables = {
-        "poses.csv": poses_frame(result, uncertainty, twin),
+        "poses.csv": poses_frame(result, uncertainty, twin, conformity),
         "legs.csv": legs_frame(result),
         "fits.csv": fits_frame(result),
     }

@@ -181,6 +181,10 @@ def verdict_items(summary: Verdict) -> list[tuple[str, str]]:
             f"k = {exact(k)} wherever U or error bars appear.",
         ),
     ]
+    if summary.conformity is not None:
+        from hexatherm.workflows.report.conformity import conformity_item
+
+        items.insert(1, conformity_item(summary.conformity))
     return items
 
 
@@ -242,6 +246,7 @@ def report_html(
     generated: str | None = None,
     on_verdict: Callable[[Verdict], None] | None = None,
     identification: Identification | None = None,
+    tolerances: dict[str, float] | None = None,
 ) -> str:
     """The report page of a processed session (see the package's docstring).
 
@@ -265,6 +270,8 @@ def report_html(
     identification : Identification, optional
         Lab, customer, CMM, hexapod ... (:func:`hexatherm.io.config.identity.identification`):
         printed in the header every printed page repeats, and the signature block.
+    tolerances : dict, optional
+        ``Tx_um`` .. ``Rz_urad`` -> T: the conformity statement (verdict and a table).
 
     Returns
     -------
@@ -275,7 +282,7 @@ def report_html(
 
     if facts is None:
         facts = current_run()
-    summary = verdict(result, uncertainty, quality, coverage_factor)
+    summary = verdict(result, uncertainty, quality, coverage_factor, tolerances)
     if on_verdict is not None:
         on_verdict(summary)
     failing = dict(summary.failing_targets + summary.failing_other)
@@ -312,6 +319,10 @@ def report_html(
         poses_table_html(result, uncertainty, "conventional", coverage_factor, failing),
         poses_table_html(result, uncertainty, "corrected", coverage_factor, failing),
     ]
+    if summary.conformity is not None:
+        from hexatherm.workflows.report.conformity import conformity_table_html
+
+        parts.append(conformity_table_html(summary.conformity))
     if uncertainty is not None:
         parts.append(shared_parts_table_html(uncertainty, coverage_factor))
     if uncertainty is not None:
@@ -389,6 +400,7 @@ def build_report(
     coverage_factor: float = 2.0,
     on_verdict: Callable[[Verdict], None] | None = None,
     lab_fields: dict[str, object] | None = None,
+    tolerances: dict[str, float] | None = None,
 ) -> str:
     """The report page of ``result`` with its pose uncertainty and quality checks.
 
@@ -410,6 +422,9 @@ def build_report(
     lab_fields : dict, optional
         A lab file's identification fields (:func:`hexatherm.io.config.identity.read_lab`);
         the session's own ``identification:`` wins key by key.
+    tolerances : dict, optional
+        The tolerances to judge (default: the session's ``tolerances:``; the command line
+        merges a lab file's, the session's and ``--tolerance``'s, in that order).
     """
     from hexatherm.io.config.identity import identification
     from hexatherm.workflows.process.quality import quality_checks
@@ -422,4 +437,5 @@ def build_report(
         coverage_factor=coverage_factor,
         on_verdict=on_verdict,
         identification=identification(result.session.identification, lab_fields),
+        tolerances=result.session.tolerances if tolerances is None else tolerances,
     )
