@@ -23,6 +23,7 @@ import numpy as np
 from hexatherm.core.calibration import PARAMETER_UNITS
 from hexatherm.core.calibration.fit import EXPLAINED_P
 from hexatherm.core.residuals import rms
+from hexatherm.io.csvout import RESOLUTION, fixed_text
 from hexatherm.io.provenance import current_run, now_iso
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.calibrate.run import Calibration
@@ -123,20 +124,46 @@ def _map_figure(stroke: StrokeMap, commanded: FloatArray) -> Figure:
 
 
 def _residual_figure(run: Calibration) -> Figure:
+    """The residual of every target before and after, translation and rotation."""
     from hexatherm.workflows.report.figures import _new_figure
 
-    fig = _new_figure(7.0, 3.4, left=0.09, right=0.98, bottom=0.16, top=0.88)
-    ax = fig.add_subplot(1, 1, 1)
+    fig = _new_figure(7.0, 5.4, left=0.1, right=0.98, bottom=0.1, top=0.93, hspace=0.35)
     n = len(run.campaign.labels)
-    before = np.linalg.norm(run.residuals_before_um_urad[:, :3], axis=1)
-    after = np.linalg.norm(run.residuals_after_um_urad[:, :3], axis=1)
-    ax.semilogy(np.arange(1, n + 1), before, "o--", color="#c44e52", label="nominal geometry")
     label = "calibrated (held out)" if run.heldout else "calibrated"
-    ax.semilogy(np.arange(1, n + 1), after, "s-", color="#4c72b0", label=label)
-    ax.set_xlabel("target")
-    ax.set_ylabel("|measured − predicted| translation (µm)")
-    ax.legend(fontsize=8)
-    ax.set_title("Residual of every target, before and after", fontsize=9)
+    for row, (part, unit) in enumerate(((slice(0, 3), "µm"), (slice(3, 6), "µrad"))):
+        ax = fig.add_subplot(2, 1, row + 1)
+        before = np.linalg.norm(run.residuals_before_um_urad[:, part], axis=1)
+        after = np.linalg.norm(run.residuals_after_um_urad[:, part], axis=1)
+        x = np.arange(1, n + 1)
+        ax.semilogy(x, before, "o--", color="#c44e52", label="nominal geometry")
+        ax.semilogy(x, after, "s-", color="#4c72b0", label=label)
+        what = "translation" if row == 0 else "rotation"
+        ax.set_ylabel(f"|measured − predicted|\n{what} ({unit})")
+        ax.legend(fontsize=8)
+        if row == 0:
+            ax.set_title("Residual of every target, before and after", fontsize=9)
+        else:
+            ax.set_xlabel("target")
+    return fig
+
+
+def _correlation_figure(run: Calibration) -> Figure:
+    """The fitted parameters' correlation matrix as a heatmap."""
+    from hexatherm.workflows.report.figures import _new_figure
+
+    fit = run.fit
+    index = [i for i, m in enumerate(fit.model.mask) if m]
+    rho = np.asarray(fit.correlation)[np.ix_(index, index)]
+    fig = _new_figure(6.6, 5.8, left=0.16, right=0.94, bottom=0.16, top=0.94)
+    ax = fig.add_subplot(1, 1, 1)
+    image = ax.imshow(rho, vmin=-1.0, vmax=1.0, cmap="RdBu_r", interpolation="nearest")
+    fig.colorbar(image, ax=ax, label="correlation ρ", shrink=0.85)
+    names = list(fit.names)
+    step = max(1, len(names) // 24)
+    ticks = np.arange(0, len(names), step)
+    ax.set_xticks(ticks, [names[i] for i in ticks], rotation=90, fontsize=6)
+    ax.set_yticks(ticks, [names[i] for i in ticks], fontsize=6)
+    ax.set_title(f"Correlation of the {len(names)} fitted parameters", fontsize=9)
     return fig
 
 
@@ -175,15 +202,17 @@ def report_html(
     inputs: Sequence[Path],
     folder: Path,
     lab_fields: dict[str, object] | None = None,
+    coverage_factor: float = COVERAGE_FACTOR,
 ) -> str:
     """The calibration's report page (see the module text); ``lab_fields``: a lab file's
-    identification (the sessions' own ``identification:`` over it, in the order given)."""
+    identification (the sessions' own ``identification:`` over it, in the order given);
+    ``coverage_factor``: k of every expanded uncertainty ``U = k u`` it prints."""
     from hexatherm.io.config.identity import identification
     from hexatherm.workflows.report.html import header_rows
 
     fit = run.fit
     obs = fit.observability
-    k = COVERAGE_FACTOR
+    k = coverage_factor
     before, after = (
         rms(run.residuals_before_um_urad, axis=0),
         rms(run.residuals_after_um_urad, axis=0),
@@ -257,7 +286,7 @@ def report_html(
             [
                 name,
                 exact(fit.model.theta0[i]),
-                repr(float(fit.parameters[i])),
+                fixed_text(np.array([fit.parameters[i]]), RESOLUTION[PARAMETER_UNITS[i]])[0],
                 fixed((fit.parameters[i] - fit.model.theta0[i]) * scale, "um"),
                 fixed(k * fit.std_errors[i] * scale, "um"),
                 unit_text(unit),
@@ -316,8 +345,18 @@ def report_html(
         figure_html(
             _residual_figure(run),
             "residuals before and after",
-            "Translation residual of every target: measured minus the nominal geometry's "
-            "prediction (the commanded pose), and minus the calibrated model's.",
+            "Translation and rotation residual of every target: measured minus the nominal "
+            "geometry's prediction (the commanded pose), and minus the calibrated model's.",
+        )
+    )
+    parts.append("<h2>Correlations</h2>")
+    parts.append(
+        figure_html(
+            _correlation_figure(run),
+            "correlation matrix of the parameters",
+            "Correlation coefficient of every pair of fitted parameters (their covariance "
+            "over the product of their standard uncertainties); near \u00b11: the campaign "
+            "does not tell the two apart.",
         )
     )
     parts.append(
