@@ -59,9 +59,8 @@ def test_balls_yaml_carries_each_centres_uncertainty_at_sane_digits(tmp_path: Pa
     the frame, so the sum of u^2 equals the fit's in the CMM frame, computed here."""
     import re
 
-    import yaml
-
     import pandas as pd
+    import yaml
 
     from hexatherm.core.spherefit import fit_spheres
 
