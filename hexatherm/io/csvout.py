@@ -44,8 +44,10 @@ RESOLUTION = {
     "ppm": 1e-4,
     "C": 1e-4,
     "degC": 1e-4,
-    "mm/mm": 1e-10,  # a gain (1e-4 ppm); only as a row's unit (csv_text's row_unit)
 }
+
+#: resolution of a row's unit (csv_text's ``row_unit``): the units above and a gain's
+ROW_RESOLUTION = {**RESOLUTION, "mm/mm": 1e-10}
 
 #: units that a column name may carry (those without a resolution are written exactly)
 UNITS = frozenset([*RESOLUTION, "s"])
@@ -137,7 +139,7 @@ def csv_text(
             j = names.index(column)
             values = frame[column].to_numpy(dtype=float)
             cells[j] = [
-                fixed_text(np.array([v]), RESOLUTION[unit])[0]
+                fixed_text(np.array([v]), ROW_RESOLUTION[unit])[0]
                 for v, unit in zip(values, units, strict=True)
             ]
             steps[j] = None

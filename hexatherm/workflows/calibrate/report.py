@@ -23,7 +23,7 @@ import numpy as np
 from hexatherm.core.calibration import PARAMETER_UNITS
 from hexatherm.core.calibration.fit import EXPLAINED_P
 from hexatherm.core.residuals import rms
-from hexatherm.io.csvout import RESOLUTION, fixed_text
+from hexatherm.io.csvout import ROW_RESOLUTION, fixed_text
 from hexatherm.io.provenance import current_run, now_iso
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.calibrate.run import Calibration
@@ -286,7 +286,7 @@ def report_html(
             [
                 name,
                 exact(fit.model.theta0[i]),
-                fixed_text(np.array([fit.parameters[i]]), RESOLUTION[PARAMETER_UNITS[i]])[0],
+                fixed_text(np.array([fit.parameters[i]]), ROW_RESOLUTION[PARAMETER_UNITS[i]])[0],
                 fixed((fit.parameters[i] - fit.model.theta0[i]) * scale, "um"),
                 fixed(k * fit.std_errors[i] * scale, "um"),
                 unit_text(unit),

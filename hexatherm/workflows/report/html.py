@@ -10,6 +10,7 @@ import numpy as np
 from hexatherm import __version__
 from hexatherm.workflows.process.pipeline import ProcessResult
 from hexatherm.workflows.report.figures import (
+    POSE_NAMES,
     _time_text,
     growth_figure,
     pose_figure,
@@ -181,6 +182,22 @@ def verdict_items(summary: Verdict) -> list[tuple[str, str]]:
             f"k = {exact(k)} wherever U or error bars appear.",
         ),
     ]
+    if summary.common_u is not None:
+        c = summary.common_u
+        items.append(
+            (
+                "Shared by all targets",
+                f"of U, the common part from the one measurement of O and R0 (k = {exact(k)}): "
+                + ", ".join(
+                    f"{name} {fixed(c[j], unit)} {unit_text(unit)}"
+                    for j, (name, unit) in enumerate(
+                        zip(POSE_NAMES, ("um",) * 3 + ("urad",) * 3, strict=True)
+                    )
+                )
+                + " at most; it shifts every corrected pose together (the band in Figure 6): "
+                "a difference between two targets cancels it, their mean keeps it.",
+            )
+        )
     if summary.conformity is not None:
         from hexatherm.workflows.report.conformity import conformity_item
 
@@ -312,6 +329,12 @@ def report_html(
             + (
                 f" Error bars: expanded uncertainty U = k\u00b7u, k = {k_text}."
                 if uncertainty is not None
+                else ""
+            )
+            + (
+                " Band: the common part of U (k\u00b7u_common, from O and R0), shared by "
+                "all targets."
+                if summary.common_u is not None
                 else ""
             )
             + (" Shaded: targets that failed a quality check." if summary.failing_targets else ""),

@@ -72,6 +72,9 @@ class Verdict:
         How the uncertainty was obtained ("not available" without one).
     conformity : Conformity, optional
         The conformity statement, with tolerances.
+    common_u : ndarray, shape (6,), optional
+        The largest expanded common part ``k u_common`` of the corrected deviations over
+        the targets (um, urad): from O and R0, shared by every target.
     """
 
     targets: int
@@ -85,6 +88,7 @@ class Verdict:
     coverage_factor: float
     basis: str
     conformity: Conformity | None = None
+    common_u: FloatArray | None = None
 
 
 def uncertainty_basis(uncertainty: PoseUncertainty | None) -> str:
@@ -166,6 +170,9 @@ def verdict(
         correction_urad=_extreme(corrected - conventional, None, labels, rotation),
         coverage_factor=float(coverage_factor),
         basis=uncertainty_basis(uncertainty),
+        common_u=None
+        if uncertainty is None or uncertainty.common_u is None
+        else coverage_factor * to_um_urad(uncertainty.common_u[:, 6:12]).max(axis=0),
         conformity=None
         if not tolerances
         else _conformity(result, uncertainty, tolerances, coverage_factor),
