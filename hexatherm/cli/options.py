@@ -40,10 +40,28 @@ interpolation_option = click.option(
     "over all references (per leg, chosen by cross-validation, which falls back to linear "
     "when the heating is not smooth).",
 )
+
+
+def _thresholds(
+    ctx: click.Context, param: click.Parameter, values: tuple[str, ...]
+) -> tuple[str, ...]:
+    """Each ``NAME=VALUE`` checked before any work: a bad one is a usage error (status 2)."""
+    from hexatherm.workflows.process.quality import parse_threshold
+
+    for value in values:
+        try:
+            parse_threshold(value)
+        except HexathermError as exc:
+            text = str(exc).removeprefix("--quality-threshold ")
+            raise click.BadParameter(text, ctx=ctx, param=param) from None
+    return values
+
+
 quality_threshold_option = click.option(
     "--quality-threshold",
     "quality_thresholds",
     multiple=True,
+    callback=_thresholds,
     metavar="NAME=VALUE",
     help="Change a quality check's limit (repeatable; over the session file's quality: "
     "mapping): form_um, diameter_dev_um, distance_dev_um, registration_rms_um, time_gap_s, "

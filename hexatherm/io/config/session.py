@@ -29,9 +29,10 @@ def read_session(path: str | os.PathLike[str]) -> Session:
     """Read a session file, or the ``session.yaml`` of a session folder, and its configs."""
     path = Path(path)
     if path.is_dir():
+        _check_session_folder(path)
         path = path / "session.yaml"
     doc = YamlDoc.load(path)
-    doc.check_format(SESSION_FORMAT)
+    _check_session_format(doc)
     doc.check_keys(
         [
             "format",
@@ -94,6 +95,46 @@ def read_session(path: str | os.PathLike[str]) -> Session:
         ident,
         tolerances,
     )
+
+
+#: formats of hexatherm's other files -> what the file is, for a message
+_OTHER_FORMATS = {
+    "hexatherm-plan/1": "a plan file",
+    "hexatherm-hexapod/1": "a hexapod file",
+    "hexatherm-balls/1": "a balls file",
+    "hexatherm-datums/1": "a datums file (for register)",
+    "hexatherm-lab/1": "a lab file (for --lab)",
+    "hexatherm-scenario/1": "a scenario (hexatherm simulate makes a session of it)",
+}
+
+
+def _check_session_folder(folder: Path) -> None:
+    """A folder without ``session.yaml``: say what it looks like (a results folder ...)."""
+    from hexatherm.errors import InputError
+
+    if (folder / "session.yaml").exists():
+        return
+    session = next((p for p in folder.parents if (p / "session.yaml").is_file()), None)
+    where = f"; its session is {session}" if session is not None else ""
+    if (folder / "poses.csv").is_file():
+        what = "a results folder (poses.csv: hexatherm process's output), not a session"
+    elif (folder / "calibration.json").is_file():
+        what = "a calibration output folder (hexatherm calibrate's), not a session"
+    else:
+        what = "not a session folder: no session.yaml in it"
+    raise InputError(f"{what}{where}", path=folder)
+
+
+def _check_session_format(doc: YamlDoc) -> None:
+    """``format:`` must be the session's; another hexatherm file is named as what it is."""
+    value = doc.get("format", default=None)
+    if isinstance(value, str) and value in _OTHER_FORMATS:
+        raise doc.error(
+            f"this is {_OTHER_FORMATS[value]} ({value}), not a session file: give the "
+            "session folder or its session.yaml",
+            "format",
+        )
+    doc.check_format(SESSION_FORMAT)
 
 
 def read_pose_check(path: str | os.PathLike[str]) -> dict[str, Any] | None:

@@ -25,7 +25,8 @@ Numbers are written at the resolution of their unit (:mod:`hexatherm.io.csvout`)
 targets (:func:`covariance_frame`).
 
 ``quality.csv`` has one row per step with the quality checks of
-:mod:`hexatherm.workflows.process.quality`.
+:mod:`hexatherm.workflows.process.quality` (``ok_*``: ``True``, ``False``, or empty where
+a check could not run).
 
 ``legs.csv`` has one row per step: ``label,kind,time``, the step's measured pose
 relative to O (``Tx_mm`` ...), its IGM leg lengths ``q_leg1_mm`` .. and, for
@@ -270,12 +271,25 @@ def write_results(
     if uncertainty.between_covariance is not None:
         tables["covariance.csv"] = covariance_frame(result, uncertainty)
     if quality is not None:
-        tables["quality.csv"] = quality.frame
+        tables["quality.csv"] = quality_file_frame(quality)
     texts = {name: csv_text(frame) for name, frame in tables.items()}
     with output_dir(out, inputs=session_inputs(result), overwrite=overwrite) as tmp:
         for name, text in texts.items():
             (tmp / name).write_text(text, encoding="utf-8", newline="")
     return [Path(out) / name for name in texts]
+
+
+def quality_file_frame(quality: QualityReport) -> pd.DataFrame:
+    """``quality.csv``'s table: the checks' frame with every ``ok_<check>`` a boolean,
+    empty where the check could not run (the frame's ``"na"``), so that pandas reads
+    ``True``/``False`` (and NaN), never text."""
+    from hexatherm.workflows.process.quality import NA
+
+    frame = quality.frame.copy()
+    for column in frame.columns:
+        if str(column).startswith("ok_"):
+            frame[column] = ["" if v is NA or v == NA else bool(v) for v in frame[column]]
+    return frame
 
 
 def session_inputs(result: ProcessResult) -> list[Path]:
