@@ -154,5 +154,5 @@ def test_the_report_prints_the_parameters_with_k_times_u_and_the_stroke_map(cali
     assert all(worst[c] >= 0.999 * at_targets[c] for c in worst)
     assert all(worst[c] < 10 * at_targets[c] for c in worst)
     assert (
-        page.count("data:image/png;base64,") == 3 and "Provenance" in page
+        page.count("data:image/png;base64,") == 4 and "Provenance" in page
     )  # map, residuals, correlations

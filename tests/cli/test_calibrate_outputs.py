@@ -70,12 +70,16 @@ def test_parameters_csv_has_u_at_k_and_the_documented_resolution(calibrated):
 def test_report_has_rotation_residuals_and_the_correlation_heatmap(calibrated):
     out, _ = calibrated
     page = (out / "report.html").read_text()
-    assert page.count("data:image/png;base64,") == 3  # map, residuals, correlations
+    assert page.count("data:image/png;base64,") == 4  # map, residuals (2), correlations
     assert "<h2>Correlations</h2>" in page and "U (k = 3)" in page
 
 
 def test_the_figures_hold_the_residuals_and_the_correlations():
-    from hexatherm.workflows.calibrate.report import _correlation_figure, _residual_figure
+    from hexatherm.workflows.calibrate.report import (
+        _correlation_figure,
+        _residual_figure,
+        _workspace_figure,
+    )
     from hexatherm.workflows.calibrate.run import calibrate, read_campaign
 
     run = calibrate(read_campaign([SESSION]), "joints")
@@ -97,3 +101,13 @@ def test_the_figures_hold_the_residuals_and_the_correlations():
         rotation[1].get_ydata(), np.linalg.norm(run.residuals_after_um_urad[:, 3:], axis=1)
     )
     assert "rotation" in residuals.axes[1].get_ylabel()
+    workspace = _workspace_figure(run)
+    before, after = (ax.collections[0] for ax in workspace.axes[:2])
+    np.testing.assert_allclose(before.get_offsets(), run.campaign.commanded[:, :2])
+    np.testing.assert_allclose(
+        before.get_array(), np.linalg.norm(run.residuals_before_um_urad[:, :3], axis=1)
+    )
+    np.testing.assert_allclose(
+        after.get_array(), np.linalg.norm(run.residuals_after_um_urad[:, :3], axis=1)
+    )
+    assert before.get_clim() == after.get_clim()  # one colour scale

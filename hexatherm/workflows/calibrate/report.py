@@ -147,6 +147,33 @@ def _residual_figure(run: Calibration) -> Figure:
     return fig
 
 
+def _workspace_figure(run: Calibration) -> Figure:
+    """The translation residual of every target at its commanded Tx, Ty: before and
+    after, one colour scale."""
+    from hexatherm.workflows.report.figures import _new_figure
+
+    fig = _new_figure(7.6, 3.6, left=0.08, right=0.9, bottom=0.14, top=0.86, wspace=0.25)
+    xy = run.campaign.commanded[:, :2]
+    before = np.linalg.norm(run.residuals_before_um_urad[:, :3], axis=1)
+    after = np.linalg.norm(run.residuals_after_um_urad[:, :3], axis=1)
+    top = float(max(np.nanmax(before), np.nanmax(after), 1e-12))
+    after_name = "calibrated (held out)" if run.heldout else "calibrated"
+    image = None
+    for k, (values, name) in enumerate(((before, "nominal geometry"), (after, after_name))):
+        ax = fig.add_subplot(1, 2, k + 1)
+        image = ax.scatter(
+            xy[:, 0], xy[:, 1], c=values, vmin=0.0, vmax=top, cmap="viridis", s=28, gid=name
+        )
+        ax.set_xlabel("commanded Tx (mm)")
+        if k == 0:
+            ax.set_ylabel("commanded Ty (mm)")
+        ax.set_title(name, fontsize=9)
+    cax = fig.add_axes((0.92, 0.14, 0.02, 0.72))
+    fig.colorbar(image, cax=cax, label="|measured − predicted| translation (µm)")
+    fig.suptitle("Residuals over the workspace (every target at its commanded Tx, Ty)", fontsize=10)
+    return fig
+
+
 def _correlation_figure(run: Calibration) -> Figure:
     """The fitted parameters' correlation matrix as a heatmap."""
     from hexatherm.workflows.report.figures import _new_figure
@@ -347,6 +374,15 @@ def report_html(
             "residuals before and after",
             "Translation and rotation residual of every target: measured minus the nominal "
             "geometry's prediction (the commanded pose), and minus the calibrated model's.",
+        )
+    )
+    parts.append(
+        figure_html(
+            _workspace_figure(run),
+            "residuals over the workspace",
+            "Translation residual of every target at its commanded Tx and Ty (all other "
+            "components as commanded), before (nominal geometry) and after (calibrated), "
+            "on one colour scale.",
         )
     )
     parts.append("<h2>Correlations</h2>")
