@@ -158,7 +158,7 @@ def _workspace_figure(run: Calibration) -> Figure:
     after = np.linalg.norm(run.residuals_after_um_urad[:, :3], axis=1)
     top = float(max(np.nanmax(before), np.nanmax(after), 1e-12))
     after_name = "calibrated (held out)" if run.heldout else "calibrated"
-    image = None
+    images = []
     for k, (values, name) in enumerate(((before, "nominal geometry"), (after, after_name))):
         ax = fig.add_subplot(1, 2, k + 1)
         image = ax.scatter(
@@ -168,8 +168,9 @@ def _workspace_figure(run: Calibration) -> Figure:
         if k == 0:
             ax.set_ylabel("commanded Ty (mm)")
         ax.set_title(name, fontsize=9)
+        images.append(image)
     cax = fig.add_axes((0.92, 0.14, 0.02, 0.72))
-    fig.colorbar(image, cax=cax, label="|measured − predicted| translation (µm)")
+    fig.colorbar(images[-1], cax=cax, label="|measured − predicted| translation (µm)")
     fig.suptitle("Residuals over the workspace (every target at its commanded Tx, Ty)", fontsize=10)
     return fig
 
