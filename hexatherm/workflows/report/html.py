@@ -332,8 +332,7 @@ def report_html(
                 else ""
             )
             + (
-                " Band: the common part of U (k\u00b7u_common, from O and R0), shared by "
-                "all targets."
+                " Band: \u00b1k\u00b7u_common, U's share from O and R0, the same for all targets."
                 if summary.common_u is not None
                 else ""
             )
