@@ -126,6 +126,7 @@ def command(
             on_verdict=verdicts.append,
             lab_fields=lab_fields,
             tolerances={**lab_tolerances, **result.session.tolerances, **tolerances},
+            extra_inputs=[] if lab is None else [lab],
         )
     write_output_file(out_file, page, inputs=inputs, overwrite=overwrite)
     for summary in verdicts:  # the page's verdict, on the screen too

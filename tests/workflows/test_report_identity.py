@@ -6,6 +6,7 @@ prints (as ``test_report_browser``), and the strict reading of the new fields.
 
 from __future__ import annotations
 
+import hashlib
 import html
 import shutil
 import subprocess
@@ -129,6 +130,9 @@ def test_process_report_prints_identification_on_every_page(tmp_path):
     assert "Signatures" in pages[-1] or "Signatures" in pages[-2]
     # the session's operator wins over the lab's
     assert "Operator: K. Lee" in pages[0] and "Operator: J. Doe" not in pages[0]
+    # the lab file is an input of the page: in the provenance with its SHA-256
+    digest = hashlib.sha256((tmp_path / "lab.yaml").read_bytes()).hexdigest()
+    assert digest in " ".join(pages)
     # the conformity statement, in the verdict on the first page, and its table
     assert "Conformity:" in pages[0]
     assert "Rz: T = 50 µrad" in " ".join(pages)

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -241,13 +242,14 @@ def provenance_block(
     quality: QualityReport | None,
     facts: RunFacts | None,
     generated: str,
+    extra_inputs: Sequence[Path] = (),
 ) -> str:
     """The provenance block of a session's report (:func:`page.provenance_html`), with the
-    quality limits."""
+    quality limits; ``extra_inputs``: further files the page was made from (a lab file)."""
     limits = "not available" if quality is None else "; ".join(threshold_texts(quality.thresholds))
     return provenance_html(
         facts,
-        result.session.input_files(),
+        [*result.session.input_files(), *extra_inputs],
         result.session.path.parent,
         generated,
         extra=[("quality limits", limits)],
@@ -264,6 +266,7 @@ def report_html(
     on_verdict: Callable[[Verdict], None] | None = None,
     identification: Identification | None = None,
     tolerances: dict[str, float] | None = None,
+    extra_inputs: Sequence[Path] = (),
 ) -> str:
     """The report page of a processed session (see the package's docstring).
 
@@ -289,6 +292,8 @@ def report_html(
         printed in the header every printed page repeats, and the signature block.
     tolerances : dict, optional
         ``Tx_um`` .. ``Rz_urad`` -> T: the conformity statement (verdict and a table).
+    extra_inputs : sequence of Path
+        Further input files listed in the provenance (the lab file).
 
     Returns
     -------
@@ -403,7 +408,7 @@ def report_html(
             numeric_from=99,
             css="meta",
         ),
-        provenance_block(result, quality, facts, generated or now_iso()),
+        provenance_block(result, quality, facts, generated or now_iso(), extra_inputs),
     ]
     if identification is not None:
         parts.append(signature_html(identification.signatures))
@@ -423,6 +428,7 @@ def build_report(
     on_verdict: Callable[[Verdict], None] | None = None,
     lab_fields: dict[str, object] | None = None,
     tolerances: dict[str, float] | None = None,
+    extra_inputs: Sequence[Path] = (),
 ) -> str:
     """The report page of ``result`` with its pose uncertainty and quality checks.
 
@@ -447,6 +453,8 @@ def build_report(
     tolerances : dict, optional
         The tolerances to judge (default: the session's ``tolerances:``; the command line
         merges a lab file's, the session's and ``--tolerance``'s, in that order).
+    extra_inputs : sequence of Path
+        Further input files for the provenance (the lab file).
     """
     from hexatherm.io.config.identity import identification
     from hexatherm.workflows.process.quality import quality_checks
@@ -460,4 +468,5 @@ def build_report(
         on_verdict=on_verdict,
         identification=identification(result.session.identification, lab_fields),
         tolerances=result.session.tolerances if tolerances is None else tolerances,
+        extra_inputs=extra_inputs,
     )
