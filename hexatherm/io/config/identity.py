@@ -36,7 +36,8 @@ IDENTIFICATION_KEYS = (*_TEXTS, *_GROUPS, "ambient", "signatures")
 def _text(doc: YamlDoc, *keys: Any) -> str:
     value = doc.get(*keys)
     if not isinstance(value, str):
-        raise doc.error(f"expected a text (quote it: '{value}'), got {value!r}", *keys)
+        hint = f" (quote it: '{value}')" if isinstance(value, int | float | bool) else ""
+        raise doc.error(f"expected a text{hint}, got {value!r}", *keys)
     if not value.strip():
         raise doc.error("expected a text, got an empty one", *keys)
     return value.strip()
