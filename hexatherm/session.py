@@ -24,7 +24,7 @@ from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
 from hexatherm.core.planning import DEFAULT_MIN_RCOND
 
-__all__ = ["Balls", "CmmNoise", "Datums", "QualityLimits", "Session"]
+__all__ = ["Balls", "CmmNoise", "Datums", "Identification", "QualityLimits", "Session"]
 
 
 @dataclass(frozen=True)
@@ -160,6 +160,13 @@ class Session:
     utc_offset_s : float or None
         The optional ``utc_offset:`` (seconds east of UTC) of the times that the
         measurement and temperature files give without an offset (a CMM's local clock).
+    identification : dict
+        The optional ``identification:`` mapping (an extension), flat: ``"lab"``,
+        ``"cmm.serial"``, ... -> text (``ambient.*`` numbers), ``"signatures"`` -> list of
+        ``(role, name)`` (:func:`hexatherm.io.config.identity.read_identification`).
+    tolerances : dict of str to float
+        The optional ``tolerances:`` mapping: ``Tx_um`` .. ``Rz_urad`` -> half-width of
+        the tolerance zone of that deviation from the commanded pose.
     """
 
     path: Path
@@ -173,6 +180,8 @@ class Session:
     quality: dict[str, float] = dataclasses.field(default_factory=dict)
     config_files: tuple[Path, ...] = ()
     utc_offset_s: float | None = None
+    identification: dict[str, object] = dataclasses.field(default_factory=dict)
+    tolerances: dict[str, float] = dataclasses.field(default_factory=dict)
 
     def input_files(self) -> list[Path]:
         """Every file a run on this session reads: the session file, the hexapod, balls
@@ -211,3 +220,55 @@ class Datums:
     balls: dict[str, float]
     probe_compensated: bool
     tip_diameter_mm: float
+
+
+#: tolerance keys -> unit of the deviation they bound (``tolerances:``, ``--tolerance``)
+TOLERANCE_UNITS: dict[str, str] = {
+    **{f"T{a}_um": "um" for a in "xyz"},
+    **{f"R{a}_urad": "urad" for a in "xyz"},
+}
+
+#: identification keys -> how a report names them, in the order it prints them
+IDENTIFICATION_NAMES: dict[str, str] = {
+    "lab": "Laboratory",
+    "address": "Address",
+    "report_number": "Report number",
+    "customer": "Customer",
+    "operator": "Operator",
+    "hexapod.model": "Hexapod model",
+    "hexapod.serial": "Hexapod serial",
+    "cmm.make": "CMM make",
+    "cmm.model": "CMM model",
+    "cmm.serial": "CMM serial",
+    "cmm.certificate": "CMM calibration certificate",
+    "cmm.mpe": "CMM MPE",
+    "ambient.temperature_C": "Ambient temperature (\u00b0C)",
+    "ambient.humidity_percent": "Relative humidity (%)",
+    "ambient.note": "Ambient conditions",
+}
+
+
+@dataclass(frozen=True)
+class Identification:
+    """Who and what a report is about: the lab file's and the session's fields merged.
+
+    Attributes
+    ----------
+    fields : tuple of (str, str or float)
+        ``(key, value)``: keys of :data:`IDENTIFICATION_NAMES`.
+    signatures : tuple of (str, str)
+        ``(role, name)`` of each signatory (the signature block), in order.
+    """
+
+    fields: tuple[tuple[str, object], ...] = ()
+    signatures: tuple[tuple[str, str], ...] = ()
+
+    def rows(self) -> list[tuple[str, str]]:
+        """``(name, text)`` of every field given, in :data:`IDENTIFICATION_NAMES`'s order."""
+        given = dict(self.fields)
+        rows = []
+        for key, name in IDENTIFICATION_NAMES.items():
+            if key in given:
+                value = given[key]
+                rows.append((name, f"{value:g}" if isinstance(value, float) else str(value)))
+        return rows

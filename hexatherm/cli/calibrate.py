@@ -8,9 +8,11 @@ import click
 
 from hexatherm.cli.options import (
     CHECK_FAILED_EXIT,
+    CheckedFloat,
     clean_errors,
     echo_err,
     interpolation_option,
+    lab_option,
     overwrite_option,
     reading_options,
 )
@@ -23,10 +25,19 @@ from hexatherm.io.files import ReadOptions
     "-o",
     "--out",
     "out",
-    required=True,
+    default=None,
     type=click.Path(file_okay=False, path_type=Path),
     help="Output folder: hexapod.yaml, parameters.csv, residuals.csv, calibration.json, "
-    "report.html, provenance.json.",
+    "report.html, provenance.json [default: the first session's folder/calibration].",
+)
+@click.option(
+    "--coverage-factor",
+    "coverage_factor",
+    type=CheckedFloat(min=0, min_open=True),
+    default=2.0,
+    show_default=True,
+    help="Coverage factor k of the expanded uncertainties U = k u of parameters.csv "
+    "(U, U_um, U_ppm) and the report (> 0).",
 )
 @click.option(
     "--poses",
@@ -74,11 +85,13 @@ from hexatherm.io.files import ReadOptions
 )
 @interpolation_option
 @overwrite_option
+@lab_option
 @reading_options
 @clean_errors
 def command(
     sessions: tuple[Path, ...],
-    out: Path,
+    out: Path | None,
+    coverage_factor: float,
     poses: str,
     twin_model: Path | None,
     strict: bool,
@@ -87,6 +100,7 @@ def command(
     iterate: bool,
     interpolation: str,
     overwrite: bool,
+    lab: Path | None,
     reading: ReadOptions,
 ) -> None:
     """Calibrate the geometry of the hexapod of SESSIONS from their measured poses.
@@ -114,7 +128,15 @@ def command(
         raise click.UsageError(
             f"--twin-model is the twin's model for --poses twin, not for --poses {poses}"
         )
+    from hexatherm.io.config.identity import read_lab
+
+    lab_fields = read_lab(lab)[0] if lab is not None else {}
+    if out is None:
+        first = sessions[0] if sessions[0].is_dir() else sessions[0].parent
+        out = first / "calibration"
     inputs = [f for s in sessions for f in read_session(s).input_files()]
+    if lab is not None:
+        inputs.append(lab)
     if twin_model is not None:
         inputs.append(twin_model)
     twin = None if twin_model is None else TwinModel.read(twin_model)
@@ -148,7 +170,7 @@ def command(
         f"calibrated from {len(run.campaign.labels)} {poses} poses{model} of "
         f"{len(sessions)} session(s)"
     )
-    files = output_files(run, inputs, out)
+    files = output_files(run, inputs, out, lab_fields, coverage_factor)
     with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
         for name, text in files.items():
             (tmp / name).write_text(text, encoding="utf-8")

@@ -8,6 +8,7 @@ import os
 import sys
 import warnings
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any, TypeVar
 
 import click
@@ -39,10 +40,28 @@ interpolation_option = click.option(
     "over all references (per leg, chosen by cross-validation, which falls back to linear "
     "when the heating is not smooth).",
 )
+
+
+def _thresholds(
+    ctx: click.Context, param: click.Parameter, values: tuple[str, ...]
+) -> tuple[str, ...]:
+    """Each ``NAME=VALUE`` checked before any work: a bad one is a usage error (status 2)."""
+    from hexatherm.workflows.process.quality import parse_threshold
+
+    for value in values:
+        try:
+            parse_threshold(value)
+        except HexathermError as exc:
+            text = str(exc).removeprefix("--quality-threshold ")
+            raise click.BadParameter(text, ctx=ctx, param=param) from None
+    return values
+
+
 quality_threshold_option = click.option(
     "--quality-threshold",
     "quality_thresholds",
     multiple=True,
+    callback=_thresholds,
     metavar="NAME=VALUE",
     help="Change a quality check's limit (repeatable; over the session file's quality: "
     "mapping): form_um, diameter_dev_um, distance_dev_um, registration_rms_um, time_gap_s, "
@@ -283,3 +302,39 @@ class ProgressBars:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+lab_option = click.option(
+    "--lab",
+    "lab",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    default=None,
+    help="A lab file (format: hexatherm-lab/1): lab, customer, operator, report number, "
+    "CMM, hexapod, ambient conditions, signatories, tolerances, printed in the header of "
+    "every page; a session file's identification: and tolerances: win key by key.",
+)
+
+
+def _tolerances(ctx: click.Context, param: click.Parameter, values: tuple[str, ...]) -> dict:
+    from hexatherm.workflows.process.conformity import parse_tolerances
+
+    found: dict[str, float] = {}
+    for value in values:
+        try:
+            found.update(parse_tolerances(value))
+        except ValueError as exc:
+            raise click.BadParameter(str(exc), ctx=ctx, param=param) from None
+    return found
+
+
+tolerance_option = click.option(
+    "--tolerance",
+    "tolerances",
+    multiple=True,
+    metavar="Tx=2um,Rx=10urad,...",
+    callback=_tolerances,
+    help="Tolerance zone |corrected - commanded| <= T of a pose component (Tx..Tz in um, "
+    "mm or nm; Rx..Rz in urad, mrad or deg; repeatable): each target is judged conforms / "
+    "does not conform / not decidable under ISO 14253-1 (U = k u as a guard band). Over "
+    "the session's tolerances: mapping (and a --lab file's).",
+)

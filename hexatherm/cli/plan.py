@@ -180,14 +180,14 @@ def parse_levels(text: str) -> list[int]:
 @click.option(
     "--seconds-per-point",
     type=CheckedFloat(min=0),
-    default=2.0,
+    default=2.4,  # core.planning.DEFAULT_SECONDS_PER_POINT (imports numpy)
     show_default=True,
     help="Estimated probing time per point.",
 )
 @click.option(
     "--seconds-per-move",
     type=CheckedFloat(min=0),
-    default=30.0,
+    default=20.0,  # core.planning.DEFAULT_SECONDS_PER_MOVE, as simulate's
     show_default=True,
     help="Estimated time to command a pose and settle.",
 )
@@ -212,7 +212,7 @@ def parse_levels(text: str) -> list[int]:
 @click.option(
     "--cap-angle",
     type=CheckedFloat(min=1, max=180),
-    default=75.0,
+    default=70.0,  # core.planning.DEFAULT_CAP_ANGLE_DEG, as the session's cmm:
     show_default=True,
     help="Half-angle of the ball cap the touch points cover (deg).",
 )

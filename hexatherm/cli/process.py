@@ -23,6 +23,7 @@ from hexatherm.cli.options import (
     quality_threshold_option,
     reading_options,
     seed_option,
+    tolerance_option,
 )
 from hexatherm.io.files import ReadOptions
 
@@ -96,6 +97,16 @@ if TYPE_CHECKING:
     help="Write covariance.csv, the covariance between every pair of targets "
     "[default: up to 200 targets; a 1000-target campaign makes it 120 MB].",
 )
+@tolerance_option
+@click.option(
+    "--coverage-factor",
+    "coverage_factor",
+    type=CheckedFloat(min=0, min_open=True),
+    default=2.0,
+    show_default=True,
+    help="Coverage factor k of the expanded uncertainty U = k u that the conformity "
+    "columns of poses.csv use (with tolerances; > 0).",
+)
 @reading_options
 @clean_errors
 def command(
@@ -115,6 +126,8 @@ def command(
     hexapod_path: Path | None,
     strict: bool,
     between: bool | None,
+    tolerances: dict[str, float],
+    coverage_factor: float,
     reading: ReadOptions,
 ) -> None:
     """Process SESSION (a folder with session.yaml, or the file itself).
@@ -187,8 +200,22 @@ def command(
             result, mc=mc, seed=seed, progress=bars.draws, between=between
         )
     quality = quality_checks(result, session_thresholds(result.session, overrides))
+    tolerances = {**result.session.tolerances, **tolerances}
+    judged = None
+    if tolerances:
+        from hexatherm.workflows.process.conformity import conformity
+
+        judged = conformity(result, uncertainty, tolerances, coverage_factor)
+    from hexatherm.workflows.process.conformity import conformity_line
+
     written = write_results(
-        result, out_dir, overwrite=overwrite, uncertainty=uncertainty, quality=quality, twin=twin
+        result,
+        out_dir,
+        overwrite=overwrite,
+        uncertainty=uncertainty,
+        quality=quality,
+        twin=twin,
+        conformity=judged,
     )
     n = len(result.correction.target_index)
     averaged = "".join(
@@ -211,6 +238,8 @@ def command(
     echo_err(f"quality checks of {len(quality.frame)} steps:")
     for line in quality.summary():
         echo_err(line)
+    if judged is not None:
+        echo_err(conformity_line(judged))
     for path in written:
         echo_err(f"wrote {path}")
     if quality.any_failed:

@@ -68,13 +68,18 @@ def command(
     """
     from hexatherm.io.config import balls_to_yaml, read_datums
     from hexatherm.io.outputs import check_output_settled, write_output_file
-    from hexatherm.workflows.register import register_balls
+    from hexatherm.workflows.register import BALLS_RESOLUTION_MM, register_balls
 
     inputs = [measurement, datums_path]
     check_output_settled(out, kind="file", inputs=inputs, overwrite=overwrite)
     datums = read_datums(datums_path)
     result = register_balls(measurement, datums, fixed_diameter, diameter_tolerance_um, reading)
-    write_output_file(out, balls_to_yaml(result.balls), inputs=inputs, overwrite=overwrite)
+    write_output_file(
+        out,
+        balls_to_yaml(result.balls, result.u_centre_um, BALLS_RESOLUTION_MM),
+        inputs=inputs,
+        overwrite=overwrite,
+    )
     plane, (b1, b2) = result.frame.plane, result.frame.bores
     echo_err(f"top face: {plane.n} points, flatness {plane.form_um:.2f} um")
     echo_err(

@@ -13,12 +13,14 @@ from hexatherm.cli.options import (
     clean_errors,
     echo_err,
     interpolation_option,
+    lab_option,
     mc_option,
     overwrite_option,
     pose_tolerance_option,
     quality_threshold_option,
     reading_options,
     seed_option,
+    tolerance_option,
 )
 from hexatherm.io.files import ReadOptions
 
@@ -55,6 +57,8 @@ from hexatherm.io.files import ReadOptions
     help="Coverage factor k of the expanded uncertainties U = k u in the figure, the "
     "tables and the verdict (2, as calibration certificates use; > 0).",
 )
+@lab_option
+@tolerance_option
 @reading_options
 @clean_errors
 def command(
@@ -68,6 +72,8 @@ def command(
     seed: int,
     quality_thresholds: tuple[str, ...],
     coverage_factor: float,
+    lab: Path | None,
+    tolerances: dict[str, float],
     reading: ReadOptions,
 ) -> None:
     """Process SESSION (a folder with session.yaml, or the file itself) and write its report.
@@ -82,16 +88,20 @@ def command(
     written when processing fails.
     """
     from hexatherm.io.config import read_session
+    from hexatherm.io.config.identity import read_lab
     from hexatherm.io.outputs import check_output_settled, write_output_file
     from hexatherm.workflows.process.pipeline import Checks, process_session
     from hexatherm.workflows.process.quality import parse_threshold, session_thresholds
     from hexatherm.workflows.report import Verdict, build_report, verdict_items
 
     check_draws(mc)
+    lab_fields, lab_tolerances = read_lab(lab) if lab is not None else ({}, {})
     overrides = dict(parse_threshold(t) for t in quality_thresholds)
     folder = session if session.is_dir() else session.parent
     out_file = out if out is not None else folder / "report.html"
     inputs = read_session(session).input_files()
+    if lab is not None:
+        inputs.append(lab)
     check_output_settled(out_file, kind="file", inputs=inputs, overwrite=overwrite)
     with ProgressBars() as bars:
         result = process_session(
@@ -114,6 +124,9 @@ def command(
             progress=bars.draws,
             coverage_factor=coverage_factor,
             on_verdict=verdicts.append,
+            lab_fields=lab_fields,
+            tolerances={**lab_tolerances, **result.session.tolerances, **tolerances},
+            extra_inputs=[] if lab is None else [lab],
         )
     write_output_file(out_file, page, inputs=inputs, overwrite=overwrite)
     for summary in verdicts:  # the page's verdict, on the screen too

@@ -45,6 +45,12 @@ DEFAULT_REFERENCE = (0.0, 0.0, -40.0, 0.0, 0.0, 0.0)
 #: reciprocal condition number of the Jacobian dq/dX (mm per mm, mm per degree)
 #: below which a commanded pose is called near-singular
 DEFAULT_MIN_RCOND = 1e-2
+#: one set of defaults for every command that plans or simulates a campaign (issue 25):
+#: probing time per point and time to command a pose and settle (s), as ``simulate``'s
+#: scenario has them, and the half-angle of the probed cap (deg), as the session's ``cmm:``
+DEFAULT_SECONDS_PER_POINT = 2.4
+DEFAULT_SECONDS_PER_MOVE = 20.0
+DEFAULT_CAP_ANGLE_DEG = 70.0
 
 
 # ----------------------------------------------------------------------- targets
@@ -472,7 +478,10 @@ class StepTiming:
 
 
 def estimate_timing(
-    plan: Plan, n_balls: int, seconds_per_point: float, seconds_per_move: float = 30.0
+    plan: Plan,
+    n_balls: int,
+    seconds_per_point: float,
+    seconds_per_move: float = DEFAULT_SECONDS_PER_MOVE,
 ) -> StepTiming:
     """Estimate when each step is measured.
 

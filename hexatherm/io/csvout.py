@@ -28,6 +28,7 @@ from __future__ import annotations
 import io
 import math
 import re
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -44,6 +45,9 @@ RESOLUTION = {
     "C": 1e-4,
     "degC": 1e-4,
 }
+
+#: resolution of a row's unit (csv_text's ``row_unit``): the units above and a gain's
+ROW_RESOLUTION = {**RESOLUTION, "mm/mm": 1e-10}
 
 #: units that a column name may carry (those without a resolution are written exactly)
 UNITS = frozenset([*RESOLUTION, "s"])
@@ -105,7 +109,12 @@ def _cells(column: pd.Series, step: float | None) -> list[str] | None:
     return None
 
 
-def csv_text(frame: pd.DataFrame, rounded: bool = True) -> str:
+def csv_text(
+    frame: pd.DataFrame,
+    rounded: bool = True,
+    row_unit: tuple[str, Sequence[str]] | None = None,
+    resolutions: Mapping[str, float] | None = None,
+) -> str:
     """CSV text of ``frame`` (no index, LF line ends), as pandas' ``to_csv`` writes it.
 
     With ``rounded`` (results), every float column with a unit is written at its
@@ -113,10 +122,27 @@ def csv_text(frame: pd.DataFrame, rounded: bool = True) -> str:
     as the shortest text that reads back as the same number. Columns of text, whole
     numbers, flags and floats are joined here (five times faster than ``to_csv``);
     a frame with anything else (a cell that needs quotes, mixed types) goes to pandas.
+
+    ``row_unit`` = ``(unit column, columns)``: those float columns hold each row's value
+    in the unit its unit column names (``parameters.csv``: ``mm`` or ``mm/mm``) and are
+    written at that unit's resolution, row by row. ``resolutions``: the resolution of
+    further columns without a unit (a correlation), by name.
     """
     names = [str(c) for c in frame.columns]
     steps = [resolution_of(c) if rounded else None for c in names]
+    if rounded and resolutions:
+        steps = [resolutions.get(c, step) for c, step in zip(names, steps, strict=True)]
     cells = [_cells(frame.iloc[:, j], steps[j]) for j in range(len(names))]
+    if rounded and row_unit is not None:
+        units = frame[row_unit[0]].astype(str).tolist()
+        for column in row_unit[1]:
+            j = names.index(column)
+            values = frame[column].to_numpy(dtype=float)
+            cells[j] = [
+                fixed_text(np.array([v]), ROW_RESOLUTION[unit])[0]
+                for v, unit in zip(values, units, strict=True)
+            ]
+            steps[j] = None
     if len(names) > 1 and not _QUOTE.search("".join(names)) and all(c is not None for c in cells):
         rows = map(",".join, zip(*cells, strict=True))
         return "\n".join([",".join(names), *rows]) + "\n"
@@ -124,6 +150,8 @@ def csv_text(frame: pd.DataFrame, rounded: bool = True) -> str:
     for j, step in enumerate(steps):
         if step is not None and pd.api.types.is_float_dtype(frame.iloc[:, j].dtype):
             frame[frame.columns[j]] = fixed_text(frame.iloc[:, j].to_numpy(), step)
+        elif rounded and row_unit is not None and names[j] in row_unit[1]:
+            frame[frame.columns[j]] = cells[j]
     buffer = io.StringIO()
     frame.to_csv(buffer, index=False, lineterminator="\n", float_format=None)
     return buffer.getvalue()

@@ -73,7 +73,13 @@ from hexatherm.core.effects import EFFECTS, Effect, effects_from_dicts
 from hexatherm.core.heating import Mat, MatHeating
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
-from hexatherm.core.planning import ReferenceEvery, sequence_steps
+from hexatherm.core.planning import (
+    DEFAULT_CAP_ANGLE_DEG,
+    DEFAULT_SECONDS_PER_MOVE,
+    DEFAULT_SECONDS_PER_POINT,
+    ReferenceEvery,
+    sequence_steps,
+)
 from hexatherm.errors import InputError, PlanError
 from hexatherm.io.config import read_balls, read_hexapod_text, read_plan
 from hexatherm.io.records import iso_to_seconds
@@ -268,8 +274,8 @@ def _scenario(doc: YamlDoc, doc_text: str | None) -> Scenario:
     seed = _whole(doc, "seed", default=0, minimum=0)
 
     _mapping(doc, "timing", ["seconds_per_point", "seconds_per_move"])
-    per_point = _non_negative(doc, "timing", "seconds_per_point", default=2.4)
-    per_move = _non_negative(doc, "timing", "seconds_per_move", default=20.0)
+    per_point = _non_negative(doc, "timing", "seconds_per_point", default=DEFAULT_SECONDS_PER_POINT)
+    per_move = _non_negative(doc, "timing", "seconds_per_move", default=DEFAULT_SECONDS_PER_MOVE)
 
     heating = _heating(doc)
     _mapping(doc, "thermocouples", ["period_s", "noise_C"])
@@ -294,7 +300,7 @@ def _scenario(doc: YamlDoc, doc_text: str | None) -> Scenario:
             "sphere needs at least 4 points",
             "plan",
         )
-    cap = doc.number("cmm", "cap_angle_deg", default=70.0, positive=True)
+    cap = doc.number("cmm", "cap_angle_deg", default=DEFAULT_CAP_ANGLE_DEG, positive=True)
     if cap > 90.0:
         raise doc.error(
             f"a vertical probe reaches at most the upper half: must be at most 90, got {cap:g}",

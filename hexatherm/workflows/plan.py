@@ -20,7 +20,10 @@ import numpy.typing as npt
 from hexatherm.core.calibration import PoseSelection, select_poses
 from hexatherm.core.plan import Plan, find_repeats
 from hexatherm.core.planning import (
+    DEFAULT_CAP_ANGLE_DEG,
     DEFAULT_MIN_RCOND,
+    DEFAULT_SECONDS_PER_MOVE,
+    DEFAULT_SECONDS_PER_POINT,
     ReferenceGap,
     StepTiming,
     build_plan,
@@ -65,12 +68,12 @@ class PlanRequest:
     origin_repeats: int = 1
     reference0_repeats: int = 1
     points_per_ball: int = 25
-    seconds_per_point: float = 3.0
-    seconds_per_move: float = 30.0
+    seconds_per_point: float = DEFAULT_SECONDS_PER_POINT
+    seconds_per_move: float = DEFAULT_SECONDS_PER_MOVE
     max_gap_s: float = 600.0
     min_rcond: float | None = None
     origin_on_cmm: Sequence[float] | None = None
-    cap_angle_deg: float = 70.0
+    cap_angle_deg: float = DEFAULT_CAP_ANGLE_DEG
     clearance_mm: float = 10.0
     dmis_name: str | None = None
     checklist: bool = False

@@ -29,6 +29,16 @@ class BallRegistration:
     form_um: npt.NDArray[np.float64]
     n: npt.NDArray[np.int64]
     bore_distance_mm: float
+    #: (k, 3, 3) each centre's covariance from its sphere fit, in the platform frame (mm^2);
+    #: the datum frame's own uncertainty (common to every ball) is not in it
+    cov_centre_mm2: npt.NDArray[np.float64] | None = None
+
+    @property
+    def u_centre_um(self) -> npt.NDArray[np.float64] | None:
+        """(k, 3) standard uncertainty of each centre along the platform's x, y, z, um."""
+        if self.cov_centre_mm2 is None:
+            return None
+        return np.sqrt(np.maximum(np.diagonal(self.cov_centre_mm2, axis1=1, axis2=2), 0)) * 1e3
 
 
 def _check_diameters(
@@ -93,6 +103,9 @@ def _points(path: str | os.PathLike[str], step: str | None, reading: ReadOptions
         rec.line[keep],
     )
 
+
+#: the resolution of the centres register writes (as every length of a result file)
+BALLS_RESOLUTION_MM = 1e-7
 
 #: largest deviation of a ball's fitted diameter from its nominal one, um (``register``)
 DIAMETER_TOLERANCE_UM = 20.0
@@ -180,6 +193,8 @@ def register_balls(
         datums.tip_diameter_mm,
     )
     distance = float(np.linalg.norm(frame.bores[1].centre_mm - frame.bores[0].centre_mm))
+    rotation = platform2cmm[:3, :3]  # cmm = R p + t: cov_p = R^T cov_cmm R
+    cov = np.einsum("ji,mjk,kl->mil", rotation, fits.cov_centre_mm2, rotation)
     return BallRegistration(
-        balls, frame, platform2cmm, 2 * fits.radius_mm, fits.form_um, fits.n, distance
+        balls, frame, platform2cmm, 2 * fits.radius_mm, fits.form_um, fits.n, distance, cov
     )

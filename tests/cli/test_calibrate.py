@@ -153,7 +153,9 @@ def test_the_report_prints_the_parameters_with_k_times_u_and_the_stroke_map(cali
     # the span holds the targets: its worst is at least the targets' worst, same order
     assert all(worst[c] >= 0.999 * at_targets[c] for c in worst)
     assert all(worst[c] < 10 * at_targets[c] for c in worst)
-    assert page.count("data:image/png;base64,") == 2 and "Provenance" in page
+    assert (
+        page.count("data:image/png;base64,") == 4 and "Provenance" in page
+    )  # map, residuals, correlations
 
 
 # ------------------------------------------------------------------ issue 22, item 6

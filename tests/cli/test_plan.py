@@ -294,6 +294,8 @@ def test_time_gap_warning(tmp_path):
         40,
         "--seconds-per-point",
         6,
+        "--seconds-per-move",
+        30,
         "--max-gap",
         600,
         "-o",

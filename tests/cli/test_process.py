@@ -287,8 +287,9 @@ def test_failed_quality_check_warns_or_exits_3_with_strict(tmp_path):
 def test_bad_quality_threshold_is_refused_before_anything_is_written(tmp_path, value, message):
     make_session(tmp_path / "s")
     result = run("process", tmp_path / "s", "--quality-threshold", value)
-    assert result.exit_code == 1 and "Traceback" not in result.output
-    assert result.output.startswith(f"Error: --quality-threshold {value!r}: {message}")
+    # a usage error (status 2, as the README's table says for a bad option)
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    assert f"Invalid value for '--quality-threshold': {value!r}: {message}" in result.output
     assert not (tmp_path / "s" / "results").exists()
 
 

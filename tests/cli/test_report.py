@@ -114,7 +114,7 @@ def test_report_of_a_bad_session_fails_cleanly_and_writes_nothing(session):
 
 def test_report_refuses_a_bad_quality_threshold(session):
     result = run("report", session, "--quality-threshold", "form=5")
-    assert result.exit_code == 1 and "unknown name 'form'" in result.output
+    assert result.exit_code == 2 and "unknown name 'form'" in result.output  # a usage error
     assert not (session / "report.html").exists()
 
 

@@ -12,6 +12,11 @@ from typing import Any
 from hexatherm.errors import InputWarning
 from hexatherm.io.config.balls import read_balls
 from hexatherm.io.config.hexapod import read_hexapod
+from hexatherm.io.config.identity import (
+    IDENTIFICATION_KEYS,
+    read_identification,
+    read_tolerances,
+)
 from hexatherm.io.config.plan import read_plan
 from hexatherm.io.config.yamlout import _dump
 from hexatherm.io.yamlfile import YamlDoc
@@ -24,9 +29,10 @@ def read_session(path: str | os.PathLike[str]) -> Session:
     """Read a session file, or the ``session.yaml`` of a session folder, and its configs."""
     path = Path(path)
     if path.is_dir():
+        _check_session_folder(path)
         path = path / "session.yaml"
     doc = YamlDoc.load(path)
-    doc.check_format(SESSION_FORMAT)
+    _check_session_format(doc)
     doc.check_keys(
         [
             "format",
@@ -40,6 +46,8 @@ def read_session(path: str | os.PathLike[str]) -> Session:
             "quality",
             "pose_check",
             "utc_offset",
+            "identification",
+            "tolerances",
         ]
     )
     name = doc.string("name", default=path.parent.name)
@@ -65,6 +73,13 @@ def read_session(path: str | os.PathLike[str]) -> Session:
     temperatures = None
     if doc.get("temperatures", default=None) is not None:
         temperatures = existing("temperatures")
+    ident: dict[str, Any] = {}
+    if doc.get("identification", default=None) is not None:
+        doc.check_keys(list(IDENTIFICATION_KEYS), "identification")
+        ident = read_identification(doc, "identification")
+    tolerances: dict[str, float] = {}
+    if doc.get("tolerances", default=None) is not None:
+        tolerances = read_tolerances(doc, "tolerances")
     return Session(
         path,
         name,
@@ -77,7 +92,49 @@ def read_session(path: str | os.PathLike[str]) -> Session:
         _read_quality(doc),
         config_files,
         _read_utc_offset(doc),
+        ident,
+        tolerances,
     )
+
+
+#: formats of hexatherm's other files -> what the file is, for a message
+_OTHER_FORMATS = {
+    "hexatherm-plan/1": "a plan file",
+    "hexatherm-hexapod/1": "a hexapod file",
+    "hexatherm-balls/1": "a balls file",
+    "hexatherm-datums/1": "a datums file (for register)",
+    "hexatherm-lab/1": "a lab file (for --lab)",
+    "hexatherm-scenario/1": "a scenario (hexatherm simulate makes a session of it)",
+}
+
+
+def _check_session_folder(folder: Path) -> None:
+    """A folder without ``session.yaml``: say what it looks like (a results folder ...)."""
+    from hexatherm.errors import InputError
+
+    if (folder / "session.yaml").exists():
+        return
+    session = next((p for p in folder.parents if (p / "session.yaml").is_file()), None)
+    where = f"; its session is {session}" if session is not None else ""
+    if (folder / "poses.csv").is_file():
+        what = "a results folder (poses.csv: hexatherm process's output), not a session"
+    elif (folder / "calibration.json").is_file():
+        what = "a calibration output folder (hexatherm calibrate's), not a session"
+    else:
+        what = "not a session folder: no session.yaml in it"
+    raise InputError(f"{what}{where}", path=folder)
+
+
+def _check_session_format(doc: YamlDoc) -> None:
+    """``format:`` must be the session's; another hexatherm file is named as what it is."""
+    value = doc.get("format", default=None)
+    if isinstance(value, str) and value in _OTHER_FORMATS:
+        raise doc.error(
+            f"this is {_OTHER_FORMATS[value]} ({value}), not a session file: give the "
+            "session folder or its session.yaml",
+            "format",
+        )
+    doc.check_format(SESSION_FORMAT)
 
 
 def read_pose_check(path: str | os.PathLike[str]) -> dict[str, Any] | None:

@@ -75,8 +75,25 @@ def twin_record(run: Calibration) -> dict[str, str]:
     return record
 
 
-def parameters_frame(run: Calibration) -> pd.DataFrame:
-    """One row per parameter of the fitted level."""
+#: parameters.csv's columns in each row's unit (mm or mm/mm), written at its resolution
+ROW_UNIT_COLUMNS = ("nominal", "calibrated", "u", "U")
+#: the resolution of parameters.csv's correlations
+CORRELATION_RESOLUTION = 1e-4
+
+
+def parameters_csv(run: Calibration, coverage_factor: float = 2.0) -> str:
+    """``parameters.csv``'s text: lengths at 1e-7 mm, gains at 1e-10 (1e-4 ppm), changes
+    and uncertainties at 1e-4 um or ppm, correlations at 1e-4."""
+    return csv_text(
+        parameters_frame(run, coverage_factor),
+        row_unit=("unit", ROW_UNIT_COLUMNS),
+        resolutions={"max_abs_correlation": CORRELATION_RESOLUTION},
+    )
+
+
+def parameters_frame(run: Calibration, coverage_factor: float = 2.0) -> pd.DataFrame:
+    """One row per parameter of the fitted level; ``U``, ``U_um``, ``U_ppm``: the expanded
+    uncertainties ``k u`` with ``k = coverage_factor``."""
     fit = run.fit
     mask = fit.model.mask
     nominal = fit.model.theta0
@@ -97,6 +114,10 @@ def parameters_frame(run: Calibration) -> pd.DataFrame:
             "u_um": np.where(gain, np.nan, u * 1e3),
             "u_ppm": np.where(gain, u * 1e6, np.nan),
             "max_abs_correlation": rho.max(axis=1),
+            "coverage_factor": np.full(len(u), float(coverage_factor)),
+            "U": coverage_factor * u,
+            "U_um": np.where(gain, np.nan, coverage_factor * u * 1e3),
+            "U_ppm": np.where(gain, coverage_factor * u * 1e6, np.nan),
         }
     )
     return frame[mask].reset_index(drop=True)
@@ -185,20 +206,28 @@ def calibration_json(run: Calibration, stroke: StrokeMap | None = None) -> str:
 
 
 def output_files(
-    run: Calibration, inputs: Sequence[Path] | None = None, folder: Path | None = None
+    run: Calibration,
+    inputs: Sequence[Path] | None = None,
+    folder: Path | None = None,
+    lab_fields: dict[str, object] | None = None,
+    coverage_factor: float = 2.0,
 ) -> dict[str, str]:
     """Every file of the output folder, name -> text; with ``inputs`` (the files the run
     read) the report too, and the predicted uncertainty over the stroke (``folder``: the
-    output folder, for the report's relative paths)."""
+    output folder, for the report's relative paths; ``lab_fields``: a lab file's
+    identification for the report's header; ``coverage_factor``: k of the expanded
+    uncertainties of ``parameters.csv`` and the report)."""
     stroke = None if inputs is None else stroke_map(run)
     files = {
         "hexapod.yaml": calibrated_hexapod_yaml(run),
-        "parameters.csv": csv_text(parameters_frame(run)),
+        "parameters.csv": parameters_csv(run, coverage_factor),
         "residuals.csv": csv_text(residuals_frame(run)),
         "calibration.json": calibration_json(run, stroke),
     }
     if stroke is not None and inputs is not None:
-        files["report.html"] = report_html(run, stroke, inputs, folder or Path("."))
+        files["report.html"] = report_html(
+            run, stroke, inputs, folder or Path("."), lab_fields, coverage_factor
+        )
     return files
 
 

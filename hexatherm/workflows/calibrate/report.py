@@ -23,6 +23,7 @@ import numpy as np
 from hexatherm.core.calibration import PARAMETER_UNITS
 from hexatherm.core.calibration.fit import EXPLAINED_P
 from hexatherm.core.residuals import rms
+from hexatherm.io.csvout import ROW_RESOLUTION, fixed_text
 from hexatherm.io.provenance import current_run, now_iso
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.calibrate.run import Calibration
@@ -32,6 +33,8 @@ from hexatherm.workflows.report.page import (
     html_table,
     page_html,
     provenance_html,
+    running_header_html,
+    signature_html,
 )
 from hexatherm.workflows.report.text import exact, fixed, unit_text
 
@@ -121,20 +124,74 @@ def _map_figure(stroke: StrokeMap, commanded: FloatArray) -> Figure:
 
 
 def _residual_figure(run: Calibration) -> Figure:
+    """The residual of every target before and after, translation and rotation."""
     from hexatherm.workflows.report.figures import _new_figure
 
-    fig = _new_figure(7.0, 3.4, left=0.09, right=0.98, bottom=0.16, top=0.88)
-    ax = fig.add_subplot(1, 1, 1)
+    fig = _new_figure(7.0, 5.4, left=0.1, right=0.98, bottom=0.1, top=0.93, hspace=0.35)
     n = len(run.campaign.labels)
+    label = "calibrated (held out)" if run.heldout else "calibrated"
+    for row, (part, unit) in enumerate(((slice(0, 3), "µm"), (slice(3, 6), "µrad"))):
+        ax = fig.add_subplot(2, 1, row + 1)
+        before = np.linalg.norm(run.residuals_before_um_urad[:, part], axis=1)
+        after = np.linalg.norm(run.residuals_after_um_urad[:, part], axis=1)
+        x = np.arange(1, n + 1)
+        ax.semilogy(x, before, "o--", color="#c44e52", label="nominal geometry")
+        ax.semilogy(x, after, "s-", color="#4c72b0", label=label)
+        what = "translation" if row == 0 else "rotation"
+        ax.set_ylabel(f"|measured − predicted|\n{what} ({unit})")
+        ax.legend(fontsize=8)
+        if row == 0:
+            ax.set_title("Residual of every target, before and after", fontsize=9)
+        else:
+            ax.set_xlabel("target")
+    return fig
+
+
+def _workspace_figure(run: Calibration) -> Figure:
+    """The translation residual of every target at its commanded Tx, Ty: before and
+    after, one colour scale."""
+    from hexatherm.workflows.report.figures import _new_figure
+
+    fig = _new_figure(7.6, 3.6, left=0.08, right=0.9, bottom=0.14, top=0.86, wspace=0.25)
+    xy = run.campaign.commanded[:, :2]
     before = np.linalg.norm(run.residuals_before_um_urad[:, :3], axis=1)
     after = np.linalg.norm(run.residuals_after_um_urad[:, :3], axis=1)
-    ax.semilogy(np.arange(1, n + 1), before, "o--", color="#c44e52", label="nominal geometry")
-    label = "calibrated (held out)" if run.heldout else "calibrated"
-    ax.semilogy(np.arange(1, n + 1), after, "s-", color="#4c72b0", label=label)
-    ax.set_xlabel("target")
-    ax.set_ylabel("|measured − predicted| translation (µm)")
-    ax.legend(fontsize=8)
-    ax.set_title("Residual of every target, before and after", fontsize=9)
+    top = float(max(np.nanmax(before), np.nanmax(after), 1e-12))
+    after_name = "calibrated (held out)" if run.heldout else "calibrated"
+    images = []
+    for k, (values, name) in enumerate(((before, "nominal geometry"), (after, after_name))):
+        ax = fig.add_subplot(1, 2, k + 1)
+        image = ax.scatter(
+            xy[:, 0], xy[:, 1], c=values, vmin=0.0, vmax=top, cmap="viridis", s=28, gid=name
+        )
+        ax.set_xlabel("commanded Tx (mm)")
+        if k == 0:
+            ax.set_ylabel("commanded Ty (mm)")
+        ax.set_title(name, fontsize=9)
+        images.append(image)
+    cax = fig.add_axes((0.92, 0.14, 0.02, 0.72))
+    fig.colorbar(images[-1], cax=cax, label="|measured − predicted| translation (µm)")
+    fig.suptitle("Residuals over the workspace (every target at its commanded Tx, Ty)", fontsize=10)
+    return fig
+
+
+def _correlation_figure(run: Calibration) -> Figure:
+    """The fitted parameters' correlation matrix as a heatmap."""
+    from hexatherm.workflows.report.figures import _new_figure
+
+    fit = run.fit
+    index = [i for i, m in enumerate(fit.model.mask) if m]
+    rho = np.asarray(fit.correlation)[np.ix_(index, index)]
+    fig = _new_figure(6.6, 5.8, left=0.16, right=0.94, bottom=0.16, top=0.94)
+    ax = fig.add_subplot(1, 1, 1)
+    image = ax.imshow(rho, vmin=-1.0, vmax=1.0, cmap="RdBu_r", interpolation="nearest")
+    fig.colorbar(image, ax=ax, label="correlation ρ", shrink=0.85)
+    names = list(fit.names)
+    step = max(1, len(names) // 24)
+    ticks = np.arange(0, len(names), step)
+    ax.set_xticks(ticks, [names[i] for i in ticks], rotation=90, fontsize=6)
+    ax.set_yticks(ticks, [names[i] for i in ticks], fontsize=6)
+    ax.set_title(f"Correlation of the {len(names)} fitted parameters", fontsize=9)
     return fig
 
 
@@ -157,18 +214,42 @@ def not_explained(run: Calibration) -> str:
     )
 
 
-def report_html(run: Calibration, stroke: StrokeMap, inputs: Sequence[Path], folder: Path) -> str:
-    """The calibration's report page (see the module text)."""
+def sessions_text(run: Calibration) -> tuple[str, str]:
+    """The hexapod (its name and file) and every session with the dates it was measured."""
+    from hexatherm.workflows.report.html import session_dates
+
+    results = run.campaign.results
+    hexapod = f"{run.campaign.nominal.name} ({results[0].session.config_files[0].name})"
+    sessions = "; ".join(f"{r.session.name} ({session_dates(r)})" for r in results)
+    return hexapod, sessions
+
+
+def report_html(
+    run: Calibration,
+    stroke: StrokeMap,
+    inputs: Sequence[Path],
+    folder: Path,
+    lab_fields: dict[str, object] | None = None,
+    coverage_factor: float = COVERAGE_FACTOR,
+) -> str:
+    """The calibration's report page (see the module text); ``lab_fields``: a lab file's
+    identification (the sessions' own ``identification:`` over it, in the order given);
+    ``coverage_factor``: k of every expanded uncertainty ``U = k u`` it prints."""
+    from hexatherm.io.config.identity import identification
+    from hexatherm.workflows.report.html import header_rows
+
     fit = run.fit
     obs = fit.observability
-    k = COVERAGE_FACTOR
+    k = coverage_factor
     before, after = (
         rms(run.residuals_before_um_urad, axis=0),
         rms(run.residuals_after_um_urad, axis=0),
     )
     worst = stroke.worst_um_urad
     how = "chosen by BIC and held-out folds" if run.choice is not None else "forced"
+    hexapod, sessions = sessions_text(run)
     verdict = [
+        f"Hexapod {hexapod}; sessions {sessions}.",
         f"Level {fit.level} ({how}): {obs.n_parameters} parameters ({obs.n_gauge} fixed by "
         f"the gauge) from {len(run.campaign.labels)} {run.campaign.poses} poses of "
         f"{len(run.campaign.results)} session(s).",
@@ -233,7 +314,7 @@ def report_html(run: Calibration, stroke: StrokeMap, inputs: Sequence[Path], fol
             [
                 name,
                 exact(fit.model.theta0[i]),
-                repr(float(fit.parameters[i])),
+                fixed_text(np.array([fit.parameters[i]]), ROW_RESOLUTION[PARAMETER_UNITS[i]])[0],
                 fixed((fit.parameters[i] - fit.model.theta0[i]) * scale, "um"),
                 fixed(k * fit.std_errors[i] * scale, "um"),
                 unit_text(unit),
@@ -292,8 +373,27 @@ def report_html(run: Calibration, stroke: StrokeMap, inputs: Sequence[Path], fol
         figure_html(
             _residual_figure(run),
             "residuals before and after",
-            "Translation residual of every target: measured minus the nominal geometry's "
-            "prediction (the commanded pose), and minus the calibrated model's.",
+            "Translation and rotation residual of every target: measured minus the nominal "
+            "geometry's prediction (the commanded pose), and minus the calibrated model's.",
+        )
+    )
+    parts.append(
+        figure_html(
+            _workspace_figure(run),
+            "residuals over the workspace",
+            "Translation residual of every target at its commanded Tx and Ty (all other "
+            "components as commanded), before (nominal geometry) and after (calibrated), "
+            "on one colour scale.",
+        )
+    )
+    parts.append("<h2>Correlations</h2>")
+    parts.append(
+        figure_html(
+            _correlation_figure(run),
+            "correlation matrix of the parameters",
+            "Correlation coefficient of every pair of fitted parameters (their covariance "
+            "over the product of their standard uncertainties); near \u00b11: the campaign "
+            "does not tell the two apart.",
         )
     )
     parts.append(
@@ -304,7 +404,14 @@ def report_html(run: Calibration, stroke: StrokeMap, inputs: Sequence[Path], fol
             now_iso(),
         )
     )
-    return page_html("hexatherm calibration", parts)
+    merged: dict[str, object] = {}
+    for result in run.campaign.results:
+        merged.update(result.session.identification)
+    ident = identification(merged, lab_fields)
+    parts.append(signature_html(ident.signatures))
+    title = "hexatherm calibration"
+    header = running_header_html(header_rows(title, ident, sessions, hexapod))
+    return page_html(title, parts, header=header)
 
 
 def _esc(text: str) -> str:

@@ -196,7 +196,7 @@ def _format_effect(
     parts = []
     for (name, value), unit in zip(effect_values.items(), units, strict=True):
         parts.append(f"{name} = {value:.4g} ± {errors.get(name, float('nan')):.2g} {unit}")
-    return ", ".join(parts)
+    return ", ".join(parts) + " (± standard uncertainty, k = 1)"
 
 
 def candidates_table(round_: tuple[Candidate, ...]) -> str:

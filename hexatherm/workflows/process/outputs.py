@@ -25,7 +25,8 @@ Numbers are written at the resolution of their unit (:mod:`hexatherm.io.csvout`)
 targets (:func:`covariance_frame`).
 
 ``quality.csv`` has one row per step with the quality checks of
-:mod:`hexatherm.workflows.process.quality`.
+:mod:`hexatherm.workflows.process.quality` (``ok_*``: ``True``, ``False``, or empty where
+a check could not run).
 
 ``legs.csv`` has one row per step: ``label,kind,time``, the step's measured pose
 relative to O (``Tx_mm`` ...), its IGM leg lengths ``q_leg1_mm`` .. and, for
@@ -47,6 +48,7 @@ from hexatherm.workflows.process.measured import nominal_fit_diameter_mm
 from hexatherm.workflows.process.pipeline import ProcessResult
 
 if TYPE_CHECKING:
+    from hexatherm.workflows.process.conformity import Conformity
     from hexatherm.workflows.process.quality import QualityReport
     from hexatherm.workflows.process.uncertainty import PoseUncertainty
 
@@ -80,11 +82,13 @@ def poses_frame(
     result: ProcessResult,
     uncertainty: PoseUncertainty | None = None,
     twin: np.ndarray | None = None,
+    conformity: Conformity | None = None,
 ) -> pd.DataFrame:
     """The ``poses.csv`` table, one row per target.
 
     ``u_*`` columns with ``uncertainty``; ``*_twin_*`` columns (after the contract
-    columns) with ``twin``, the twin-corrected poses (M, 6).
+    columns) with ``twin``, the twin-corrected poses (M, 6); the conformity columns
+    (:meth:`Conformity.columns`, last) with ``conformity``.
     """
     corr = result.correction
     plan = result.session.plan
@@ -147,6 +151,8 @@ def poses_frame(
             if tag in parts_of:
                 data[f"u_common_{col}"] = parts_of[tag][0][:, j]
                 data[f"u_own_{col}"] = parts_of[tag][1][:, j]
+    if conformity is not None:
+        data.update(conformity.columns())
     return pd.DataFrame(data)
 
 
@@ -242,6 +248,7 @@ def write_results(
     uncertainty: PoseUncertainty | None = None,
     quality: QualityReport | None = None,
     twin: np.ndarray | None = None,
+    conformity: Conformity | None = None,
 ) -> list[Path]:
     """Write ``poses.csv``, ``legs.csv``, ``fits.csv``, ``covariance.csv`` (and
     ``quality.csv``) into ``out``.
@@ -249,26 +256,40 @@ def write_results(
     The folder is replaced atomically. ``uncertainty`` defaults to linear
     propagation (:func:`hexatherm.workflows.process.uncertainty.pose_uncertainty`); ``quality.csv``
     is written when ``quality`` is given (``hexatherm process`` always gives it);
-    ``twin`` (M, 6) adds the twin-corrected poses (``process --method twin``).
+    ``twin`` (M, 6) adds the twin-corrected poses (``process --method twin``);
+    ``conformity`` the conformity columns (``process --tolerance``).
     """
     if uncertainty is None:
         from hexatherm.workflows.process.uncertainty import pose_uncertainty
 
         uncertainty = pose_uncertainty(result)
     tables = {
-        "poses.csv": poses_frame(result, uncertainty, twin),
+        "poses.csv": poses_frame(result, uncertainty, twin, conformity),
         "legs.csv": legs_frame(result),
         "fits.csv": fits_frame(result),
     }
     if uncertainty.between_covariance is not None:
         tables["covariance.csv"] = covariance_frame(result, uncertainty)
     if quality is not None:
-        tables["quality.csv"] = quality.frame
+        tables["quality.csv"] = quality_file_frame(quality)
     texts = {name: csv_text(frame) for name, frame in tables.items()}
     with output_dir(out, inputs=session_inputs(result), overwrite=overwrite) as tmp:
         for name, text in texts.items():
             (tmp / name).write_text(text, encoding="utf-8", newline="")
     return [Path(out) / name for name in texts]
+
+
+def quality_file_frame(quality: QualityReport) -> pd.DataFrame:
+    """``quality.csv``'s table: the checks' frame with every ``ok_<check>`` a boolean,
+    empty where the check could not run (the frame's ``"na"``), so that pandas reads
+    ``True``/``False`` (and NaN), never text."""
+    from hexatherm.workflows.process.quality import NA
+
+    frame = quality.frame.copy()
+    for column in frame.columns:
+        if str(column).startswith("ok_"):
+            frame[column] = ["" if v is NA or v == NA else bool(v) for v in frame[column]]
+    return frame
 
 
 def session_inputs(result: ProcessResult) -> list[Path]:

@@ -162,6 +162,10 @@ def pose_figure(
     ``uncertainty``, each marker has an expanded uncertainty bar ``U = k u``
     (``k = coverage_factor``, stated in the title).
 
+    With the uncertainty's common part (``common_u``), a band with gid ``"common"``
+    spans ``+-k u_common`` of the corrected poses about zero: the part of U from the one
+    measurement of O and R0, which shifts every target's corrected pose together.
+
     The lines are labelled ``"conventional"`` and ``"corrected"``; a target in
     ``failing`` (labels that failed a quality check) gets a shaded band with gid
     ``"failed"``, labelled ``"failed a check"`` in the legend.
@@ -175,10 +179,27 @@ def pose_figure(
             coverage_factor * to_um_urad(uncertainty.conventional_u),
             coverage_factor * to_um_urad(uncertainty.corrected_u),
         )
+    common = None
+    if uncertainty is not None and uncertainty.common_u is not None:
+        common = coverage_factor * to_um_urad(uncertainty.common_u[:, 6:12])
     bad = [i for i, label in enumerate(labels) if label in failing]
     fig = _new_figure(9.5, 6.2, left=0.08, bottom=0.1, top=0.84, wspace=0.36, hspace=0.2)
     axes = fig.subplots(2, 3, sharex=True)
     for j, ax in enumerate(axes.flat):
+        if common is not None:
+            # the corrected poses' common part (O and R0, measured once): +-U_common about
+            # zero, the shift every target shares
+            ax.fill_between(
+                trials,
+                -common[:, j],
+                common[:, j],
+                color=CORRECTED_COLOUR,
+                alpha=0.15,
+                linewidth=0,
+                zorder=0,
+                gid="common",
+                label="common part of U (O, R0): shared by all targets",
+            )
         for values, u, name, colour, marker, line, dx in (
             (conventional, bars[0], "conventional", CONVENTIONAL_COLOUR, "o", "--", -TRIAL_OFFSET),
             (corrected, bars[1], "corrected", CORRECTED_COLOUR, "s", "-", TRIAL_OFFSET),

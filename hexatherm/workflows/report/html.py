@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -10,6 +11,7 @@ import numpy as np
 from hexatherm import __version__
 from hexatherm.workflows.process.pipeline import ProcessResult
 from hexatherm.workflows.report.figures import (
+    POSE_NAMES,
     _time_text,
     growth_figure,
     pose_figure,
@@ -24,6 +26,8 @@ from hexatherm.workflows.report.page import (
     html_table,
     page_html,
     provenance_html,
+    running_header_html,
+    signature_html,
 )
 from hexatherm.workflows.report.tables import (
     FAIL_MARK,
@@ -44,7 +48,7 @@ __all__ = ["STYLE", "build_report", "metadata_rows", "provenance_block", "report
 
 if TYPE_CHECKING:
     from hexatherm.io.provenance import RunFacts
-    from hexatherm.session import QualityLimits
+    from hexatherm.session import Identification, QualityLimits
     from hexatherm.workflows.process.quality import QualityReport
     from hexatherm.workflows.process.uncertainty import PoseUncertainty
 
@@ -96,6 +100,29 @@ def metadata_rows(result: ProcessResult) -> list[tuple[str, str]]:
         ("interpolation", result.interpolation),
         ("hexatherm", __version__),
     ]
+
+
+def session_dates(result: ProcessResult) -> str:
+    """The dates of the session's measurements: first and last step."""
+    times = result.centres.times_s
+    first, last = _time_text(result, float(np.min(times))), _time_text(result, float(np.max(times)))
+    return first if first == last else f"{first} to {last}"
+
+
+def header_rows(
+    title: str, ident: Identification | None, dates: str, hexapod: str
+) -> list[tuple[str, str]]:
+    """The running header's ``(name, text)`` rows: the report, every identification field
+    given, the hexapod file's name, the sessions' dates and the signatories."""
+    rows = [("Report", title)]
+    if ident is None or not (ident.fields or ident.signatures):
+        rows.append(("Identification", "none given (session.yaml identification:, --lab)"))
+    else:
+        rows += ident.rows()
+    rows += [("Hexapod", hexapod), ("Measured", dates)]
+    if ident is not None and ident.signatures:
+        rows.append(("Signed by", ", ".join(f"{name} ({role})" for role, name in ident.signatures)))
+    return rows
 
 
 def _extreme_text(extreme: Extreme, unit: str, k: float) -> str:
@@ -156,6 +183,26 @@ def verdict_items(summary: Verdict) -> list[tuple[str, str]]:
             f"k = {exact(k)} wherever U or error bars appear.",
         ),
     ]
+    if summary.common_u is not None:
+        c = summary.common_u
+        items.append(
+            (
+                "Shared by all targets",
+                f"of U, the common part from the one measurement of O and R0 (k = {exact(k)}): "
+                + ", ".join(
+                    f"{name} {fixed(c[j], unit)} {unit_text(unit)}"
+                    for j, (name, unit) in enumerate(
+                        zip(POSE_NAMES, ("um",) * 3 + ("urad",) * 3, strict=True)
+                    )
+                )
+                + " at most; it shifts every corrected pose together (the band in Figure 6): "
+                "a difference between two targets cancels it, their mean keeps it.",
+            )
+        )
+    if summary.conformity is not None:
+        from hexatherm.workflows.report.conformity import conformity_item
+
+        items.insert(1, conformity_item(summary.conformity))
     return items
 
 
@@ -195,13 +242,14 @@ def provenance_block(
     quality: QualityReport | None,
     facts: RunFacts | None,
     generated: str,
+    extra_inputs: Sequence[Path] = (),
 ) -> str:
     """The provenance block of a session's report (:func:`page.provenance_html`), with the
-    quality limits."""
+    quality limits; ``extra_inputs``: further files the page was made from (a lab file)."""
     limits = "not available" if quality is None else "; ".join(threshold_texts(quality.thresholds))
     return provenance_html(
         facts,
-        result.session.input_files(),
+        [*result.session.input_files(), *extra_inputs],
         result.session.path.parent,
         generated,
         extra=[("quality limits", limits)],
@@ -216,6 +264,9 @@ def report_html(
     facts: RunFacts | None = None,
     generated: str | None = None,
     on_verdict: Callable[[Verdict], None] | None = None,
+    identification: Identification | None = None,
+    tolerances: dict[str, float] | None = None,
+    extra_inputs: Sequence[Path] = (),
 ) -> str:
     """The report page of a processed session (see the package's docstring).
 
@@ -236,6 +287,13 @@ def report_html(
         Generation time, ISO 8601 with UTC offset (default: now).
     on_verdict : callable, optional
         Called with the page's verdict (the command line prints it).
+    identification : Identification, optional
+        Lab, customer, CMM, hexapod ... (:func:`hexatherm.io.config.identity.identification`):
+        printed in the header every printed page repeats, and the signature block.
+    tolerances : dict, optional
+        ``Tx_um`` .. ``Rz_urad`` -> T: the conformity statement (verdict and a table).
+    extra_inputs : sequence of Path
+        Further input files listed in the provenance (the lab file).
 
     Returns
     -------
@@ -246,7 +304,7 @@ def report_html(
 
     if facts is None:
         facts = current_run()
-    summary = verdict(result, uncertainty, quality, coverage_factor)
+    summary = verdict(result, uncertainty, quality, coverage_factor, tolerances)
     if on_verdict is not None:
         on_verdict(summary)
     failing = dict(summary.failing_targets + summary.failing_other)
@@ -278,11 +336,20 @@ def report_html(
                 if uncertainty is not None
                 else ""
             )
+            + (
+                " Band: \u00b1k\u00b7u_common, U's share from O and R0, the same for all targets."
+                if summary.common_u is not None
+                else ""
+            )
             + (" Shaded: targets that failed a quality check." if summary.failing_targets else ""),
         ),
         poses_table_html(result, uncertainty, "conventional", coverage_factor, failing),
         poses_table_html(result, uncertainty, "corrected", coverage_factor, failing),
     ]
+    if summary.conformity is not None:
+        from hexatherm.workflows.report.conformity import conformity_table_html
+
+        parts.append(conformity_table_html(summary.conformity))
     if uncertainty is not None:
         parts.append(shared_parts_table_html(uncertainty, coverage_factor))
     if uncertainty is not None:
@@ -341,9 +408,14 @@ def report_html(
             numeric_from=99,
             css="meta",
         ),
-        provenance_block(result, quality, facts, generated or now_iso()),
+        provenance_block(result, quality, facts, generated or now_iso(), extra_inputs),
     ]
-    return page_html(f"hexatherm report: {name}", parts)
+    if identification is not None:
+        parts.append(signature_html(identification.signatures))
+    title = f"hexatherm report: {name}"
+    hexapod = f"{result.session.hexapod.name} ({_session_files(result)['hexapod']})"
+    header = running_header_html(header_rows(title, identification, session_dates(result), hexapod))
+    return page_html(title, parts, header=header)
 
 
 def build_report(
@@ -354,6 +426,9 @@ def build_report(
     progress: Callable[[int, int], None] | None = None,
     coverage_factor: float = 2.0,
     on_verdict: Callable[[Verdict], None] | None = None,
+    lab_fields: dict[str, object] | None = None,
+    tolerances: dict[str, float] | None = None,
+    extra_inputs: Sequence[Path] = (),
 ) -> str:
     """The report page of ``result`` with its pose uncertainty and quality checks.
 
@@ -372,7 +447,16 @@ def build_report(
         ``k`` of the expanded uncertainties (> 0).
     on_verdict : callable, optional
         As :func:`report_html`.
+    lab_fields : dict, optional
+        A lab file's identification fields (:func:`hexatherm.io.config.identity.read_lab`);
+        the session's own ``identification:`` wins key by key.
+    tolerances : dict, optional
+        The tolerances to judge (default: the session's ``tolerances:``; the command line
+        merges a lab file's, the session's and ``--tolerance``'s, in that order).
+    extra_inputs : sequence of Path
+        Further input files for the provenance (the lab file).
     """
+    from hexatherm.io.config.identity import identification
     from hexatherm.workflows.process.quality import quality_checks
     from hexatherm.workflows.process.uncertainty import pose_uncertainty
 
@@ -382,4 +466,7 @@ def build_report(
         quality=quality_checks(result, thresholds),
         coverage_factor=coverage_factor,
         on_verdict=on_verdict,
+        identification=identification(result.session.identification, lab_fields),
+        tolerances=result.session.tolerances if tolerances is None else tolerances,
+        extra_inputs=extra_inputs,
     )

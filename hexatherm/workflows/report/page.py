@@ -47,8 +47,18 @@ p.missing { background: #fff3cd; border: 1px solid #e0c060; padding: 4px 8px; }
 div.verdict { border: 2px solid #444; padding: 0.3em 1em; margin: 1em 0; }
 div.verdict.failed { border-color: #b00; }
 div.verdict li { margin: 0.2em 0; }
-@page { size: A4; margin: 14mm 15mm; }
+table.running { width: 100%; border-collapse: collapse; margin: 0; font-size: inherit; }
+table.running > thead > tr > td, table.running > tbody > tr > td { border: none; padding: 0; }
+div.running { font-size: 7pt; color: #333; border-bottom: 1px solid #888; padding-bottom: 2px;
+  margin-bottom: 6px; line-height: 1.25; }
+div.running b { font-weight: 600; }
+div.running span { display: inline-block; max-width: 100%; margin-right: 0.8em; }
+table.signatures td { height: 2.2em; min-width: 9em; }
+@page { size: A4; margin: 14mm 15mm;
+  @bottom-right { content: "page " counter(page) " of " counter(pages); font-size: 8pt; } }
 @media print {
+  table.running { font-size: inherit; }
+  table.running > tbody > tr { break-inside: auto; page-break-inside: auto; }
   body { max-width: none; margin: 0; font-size: 9.5pt; }
   h2 { break-after: avoid; page-break-after: avoid; }
   table { font-size: 7.5pt; }
@@ -189,15 +199,47 @@ def provenance_html(
     )
 
 
-def page_html(title: str, parts: Iterable[str]) -> str:
+def running_header_html(rows: Sequence[tuple[str, str]]) -> str:
+    """The running header: ``(name, text)`` pairs (escaped) in one small block, which
+    :func:`page_html` repeats at the top of every printed page."""
+    items = " ".join(f"<span><b>{_e(name)}:</b> {_e(text)}</span>" for name, text in rows)
+    return f'<div class="running">{items}</div>'
+
+
+def signature_html(signatures: Sequence[tuple[str, str]]) -> str:
+    """The signature block: one row per ``(role, name)``, with room to sign and date."""
+    if not signatures:
+        return ""
+    rows: list[Sequence[Cell]] = [[role, name, "", ""] for role, name in signatures]
+    return "<h2>Signatures</h2>" + html_table(
+        [[("role", 1), ("name", 1), ("signature", 1), ("date", 1)]],
+        rows,
+        numeric_from=99,
+        css="signatures",
+    )
+
+
+def page_html(title: str, parts: Iterable[str], header: str = "") -> str:
     """The self-contained page: ``title`` (escaped) as its title and heading, the ``parts``
-    (HTML) in order, and a last line naming the version."""
+    (HTML) in order, and a last line naming the version.
+
+    ``header`` (HTML, :func:`running_header_html`) is repeated at the top of every printed
+    page: the page is one table whose head it is (browsers repeat a table's head on every
+    page it spans); every page's foot says "page x of y" (CSS page margin box).
+    """
     head = [
         "<!DOCTYPE html>",
         '<html lang="en"><head><meta charset="utf-8">',
         f"<title>{_e(title)}</title>",
         f"<style>\n{STYLE}\n</style></head><body>",
-        f"<h1>{_e(title)}</h1>",
     ]
-    tail = [f'<p class="note">Made by hexatherm {_e(__version__)}.</p>', "</body></html>"]
+    if header:
+        head.append(
+            f'<table class="running"><thead><tr><td>{header}</td></tr></thead><tbody><tr><td>'
+        )
+    head.append(f"<h1>{_e(title)}</h1>")
+    tail = [f'<p class="note">Made by hexatherm {_e(__version__)}.</p>']
+    if header:
+        tail.append("</td></tr></tbody></table>")
+    tail.append("</body></html>")
     return "\n".join([*head, *parts, *tail]) + "\n"

@@ -20,6 +20,7 @@ from hexatherm.workflows.process.pipeline import ProcessResult
 from hexatherm.workflows.report.figures import POSE_NAMES, pose_deviations, target_labels
 
 if TYPE_CHECKING:
+    from hexatherm.workflows.process.conformity import Conformity
     from hexatherm.workflows.process.quality import QualityReport
     from hexatherm.workflows.process.uncertainty import PoseUncertainty
 
@@ -69,6 +70,11 @@ class Verdict:
         ``k`` of every expanded uncertainty.
     basis : str
         How the uncertainty was obtained ("not available" without one).
+    conformity : Conformity, optional
+        The conformity statement, with tolerances.
+    common_u : ndarray, shape (6,), optional
+        The largest expanded common part ``k u_common`` of the corrected deviations over
+        the targets (um, urad): from O and R0, shared by every target.
     """
 
     targets: int
@@ -81,6 +87,8 @@ class Verdict:
     correction_urad: Extreme
     coverage_factor: float
     basis: str
+    conformity: Conformity | None = None
+    common_u: FloatArray | None = None
 
 
 def uncertainty_basis(uncertainty: PoseUncertainty | None) -> str:
@@ -126,6 +134,7 @@ def verdict(
     uncertainty: PoseUncertainty | None,
     quality: QualityReport | None,
     coverage_factor: float = 2.0,
+    tolerances: dict[str, float] | None = None,
 ) -> Verdict:
     """The verdict of a processed session (see :class:`Verdict`).
 
@@ -137,6 +146,8 @@ def verdict(
     quality : QualityReport, optional
     coverage_factor : float
         ``k`` of the expanded uncertainties, > 0.
+    tolerances : dict, optional
+        ``Tx_um`` .. ``Rz_urad`` -> T: the conformity statement is made for them.
     """
     if not coverage_factor > 0:
         raise ValueError(f"coverage factor {coverage_factor}: must be > 0")
@@ -159,4 +170,21 @@ def verdict(
         correction_urad=_extreme(corrected - conventional, None, labels, rotation),
         coverage_factor=float(coverage_factor),
         basis=uncertainty_basis(uncertainty),
+        common_u=None
+        if uncertainty is None or uncertainty.common_u is None
+        else coverage_factor * to_um_urad(uncertainty.common_u[:, 6:12]).max(axis=0),
+        conformity=None
+        if not tolerances
+        else _conformity(result, uncertainty, tolerances, coverage_factor),
     )
+
+
+def _conformity(
+    result: ProcessResult,
+    uncertainty: PoseUncertainty | None,
+    tolerances: dict[str, float],
+    coverage_factor: float,
+) -> Conformity:
+    from hexatherm.workflows.process.conformity import conformity
+
+    return conformity(result, uncertainty, tolerances, coverage_factor)

@@ -205,10 +205,11 @@ def _p(p: float) -> str:
 
 
 def format_value(value: float, std_error: float | None = None, unit: str = "") -> str:
-    """A parameter with its standard error, to the se's precision (two digits).
+    """A parameter with its standard error, to the se's precision (two digits), labelled
+    k = 1 (a standard uncertainty, not the U = 2u of ``report`` and ``calibrate``).
 
     >>> format_value(1509.358, 35.9, "s"), format_value(1.23e-5, 4.1e-7, "1/K")
-    ('1509 ± 36 s', '1.230e-05 ± 4.1e-07 1/K')
+    ('1509 ± 36 s (k = 1)', '1.230e-05 ± 4.1e-07 1/K (k = 1)')
     >>> format_value(0.5, None, "1")
     '0.5'
     """
@@ -217,9 +218,9 @@ def format_value(value: float, std_error: float | None = None, unit: str = "") -
         return f"{value:.4g}{suffix}"
     size = max(abs(value), std_error)
     if not 1e-3 <= size < 1e6:
-        return f"{value:.3e} ± {std_error:.1e}{suffix}"
+        return f"{value:.3e} ± {std_error:.1e}{suffix} (k = 1)"
     decimals = max(0, 1 - int(np.floor(np.log10(std_error))))
-    return f"{value:.{decimals}f} ± {std_error:.{decimals}f}{suffix}"
+    return f"{value:.{decimals}f} ± {std_error:.{decimals}f}{suffix} (k = 1)"
 
 
 def _states(after: bool) -> tuple[str, ...]:
