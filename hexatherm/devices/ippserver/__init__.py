@@ -42,11 +42,12 @@ Examples
 >>> with IppSimServer(balls, tools={"Probe1": 2.0}) as server:
 ...     from hexatherm.devices.ipp import IppClient
 ...     with IppClient("127.0.0.1", server.port, timeout_s=30) as cmm:
-...         cmm.start_session(); cmm.home(); cmm.change_tool("Probe1")
+...         stale = cmm.start_session()  # True when a stale session was ended first
+...         cmm.home(); cmm.change_tool("Probe1")
 ...         cmm.goto(0, 0, 30)
 ...         p = cmm.pt_meas(0, 0, 12.7, 0, 0, 1)
->>> p.point_mm
-(0.0, 0.0, 12.7)
+>>> p.point_mm, stale
+((0.0, 0.0, 12.7), False)
 """
 
 from __future__ import annotations
