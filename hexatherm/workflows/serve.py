@@ -122,18 +122,21 @@ process corrects it (--time-scale 1 for those)
     tau_s = getattr(heating, "tau_s", None)
     if isinstance(tau_s, float):
         taus.append(tau_s)
-    factor = scale if scale > 1 else 1.0 / scale
+    def three(value: float) -> str:  # 3 significant digits, no exponent below 1e6
+        return f"{float(f'{value:.3g}'):g}"
+
+    factor = three(scale if scale > 1 else 1.0 / scale)
     faster, more = ("faster", "more") if scale > 1 else ("slower", "less")
     constant = (
-        f"the heating's {min(taus):g} s time constant lasts {min(taus) / scale:.3g} s of the "
+        f"the heating's {min(taus):g} s time constant lasts {three(min(taus) / scale)} s of the "
         "session's times, and "
         if taus
         else ""
     )
     return (
-        f"--time-scale {scale:g}: the twin's legs heat {factor:.3g} times {faster} than the "
+        f"--time-scale {scale:g}: the twin's legs heat {factor} times {faster} than the "
         f"wall clock that hexatherm run stamps its session with: {constant}the legs drift "
-        f"{factor:.3g} times {more} while a ball is probed and between a target and its "
+        f"{factor} times {more} while a ball is probed and between a target and its "
         "references than they would at the real pace. The rehearsal checks the campaign "
         "(moves, probing, logs, resume), not the thermal drift nor how well process corrects "
         "it (--time-scale 1 for those)"
