@@ -122,6 +122,7 @@ process corrects it (--time-scale 1 for those)
     tau_s = getattr(heating, "tau_s", None)
     if isinstance(tau_s, float):
         taus.append(tau_s)
+
     def three(value: float) -> str:  # 3 significant digits, no exponent below 1e6
         return f"{float(f'{value:.3g}'):g}"
 

@@ -176,11 +176,16 @@ def run_campaign(
     ------
     IncompleteSession
         The run stopped before the end of the plan (an error needing the operator, a
-        machine away); the hexapod was sent ``stop()``; ``--resume`` continues.
+        machine away); the hexapod was sent ``stop()``; the message says once what
+        became of it; ``--resume`` continues.
     PoseError
         A pose of the plan is refused (nothing moved).
     AcquisitionError
-        The session folder is in the way, or there is nothing to resume.
+        The session folder is in the way, or there is nothing to resume; or a new run
+        reached no machine (the controller and the thermocouple port did not answer):
+        what it created is removed again (:func:`_remove_created`) and the message says
+        so. A KeyboardInterrupt gets a note (:data:`STOPPED_NOTE`) saying what became of
+        the hexapod and of the session.
     """
     folder = options.session
     transcript = folder / TRANSCRIPT_NAME
