@@ -9,11 +9,13 @@ from datetime import datetime
 from pathlib import Path
 
 import pandas as pd
+import pytest
 
+from hexatherm.errors import IncompleteSession
 from hexatherm.io.records import iso_to_seconds
 from hexatherm.workflows.run.run.pace import Pace, clock_text, duration_text
 from hexatherm.workflows.serve import default_heating, time_scale_warning
-from tests.workflows.test_run import START, make_bench
+from tests.workflows.test_run import make_bench
 
 STEP_LINE = re.compile(
     r"^step (\d+)/(\d+) (\S+) \((\w+)\) in position at (\S+): \[.*\] deg; "
@@ -23,13 +25,17 @@ STEP_LINE = re.compile(
 
 def test_pace_corrects_the_plan_timing_by_the_measured_pace() -> None:
     # the model: 30 s a move, 6 points x 3 s a ball (18 s); the run goes at its own pace
-    pace = Pace(1000.0, 6)
-    assert pace.eta_s(1000.0, moves_left=4, balls_left=12) == 1000.0 + 4 * 30 + 12 * 18
-    pace.moved()  # in position at 1045 s: 45 s for 30 model seconds, 1.5 x slower
-    assert pace.eta_s(1045.0, moves_left=3, balls_left=12) == 1045.0 + (3 * 30 + 12 * 18) * 1.5
+    pace = Pace(6)
+    assert pace.eta_s(900.0, moves_left=4, balls_left=12) == 900.0 + 4 * 30 + 12 * 18
+    pace.move_started(1000.0)  # the setup before (100 s here) is not counted
+    pace.moved()  # no ball yet: the model's pace
+    assert pace.eta_s(1045.0, moves_left=3, balls_left=12) == 1045.0 + 3 * 30 + 12 * 18
     for _ in range(3):
-        pace.probed()  # three balls: 30 + 54 = 84 model seconds in 1045 + ... = 126 s
-    assert pace.eta_s(1126.0, moves_left=2, balls_left=6) == 1126.0 + (2 * 30 + 6 * 18) * 1.5
+        pace.probed()  # 30 + 54 = 84 model seconds done in 126 s: 1.5 times slower
+    assert pace.eta_s(1126.0, moves_left=3, balls_left=9) == 1126.0 + (3 * 30 + 9 * 18) * 1.5
+    pace.move_started(1126.0)  # only the first move starts the pace's clock
+    pace.moved()  # 114 model seconds in 171 s: 1.5 again
+    assert pace.eta_s(1171.0, moves_left=2, balls_left=9) == 1171.0 + (2 * 30 + 9 * 18) * 1.5
     assert duration_text(7530.4) == "2 h 05 min" and duration_text(59.6) == "1 min 00 s"
 
 
@@ -54,6 +60,10 @@ def test_each_step_line_has_its_clock_time_and_the_campaigns_eta(tmp_path: Path)
     points["t"] = [iso_to_seconds(x) for x in points["time"]]
     last_point = points.groupby(["label", "ball"])["t"].max()
     end_s = float(points["t"].max())
+    # the pace's clock starts when the first move is commanded (controller.log's note)
+    log = (b.session / "controller.log").read_text().splitlines()
+    first_move = next(line for line in log if line.endswith(' * "run move O"'))
+    start_s = iso_to_seconds(first_move.split()[0])
     ppb = plan.points_per_ball
     for k, line in enumerate(lines):
         match = STEP_LINE.match(line)
@@ -63,12 +73,14 @@ def test_each_step_line_has_its_clock_time_and_the_campaigns_eta(tmp_path: Path)
         now_s = iso_to_seconds(steps["time"][k])
         assert datetime.fromisoformat(match[5]).timestamp() == math.floor(now_s)
         # the ETA, from what the session recorded: the plan's model (30 s a move, 3 s a
-        # point) for the work left, scaled by the time taken so far (the run started at
-        # START) over the model's time of the moves in position and the balls accepted
+        # point) for the work left, scaled by the time taken since the first move over
+        # the model's time of the moves in position and the balls accepted (the model's
+        # pace before the first ball)
         done_balls = int((last_point < now_s).sum())
         done_model_s = (k + 1) * 30.0 + done_balls * ppb * 3.0
         left_model_s = (n - 1 - k) * 30.0 + (n - k) * len(names) * ppb * 3.0
-        expected = now_s + left_model_s * (now_s - START) / done_model_s
+        ratio = (now_s - start_s) / done_model_s if done_balls else 1.0
+        expected = now_s + left_model_s * ratio
         eta = datetime.fromisoformat(match[6]).timestamp()
         assert eta in {math.floor(expected - 1e-6), math.floor(expected + 1e-6)}, (line, expected)
         assert match[7] == duration_text(expected - now_s)
@@ -86,3 +98,27 @@ def test_the_time_scale_warning_says_what_it_does_to_the_heating() -> None:
     assert "2400 s time constant lasts 40 s of the session's times" in fast
     slow = time_scale_warning(0.5, default_heating())
     assert slow is not None and "2 times slower" in slow and "lasts 4800 s" in slow
+
+
+def test_a_stop_that_cannot_be_delivered_after_a_move_is_said_once(tmp_path: Path) -> None:
+    """Both machines go away once S1 is in position: the run stops, the STOP cannot be
+    delivered, and the one error says the hexapod may still be moving (no line before it
+    claiming it was stopped)."""
+    b = make_bench(tmp_path)
+
+    def notify(level: str, message: str) -> None:
+        b.messages.append((level, message))
+        if " S1 (target) in position" in message:
+            b.machines.close()
+
+    b.notify = notify  # type: ignore[method-assign]
+    try:
+        with pytest.raises(IncompleteSession) as stopped:
+            b.run(reconnects=0)
+    finally:
+        b.machines.close()
+    text = str(stopped.value)
+    assert text.count("STOP") == 1 and "THE HEXAPOD MAY STILL BE MOVING; " in text, text
+    assert ". Could not deliver STOP to the " in text and text.endswith("continue with --resume")
+    assert not any("STOP" in m or "MAY STILL" in m for _, m in b.messages)
+    assert (b.session / "points.csv").is_file()  # a machine answered: the session is kept

@@ -314,7 +314,7 @@ class _Campaign:
         self.controller: SocketController | None = None
         self.tlog: LineLog | None = None
         self.clog: LineLog | None = None
-        self.pace = Pace(clock(), self.plan.points_per_ball)
+        self.pace = Pace(self.plan.points_per_ball)
         #: a machine answered (the controller connected, the thermocouple port opened)
         self.reached = False
         #: a move was commanded in this run (a STOP that cannot be delivered matters)
@@ -487,8 +487,8 @@ class _Campaign:
                 controller.stop()
                 said = "the hexapod was sent STOP"
             except HexathermError as exc:
-                if self.commanded:
-                    said = f"STOP could not be delivered: {exc}"
+                if self.commanded:  # the controller's own words: THE HEXAPOD MAY STILL BE MOVING
+                    said = str(exc)
                 elif not self.controller_connected:
                     said = f"nothing was moved (the controller at {controller.url} was not reached)"
                 else:  # no move was commanded: the hexapod was never set moving by this run
@@ -664,6 +664,7 @@ class _Campaign:
         """Command step i's pose and wait in position; record the step."""
         assert self.controller is not None and self.clog is not None
         label, pose = self.plan.labels[i], self.plan.poses[i]
+        self.pace.move_started(self.clock())
         self.clog.note(f"move {label}")
         tries = 0
         while True:
