@@ -13,6 +13,8 @@ import pytest
 
 from hexatherm.errors import IncompleteSession
 from hexatherm.io.records import iso_to_seconds
+from hexatherm.workflows.run.run import run_campaign
+from hexatherm.workflows.run.run.campaign import STOPPED_NOTE
 from hexatherm.workflows.run.run.pace import Pace, clock_text, duration_text
 from hexatherm.workflows.serve import default_heating, time_scale_warning
 from tests.workflows.test_run import make_bench
@@ -122,3 +124,37 @@ def test_a_stop_that_cannot_be_delivered_after_a_move_is_said_once(tmp_path: Pat
     assert ". Could not deliver STOP to the " in text and text.endswith("continue with --resume")
     assert not any("STOP" in m or "MAY STILL" in m for _, m in b.messages)
     assert (b.session / "points.csv").is_file()  # a machine answered: the session is kept
+
+
+def test_ctrl_c_before_any_machine_answered_leaves_no_folder(tmp_path: Path) -> None:
+    """Ctrl-C as the run starts (here: raised by the clock stamping the transcript's first
+    note, before the controller is contacted): the note the command line prints says
+    nothing was moved and nothing recorded, and the new folder is gone."""
+    b = make_bench(tmp_path)
+    raised: list[float] = []
+
+    def clock() -> float:
+        if not raised:
+            raised.append(b.clock())
+            raise KeyboardInterrupt
+        return b.clock()
+
+    session = tmp_path / "night" / "NEW"
+    try:
+        with pytest.raises(KeyboardInterrupt) as stopped:
+            run_campaign(
+                b.files,
+                b.world.hexapod,
+                b.options(session=session),
+                b.notify,
+                clock=clock,
+                sleep=b.clock.sleep,
+            )
+    finally:
+        b.machines.close()
+    assert raised and getattr(stopped.value, "__notes__", None) == [
+        f"{STOPPED_NOTE}nothing was moved (the hexapod controller was not contacted); "
+        f"nothing was recorded ({session} was not created)"
+    ]
+    assert not session.parent.exists() and b.messages == []
+    assert not b.machines.controller.received  # the controller was never contacted
