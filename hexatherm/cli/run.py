@@ -259,6 +259,7 @@ def command(
     from hexatherm.workflows.run.resume import ProbeSettings
     from hexatherm.workflows.run.run import BallChecks, RunOptions, run_campaign
     from hexatherm.workflows.run.run import dry_run as check_plan
+    from hexatherm.workflows.run.run.campaign import STOPPED_NOTE
 
     if dry_run and resume:
         raise click.UsageError("--dry-run checks a plan: not with --resume")
@@ -315,11 +316,16 @@ def command(
             result = run_campaign(files, hexapod, options, notify)
     except KeyboardInterrupt as exc:
         how = exc.name if isinstance(exc, Terminated) else "Ctrl-C"
+        # what became of the hexapod and the session, said once (the campaign's note)
+        notes = [n for n in getattr(exc, "__notes__", ()) if n.startswith(STOPPED_NOTE)]
+        said = (
+            notes[-1][len(STOPPED_NOTE) :]
+            if notes
+            else f"the hexapod was sent STOP; everything measured is in {session}; "
+            "continue with --resume"
+        )
         with contextlib.suppress(OSError):  # SIGHUP: the terminal may be gone
-            echo_err(
-                f"interrupted ({how}): the hexapod was sent STOP; everything measured is in "
-                f"{session}; continue with --resume"
-            )
+            echo_err(f"interrupted ({how}): {said}")
         sys.exit(130)
     lines = ["label,ball,n,x,y,z,radius_mm,form_um,rms_um,attempts,problems"]
     for b in result.balls:

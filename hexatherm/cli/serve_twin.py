@@ -178,6 +178,7 @@ def command(
         TwinWorld,
         default_heating,
         parse_fault,
+        time_scale_warning,
     )
 
     heating: HeatingModel = default_heating()
@@ -243,6 +244,9 @@ def command(
         click.echo(f"controller: {machines.controller_url}")
         click.echo(f"thermocouples: {machines.thermocouples_url}")
         sys_stdout_flush()
+        distorted = time_scale_warning(time_scale, heating)
+        if distorted is not None:
+            echo_err(f"warning: {distorted}")
         echo_err(
             f"serving the twin ({dialect}, x{time_scale:g} time, {noise:g} um probing noise, "
             f"{len(injected.ipp)} I++ fault(s)); Ctrl-C to stop. Rehearse with:\n"

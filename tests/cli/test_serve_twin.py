@@ -65,6 +65,9 @@ def test_serve_twin_prints_its_urls_serves_and_stops_on_ctrl_c() -> None:
         _, err = proc.communicate(timeout=SAFETY_S)
         assert proc.returncode == 0, err
         assert "stopped" in err and "hexatherm run PLAN --cmm ipp://127.0.0.1:" in err
+        # what the accelerated time does to the rehearsal's heating, said before serving
+        assert err.count("warning: --time-scale 100: the twin's legs heat 100 times faster") == 1
+        assert "the heating's 2400 s time constant lasts 24 s of the session's times" in err
     finally:
         if proc.poll() is None:
             proc.kill()

@@ -50,10 +50,12 @@ def test_severity_2_error_is_cleared_and_the_command_retried(tmp: Path) -> None:
 def test_severity_3_error_stops_the_hexapod_and_resume_finishes(tmp: Path) -> None:
     b = bench_with(tmp, ipp_faults=[Fault("error", 20, "PtMeas", severity=3)])
     try:
-        with pytest.raises(IncompleteSession, match="continue with --resume"):
+        with pytest.raises(IncompleteSession, match="continue with --resume") as stopped:
             b.run()
         assert "STOP" in b.machines.controller.received
-        assert any("hexapod stopped" in m for _, m in b.messages)
+        # said once, in the error: no warning before it saying it again
+        assert ". The hexapod was sent STOP; " in str(stopped.value)
+        assert not any("STOP" in m for _, m in b.messages)
         before = pd.read_csv(b.session / "points.csv")
         b.run(resume=True)
         after = check_complete(b)

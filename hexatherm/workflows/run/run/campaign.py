@@ -49,6 +49,7 @@ from hexatherm.errors import (
     Terminated,
 )
 from hexatherm.io.atomic import atomic_write_text
+from hexatherm.io.manifest import MANIFEST_NAME
 from hexatherm.io.recording import check_new_recording, check_resume, recording_manifest
 from hexatherm.io.seriallog import (
     LOG_NAME,
@@ -90,6 +91,7 @@ from hexatherm.workflows.run.resume import (
 )
 from hexatherm.workflows.run.run.cmmfacts import dme_version, tip_radius
 from hexatherm.workflows.run.run.options import BallResult, Notify, RunOptions, RunResult
+from hexatherm.workflows.run.run.pace import Pace, clock_text, duration_text
 from hexatherm.workflows.run.run.support import (
     _Geometry,
     _Thermocouples,
@@ -100,6 +102,10 @@ from hexatherm.workflows.run.run.support import (
 )
 
 # ------------------------------------------------------------------------ the run
+#: starts the note an interrupted run adds to its KeyboardInterrupt: what became of the
+#: hexapod (the command line prints it)
+STOPPED_NOTE = "hexatherm run: "
+NOT_MOVED = "nothing was moved (the hexapod controller was not contacted)"
 #: every file a run writes in its session folder (its manifest lists only these)
 RUN_FILES = (
     "plan.yaml",
@@ -174,11 +180,16 @@ def run_campaign(
     ------
     IncompleteSession
         The run stopped before the end of the plan (an error needing the operator, a
-        machine away); the hexapod was sent ``stop()``; ``--resume`` continues.
+        machine away); the hexapod was sent ``stop()``; the message says once what
+        became of it; ``--resume`` continues.
     PoseError
         A pose of the plan is refused (nothing moved).
     AcquisitionError
-        The session folder is in the way, or there is nothing to resume.
+        The session folder is in the way, or there is nothing to resume; or a new run
+        reached no machine (the controller and the thermocouple port did not answer):
+        what it created is removed again (:func:`_remove_created`) and the message says
+        so. A KeyboardInterrupt gets a note (:data:`STOPPED_NOTE`) saying what became of
+        the hexapod and of the session.
     """
     folder = options.session
     transcript = folder / TRANSCRIPT_NAME
@@ -193,7 +204,62 @@ def run_campaign(
         )
     else:
         check_new_recording(folder, command="run", inputs=files.paths)
+    # what a new run creates, removed again when no machine answered
+    created_dirs = [p for p in (folder, *folder.parents) if not os.path.lexists(p)]
+    before = set() if created_dirs else set(os.listdir(folder))
     folder.mkdir(parents=True, exist_ok=True)
+    campaigns: list[_Campaign] = []
+    try:
+        return _record(files, hexapod, options, notify, clock, sleep, campaigns)
+    except BaseException as exc:
+        campaign = campaigns[0] if campaigns else None
+        kept = options.resume or (campaign is not None and campaign.reached)
+        left = (
+            f"everything measured is in {folder}; continue with --resume"
+            if kept
+            else _remove_created(folder, before, created_dirs)
+        )
+        if isinstance(exc, KeyboardInterrupt):
+            said = campaign.stopped if campaign is not None and campaign.stopped else NOT_MOVED
+            exc.add_note(f"{STOPPED_NOTE}{said}; {left}")
+        elif isinstance(exc, IncompleteSession) and not kept:
+            cause = exc.__cause__ or exc
+            said = campaign.stopped if campaign is not None and campaign.stopped else NOT_MOVED
+            raise AcquisitionError(
+                f"run stopped before any machine answered: {cause}. "
+                f"{said[0].upper()}{said[1:]}; {left}"
+            ) from cause
+        raise
+
+
+def _remove_created(folder: Path, before: set[str], created_dirs: list[Path]) -> str:
+    """Remove what a run that reached no machine created in ``folder`` (its own files that
+    were not there ``before``, the folders it made, if then empty); say what was left."""
+    for name in (*RUN_FILES, MANIFEST_NAME):
+        if name not in before:
+            with contextlib.suppress(FileNotFoundError, IsADirectoryError):
+                (folder / name).unlink()
+    for path in created_dirs:
+        try:
+            path.rmdir()
+        except OSError:
+            return f"nothing was recorded ({path} holds files this run did not write: kept)"
+    if created_dirs:
+        return f"nothing was recorded ({folder} was not created)"
+    return f"nothing was recorded ({folder} left as it was)"
+
+
+def _record(
+    files: SessionFiles,
+    hexapod: Hexapod,
+    options: RunOptions,
+    notify: Notify,
+    clock: Callable[[], float],
+    sleep: Callable[[float], None],
+    campaigns: list[_Campaign],
+) -> RunResult:
+    """Record the run into its (existing) folder; the campaign goes into ``campaigns``."""
+    folder = options.session
     with _session_lock(folder), recording_manifest(folder, "run", RUN_FILES):
         if options.resume:
             check_same_files(files, folder)
@@ -213,6 +279,7 @@ def run_campaign(
             atomic_write_text(folder / STEPS_NAME, step_header() + "\n")
             state = RunState({}, collections.Counter())
         campaign = _Campaign(files, hexapod, options, settings, state, notify, clock, sleep)
+        campaigns.append(campaign)
         return campaign.run()
 
 
@@ -251,6 +318,14 @@ class _Campaign:
         self.controller: SocketController | None = None
         self.tlog: LineLog | None = None
         self.clog: LineLog | None = None
+        self.pace = Pace(self.plan.points_per_ball)
+        #: a machine answered (the controller connected, the thermocouple port opened)
+        self.reached = False
+        #: a move was commanded in this run (a STOP that cannot be delivered matters)
+        self.commanded = False
+        self.controller_connected = False
+        #: what became of the hexapod when the run stopped (:meth:`_stop`)
+        self.stopped = ""
 
     # ------------------------------------------------------------------ state
     def _fit_centre(self, xyz: FloatArray) -> FloatArray:
@@ -312,6 +387,7 @@ class _Campaign:
                 thermo = _Thermocouples(
                     folder, port, self.files, self.clock, options.reconnect_wait_s
                 )
+                self.reached = True
             self._connect_controller()
             travel = _travel_z(self.geometry, self.origin2cmm())
             assert self.controller is not None
@@ -330,14 +406,16 @@ class _Campaign:
             self.tlog.note("end complete")
             self.clog.note("end complete")
         except KeyboardInterrupt as exc:  # Ctrl-C, or a terminating signal (Terminated)
-            self._stop(f"interrupted ({exc.name if isinstance(exc, Terminated) else 'Ctrl-C'})")
+            how = exc.name if isinstance(exc, Terminated) else "Ctrl-C"
+            # said once, by the command line, with what became of the hexapod (a note)
+            self._stop(f"interrupted ({how})", say=False)
             raise
         except HexathermError as exc:
-            self._stop(f"{type(exc).__name__}: {exc}")
+            stopped = self._stop(f"{type(exc).__name__}: {exc}", say=False)
             if isinstance(exc, PoseError) and not self.state.accepted and not options.resume:
                 raise
             raise IncompleteSession(
-                f"run stopped at {self._where()}: {exc}. The hexapod was sent STOP; "
+                f"run stopped at {self._where()}: {exc}. {stopped[0].upper()}{stopped[1:]}; "
                 f"{self._n_points()} points in {folder}; continue with --resume"
             ) from exc
         except BaseException as exc:
@@ -392,8 +470,13 @@ class _Campaign:
         missing = [b for b in self.balls.names if (label, b) not in self.state.accepted]
         return f"step {label} ({self.plan.kinds[i]}), ball {missing[0]}"
 
-    def _stop(self, why: str) -> None:
-        """Stop the hexapod (whatever happened) and say so in the logs."""
+    def _stop(self, why: str, say: bool = True) -> str:
+        """Stop the hexapod (whatever happened) and say so in the logs.
+
+        Returns what became of the hexapod, one phrase (also a warning with ``say``): sent
+        STOP; not moved by this run (the controller not reached, or no move commanded,
+        when STOP could not be delivered); or STOP not delivered after a move.
+        """
         with contextlib.suppress(Exception):
             if self.tlog is not None:
                 self.tlog.note(f"stopped {why}")
@@ -402,14 +485,23 @@ class _Campaign:
                 self.clog.note(f"stopped {why}")
         controller = self.controller
         if controller is None:
-            return
-        try:
-            controller.stop()
-            said = f"hexapod stopped ({why})"
-        except HexathermError as exc:
-            said = f"could not stop the hexapod: {exc}"
-        with contextlib.suppress(OSError):  # SIGHUP: the terminal may be gone
-            self.notify("warn", said)
+            said = NOT_MOVED
+        else:
+            try:
+                controller.stop()
+                said = "the hexapod was sent STOP"
+            except HexathermError as exc:
+                if self.commanded:  # the controller's own words: THE HEXAPOD MAY STILL BE MOVING
+                    said = str(exc)
+                elif not self.controller_connected:
+                    said = f"nothing was moved (the controller at {controller.url} was not reached)"
+                else:  # no move was commanded: the hexapod was never set moving by this run
+                    said = "nothing was moved (no move had been commanded; STOP was not delivered)"
+        self.stopped = said
+        if say:
+            with contextlib.suppress(OSError):  # SIGHUP: the terminal may be gone
+                self.notify("warn", f"{said} ({why})")
+        return said
 
     # ------------------------------------------------------------- machines
     def _controller_log(self, direction: str, line: str) -> None:
@@ -430,6 +522,7 @@ class _Campaign:
         assert self.clog is not None
         self.clog.note(f"connect {controller.url}")
         controller.connect()
+        self.reached = self.controller_connected = True
         self._check_controller()
 
     def _reconnect_controller(self, why: str) -> None:
@@ -576,10 +669,12 @@ class _Campaign:
         """Command step i's pose and wait in position; record the step."""
         assert self.controller is not None and self.clog is not None
         label, pose = self.plan.labels[i], self.plan.poses[i]
+        self.pace.move_started(self.clock())
         self.clog.note(f"move {label}")
         tries = 0
         while True:
             try:
+                self.commanded = True
                 self.controller.move_absolute(pose)
                 record = self.controller.wait_in_position(self.options.criteria)
                 break
@@ -592,13 +687,26 @@ class _Campaign:
                 raise ControllerError(f"step {label}: {exc}") from exc
         self.state.positionings[label] += 1
         n = self.state.positionings[label]
-        row = step_row(label, self.plan.kinds[i], n, self.clock(), record)
+        now = self.clock()
+        row = step_row(label, self.plan.kinds[i], n, now, record)
         write_lines(self.folder / STEPS_NAME, [row], durable=self.options.durable)
         self.clog.note(f"in position {label}")
+        self.pace.moved()
+        labels, names = self.plan.labels, self.balls.names
+        eta = self.pace.eta_s(
+            now,
+            moves_left=sum(not self._done(k) for k in range(i + 1, len(labels))),
+            balls_left=sum(
+                (labels[k], b) not in self.state.accepted
+                for k in range(i, len(labels))
+                for b in names
+            ),
+        )
         self.notify(
             "info",
-            f"step {i + 1}/{len(self.plan.labels)} {label} ({self.plan.kinds[i]}) in position at "
-            f"{format_pose(record.pose_mm_deg)}",
+            f"step {i + 1}/{len(labels)} {label} ({self.plan.kinds[i]}) in position at "
+            f"{clock_text(now)}: {format_pose(record.pose_mm_deg)}; ETA {clock_text(eta)} "
+            f"({duration_text(eta - now)} left)",
         )
 
     def _cmm_call(self, action: Callable[[], Any]) -> Any:
@@ -711,6 +819,7 @@ class _Campaign:
         self.state.accepted[key] = AcceptedBall(label, name, tuple(probed), stamp)
         self.fits[key] = result.centre_mm
         self.results.append(result)
+        self.pace.probed()
         slot = i * len(self.balls.names) + j
         later = any(
             self.plan.labels.index(k[0]) * len(self.balls.names) + self.balls.names.index(k[1])
