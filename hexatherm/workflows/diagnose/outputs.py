@@ -211,13 +211,20 @@ def candidates_table(round_: tuple[Candidate, ...]) -> str:
     return "\n".join(lines)
 
 
+def verdict_line(summary: str, cautions: list[str]) -> str:
+    """The adequacy verdict's line with the cautions that the named effects may stand
+    in for a cause outside the registry (:meth:`Diagnosis.cautions`) after it."""
+    return summary + "".join(f"; caution: {c}" for c in cautions)
+
+
 def story(result: DiagnosisResult) -> str:
     """What the diagnosis found, in words and numbers (the command prints it)."""
     d = result.diagnosis
     data = result.data
     obs = data.observations
     model = ", ".join(e.name for e in data.current) or "no effect"
-    lines = [] if d.adequacy is None else [d.adequacy.summary()]
+    cautions = d.cautions()
+    lines = [] if d.adequacy is None else [verdict_line(d.adequacy.summary(), cautions)]
     lines += [
         f"session {data.session.name}: {obs.n_steps} steps, {obs.balls_mm.shape[0]} balls, "
         f"{obs.log.times_s.size} thermocouple samples"
@@ -279,6 +286,7 @@ def story(result: DiagnosisResult) -> str:
             lines.append(
                 f"   {effect.name}: {_format_effect(effect.values, errors, type(effect).units)}"
             )
+    lines += [f"caution: {c}" for c in cautions]
     if d.adequacy is not None and not d.adequacy.adequate:
         lines.append(
             f"verdict: NOT ADEQUATE: {d.adequacy.unexplained_rms_um:.3f} um RMS unexplained; "
