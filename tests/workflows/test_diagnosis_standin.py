@@ -13,6 +13,7 @@ report.md/html must say so; a registry effect hidden alone must not raise it.
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -22,7 +23,7 @@ import pytest
 from hexatherm.core.diagnosis import FOLD_SIGMAS, Addition, Folds, stand_in_reasons
 from hexatherm.core.effects import EFFECTS, Effect, ThermocoupleLog, make_effect
 from hexatherm.typing import FloatArray
-from hexatherm.workflows.diagnose.outputs import story
+from hexatherm.workflows.diagnose.outputs import diagnosis_json, story
 from hexatherm.workflows.diagnose.report import report_html, report_markdown
 from hexatherm.workflows.diagnose.run import DiagnosisResult, read_for_diagnosis, run_diagnosis
 from hexatherm.workflows.simulate.campaigns import NOMINAL_HIDDEN, diagnosis_campaign
@@ -158,6 +159,8 @@ def test_a_cancelling_pair_says_the_overheat_size_is_not_trustworthy(
         assert caution in where
         assert "neither size is trustworthy" in where
     assert first.startswith("ADEQUATE")
+    doc = json.loads(diagnosis_json(cancelling))
+    assert doc["cautions"] == d.cautions() and any(caution in c for c in doc["cautions"])
 
 
 @pytest.mark.parametrize("name", ["leg_cte_error", "steel_overheat"])
@@ -173,6 +176,9 @@ def test_a_registry_effect_hidden_alone_raises_no_caution(tmp_path: Path, name: 
     folds = d.added[0].folds
     assert folds is not None and folds.unstable() == {}
     assert all(math.isfinite(z) for z in folds.z().values())
+    doc = json.loads(diagnosis_json(result))
+    assert doc["cautions"] == []
+    assert doc["added"][0]["folds"]["z"] == pytest.approx(folds.z())
 
 
 def test_folds_that_disagree_make_an_effect_a_stand_in() -> None:
