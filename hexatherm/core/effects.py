@@ -221,6 +221,11 @@ class Effect:
     ranges : tuple of (float, float)
         A physically sensible range of each parameter (bounds for a fit; a
         simulation refuses values outside it).
+    plausible : tuple of (float, float), optional
+        Where a parameter of a real, physical instance of the effect lies, when
+        that is much narrower than ``ranges`` (None: ``ranges``). A fitted value
+        outside it is far from physical: ``diagnose`` then says the effect may be
+        a stand-in for a cause outside its registry (:meth:`implausible`).
     needs_air : bool
         Whether the effect needs the air temperature of the log.
     summary : str
@@ -238,6 +243,7 @@ class Effect:
     parameters: ClassVar[tuple[str, ...]] = ()
     units: ClassVar[tuple[str, ...]] = ()
     ranges: ClassVar[tuple[tuple[float, float], ...]] = ()
+    plausible: ClassVar[tuple[tuple[float, float], ...] | None] = None
     needs_air: ClassVar[bool] = False
     summary: ClassVar[str] = ""
 
@@ -321,6 +327,25 @@ class Effect:
             if not lo <= self.values[p] <= hi:
                 problems[p] = (
                     f"{self.values[p]:g} is outside the sensible range [{lo:g}, {hi:g}] {unit}"
+                )
+        return problems
+
+    def implausible(self) -> dict[str, str]:
+        """The parameters far from physical: outside ``plausible`` (default ``ranges``),
+        or at a bound of ``ranges`` (a fit stopped there): name -> why, in words."""
+        plausible = self.plausible if self.plausible is not None else self.ranges
+        problems = {}
+        for p, unit, (lo, hi), (plo, phi) in zip(
+            self.parameters, self.units, self.ranges, plausible, strict=True
+        ):
+            value, span = self.values[p], hi - lo
+            if value <= lo + 1e-6 * span or value >= hi - 1e-6 * span:
+                problems[p] = (
+                    f"{p} = {value:.4g} {unit} is at a bound of its range [{lo:g}, {hi:g}]"
+                )
+            elif not plo <= value <= phi:
+                problems[p] = (
+                    f"{p} = {value:.4g} {unit} is outside what physics gives [{plo:g}, {phi:g}]"
                 )
         return problems
 
@@ -557,6 +582,9 @@ class LegGrowthQuadratic(Effect):
     parameters = _LEGS
     units = ("um/K^2",) * 6
     ranges = ((-0.5, 0.5),) * 6
+    # aluminium's expansion coefficient changes by about 0.02e-6/K per K near room
+    # temperature: 0.5 L dalpha/dT is 0.003 um/K^2 for a 300 mm leg; 0.02 allows 7 times it
+    plausible = ((-0.02, 0.02),) * 6
     summary = "each leg's growth has a term quadratic in its temperature"
 
     @classmethod

@@ -150,6 +150,8 @@ def test_null_campaigns_are_adequate_over_10_seeds(tmp_path: Path) -> None:
         assert verdict is not None
         assert verdict.adequate, (seed, verdict.summary())
         assert not story(result).startswith("NOT ADEQUATE")
+        # no false alarm: nothing named is called a stand-in (issue 24, item 7)
+        assert result.diagnosis.cautions() == [], (seed, result.diagnosis.cautions())
         ratios.append(result.diagnosis.final_rms_um / verdict.noise_floor_um)
     # the floor estimated from the references is the noise: the ratio is about 1
     assert 0.85 < float(np.mean(ratios)) < 1.15, ratios

@@ -56,16 +56,24 @@ from hexatherm.core.diagnosis.fitting import (
 )
 from hexatherm.core.diagnosis.model import (
     DELTA_BIC_THRESHOLD,
+    FOLD_SIGMAS,
     SIMILARITY_THRESHOLD,
     Addition,
     BoolArray,
     Candidate,
     Fit,
+    Folds,
     Observations,
     RunnerUp,
     place,
     rms_um,
     twin_centres,
+)
+from hexatherm.core.diagnosis.standin import (
+    TRADE_OFF_SE,
+    cautions,
+    stand_in_reasons,
+    trade_offs,
 )
 
 __all__ = [
@@ -77,14 +85,18 @@ __all__ = [
     "DELTA_BIC_THRESHOLD",
     "Diagnosis",
     "Finding",
+    "FOLD_SIGMAS",
     "Fit",
+    "Folds",
     "Observations",
     "RMS_RATIO_LIMIT",
     "RunnerUp",
     "SIMILARITY_THRESHOLD",
     "STRUCTURE_ALPHA",
+    "TRADE_OFF_SE",
     "adequacy",
     "bound_flags",
+    "cautions",
     "diagnose",
     "fit_model",
     "heldout_rms_um",
@@ -92,5 +104,7 @@ __all__ = [
     "place",
     "pose_residuals",
     "rms_um",
+    "stand_in_reasons",
+    "trade_offs",
     "twin_centres",
 ]

@@ -22,12 +22,14 @@ from hexatherm.core.diagnosis.model import (
     BoolArray,
     Candidate,
     Fit,
+    Folds,
     Observations,
     RunnerUp,
     place,
     rms_um,
     twin_centres,
 )
+from hexatherm.core.diagnosis.standin import cautions
 from hexatherm.core.effects import EFFECTS, Effect
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.residuals import (
@@ -73,6 +75,20 @@ class Diagnosis:
     @property
     def final_rms_um(self) -> float:
         return rms_um(self.final.residual_mm)
+
+    def chosen_fits(self) -> tuple[Fit, ...]:
+        """The joint fit of each round that added an effect (every effect added up to it)."""
+        out = []
+        for round_, addition in zip(self.rounds, self.added, strict=False):
+            fit = next(c.fit for c in round_ if c.name == addition.effect.name)
+            if fit is not None:
+                out.append(fit)
+        return tuple(out)
+
+    def cautions(self) -> list[str]:
+        """Added effects that may stand in for a cause outside the registry, and pairs
+        that trade off, in words (:mod:`hexatherm.core.diagnosis.standin`)."""
+        return cautions(self.added, self.final, self.chosen_fits())
 
 
 # --------------------------------------------------------------------- the model
@@ -454,8 +470,9 @@ def diagnose(
         model, heldout = best.fit, best.heldout_rms_um
         # the joint refit of everything added so far is ``best.fit`` itself
     # the flags are those of the final joint fit (the values written to hexapod.yaml)
+    folds = _folds(hexapod, obs, current, model, blocks)
     added = [
-        replace(a, flags=bound_flags(effect, model.unseen_of(k)))
+        replace(a, flags=bound_flags(effect, model.unseen_of(k)), folds=folds[k])
         for k, (a, effect) in enumerate(zip(added, model.effects, strict=True))
     ]
     return Diagnosis(
@@ -468,6 +485,30 @@ def diagnose(
         skipped,
         adequacy(hexapod, obs, model),
     )
+
+
+def _folds(
+    hexapod: Hexapod,
+    obs: Observations,
+    current: Sequence[Effect],
+    final: Fit,
+    blocks: npt.NDArray[np.intp],
+) -> list[Folds]:
+    """The final fit's added effects refitted on each held-out fold (see :class:`Folds`)."""
+    if not final.effects:
+        return []
+    problem = _Problem(hexapod, obs, current, [type(e) for e in final.effects])
+    theta = np.concatenate([e.vector() for e in final.effects])
+    values: list[list[dict[str, float]]] = [[] for _ in final.effects]
+    errors: list[list[dict[str, float]]] = [[] for _ in final.effects]
+    for parity in (0, 1):
+        train = blocks % 2 == parity
+        fold = problem.fit(problem.refit(theta, train), train)
+        for k, (effect, se) in enumerate(zip(fold.effects, fold.std_errors, strict=True)):
+            unseen = final.unseen_of(k)
+            values[k].append(dict(effect.values))
+            errors[k].append({p: float("nan") if p in unseen else v for p, v in se.items()})
+    return [Folds((v[0], v[1]), (e[0], e[1])) for v, e in zip(values, errors, strict=True)]
 
 
 def _runner_up(

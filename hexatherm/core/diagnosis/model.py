@@ -200,6 +200,8 @@ class Addition:
     """Parameters of the final joint fit at a bound of their range or outside it."""
     runner_up: RunnerUp | None = None
     """How this effect's parameters move when the round's runner-up is fitted with it."""
+    folds: Folds | None = None
+    """This effect's parameters of the final joint fit refitted on each held-out fold."""
 
     @property
     def explains(self) -> str:
@@ -253,6 +255,45 @@ class RunnerUp:
             p: self.std_errors_with[p] / se if se > 0 else float("nan")
             for p, se in self.std_errors.items()
         }
+
+
+#: the two held-out folds' values of a parameter differing by more than this many of
+#: their combined standard errors: the parameter is not stable across the session
+FOLD_SIGMAS = 3.0
+
+
+@dataclass(frozen=True)
+class Folds:
+    """An added effect's parameters fitted separately on the two held-out folds.
+
+    The final joint fit refitted on the even blocks of time, then on the odd ones
+    (the folds of the held-out check). A physical effect has one value all session
+    long: the two halves agree within their standard errors. A stand-in for a cause
+    outside the registry takes whatever values bend it to the disagreement of each
+    half, which need not agree.
+
+    Attributes
+    ----------
+    values, std_errors : tuple of two dicts of str to float
+        The parameters and their standard errors (clustered by step) on the even
+        and on the odd blocks.
+    """
+
+    values: tuple[dict[str, float], dict[str, float]]
+    std_errors: tuple[dict[str, float], dict[str, float]]
+
+    def z(self) -> dict[str, float]:
+        """``(even - odd) / sqrt(se_even^2 + se_odd^2)`` per parameter (nan: no SE)."""
+        (a, b), (sa, sb) = self.values, self.std_errors
+        out = {}
+        for p in a:
+            se = float(np.hypot(sa[p], sb[p]))
+            out[p] = (a[p] - b[p]) / se if np.isfinite(se) and se > 0 else float("nan")
+        return out
+
+    def unstable(self) -> dict[str, float]:
+        """The parameters whose folds differ by more than ``FOLD_SIGMAS``: name -> z."""
+        return {p: z for p, z in self.z().items() if np.isfinite(z) and abs(z) > FOLD_SIGMAS}
 
 
 def rms_um(residual_mm: npt.ArrayLike) -> float:

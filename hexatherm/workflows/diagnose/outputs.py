@@ -33,6 +33,12 @@ these extensions, documented in the README:
   their range or outside it) and ``runner_up`` (the round's runner-up fitted
   with it: the effect's parameters and standard errors without and with it).
 
+* ``cautions`` (issue 24): the sentences saying that an added effect may stand in
+  for a cause outside the registry, or that two added effects trade off
+  (:mod:`hexatherm.core.diagnosis.standin`); in each ``added`` entry, ``folds``:
+  its parameters of the final joint fit refitted on the even and on the odd blocks
+  of time, with standard errors and ``z``, their difference in combined SE.
+
 Numbers that are not defined are written as ``null``.
 """
 
@@ -44,7 +50,7 @@ import math
 from typing import Any
 
 from hexatherm import __version__
-from hexatherm.core.diagnosis import Adequacy, Candidate, RunnerUp
+from hexatherm.core.diagnosis import Adequacy, Candidate, Folds, RunnerUp
 from hexatherm.io.config import hexapod_to_yaml
 from hexatherm.workflows.diagnose.run import DiagnosisResult
 
@@ -124,6 +130,18 @@ def _runner_up(runner: RunnerUp | None) -> dict[str, Any] | None:
     }
 
 
+def _folds(folds: Folds | None) -> dict[str, Any] | None:
+    if folds is None:
+        return None
+    return {
+        "parameters_even": _values(folds.values[0]),
+        "parameters_odd": _values(folds.values[1]),
+        "std_errors_even": _values(folds.std_errors[0]),
+        "std_errors_odd": _values(folds.std_errors[1]),
+        "z": _values(folds.z()),
+    }
+
+
 def diagnosis_document(result: DiagnosisResult) -> dict[str, Any]:
     """The content of ``diagnosis.json`` (spec keys first, then the extensions)."""
     diagnosis = result.diagnosis
@@ -152,6 +170,7 @@ def diagnosis_document(result: DiagnosisResult) -> dict[str, Any]:
                 "explains": addition.explains,
                 "flags": list(addition.flags),
                 "runner_up": _runner_up(addition.runner_up),
+                "folds": _folds(addition.folds),
             }
         )
     data = result.data
@@ -164,6 +183,7 @@ def diagnosis_document(result: DiagnosisResult) -> dict[str, Any]:
         "noise_floor_um": None if verdict is None else _number(verdict.noise_floor_um),
         "unexplained_rms_um": None if verdict is None else _number(verdict.unexplained_rms_um),
         "adequacy": None if verdict is None else _adequacy(verdict),
+        "cautions": diagnosis.cautions(),
         "baseline_heldout_rms_um": _number(diagnosis.baseline_heldout_rms_um),
         "final_heldout_rms_um": _number(diagnosis.final_heldout_rms_um),
         "rounds": [[_candidate(c) for c in round_] for round_ in diagnosis.rounds],
@@ -211,13 +231,20 @@ def candidates_table(round_: tuple[Candidate, ...]) -> str:
     return "\n".join(lines)
 
 
+def verdict_line(summary: str, cautions: list[str]) -> str:
+    """The adequacy verdict's line with the cautions that the named effects may stand
+    in for a cause outside the registry (:meth:`Diagnosis.cautions`) after it."""
+    return summary + "".join(f"; caution: {c}" for c in cautions)
+
+
 def story(result: DiagnosisResult) -> str:
     """What the diagnosis found, in words and numbers (the command prints it)."""
     d = result.diagnosis
     data = result.data
     obs = data.observations
     model = ", ".join(e.name for e in data.current) or "no effect"
-    lines = [] if d.adequacy is None else [d.adequacy.summary()]
+    cautions = d.cautions()
+    lines = [] if d.adequacy is None else [verdict_line(d.adequacy.summary(), cautions)]
     lines += [
         f"session {data.session.name}: {obs.n_steps} steps, {obs.balls_mm.shape[0]} balls, "
         f"{obs.log.times_s.size} thermocouple samples"
@@ -279,6 +306,7 @@ def story(result: DiagnosisResult) -> str:
             lines.append(
                 f"   {effect.name}: {_format_effect(effect.values, errors, type(effect).units)}"
             )
+    lines += [f"caution: {c}" for c in cautions]
     if d.adequacy is not None and not d.adequacy.adequate:
         lines.append(
             f"verdict: NOT ADEQUATE: {d.adequacy.unexplained_rms_um:.3f} um RMS unexplained; "

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from hexatherm.core.diagnosis import Diagnosis
+from hexatherm.workflows.diagnose.outputs import verdict_line
 from hexatherm.workflows.diagnose.report.tables import (
     _HOUR_S,
     FIGURE_CAPTIONS,
@@ -47,7 +48,8 @@ def headline(result: DiagnosisResult) -> str:
     """The story in a few lines of Markdown: baseline, what was added, before/after."""
     d = result.diagnosis
     current = ", ".join(e.name for e in result.data.current) or "no effect"
-    out = [] if d.adequacy is None else [f"**{d.adequacy.summary()}**"]
+    verdict = None if d.adequacy is None else verdict_line(d.adequacy.summary(), d.cautions())
+    out = [] if verdict is None else [f"**{verdict}**"]
     out += [
         f"**Current model** ({current}): RMS "
         f"{d.baseline_rms_um:.2f} um, held-out {d.baseline_heldout_rms_um:.2f} um."
@@ -116,6 +118,7 @@ def adequacy_section(diagnosis: Diagnosis) -> list[str]:
         "(Bonferroni, family level 0.001)",
     ]
     md += [f"- note: {n}" for n in v.notes]
+    md += [f"- caution: {c}" for c in diagnosis.cautions()]
     if not v.adequate:
         md += [f"- it shows in: {'; '.join(v.where())}"]
     md += [f"  - {f.text()}" for f in v.findings[:12]]
