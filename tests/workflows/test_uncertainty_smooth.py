@@ -13,6 +13,7 @@ from click.testing import CliRunner
 from hexatherm.cli import main
 from hexatherm.core.propagation import target_jacobian
 from hexatherm.workflows.process.pipeline import ProcessResult, process_session
+from hexatherm.workflows.process.smootherror import smooth_excess
 from hexatherm.workflows.process.uncertainty import (
     PoseUncertainty,
     centre_covariance,
@@ -96,12 +97,25 @@ def test_smooth_uncertainty_is_the_replicas_scatter(
     assert np.all(np.abs(ratio - 1) < limit), ratio.round(3)
     inside = np.abs(poses - poses.mean(axis=0)) <= 2 * claimed
     assert 0.92 <= inside.mean() <= 0.98, inside.mean()
-    # the parts still add up, and the smooth fit shrinks the own part of the corrected pose
+    # the parts still add up, and the smooth fit shrinks the noise in the own part of the
+    # corrected pose (its own error, added to the own part, aside)
     first = used.index(True)
     lin = pose_uncertainty(process_session(replicas[first][0].session.path))
-    smooth_u = replicas[first][1]
+    smooth_result, smooth_u = replicas[first]
     assert smooth_u.own_u is not None and lin.own_u is not None
-    assert np.mean(smooth_u.own_u[:, 6:9]) < np.mean(lin.own_u[:, 6:9])
+    assert smooth_u.common_u is not None
+    np.testing.assert_allclose(
+        smooth_u.own_u**2 + smooth_u.common_u**2,
+        np.concatenate([smooth_u.conventional_u, smooth_u.corrected_u], axis=1) ** 2,
+        rtol=1e-9,
+    )
+    excess = smooth_excess(
+        smooth_result, pose_chain(smooth_result), centre_covariance(smooth_result).cov_mm2
+    )
+    assert excess is not None
+    added = np.diagonal(excess[0], axis1=1, axis2=2)[:, :3]
+    noise_own = np.sqrt(smooth_u.own_u[:, 6:9] ** 2 - added)
+    assert np.mean(noise_own) < np.mean(lin.own_u[:, 6:9])
 
 
 def test_the_screen_and_poses_say_what_was_used(tmp_path: Path) -> None:
