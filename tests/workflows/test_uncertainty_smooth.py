@@ -17,6 +17,7 @@ from hexatherm.workflows.process.smootherror import smooth_excess
 from hexatherm.workflows.process.uncertainty import (
     PoseUncertainty,
     centre_covariance,
+    joint_pose_covariance,
     pose_chain,
     pose_uncertainty,
 )
@@ -68,6 +69,20 @@ def test_smooth_jacobian_equals_the_brute_force_one(tmp_path: Path) -> None:
     assert np.all(np.abs(fast - slow).max(axis=(1, 2)) <= 1e-6 * scale**2)
     # every reference now moves every corrected pose a little
     assert target_jacobian(chain, centres).jac.shape[1] == 2 + N_TARGETS + 1
+
+
+def test_a_calibration_weighs_smooth_poses_with_their_own_error(tmp_path: Path) -> None:
+    """The joint covariance a calibration weighs the corrected poses with holds each pose's
+    covariance as ``process`` reports it, the smooth fit's own error included."""
+    result = process_session(
+        session(tmp_path / "s", seed=1, heating=MID_SESSION), interpolation="smooth"
+    )
+    u = pose_uncertainty(result)
+    assert u.smooth_excess is not None and u.smooth_excess.excess_um > 0
+    joint = joint_pose_covariance(result)
+    m = len(result.correction.target_index)
+    blocks = joint.reshape(m, 6, m, 6)[np.arange(m), :, np.arange(m)]
+    np.testing.assert_allclose(blocks, u.covariance[:, 6:, 6:], rtol=1e-9, atol=1e-18)
 
 
 REPLICAS = 50

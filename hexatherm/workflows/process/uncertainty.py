@@ -536,10 +536,17 @@ def pose_uncertainty(
 def joint_pose_covariance(result: ProcessResult, corrected: bool = True) -> FloatArray:
     """Covariance (6M, 6M) of all targets' corrected (or conventional) poses together, by
     linear propagation: target by target, mm and deg, every term between targets and
-    components included (what a calibration weighs the poses with)."""
+    components included (what a calibration weighs the poses with); the smooth fit's own
+    error, where it was used, on each corrected pose's own block."""
     centres = centre_covariance(result)
-    jacobian = target_jacobian(pose_chain(result), result.centres.centres_mm)
-    return jacobian.joint_covariance(centres.cov_mm2, slice(6, 12) if corrected else slice(0, 6))
+    chain = pose_chain(result)
+    jacobian = target_jacobian(chain, result.centres.centres_mm)
+    joint = jacobian.joint_covariance(centres.cov_mm2, slice(6, 12) if corrected else slice(0, 6))
+    excess = smooth_excess(result, chain, centres.cov_mm2) if corrected else None
+    if excess is not None:
+        for m, block in enumerate(excess[0]):
+            joint[6 * m : 6 * m + 6, 6 * m : 6 * m + 6] += block
+    return joint
 
 
 def shared_parts(
