@@ -140,6 +140,9 @@ def test_the_screen_and_poses_say_what_was_used(tmp_path: Path) -> None:
     assert result.exit_code == 0, result.output
     assert "interpolation smooth: leave-one-out error" in result.output
     assert "smooth fit used" in result.output
+    # what the smooth fit's own error added to u, and from which residuals
+    assert "smooth fit's own error" in result.output
+    assert "standardized residuals from the smooth fit" in result.output
     poses = pd.read_csv(folder / "results" / "poses.csv")
     assert set(poses["interpolation"]) == {"smooth"}
     # the default writes no such column
