@@ -102,8 +102,9 @@ def growth_excess(
     s = np.asarray(ref_leg_cov_mm2, dtype=float)
     x = (t - t[0]) / (t[-1] - t[0])
     hat = smoothing_hat(x, np.asarray(ref_weights, dtype=float), lam)
-    # standardized residuals: noise alone gives each the noise of one reference
-    a = (np.eye(len(t)) - hat) / np.sqrt(1.0 - np.diag(hat))[:, None]
+    # standardized residuals (a fit that interpolates a reference leaves it none: 0)
+    d = np.maximum(1.0 - np.diag(hat), 1e-12)
+    a = (np.eye(len(t)) - hat) / np.sqrt(d)[:, None]
     a = a[1:-1]  # inner references: the targets lie between references
     e = a @ g  # (n-2, 6)
     observed = np.einsum("il,im->lm", e, e) / len(e)

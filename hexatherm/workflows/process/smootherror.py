@@ -26,7 +26,7 @@ def smooth_excess(
     """The smooth growth's own error carried to the corrected poses, (M, 6, 6), and its
     evaluation at the references; None unless the smooth fit was used.
 
-    The inner references' leave-one-out errors beyond what their noise predicts
+    The inner references' standardized residuals beyond what their noise predicts
     (:func:`~hexatherm.core.smoothbias.growth_excess`) give the covariance of the growth
     at R that the fixed-smoothing propagation leaves out (the spline's bias, the smoothing's
     choice); it is carried to every target's legs by the growth scaling and through the
