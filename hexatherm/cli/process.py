@@ -270,6 +270,19 @@ def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
             f"{t_um:.3f} um, {r_urad:.2f} urad"
         )
     lines.extend(shared_summary(uncertainty))
+    excess = uncertainty.smooth_excess
+    if excess is not None:
+        residuals = (
+            f"the references' standardized residuals from the smooth fit {excess.observed_um:.3g}"
+            f" um RMS, {excess.noise_um:.3g} um from their noise alone"
+        )
+        lines.append(
+            f"  smooth fit's own error (bias, smoothing chosen from the data): growth at R "
+            f"{excess.excess_um:.3g} um RMS over the legs added to each corrected pose's own u "
+            f"({residuals})"
+            if excess.excess_um > 0
+            else f"  smooth fit's own error: nothing added ({residuals})"
+        )
     for check in uncertainty.repeats:
         line = (
             f"  {check.label} measured {check.n} times, averaged: their scatter is "

@@ -50,11 +50,13 @@ from hexatherm.core.propagation import (
     residual_scale,
     target_jacobian,
 )
+from hexatherm.core.smoothbias import GrowthExcess
 from hexatherm.core.spherefit import fit_spheres, refine_spheres
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.heights import reference_height_scale
 from hexatherm.workflows.process.measured import fit_radii, point_groups, registration_weights
 from hexatherm.workflows.process.pipeline import ProcessResult
+from hexatherm.workflows.process.smootherror import smooth_excess
 
 Method = Literal["linear", "monte-carlo"]
 IntArray = npt.NDArray[np.intp]
@@ -130,6 +132,10 @@ class PoseUncertainty:
         Its diagonal is ``u^2``. None when not computed (``between``).
     repeats : tuple of RepeatCheck
         The scatter of repeated O and R0 against their claimed uncertainty.
+    smooth_excess : GrowthExcess, optional
+        With ``--interpolation smooth`` when the smooth fit is used: the fit's own error
+        of the growth at R beyond the references' noise (:func:`smooth_excess`), in
+        ``covariance``, ``linear_covariance`` and the corrected poses' own part.
     """
 
     conventional_u: FloatArray
@@ -145,6 +151,7 @@ class PoseUncertainty:
     own_u: FloatArray | None = None
     between_covariance: FloatArray | None = None
     repeats: tuple[RepeatCheck, ...] = ()
+    smooth_excess: GrowthExcess | None = None
 
     def ratio_to_linear(self) -> FloatArray:
         """Reported over linear standard uncertainty, (M, 12) (1 for the linear method)."""
@@ -496,6 +503,18 @@ def pose_uncertainty(
     if between is None:
         between = len(result.correction.target_index) <= BETWEEN_MAX_TARGETS
     common_u, own_u, pairs = shared_parts(jacobian, centres.cov_mm2, u, linear, between)
+    excess = smooth_excess(result, chain, centres.cov_mm2)
+    if excess is not None:
+        # the smooth fit's own error: a target's own part, independent between targets
+        added = np.zeros_like(linear)
+        added[:, 6:, 6:] = excess[0]
+        covariance, linear = covariance + added, linear + added
+        extra = np.diagonal(added, axis1=1, axis2=2)  # (M, 12)
+        u = np.sqrt(np.clip(np.diagonal(covariance, axis1=1, axis2=2), 0.0, None))
+        own_u = np.sqrt(own_u**2 + extra)
+        if pairs is not None:
+            m = u.shape[0]
+            pairs[:, np.arange(m), np.arange(m)] += extra.T
     return PoseUncertainty(
         conventional_u=u[:, :6],
         corrected_u=u[:, 6:],
@@ -510,16 +529,24 @@ def pose_uncertainty(
         own_u=own_u,
         between_covariance=pairs,
         repeats=repeat_checks(result, centres.cov_mm2),
+        smooth_excess=None if excess is None else excess[1],
     )
 
 
 def joint_pose_covariance(result: ProcessResult, corrected: bool = True) -> FloatArray:
     """Covariance (6M, 6M) of all targets' corrected (or conventional) poses together, by
     linear propagation: target by target, mm and deg, every term between targets and
-    components included (what a calibration weighs the poses with)."""
+    components included (what a calibration weighs the poses with); the smooth fit's own
+    error, where it was used, on each corrected pose's own block."""
     centres = centre_covariance(result)
-    jacobian = target_jacobian(pose_chain(result), result.centres.centres_mm)
-    return jacobian.joint_covariance(centres.cov_mm2, slice(6, 12) if corrected else slice(0, 6))
+    chain = pose_chain(result)
+    jacobian = target_jacobian(chain, result.centres.centres_mm)
+    joint = jacobian.joint_covariance(centres.cov_mm2, slice(6, 12) if corrected else slice(0, 6))
+    excess = smooth_excess(result, chain, centres.cov_mm2) if corrected else None
+    if excess is not None:
+        for m, block in enumerate(excess[0]):
+            joint[6 * m : 6 * m + 6, 6 * m : 6 * m + 6] += block
+    return joint
 
 
 def shared_parts(
