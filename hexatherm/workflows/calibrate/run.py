@@ -35,6 +35,7 @@ from scipy.linalg import block_diag
 
 from hexatherm.core.calibration import (
     PARAMETER_UNITS,
+    BandedCovariance,
     CalibrationFit,
     LevelChoice,
     fit_calibration,
@@ -51,7 +52,10 @@ from hexatherm.io.yamlfile import YamlDoc
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.pipeline import ProcessResult, process_session
 from hexatherm.workflows.process.twin import twin_poses
-from hexatherm.workflows.process.uncertainty import joint_pose_covariance
+from hexatherm.workflows.process.uncertainty import (
+    joint_pose_covariance,
+    joint_pose_covariance_structured,
+)
 
 PoseKind = Literal["corrected", "conventional", "twin"]
 POSE_KINDS: tuple[PoseKind, ...] = ("corrected", "conventional", "twin")
@@ -154,6 +158,9 @@ class Campaign:
     poses : {"corrected", "conventional", "twin"}
     twin : TwinModel or None
         The twin's model (``twin`` poses only).
+    structure : BandedCovariance or None
+        ``covariance`` with its structure (O and R0 low-rank, the rest banded), what the
+        fit whitens with (None: not banded, the dense one is used).
     """
 
     results: list[ProcessResult]
@@ -164,6 +171,12 @@ class Campaign:
     covariance: FloatArray
     poses: PoseKind
     twin: TwinModel | None = None
+    structure: BandedCovariance | None = None
+
+    @property
+    def weights_covariance(self) -> FloatArray | BandedCovariance:
+        """The covariance the fit whitens with: its structure where it has one."""
+        return self.covariance if self.structure is None else self.structure
 
 
 def read_campaign(
@@ -206,6 +219,7 @@ def read_campaign(
     check_reference_states(results)
     labels: list[str] = []
     commanded, measured, covariance = [], [], []
+    structures: list[BandedCovariance | None] = []
     for result in results:
         corr = result.correction
         targets = corr.target_index
@@ -216,6 +230,7 @@ def read_campaign(
         else:
             measured.append(corr.corrected if poses == "corrected" else corr.conventional)
         covariance.append(joint_pose_covariance(result, corrected=poses == "corrected"))
+        structures.append(joint_pose_covariance_structured(result, corrected=poses == "corrected"))
     n = len(labels)
     if n < MIN_POSES:
         raise InputError(
@@ -232,6 +247,9 @@ def read_campaign(
         block_diag(*covariance),
         poses,
         twin,
+        None
+        if any(s is None for s in structures)
+        else BandedCovariance.stacked([s for s in structures if s is not None]),
     )
 
 
@@ -302,7 +320,7 @@ def calibrate(campaign: Campaign, level: str = "auto", residuals: str = "pose") 
             campaign.nominal,
             campaign.commanded,
             campaign.measured,
-            campaign.covariance,
+            campaign.weights_covariance,
             residuals=residuals,
         )
         fit = choice.fit
@@ -314,7 +332,7 @@ def calibrate(campaign: Campaign, level: str = "auto", residuals: str = "pose") 
             campaign.nominal,
             campaign.commanded,
             campaign.measured,
-            campaign.covariance,
+            campaign.weights_covariance,
             level=level,
             residuals=residuals,
         )

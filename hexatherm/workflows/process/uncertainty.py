@@ -31,7 +31,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -51,6 +51,9 @@ from hexatherm.core.spherefit import fit_spheres, refine_spheres
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.measured import fit_radii, point_groups, registration_weights
 from hexatherm.workflows.process.pipeline import ProcessResult
+
+if TYPE_CHECKING:  # the calibration's weights (and scipy.sparse): imported when used
+    from hexatherm.core.calibration.weights import BandedCovariance
 
 Method = Literal["linear", "monte-carlo"]
 IntArray = npt.NDArray[np.intp]
@@ -509,6 +512,18 @@ def joint_pose_covariance(result: ProcessResult, corrected: bool = True) -> Floa
     centres = centre_covariance(result)
     jacobian = target_jacobian(pose_chain(result), result.centres.centres_mm)
     return jacobian.joint_covariance(centres.cov_mm2, slice(6, 12) if corrected else slice(0, 6))
+
+
+def joint_pose_covariance_structured(
+    result: ProcessResult, corrected: bool = True
+) -> BandedCovariance | None:
+    """:func:`joint_pose_covariance` with its structure (the O and R0 part low-rank, the
+    rest banded; None when it is not banded), for a calibration's whitening."""
+    centres = centre_covariance(result)
+    jacobian = target_jacobian(pose_chain(result), result.centres.centres_mm)
+    return jacobian.joint_covariance_structured(
+        centres.cov_mm2, slice(6, 12) if corrected else slice(0, 6)
+    )
 
 
 def shared_parts(
