@@ -23,11 +23,23 @@ code  meaning
 from __future__ import annotations
 
 import importlib
+import os
 from typing import Any
 
 import click
 
 from hexatherm import __version__
+
+#: BLAS threads, one unless the user's environment says otherwise (set here, before
+#: numpy is imported: nothing above imports it). The matrices are small (6x6 per pose,
+#: a few hundred columns at most): a threaded BLAS gains little on them, and on a
+#: shared machine its threads spin waiting for each other (calibrate --level auto, 100
+#: targets: 6.5 s of CPU with the default threads on 2 loaded cores, 0.6 s with one;
+#: issue 26). The outputs are the same bytes either way (checked on the commands'
+#: outputs, see the README's Speed section).
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
+for _name in BLAS_THREAD_VARIABLES:
+    os.environ.setdefault(_name, "1")
 
 #: exit status -> meaning, for every command
 EXIT_CODES = {

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -44,6 +45,11 @@ from hexatherm.core.plan import Plan
 from hexatherm.core.registration import register
 from hexatherm.core.touch import cap_directions
 from hexatherm.typing import FloatArray
+
+if TYPE_CHECKING:  # scipy.sparse and the calibration's weights: imported when used
+    from scipy import sparse
+
+    from hexatherm.core.calibration.weights import BandedCovariance
 
 IntArray = npt.NDArray[np.intp]
 
@@ -253,6 +259,29 @@ class TargetJacobian:
                [1., 0., 1., 0.],
                [0., 0., 0., 0.]])
         """
+        a = self._joint_factor(centre_cov_mm2, outputs)
+        return np.asarray((a @ a.T).toarray())
+
+    def joint_covariance_structured(
+        self, centre_cov_mm2: npt.ArrayLike, outputs: slice
+    ) -> BandedCovariance | None:
+        """:meth:`joint_covariance` with its structure: the steps of the
+        :attr:`common_parts` (O and R0) as the low-rank part, the others (each
+        target's own step and neighbouring references) as a band; None when that
+        part is not banded (the smooth growth: every reference moves every target).
+        """
+        from hexatherm.core.calibration.weights import BandedCovariance
+
+        a = self._joint_factor(centre_cov_mm2, outputs)
+        k = self.jac.shape[3]
+        steps = self.steps[:, list(self.common_parts)]
+        shared = np.unique(steps[steps >= 0])
+        columns = (shared[:, None] * (3 * k) + np.arange(3 * k)).ravel()
+        return BandedCovariance.from_factor(a, columns, block=a.shape[0] // self.jac.shape[0])
+
+    def _joint_factor(self, centre_cov_mm2: npt.ArrayLike, outputs: slice) -> sparse.csr_matrix:
+        """``A`` (M*d, N*3k), sparse, with ``A A^T`` the :meth:`joint_covariance`: a
+        column per centre coordinate of every step (whitened by its covariance)."""
         from scipy import sparse
 
         cov = np.asarray(centre_cov_mm2, dtype=float)
@@ -271,7 +300,7 @@ class TargetJacobian:
         a = sparse.csr_matrix(
             (white.ravel(), (rows.ravel(), cols.ravel())), shape=(m * d, n * 3 * k)
         )  # duplicates (a step in two parts of one target) are summed
-        return np.asarray((a @ a.T).toarray())
+        return a
 
 
 def linear_covariance(

@@ -206,3 +206,18 @@ def test_centres_sessions_draw_the_centres(tmp_path):
     assert point_sampler(result, centre_covariance(result).cov_mm2) is None
     u = pose_uncertainty(result, mc=50, seed=1)
     assert u.drawn == "centres" and np.isfinite(u.corrected_u).all()
+
+
+def test_point_draws_do_not_depend_on_how_the_refits_are_chunked(noisy, monkeypatch):
+    # issue 26: the refits run in chunks small enough for the caches; the draws come
+    # from the generator in the same order and each sphere's arithmetic is its own, so
+    # the drawn centres are the same to the bit whatever the chunk
+    import hexatherm.workflows.process.uncertainty as uncertainty
+
+    cov = centre_covariance(noisy).cov_mm2
+    whole = point_sampler(noisy, cov)(np.random.default_rng(8), 300)
+    n_points = sum(len(p.xyz_mm) for p in noisy.points if p is not None)
+    for per_chunk in (7, 64):  # draws per chunk: 300 = 42 x 7 + 6; 4 x 64 + 44
+        monkeypatch.setattr(uncertainty, "POINTS_PER_REFIT", per_chunk * n_points)
+        chunked = point_sampler(noisy, cov)(np.random.default_rng(8), 300)
+        assert np.array_equal(chunked, whole)

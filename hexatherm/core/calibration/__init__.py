@@ -165,7 +165,11 @@ from hexatherm.core.calibration.model import (
     split_parameters,
     true_leg_lengths,
 )
-from hexatherm.core.calibration.weights import PoseWeights, pose_covariance_from_sigma
+from hexatherm.core.calibration.weights import (
+    BandedCovariance,
+    PoseWeights,
+    pose_covariance_from_sigma,
+)
 from hexatherm.errors import CalibrationError, RankDeficientError
 
 __all__ = [
@@ -186,6 +190,7 @@ __all__ = [
     "LevelScore",
     "Observability",
     "PoseSelection",
+    "BandedCovariance",
     "PoseWeights",
     "RankDeficientError",
     "commanded_leg_lengths",

@@ -20,7 +20,11 @@ from hexatherm.core.calibration.fit import (
     refuse_rank_deficient,
 )
 from hexatherm.core.calibration.model import LEVELS, CalibrationModel, Level, check_level
-from hexatherm.core.calibration.weights import PoseWeights, pose_covariance_from_sigma
+from hexatherm.core.calibration.weights import (
+    BandedCovariance,
+    PoseWeights,
+    pose_covariance_from_sigma,
+)
 from hexatherm.core.geometry import check_poses, to_um_urad
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.errors import CalibrationError
@@ -92,7 +96,7 @@ def select_level(
     nominal: Hexapod,
     commanded_poses: npt.ArrayLike,
     measured_poses: npt.ArrayLike,
-    covariance: npt.ArrayLike,
+    covariance: npt.ArrayLike | BandedCovariance,
     *,
     levels: tuple[str, ...] = LEVELS,
     n_folds: int = 5,

@@ -27,7 +27,7 @@ from hexatherm.core.calibration.model import (
     angle_axes,
     check_level,
 )
-from hexatherm.core.calibration.weights import PoseWeights
+from hexatherm.core.calibration.weights import BandedCovariance, PoseWeights
 from hexatherm.core.geometry import check_poses, rotation_from_angles, to_um_urad
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.errors import CalibrationError, RankDeficientError
@@ -392,7 +392,7 @@ def fit_calibration(
     nominal: Hexapod,
     commanded_poses: npt.ArrayLike,
     measured_poses: npt.ArrayLike,
-    covariance: npt.ArrayLike | PoseWeights,
+    covariance: npt.ArrayLike | BandedCovariance | PoseWeights,
     *,
     level: str = "joints",
     residuals: str = "pose",

@@ -121,7 +121,20 @@ class _Problem:
         self.lo = cat([np.array([r[0] for r in cls.ranges]) for cls in self.free])
         self.hi = cat([np.array([r[1] for r in cls.ranges]) for cls in self.free])
         self.sqrt_w = 1.0 / obs.u_mm[..., None]
+        # the parameters the twin's centres depend on: a CMM-side effect (a drift, a
+        # scale) acts after the twin, in ``place``, so its parameters share one twin
+        self._twin_sees = np.concatenate(
+            [
+                np.full(size, _moves_twin(cls))
+                for cls, size in zip(self.free, self.sizes, strict=True)
+            ]
+            or [np.zeros(0, dtype=bool)]
+        )
         self._cache: dict[bytes, FloatArray] = {}
+        # placements and weighted residuals by (theta, mask): a Jacobian's columns, the
+        # covariance's Jacobian and the held-out refits ask for the same ones again
+        self._placed: dict[tuple[bytes, bytes], tuple[FloatArray, FloatArray, FloatArray]] = {}
+        self._weighted: dict[tuple[bytes, bytes], FloatArray] = {}
 
     def effects(self, theta: FloatArray) -> tuple[Effect, ...]:
         out, i = [], 0
@@ -131,7 +144,7 @@ class _Problem:
         return self.fixed + tuple(out)
 
     def centres(self, theta: FloatArray) -> FloatArray:
-        key = np.asarray(theta, dtype=float).tobytes()
+        key = np.asarray(theta, dtype=float)[self._twin_sees].tobytes()
         if key not in self._cache:
             self._cache[key] = twin_centres(self.hexapod, self.obs, self.effects(theta))
         return self._cache[key]
@@ -139,12 +152,19 @@ class _Problem:
     def evaluate(
         self, theta: FloatArray, mask: BoolArray
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Placement of O, predicted centres and residuals (all steps) fitted on ``mask``."""
-        origin2cmm, predicted = place(self.centres(theta), self.obs, self.effects(theta), mask)
-        return origin2cmm, predicted, self.obs.centres_mm - predicted
+        """Placement of O, predicted centres and residuals (all steps) fitted on ``mask``
+        (memoized: the arrays returned are shared, never to be modified)."""
+        key = (np.asarray(theta, dtype=float).tobytes(), np.asarray(mask).tobytes())
+        if key not in self._placed:
+            origin2cmm, predicted = place(self.centres(theta), self.obs, self.effects(theta), mask)
+            self._placed[key] = (origin2cmm, predicted, self.obs.centres_mm - predicted)
+        return self._placed[key]
 
     def weighted(self, theta: FloatArray, mask: BoolArray) -> FloatArray:
-        return (self.evaluate(theta, mask)[2] * self.sqrt_w)[mask].ravel()
+        key = (np.asarray(theta, dtype=float).tobytes(), np.asarray(mask).tobytes())
+        if key not in self._weighted:
+            self._weighted[key] = (self.evaluate(theta, mask)[2] * self.sqrt_w)[mask].ravel()
+        return self._weighted[key].copy()  # the optimizer's own array
 
     def jacobian(self, theta: FloatArray, mask: BoolArray) -> FloatArray:
         """Forward differences of the weighted residuals in units of each parameter's scale."""
@@ -283,6 +303,25 @@ class _Problem:
         meat = scores.T @ scores * groups / max(groups - 1, 1)
         cov_z = bread @ meat @ bread
         return cov_z * np.outer(self.scale, self.scale)
+
+
+#: the stages of :class:`~hexatherm.core.effects.Effect` the twin's centres go through
+#: (all but the CMM's reading, ``cmm_coordinates_mm``)
+_TWIN_STAGES = (
+    "leg_temperature_C",
+    "segment_temperature_C",
+    "growth_mm",
+    "leg_growth_mm",
+    "leg_length_mm",
+    "commanded_leg_length_mm",
+    "ball_positions_mm",
+    "base_joints_mm",
+)
+
+
+def _moves_twin(cls: type[Effect]) -> bool:
+    """Whether an effect changes :func:`twin_centres` (overrides a stage before the CMM's)."""
+    return any(getattr(cls, stage) is not getattr(Effect, stage) for stage in _TWIN_STAGES)
 
 
 def fit_model(

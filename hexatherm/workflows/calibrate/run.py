@@ -35,6 +35,7 @@ from scipy.linalg import block_diag
 
 from hexatherm.core.calibration import (
     PARAMETER_UNITS,
+    BandedCovariance,
     CalibrationFit,
     LevelChoice,
     fit_calibration,
@@ -56,7 +57,10 @@ from hexatherm.workflows.calibrate.checks import (
 )
 from hexatherm.workflows.process.pipeline import ProcessResult, process_session
 from hexatherm.workflows.process.twin import twin_poses
-from hexatherm.workflows.process.uncertainty import joint_pose_covariance
+from hexatherm.workflows.process.uncertainty import (
+    joint_pose_covariance,
+    joint_pose_covariance_structured,
+)
 
 PoseKind = Literal["corrected", "conventional", "twin"]
 POSE_KINDS: tuple[PoseKind, ...] = ("corrected", "conventional", "twin")
@@ -159,6 +163,9 @@ class Campaign:
     poses : {"corrected", "conventional", "twin"}
     twin : TwinModel or None
         The twin's model (``twin`` poses only).
+    structure : BandedCovariance or None
+        ``covariance`` with its structure (O and R0 low-rank, the rest banded), what the
+        fit whitens with (None: not banded, the dense one is used).
     """
 
     results: list[ProcessResult]
@@ -169,6 +176,12 @@ class Campaign:
     covariance: FloatArray
     poses: PoseKind
     twin: TwinModel | None = None
+    structure: BandedCovariance | None = None
+
+    @property
+    def weights_covariance(self) -> FloatArray | BandedCovariance:
+        """The covariance the fit whitens with: its structure where it has one."""
+        return self.covariance if self.structure is None else self.structure
 
 
 def read_campaign(
@@ -201,6 +214,7 @@ def read_campaign(
     check_reference_states(results, warn=geometry is None)  # --iterate's rounds: said once
     labels: list[str] = []
     commanded, measured, covariance = [], [], []
+    structures: list[BandedCovariance | None] = []
     for result in results:
         corr = result.correction
         targets = corr.target_index
@@ -211,6 +225,7 @@ def read_campaign(
         else:
             measured.append(corr.corrected if poses == "corrected" else corr.conventional)
         covariance.append(joint_pose_covariance(result, corrected=poses == "corrected"))
+        structures.append(joint_pose_covariance_structured(result, corrected=poses == "corrected"))
     n = len(labels)
     if n < MIN_POSES:
         raise InputError(
@@ -227,6 +242,9 @@ def read_campaign(
         block_diag(*covariance),
         poses,
         twin,
+        None
+        if any(s is None for s in structures)
+        else BandedCovariance.stacked([s for s in structures if s is not None]),
     )
 
 
@@ -266,7 +284,7 @@ def calibrate(campaign: Campaign, level: str = "auto", residuals: str = "pose") 
             campaign.nominal,
             campaign.commanded,
             campaign.measured,
-            campaign.covariance,
+            campaign.weights_covariance,
             residuals=residuals,
         )
         fit = choice.fit
@@ -278,7 +296,7 @@ def calibrate(campaign: Campaign, level: str = "auto", residuals: str = "pose") 
             campaign.nominal,
             campaign.commanded,
             campaign.measured,
-            campaign.covariance,
+            campaign.weights_covariance,
             level=level,
             residuals=residuals,
         )

@@ -1,0 +1,106 @@
+"""The calibration whitens with the structure of the poses' covariance (issue 26): the
+O and R0 part low-rank, the rest banded. Checked against the dense covariance and its
+Cholesky factor on simulated campaigns of two sessions (small enough for both)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from hexatherm.core.calibration import BandedCovariance, PoseWeights, fit_calibration
+from hexatherm.io.scenario import read_scenario
+from hexatherm.workflows.calibrate.run import Campaign, calibrate, read_campaign
+from hexatherm.workflows.simulate.run import simulate
+from hexatherm.workflows.simulate.twinsession import write_files
+from tests.sessions import calibration_scenario, calibration_targets
+
+
+@pytest.fixture(scope="module")
+def campaign(tmp_path_factory: pytest.TempPathFactory) -> Campaign:
+    root = tmp_path_factory.mktemp("structure")
+    folders = []
+    for seed, n in ((31, 14), (32, 9)):
+        text = calibration_scenario(
+            calibration_targets(seed, n),
+            geometry_seed=900,  # one true hexapod for both sessions
+            seed=seed,
+            name=f"s{seed}",
+            points_per_ball=8,
+            cmm={"point_noise_um": 0.3},
+            thermocouples={"noise_C": 0.02},
+        )
+        (root / f"{seed}.yaml").write_text(text)
+        write_files(simulate(read_scenario(root / f"{seed}.yaml")).files, root / f"s{seed}")
+        folders.append(root / f"s{seed}")
+    return read_campaign(folders)
+
+
+def rel(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.abs(a - b).max() / np.abs(b).max())
+
+
+def test_the_structure_is_the_dense_covariance(campaign: Campaign) -> None:
+    structure = campaign.structure
+    assert structure is not None
+    n = campaign.measured.shape[0]
+    assert structure.band.shape == (12, 6 * n)  # a pose and its neighbour: 12 diagonals
+    assert structure.common.shape == (6 * n, 2 * 2 * 9)  # O and R0 of 3 balls, 2 sessions
+    assert rel(structure.dense(), campaign.covariance) < 1e-13
+    # there is something between the targets to get right: the off-band part is O and R0
+    cov = campaign.covariance
+    assert np.abs(cov[:6, 60:66]).max() > 0.01 * np.sqrt(cov[0, 0] * cov[60, 60])
+
+
+def test_whitening_keeps_every_inner_product(campaign: Campaign) -> None:
+    assert campaign.structure is not None
+    n = campaign.measured.shape[0]
+    x = np.random.default_rng(5).normal(size=(n, 6, 4)) * 1e-3
+    structured = PoseWeights(campaign.structure, n)
+    dense = PoseWeights(campaign.covariance, n)
+    a, b = structured.whiten(x), dense.whiten(x)
+    assert rel(a.T @ a, b.T @ b) < 1e-10
+    # x^T C^-1 x against a solve with the dense matrix
+    flat = x.reshape(6 * n, 4)
+    assert rel(a.T @ a, flat.T @ np.linalg.solve(campaign.covariance, flat)) < 1e-10
+    fold = np.arange(1, n, 3)
+    a, b = structured.subset(fold).whiten(x[fold]), dense.subset(fold).whiten(x[fold])
+    assert rel(a.T @ a, b.T @ b) < 1e-10
+    by = np.eye(6) + np.random.default_rng(6).normal(size=(n, 6, 6)) * 0.1
+    a, b = structured.mapped(by).whiten(x), dense.mapped(by).whiten(x)
+    assert rel(a.T @ a, b.T @ b) < 1e-10
+
+
+@pytest.mark.parametrize("residuals", ["pose", "leg"])
+def test_the_fit_is_the_dense_fit(campaign: Campaign, residuals: str) -> None:
+    args = (campaign.nominal, campaign.commanded, campaign.measured)
+    assert campaign.structure is not None
+    structured = fit_calibration(*args, campaign.structure, level="joints", residuals=residuals)
+    dense = fit_calibration(*args, campaign.covariance, level="joints", residuals=residuals)
+    assert structured.chi_square == pytest.approx(dense.chi_square, rel=1e-10)
+    assert rel(structured.covariance, dense.covariance) < 1e-9
+    # the optimum to the optimizer's tolerance: a millionth of each standard uncertainty
+    u = np.sqrt(np.diag(dense.covariance))
+    free = u > 0
+    moved = np.abs(structured.parameters - dense.parameters)[free] / u[free]
+    assert moved.max() < 1e-6
+
+
+def test_the_level_choice_is_the_dense_one(campaign: Campaign) -> None:
+    structured = calibrate(campaign)
+    dense = calibrate(dataclasses.replace(campaign, structure=None))
+    assert structured.choice is not None and dense.choice is not None
+    assert structured.choice.level == dense.choice.level
+    for a, b in zip(structured.choice.scores, dense.choice.scores, strict=True):
+        assert a.bic == pytest.approx(b.bic, rel=1e-10)
+        # each fold's fit agrees to the optimizer's tolerance, its held-out RMS with it
+        assert a.heldout_rms_w == pytest.approx(b.heldout_rms_w, rel=1e-7)
+
+
+def test_a_covariance_without_a_band_is_not_forced_into_one() -> None:
+    # every column touches every row: nothing banded to gain
+    from scipy import sparse
+
+    full = sparse.csr_matrix(np.random.default_rng(1).normal(size=(48, 60)))
+    assert BandedCovariance.from_factor(full, [0, 1, 2]) is None
