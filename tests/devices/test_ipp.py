@@ -46,6 +46,7 @@ from hexatherm.errors import (
     IppProtocolError,
     IppTimeout,
 )
+from tests.waiting import SAFETY_S
 
 BALL_DIAMETER_MM = 25.4
 TIP_DIAMETER_MM = 2.0
@@ -474,7 +475,9 @@ def _probe(cmm, centre_mm, n_points=12):
 def test_session_probes_balls_and_the_fit_recovers_the_centres():
     lines: list[str] = []
     with _server(noise_um=0.5, seed=7) as server:
-        with IppClient("127.0.0.1", server.port, timeout_s=30, transcript=lines.append) as cmm:
+        with IppClient(
+            "127.0.0.1", server.port, timeout_s=SAFETY_S, transcript=lines.append
+        ) as cmm:
             cmm.start_session()
             assert not cmm.is_homed()
             cmm.home()
@@ -513,7 +516,7 @@ def test_session_probes_balls_and_the_fit_recovers_the_centres():
 
 
 def test_session_without_noise_is_exact():
-    with _server() as server, IppClient("127.0.0.1", server.port, timeout_s=30) as cmm:
+    with _server() as server, IppClient("127.0.0.1", server.port, timeout_s=SAFETY_S) as cmm:
         _prepare(cmm)
         m = _probe(cmm, CENTRES_MM[0] + [0.5, 0.0, -0.4], n_points=8)
     distance = np.linalg.norm(m.points_mm - CENTRES_MM[0], axis=1)
@@ -525,7 +528,9 @@ def test_fault_severity_2_is_cleared_and_retried_once():
     lines: list[str] = []
     fault = Fault("error", nth=3, method="PtMeas", severity=2)
     with _server(faults=[fault], noise_um=0.5, seed=1) as server:
-        with IppClient("127.0.0.1", server.port, timeout_s=30, transcript=lines.append) as cmm:
+        with IppClient(
+            "127.0.0.1", server.port, timeout_s=SAFETY_S, transcript=lines.append
+        ) as cmm:
             _prepare(cmm)
             m = _probe(cmm, CENTRES_MM[0], n_points=6)
     assert len(m.probed) == 6 and server.touches == 6
@@ -544,7 +549,10 @@ def test_fault_severity_2_is_cleared_and_retried_once():
 
 def test_fault_severity_2_twice_raises_after_one_retry():
     faults = [Fault("error", nth=2, method="PtMeas"), Fault("error", nth=3, method="PtMeas")]
-    with _server(faults=faults) as server, IppClient("127.0.0.1", server.port, timeout_s=30) as cmm:
+    with (
+        _server(faults=faults) as server,
+        IppClient("127.0.0.1", server.port, timeout_s=SAFETY_S) as cmm,
+    ):
         _prepare(cmm)
         cmm.goto(*(CENTRES_MM[0] + [0, 0, 20]))
         top = CENTRES_MM[0] + [0, 0, 12.7]
@@ -562,7 +570,7 @@ def test_fault_severity_3_raises_and_blocks_until_cleared():
     fault = Fault("error", nth=2, method="PtMeas", severity=3)
     with (
         _server(faults=[fault]) as server,
-        IppClient("127.0.0.1", server.port, timeout_s=30) as cmm,
+        IppClient("127.0.0.1", server.port, timeout_s=SAFETY_S) as cmm,
     ):
         _prepare(cmm)
         cmm.goto(*(CENTRES_MM[0] + [0, 0, 20]))
@@ -598,7 +606,7 @@ def test_fault_events_are_routed_apart_from_the_transactions():
     fault = Fault("event", nth=2, method="PtMeas")
     with (
         _server(faults=[fault]) as server,
-        IppClient("127.0.0.1", server.port, timeout_s=30) as cmm,
+        IppClient("127.0.0.1", server.port, timeout_s=SAFETY_S) as cmm,
     ):
         _prepare(cmm)
         m = _probe(cmm, CENTRES_MM[1], n_points=4)
@@ -620,7 +628,7 @@ def test_fault_events_are_routed_apart_from_the_transactions():
     # with a callback instead of the queue
     got: list[IppEvent] = []
     with _server(faults=[Fault("event", nth=5)]) as server:
-        with IppClient("127.0.0.1", server.port, timeout_s=30, on_event=got.append) as cmm:
+        with IppClient("127.0.0.1", server.port, timeout_s=SAFETY_S, on_event=got.append) as cmm:
             _prepare(cmm)
             cmm.goto(0, 0, 300)
     assert len(got) == 2 and cmm.events.empty()
@@ -630,7 +638,9 @@ def test_fault_dropped_connection_names_the_pending_command():
     lines: list[str] = []
     fault = Fault("drop", nth=3, method="PtMeas", after_lines=1)
     with _server(faults=[fault]) as server:
-        with IppClient("127.0.0.1", server.port, timeout_s=60, transcript=lines.append) as cmm:
+        with IppClient(
+            "127.0.0.1", server.port, timeout_s=SAFETY_S, transcript=lines.append
+        ) as cmm:
             _prepare(cmm)
             with pytest.raises(IppConnectionLost, match=r"lost .*while waiting for \d{5} PtMeas\("):
                 _probe(cmm, CENTRES_MM[0], n_points=6)
@@ -638,7 +648,7 @@ def test_fault_dropped_connection_names_the_pending_command():
                 cmm.goto(0, 0, 300)
             assert len(cmm.points) == 2
         # the server is still there for a new connection
-        with IppClient("127.0.0.1", server.port, timeout_s=30) as again:
+        with IppClient("127.0.0.1", server.port, timeout_s=SAFETY_S) as again:
             _prepare(again)
             assert again.is_homed()
     assert any(' * "lost connection closed by the server' in line for line in lines)
@@ -652,7 +662,7 @@ def test_fault_split_lines_give_the_same_points():
     split = [Fault("split", nth=n, method="PtMeas", chunk_bytes=c) for n, c in enumerate(chunks, 1)]
     for faults in ([], split):
         with _server(faults=faults, noise_um=1.0, seed=11) as server:
-            with IppClient("127.0.0.1", server.port, timeout_s=30) as cmm:
+            with IppClient("127.0.0.1", server.port, timeout_s=SAFETY_S) as cmm:
                 _prepare(cmm)
                 results.append(_probe(cmm, CENTRES_MM[0], n_points=8))
     np.testing.assert_array_equal(results[0].points_mm, results[1].points_mm)
@@ -662,7 +672,9 @@ def test_fault_split_lines_give_the_same_points():
 def test_fault_delay_times_out_and_a_short_delay_does_not():
     lines: list[str] = []
     with _server(faults=[Fault("delay", nth=5, delay_s=60.0)]) as server:
-        with IppClient("127.0.0.1", server.port, timeout_s=30, transcript=lines.append) as cmm:
+        with IppClient(
+            "127.0.0.1", server.port, timeout_s=SAFETY_S, transcript=lines.append
+        ) as cmm:
             _prepare(cmm)
             with pytest.raises(
                 IppTimeout,
@@ -671,7 +683,7 @@ def test_fault_delay_times_out_and_a_short_delay_does_not():
                 cmm.transact("GoTo(X(0), Y(0), Z(300))", timeout_s=0.2)
     assert lines[-2].endswith('* "abandon 00005 timeout after 0.2 s"\n')
     with _server(faults=[Fault("delay", nth=5, delay_s=0.05)]) as server:
-        with IppClient("127.0.0.1", server.port, timeout_s=30) as cmm:
+        with IppClient("127.0.0.1", server.port, timeout_s=SAFETY_S) as cmm:
             _prepare(cmm)
             cmm.goto(0, 0, 300)
             assert cmm.get_position() == (0.0, 0.0, 300.0)
@@ -680,7 +692,7 @@ def test_fault_delay_times_out_and_a_short_delay_does_not():
 def test_policy_can_refuse_every_retry_and_errors_name_the_command():
     with _server(faults=[Fault("error", nth=1, method="GoTo")]) as server:
         with IppClient(
-            "127.0.0.1", server.port, timeout_s=30, policy=ClearAndRetry(retries=0)
+            "127.0.0.1", server.port, timeout_s=SAFETY_S, policy=ClearAndRetry(retries=0)
         ) as cmm:
             _prepare(cmm)
             with pytest.raises(
@@ -692,7 +704,7 @@ def test_policy_can_refuse_every_retry_and_errors_name_the_command():
 
 
 def test_client_preconditions():
-    with _server() as server, IppClient("127.0.0.1", server.port, timeout_s=30) as cmm:
+    with _server() as server, IppClient("127.0.0.1", server.port, timeout_s=SAFETY_S) as cmm:
         for bad in (
             lambda: cmm.pt_meas(0, 0, 0, 0, 0, 0),
             lambda: cmm.change_tool('a"b'),
@@ -716,7 +728,7 @@ def test_concurrent_events_do_not_disturb_a_waiting_command():
     seen = threading.Event()
     with _server(faults=[Fault("event", nth=4, events=('KeyPress("F2")',))]) as server:
         with IppClient(
-            "127.0.0.1", server.port, timeout_s=30, on_event=lambda e: seen.set()
+            "127.0.0.1", server.port, timeout_s=SAFETY_S, on_event=lambda e: seen.set()
         ) as cmm:
             _prepare(cmm)
             assert cmm.is_homed()
@@ -728,7 +740,7 @@ def test_a_raising_callback_or_transcript_is_not_swallowed():
         raise RuntimeError("operator display down")
 
     with _server(faults=[Fault("event", nth=2)]) as server:
-        with IppClient("127.0.0.1", server.port, timeout_s=30, on_event=callback) as cmm:
+        with IppClient("127.0.0.1", server.port, timeout_s=SAFETY_S, on_event=callback) as cmm:
             cmm.start_session()
             cmm.home()  # its answer carries the events: the callback raises on the reader
             sent = len(server.commands)
@@ -746,7 +758,7 @@ def test_a_raising_callback_or_transcript_is_not_swallowed():
         lines.append(line)
 
     with _server() as server:
-        with IppClient("127.0.0.1", server.port, timeout_s=60, transcript=sink) as cmm:
+        with IppClient("127.0.0.1", server.port, timeout_s=SAFETY_S, transcript=sink) as cmm:
             cmm.start_session()  # connect, >, <, < : 4 lines
             with pytest.raises(
                 IppConnectionLost, match=r"OSError while recording a line: disk full"
@@ -759,7 +771,7 @@ def test_a_raising_callback_or_transcript_is_not_swallowed():
 def test_client_against_a_plain_dme_1_4_server():
     """Version first, optional queries cleared, points read by name, a stale session ended."""
     with _server(dialect="dme-1.4") as server:
-        with IppClient("127.0.0.1", server.port, timeout_s=30) as cmm:
+        with IppClient("127.0.0.1", server.port, timeout_s=SAFETY_S) as cmm:
             _prepare(cmm)
             assert cmm.dme_version() == ("1.4", (1, 4))
             result, error = cmm.optional("GetProp(Tool.AvrRadius())")
@@ -772,20 +784,23 @@ def test_client_against_a_plain_dme_1_4_server():
             np.testing.assert_allclose(point.point_mm, top, atol=1e-9)
             assert point.er_mm == 0.5 * TIP_DIAMETER_MM
         # the session outlived that connection: the next client ends it and starts anew
-        with IppClient("127.0.0.1", server.port, timeout_s=30) as cmm:
+        with IppClient("127.0.0.1", server.port, timeout_s=SAFETY_S) as cmm:
             assert cmm.start_session() is True
             assert cmm.error_state is None
             tail = [c[6:] for c in server.commands[-4:]]
             assert tail == ["StartSession()", "ClearAllErrors()", "EndSession()", "StartSession()"]
             assert cmm.dme_version() == ("1.4", (1, 4))
-    with _server() as server, IppClient("127.0.0.1", server.port, timeout_s=30) as cmm:
+    with _server() as server, IppClient("127.0.0.1", server.port, timeout_s=SAFETY_S) as cmm:
         assert cmm.start_session() is False
         assert cmm.dme_version() == ("1.4.3", (1, 4, 3))
 
 
 def test_end_session_is_not_sent_in_an_error_state():
     faults = [Fault("error", nth=1, method="GoTo", severity=3)]
-    with _server(faults=faults) as server, IppClient("127.0.0.1", server.port, timeout_s=30) as cmm:
+    with (
+        _server(faults=faults) as server,
+        IppClient("127.0.0.1", server.port, timeout_s=SAFETY_S) as cmm,
+    ):
         _prepare(cmm)
         with pytest.raises(IppCommandError):
             cmm.goto(*(CENTRES_MM[0] + [0, 0, 20]))
@@ -808,7 +823,7 @@ def test_warnings_are_said_not_dropped():
         IppClient(
             "127.0.0.1",
             server.port,
-            timeout_s=30,
+            timeout_s=SAFETY_S,
             transcript=lines.append,
             on_warning=lambda r, w: said.append((r.method, w.severity, w.number)),
         ) as cmm,
