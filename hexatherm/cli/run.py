@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import contextlib
 import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -69,6 +71,20 @@ def _numbers(text: str | None, n: int, what: str) -> tuple[float, ...] | None:
 )
 @click.option(
     "--dry-run", is_flag=True, help="Check the whole plan on both machines; move nothing."
+)
+@click.option(
+    "--dry-run-transcript",
+    "dry_run_transcript",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="With --dry-run: keep its I++ transcript in this file (written once the CMM was "
+    "reached, whether the check passed or not; never replaced without --overwrite, never "
+    "an input, never inside SESSION, which a dry run leaves untouched).",
+)
+@click.option(
+    "--overwrite",
+    is_flag=True,
+    help="Replace an existing --dry-run-transcript file that hexatherm wrote.",
 )
 @click.option("--resume", is_flag=True, help="Continue an interrupted run at its first open ball.")
 @click.option("--tool", default="Probe1", show_default=True, help="The CMM's tool (ChangeTool).")
@@ -217,6 +233,8 @@ def command(
     balls_path: Path | None,
     origin_on_cmm: str | None,
     dry_run: bool,
+    dry_run_transcript: Path | None,
+    overwrite: bool,
     resume: bool,
     tool: str,
     cap_angle: float,
@@ -258,11 +276,12 @@ def command(
     from hexatherm.workflows.acquire.files import load_files
     from hexatherm.workflows.run.resume import ProbeSettings
     from hexatherm.workflows.run.run import BallChecks, RunOptions, run_campaign
-    from hexatherm.workflows.run.run import dry_run as check_plan
     from hexatherm.workflows.run.run.campaign import STOPPED_NOTE
 
     if dry_run and resume:
         raise click.UsageError("--dry-run checks a plan: not with --resume")
+    if (dry_run_transcript is not None or overwrite) and not dry_run:
+        raise click.UsageError("--dry-run-transcript and --overwrite go with --dry-run")
     if (hexapod_path is None or balls_path is None) and not resume:
         raise click.UsageError("--hexapod and --balls are needed (except with --resume)")
     if origin_on_cmm is None and not resume:
@@ -311,7 +330,7 @@ def command(
         # SIGTERM, SIGHUP, SIGQUIT, ... take Ctrl-C's path: the hexapod is sent STOP
         with signals_interrupt():
             if dry_run:
-                check_plan(files, hexapod, options, notify)
+                _dry_run(files, hexapod, options, notify, dry_run_transcript, overwrite)
                 return
             result = run_campaign(files, hexapod, options, notify)
     except KeyboardInterrupt as exc:
@@ -353,3 +372,42 @@ def command(
             f"it (exit status {CHECK_FAILED_EXIT})"
         )
         sys.exit(CHECK_FAILED_EXIT)
+
+
+def _dry_run(
+    files: Any,
+    hexapod: Any,
+    options: Any,
+    notify: Callable[[str, str], None],
+    transcript: Path | None,
+    overwrite: bool,
+) -> None:
+    """``run --dry-run``, its I++ transcript kept in ``transcript`` when given: checked as
+    an output first (not an input, not inside the session folder), written at the end
+    whatever the check found."""
+    from hexatherm.io.outputs import check_output_settled, write_output_file
+    from hexatherm.workflows.run.run import dry_run as check_plan
+
+    if transcript is None:
+        check_plan(files, hexapod, options, notify)
+        return
+    inputs = list(files.paths)
+    if options.session.resolve() in transcript.resolve().parents:
+        raise click.BadParameter(
+            f"{transcript} is inside the session folder {options.session}, which a dry run "
+            "leaves untouched",
+            param_hint="--dry-run-transcript",
+        )
+    check_output_settled(
+        transcript, kind="file", inputs=inputs, overwrite=overwrite, option="--dry-run-transcript"
+    )
+    lines: list[str] = []
+    try:
+        check_plan(files, hexapod, options, notify, transcript=lines.append)
+    finally:
+        if lines:
+            text = "".join(line if line.endswith("\n") else line + "\n" for line in lines)
+            write_output_file(
+                transcript, text, inputs=inputs, overwrite=True, option="--dry-run-transcript"
+            )
+            echo_err(f"wrote {transcript} ({len(lines)} lines)")

@@ -92,6 +92,43 @@ def test_dry_run_names_the_step_out_of_the_stroke(tmp_path: Path, machines: Twin
     assert "4 steps can be measured; nothing moved" in good.stderr
 
 
+def test_dry_run_keeps_its_transcript_where_asked(tmp_path: Path, machines: TwinMachines) -> None:
+    """issue 23: a dry run kept no transcript. It goes to --dry-run-transcript FILE (the
+    session folder stays untouched), whether the tool check passes or not."""
+    plan = write_plan(tmp_path, [[5.0, -3.0, 4.0, 1.0, -2.0, 3.0]])
+    kept = tmp_path / "dry.transcript"
+    good = invoke(*base(plan, machines, tmp_path / "s"), "--dry-run", "--dry-run-transcript", kept)
+    assert good.exit_code == 0, good.output
+    text = kept.read_text()
+    sent = [line for line in text.splitlines() if "StartSession()" in line]
+    assert sent and "EndSession()" in text and "EnumTools()" in text
+    assert f"wrote {kept} ({len(text.splitlines())} lines)" in good.stderr
+    assert not (tmp_path / "s").exists() and machines.world.model.moves == 0
+    # a refused tool: the transcript shows what the CMM answered
+    bad = invoke(
+        *base(plan, machines, tmp_path / "s"), "--dry-run", "--tool", "Probe9",
+        "--dry-run-transcript", kept, "--overwrite",
+    )  # fmt: skip
+    assert bad.exit_code == 1, bad.output
+    assert "Probe9" in bad.output and "wrote" in bad.stderr
+    assert kept.read_text() != text and '\\"Probe1\\"' in kept.read_text()  # EnumTools' answer
+    # never without --dry-run, never inside the session folder, never over a foreign file
+    alone = invoke(*base(plan, machines, tmp_path / "s"), "--dry-run-transcript", kept)
+    assert alone.exit_code == 2 and "go with --dry-run" in alone.output
+    inside = invoke(
+        *base(plan, machines, tmp_path / "s"), "--dry-run",
+        "--dry-run-transcript", tmp_path / "s" / "t.txt",
+    )  # fmt: skip
+    assert inside.exit_code == 2 and not (tmp_path / "s").exists()
+    foreign = tmp_path / "notes.txt"
+    foreign.write_text("mine\n")
+    refused = invoke(
+        *base(plan, machines, tmp_path / "s"), "--dry-run", "--dry-run-transcript", foreign,
+        "--overwrite",
+    )  # fmt: skip
+    assert refused.exit_code == 1 and foreign.read_text() == "mine\n"
+
+
 def test_usage_errors(tmp_path: Path, machines: TwinMachines) -> None:
     plan = write_plan(tmp_path, [[5.0, -3.0, 4.0, 1.0, -2.0, 3.0]])
     args = base(plan, machines, tmp_path / "s")

@@ -200,6 +200,7 @@ def dry_run(
     *,
     clock: Callable[[], float] = time.time,
     sleep: Callable[[float], None] = time.sleep,
+    transcript: Callable[[str], None] | None = None,
 ) -> int:
     """Check the whole plan against both machines' limits without moving either.
 
@@ -208,7 +209,8 @@ def dry_run(
     clearance and travel positions around the nominal prediction) through the CMM's travel
     box when one is given; the CMM is asked whether it knows the tool; the controller's
     state is checked as before a move (PI: servo, referencing, ready, coordinate system).
-    Nothing moves.
+    Nothing moves, and nothing is written into the session folder; ``transcript`` gets
+    every line of the I++ conversation (the caller keeps it where the user asked).
 
     Returns
     -------
@@ -252,11 +254,12 @@ def dry_run(
     finally:
         controller.close()
     host, port = parse_ipp_url(options.cmm_url)
-    # no transcript: a dry run leaves nothing behind (nothing in the session folder)
+    # a dry run leaves nothing in the session folder: its transcript goes to the caller
     with IppClient(
         host,
         port,
         timeout_s=options.ipp_timeout_s,
+        transcript=transcript,
         on_warning=lambda r, w: notify("warn", f"CMM warning on {r.tag} {r.command}: {w}"),
     ) as cmm:
         if cmm.start_session():
