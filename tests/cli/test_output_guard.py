@@ -17,6 +17,10 @@ from click.testing import CliRunner, Result
 
 from hexatherm.cli import main
 from hexatherm.io.manifest import read_manifest
+from hexatherm.workflows.serve import TwinMachines
+from tests.cli.test_run import machines
+
+__all__ = ["machines"]  # the twin's machines, a fixture
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -146,11 +150,16 @@ def checksums(folder: Path) -> dict[str, str]:
     }
 
 
-def record(command: str, plan: Path, session: Path, *extra: object) -> list[str]:
-    """``run`` with no machine answering, or ``acquire`` on a port where nothing comes."""
+def record(
+    command: str, plan: Path, session: Path, *extra: object, controller: str | None = None
+) -> list[str]:
+    """``run`` with no machine answering (or only ``controller``: then the run reaches it,
+    the CMM refuses, and the folder it recorded is kept), or ``acquire`` on a port where
+    nothing comes."""
     if command == "run":
         args: list[object] = [
-            "run", plan, "--cmm", "ipp://127.0.0.1:1", "--controller", "symetrie://127.0.0.1:1",
+            "run", plan, "--cmm", "ipp://127.0.0.1:1",
+            "--controller", controller or "symetrie://127.0.0.1:1",
             "--session", session, "--hexapod", HEXAPOD, "--balls", BALLS,
             "--origin-on-cmm", "450,320,210,0,0,15", "--no-fsync", "--reconnects", "0",
         ]  # fmt: skip
@@ -219,38 +228,45 @@ def test_a_recording_command_refuses_a_folder_with_a_foreign_file(
     assert checksums(lab) == before
 
 
-def test_run_starts_again_only_in_a_folder_it_recorded_unchanged(lab: Path, recorded: Path) -> None:
-    """A run refused before anything was probed can be started again in its folder (and
-    writes its manifest); a file added there, or one of its files edited, is refused."""
+def test_run_starts_again_only_in_a_folder_it_recorded_unchanged(
+    lab: Path, recorded: Path, machines: TwinMachines
+) -> None:
+    """A run refused before anything was probed (the controller answered, the CMM did not)
+    can be started again in its folder (and writes its manifest); a file added there, or
+    one of its files edited, is refused."""
     folder = lab / "new"
-    first = CliRunner().invoke(main, record("run", lab / "plan.yaml", folder))
+    live = {"controller": machines.controller_url}
+    first = CliRunner().invoke(main, record("run", lab / "plan.yaml", folder, **live))
     assert first.exit_code == 1 and "Connection refused" in first.output, first.output
     manifest = read_manifest(folder)
     assert manifest is not None and manifest.recorder == "run"
     assert {"plan.yaml", "balls.yaml", "ipp.transcript", "run.yaml"} <= set(manifest.files)
-    again = CliRunner().invoke(main, record("run", lab / "plan.yaml", folder))
+    again = CliRunner().invoke(main, record("run", lab / "plan.yaml", folder, **live))
     assert again.exit_code == 1 and "Connection refused" in again.output, again.output
     (folder / "notes.txt").write_text("mine\n")
     before = checksums(lab)
-    refused = CliRunner().invoke(main, record("run", lab / "plan.yaml", folder))
+    refused = CliRunner().invoke(main, record("run", lab / "plan.yaml", folder, **live))
     assert refused.exit_code == 1 and "notes.txt (not written by hexatherm)" in refused.output
     assert checksums(lab) == before
     (folder / "notes.txt").unlink()
     with open(folder / "run.yaml", "a") as handle:
         handle.write("# checked\n")
     before = checksums(lab)
-    edited = CliRunner().invoke(main, record("run", lab / "plan.yaml", folder))
+    edited = CliRunner().invoke(main, record("run", lab / "plan.yaml", folder, **live))
     assert edited.exit_code == 1 and "run.yaml (changed since hexatherm wrote it)" in edited.output
     assert checksums(lab) == before
 
 
 def test_resume_continues_only_a_folder_the_same_command_recorded(
-    lab: Path, recorded: Path
+    lab: Path, recorded: Path, machines: TwinMachines
 ) -> None:
-    """A run whose thermocouple port did not open left serial.log (the file acquire
+    """A run stopped by a CMM that did not answer left serial.log (the file acquire
     resumes from): ``acquire --resume`` must not take that folder for its own."""
     folder = lab / "new"
-    args = record("run", lab / "plan.yaml", folder, "--temperature-port", "socket://127.0.0.1:1")
+    args = record(
+        "run", lab / "plan.yaml", folder, "--temperature-port", machines.thermocouples_url,
+        controller=machines.controller_url,
+    )  # fmt: skip
     first = CliRunner().invoke(main, args)
     assert first.exit_code == 1, first.output
     assert (folder / "serial.log").is_file()
@@ -322,12 +338,13 @@ def test_process_overwrite_never_replaces_a_simulated_session_results_links_to(l
 
 
 def test_overwrite_never_replaces_what_a_recording_command_recorded(
-    lab: Path, recorded: Path
+    lab: Path, recorded: Path, machines: TwinMachines
 ) -> None:
     """A run's folder lists its files in its manifest: that makes them the run's, not an
     output --overwrite may replace (a whole folder, or one of its logs)."""
     folder = lab / "new"
-    first = CliRunner().invoke(main, record("run", lab / "plan.yaml", folder))
+    live = {"controller": machines.controller_url}
+    first = CliRunner().invoke(main, record("run", lab / "plan.yaml", folder, **live))
     assert first.exit_code == 1 and "Connection refused" in first.output, first.output
     before = checksums(lab)
     simulate = ["simulate", lab / "scenario.yaml", "-o", folder, "--overwrite"]
@@ -348,7 +365,7 @@ def test_overwrite_never_replaces_what_a_recording_command_recorded(
     replaced = CliRunner().invoke(main, [str(a) for a in [*beside, "--overwrite"]])
     assert replaced.exit_code == 0, replaced.output
     before = checksums(lab)
-    again = CliRunner().invoke(main, record("run", lab / "plan.yaml", folder))
+    again = CliRunner().invoke(main, record("run", lab / "plan.yaml", folder, **live))
     assert again.exit_code == 1, again.output
     assert "centres.csv (written by hexatherm as an output, not recorded by run)" in again.output
     assert checksums(lab) == before

@@ -24,7 +24,7 @@ from hexatherm.cli import main
 from hexatherm.devices.controller import InPositionCriteria
 from hexatherm.devices.serialport import PortSettings
 from hexatherm.devices.thermosim import SentSample
-from hexatherm.errors import IncompleteSession
+from hexatherm.errors import AcquisitionError
 from hexatherm.io.records import iso_to_seconds
 from hexatherm.workflows.acquire.run import session_from_log
 from hexatherm.workflows.run.run import run_campaign
@@ -217,25 +217,23 @@ def test_sigkill_of_run_then_resume_loses_or_doubles_no_temperature_line(tmp_pat
     assert "temperatures: temperatures.csv" in (b.session / "session.yaml").read_text()
 
 
-def test_a_logger_that_does_not_open_stops_the_run_and_its_log_is_kept(tmp_path: Path) -> None:
-    """The thermocouple port refuses (logger off): the run stops before its first move; the
-    same command started again (nothing was sent to the CMM) continues serial.log, never
-    replaces it, and replays into the same temperatures.csv."""
+def test_a_logger_that_does_not_open_stops_the_run_and_leaves_nothing(tmp_path: Path) -> None:
+    """The thermocouple port refuses (logger off): the run stops before it contacts either
+    machine, and records nothing (issue 25: no session folder when nothing was reached);
+    the same command started again with the logger on records the whole campaign, and
+    serial.log replays into the same temperatures.csv."""
     b = make_bench(tmp_path, **SHORT)  # type: ignore[arg-type]
     try:
-        with pytest.raises(IncompleteSession, match="cannot open port socket://127.0.0.1:1"):
+        with pytest.raises(AcquisitionError, match="cannot open port socket://127.0.0.1:1"):
             b.run(temperature_port=PortSettings("socket://127.0.0.1:1"))
         assert b.world.model.moves == 0 and b.machines.cmm.touches == 0
-        first = (b.session / "serial.log").read_bytes()
-        assert b'open temperature "socket://127.0.0.1:1 ' in first
+        assert not b.session.exists()
         b.run(temperature_port=PortSettings(b.machines.thermocouples_url))
     finally:
         b.machines.close()
     log = (b.session / "serial.log").read_bytes()
-    assert log.startswith(first) and log.count(b" rx temperature ") >= 2
-    assert first.endswith(b' end - "interrupted"\n') and log.endswith(b' end - "complete"\n')
-    replay = session_from_log(b.files, b.session / "serial.log", tmp_path / "replay", b.notify)
-    assert not replay.complete
+    assert log.count(b" rx temperature ") >= 2 and log.endswith(b' end - "complete"\n')
+    session_from_log(b.files, b.session / "serial.log", tmp_path / "replay", b.notify)
     assert (tmp_path / "replay" / "temperatures.csv").read_bytes() == (
         b.session / "temperatures.csv"
     ).read_bytes()
