@@ -8,8 +8,8 @@ import click
 
 from hexatherm.cli.options import (
     CHECK_FAILED_EXIT,
-    CheckedFloat,
     clean_errors,
+    coverage_factor_option,
     echo_err,
     interpolation_option,
     lab_option,
@@ -30,15 +30,7 @@ from hexatherm.io.files import ReadOptions
     help="Output folder: hexapod.yaml, parameters.csv, residuals.csv, calibration.json, "
     "report.html, provenance.json [default: the first session's folder/calibration].",
 )
-@click.option(
-    "--coverage-factor",
-    "coverage_factor",
-    type=CheckedFloat(min=0, min_open=True),
-    default=2.0,
-    show_default=True,
-    help="Coverage factor k of the expanded uncertainties U = k u of parameters.csv "
-    "(U, U_um, U_ppm) and the report (> 0).",
-)
+@coverage_factor_option("of parameters.csv (U, U_um, U_ppm) and the report")
 @click.option(
     "--poses",
     type=click.Choice(["corrected", "conventional", "twin"]),

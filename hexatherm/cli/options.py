@@ -338,3 +338,16 @@ tolerance_option = click.option(
     "does not conform / not decidable under ISO 14253-1 (U = k u as a guard band). Over "
     "the session's tolerances: mapping (and a --lab file's).",
 )
+
+
+def coverage_factor_option(what: str) -> Callable[[F], F]:
+    """``--coverage-factor k`` (default 2, > 0) of the expanded uncertainties U = k u
+    ``what`` (the command's own words: where its U appear)."""
+    return click.option(
+        "--coverage-factor",
+        "coverage_factor",
+        type=CheckedFloat(min=0, min_open=True),
+        default=2.0,
+        show_default=True,
+        help=f"Coverage factor k of the expanded uncertainties U = k u {what} (> 0).",
+    )

@@ -14,6 +14,7 @@ from hexatherm.cli.options import (
     ProgressBars,
     check_draws,
     clean_errors,
+    coverage_factor_option,
     echo_err,
     interpolation_option,
     mc_option,
@@ -98,15 +99,7 @@ if TYPE_CHECKING:
     "[default: up to 200 targets; a 1000-target campaign makes it 120 MB].",
 )
 @tolerance_option
-@click.option(
-    "--coverage-factor",
-    "coverage_factor",
-    type=CheckedFloat(min=0, min_open=True),
-    default=2.0,
-    show_default=True,
-    help="Coverage factor k of the expanded uncertainty U = k u that the conformity "
-    "columns of poses.csv use (with tolerances; > 0).",
-)
+@coverage_factor_option("that the conformity columns of poses.csv use (with tolerances)")
 @reading_options
 @clean_errors
 def command(

@@ -7,10 +7,10 @@ from pathlib import Path
 import click
 
 from hexatherm.cli.options import (
-    CheckedFloat,
     ProgressBars,
     check_draws,
     clean_errors,
+    coverage_factor_option,
     echo_err,
     interpolation_option,
     lab_option,
@@ -48,14 +48,8 @@ from hexatherm.io.files import ReadOptions
 @mc_option
 @seed_option
 @quality_threshold_option
-@click.option(
-    "--coverage-factor",
-    "coverage_factor",
-    type=CheckedFloat(min=0, min_open=True),
-    default=2.0,
-    show_default=True,
-    help="Coverage factor k of the expanded uncertainties U = k u in the figure, the "
-    "tables and the verdict (2, as calibration certificates use; > 0).",
+@coverage_factor_option(
+    "in the figure, the tables and the verdict (2, as calibration certificates use)"
 )
 @lab_option
 @tolerance_option
