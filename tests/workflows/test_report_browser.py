@@ -63,14 +63,13 @@ def printed(tmp_path_factory):
     return print_report(SESSION, tmp_path_factory.mktemp("browser"))
 
 
-def print_report(session: Path, folder: Path):
-    """The report of ``session`` printed by Chromium: as :func:`printed`."""
+def print_pdf(page: Path, pdf: Path) -> str:
+    """Print the HTML file ``page`` to ``pdf`` on A4 with headless Chromium (its profile
+    beside ``pdf``) and return the PDF's words with their boxes (``pdftotext -bbox``);
+    skip where no Chromium is installed."""
     chromium = browser()
     if chromium is None:
         pytest.skip("no Chromium (apt-get install -y chromium poppler-utils)")
-    page = build_report(process_session(session))
-    (folder / "report.html").write_text(page, encoding="utf-8")
-    pdf = folder / "report.pdf"
     subprocess.run(
         [
             chromium,
@@ -78,17 +77,27 @@ def print_report(session: Path, folder: Path):
             "--no-sandbox",
             "--disable-gpu",
             "--no-pdf-header-footer",
-            f"--user-data-dir={folder / 'profile'}",
+            f"--user-data-dir={pdf.parent / 'profile'}",
             f"--print-to-pdf={pdf}",
-            (folder / "report.html").as_uri(),
+            page.as_uri(),
         ],
         check=True,
         capture_output=True,
         timeout=SAFETY_S,
     )
-    text = subprocess.run(
+    return subprocess.run(
         [poppler("pdftotext"), "-bbox", str(pdf), "-"], check=True, capture_output=True
     ).stdout.decode("utf-8")
+
+
+def print_report(session: Path, folder: Path):
+    """The report of ``session`` printed by Chromium: as :func:`printed`."""
+    if browser() is None:
+        pytest.skip("no Chromium (apt-get install -y chromium poppler-utils)")
+    page = build_report(process_session(session))
+    (folder / "report.html").write_text(page, encoding="utf-8")
+    pdf = folder / "report.pdf"
+    text = print_pdf(folder / "report.html", pdf)
     pages = [
         (
             float(w),

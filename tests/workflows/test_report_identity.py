@@ -9,7 +9,6 @@ from __future__ import annotations
 import hashlib
 import html
 import shutil
-import subprocess
 from pathlib import Path
 
 import pytest
@@ -19,7 +18,7 @@ from hexatherm.cli import main
 from hexatherm.errors import InputError
 from hexatherm.io.config import read_session
 from hexatherm.io.config.identity import read_lab
-from tests.workflows.test_report_browser import PAGE, WORD, browser, poppler
+from tests.workflows.test_report_browser import PAGE, WORD, print_pdf
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -72,28 +71,7 @@ def session_copy(name: str, tmp_path: Path, extra: str = IDENT) -> Path:
 
 def pdf_pages(page: Path, folder: Path) -> list[str]:
     """The text of every page of ``page`` as Chromium prints it on A4."""
-    chromium = browser()
-    if chromium is None:
-        pytest.skip("no Chromium (apt-get install -y chromium poppler-utils)")
-    pdf = folder / "page.pdf"
-    subprocess.run(
-        [
-            chromium,
-            "--headless",
-            "--no-sandbox",
-            "--disable-gpu",
-            "--no-pdf-header-footer",
-            f"--user-data-dir={folder / 'profile'}",
-            f"--print-to-pdf={pdf}",
-            page.as_uri(),
-        ],
-        check=True,
-        capture_output=True,
-        timeout=120,
-    )
-    text = subprocess.run(
-        [poppler("pdftotext"), "-bbox", str(pdf), "-"], check=True, capture_output=True
-    ).stdout.decode("utf-8")
+    text = print_pdf(page, folder / "page.pdf")
     pages = []
     for width, height, body in PAGE.findall(text):
         words = WORD.findall(body)
