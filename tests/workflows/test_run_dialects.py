@@ -120,3 +120,30 @@ def test_warnings_are_said_and_kept(tmp_path: Path) -> None:
         assert '! Error(1, 1005, \\"PtMeas\\"' in (b.session / "ipp.transcript").read_text()
     finally:
         b.machines.close()
+
+
+@pytest.mark.parametrize("controller", ["symetrie", "pi", "symetrie-pmac"])
+def test_a_plain_dme_1_4_server_with_each_controller_dialect(
+    tmp_path: Path, controller: str
+) -> None:
+    """issue 23: a campaign against a standard DME 1.4 server completes with a controller
+    of each dialect (Symetrie API v2, PI GCS, Symetrie gpascii), and processes to the
+    twin's truth."""
+    b = make_bench(tmp_path, **SHORT, cmm_dialect="dme-1.4")  # type: ignore[arg-type]
+    b.restart(dialect=controller, cmm_dialect="dme-1.4")
+    try:
+        result = b.run()
+        plan = b.files.plan
+        assert result.n_points == len(plan.labels) * 3 * plan.points_per_ball
+        check_complete(b)
+        processed = process_session(b.session)
+        truth = b.world.truth(plan, step_times(b.session, plan.labels))
+        err = (
+            processed.correction.corrected - truth.corrected_pose[processed.correction.target_index]
+        )
+        assert np.abs(err[:, :3]).max() * 1e3 < 0.3
+        assert np.abs(err[:, 3:]).max() * URAD < 10.0
+        assert b.machines.cmm_url.startswith("ipp://")
+        assert controller in b.machines.controller_url.split(":")[0]
+    finally:
+        b.machines.close()
