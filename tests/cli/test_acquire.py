@@ -342,7 +342,14 @@ def test_pty_split_lines_timeout_mid_line_garbage_and_temperature_port(tmp_path)
             for chunk in random_chunks(line + (b"\n" if k % 2 else b"\r\n"), rng, 9):
                 os.write(master, chunk)
             if k % 30 == 0:
+                logged = log_text(session).count("19.6")
                 os.write(t_master, b"21.5 21.6 21.7 21.8 21.9 22.0 19.6\n")
+                # the session may end with the probe's last ball: let the logger's line in
+                # before more probe lines go (an event, not a pause)
+                wait_for(
+                    lambda n=logged: log_text(session).count("19.6") > n,
+                    what="the thermocouple line to be logged",
+                )
 
     thread = threading.Thread(target=device, daemon=True)
     thread.start()
