@@ -360,13 +360,8 @@ class IppClient:
                 attempt += 1
                 continue
             result = self.transact(command, timeout_s=timeout_s)
-            if result.protocol_error is not None:
-                raise IppProtocolError(f"{result.tag} {command}: {result.protocol_error}")
-            failure = result.failure
+            failure = self._failure_of(result, command)
             if failure is None:
-                if self._on_warning is not None:
-                    for warning in result.warnings:
-                        self._on_warning(result, warning)
                 return result
             if self.policy.decide(failure, command, attempt) != "retry":
                 raise IppCommandError(
@@ -378,6 +373,17 @@ class IppClient:
             self.clear_all_errors()
             attempt += 1
 
+    def _failure_of(self, result: TransactionResult, command: str) -> ErrorReport | None:
+        """The error that failed ``result`` (None: it succeeded, and its warnings of
+        severity 0/1 are said to ``on_warning``); IppProtocolError on a broken answer."""
+        if result.protocol_error is not None:
+            raise IppProtocolError(f"{result.tag} {command}: {result.protocol_error}")
+        failure = result.failure
+        if failure is None and self._on_warning is not None:
+            for warning in result.warnings:
+                self._on_warning(result, warning)
+        return failure
+
     def optional(self, command: str) -> tuple[TransactionResult | None, ErrorReport | None]:
         """Send a command whose refusal is not the end of anything (an optional query).
 
@@ -388,13 +394,8 @@ class IppClient:
             and the error returned.
         """
         result = self.transact(command)
-        if result.protocol_error is not None:
-            raise IppProtocolError(f"{result.tag} {command}: {result.protocol_error}")
-        failure = result.failure
+        failure = self._failure_of(result, command)
         if failure is None:
-            if self._on_warning is not None:
-                for warning in result.warnings:
-                    self._on_warning(result, warning)
             return result, None
         if self.error_state is not None:
             self.clear_all_errors()
