@@ -14,7 +14,10 @@
 - ``calibration.json``: level and how it was chosen (every level's BIC and held-out
   RMS), chi-square and degrees of freedom, singular values, condition number and the
   observability indices O1..O5, the pairs of parameters with |rho| > 0.9, the
-  predicted-pose standard uncertainty at the targets (worst and RMS).
+  predicted-pose standard uncertainty at the targets (worst and RMS), and the claim for
+  a new pose over the campaign's span (``new_pose_claim``: worst and typical standard
+  uncertainty, the level's model floor and how it was estimated; see
+  :mod:`hexatherm.workflows.calibrate.claim`).
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ from hexatherm.core.residuals import rms
 from hexatherm.io.config import hexapod_to_yaml
 from hexatherm.io.csvout import csv_text
 from hexatherm.io.provenance import now_iso
+from hexatherm.workflows.calibrate.claim import PoseClaim, pose_claim
 from hexatherm.workflows.calibrate.report import (
     StrokeMap,
     not_explained,
@@ -137,9 +141,39 @@ def _finite(value: float) -> float | None:
     return float(value) if math.isfinite(value) else None
 
 
-def calibration_json(run: Calibration, stroke: StrokeMap | None = None) -> str:
+def claim_record(claim: PoseClaim) -> dict[str, Any]:
+    """``calibration.json``'s ``new_pose_claim``: what the calibration claims for a pose
+    it was not fitted to, over the campaign's span (standard uncertainties, k = 1)."""
+    floor = claim.floor
+
+    def per_component(values: Any) -> dict[str, float]:
+        return dict(zip(COMPONENTS, map(float, values), strict=True))
+
+    return {
+        "meaning": "standard uncertainty (k = 1) of a pose the calibrated model predicts "
+        "for a new commanded pose (not one of the campaign's), relative to O in the "
+        "thermal state of R0: the parameters' uncertainty propagated to the pose and the "
+        "level's model floor, over poses drawn uniformly in the campaign's span inside "
+        "the stroke",
+        "n_poses": len(claim.poses),
+        "worst_um_urad": per_component(claim.worst_um_urad),
+        "typical_rms_um_urad": per_component(claim.typical_um_urad),
+        "parameters_rms_um_urad": per_component(rms(claim.parameters_um_urad, axis=0)),
+        "floor_um_urad": per_component(floor.sigma_um_urad),
+        "floor_method": floor.method,
+        "floor_note": floor.note,
+        "floor_growth_um_urad": per_component(floor.growth_um_urad),
+        "leg_temperature_R0_C": [[float(v) for v in row] for row in floor.leg_temperature_C],
+        "leg_temperature_O_C": [[float(v) for v in row] for row in floor.origin_temperature_C],
+        "leg_reference_temperature_C": _finite(floor.reference_temperature_C),
+    }
+
+
+def calibration_json(
+    run: Calibration, stroke: StrokeMap | None = None, claim: PoseClaim | None = None
+) -> str:
     """``calibration.json`` (see the module text); with ``stroke``, the predicted
-    uncertainty over the campaign's span too."""
+    uncertainty over the campaign's span too; with ``claim``, the claim for new poses."""
     fit = run.fit
     obs = fit.observability
     sigma = fit.predicted_sigma_um_urad(run.campaign.commanded)
@@ -202,6 +236,8 @@ def calibration_json(run: Calibration, stroke: StrokeMap | None = None) -> str:
             "span_lower": [float(v) for v in stroke.lower],
             "span_upper": [float(v) for v in stroke.upper],
         }
+    if claim is not None:
+        doc["new_pose_claim"] = claim_record(claim)
     return json.dumps(doc, indent=1, allow_nan=False) + "\n"
 
 
@@ -213,20 +249,25 @@ def output_files(
     coverage_factor: float = 2.0,
 ) -> dict[str, str]:
     """Every file of the output folder, name -> text; with ``inputs`` (the files the run
-    read) the report too, and the predicted uncertainty over the stroke (``folder``: the
+    read) the report too, and the predicted uncertainty over the stroke; the claim for
+    new poses (:func:`~hexatherm.workflows.calibrate.claim.pose_claim`) always (``folder``: the
     output folder, for the report's relative paths; ``lab_fields``: a lab file's
     identification for the report's header; ``coverage_factor``: k of the expanded
     uncertainties of ``parameters.csv`` and the report)."""
     stroke = None if inputs is None else stroke_map(run)
+    if stroke is None:
+        claim = pose_claim(run)
+    else:
+        claim = pose_claim(run, stroke.poses, stroke.sigma_um_urad)
     files = {
         "hexapod.yaml": calibrated_hexapod_yaml(run),
         "parameters.csv": parameters_csv(run, coverage_factor),
         "residuals.csv": csv_text(residuals_frame(run)),
-        "calibration.json": calibration_json(run, stroke),
+        "calibration.json": calibration_json(run, stroke, claim),
     }
     if stroke is not None and inputs is not None:
         files["report.html"] = report_html(
-            run, stroke, inputs, folder or Path("."), lab_fields, coverage_factor
+            run, stroke, inputs, folder or Path("."), lab_fields, coverage_factor, claim
         )
     return files
 

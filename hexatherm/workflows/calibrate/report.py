@@ -3,8 +3,9 @@
 uncertainty over the stroke.
 
 The page holds: the verdict (level, poses, chi-square per degree of freedom, residuals
-before and after, the worst predicted uncertainty over the stroke); how the level was
-chosen; the parameters with their expanded uncertainty ``U = k u`` (k = 2) and their
+before and after, the claimed uncertainty of a new pose over the stroke, worst and
+typical, with the level's model floor: :mod:`hexatherm.workflows.calibrate.claim`); how
+the level was chosen; the parameters with their expanded uncertainty ``U = k u`` (k = 2) and their
 largest correlation, pairs above 0.9 flagged; the observability (singular values,
 condition number, O1..O5); the map of the predicted uncertainty of a calibrated pose
 over Tx, Ty (the other components at zero) and its worst value over the poses the
@@ -26,6 +27,7 @@ from hexatherm.core.residuals import rms
 from hexatherm.io.csvout import ROW_RESOLUTION, fixed_text
 from hexatherm.io.provenance import current_run, now_iso
 from hexatherm.typing import FloatArray
+from hexatherm.workflows.calibrate.claim import PoseClaim, span_poses
 from hexatherm.workflows.calibrate.run import Calibration
 from hexatherm.workflows.report.page import (
     Cell,
@@ -91,9 +93,7 @@ def stroke_map(run: Calibration, seed: int = 0) -> StrokeMap:
     nominal = run.campaign.nominal
     commanded = run.campaign.commanded
     lower, upper = commanded.min(axis=0), commanded.max(axis=0)
-    draws = np.random.default_rng(seed).uniform(lower, upper, (N_STROKE_POSES, 6))
-    inside = ~nominal.check_stroke(nominal.igm(draws)).any(axis=1)
-    poses = draws[inside]
+    poses = span_poses(run, N_STROKE_POSES, seed)
     sigma = fit.predicted_sigma_um_urad(poses)
     tx = np.linspace(lower[0], upper[0], N_MAP)
     ty = np.linspace(lower[1], upper[1], N_MAP)
@@ -214,6 +214,38 @@ def not_explained(run: Calibration) -> str:
     )
 
 
+def _components_text(values: FloatArray, k: float) -> str:
+    return ", ".join(
+        f"{c} {fixed(k * v, u)} {'µm' if u == 'um' else 'µrad'}"
+        for c, v, u in zip(COMPONENTS, values, UNITS, strict=True)
+    )
+
+
+def claim_lines(stroke: StrokeMap, claim: PoseClaim | None, k: float) -> list[str]:
+    """The verdict's lines on what a new calibrated pose is claimed to be good to."""
+    if claim is None:
+        return [
+            f"Worst predicted uncertainty of a calibrated pose over the campaign's span "
+            f"(U, k = {exact(k)}): {_components_text(stroke.worst_um_urad, k)} "
+            f"({len(stroke.poses)} poses inside the stroke)."
+        ]
+    floor = claim.floor
+    lines = [
+        f"Claimed uncertainty of a new calibrated pose (one not measured) over the "
+        f"campaign's span (U, k = {exact(k)}; {len(claim.poses)} poses inside the "
+        f"stroke): worst {_components_text(claim.worst_um_urad, k)}; typical (RMS) "
+        f"{_components_text(claim.typical_um_urad, k)}."
+    ]
+    if floor.note:
+        lines.append(f"It holds no model floor: {floor.note}.")
+    else:
+        lines.append(
+            f"It includes the level's model floor (k = 1) "
+            f"{_components_text(floor.sigma_um_urad, 1.0)}, from {floor.method}."
+        )
+    return lines
+
+
 def sessions_text(run: Calibration) -> tuple[str, str]:
     """The hexapod (its name and file) and every session with the dates it was measured."""
     from hexatherm.workflows.report.html import session_dates
@@ -231,10 +263,12 @@ def report_html(
     folder: Path,
     lab_fields: dict[str, object] | None = None,
     coverage_factor: float = COVERAGE_FACTOR,
+    claim: PoseClaim | None = None,
 ) -> str:
     """The calibration's report page (see the module text); ``lab_fields``: a lab file's
     identification (the sessions' own ``identification:`` over it, in the order given);
-    ``coverage_factor``: k of every expanded uncertainty ``U = k u`` it prints."""
+    ``coverage_factor``: k of every expanded uncertainty ``U = k u`` it prints; ``claim``:
+    the claim for new poses (the parameters' part alone, over ``stroke``, without it)."""
     from hexatherm.io.config.identity import identification
     from hexatherm.workflows.report.html import header_rows
 
@@ -245,7 +279,6 @@ def report_html(
         rms(run.residuals_before_um_urad, axis=0),
         rms(run.residuals_after_um_urad, axis=0),
     )
-    worst = stroke.worst_um_urad
     how = "chosen by BIC and held-out folds" if run.choice is not None else "forced"
     hexapod, sessions = sessions_text(run)
     verdict = [
@@ -265,13 +298,7 @@ def report_html(
         + " µm; calibrated "
         + ", ".join(fixed(v, "um") for v in after[:3])
         + f" µm ({'held out' if run.heldout else 'in sample'}).",
-        f"Worst predicted uncertainty of a calibrated pose over the campaign's span "
-        f"(U, k = {exact(k)}): "
-        + ", ".join(
-            f"{c} {fixed(k * v, u)} {'µm' if u == 'um' else 'µrad'}"
-            for c, v, u in zip(COMPONENTS, worst, UNITS, strict=True)
-        )
-        + f" ({len(stroke.poses)} poses inside the stroke).",
+        *claim_lines(stroke, claim, k),
     ]
     pairs = fit.high_correlations()
     if pairs:

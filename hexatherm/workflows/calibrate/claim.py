@@ -1,0 +1,139 @@
+"""The calibration's claim for new poses over the stroke: the parameters' uncertainty
+at poses drawn over the campaign's span and the level's model floor
+(:mod:`hexatherm.core.calibration.claim`), from the sessions' thermocouple logs at
+their first reference R0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hexatherm.core.calibration.claim import ModelFloor, combined_sigma, model_floor
+from hexatherm.core.effects import ThermocoupleLog
+from hexatherm.core.residuals import rms
+from hexatherm.typing import FloatArray
+from hexatherm.workflows.calibrate.run import Calibration
+
+#: new poses drawn over the campaign's span for the claim (and the report's map)
+N_SPAN_POSES = 2000
+#: the leg temperatures at O and R0 are the trend of the log's samples this far around
+TREND_MARGIN_S = 300.0
+
+
+def span_poses(run: Calibration, n: int = N_SPAN_POSES, seed: int = 0) -> FloatArray:
+    """New poses drawn uniformly in the span of the campaign's commanded poses (its
+    smallest box, mm and deg), those whose legs stay inside the stroke (seeded)."""
+    nominal = run.campaign.nominal
+    commanded = run.campaign.commanded
+    lower, upper = commanded.min(axis=0), commanded.max(axis=0)
+    draws = np.random.default_rng(seed).uniform(lower, upper, (n, 6))
+    inside = ~nominal.check_stroke(nominal.igm(draws)).any(axis=1)
+    return np.asarray(draws[inside], float)
+
+
+@dataclass(frozen=True)
+class PoseClaim:
+    """What the calibration claims for a new pose over the campaign's span.
+
+    Attributes
+    ----------
+    poses : ndarray, shape (M, 6)
+        The new poses (:func:`span_poses`).
+    parameters_um_urad : ndarray, shape (M, 6)
+        The parameters' part of their standard uncertainty (um, urad).
+    floor : ModelFloor
+        The level's model floor, added to every pose.
+    """
+
+    poses: FloatArray
+    parameters_um_urad: FloatArray
+    floor: ModelFloor
+
+    @property
+    def sigma_um_urad(self) -> FloatArray:
+        """The claimed standard uncertainty (M, 6) of each new pose (um, urad)."""
+        return combined_sigma(self.parameters_um_urad, self.floor)
+
+    @property
+    def worst_um_urad(self) -> FloatArray:
+        """Its largest value (6,) over the new poses."""
+        return np.asarray(self.sigma_um_urad.max(axis=0), float)
+
+    @property
+    def typical_um_urad(self) -> FloatArray:
+        """Its RMS (6,) over the new poses: what a new pose's error is on average."""
+        return np.asarray(rms(self.sigma_um_urad, axis=0), float)
+
+
+def leg_trend_C(
+    times_s: FloatArray, legs_C: FloatArray, at_s: FloatArray, margin_s: float = TREND_MARGIN_S
+) -> FloatArray:
+    """Each leg's temperature (len(at_s), 6) at ``at_s`` from a straight line fitted (least
+    squares) to the log's samples from ``margin_s`` before the first to ``margin_s``
+    after the last of ``at_s``: the trend, without the thermocouples' noise of single
+    samples (which would make a difference of two of them look like growth); the
+    samples joined by straight lines where fewer than 3 fall in the window."""
+    inside = (times_s >= at_s.min() - margin_s) & (times_s <= at_s.max() + margin_s)
+    if np.count_nonzero(inside) < 3:
+        return ThermocoupleLog(times_s, legs_C).legs_at(at_s)
+    t = times_s[inside]
+    mid = t.mean()
+    design = np.column_stack([np.ones(t.size), t - mid])
+    coef = np.linalg.lstsq(design, legs_C[inside], rcond=None)[0]  # (2, 6)
+    return np.asarray(np.column_stack([np.ones(at_s.size), at_s - mid]) @ coef, float)
+
+
+def r0_leg_temperatures(run: Calibration) -> tuple[FloatArray | None, str]:
+    """Every session's leg temperatures at its R0 and at its origin step O (S, 2, 6)
+    from its thermocouple log (:func:`leg_trend_C`), or None and why not."""
+    rows = []
+    for result in run.campaign.results:
+        if result.temperatures is None:
+            return None, f"{result.session.name} has no thermocouple log (temperatures:)"
+        plan = result.session.plan
+        refs = plan.reference_indices
+        r0 = int(refs[0]) if refs.size else plan.origin_index
+        temps = result.temperatures
+        at = np.asarray(result.centres.times_s, float)[[r0, plan.origin_index]]
+        rows.append(leg_trend_C(np.asarray(temps.time_s, float), temps.legs_C, at))
+    return np.asarray(rows, float), ""
+
+
+def pose_claim(
+    run: Calibration,
+    poses: FloatArray | None = None,
+    parameters_um_urad: FloatArray | None = None,
+) -> PoseClaim:
+    """The claim over new ``poses`` (default :func:`span_poses`) whose parameters' part
+    ``parameters_um_urad`` may be given (computed otherwise)."""
+    if poses is None:
+        poses = span_poses(run)
+    if parameters_um_urad is None:
+        parameters_um_urad = run.fit.predicted_sigma_um_urad(poses)
+    campaign = run.campaign
+    legs = campaign.nominal.legs
+    temps, why = r0_leg_temperatures(run)
+    if legs is None:
+        floor = ModelFloor.none("the hexapod file has no leg model (legs:)")
+    elif temps is None:
+        floor = ModelFloor.none(why)
+    else:
+        session = np.concatenate(
+            [
+                np.full(r.correction.target_index.size, i, dtype=np.int64)
+                for i, r in enumerate(campaign.results)
+            ]
+        )
+        floor = model_floor(
+            run.fit,
+            campaign.commanded,
+            campaign.weights_covariance,
+            legs,
+            temps[:, 0],
+            temps[:, 1],
+            session,
+            poses,
+        )
+    return PoseClaim(poses, parameters_um_urad, floor)
