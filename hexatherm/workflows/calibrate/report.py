@@ -391,7 +391,8 @@ def report_html(
             _map_figure(stroke, run.campaign.commanded),
             "predicted uncertainty map",
             "Largest predicted standard uncertainty (k = 1) of Tx, Ty, Tz of a pose the "
-            "calibrated model predicts, over Tx and Ty with the other components at zero; "
+            "calibrated model predicts, from its parameters' uncertainty (the claim adds "
+            "the level's model floor), over Tx and Ty with the other components at zero; "
             "blank: out of the stroke. Crosses: the campaign's targets (all components).",
         )
     )
