@@ -30,7 +30,9 @@ from hexatherm.io.files import ReadOptions
     help="Output folder: hexapod.yaml, parameters.csv, residuals.csv, calibration.json, "
     "report.html, provenance.json [default: the first session's folder/calibration].",
 )
-@coverage_factor_option("of parameters.csv (U, U_um, U_ppm) and the report")
+@coverage_factor_option(
+    "of parameters.csv (U, U_um, U_ppm), the report and the new-pose claim on screen"
+)
 @click.option(
     "--poses",
     type=click.Choice(["corrected", "conventional", "twin"]),
@@ -106,7 +108,11 @@ def command(
     """
     from hexatherm.io.config import read_session
     from hexatherm.io.outputs import check_output_settled, output_dir
-    from hexatherm.workflows.calibrate.outputs import output_files, summary_lines
+    from hexatherm.workflows.calibrate.outputs import (
+        claim_lines,
+        output_files,
+        summary_lines,
+    )
     from hexatherm.workflows.calibrate.run import (
         TwinModel,
         calibrate,
@@ -166,7 +172,7 @@ def command(
     with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
         for name, text in files.items():
             (tmp / name).write_text(text, encoding="utf-8")
-    for line in summary_lines(run):
+    for line in summary_lines(run) + claim_lines(files["calibration.json"], coverage_factor):
         click.echo(line)
     for name in files:
         echo_err(f"wrote {out / name}")

@@ -24,7 +24,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
+from hexatherm.cli import main
 from hexatherm.core.geometry import to_um_urad
 from hexatherm.io.scenario import read_scenario
 from hexatherm.workflows.calibrate.claim import pose_claim
@@ -156,3 +158,22 @@ def test_no_thermocouple_log_no_floor_said(tmp_path: Path) -> None:
     assert np.all(claim.floor.sigma_um_urad == 0.0)
     assert "no thermocouple log" in claim.floor.note
     assert np.allclose(claim.sigma_um_urad, claim.parameters_um_urad)
+
+
+def test_screen_shows_the_claim_of_calibration_json(tmp_path: Path) -> None:
+    campaign(tmp_path, 5)
+    out = tmp_path / "out"
+    result = CliRunner().invoke(
+        main,
+        ["calibrate", str(tmp_path / "s5"), "-o", str(out), "--level", "joints"]
+        + ["--coverage-factor", "3"],
+    )
+    assert result.exit_code == 0, result.output
+    record = json.loads((out / "calibration.json").read_text())["new_pose_claim"]
+    lines = {line.split()[0]: line.split() for line in result.stdout.splitlines() if line}
+    assert "new" in lines and "(k = 3)" in result.stdout
+    for name, key in (("worst", "worst_um_urad"), ("typical", "typical_rms_um_urad")):
+        shown = np.array(lines[name][1:7], dtype=float)
+        assert np.allclose(shown, 3.0 * np.array(list(record[key].values())), atol=6e-4)
+    floor = np.array(lines["floor"][4:10], dtype=float)
+    assert np.allclose(floor, list(record["floor_um_urad"].values()), atol=6e-4)

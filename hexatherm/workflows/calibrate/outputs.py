@@ -272,6 +272,24 @@ def output_files(
     return files
 
 
+def claim_lines(calibration_json_text: str, coverage_factor: float = 2.0) -> list[str]:
+    """What the terminal shows of ``calibration.json``'s ``new_pose_claim``: the worst
+    and typical U = k u of a new pose over the span, and the floor in it."""
+    record = json.loads(calibration_json_text)["new_pose_claim"]
+    k = coverage_factor
+    head = f"new pose, U (k = {k:g})"
+    lines = [f"{head:19} " + " ".join(f"{c:>9}" for c in COMPONENTS)]
+    for name, key in (("worst", "worst_um_urad"), ("typical", "typical_rms_um_urad")):
+        values = [k * v for v in record[key].values()]
+        lines.append(f"{'  ' + name:19} " + " ".join(f"{v:9.3f}" for v in values))
+    floor = " ".join(f"{v:9.3f}" for v in record["floor_um_urad"].values())
+    lines.append(
+        f"{'  floor (k = 1)':19} {floor}"
+        + (f"   (none: {record['floor_note']})" if record["floor_note"] else "   (in the U)")
+    )
+    return lines
+
+
 def summary_lines(run: Calibration) -> list[str]:
     """What the terminal shows: level, fit, residuals before and after."""
     fit = run.fit
