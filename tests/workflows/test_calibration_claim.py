@@ -128,6 +128,13 @@ def test_floor_is_the_error_of_a_noise_free_calibration(tmp_path: Path, seed: in
     assert floor[2] > 0.1  # Tz, um: the 15 ppm gain the joints cannot model
     parameters = np.sqrt(np.mean(claim.parameters_um_urad**2, axis=0))
     assert np.all(parameters < 0.2 * floor), (parameters, floor)  # the floor alone
+    # the gains absorb R0's growth; the legs' warming between O and R0 stays (Tz)
+    gains = calibrate(run.campaign, level="joints+gains")
+    claim = pose_claim(gains, held)
+    error = to_um_urad(gains.fit.predict(held) - heldout_truth(spec, held))
+    tz = np.sqrt(np.mean(error[:, 2] ** 2))
+    assert abs(claim.floor.sigma_um_urad[2] / tz - 1.0) < 0.1, (claim.floor.sigma_um_urad, tz)
+    assert claim.floor.sigma_um_urad[2] < 0.6 * floor[2]
 
 
 def test_calibration_json_and_report_say_the_claim_and_its_floor(tmp_path: Path) -> None:
@@ -177,3 +184,17 @@ def test_screen_shows_the_claim_of_calibration_json(tmp_path: Path) -> None:
         assert np.allclose(shown, 3.0 * np.array(list(record[key].values())), atol=6e-4)
     floor = np.array(lines["floor"][4:10], dtype=float)
     assert np.allclose(floor, list(record["floor_um_urad"].values()), atol=6e-4)
+
+
+def test_report_says_the_claim_covers_only_the_model_when_it_does_not_explain(
+    tmp_path: Path,
+) -> None:
+    """The offsets level leaves the 50 um joint errors in the residuals: the chi-square
+    test fails, and the claim (parameters and floor) is said to cover only the model."""
+    run, _ = campaign(tmp_path, 6)
+    offsets = calibrate(run.campaign, level="offsets")
+    assert not offsets.fit.explains_poses
+    page = output_files(offsets, [tmp_path / "s6" / "session.yaml"], tmp_path / "o")["report.html"]
+    assert "this claim covers only what it models" in page
+    page = output_files(run, [tmp_path / "s6" / "session.yaml"], tmp_path / "o")["report.html"]
+    assert "this claim covers only what it models" not in page

@@ -221,8 +221,11 @@ def _components_text(values: FloatArray, k: float) -> str:
     )
 
 
-def claim_lines(stroke: StrokeMap, claim: PoseClaim | None, k: float) -> list[str]:
-    """The verdict's lines on what a new calibrated pose is claimed to be good to."""
+def claim_lines(
+    stroke: StrokeMap, claim: PoseClaim | None, k: float, explained: bool = True
+) -> list[str]:
+    """The verdict's lines on what a new calibrated pose is claimed to be good to
+    (``explained``: whether the model explains the poses, the chi-square test)."""
     if claim is None:
         return [
             f"Worst predicted uncertainty of a calibrated pose over the campaign's span "
@@ -242,6 +245,11 @@ def claim_lines(stroke: StrokeMap, claim: PoseClaim | None, k: float) -> list[st
         lines.append(
             f"It includes the level's model floor (k = 1) "
             f"{_components_text(floor.sigma_um_urad, 1.0)}, from {floor.method}."
+        )
+    if not explained:
+        lines.append(
+            "The model does not explain the poses (above): this claim covers only what "
+            "it models, and the held-out residuals say more of the error than it does."
         )
     return lines
 
@@ -298,7 +306,7 @@ def report_html(
         + " µm; calibrated "
         + ", ".join(fixed(v, "um") for v in after[:3])
         + f" µm ({'held out' if run.heldout else 'in sample'}).",
-        *claim_lines(stroke, claim, k),
+        *claim_lines(stroke, claim, k, fit.explains_poses),
     ]
     pairs = fit.high_correlations()
     if pairs:
