@@ -1,4 +1,4 @@
-"""Screenshots of the shipped sessions' reports, for the README: ``docs/report-<session>.png``.
+"""Screenshots of the shipped sessions' reports, for docs/report.md: ``docs/report-<session>.png``.
 
 Each session's report is written by the command line (``python -m hexatherm report
 SESSION -o TMP/report.html``, so its provenance block shows a real command line) into a
