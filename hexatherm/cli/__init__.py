@@ -36,7 +36,7 @@ from hexatherm import __version__
 #: shared machine its threads spin waiting for each other (calibrate --level auto, 100
 #: targets: 6.5 s of CPU with the default threads on 2 loaded cores, 0.6 s with one;
 #: issue 26). The outputs are the same bytes either way (checked on the commands'
-#: outputs, see the README's Speed section).
+#: outputs, see docs/speed.md).
 BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
 for _name in BLAS_THREAD_VARIABLES:
     os.environ.setdefault(_name, "1")

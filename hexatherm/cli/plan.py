@@ -390,7 +390,7 @@ def command(
                 "note: O and R0 are measured once: their error is common to every corrected "
                 "pose, so it does not average out in the calibration; --origin-repeats 4 "
                 "--reference0-repeats 4, measured before the legs warm, remove most of it "
-                "(README, 'The paper's claim, measured')"
+                "(docs/calibrate.md, 'The paper's claim, measured')"
             )
     for gap in made.gaps:
         echo_err(

@@ -13,7 +13,7 @@ covariance of reference j's leg lengths from its own centres; O's and R0's noise
 to every reference and the spline reproduces constants, so it cancels). What the observed
 residuals hold beyond that is the smooth fit's own error (:func:`growth_excess`, a Type A
 evaluation). Which of the three residuals carries the error to the targets was chosen
-against a simulated twin's truth (README, Uncertainty): the in-sample residuals claimed
+against a simulated twin's truth (docs/uncertainty.md): the in-sample residuals claimed
 0.73x of the error on heating switched on mid-session, the leave-one-out ones 1.47x, the
 standardized ones 0.95x.
 """

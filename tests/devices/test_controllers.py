@@ -135,7 +135,7 @@ def rig_factory() -> Iterator[Callable[..., Rig]]:
 
 
 def scipy_rotation(pose: np.ndarray, convention: str) -> np.ndarray:
-    """The rotation matrix of a pose by scipy (README: symetrie 'xyz', pi 'XYZ')."""
+    """The rotation matrix of a pose by scipy (docs/method.md: symetrie 'xyz', pi 'XYZ')."""
     seq = "xyz" if convention == "symetrie" else "XYZ"
     return Rotation.from_euler(seq, pose[3:], degrees=True).as_matrix()
 

@@ -11,6 +11,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from hexatherm.core.planning import DEFAULT_SECONDS_PER_MOVE, DEFAULT_SECONDS_PER_POINT
 from hexatherm.errors import IncompleteSession
 from hexatherm.io.records import iso_to_seconds
 from hexatherm.workflows.run.run import run_campaign
@@ -26,18 +27,31 @@ STEP_LINE = re.compile(
 
 
 def test_pace_corrects_the_plan_timing_by_the_measured_pace() -> None:
-    # the model: 30 s a move, 6 points x 3 s a ball (18 s); the run goes at its own pace
+    # the model: plan's defaults, a move of M s, 6 points a ball of B s; the run goes at
+    # its own pace
+    move, ball = DEFAULT_SECONDS_PER_MOVE, 6 * DEFAULT_SECONDS_PER_POINT
+    assert (move, ball) == (20.0, pytest.approx(14.4))  # plan --help's defaults
     pace = Pace(6)
-    assert pace.eta_s(900.0, moves_left=4, balls_left=12) == 900.0 + 4 * 30 + 12 * 18
+    assert pace.eta_s(900.0, moves_left=4, balls_left=12) == pytest.approx(
+        900.0 + 4 * move + 12 * ball
+    )
     pace.move_started(1000.0)  # the setup before (100 s here) is not counted
     pace.moved()  # no ball yet: the model's pace
-    assert pace.eta_s(1045.0, moves_left=3, balls_left=12) == 1045.0 + 3 * 30 + 12 * 18
+    assert pace.eta_s(1045.0, moves_left=3, balls_left=12) == pytest.approx(
+        1045.0 + 3 * move + 12 * ball
+    )
     for _ in range(3):
-        pace.probed()  # 30 + 54 = 84 model seconds done in 126 s: 1.5 times slower
-    assert pace.eta_s(1126.0, moves_left=3, balls_left=9) == 1126.0 + (3 * 30 + 9 * 18) * 1.5
-    pace.move_started(1126.0)  # only the first move starts the pace's clock
-    pace.moved()  # 114 model seconds in 171 s: 1.5 again
-    assert pace.eta_s(1171.0, moves_left=2, balls_left=9) == 1171.0 + (2 * 30 + 9 * 18) * 1.5
+        pace.probed()
+    now = 1000.0 + 1.5 * (move + 3 * ball)  # the model's seconds done, 1.5 times slower
+    assert pace.eta_s(now, moves_left=3, balls_left=9) == pytest.approx(
+        now + (3 * move + 9 * ball) * 1.5
+    )
+    pace.move_started(now)  # only the first move starts the pace's clock
+    pace.moved()
+    now = 1000.0 + 1.5 * (2 * move + 3 * ball)  # 1.5 again
+    assert pace.eta_s(now, moves_left=2, balls_left=9) == pytest.approx(
+        now + (2 * move + 9 * ball) * 1.5
+    )
     assert duration_text(7530.4) == "2 h 05 min" and duration_text(59.6) == "1 min 00 s"
 
 
@@ -74,13 +88,14 @@ def test_each_step_line_has_its_clock_time_and_the_campaigns_eta(tmp_path: Path)
         # the clock time is the one steps.csv recorded for the step, to the second
         now_s = iso_to_seconds(steps["time"][k])
         assert datetime.fromisoformat(match[5]).timestamp() == math.floor(now_s)
-        # the ETA, from what the session recorded: the plan's model (30 s a move, 3 s a
-        # point) for the work left, scaled by the time taken since the first move over
+        # the ETA, from what the session recorded: the plan's default model (20 s a
+        # move, 2.4 s a point) for the work left, scaled by the time taken since the first move over
         # the model's time of the moves in position and the balls accepted (the model's
         # pace before the first ball)
         done_balls = int((last_point < now_s).sum())
-        done_model_s = (k + 1) * 30.0 + done_balls * ppb * 3.0
-        left_model_s = (n - 1 - k) * 30.0 + (n - k) * len(names) * ppb * 3.0
+        (move, point) = (DEFAULT_SECONDS_PER_MOVE, DEFAULT_SECONDS_PER_POINT)
+        done_model_s = (k + 1) * move + done_balls * ppb * point
+        left_model_s = (n - 1 - k) * move + (n - k) * len(names) * ppb * point
         ratio = (now_s - start_s) / done_model_s if done_balls else 1.0
         expected = now_s + left_model_s * ratio
         eta = datetime.fromisoformat(match[6]).timestamp()

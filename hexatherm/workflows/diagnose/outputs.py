@@ -4,7 +4,7 @@
 ``baseline_rms_um``, ``added`` (each with ``effect``, ``parameters``,
 ``std_errors``, ``delta_bic``, ``rms_before_um``, ``rms_after_um``,
 ``heldout_rms_before_um``, ``heldout_rms_after_um``) and ``final_rms_um``, and
-these extensions, documented in the README:
+these extensions, documented in docs/diagnose.md:
 
 * ``parameters`` and ``std_errors`` of an ``added`` entry are those of the final
   joint fit of every added effect (the values written to ``hexapod.yaml``);

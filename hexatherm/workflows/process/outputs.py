@@ -1,7 +1,7 @@
 """Result tables of ``hexatherm process``: poses, legs, fits, quality and the screen table.
 
 ``poses.csv`` has the contract columns first (spec: "Results of hexatherm
-process"), then these extensions, documented in the README:
+process"), then these extensions, documented in docs/files.md:
 
 * ``Tx_cmd_mm`` .. ``Rz_cmd_deg``: the commanded pose of the target;
 * ``dq_leg1_um`` .. ``dq_leg6_um``: thermal growth of each leg at S_i (relative

@@ -16,10 +16,13 @@ from __future__ import annotations
 
 from datetime import datetime
 
+from hexatherm.core.planning import DEFAULT_SECONDS_PER_MOVE, DEFAULT_SECONDS_PER_POINT
+
 #: the plan's timing model (``hexatherm plan --seconds-per-point/--seconds-per-move``
-#: defaults): only their ratio matters once the run has a measured pace
-SECONDS_PER_POINT = 3.0
-SECONDS_PER_MOVE = 30.0
+#: defaults, the same as ``simulate``'s): only their ratio matters once the run has a
+#: measured pace
+SECONDS_PER_POINT = DEFAULT_SECONDS_PER_POINT
+SECONDS_PER_MOVE = DEFAULT_SECONDS_PER_MOVE
 
 
 def clock_text(seconds: float) -> str:
