@@ -134,7 +134,7 @@ def campaign_folder(
 def heldout_error_um(campaign: Campaign, truth: np.ndarray, held: np.ndarray) -> float:
     """RMS translation error (um) of the calibrated predictions of ``held`` poses."""
     fit = fit_calibration(
-        campaign.nominal, campaign.commanded, campaign.measured, campaign.covariance
+        campaign.nominal, campaign.commanded, campaign.measured, campaign.weights_covariance
     )
     true_poses, _ = CalibrationModel(campaign.nominal, "joints+gains").predict(truth, held)
     error = (fit.predict(held) - true_poses)[:, :3] * 1e3

@@ -8,10 +8,12 @@ import dataclasses
 
 import numpy as np
 import pytest
+from scipy.linalg import block_diag
 
 from hexatherm.core.calibration import BandedCovariance, PoseWeights, fit_calibration
 from hexatherm.io.scenario import read_scenario
 from hexatherm.workflows.calibrate.run import Campaign, calibrate, read_campaign
+from hexatherm.workflows.process.uncertainty import joint_pose_covariance
 from hexatherm.workflows.simulate.run import simulate
 from hexatherm.workflows.simulate.twinsession import write_files
 from tests.sessions import calibration_scenario, calibration_targets
@@ -37,62 +39,70 @@ def campaign(tmp_path_factory: pytest.TempPathFactory) -> Campaign:
     return read_campaign(folders)
 
 
+@pytest.fixture(scope="module")
+def dense(campaign: Campaign) -> np.ndarray:
+    """The campaign's covariance by the dense propagation, session by session."""
+    return block_diag(*[joint_pose_covariance(r) for r in campaign.results])
+
+
 def rel(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.abs(a - b).max() / np.abs(b).max())
 
 
-def test_the_structure_is_the_dense_covariance(campaign: Campaign) -> None:
+def test_the_structure_is_the_dense_covariance(campaign: Campaign, dense: np.ndarray) -> None:
     structure = campaign.structure
     assert structure is not None
+    assert campaign.dense_covariance is None  # the dense matrix is not built for the fit
     n = campaign.measured.shape[0]
     assert structure.band.shape == (12, 6 * n)  # a pose and its neighbour: 12 diagonals
     assert structure.common.shape == (6 * n, 2 * 2 * 9)  # O and R0 of 3 balls, 2 sessions
-    assert rel(structure.dense(), campaign.covariance) < 1e-13
+    assert rel(structure.dense(), dense) < 1e-13
+    assert rel(campaign.covariance, dense) < 1e-13  # on request
     # there is something between the targets to get right: the off-band part is O and R0
-    cov = campaign.covariance
+    cov = dense
     assert np.abs(cov[:6, 60:66]).max() > 0.01 * np.sqrt(cov[0, 0] * cov[60, 60])
 
 
-def test_whitening_keeps_every_inner_product(campaign: Campaign) -> None:
+def test_whitening_keeps_every_inner_product(campaign: Campaign, dense: np.ndarray) -> None:
     assert campaign.structure is not None
     n = campaign.measured.shape[0]
     x = np.random.default_rng(5).normal(size=(n, 6, 4)) * 1e-3
     structured = PoseWeights(campaign.structure, n)
-    dense = PoseWeights(campaign.covariance, n)
-    a, b = structured.whiten(x), dense.whiten(x)
+    full = PoseWeights(dense, n)
+    a, b = structured.whiten(x), full.whiten(x)
     assert rel(a.T @ a, b.T @ b) < 1e-10
     # x^T C^-1 x against a solve with the dense matrix
     flat = x.reshape(6 * n, 4)
-    assert rel(a.T @ a, flat.T @ np.linalg.solve(campaign.covariance, flat)) < 1e-10
+    assert rel(a.T @ a, flat.T @ np.linalg.solve(dense, flat)) < 1e-10
     fold = np.arange(1, n, 3)
-    a, b = structured.subset(fold).whiten(x[fold]), dense.subset(fold).whiten(x[fold])
+    a, b = structured.subset(fold).whiten(x[fold]), full.subset(fold).whiten(x[fold])
     assert rel(a.T @ a, b.T @ b) < 1e-10
     by = np.eye(6) + np.random.default_rng(6).normal(size=(n, 6, 6)) * 0.1
-    a, b = structured.mapped(by).whiten(x), dense.mapped(by).whiten(x)
+    a, b = structured.mapped(by).whiten(x), full.mapped(by).whiten(x)
     assert rel(a.T @ a, b.T @ b) < 1e-10
 
 
 @pytest.mark.parametrize("residuals", ["pose", "leg"])
-def test_the_fit_is_the_dense_fit(campaign: Campaign, residuals: str) -> None:
+def test_the_fit_is_the_dense_fit(campaign: Campaign, dense: np.ndarray, residuals: str) -> None:
     args = (campaign.nominal, campaign.commanded, campaign.measured)
     assert campaign.structure is not None
     structured = fit_calibration(*args, campaign.structure, level="joints", residuals=residuals)
-    dense = fit_calibration(*args, campaign.covariance, level="joints", residuals=residuals)
-    assert structured.chi_square == pytest.approx(dense.chi_square, rel=1e-10)
-    assert rel(structured.covariance, dense.covariance) < 1e-9
+    full = fit_calibration(*args, dense, level="joints", residuals=residuals)
+    assert structured.chi_square == pytest.approx(full.chi_square, rel=1e-10)
+    assert rel(structured.covariance, full.covariance) < 1e-9
     # the optimum to the optimizer's tolerance: a millionth of each standard uncertainty
-    u = np.sqrt(np.diag(dense.covariance))
+    u = np.sqrt(np.diag(full.covariance))
     free = u > 0
-    moved = np.abs(structured.parameters - dense.parameters)[free] / u[free]
+    moved = np.abs(structured.parameters - full.parameters)[free] / u[free]
     assert moved.max() < 1e-6
 
 
-def test_the_level_choice_is_the_dense_one(campaign: Campaign) -> None:
+def test_the_level_choice_is_the_dense_one(campaign: Campaign, dense: np.ndarray) -> None:
     structured = calibrate(campaign)
-    dense = calibrate(dataclasses.replace(campaign, structure=None))
-    assert structured.choice is not None and dense.choice is not None
-    assert structured.choice.level == dense.choice.level
-    for a, b in zip(structured.choice.scores, dense.choice.scores, strict=True):
+    full = calibrate(dataclasses.replace(campaign, structure=None, dense_covariance=dense))
+    assert structured.choice is not None and full.choice is not None
+    assert structured.choice.level == full.choice.level
+    for a, b in zip(structured.choice.scores, full.choice.scores, strict=True):
         assert a.bic == pytest.approx(b.bic, rel=1e-10)
         # each fold's fit agrees to the optimizer's tolerance, its held-out RMS with it
         assert a.heldout_rms_w == pytest.approx(b.heldout_rms_w, rel=1e-7)
