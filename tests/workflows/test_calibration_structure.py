@@ -10,7 +10,12 @@ import numpy as np
 import pytest
 from scipy.linalg import block_diag
 
-from hexatherm.core.calibration import BandedCovariance, PoseWeights, fit_calibration
+from hexatherm.core.calibration import (
+    BandedCovariance,
+    CalibrationModel,
+    PoseWeights,
+    fit_calibration,
+)
 from hexatherm.io.scenario import read_scenario
 from hexatherm.workflows.calibrate.run import Campaign, calibrate, read_campaign
 from hexatherm.workflows.process.uncertainty import joint_pose_covariance
@@ -114,3 +119,25 @@ def test_a_covariance_without_a_band_is_not_forced_into_one() -> None:
 
     full = sparse.csr_matrix(np.random.default_rng(1).normal(size=(48, 60)))
     assert BandedCovariance.from_factor(full, [0, 1, 2]) is None
+
+
+def test_each_point_is_evaluated_once(campaign: Campaign, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A fit evaluates the model (an FGM of every pose) once per point the optimizer
+    tries: the start's rank check is its first evaluation, the solution's residuals,
+    Jacobian and predictions are its last (issue 24, item 5: 1000 targets)."""
+    calls = []
+    predict = CalibrationModel.predict
+
+    def counted(self: CalibrationModel, theta: np.ndarray, poses: np.ndarray) -> object:
+        calls.append(np.asarray(theta).copy())
+        return predict(self, theta, poses)
+
+    monkeypatch.setattr(CalibrationModel, "predict", counted)
+    args = (campaign.nominal, campaign.commanded, campaign.measured, campaign.weights_covariance)
+    fit = fit_calibration(*args, level="joints")
+    assert len(calls) == fit.n_evaluations
+    assert len({c.tobytes() for c in calls}) == len(calls)  # no point twice
+    monkeypatch.undo()
+    # and the fit is the one the model's predictions give at its parameters
+    again = campaign.measured - fit.model.predict(fit.parameters, campaign.commanded)[0]
+    np.testing.assert_allclose(fit.residuals, again, rtol=0, atol=1e-12)
