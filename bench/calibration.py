@@ -11,7 +11,9 @@ of ``accuracy`` (the default), ``speed``, ``design`` (comma-separated, or ``all`
   median of ``--repeats`` runs, with the machine's load average before and after. The
   sessions are ``bench/analyses.py``'s (cached in ``bench/.cache/``):
   ``tests.sessions.calibration_scenario``, the Symetrie-like hexapod with joint and
-  offset errors, 12 points per ball on a 70 deg cap at 0.3 um, R around each target.
+  offset errors, 12 points per ball on a 70 deg cap at 0.3 um, R around each target;
+  with ``--sessions K`` the targets are split into K such sessions (seeds 7, 8, ...) of
+  one true hexapod, all calibrated together.
 - ``design``: ``bench/design.py`` over ``--seeds`` seeds (8 if not given): for 200
   candidate poses, 30 chosen by each criterion of ``plan --calibration-criterion``
   (d-optimal, g-optimal, i-optimal), the predicted worst and RMS standard uncertainty of
@@ -182,7 +184,38 @@ def true_poses_both(
 SECTIONS = ("accuracy", "speed", "design")
 
 
-def speed(sizes: list[int], levels: list[str], repeats: int) -> None:
+def split_sessions(n_targets: int, n_sessions: int) -> list[Path]:
+    """``n_targets`` in ``n_sessions`` sessions of one true hexapod (cached in
+    ``bench/.cache/``), each as ``bench/analyses.py``'s calibration session: seeds 7, 8,
+    ..., the same geometry errors (seed 11)."""
+    from analyses import CACHE  # type: ignore[import-not-found]
+
+    from tests.sessions import calibration_scenario, calibration_targets
+
+    root = CACHE / f"calibrate-{n_targets}-in-{n_sessions}"
+    folders = []
+    for i in range(n_sessions):
+        seed = 7 + i
+        folder = root / f"s{i}"
+        if not (folder / "session.yaml").is_file():
+            text = calibration_scenario(
+                calibration_targets(seed, n_targets // n_sessions),
+                geometry_seed=11,
+                seed=seed,
+                name=f"calibrate-{n_targets}-in-{n_sessions}-{i}",
+                points_per_ball=12,
+                cmm={"point_noise_um": 0.3, "cap_angle_deg": 70},
+                timing={"seconds_per_point": 2.0, "seconds_per_move": 20},
+                thermocouples={"period_s": 30, "noise_C": 0.02},
+            )
+            root.mkdir(parents=True, exist_ok=True)
+            (root / f"s{i}.yaml").write_text(text)
+            write_files(simulate(read_scenario(root / f"s{i}.yaml")).files, folder)
+        folders.append(folder)
+    return folders
+
+
+def speed(sizes: list[int], levels: list[str], repeats: int, sessions: int) -> None:
     """Print calibrate's CPU seconds per size and level (see the module text)."""
     sys.path.insert(0, str(ROOT / "bench"))
     from analyses import (  # type: ignore[import-not-found]
@@ -191,22 +224,23 @@ def speed(sizes: list[int], levels: list[str], repeats: int) -> None:
         median,
     )
 
-    folders = {n: calibration_session(n) for n in sizes}  # simulated first, not timed
+    # simulated first, not timed
+    folders = {
+        n: [calibration_session(n)] if sessions == 1 else split_sessions(n, sessions) for n in sizes
+    }
     print(
-        f"hexatherm calibrate, one session, CPU s (user + system), median of {repeats}; "
-        f"load average at the start {os.getloadavg()[0]:.1f} (1 min), "
+        f"hexatherm calibrate, {sessions} session(s), CPU s (user + system), median of "
+        f"{repeats}; load average at the start {os.getloadavg()[0]:.1f} (1 min), "
         f"{os.getloadavg()[1]:.1f} (5 min)"
     )
-    print("| targets | level | CPU s | runs (s) |")
-    print("|---:|---|---:|---|")
+    print("| targets | sessions | level | CPU s | runs (s) |")
+    print("|---:|---:|---|---:|---|")
     for n in sizes:
         for level in levels:
-            runs = [
-                cpu_seconds(ROOT, ["calibrate", str(folders[n]), "--level", level])
-                for _ in range(repeats)
-            ]
+            command = ["calibrate", *map(str, folders[n]), "--level", level]
+            runs = [cpu_seconds(ROOT, command) for _ in range(repeats)]
             print(
-                f"| {n} | {level} | {median(runs):.2f} | "
+                f"| {n} | {sessions} | {level} | {median(runs):.2f} | "
                 + ", ".join(f"{r:.2f}" for r in runs)
                 + " |",
                 flush=True,
@@ -221,6 +255,7 @@ def main() -> None:
     parser.add_argument("--targets", default="100,300,1000", help="speed: session sizes")
     parser.add_argument("--levels", default="joints,auto", help="speed: calibrate levels")
     parser.add_argument("--repeats", type=int, default=3, help="speed: runs per row")
+    parser.add_argument("--sessions", type=int, default=1, help="speed: targets split in")
     args = parser.parse_args()
     sections = SECTIONS if args.sections == "all" else args.sections.split(",")
     for section in sections:
@@ -231,6 +266,7 @@ def main() -> None:
             [int(n) for n in args.targets.split(",")],
             args.levels.split(","),
             args.repeats,
+            args.sessions,
         )
     if "design" in sections:
         sys.path.insert(0, str(ROOT / "bench"))

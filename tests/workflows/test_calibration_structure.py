@@ -68,6 +68,25 @@ def test_the_structure_is_the_dense_covariance(campaign: Campaign, dense: np.nda
     assert np.abs(cov[:6, 60:66]).max() > 0.01 * np.sqrt(cov[0, 0] * cov[60, 60])
 
 
+def test_each_session_is_its_own_group(campaign: Campaign) -> None:
+    """Sessions are independent: the low-rank part is factored per session, each with
+    its own O and R0 columns (18 each), in the folds too."""
+    structure = campaign.structure
+    assert structure is not None
+    assert structure.groups == (6 * 14, 6 * 9)
+    groups = structure.group_rows()
+    assert [(a, b, c.tolist()) for a, b, c in groups] == [
+        (0, 84, list(range(18))),
+        (84, 138, list(range(18, 36))),
+    ]
+    fold = np.arange(1, 23, 3)  # poses 1, 4, .., 13 of the first session, 16, 19, 22 of the second
+    rows = (6 * fold[:, None] + np.arange(6)).ravel()
+    assert [(a, b) for a, b, _ in structure.subset(rows).group_rows()] == [(0, 30), (30, 48)]
+    # a column of U across both groups: one group, as before
+    mixed = dataclasses.replace(structure, common=structure.common + 1e-9)
+    assert len(mixed.group_rows()) == 1
+
+
 def test_whitening_keeps_every_inner_product(campaign: Campaign, dense: np.ndarray) -> None:
     assert campaign.structure is not None
     n = campaign.measured.shape[0]
