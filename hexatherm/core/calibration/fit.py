@@ -12,7 +12,7 @@ from typing import Literal, TypeVar
 
 import numpy as np
 import numpy.typing as npt
-from scipy import stats
+from scipy import special
 from scipy.optimize import least_squares
 
 from hexatherm.core.calibration.model import (
@@ -312,8 +312,9 @@ class CalibrationFit:
     @property
     def chi_square_p(self) -> float:
         """Probability that the chi-square is this large or larger by chance alone, the
-        model right and the poses' covariance honest (chi-square with ``dof``)."""
-        return float(stats.chi2.sf(self.chi_square, self.dof)) if self.dof > 0 else 1.0
+        model right and the poses' covariance honest (chi-square with ``dof``): the
+        arithmetic of ``scipy.stats.chi2.sf``, without importing scipy.stats (0.3 s)."""
+        return float(special.chdtrc(self.dof, self.chi_square)) if self.dof > 0 else 1.0
 
     @property
     def explains_poses(self) -> bool:
@@ -324,7 +325,7 @@ class CalibrationFit:
 
     def chi_square_limit_per_dof(self) -> float:
         """The chi2/dof above which :attr:`explains_poses` fails."""
-        return float(stats.chi2.isf(EXPLAINED_P, self.dof)) / self.dof if self.dof > 0 else np.inf
+        return float(special.chdtri(self.dof, EXPLAINED_P)) / self.dof if self.dof > 0 else np.inf
 
     @property
     def leg_offsets_mm(self) -> FloatArray:
