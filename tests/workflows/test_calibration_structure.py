@@ -160,3 +160,25 @@ def test_each_point_is_evaluated_once(campaign: Campaign, monkeypatch: pytest.Mo
     # and the fit is the one the model's predictions give at its parameters
     again = campaign.measured - fit.model.predict(fit.parameters, campaign.commanded)[0]
     np.testing.assert_allclose(fit.residuals, again, rtol=0, atol=1e-12)
+
+
+def test_a_factor_without_a_band_is_refused_from_its_pattern(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The smooth growth's factor touches every row: refused before its (dense, 60 s at
+    300 targets) product is formed; a banded one with the same entries elsewhere is not."""
+    from scipy import sparse
+
+    rng = np.random.default_rng(2)
+    n, m = 240, 300
+    wide = sparse.random(n, m, density=0.05, random_state=3, format="csc")
+    monkeypatch.setattr(sparse.csc_matrix, "__matmul__", lambda *_: pytest.fail("formed"))
+    assert BandedCovariance.from_factor(wide, [0, 1]) is None
+    monkeypatch.undo()
+    # a band of 12 rows (two poses) per column: kept, and equal to the product
+    rows = (np.arange(m) * (n - 12) // m)[:, None] + np.arange(12)
+    cols = np.repeat(np.arange(m), 12)
+    banded = sparse.csc_matrix((rng.normal(size=rows.size), (rows.ravel(), cols)), shape=(n, m))
+    structure = BandedCovariance.from_factor(banded, [0, 1])
+    assert structure is not None and structure.band.shape[0] == 12
+    assert rel(structure.dense(), (banded @ banded.T).toarray()) < 1e-14

@@ -69,8 +69,20 @@ class BandedCovariance:
         n = a.shape[0]
         common = np.zeros(a.shape[1], dtype=bool)
         common[np.asarray(common_columns, dtype=np.intp)] = True
-        u = np.asarray(a[:, np.flatnonzero(common)].toarray(), dtype=float)
         rest = a[:, np.flatnonzero(~common)]
+        # the band's width from the pattern first (O(nnz)): rows i and j meet in B only
+        # through a column both touch; a dense product of a factor whose columns touch
+        # every row (the smooth growth) is not worth forming to learn that
+        rows_of = sparse.csc_matrix(rest, copy=True)
+        rows_of.eliminate_zeros()
+        rows_of.sort_indices()
+        touched = np.flatnonzero(np.diff(rows_of.indptr))
+        if touched.size:
+            first = rows_of.indices[rows_of.indptr[touched]]
+            last = rows_of.indices[rows_of.indptr[touched + 1] - 1]
+            if block * (int((last - first).max()) // block + 1) > max(n // 4, block):
+                return None
+        u = np.asarray(a[:, np.flatnonzero(common)].toarray(), dtype=float)
         b = sparse.coo_matrix(rest @ rest.T)
         lower = b.row >= b.col
         rows, cols, values = b.row[lower], b.col[lower], b.data[lower]
