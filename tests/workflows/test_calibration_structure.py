@@ -5,6 +5,7 @@ Cholesky factor on simulated campaigns of two sessions (small enough for both)."
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -182,3 +183,27 @@ def test_a_factor_without_a_band_is_refused_from_its_pattern(
     structure = BandedCovariance.from_factor(banded, [0, 1])
     assert structure is not None and structure.band.shape[0] == 12
     assert rel(structure.dense(), (banded @ banded.T).toarray()) < 1e-14
+
+
+def test_a_filled_factor_is_multiplied_dense(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``--interpolation smooth``: every reference moves every target, the factor is half
+    filled, and its product is formed by BLAS (15 -> 0.8 s at 300 targets), equal to the
+    sparse product."""
+    from scipy import sparse
+
+    from hexatherm.core.propagation import target_jacobian
+    from hexatherm.workflows.process.pipeline import process_session
+    from hexatherm.workflows.process.uncertainty import centre_covariance, pose_chain
+    from tests.workflows.test_uncertainty_smooth import MID_SESSION, session
+
+    result = process_session(session(tmp_path / "s", 1, MID_SESSION), interpolation="smooth")
+    assert result.correction.smooth is not None and result.correction.smooth.used
+    jacobian = target_jacobian(pose_chain(result), result.centres.centres_mm)
+    cov = centre_covariance(result).cov_mm2
+    factor = jacobian._joint_factor(cov, slice(6, 12))
+    assert factor.nnz > 0.3 * factor.shape[0] * factor.shape[1]
+    expected = (factor @ factor.T).toarray()
+    monkeypatch.setattr(sparse.csr_matrix, "__matmul__", lambda *_: pytest.fail("sparse"))
+    assert rel(jacobian.joint_covariance(cov, slice(6, 12)), expected) < 1e-13
