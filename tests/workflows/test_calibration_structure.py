@@ -195,7 +195,12 @@ def test_a_filled_factor_is_multiplied_dense(
 
     from hexatherm.core.propagation import target_jacobian
     from hexatherm.workflows.process.pipeline import process_session
-    from hexatherm.workflows.process.uncertainty import centre_covariance, pose_chain
+    from hexatherm.workflows.process.smootherror import smooth_excess
+    from hexatherm.workflows.process.uncertainty import (
+        centre_covariance,
+        joint_pose_covariance_for_fit,
+        pose_chain,
+    )
     from tests.workflows.test_uncertainty_smooth import MID_SESSION, session
 
     result = process_session(session(tmp_path / "s", 1, MID_SESSION), interpolation="smooth")
@@ -207,3 +212,17 @@ def test_a_filled_factor_is_multiplied_dense(
     expected = (factor @ factor.T).toarray()
     monkeypatch.setattr(sparse.csr_matrix, "__matmul__", lambda *_: pytest.fail("sparse"))
     assert rel(jacobian.joint_covariance(cov, slice(6, 12)), expected) < 1e-13
+    # what the fit whitens with: dense, the smooth fit's own error on each pose's block
+    weights = joint_pose_covariance_for_fit(result)
+    assert isinstance(weights, np.ndarray)
+    np.testing.assert_array_equal(weights, joint_pose_covariance(result))
+    excess = smooth_excess(result, pose_chain(result), cov)
+    assert excess is not None
+    m = excess[0].shape[0]
+    blocks = (weights - expected).reshape(m, 6, m, 6)
+    np.testing.assert_allclose(
+        blocks[np.arange(m), :, np.arange(m)], excess[0], rtol=1e-9, atol=1e-14 * expected.max()
+    )
+    off = blocks.copy()
+    off[np.arange(m), :, np.arange(m)] = 0.0
+    assert np.abs(off).max() <= 1e-13 * np.abs(expected).max()

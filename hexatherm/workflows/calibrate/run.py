@@ -60,7 +60,7 @@ from hexatherm.workflows.process.pipeline import ProcessResult, process_session
 from hexatherm.workflows.process.twin import twin_poses
 from hexatherm.workflows.process.uncertainty import (
     joint_pose_covariance,
-    joint_pose_covariance_structured,
+    joint_pose_covariance_for_fit,
 )
 
 PoseKind = Literal["corrected", "conventional", "twin"]
@@ -229,7 +229,7 @@ def read_campaign(
     check_reference_states(results, warn=geometry is None)  # --iterate's rounds: said once
     labels: list[str] = []
     commanded, measured = [], []
-    structures: list[BandedCovariance | None] = []
+    weights: list[BandedCovariance | FloatArray] = []
     for result in results:
         corr = result.correction
         targets = corr.target_index
@@ -239,7 +239,7 @@ def read_campaign(
             measured.append(twin_poses(result, twin.with_geometry(geometry), twin.path))
         else:
             measured.append(corr.corrected if poses == "corrected" else corr.conventional)
-        structures.append(joint_pose_covariance_structured(result, corrected=poses == "corrected"))
+        weights.append(joint_pose_covariance_for_fit(result, corrected=poses == "corrected"))
     n = len(labels)
     if n < MIN_POSES:
         raise InputError(
@@ -247,12 +247,17 @@ def read_campaign(
             "more spread over the stroke for the joints)",
             path=str(results[0].session.path),
         )
-    banded = [s for s in structures if s is not None]
-    structure = BandedCovariance.stacked(banded) if len(banded) == len(structures) else None
+    banded = [w for w in weights if isinstance(w, BandedCovariance)]
+    structure = BandedCovariance.stacked(banded) if len(banded) == len(weights) else None
     dense = None
     if structure is None:  # the dense matrix only when the fit whitens with it
         dense = block_diag(
-            *[joint_pose_covariance(r, corrected=poses == "corrected") for r in results]
+            *[
+                joint_pose_covariance(r, corrected=poses == "corrected")
+                if isinstance(w, BandedCovariance)
+                else w
+                for w, r in zip(weights, results, strict=True)
+            ]
         )
     return Campaign(
         results,
