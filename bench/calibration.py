@@ -1,7 +1,26 @@
 """The paper's claim, measured: calibration from thermally decoupled poses (a script, not
-a test; issue 15, item 7).
+a test; issue 15, item 7); also calibrate's CPU time at scale and the pose-selection
+criteria against random poses (issue 24, items 5 and 6).
 
-Run with ``.venv/bin/python bench/calibration.py [--seeds N]``. For seeded campaigns of
+Run with ``.venv/bin/python bench/calibration.py [--seeds N] [--sections LIST]``, LIST
+of ``accuracy`` (the default), ``speed``, ``design`` (comma-separated, or ``all``):
+
+- ``speed``: CPU seconds (user + system of the child) of a whole ``hexatherm calibrate
+  SESSION --level L`` process (the CLI sets one BLAS thread), for one session of 100,
+  300 and 1000 targets (``--targets``) at levels ``joints`` and ``auto`` (``--levels``),
+  median of ``--repeats`` runs, with the machine's load average before and after. The
+  sessions are ``bench/analyses.py``'s (cached in ``bench/.cache/``):
+  ``tests.sessions.calibration_scenario``, the Symetrie-like hexapod with joint and
+  offset errors, 12 points per ball on a 70 deg cap at 0.3 um, R around each target;
+  with ``--sessions K`` the targets are split into K such sessions (seeds 7, 8, ...) of
+  one true hexapod, all calibrated together.
+- ``design``: ``bench/design.py`` over ``--seeds`` seeds (8 if not given): for 200
+  candidate poses, 30 chosen by each criterion of ``plan --calibration-criterion``
+  (d-optimal, g-optimal, i-optimal), the predicted worst and RMS standard uncertainty of
+  a calibrated pose over all candidates, against 30 random candidates (median of 20
+  draws) and against all 200 measured.
+
+``accuracy``: for seeded campaigns of
 the Symetrie-like hexapod whose true geometry differs from its hexapod file (joints
 sigma 50 um, leg offsets sigma 30 um: ``geometry_errors:``), 30 targets drawn in
 +-20/+-20/+-15 mm, +-4/+-4/+-8 deg with a reference R between every two targets, 12
@@ -33,6 +52,7 @@ x4 / drift-free and conventional / decoupled.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import tempfile
 from pathlib import Path
@@ -134,7 +154,7 @@ def campaign_folder(
 def heldout_error_um(campaign: Campaign, truth: np.ndarray, held: np.ndarray) -> float:
     """RMS translation error (um) of the calibrated predictions of ``held`` poses."""
     fit = fit_calibration(
-        campaign.nominal, campaign.commanded, campaign.measured, campaign.covariance
+        campaign.nominal, campaign.commanded, campaign.measured, campaign.weights_covariance
     )
     true_poses, _ = CalibrationModel(campaign.nominal, "joints+gains").predict(truth, held)
     error = (fit.predict(held) - true_poses)[:, :3] * 1e3
@@ -161,10 +181,104 @@ def true_poses_both(
     return relative, absolute
 
 
+SECTIONS = ("accuracy", "speed", "design")
+
+
+def split_sessions(n_targets: int, n_sessions: int) -> list[Path]:
+    """``n_targets`` in ``n_sessions`` sessions of one true hexapod (cached in
+    ``bench/.cache/``), each as ``bench/analyses.py``'s calibration session: seeds 7, 8,
+    ..., the same geometry errors (seed 11)."""
+    from analyses import CACHE  # type: ignore[import-not-found]
+
+    from tests.sessions import calibration_scenario, calibration_targets
+
+    root = CACHE / f"calibrate-{n_targets}-in-{n_sessions}"
+    folders = []
+    for i in range(n_sessions):
+        seed = 7 + i
+        folder = root / f"s{i}"
+        if not (folder / "session.yaml").is_file():
+            text = calibration_scenario(
+                calibration_targets(seed, n_targets // n_sessions),
+                geometry_seed=11,
+                seed=seed,
+                name=f"calibrate-{n_targets}-in-{n_sessions}-{i}",
+                points_per_ball=12,
+                cmm={"point_noise_um": 0.3, "cap_angle_deg": 70},
+                timing={"seconds_per_point": 2.0, "seconds_per_move": 20},
+                thermocouples={"period_s": 30, "noise_C": 0.02},
+            )
+            root.mkdir(parents=True, exist_ok=True)
+            (root / f"s{i}.yaml").write_text(text)
+            write_files(simulate(read_scenario(root / f"s{i}.yaml")).files, folder)
+        folders.append(folder)
+    return folders
+
+
+def speed(sizes: list[int], levels: list[str], repeats: int, sessions: int) -> None:
+    """Print calibrate's CPU seconds per size and level (see the module text)."""
+    sys.path.insert(0, str(ROOT / "bench"))
+    from analyses import (  # type: ignore[import-not-found]
+        calibration_session,
+        cpu_seconds,
+        median,
+    )
+
+    # simulated first, not timed
+    folders = {
+        n: [calibration_session(n)] if sessions == 1 else split_sessions(n, sessions) for n in sizes
+    }
+    print(
+        f"hexatherm calibrate, {sessions} session(s), CPU s (user + system), median of "
+        f"{repeats}; load average at the start {os.getloadavg()[0]:.1f} (1 min), "
+        f"{os.getloadavg()[1]:.1f} (5 min)"
+    )
+    print("| targets | sessions | level | CPU s | runs (s) |")
+    print("|---:|---:|---|---:|---|")
+    for n in sizes:
+        for level in levels:
+            command = ["calibrate", *map(str, folders[n]), "--level", level]
+            runs = [cpu_seconds(ROOT, command) for _ in range(repeats)]
+            print(
+                f"| {n} | {sessions} | {level} | {median(runs):.2f} | "
+                + ", ".join(f"{r:.2f}" for r in runs)
+                + " |",
+                flush=True,
+            )
+    print(f"load average at the end {os.getloadavg()[0]:.1f} (1 min)")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--seeds", type=int, default=3)
+    parser.add_argument("--seeds", type=int, help="accuracy: 3 if not given; design: 8")
+    parser.add_argument("--sections", default="accuracy", help=f"of {', '.join(SECTIONS)}, all")
+    parser.add_argument("--targets", default="100,300,1000", help="speed: session sizes")
+    parser.add_argument("--levels", default="joints,auto", help="speed: calibrate levels")
+    parser.add_argument("--repeats", type=int, default=3, help="speed: runs per row")
+    parser.add_argument("--sessions", type=int, default=1, help="speed: targets split in")
     args = parser.parse_args()
+    sections = SECTIONS if args.sections == "all" else args.sections.split(",")
+    for section in sections:
+        if section not in SECTIONS:
+            parser.error(f"unknown section {section!r}")
+    if "speed" in sections:
+        speed(
+            [int(n) for n in args.targets.split(",")],
+            args.levels.split(","),
+            args.repeats,
+            args.sessions,
+        )
+    if "design" in sections:
+        sys.path.insert(0, str(ROOT / "bench"))
+        from design import compare_designs  # type: ignore[import-not-found]
+
+        compare_designs(8 if args.seeds is None else args.seeds, 200, 30)
+    if "accuracy" in sections:
+        accuracy(3 if args.seeds is None else args.seeds)
+
+
+def accuracy(seeds: int) -> None:
+    """Print the held-out error table (see the module text)."""
     held = np.random.default_rng(99).uniform(-1, 1, (200, 6)) * SPAN
     nominal = read_hexapod(ROOT / "configs" / "symetrie-like.yaml")
     rows: dict[str, dict[str, list[float]]] = {h: {} for h in HEATING}
@@ -172,7 +286,7 @@ def main() -> None:
     nominal_absolute: list[float] = []
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
-        for seed in range(args.seeds):
+        for seed in range(seeds):
             free, truth = campaign_folder(root, seed, "none")
             drift_free = heldout_error_um(read_campaign([free], "conventional"), truth, held)
             true_poses, absolute = true_poses_both(nominal, truth, held)
@@ -200,7 +314,7 @@ def main() -> None:
     rms = lambda values: float(np.sqrt(np.mean(np.square(values))))  # noqa: E731
     print(
         f"Calibrated model's RMS translation error on 200 held-out poses (um), "
-        f"{args.seeds} seeds; nominal model: {rms(nominal_error):.1f} um relative to the "
+        f"{seeds} seeds; nominal model: {rms(nominal_error):.1f} um relative to the "
         f"measured O, {rms(nominal_absolute):.1f} um in a frame fixed to the base"
     )
     columns = [

@@ -47,13 +47,18 @@ def main() -> None:
     parser.add_argument("--candidates", type=int, default=200)
     parser.add_argument("--poses", type=int, default=30)
     args = parser.parse_args()
+    compare_designs(args.seeds, args.candidates, args.poses)
+
+
+def compare_designs(seeds: int, m: int, n: int) -> None:
+    """Print the table and the mean gains (see the module text): ``seeds`` seeds, ``m``
+    candidates, ``n`` chosen (also ``bench/calibration.py --sections design``)."""
     nominal = read_hexapod(ROOT / "configs" / "symetrie-like.yaml")
-    m, n = args.candidates, args.poses
     print(f"{m} candidates, {n} chosen, level joints, 1 um / 5 urad per pose; um, Tx/Ty/Tz")
     print("| seed | design | worst | RMS | random worst / worst | random RMS / RMS |")
     print("|---:|---|---:|---:|---:|---:|")
     gains: dict[str, list[tuple[float, float]]] = {c: [] for c in CRITERIA}
-    for seed in range(args.seeds):
+    for seed in range(seeds):
         rng = np.random.default_rng(seed)
         candidates = rng.uniform(-1, 1, (m, 6)) * SPAN
         draws = np.array(

@@ -24,16 +24,24 @@ class BandedCovariance:
     the first reference R0, measured once and carried by every pose, make ``U``. Its
     whitening costs O(n) instead of the O(n^3) of a dense Cholesky factor.
 
+    Several sessions together are independent: ``groups`` gives the sizes of the runs
+    of rows that are (their ``B`` and ``U`` blocks do not meet), and the whitening's
+    low-rank part is factored group by group, each with its own columns of ``U``
+    (O and R0 of each session: O(n r / g) instead of O(n r) per use).
+
     Attributes
     ----------
     band : ndarray, shape (w + 1, n)
         The lower band of ``B``: ``band[d, j] = B[j + d, j]`` (zero past the end).
     common : ndarray, shape (n, r)
         ``U``.
+    groups : tuple of int
+        Sizes of consecutive independent groups of rows (sum ``n``); empty: one group.
     """
 
     band: FloatArray
     common: FloatArray
+    groups: tuple[int, ...] = ()
 
     @property
     def size(self) -> int:
@@ -61,8 +69,20 @@ class BandedCovariance:
         n = a.shape[0]
         common = np.zeros(a.shape[1], dtype=bool)
         common[np.asarray(common_columns, dtype=np.intp)] = True
-        u = np.asarray(a[:, np.flatnonzero(common)].toarray(), dtype=float)
         rest = a[:, np.flatnonzero(~common)]
+        # the band's width from the pattern first (O(nnz)): rows i and j meet in B only
+        # through a column both touch; a dense product of a factor whose columns touch
+        # every row (the smooth growth) is not worth forming to learn that
+        rows_of = sparse.csc_matrix(rest, copy=True)
+        rows_of.eliminate_zeros()
+        rows_of.sort_indices()
+        touched = np.flatnonzero(np.diff(rows_of.indptr))
+        if touched.size:
+            first = rows_of.indices[rows_of.indptr[touched]]
+            last = rows_of.indices[rows_of.indptr[touched + 1] - 1]
+            if block * (int((last - first).max()) // block + 1) > max(n // 4, block):
+                return None
+        u = np.asarray(a[:, np.flatnonzero(common)].toarray(), dtype=float)
         b = sparse.coo_matrix(rest @ rest.T)
         lower = b.row >= b.col
         rows, cols, values = b.row[lower], b.col[lower], b.data[lower]
@@ -81,7 +101,30 @@ class BandedCovariance:
         band = np.concatenate(
             [np.pad(p.band, ((0, width - p.band.shape[0]), (0, 0))) for p in parts], axis=1
         )
-        return cls(band, np.asarray(block_diag(*[p.common for p in parts]), dtype=float))
+        groups = tuple(g for p in parts for g in (p.groups or (p.size,)))
+        return cls(band, np.asarray(block_diag(*[p.common for p in parts]), dtype=float), groups)
+
+    def group_rows(self) -> list[tuple[int, int, npt.NDArray[np.intp]]]:
+        """Each independent group's first and past-the-end rows and its columns of ``U``
+        (those not zero on its rows); one group of every row and column when
+        :attr:`groups` is empty or the groups meet (a band entry or a column of ``U``
+        across two of them)."""
+        whole = [(0, self.size, np.arange(self.common.shape[1]))]
+        if len(self.groups) < 2:
+            return whole
+        ends = np.cumsum(self.groups)
+        starts = ends - np.asarray(self.groups)
+        out = []
+        used = np.zeros(self.common.shape[1], dtype=int)
+        for start, end in zip(starts.tolist(), ends.tolist(), strict=True):
+            cols = np.flatnonzero(np.any(self.common[start:end] != 0.0, axis=0))
+            used[cols] += 1
+            out.append((start, end, cols))
+            # band entries from this group's columns into a later row: none
+            d, j = np.nonzero(self.band[:, start:end])
+            if np.any(start + j + d >= end):
+                return whole
+        return whole if np.any(used > 1) else out
 
     def subset(self, rows: npt.NDArray[np.intp]) -> BandedCovariance:
         """The marginal covariance of some rows (increasing)."""
@@ -93,7 +136,11 @@ class BandedCovariance:
             band[d, : rows.size - d][inside] = self.band[
                 apart[inside], rows[: rows.size - d][inside]
             ]
-        return BandedCovariance(band, self.common[rows])
+        groups: tuple[int, ...] = ()
+        if self.groups:
+            counts = np.diff(np.searchsorted(rows, np.cumsum((0,) + self.groups)))
+            groups = tuple(int(c) for c in counts if c > 0)
+        return BandedCovariance(band, self.common[rows], groups)
 
     def mapped(self, by: FloatArray) -> BandedCovariance:
         """The covariance of ``A_k X_k`` (poses of 6 rows, A (N, 6, 6)): ``P C P^T`` with
@@ -114,7 +161,7 @@ class BandedCovariance:
             mapped.data[lower],
         )
         common = np.einsum("kab,kbr->kar", by, self.common.reshape(by.shape[0], 6, -1))
-        return BandedCovariance(band, common.reshape(n, -1))
+        return BandedCovariance(band, common.reshape(n, -1), self.groups)
 
 
 class PoseWeights:
@@ -183,25 +230,30 @@ class PoseWeights:
     def _factor_structure(self, cov: BandedCovariance, n_poses: int) -> bool:
         """Factor ``B + U U^T`` as ``F F^T``, ``F = L_B M``: ``L_B`` the banded Cholesky
         factor of ``B``, ``M = I + Q (G - I) Q^T`` with ``V = L_B^-1 U = Q R`` and ``G``
-        the Cholesky factor of ``I + R R^T`` (then ``M M^T = I + V V^T``). False when
-        ``B`` is not positive definite."""
+        the Cholesky factor of ``I + R R^T`` (then ``M M^T = I + V V^T``), ``M``
+        block-diagonal over independent groups (:meth:`BandedCovariance.group_rows`).
+        False when ``B`` is not positive definite."""
         if not (np.all(np.isfinite(cov.band)) and np.all(np.isfinite(cov.common))):
             raise CalibrationError("pose covariance has a non-finite value")
         try:
             lower = cholesky_banded(cov.band, lower=True)
         except np.linalg.LinAlgError:
             return False
-        v = _solve_band(lower, cov.common)
-        q, r = np.linalg.qr(v)
-        g = np.linalg.cholesky(np.eye(r.shape[0]) + r @ r.T)
-        eye = np.eye(g.shape[0])
+        # per independent group (a session): its rows, Q and G^-1 - I of its columns of U
+        self._low_rank: list[tuple[int, int, FloatArray, FloatArray]] = []
+        for start, end, cols in cov.group_rows():
+            # a group's band factor is its slice (nothing crosses to the next group)
+            v = _solve_band(lower[:, start:end], cov.common[start:end, cols])
+            q, r = np.linalg.qr(v)
+            g = np.linalg.cholesky(np.eye(r.shape[0]) + r @ r.T)
+            eye = np.eye(g.shape[0])
+            less_eye = np.asarray(solve_triangular(g, eye, lower=True), float) - eye
+            self._low_rank.append((start, end, q, less_eye))
         self.blocks = False
         self._covariance = None  # dense on request only
         self.n_poses = n_poses
         self.structure = cov
         self._band_factor = lower
-        self._q = q
-        self._g_inv_less_eye = np.asarray(solve_triangular(g, eye, lower=True), float) - eye
         self._inverse = None
         return True
 
@@ -222,7 +274,12 @@ class PoseWeights:
         if self.structure is not None:
             flat = x.reshape((6 * self.n_poses, -1))
             y = _solve_band(self._band_factor, flat)
-            y = y + self._q @ (self._g_inv_less_eye @ (self._q.T @ y))
+            if len(self._low_rank) == 1:
+                _, _, q, less_eye = self._low_rank[0]
+                y = y + q @ (less_eye @ (q.T @ y))
+            else:
+                for start, end, q, less_eye in self._low_rank:
+                    y[start:end] += q @ (less_eye @ (q.T @ y[start:end]))
             return y.reshape((6 * self.n_poses,) + x.shape[2:])
         if self.blocks:
             flat = solve_triangular_blocks(self.cholesky, x)

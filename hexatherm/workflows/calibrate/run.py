@@ -25,6 +25,7 @@ freedom above 1, and as parameters off by more than their uncertainty.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -59,7 +60,7 @@ from hexatherm.workflows.process.pipeline import ProcessResult, process_session
 from hexatherm.workflows.process.twin import twin_poses
 from hexatherm.workflows.process.uncertainty import (
     joint_pose_covariance,
-    joint_pose_covariance_structured,
+    joint_pose_covariance_for_fit,
 )
 
 PoseKind = Literal["corrected", "conventional", "twin"]
@@ -155,17 +156,15 @@ class Campaign:
         ``session:step`` of every target.
     commanded, measured : ndarray, shape (N, 6)
         Commanded and measured (``poses``) poses relative to O, mm and deg.
-    covariance : ndarray, shape (6N, 6N)
-        Of the measured poses together (linear propagation), mm and deg: the terms
-        between targets of one session (its one frame O and reference R0 move every
-        pose) included, sessions independent; for ``twin`` poses, the measured
-        (conventional) poses' covariance (see the module text).
     poses : {"corrected", "conventional", "twin"}
     twin : TwinModel or None
         The twin's model (``twin`` poses only).
     structure : BandedCovariance or None
-        ``covariance`` with its structure (O and R0 low-rank, the rest banded), what the
-        fit whitens with (None: not banded, the dense one is used).
+        :attr:`covariance` with its structure (O and R0 low-rank, the rest banded), what
+        the fit whitens with (None: not banded, the dense one is used).
+    dense_covariance : ndarray, shape (6N, 6N), or None
+        :attr:`covariance` as computed when it has no structure (None: it has one, and
+        the dense matrix, 288 MB at 1000 targets, is built only on request).
     """
 
     results: list[ProcessResult]
@@ -173,10 +172,26 @@ class Campaign:
     labels: list[str]
     commanded: FloatArray
     measured: FloatArray
-    covariance: FloatArray
     poses: PoseKind
     twin: TwinModel | None = None
     structure: BandedCovariance | None = None
+    dense_covariance: FloatArray | None = None
+
+    def __post_init__(self) -> None:
+        if (self.structure is None) == (self.dense_covariance is None):
+            raise ValueError("a campaign's covariance is either structured or dense")
+
+    @functools.cached_property
+    def covariance(self) -> FloatArray:
+        """Covariance (6N, 6N) of the measured poses together (linear propagation), mm
+        and deg: the terms between targets of one session (its one frame O and reference
+        R0 move every pose) included, sessions independent; for ``twin`` poses, the
+        measured (conventional) poses' covariance (see the module text). Dense, built
+        from :attr:`structure` on first use where there is one."""
+        if self.dense_covariance is not None:
+            return self.dense_covariance
+        assert self.structure is not None
+        return self.structure.dense()
 
     @property
     def weights_covariance(self) -> FloatArray | BandedCovariance:
@@ -213,8 +228,8 @@ def read_campaign(
     nominal = specs[0].hexapod
     check_reference_states(results, warn=geometry is None)  # --iterate's rounds: said once
     labels: list[str] = []
-    commanded, measured, covariance = [], [], []
-    structures: list[BandedCovariance | None] = []
+    commanded, measured = [], []
+    weights: list[BandedCovariance | FloatArray] = []
     for result in results:
         corr = result.correction
         targets = corr.target_index
@@ -224,8 +239,7 @@ def read_campaign(
             measured.append(twin_poses(result, twin.with_geometry(geometry), twin.path))
         else:
             measured.append(corr.corrected if poses == "corrected" else corr.conventional)
-        covariance.append(joint_pose_covariance(result, corrected=poses == "corrected"))
-        structures.append(joint_pose_covariance_structured(result, corrected=poses == "corrected"))
+        weights.append(joint_pose_covariance_for_fit(result, corrected=poses == "corrected"))
     n = len(labels)
     if n < MIN_POSES:
         raise InputError(
@@ -233,18 +247,28 @@ def read_campaign(
             "more spread over the stroke for the joints)",
             path=str(results[0].session.path),
         )
+    banded = [w for w in weights if isinstance(w, BandedCovariance)]
+    structure = BandedCovariance.stacked(banded) if len(banded) == len(weights) else None
+    dense = None
+    if structure is None:  # the dense matrix only when the fit whitens with it
+        dense = block_diag(
+            *[
+                joint_pose_covariance(r, corrected=poses == "corrected")
+                if isinstance(w, BandedCovariance)
+                else w
+                for w, r in zip(weights, results, strict=True)
+            ]
+        )
     return Campaign(
         results,
         nominal,
         labels,
         np.concatenate(commanded),
         np.concatenate(measured),
-        block_diag(*covariance),
         poses,
         twin,
-        None
-        if any(s is None for s in structures)
-        else BandedCovariance.stacked([s for s in structures if s is not None]),
+        structure,
+        dense,
     )
 
 

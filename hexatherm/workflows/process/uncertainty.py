@@ -501,6 +501,29 @@ def joint_pose_covariance_structured(
     )
 
 
+def joint_pose_covariance_for_fit(
+    result: ProcessResult, corrected: bool = True
+) -> BandedCovariance | FloatArray:
+    """What a calibration whitens the poses with: the covariance with its structure
+    (:func:`joint_pose_covariance_structured`) where it has one, else dense
+    (:func:`joint_pose_covariance`: the smooth growth, whose own error on each pose's
+    block the structure does not carry), from one Jacobian of the targets."""
+    centres = centre_covariance(result)
+    chain = pose_chain(result)
+    jacobian = target_jacobian(chain, result.centres.centres_mm)
+    outputs = slice(6, 12) if corrected else slice(0, 6)
+    excess = smooth_excess(result, chain, centres.cov_mm2) if corrected else None
+    if excess is None:
+        structure = jacobian.joint_covariance_structured(centres.cov_mm2, outputs)
+        if structure is not None:
+            return structure
+    joint = jacobian.joint_covariance(centres.cov_mm2, outputs)
+    if excess is not None:
+        for m, block in enumerate(excess[0]):
+            joint[6 * m : 6 * m + 6, 6 * m : 6 * m + 6] += block
+    return joint
+
+
 def shared_parts(
     jacobian: TargetJacobian,
     centre_cov_mm2: FloatArray,
