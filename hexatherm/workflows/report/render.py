@@ -16,9 +16,8 @@ gives is escaped, whatever the template.
 A template that cannot be read, has a syntax error or fails while rendering raises
 :class:`~hexatherm.errors.InputError` naming its file and line; nothing is written.
 
->>> page = render_page("macros_demo.html.j2", source="{{ x }}", x="<script>")
->>> page
-'&lt;script&gt;'
+>>> environment().from_string("<p>{{ x }}</p>").render(x='<script a="1">')
+'<p>&lt;script a=&quot;1&quot;&gt;</p>'
 """
 
 from __future__ import annotations
@@ -205,18 +204,12 @@ def _folders(env: jinja2.Environment) -> str:
     )
 
 
-def render_page(
-    name: str,
-    template_dir: Path | None = None,
-    source: str | None = None,
-    **context: Any,
-) -> str:
-    """The template ``name`` (or the text ``source``) rendered with ``context``; a
-    template's failure is an :class:`InputError` naming its file and line."""
+def render_page(name: str, template_dir: Path | None = None, **context: Any) -> str:
+    """The template ``name`` rendered with ``context``; a template's failure is an
+    :class:`InputError` naming its file and line."""
     env = environment(template_dir)
     try:
-        template = env.from_string(source) if source is not None else env.get_template(name)
-        return template.render(**context)
+        return env.get_template(name).render(**context)
     except jinja2.TemplateError as exc:
         raise template_error(exc, env) from None
 
