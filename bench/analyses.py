@@ -8,7 +8,9 @@ Each row is a whole ``hexatherm`` process on a simulated session cached in
 - ``process --mc 2000`` on the 122-step points campaign of ``bench/montecarlo.py``;
 - ``calibrate --iterate``, 100 / 300 targets, and ``calibrate --level auto``, 100 targets
   (``tests.sessions.calibration_scenario``: the Symetrie-like hexapod with joint and
-  offset errors, 12 points per ball, R around each target).
+  offset errors, 12 points per ball, R around each target);
+- ``report`` of the shipped 40-target session ``sessions/with-hidden-effect`` (the
+  page, its four figures, linear uncertainty and quality checks).
 
 CPU time is user + system of the child (``resource.getrusage(RUSAGE_CHILDREN)``), which
 moves less with the machine's load than wall time. With ``--baseline DIR`` (a checkout
@@ -118,6 +120,11 @@ ROWS: dict[str, tuple[str, Callable[[], list[str]], str]] = {
         "calibrate --level auto, 100 targets",
         lambda: ["calibrate", str(calibration_session(100)), "--level", "auto"],
         "< 3 s",
+    ),
+    "report-40": (
+        "report, 40-target session (shipped with-hidden-effect)",
+        lambda: ["report", str(ROOT / "sessions" / "with-hidden-effect")],
+        "< 2 s",
     ),
 }
 

@@ -15,6 +15,9 @@ from hexatherm.cli.options import (
     lab_option,
     overwrite_option,
     reading_options,
+    template_dir_option,
+    template_files,
+    template_folder,
 )
 from hexatherm.io.files import ReadOptions
 
@@ -80,6 +83,7 @@ from hexatherm.io.files import ReadOptions
 @interpolation_option
 @overwrite_option
 @lab_option
+@template_dir_option
 @reading_options
 @clean_errors
 def command(
@@ -95,6 +99,7 @@ def command(
     interpolation: str,
     overwrite: bool,
     lab: Path | None,
+    template_dir: Path | None,
     reading: ReadOptions,
 ) -> None:
     """Calibrate the geometry of the hexapod of SESSIONS from their measured poses.
@@ -129,12 +134,14 @@ def command(
     from hexatherm.io.config.identity import read_lab
 
     lab_fields = read_lab(lab)[0] if lab is not None else {}
+    templates = template_folder(template_dir, lab)
     if out is None:
         first = sessions[0] if sessions[0].is_dir() else sessions[0].parent
         out = first / "calibration"
     inputs = [f for s in sessions for f in read_session(s).input_files()]
     if lab is not None:
         inputs.append(lab)
+    inputs += template_files(templates, lab)
     if twin_model is not None:
         inputs.append(twin_model)
     twin = None if twin_model is None else TwinModel.read(twin_model)
@@ -168,7 +175,7 @@ def command(
         f"calibrated from {len(run.campaign.labels)} {poses} poses{model} of "
         f"{len(sessions)} session(s)"
     )
-    files = output_files(run, inputs, out, lab_fields, coverage_factor)
+    files = output_files(run, inputs, out, lab_fields, coverage_factor, templates)
     with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
         for name, text in files.items():
             (tmp / name).write_text(text, encoding="utf-8")

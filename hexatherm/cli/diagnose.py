@@ -12,6 +12,9 @@ from hexatherm.cli.options import (
     echo_err,
     overwrite_option,
     reading_options,
+    template_dir_option,
+    template_files,
+    template_folder,
 )
 from hexatherm.io.files import ReadOptions
 
@@ -35,6 +38,7 @@ from hexatherm.io.files import ReadOptions
     help="The model to diagnose (a hexapod file, e.g. an earlier diagnosis' "
     "hexapod.yaml) instead of the session's; its thermal_model effects are kept.",
 )
+@template_dir_option
 @reading_options
 @clean_errors
 def command(
@@ -42,6 +46,7 @@ def command(
     out: str | None,
     overwrite: bool,
     hexapod_path: Path | None,
+    template_dir: Path | None,
     reading: ReadOptions,
 ) -> None:
     """Compare SESSION's measurements with the twin and find the missing effects.
@@ -67,6 +72,8 @@ def command(
     out_dir = Path(out) if out is not None else folder / "diagnosis"
     inputs = read_session(session).input_files()
     inputs += [hexapod_path] if hexapod_path is not None else []
+    templates = template_folder(template_dir, None)
+    inputs += template_files(templates)
     # before any work: never into, around or onto the session's files (checked again
     # under the output's lock when the results are written)
     check_output_settled(out_dir, kind="folder", inputs=inputs, overwrite=overwrite)
@@ -86,7 +93,8 @@ def command(
         for name, text in files.items():
             (tmp / name).write_text(text, encoding="utf-8")
             written.append(out_dir / name)
-        written += [out_dir / p.relative_to(tmp) for p in write_report_files(result, tmp)]
+        pages = write_report_files(result, tmp, template_dir=templates)
+        written += [out_dir / p.relative_to(tmp) for p in pages]
     click.echo(terminal_tables(result, tests=False))
     click.echo()
     click.echo(story(result))

@@ -315,6 +315,37 @@ lab_option = click.option(
 )
 
 
+template_dir_option = click.option(
+    "--template-dir",
+    "template_dir",
+    type=click.Path(exists=True, file_okay=False, path_type=Path),
+    default=None,
+    help="A folder of the lab's report templates (Jinja2: letterhead.html.j2, closing.html.j2 "
+    "or any other of hexatherm's), used before hexatherm's own: logo, address, wording. "
+    "Over a --lab file's templates: entry.",
+)
+
+
+def template_folder(template_dir: Path | None, lab: Path | None) -> Path | None:
+    """The lab's templates (``--template-dir``, else the lab file's ``templates:``),
+    every one of them compiled: a syntax error is refused naming file and line."""
+    from hexatherm.io.config.identity import lab_template_dir
+    from hexatherm.workflows.report.render import check_template_dir
+
+    if template_dir is None and lab is not None:
+        template_dir = lab_template_dir(lab)
+    return check_template_dir(template_dir)
+
+
+def template_files(folder: Path | None, lab: Path | None = None) -> list[Path]:
+    """The files of the lab's template folder (but the lab file): inputs of the page (its
+    provenance, and never an output)."""
+    if folder is None:
+        return []
+    skip = None if lab is None else lab.resolve()
+    return sorted(p for p in folder.iterdir() if p.is_file() and p.resolve() != skip)
+
+
 def _tolerances(ctx: click.Context, param: click.Parameter, values: tuple[str, ...]) -> dict:
     from hexatherm.workflows.process.conformity import parse_tolerances
 

@@ -20,6 +20,9 @@ from hexatherm.cli.options import (
     quality_threshold_option,
     reading_options,
     seed_option,
+    template_dir_option,
+    template_files,
+    template_folder,
     tolerance_option,
 )
 from hexatherm.io.files import ReadOptions
@@ -52,6 +55,7 @@ from hexatherm.io.files import ReadOptions
     "in the figure, the tables and the verdict (2, as calibration certificates use)"
 )
 @lab_option
+@template_dir_option
 @tolerance_option
 @reading_options
 @clean_errors
@@ -67,6 +71,7 @@ def command(
     quality_thresholds: tuple[str, ...],
     coverage_factor: float,
     lab: Path | None,
+    template_dir: Path | None,
     tolerances: dict[str, float],
     reading: ReadOptions,
 ) -> None:
@@ -79,7 +84,8 @@ def command(
     paper's Figure 6); the temperatures (Figure 7); the legs' growth at the
     references; the registration residuals; quality flags; the session's metadata
     and the provenance (command line, options, limits, inputs' SHA-256). Nothing is
-    written when processing fails.
+    written when processing fails. A lab's own templates (--template-dir, or the lab
+    file's templates:) give the page its letterhead and wording.
     """
     from hexatherm.io.config import read_session
     from hexatherm.io.config.identity import read_lab
@@ -90,12 +96,12 @@ def command(
 
     check_draws(mc)
     lab_fields, lab_tolerances = read_lab(lab) if lab is not None else ({}, {})
+    templates = template_folder(template_dir, lab)
+    extra_inputs = ([] if lab is None else [lab]) + template_files(templates, lab)
     overrides = dict(parse_threshold(t) for t in quality_thresholds)
     folder = session if session.is_dir() else session.parent
     out_file = out if out is not None else folder / "report.html"
-    inputs = read_session(session).input_files()
-    if lab is not None:
-        inputs.append(lab)
+    inputs = read_session(session).input_files() + extra_inputs
     check_output_settled(out_file, kind="file", inputs=inputs, overwrite=overwrite)
     with ProgressBars() as bars:
         result = process_session(
@@ -120,7 +126,8 @@ def command(
             on_verdict=verdicts.append,
             lab_fields=lab_fields,
             tolerances={**lab_tolerances, **result.session.tolerances, **tolerances},
-            extra_inputs=[] if lab is None else [lab],
+            extra_inputs=extra_inputs,
+            template_dir=templates,
         )
     write_output_file(out_file, page, inputs=inputs, overwrite=overwrite)
     for summary in verdicts:  # the page's verdict, on the screen too

@@ -221,8 +221,6 @@ class TargetJacobian:
         diagonal ``C[y, a, a]`` is the variance of :meth:`covariance`. Sparse products:
         each target has at most five steps.
         """
-        from scipy import sparse
-
         cov = np.asarray(centre_cov_mm2, dtype=float)
         m, n_parts, n_out, k = self.jac.shape[:4]
         n = cov.shape[0]
@@ -242,6 +240,8 @@ class TargetJacobian:
             keep = values.any(axis=0)
             dense[:, rows[keep], cols[keep]] = values[:, keep]
             return np.asarray(dense @ np.swapaxes(dense, 1, 2))
+        from scipy import sparse  # here: the dense path (a report's session) needs none
+
         out = np.empty((n_out, m, m))
         for y in range(n_out):
             a = sparse.csr_matrix((white[:, :, y].ravel(), (rows, cols)), shape=(m, n * 3 * k))

@@ -33,7 +33,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from scipy import stats
 
 from hexatherm.typing import FloatArray
 
@@ -198,6 +197,8 @@ def ljung_box(x: npt.ArrayLike, lags: int | None = None) -> LjungBox:
         return LjungBox(float("nan"), h, float("nan"))
     k = np.arange(1, h + 1)
     q = float(n * (n + 2) * np.sum(r**2 / (n - k)))
+    from scipy import stats  # here: scipy.stats takes ~1 s to import; rms() needs none
+
     return LjungBox(q, h, float(stats.chi2.sf(q, h)))
 
 
@@ -227,6 +228,8 @@ def linear_trend(times_s: npt.ArrayLike, y: npt.ArrayLike) -> Trend:
             slope, 0.0, float("inf") if slope else float("nan"), 0.0 if slope else float("nan")
         )
     t_value = slope / se
+    from scipy import stats
+
     return Trend(slope, se, t_value, float(2 * stats.t.sf(abs(t_value), n - 2)))
 
 
@@ -236,6 +239,8 @@ def spearman(x: npt.ArrayLike, y: npt.ArrayLike) -> Correlation:
     y = np.asarray(y, dtype=float).reshape(-1)
     if x.size < 3 or np.ptp(x) == 0 or np.ptp(y) == 0:
         return Correlation(float("nan"), float("nan"))
+    from scipy import stats
+
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         result = stats.spearmanr(x, y)

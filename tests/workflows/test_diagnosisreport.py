@@ -128,9 +128,10 @@ def test_report_html_is_the_same_story_with_the_figures_embedded(
     pngs = [p.read_bytes() for p in written[1:-1]]
     assert sorted(base64.b64decode(d) for d in embedded) == sorted(pngs)
     # every table of report.md (a header line followed by its alignment line), plus the
-    # provenance block's two
+    # provenance block's two and the running header's (the page every report shares)
     md_tables = len(re.findall(r"^\|.*\|\n\|[:-]", text, flags=re.M))
-    assert md_tables >= 5 and page.count("<table") == md_tables + 2
+    assert md_tables >= 5 and page.count("<table") == md_tables + 3
+    assert page.count('<table class="running">') == 1
     # the story's numbers, in µm
     added = result.diagnosis.added[0]
     tau, se = added.effect.values["tau_s"], added.std_errors["tau_s"]

@@ -2,9 +2,10 @@
 ``tolerances:`` mappings and the lab file (``hexatherm-lab/1``), all extensions.
 
 A lab file holds what is the same on every report of a lab (the lab, its CMM, its
-signatories, default tolerances); a session file's own ``identification:`` (and
-``tolerances:``) add to it and win key by key (``cmm.serial`` in the session replaces
-the lab's ``cmm.serial``; a session's ``signatures`` replace the lab's list). Every value
+signatories, default tolerances, ``templates:`` the folder of its own report templates);
+a session file's own ``identification:`` (and ``tolerances:``) add to it and win key by
+key (``cmm.serial`` in the session replaces the lab's ``cmm.serial``; a session's
+``signatures`` replace the lab's list). Every value
 is read strictly: texts must be YAML strings (quote serial and report numbers, so that
 ``007`` stays ``007``), numbers numbers; a bad value is refused naming file, line and
 field.
@@ -103,11 +104,23 @@ def read_lab(path: str | os.PathLike[str]) -> tuple[dict[str, Any], dict[str, fl
     tolerances (as :func:`read_tolerances`, empty without them)."""
     doc = YamlDoc.load(Path(path))
     doc.check_format(LAB_FORMAT)
-    doc.check_keys(["format", *IDENTIFICATION_KEYS, "tolerances"])
+    doc.check_keys(["format", *IDENTIFICATION_KEYS, "tolerances", "templates"])
     tolerances = {}
     if doc.get("tolerances", default=None) is not None:
         tolerances = read_tolerances(doc, "tolerances")
     return read_identification(doc), tolerances
+
+
+def lab_template_dir(path: str | os.PathLike[str]) -> Path | None:
+    """The lab file's ``templates:`` folder (the lab's report templates), relative to the
+    lab file's folder; None without it; not a folder: refused naming file, line and field."""
+    doc = YamlDoc.load(Path(path))
+    if doc.get("templates", default=None) is None:
+        return None
+    folder = Path(path).parent / _text(doc, "templates")
+    if not folder.is_dir():
+        raise doc.error(f"no folder {str(folder)!r} (relative to the lab file)", "templates")
+    return folder
 
 
 def identification(

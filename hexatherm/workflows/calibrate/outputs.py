@@ -247,13 +247,15 @@ def output_files(
     folder: Path | None = None,
     lab_fields: dict[str, object] | None = None,
     coverage_factor: float = 2.0,
+    template_dir: Path | None = None,
 ) -> dict[str, str]:
     """Every file of the output folder, name -> text; with ``inputs`` (the files the run
     read) the report too, and the predicted uncertainty over the stroke; the claim for
     new poses (:func:`~hexatherm.workflows.calibrate.claim.pose_claim`) always (``folder``: the
     output folder, for the report's relative paths; ``lab_fields``: a lab file's
     identification for the report's header; ``coverage_factor``: k of the expanded
-    uncertainties of ``parameters.csv`` and the report)."""
+    uncertainties of ``parameters.csv`` and the report; ``template_dir``: a lab's
+    templates for the report)."""
     stroke = None if inputs is None else stroke_map(run)
     if stroke is None:
         claim = pose_claim(run)
@@ -267,7 +269,14 @@ def output_files(
     }
     if stroke is not None and inputs is not None:
         files["report.html"] = report_html(
-            run, stroke, inputs, folder or Path("."), lab_fields, coverage_factor, claim
+            run,
+            stroke,
+            inputs,
+            folder or Path("."),
+            lab_fields,
+            coverage_factor,
+            claim,
+            template_dir,
         )
     return files
 

@@ -1,6 +1,6 @@
-"""The calibration's report (``OUT/report.html``), in the style of ``report`` and
-``diagnose`` (:mod:`hexatherm.workflows.report.page`), and the predicted-pose
-uncertainty over the stroke.
+"""The calibration's report (``OUT/report.html``), from the template
+``calibration.html.j2`` as ``report`` and ``diagnose`` (:mod:`hexatherm.workflows.report.render`:
+a lab may override it), and the predicted-pose uncertainty over the stroke.
 
 The page holds: the verdict (level, poses, chi-square per degree of freedom, residuals
 before and after, the claimed uncertainty of a new pose over the stroke, worst and
@@ -29,15 +29,8 @@ from hexatherm.io.provenance import current_run, now_iso
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.calibrate.claim import PoseClaim, span_poses
 from hexatherm.workflows.calibrate.run import Calibration
-from hexatherm.workflows.report.page import (
-    Cell,
-    figure_html,
-    html_table,
-    page_html,
-    provenance_html,
-    running_header_html,
-    signature_html,
-)
+from hexatherm.workflows.report.page import Cell, figure, provenance, signature_table, table
+from hexatherm.workflows.report.render import render_page
 from hexatherm.workflows.report.text import exact, fixed, unit_text
 
 if TYPE_CHECKING:
@@ -272,11 +265,13 @@ def report_html(
     lab_fields: dict[str, object] | None = None,
     coverage_factor: float = COVERAGE_FACTOR,
     claim: PoseClaim | None = None,
+    template_dir: Path | None = None,
 ) -> str:
     """The calibration's report page (see the module text); ``lab_fields``: a lab file's
     identification (the sessions' own ``identification:`` over it, in the order given);
     ``coverage_factor``: k of every expanded uncertainty ``U = k u`` it prints; ``claim``:
-    the claim for new poses (the parameters' part alone, over ``stroke``, without it)."""
+    the claim for new poses (the parameters' part alone, over ``stroke``, without it);
+    ``template_dir``: a lab's templates, over the package's."""
     from hexatherm.io.config.identity import identification
     from hexatherm.workflows.report.html import header_rows
 
@@ -313,7 +308,7 @@ def report_html(
         verdict.append(
             f"{len(pairs)} pair(s) of parameters correlated beyond |ρ| = 0.9 (flagged below)."
         )
-    parts = ["<h2>Verdict</h2><ul>" + "".join(f"<li>{_esc(v)}</li>" for v in verdict) + "</ul>"]
+    levels = None
     if run.choice is not None:
         rows: list[list[Cell]] = []
         for score in run.choice.scores:
@@ -325,15 +320,12 @@ def report_html(
                     score.note,
                 ]
             )
-        parts.append("<h2>Level</h2>")
-        parts.append(
-            html_table(
-                [[("level", 1), ("BIC", 1), ("held-out RMS (whitened)", 1), ("note", 1)]],
-                rows,
-                align="lrrl",
-                caption="The next larger level is chosen when its BIC is lower by more than "
-                "10 and its held-out RMS is lower.",
-            )
+        levels = table(
+            [[("level", 1), ("BIC", 1), ("held-out RMS (whitened)", 1), ("note", 1)]],
+            rows,
+            align="lrrl",
+            caption="The next larger level is chosen when its BIC is lower by more than "
+            "10 and its held-out RMS is lower.",
         )
     flagged = {a for a, _, _ in pairs} | {b for _, b, _ in pairs}
     names = fit.names
@@ -357,9 +349,21 @@ def report_html(
             ]
         )
         classes.append("fail" if name in flagged else "")
-    parts.append("<h2>Parameters</h2>")
-    parts.append(
-        html_table(
+    indices = obs.indices()
+    merged: dict[str, object] = {}
+    for result in run.campaign.results:
+        merged.update(result.session.identification)
+    ident = identification(merged, lab_fields)
+    title = "hexatherm calibration"
+    return render_page(
+        "calibration.html.j2",
+        template_dir,
+        title=title,
+        header_rows=header_rows(title, ident, sessions, hexapod),
+        signatures=signature_table(ident.signatures),
+        verdict=verdict,
+        levels=levels,
+        parameters=table(
             [
                 [
                     ("parameter", 1),
@@ -377,80 +381,40 @@ def report_html(
             "for gains). Highlighted: correlated beyond |ρ| = 0.9 with another parameter. "
             "Base joints in the fit's gauge (the least-squares rigid fit of the fitted base "
             "onto the nominal one); hexapod.yaml holds them in frame O.",
-        )
-    )
-    indices = obs.indices()
-    parts.append("<h2>Observability</h2>")
-    parts.append(
-        html_table(
+        ),
+        observability=table(
             [[("figure", 1), ("value", 1)]],
             [[name, f"{value:.4g}"] for name, value in indices.items()]
             + [["rank", f"{obs.rank} of {obs.n_parameters}"]],
-        )
-    )
-    parts.append(
-        '<p class="note">Singular values of the whitened Jacobian: '
-        + _esc(", ".join(f"{v:.3g}" for v in obs.singular_values))
-        + "</p>"
-    )
-    parts.append("<h2>Predicted uncertainty over the stroke</h2>")
-    parts.append(
-        figure_html(
+        ),
+        singular_values=", ".join(f"{v:.3g}" for v in obs.singular_values),
+        map_figure=figure(
             _map_figure(stroke, run.campaign.commanded),
             "predicted uncertainty map",
             "Largest predicted standard uncertainty (k = 1) of Tx, Ty, Tz of a pose the "
             "calibrated model predicts, from its parameters' uncertainty (the claim adds "
             "the level's model floor), over Tx and Ty with the other components at zero; "
             "blank: out of the stroke. Crosses: the campaign's targets (all components).",
-        )
-    )
-    parts.append("<h2>Residuals</h2>")
-    parts.append(
-        figure_html(
+        ),
+        residual_figure=figure(
             _residual_figure(run),
             "residuals before and after",
             "Translation and rotation residual of every target: measured minus the nominal "
             "geometry's prediction (the commanded pose), and minus the calibrated model's.",
-        )
-    )
-    parts.append(
-        figure_html(
+        ),
+        workspace_figure=figure(
             _workspace_figure(run),
             "residuals over the workspace",
             "Translation residual of every target at its commanded Tx and Ty (all other "
             "components as commanded), before (nominal geometry) and after (calibrated), "
             "on one colour scale.",
-        )
-    )
-    parts.append("<h2>Correlations</h2>")
-    parts.append(
-        figure_html(
+        ),
+        correlation_figure=figure(
             _correlation_figure(run),
             "correlation matrix of the parameters",
             "Correlation coefficient of every pair of fitted parameters (their covariance "
-            "over the product of their standard uncertainties); near \u00b11: the campaign "
+            "over the product of their standard uncertainties); near ±1: the campaign "
             "does not tell the two apart.",
-        )
+        ),
+        provenance=provenance(current_run(), inputs, folder, now_iso()),
     )
-    parts.append(
-        provenance_html(
-            current_run(),
-            inputs,
-            folder,
-            now_iso(),
-        )
-    )
-    merged: dict[str, object] = {}
-    for result in run.campaign.results:
-        merged.update(result.session.identification)
-    ident = identification(merged, lab_fields)
-    parts.append(signature_html(ident.signatures))
-    title = "hexatherm calibration"
-    header = running_header_html(header_rows(title, ident, sessions, hexapod))
-    return page_html(title, parts, header=header)
-
-
-def _esc(text: str) -> str:
-    from hexatherm.workflows.report.page import escape
-
-    return escape(text)

@@ -25,7 +25,9 @@ given (either may be left out, and the page says so). It holds:
 Numbers have fixed decimals per unit and nominal values are exact
 (:mod:`~hexatherm.workflows.report.text`); a step that failed a check is marked in
 every table (:mod:`~hexatherm.workflows.report.tables`) and shaded in the pose
-figure. The page prints on A4 (a print style sheet; the widest table fits 180 mm).
+figure. The page prints on A4 (a print style sheet; the widest table fits 180 mm). It is
+written from the template ``process.html.j2`` (:mod:`~hexatherm.workflows.report.render`),
+which a lab may override with its own.
 
 The figure functions return :class:`matplotlib.figure.Figure` objects drawn with
 the Agg canvas (no pyplot, no global state), so tests can read their axes' data.
@@ -61,25 +63,27 @@ from hexatherm.workflows.report.html import (
     metadata_rows,
     provenance_block,
     report_html,
-    verdict_html,
+    verdict_failed,
     verdict_items,
 )
 from hexatherm.workflows.report.page import (
     STYLE,
     Cell,
-    figure_html,
-    html_table,
-    page_html,
-    provenance_html,
+    figure,
+    provenance,
+    signature_table,
+    table,
 )
+from hexatherm.workflows.report.render import Figure, Table, render_page
 from hexatherm.workflows.report.tables import (
     FAIL_MARK,
     commanded_columns,
     failing_rows,
-    growth_table_html,
+    growth_table,
+    poses_table,
     poses_table_html,
-    quality_summary_html,
-    quality_table_html,
+    quality_summary,
+    quality_table,
 )
 from hexatherm.workflows.report.text import exact, fixed, unit_text
 from hexatherm.workflows.report.verdict import Extreme, Verdict, verdict
@@ -93,13 +97,13 @@ __all__ = [
     "commanded_columns",
     "exact",
     "fixed",
-    "figure_html",
-    "page_html",
+    "figure",
+    "render_page",
     "provenance_block",
-    "provenance_html",
+    "provenance",
     "unit_text",
     "verdict",
-    "verdict_html",
+    "verdict_failed",
     "verdict_items",
     "CONVENTIONAL_COLOUR",
     "CORRECTED_COLOUR",
@@ -115,15 +119,19 @@ __all__ = [
     "failing_rows",
     "figure_png",
     "growth_figure",
-    "growth_table_html",
+    "growth_table",
     "hours_since_start",
-    "html_table",
+    "table",
     "metadata_rows",
     "pose_deviations",
     "pose_figure",
+    "poses_table",
     "poses_table_html",
-    "quality_summary_html",
-    "quality_table_html",
+    "signature_table",
+    "Figure",
+    "Table",
+    "quality_summary",
+    "quality_table",
     "reference_growth_um",
     "registration_figure",
     "report_html",

@@ -7,7 +7,8 @@ import numpy as np
 
 from hexatherm.core.conformity import DECISION_RULE, WORDS
 from hexatherm.workflows.process.conformity import Conformity, tolerance_text
-from hexatherm.workflows.report.page import Cell, html_table
+from hexatherm.workflows.report.page import Cell, table
+from hexatherm.workflows.report.render import Table
 from hexatherm.workflows.report.text import exact, fixed, unit_text
 
 
@@ -24,7 +25,7 @@ def conformity_item(judged: Conformity) -> tuple[str, str]:
     )
 
 
-def conformity_table_html(judged: Conformity) -> str:
+def conformity_table(judged: Conformity) -> Table:
     """One row per target: per toleranced component the deviation, its U (the guard band)
     and the decision; then the target's decision. The header gives each tolerance."""
     head: list[tuple[str, int]] = [("target", 1)]
@@ -51,7 +52,7 @@ def conformity_table_html(judged: Conformity) -> str:
         rows.append(row)
         classes.append("fail" if judged.per_target[i] != "conforms" else "")
     align = "l" + "rrl" * len(judged.keys) + "l"
-    return html_table(
+    return table(
         [head, sub],
         rows,
         row_classes=classes,

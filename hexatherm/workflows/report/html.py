@@ -21,28 +21,24 @@ from hexatherm.workflows.report.figures import (
 )
 from hexatherm.workflows.report.page import (
     STYLE,
-    escape,
-    figure_html,
-    html_table,
-    page_html,
-    provenance_html,
-    running_header_html,
-    signature_html,
+    figure,
+    provenance,
+    signature_table,
+    table,
 )
+from hexatherm.workflows.report.render import Table, render_page
 from hexatherm.workflows.report.tables import (
     FAIL_MARK,
     QUALITY_HEADS,
     failing_rows,
-    growth_table_html,
-    poses_table_html,
-    quality_summary_html,
-    quality_table_html,
-    shared_parts_table_html,
+    growth_table,
+    poses_table,
+    quality_summary,
+    quality_table,
+    shared_parts_table,
 )
 from hexatherm.workflows.report.text import exact, fixed, unit_text
 from hexatherm.workflows.report.verdict import Extreme, Verdict, verdict
-
-_e = escape
 
 __all__ = ["STYLE", "build_report", "metadata_rows", "provenance_block", "report_html"]
 
@@ -206,18 +202,9 @@ def verdict_items(summary: Verdict) -> list[tuple[str, str]]:
     return items
 
 
-def verdict_html(summary: Verdict) -> str:
-    """The verdict block (see :class:`~hexatherm.workflows.report.verdict.Verdict`)."""
-    items = [
-        f"<b>{_e(head)}{'' if text.startswith('(') else ':'}</b> {_e(text)}"
-        for head, text in verdict_items(summary)
-    ]
-    cls = "verdict failed" if summary.failing_targets or summary.failing_other else "verdict"
-    return (
-        f'<div class="{cls}"><h2>Verdict</h2><ul>'
-        + "".join(f"<li>{item}</li>" for item in items)
-        + "</ul></div>"
-    )
+def verdict_failed(summary: Verdict) -> bool:
+    """Whether the verdict block is drawn as failed (a target or reference failed a check)."""
+    return bool(summary.failing_targets or summary.failing_other)
 
 
 def threshold_texts(thresholds: QualityLimits) -> list[str]:
@@ -243,11 +230,11 @@ def provenance_block(
     facts: RunFacts | None,
     generated: str,
     extra_inputs: Sequence[Path] = (),
-) -> str:
-    """The provenance block of a session's report (:func:`page.provenance_html`), with the
+) -> dict[str, Table]:
+    """The provenance block of a session's report (:func:`page.provenance`), with the
     quality limits; ``extra_inputs``: further files the page was made from (a lab file)."""
     limits = "not available" if quality is None else "; ".join(threshold_texts(quality.thresholds))
-    return provenance_html(
+    return provenance(
         facts,
         [*result.session.input_files(), *extra_inputs],
         result.session.path.parent,
@@ -267,6 +254,7 @@ def report_html(
     identification: Identification | None = None,
     tolerances: dict[str, float] | None = None,
     extra_inputs: Sequence[Path] = (),
+    template_dir: Path | None = None,
 ) -> str:
     """The report page of a processed session (see the package's docstring).
 
@@ -294,6 +282,8 @@ def report_html(
         ``Tx_um`` .. ``Rz_urad`` -> T: the conformity statement (verdict and a table).
     extra_inputs : sequence of Path
         Further input files listed in the provenance (the lab file).
+    template_dir : Path, optional
+        A lab's templates, over the package's (:mod:`~hexatherm.workflows.report.render`).
 
     Returns
     -------
@@ -309,113 +299,87 @@ def report_html(
         on_verdict(summary)
     failing = dict(summary.failing_targets + summary.failing_other)
     k_text = exact(coverage_factor)
-    name = result.session.name
-    parts = [verdict_html(summary)]
-    if result.warnings:
-        parts.append(
-            "<h2>Warnings</h2><ul>"
-            + "".join(f"<li>{_e(w)}</li>" for w in result.warnings)
-            + "</ul>"
+    pose_caption = (
+        "Deviations of the conventional (measured) and corrected (thermal state "
+        "of R0) poses from the commanded pose: translations in \u00b5m, rotations in "
+        "\u00b5rad."
+        + (
+            f" Error bars: expanded uncertainty U = k\u00b7u, k = {k_text}."
+            if uncertainty is not None
+            else ""
         )
+        + (
+            " Band: \u00b1k\u00b7u_common, U's share from O and R0, the same for all targets."
+            if summary.common_u is not None
+            else ""
+        )
+        + (" Shaded: targets that failed a quality check." if summary.failing_targets else "")
+    )
+    quality_part = None
+    if quality is not None:
+        quality_part = {
+            "failed": sum(failing_rows(quality.frame)),
+            "mark": FAIL_MARK.strip(),
+            "summary": quality_summary(quality),
+            "table": quality_table(quality),
+        }
+    conformity = None
+    if summary.conformity is not None:
+        from hexatherm.workflows.report.conformity import conformity_table
 
-    parts.append("<h2>Pose parameters per trial (the paper's Figure 6)</h2>")
-    if uncertainty is None:
-        parts.append(
-            '<p class="missing">uncertainty not available: the poses are shown '
-            "without uncertainty bars.</p>"
-        )
-    parts += [
-        figure_html(
+        conformity = conformity_table(summary.conformity)
+    title = f"hexatherm report: {result.session.name}"
+    hexapod = f"{result.session.hexapod.name} ({_session_files(result)['hexapod']})"
+    return render_page(
+        "process.html.j2",
+        template_dir,
+        title=title,
+        header_rows=header_rows(title, identification, session_dates(result), hexapod),
+        signatures=None if identification is None else signature_table(identification.signatures),
+        verdict=verdict_items(summary),
+        verdict_failed=verdict_failed(summary),
+        warnings=list(result.warnings),
+        uncertainty_given=uncertainty is not None,
+        pose_figure=figure(
             pose_figure(result, uncertainty, coverage_factor, failing),
             "pose parameters per trial",
-            "Deviations of the conventional (measured) and corrected (thermal state "
-            "of R0) poses from the commanded pose: translations in \u00b5m, rotations in "
-            "\u00b5rad."
-            + (
-                f" Error bars: expanded uncertainty U = k\u00b7u, k = {k_text}."
-                if uncertainty is not None
-                else ""
-            )
-            + (
-                " Band: \u00b1k\u00b7u_common, U's share from O and R0, the same for all targets."
-                if summary.common_u is not None
-                else ""
-            )
-            + (" Shaded: targets that failed a quality check." if summary.failing_targets else ""),
+            pose_caption,
         ),
-        poses_table_html(result, uncertainty, "conventional", coverage_factor, failing),
-        poses_table_html(result, uncertainty, "corrected", coverage_factor, failing),
-    ]
-    if summary.conformity is not None:
-        from hexatherm.workflows.report.conformity import conformity_table_html
-
-        parts.append(conformity_table_html(summary.conformity))
-    if uncertainty is not None:
-        parts.append(shared_parts_table_html(uncertainty, coverage_factor))
-    if uncertainty is not None:
-        parts.append(
-            f'<p class="note">Uncertainty: {_e(summary.basis)}; ball centres: '
-            f"{_e(uncertainty.centres.description)}. U = k\u00b7u with k = {_e(k_text)}.</p>"
-        )
-
-    parts.append("<h2>Temperatures (the paper's Figure 7)</h2>")
-    temperature = temperature_figure(result)
-    if temperature is None:
-        parts.append('<p class="missing">no temperature log in this session.</p>')
-    else:
-        parts.append(
-            figure_html(
-                temperature,
-                "measured temperatures",
-                "Thermocouple temperatures over time; ticks at the bottom: the targets' times.",
-            )
-        )
-
-    parts += [
-        "<h2>Leg growth at the references</h2>",
-        figure_html(
+        conventional=poses_table(result, uncertainty, "conventional", coverage_factor, failing),
+        corrected=poses_table(result, uncertainty, "corrected", coverage_factor, failing),
+        conformity=conformity,
+        shared=None if uncertainty is None else shared_parts_table(uncertainty, coverage_factor),
+        uncertainty_note=None
+        if uncertainty is None
+        else f"Uncertainty: {summary.basis}; ball centres: {uncertainty.centres.description}. "
+        f"U = k\u00b7u with k = {k_text}.",
+        temperature_figure=figure(
+            temperature_figure(result),
+            "measured temperatures",
+            "Thermocouple temperatures over time; ticks at the bottom: the targets' times.",
+        ),
+        growth_figure=figure(
             growth_figure(result),
             "leg growth at the references",
             "Growth of each leg since R0 (\u00b5m), from the IGM of the measured reference "
             "poses; ticks at the bottom: the targets' times.",
         ),
-        growth_table_html(result, failing),
-        "<h2>Registration residuals</h2>",
-        figure_html(
+        growth=growth_table(result, failing),
+        registration_figure=figure(
             registration_figure(result),
             "registration residuals",
             "RMS distance between the measured ball centres and the registered "
             "balls file, per step (\u00b5m).",
         ),
-        "<h2>Quality flags</h2>",
-    ]
-    if quality is None:
-        parts.append('<p class="missing">quality checks not available.</p>')
-    else:
-        failed = sum(failing_rows(quality.frame))
-        parts.append(
-            f'<p class="note">{failed} step(s) failing a check (highlighted and marked '
-            f"{FAIL_MARK.strip()}, the failing values in bold). Worst value of every check "
-            "and its limit:</p>"
-        )
-        parts.append(quality_summary_html(quality))
-        parts.append(quality_table_html(quality))
-    parts += [
-        "<h2>Session</h2>",
-        html_table(
+        quality=quality_part,
+        session=table(
             [[("field", 1), ("value", 1)]],
             [[k, v] for k, v in metadata_rows(result)],
             numeric_from=99,
             css="meta",
         ),
-        provenance_block(result, quality, facts, generated or now_iso(), extra_inputs),
-    ]
-    if identification is not None:
-        parts.append(signature_html(identification.signatures))
-    title = f"hexatherm report: {name}"
-    hexapod = f"{result.session.hexapod.name} ({_session_files(result)['hexapod']})"
-    header = running_header_html(header_rows(title, identification, session_dates(result), hexapod))
-    return page_html(title, parts, header=header)
+        provenance=provenance_block(result, quality, facts, generated or now_iso(), extra_inputs),
+    )
 
 
 def build_report(
@@ -429,6 +393,7 @@ def build_report(
     lab_fields: dict[str, object] | None = None,
     tolerances: dict[str, float] | None = None,
     extra_inputs: Sequence[Path] = (),
+    template_dir: Path | None = None,
 ) -> str:
     """The report page of ``result`` with its pose uncertainty and quality checks.
 
@@ -455,6 +420,8 @@ def build_report(
         merges a lab file's, the session's and ``--tolerance``'s, in that order).
     extra_inputs : sequence of Path
         Further input files for the provenance (the lab file).
+    template_dir : Path, optional
+        A lab's templates, over the package's.
     """
     from hexatherm.io.config.identity import identification
     from hexatherm.workflows.process.quality import quality_checks
@@ -469,4 +436,5 @@ def build_report(
         identification=identification(result.session.identification, lab_fields),
         tolerances=result.session.tolerances if tolerances is None else tolerances,
         extra_inputs=extra_inputs,
+        template_dir=template_dir,
     )

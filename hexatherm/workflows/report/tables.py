@@ -1,4 +1,4 @@
-"""The report's tables, as escaped HTML that prints on A4.
+"""The report's tables, as data the templates print (escaped) on A4.
 
 Numbers have the fixed decimals of their unit (:mod:`~hexatherm.workflows.report.text`),
 right-aligned in tabular figures so a column lines up on its decimal point; nominal
@@ -8,7 +8,6 @@ appears in (its row highlighted, its label followed by :data:`FAIL_MARK`).
 
 from __future__ import annotations
 
-import re
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Literal
 
@@ -27,10 +26,9 @@ from hexatherm.workflows.report.figures import (
     reference_growth_um,
     target_labels,
 )
-from hexatherm.workflows.report.page import Cell, escape, html_table
+from hexatherm.workflows.report.page import Cell, table
+from hexatherm.workflows.report.render import Table, render_macro
 from hexatherm.workflows.report.text import exact, fixed, unit_text
-
-_e = escape
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -78,6 +76,17 @@ def poses_table_html(
     coverage_factor: float = 2.0,
     failing: Mapping[str, str] | None = None,
 ) -> str:
+    """:func:`poses_table` as HTML."""
+    return render_macro("table", poses_table(result, uncertainty, which, coverage_factor, failing))
+
+
+def poses_table(
+    result: ProcessResult,
+    uncertainty: PoseUncertainty | None,
+    which: Literal["conventional", "corrected"],
+    coverage_factor: float = 2.0,
+    failing: Mapping[str, str] | None = None,
+) -> Table:
     """Every target: commanded pose (its non-zero columns, exact) and the ``which`` pose's
     deviation from it (µm, µrad), each with its expanded uncertainty ``U = k u``.
 
@@ -152,10 +161,10 @@ def poses_table_html(
     if dropped:
         caption += f"; commanded {', '.join(dropped)} = 0 at every target"
     caption += "; spread: max \u2212 min over the targets."
-    return html_table(header, rows, numeric_from=1, row_classes=classes, caption=caption)
+    return table(header, rows, numeric_from=1, row_classes=classes, caption=caption)
 
 
-def growth_table_html(result: ProcessResult, failing: Mapping[str, str] | None = None) -> str:
+def growth_table(result: ProcessResult, failing: Mapping[str, str] | None = None) -> Table:
     """Every reference step: its time and the growth of each leg since R0 (µm)."""
     failing = failing or {}
     refs, growth = reference_growth_um(result)
@@ -167,7 +176,7 @@ def growth_table_html(result: ProcessResult, failing: Mapping[str, str] | None =
     ]
     classes = ["fail" if label in failing else "" for label in labels]
     header = [[("reference", 1), ("t (h)", 1), *[(head(f"leg {i}", "um"), 1) for i in range(1, 7)]]]
-    return html_table(header, rows, row_classes=classes)
+    return table(header, rows, row_classes=classes)
 
 
 def failing_rows(frame: pd.DataFrame) -> list[bool]:
@@ -175,7 +184,7 @@ def failing_rows(frame: pd.DataFrame) -> list[bool]:
     return [bool(text) for text in frame["failed"].fillna("").astype(str)]
 
 
-def quality_table_html(quality: QualityReport) -> str:
+def quality_table(quality: QualityReport) -> Table:
     """The quality checks, one row per step: failing rows highlighted, failing values marked.
 
     Columns: step, kind, the value of every check (fixed decimals per column, its
@@ -188,25 +197,30 @@ def quality_table_html(quality: QualityReport) -> str:
     failed = failing_rows(frame)
     heads = [head(*QUALITY_HEADS.get(column, (column, ""))) for column, _ in checks]
     units = [QUALITY_HEADS.get(column, (column, ""))[1] for column, _ in checks]
-    out = [
-        '<table class="quality">',
-        "<thead><tr><th>step</th><th>kind</th>"
-        + "".join(f"<th>{_e(h)}</th>" for h in heads)
-        + "<th>failed</th></tr></thead><tbody>",
-    ]
+    rows: list[list[Cell]] = []
+    cell_classes = []
     for i, row in enumerate(frame.to_dict("records")):
         label = str(row["label"]) + (FAIL_MARK if failed[i] else "")
-        cells = [f"<td>{_e(label)}</td>", f"<td>{_e(row['kind'])}</td>"]
+        cells: list[Cell] = [label, str(row["kind"])]
+        classes = ["", ""]
         for (column, ok), unit in zip(checks, units, strict=True):
-            cls = "num" if row[ok] else "num bad"  # "na" (could not run) is not a failure
-            cells.append(f'<td class="{cls}">{_e(fixed(float(row[column]), unit))}</td>')
-        cells.append(f"<td>{_e(str(row['failed']).replace(';', ', '))}</td>")
-        out.append(('<tr class="fail">' if failed[i] else "<tr>") + "".join(cells) + "</tr>")
-    out.append("</tbody></table>")
-    return "\n".join(out)
+            classes.append("num" if row[ok] else "num bad")  # "na" (could not run): no failure
+            cells.append(fixed(float(row[column]), unit))
+        cells.append(str(row["failed"]).replace(";", ", "))
+        classes.append("")
+        rows.append(cells)
+        cell_classes.append(classes)
+    out = table(
+        [[("step", 1), ("kind", 1), *[(h, 1) for h in heads], ("failed", 1)]],
+        rows,
+        row_classes=["fail" if f else "" for f in failed],
+        css="quality",
+    )
+    out.cell_classes = cell_classes
+    return out
 
 
-def quality_summary_html(quality: QualityReport) -> str:
+def quality_summary(quality: QualityReport) -> Table:
     """One row per check: its worst value over the steps, its limit, and which steps failed
     it (or that it could not run at any step)."""
     from hexatherm.workflows.process.quality import CHECKS
@@ -240,17 +254,17 @@ def quality_summary_html(quality: QualityReport) -> str:
         )
     classes = ["fail" if row[3].startswith("failed") else "" for row in rows]
     header = [[("check", 1), ("worst value", 1), ("limit", 1), ("status", 1)]]
-    table = html_table(header, rows, numeric_from=1, row_classes=classes)
-    # the status is text: left-aligned, wrapping
-    return re.sub(r'<td class="num">([^<]*)</td></tr>', r'<td class="wrap">\1</td></tr>', table)
+    out = table(header, rows, numeric_from=1, row_classes=classes)
+    out.cell_classes = [["", "num", "num", "wrap"]] * len(rows)  # the status: text, wrapping
+    return out
 
 
-def shared_parts_table_html(uncertainty: PoseUncertainty, coverage_factor: float = 2.0) -> str:
+def shared_parts_table(uncertainty: PoseUncertainty, coverage_factor: float = 2.0) -> Table | None:
     """The expanded uncertainty of the corrected poses split into the part common to every
     target and the part of its own (RMS over the targets, µm and µrad), with what each
     means: the table every reader of the pose tables needs once."""
     if uncertainty.common_u is None or uncertainty.own_u is None:
-        return ""
+        return None
     common = coverage_factor * to_um_urad(uncertainty.common_u[:, 6:])
     own = coverage_factor * to_um_urad(uncertainty.own_u[:, 6:])
     total = coverage_factor * to_um_urad(uncertainty.corrected_u)
@@ -278,4 +292,4 @@ def shared_parts_table_html(uncertainty: PoseUncertainty, coverage_factor: float
         "target: it is what differences between targets carry. Total = "
         "sqrt(common\u00b2 + own\u00b2)."
     )
-    return html_table(header, rows, caption=caption)
+    return table(header, rows, caption=caption)

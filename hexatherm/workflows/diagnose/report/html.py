@@ -1,11 +1,12 @@
 """report.html of diagnose: the story of ``report.md`` as one page in the report's style.
 
-The page is written from the same text as ``report.md`` (:func:`report_markdown`), read
-back block by block in the small Markdown it uses (headings, paragraphs, ``-`` lists
-two levels deep, ``**bold**``, ``code``, pipe tables, figure links), and laid out with
-the parts every hexatherm report shares (:mod:`hexatherm.workflows.report.page`): the
-style sheet that prints on A4, escaped tables, the figures embedded as PNG data URIs,
-and the provenance block. Units are written µm, µrad, °C.
+The page is written from the same text as ``report.md`` (:func:`report_markdown`), parsed
+by markdown-it-py (CommonMark and pipe tables, raw HTML off: a user's text stays text),
+its units written as a reader writes them (µm, µrad, °C) and its figure links replaced
+by the figures, embedded as PNG data URIs; the template ``diagnosis.html.j2``
+(:mod:`hexatherm.workflows.report.render`, a lab may override it) lays it out with the
+parts every hexatherm report shares: the style sheet that prints on A4, the running
+header and the provenance block.
 """
 
 from __future__ import annotations
@@ -19,15 +20,12 @@ from hexatherm.workflows.diagnose.report.figures import report_figures
 from hexatherm.workflows.diagnose.report.markdown import report_markdown
 from hexatherm.workflows.diagnose.report.tables import FIGURE_DPI, FIGURE_FILES, REPORT_FILE
 from hexatherm.workflows.report.figures import figure_png
-from hexatherm.workflows.report.page import (
-    escape,
-    figure_html,
-    html_table,
-    page_html,
-    provenance_html,
-)
+from hexatherm.workflows.report.page import figure, provenance
+from hexatherm.workflows.report.render import Markup, render_macro, render_page
 
 if TYPE_CHECKING:
+    from markdown_it.token import Token
+
     from hexatherm.io.provenance import RunFacts
     from hexatherm.workflows.diagnose.run import DiagnosisResult
 
@@ -39,10 +37,6 @@ _UNITS = (
     (re.compile(r"\bum\b"), "µm"),
     (re.compile(r"\bdegC\b"), "°C"),
 )
-_HEADING = re.compile(r"(#{1,4}) (.*)")
-_IMAGE = re.compile(r"!\[(.*)\]\((.*)\)")
-_ITEM = re.compile(r"( *)- (.*)")
-_PIPE = re.compile(r"(?<!\\)\|")
 
 
 def units(text: str) -> str:
@@ -56,100 +50,72 @@ def units(text: str) -> str:
     return text
 
 
-#: a code span, or a backslash escape (CommonMark: ASCII punctuation made literal)
-_LITERAL = re.compile(r"`([^`]+)`|\\([!-/:-@\[-`{-~])")
-#: where a literal stands while the rest is formatted (private-use characters)
-_SLOT = re.compile("\ue000([0-9]+)\ue001")
+def _text(token: Token) -> str:
+    return "".join(c.content for c in token.children or () if c.type in ("text", "code_inline"))
 
 
-def inline(text: str) -> str:
-    r"""One line of Markdown text as escaped HTML: ``**bold**``, ```code```, units, and
-    backslash escapes (``\<`` is ``<``, text: how :func:`~.tables.md_text` writes a
-    user's name).
+def _figure_token(inline: Token, figures: Mapping[str, bytes]) -> Token | None:
+    """An ``html_block`` token holding the figure a paragraph of one image links to."""
+    from markdown_it.token import Token
 
-    >>> inline("**NOT adequate** <1 um> in `a|b`")
-    '<b>NOT adequate</b> &lt;1 µm&gt; in <code>a|b</code>'
-    >>> inline(r"of \<i\>\*x\*\</i\>")
-    'of &lt;i&gt;*x*&lt;/i&gt;'
-    """
-    literals: list[str] = []
-
-    def keep(match: re.Match[str]) -> str:
-        code, char = match[1], match[2]
-        literals.append(f"<code>{escape(units(code))}</code>" if code else escape(char))
-        return f"\ue000{len(literals) - 1}\ue001"
-
-    out = escape(units(_LITERAL.sub(keep, text)))
-    out = re.sub(r"\*\*(.+?)\*\*", r"<b>\1</b>", out)
-    return _SLOT.sub(lambda m: literals[int(m[1])], out)
-
-
-def _cells(line: str) -> list[str]:
-    unescape = re.compile(r"\\([!-/:-@\[-`{-~])")
-    return [unescape.sub(r"\1", c.strip()) for c in _PIPE.split(line.strip())[1:-1]]
-
-
-def _table(lines: list[str]) -> str:
-    headers = [units(c) for c in _cells(lines[0])]
-    align = "".join("l" if c.startswith(":") else "r" for c in _cells(lines[1]))
-    rows = [[units(c) for c in _cells(line)] for line in lines[2:]]
-    return html_table([[(h, 1) for h in headers]], rows, align=align)
-
-
-def _items(lines: list[str]) -> str:
-    out, depth = [], 0
-    for line in lines:
-        match = _ITEM.fullmatch(line)
-        assert match is not None
-        level = 1 + len(match[1]) // 2
-        if level > depth:
-            out.append("<ul>" * (level - depth))
-        elif level < depth:
-            out.append("</li></ul>" * (depth - level) + "</li>")
-        elif out:
-            out.append("</li>")
-        out.append(f"<li>{inline(match[2])}")
-        depth = level
-    out.append("</li></ul>" * depth)
-    return "".join(out)
+    children = inline.children or []
+    if len(children) != 1 or children[0].type != "image":
+        return None
+    image = children[0]
+    caption = units(_text(image))
+    png = figures.get(str(image.attrGet("src")))
+    html = "" if png is None else render_macro("figure", figure(png, caption, caption)) + "\n"
+    return Token("html_block", "", 0, content=html, block=True)
 
 
 def markdown_html(markdown: str, figures: Mapping[str, bytes]) -> list[str]:
-    """The blocks of ``markdown`` (the subset :func:`report_markdown` writes) as HTML.
+    r"""``markdown`` (as :func:`report_markdown` writes it) as HTML, by markdown-it-py.
 
     Parameters
     ----------
     markdown : str
     figures : mapping of str to bytes
-        Link target (``residuals_time.png``) -> its PNG, embedded in place of the link;
-        a link to anything else is left out.
+        Link target (``residuals_time.png``) -> its PNG, embedded in place of a paragraph
+        that is that one image link; a link to anything else is left out.
 
     Returns
     -------
     list of str
-        One HTML part per block; the level-1 heading is left out (the page has it).
+        The HTML, one part; the level-1 heading is left out (the page has it).
+
+    >>> md = "# T\n\n**NOT adequate** <1 um>, `a|b`\n\n| a (um) |\n|--:|\n| 1 |"
+    >>> print(markdown_html(md, {})[0].replace("\n", "").replace("</p>", "</p>\n"))
+    <p><strong>NOT adequate</strong> &lt;1 µm&gt;, <code>a|b</code></p>
+    <table><thead><tr><th>a (µm)</th></tr></thead><tbody><tr><td class="num">1</td></tr>...
     """
-    parts = []
-    for block in re.split(r"\n[ \t]*\n", markdown.strip("\n")):
-        lines = [line for line in block.split("\n") if line.strip()]
-        if not lines:
+    from markdown_it import MarkdownIt
+
+    parser = MarkdownIt("commonmark", {"html": False, "breaks": True}).enable("table")
+    tokens = parser.parse(markdown)
+    out: list[Token] = []
+    k = 0
+    while k < len(tokens):
+        token = tokens[k]
+        if token.type == "heading_open" and token.tag == "h1":
+            k += 3  # open, inline, close: the page's title
             continue
-        heading = _HEADING.fullmatch(lines[0])
-        image = _IMAGE.fullmatch(lines[0])
-        if heading and len(lines) == 1:
-            level = len(heading[1])
-            if level > 1:
-                parts.append(f"<h{level}>{inline(heading[2])}</h{level}>")
-        elif image and len(lines) == 1:
-            caption = units(image[1])
-            parts.append(figure_html(figures.get(image[2]), caption, caption))
-        elif all(line.startswith("|") for line in lines) and len(lines) >= 2:
-            parts.append(_table(lines))
-        elif all(_ITEM.fullmatch(line) for line in lines):
-            parts.append(_items(lines))
-        else:
-            parts.append("<p>" + "<br>".join(inline(line) for line in lines) + "</p>")
-    return parts
+        if token.type == "paragraph_open" and not token.hidden:
+            replaced = _figure_token(tokens[k + 1], figures)
+            if replaced is not None:
+                out.append(replaced)
+                k += 3
+                continue
+        if token.type in ("th_open", "td_open"):
+            right = token.attrGet("style") != "text-align:left"
+            token.attrs.pop("style", None)
+            if right and token.type == "td_open":
+                token.attrSet("class", "num")
+        for child in token.children or ():
+            if child.type in ("text", "code_inline"):
+                child.content = units(child.content)
+        out.append(token)
+        k += 1
+    return [parser.renderer.render(out, parser.options, {})]
 
 
 def report_html(
@@ -157,6 +123,7 @@ def report_html(
     figures: Mapping[str, bytes],
     facts: RunFacts | None = None,
     generated: str | None = None,
+    template_dir: Path | None = None,
 ) -> str:
     """The page ``report.html`` of a diagnosis.
 
@@ -170,30 +137,45 @@ def report_html(
         command line, and the provenance block says so).
     generated : str, optional
         Generation time, ISO 8601 with UTC offset (default: now).
+    template_dir : Path, optional
+        A lab's templates, over the package's.
     """
     from hexatherm.io.provenance import current_run, now_iso
 
     names = {key: FIGURE_FILES[key] for key in figures}
     pngs = {FIGURE_FILES[key]: png for key, png in figures.items()}
     session = result.data.session
-    parts = markdown_html(report_markdown(result, names), pngs)
-    parts.append(
-        provenance_html(
+    title = f"Diagnosis of {session.name}"
+    return render_page(
+        "diagnosis.html.j2",
+        template_dir,
+        title=title,
+        header_rows=[
+            ("Report", title),
+            ("Hexapod", f"{result.data.hexapod.name} ({result.data.hexapod_source})"),
+        ],
+        signatures=None,
+        story=Markup("".join(markdown_html(report_markdown(result, names), pngs))),
+        provenance=provenance(
             current_run() if facts is None else facts,
             session.input_files(),
             session.path.parent,
             generated or now_iso(),
             extra=[("hexapod", result.data.hexapod_source)],
-        )
+        ),
     )
-    return page_html(f"Diagnosis of {session.name}", parts)
 
 
 def write_report_files(
-    result: DiagnosisResult, out_dir: Path, *, dpi: int = FIGURE_DPI
+    result: DiagnosisResult,
+    out_dir: Path,
+    *,
+    dpi: int = FIGURE_DPI,
+    template_dir: Path | None = None,
 ) -> list[Path]:
     """Write ``report.md``, its PNG figures (:data:`FIGURE_FILES`) and ``report.html`` (the
-    same story, figures embedded) into the folder ``out_dir``.
+    same story, figures embedded; ``template_dir``: a lab's templates) into the folder
+    ``out_dir``.
 
     The folder must exist; files of the same names are replaced. Returns the
     paths written, ``report.md`` first and ``report.html`` last.
@@ -208,5 +190,5 @@ def write_report_files(
         written.append(path)
     written[0].write_text(report_markdown(result, FIGURE_FILES), encoding="utf-8")
     page = out_dir / REPORT_HTML
-    page.write_text(report_html(result, pngs), encoding="utf-8")
+    page.write_text(report_html(result, pngs, template_dir=template_dir), encoding="utf-8")
     return [*written, page]

@@ -1,0 +1,233 @@
+"""The page system of every hexatherm report: Jinja2 templates, and a lab's own over them.
+
+The reports (``report``, ``calibrate``, ``diagnose``) are written from templates shipped
+in the package (``hexatherm/templates``): ``base.html.j2`` (the page, its style sheet,
+the running header every printed page repeats, "page x of y", the signature block),
+which ``process.html.j2``, ``calibration.html.j2`` and ``diagnosis.html.j2`` extend,
+``letterhead.html.j2`` (what the running header shows), ``closing.html.j2`` (the lab's
+wording after the report) and ``macros.html.j2`` (tables, figures, provenance).
+
+A lab overrides any of them with a template of the same name in its own folder
+(``--template-dir DIR``, or ``templates:`` in the lab file): that folder is searched
+first. Its templates may embed files of the folder (a logo) with ``asset("logo.svg")``,
+a data URI: the page stays self-contained. Autoescape is on: every value the data
+gives is escaped, whatever the template.
+
+A template that cannot be read, has a syntax error or fails while rendering raises
+:class:`~hexatherm.errors.InputError` naming its file and line; nothing is written.
+
+>>> environment().from_string("<p>{{ x }}</p>").render(x='<script a="1">')
+'<p>&lt;script a=&quot;1&quot;&gt;</p>'
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import os
+import traceback
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import jinja2
+from markupsafe import Markup
+
+from hexatherm import __version__
+from hexatherm.errors import InputError
+
+#: the package's own templates
+PACKAGE_TEMPLATES = Path(__file__).resolve().parents[2] / "templates"
+#: MIME type of an asset, by suffix
+ASSET_TYPES = {
+    ".svg": "image/svg+xml",
+    ".png": "image/png",
+    ".jpg": "image/jpeg",
+    ".jpeg": "image/jpeg",
+    ".gif": "image/gif",
+    ".webp": "image/webp",
+}
+
+
+@dataclass(frozen=True)
+class TableCell:
+    """One cell as the table macro prints it: its CSS class, its text, and an expanded
+    uncertainty printed under it (empty: none)."""
+
+    css: str
+    value: str
+    u: str = ""
+
+
+@dataclass
+class Table:
+    """A table as data, which ``macros.html.j2``'s ``table`` prints (escaped).
+
+    Attributes
+    ----------
+    header_rows : list of list of (text, colspan)
+    rows : list of list of Cell
+        Cell texts; a ``(value, U)`` pair prints U under the value.
+    numeric_from : int
+        Cells from this column on are right-aligned numbers (class ``num``).
+    row_classes : list of str, optional
+        CSS class of each body row (``"fail"`` highlights it).
+    caption : str
+    align : str
+        ``"l"`` or ``"r"`` per column; overrides ``numeric_from``.
+    css : str
+        The table's CSS class (``"meta"``: a field/value table).
+    cell_classes : list of list of str, optional
+        The CSS class of every cell, overriding ``align`` and ``numeric_from``.
+    """
+
+    header_rows: list[list[tuple[str, int]]]
+    rows: list[list[str | tuple[str, str]]]
+    numeric_from: int = 1
+    row_classes: list[str] | None = None
+    caption: str = ""
+    align: str = ""
+    css: str = ""
+    cell_classes: list[list[str]] | None = field(default=None)
+
+    def body(self) -> Iterator[tuple[str, list[TableCell]]]:
+        """``(row class, cells)`` of every body row."""
+        for i, row in enumerate(self.rows):
+            cells = []
+            for k, cell in enumerate(row):
+                if self.cell_classes is not None:
+                    css = self.cell_classes[i][k]
+                else:
+                    numeric = self.align[k] == "r" if self.align else k >= self.numeric_from
+                    css = "num" if numeric else ""
+                value, u = cell if isinstance(cell, tuple) else (cell, "")
+                cells.append(TableCell(css, value, u))
+            yield (self.row_classes[i] if self.row_classes is not None else ""), cells
+
+
+@dataclass(frozen=True)
+class Figure:
+    """A figure: its PNG (embedded as a data URI), alternative text and caption."""
+
+    png: bytes
+    alt: str
+    caption: str
+
+    @property
+    def uri(self) -> str:
+        return "data:image/png;base64," + base64.b64encode(self.png).decode("ascii")
+
+
+def _asset(folders: tuple[Path, ...], name: str) -> str:
+    """A file of the lab's template folder (or the package's) as a data URI."""
+    kind = ASSET_TYPES.get(Path(name).suffix.lower())
+    if kind is None:
+        raise jinja2.TemplateRuntimeError(
+            f"asset {name!r}: not an image ({', '.join(sorted(ASSET_TYPES))})"
+        )
+    for folder in folders:
+        path = folder / name
+        if folder.resolve() in path.resolve().parents and path.is_file():
+            return f"data:{kind};base64," + base64.b64encode(path.read_bytes()).decode("ascii")
+    raise jinja2.TemplateRuntimeError(
+        f"asset {name!r} not found in {', '.join(str(f) for f in folders)}"
+    )
+
+
+def _escaped(value: object) -> Markup:
+    """Every value printed, escaped as :func:`html.escape` does (``&quot;``, ``&#x27;``):
+    autoescape leaves markup as it is."""
+    if isinstance(value, Markup):
+        return value
+    return Markup(html.escape(str(value), quote=True))
+
+
+@cache
+def environment(template_dir: Path | None = None) -> jinja2.Environment:
+    """The templates: ``template_dir``'s first (a lab's), then the package's."""
+    folders = (PACKAGE_TEMPLATES,) if template_dir is None else (template_dir, PACKAGE_TEMPLATES)
+    env = jinja2.Environment(
+        loader=jinja2.ChoiceLoader([jinja2.FileSystemLoader(str(f)) for f in folders]),
+        autoescape=True,
+        undefined=jinja2.StrictUndefined,
+        keep_trailing_newline=True,
+        trim_blocks=True,
+        lstrip_blocks=True,
+        finalize=_escaped,
+    )
+    env.globals["asset"] = lambda name: _asset(folders, str(name))
+    env.globals["version"] = __version__
+    return env
+
+
+def check_template_dir(template_dir: str | os.PathLike[str] | None) -> Path | None:
+    """``template_dir`` resolved, every template in it compiled: a syntax error is an
+    :class:`InputError` naming the file and line, before any work is done."""
+    if template_dir is None:
+        return None
+    folder = Path(template_dir).resolve()
+    if not folder.is_dir():
+        raise InputError("not a folder of templates", path=template_dir)
+    env = environment(folder)
+    for name in sorted(os.listdir(folder)):
+        if name.endswith(".j2") and (folder / name).is_file():
+            try:
+                env.get_template(name)
+            except jinja2.TemplateError as exc:
+                raise template_error(exc, env) from None
+    return folder
+
+
+def template_error(exc: jinja2.TemplateError, env: jinja2.Environment) -> InputError:
+    """``exc`` as an :class:`InputError` naming the template's file and line."""
+    message = str(exc.message if exc.message is not None else exc).splitlines()[0]
+    if isinstance(exc, jinja2.TemplateSyntaxError) and exc.filename:
+        return InputError(f"template: {message}", path=exc.filename, line=exc.lineno)
+    if isinstance(exc, jinja2.TemplateNotFound):
+        return InputError(f"template {exc.name!r} not found", path=_folders(env))
+    for frame in reversed(traceback.extract_tb(exc.__traceback__)):
+        if frame.filename.endswith(".j2"):
+            return InputError(f"template: {message}", path=frame.filename, line=frame.lineno)
+    return InputError(f"template: {message}", path=_folders(env))
+
+
+def _folders(env: jinja2.Environment) -> str:
+    loader = env.loader
+    assert isinstance(loader, jinja2.ChoiceLoader)
+    return ", ".join(
+        str(path)
+        for sub in loader.loaders
+        if isinstance(sub, jinja2.FileSystemLoader)
+        for path in sub.searchpath
+    )
+
+
+def render_page(name: str, template_dir: Path | None = None, **context: Any) -> str:
+    """The template ``name`` rendered with ``context``; a template's failure is an
+    :class:`InputError` naming its file and line."""
+    env = environment(template_dir)
+    try:
+        return env.get_template(name).render(**context)
+    except jinja2.TemplateError as exc:
+        raise template_error(exc, env) from None
+
+
+def render_macro(name: str, *args: Any) -> str:
+    """One macro of the package's ``macros.html.j2`` (a table, a figure) as HTML."""
+    module = environment(None).get_template("macros.html.j2").module
+    return str(getattr(module, name)(*args))
+
+
+__all__ = [
+    "Figure",
+    "Markup",
+    "Table",
+    "TableCell",
+    "check_template_dir",
+    "environment",
+    "render_macro",
+    "render_page",
+    "template_error",
+]
