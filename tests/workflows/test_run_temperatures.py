@@ -273,3 +273,33 @@ def test_a_logger_connection_lost_mid_run_is_reopened(tmp_path: Path) -> None:
     assert (tmp_path / "replay" / "temperatures.csv").read_bytes() == (
         b.session / "temperatures.csv"
     ).read_bytes()
+
+
+def test_a_silent_logger_is_waited_for_then_said_and_the_run_goes_on(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A logger that accepts the connection but sends nothing: the run waits for its first
+    row (here no time at all: the wait is patched to 0 s), says so in one warning, and
+    measures the campaign without temperatures. With the twin's logger, which sends its
+    first line on connection, the first row precedes every point (test above)."""
+    import socket
+
+    from hexatherm.workflows.run.run import campaign
+
+    monkeypatch.setattr(campaign, "FIRST_TEMPERATURE_WAIT_S", 0.0)
+    b = make_bench(tmp_path, **SHORT)  # type: ignore[arg-type]
+    with socket.socket() as silent:
+        silent.bind(("127.0.0.1", 0))
+        silent.listen(1)
+        url = f"socket://127.0.0.1:{silent.getsockname()[1]}"
+        try:
+            b.run(temperature_port=PortSettings(url))
+        finally:
+            b.machines.close()
+    warnings = [m for level, m in b.messages if level == "warn" and "no temperature row" in m]
+    assert warnings == [
+        f"no temperature row from {PortSettings(url).describe()} within 0 s of opening it: "
+        "the run goes on, and temperatures.csv will start after the first points"
+    ]
+    assert pd.read_csv(b.session / "points.csv").shape[0] > 0
+    assert not (b.session / "temperatures.csv").exists()

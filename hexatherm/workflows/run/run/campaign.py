@@ -105,6 +105,10 @@ from hexatherm.workflows.run.run.support import (
 #: starts the note an interrupted run adds to its KeyboardInterrupt: what became of the
 #: hexapod (the command line prints it)
 STOPPED_NOTE = "hexatherm run: "
+#: real seconds a run waits, after opening the thermocouple port, for the logger's first
+#: temperature row before it moves anything (a logger samples every few seconds): the
+#: log then covers frame O
+FIRST_TEMPERATURE_WAIT_S = 120.0
 NOT_MOVED = "nothing was moved (the hexapod controller was not contacted)"
 #: every file a run writes in its session folder (its manifest lists only these)
 RUN_FILES = (
@@ -388,6 +392,13 @@ class _Campaign:
                     folder, port, self.files, self.clock, options.reconnect_wait_s
                 )
                 self.reached = True
+                if not thermo.wait_first_row(FIRST_TEMPERATURE_WAIT_S):
+                    self.notify(
+                        "warn",
+                        f"no temperature row from {port.describe()} within "
+                        f"{FIRST_TEMPERATURE_WAIT_S:.0f} s of opening it: the run goes on, "
+                        "and temperatures.csv will start after the first points",
+                    )
             self._connect_controller()
             travel = _travel_z(self.geometry, self.origin2cmm())
             assert self.controller is not None

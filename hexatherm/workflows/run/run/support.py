@@ -324,6 +324,9 @@ class _Thermocouples:
         else:
             self.log = SerialLog(log_path, create=True)
         self.recorder.temperature_sink = self.sink
+        #: set once a temperature row of this connection is recorded (see :meth:`wait_first_row`)
+        self.first_row = threading.Event()
+        self._rows_before = len(self.recorder.temperatures.lines)
         self._record(entry("open", TEMPERATURE, settings.describe(), when=stamp()))
         try:
             port = settings.open()
@@ -358,6 +361,14 @@ class _Thermocouples:
             kind, source, when, data = item
             payload = data if isinstance(data, bytes) else str(data).encode("utf-8", "replace")
             self._record(LogEntry(when, kind, source, payload))
+            if len(self.recorder.temperatures.lines) > self._rows_before:
+                self.first_row.set()
+
+    def wait_first_row(self, timeout_s: float) -> bool:
+        """Wait until the logger's first temperature row of this run is recorded (a data
+        row, not the header), at most ``timeout_s`` seconds of real time: the run moves
+        nothing before, so that the log covers frame O. False when none came."""
+        return self.first_row.wait(timeout_s)
 
     def close(self, outcome: str = "interrupted") -> None:
         """Stop reading, log what arrived until now and ``end`` with ``outcome``."""
