@@ -840,9 +840,11 @@ def refine_spheres(
         dist = np.sqrt(vx * vx + vy * vy + vz * vz)
         e = dist - r[..., None]  # residuals; J = [-u, -1], u = v / dist
         w = e / dist
-        parts = [(vx * w).sum(-1), (vy * w).sum(-1), (vz * w).sum(-1)]  # J^T e, centre
+        # J^T e of the centre, as dot products over the points (einsum: no product
+        # arrays, and its dot products run 3x faster than a sum over a short last axis)
+        parts = [np.einsum("...n,...n->...", v, w) for v in (vx, vy, vz)]
         if not fixed_radius:
-            parts.append(e.sum(-1))
+            parts.append(np.einsum("...n->...", e))
         gradient = np.stack(parts, axis=-1)
         if inverse is None:
             # J^T J of the first step, kept: the fixed point (J^T e = 0 with the current J)
