@@ -219,8 +219,6 @@ class TargetJacobian:
         diagonal ``C[y, a, a]`` is the variance of :meth:`covariance`. Sparse products:
         each target has at most five steps.
         """
-        from scipy import sparse
-
         cov = np.asarray(centre_cov_mm2, dtype=float)
         m, n_parts, n_out, k = self.jac.shape[:4]
         n = cov.shape[0]
@@ -240,6 +238,10 @@ class TargetJacobian:
             keep = values.any(axis=0)
             dense[:, rows[keep], cols[keep]] = values[:, keep]
             return np.asarray(dense @ np.swapaxes(dense, 1, 2))
+        # here, not at the top: scipy.sparse (and the array API layer it loads) costs
+        # 0.1 s of CPU to import, which the dense path of small sessions does not need
+        from scipy import sparse
+
         out = np.empty((n_out, m, m))
         for y in range(n_out):
             a = sparse.csr_matrix((white[:, :, y].ravel(), (rows, cols)), shape=(m, n * 3 * k))
