@@ -238,9 +238,7 @@ class TargetJacobian:
             keep = values.any(axis=0)
             dense[:, rows[keep], cols[keep]] = values[:, keep]
             return np.asarray(dense @ np.swapaxes(dense, 1, 2))
-        # here, not at the top: scipy.sparse (and the array API layer it loads) costs
-        # 0.1 s of CPU to import, which the dense path of small sessions does not need
-        from scipy import sparse
+        from scipy import sparse  # here: the dense path (a report's session) needs none
 
         out = np.empty((n_out, m, m))
         for y in range(n_out):
