@@ -18,7 +18,13 @@ of the code before, e.g. ``git worktree add /tmp/before main``) every row runs t
 baseline and this code alternately, ``--pairs`` times, and prints both medians and the
 median of the paired ratios. ``process`` against its floor is ``bench/floor.py``'s.
 
-    python bench/analyses.py [--pairs 3] [--baseline DIR] [--rows diagnose-16,mc]
+With ``--bytecode`` the children compile their modules once into
+``bench/.cache/pycache/`` (``PYTHONPYCACHEPREFIX``, one warm-up run per checkout) and
+read them from there, as an installed wheel does, even where the environment sets
+``PYTHONDONTWRITEBYTECODE`` (then every run compiles hexatherm's modules again: about
+0.15 s of a ``diagnose``).
+
+    python bench/analyses.py [--pairs 3] [--baseline DIR] [--rows diagnose-16,mc] [--bytecode]
 """
 
 from __future__ import annotations
@@ -129,10 +135,14 @@ ROWS: dict[str, tuple[str, Callable[[], list[str]], str]] = {
 }
 
 
-def cpu_seconds(code: Path, args: list[str]) -> float:
-    """CPU seconds (user + system) of ``python -m hexatherm ARGS -o OUT`` run from ``code``."""
+def cpu_seconds(code: Path, args: list[str], bytecode: bool = False) -> float:
+    """CPU seconds (user + system) of ``python -m hexatherm ARGS -o OUT`` run from ``code``
+    (``bytecode``: with compiled modules kept under ``bench/.cache/pycache/``)."""
     out = Path(tempfile.mkdtemp())
     env = dict(os.environ, PYTHONPATH=str(code))
+    if bytecode:
+        env.pop("PYTHONDONTWRITEBYTECODE", None)
+        env["PYTHONPYCACHEPREFIX"] = str(CACHE / "pycache")
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     subprocess.run(
         [sys.executable, "-m", "hexatherm", *args, "-o", str(out / "out")],
@@ -157,12 +167,15 @@ def main() -> None:
     parser.add_argument("--pairs", type=int, default=3)
     parser.add_argument("--baseline", type=Path, help="a checkout of the code before")
     parser.add_argument("--rows", default=",".join(ROWS), help=f"of {', '.join(ROWS)}")
+    parser.add_argument("--bytecode", action="store_true", help="compiled modules, as installed")
     args = parser.parse_args()
     rows = [r.strip() for r in args.rows.split(",") if r.strip()]
     for row in rows:
         if row not in ROWS:
             parser.error(f"unknown row {row!r}")
     print(f"load average at the start: {os.getloadavg()[0]:.1f} (2-minute: see `uptime`)")
+    if args.bytecode:
+        print("modules compiled once, read from bench/.cache/pycache/ (as installed)")
     if args.baseline:
         print("| workload | before (s CPU) | now (s CPU) | now / before | target |")
         print("|---|---:|---:|---:|---|")
@@ -172,11 +185,14 @@ def main() -> None:
     for row in rows:
         title, make, target = ROWS[row]
         command = make()
+        if args.bytecode:  # compile once (the modules a row imports)
+            for code in (args.baseline, ROOT) if args.baseline else (ROOT,):
+                cpu_seconds(code, command, bytecode=True)
         now, before = [], []
         for _ in range(args.pairs):
             if args.baseline:
-                before.append(cpu_seconds(args.baseline, command))
-            now.append(cpu_seconds(ROOT, command))
+                before.append(cpu_seconds(args.baseline, command, args.bytecode))
+            now.append(cpu_seconds(ROOT, command, args.bytecode))
         if args.baseline:
             ratio = median([a / b for a, b in zip(now, before, strict=True)])
             print(

@@ -10,6 +10,12 @@ fits, registration, correction, uncertainty, quality checks, writing, provenance
 prints every pair's ratio and their median, of wall time and of CPU time (user +
 system: it moves less when other work shares the machine). The issue's target is 1.5x.
 
+With ``--baseline DIR`` (a checkout of the code before, e.g. ``git worktree add
+/tmp/before main``) every pair becomes a triple, the floor, that code and this code,
+both run as ``python -m hexatherm`` with ``PYTHONPATH`` set to their checkout, and both
+ratios to the floor are printed, with the median of this code's CPU time over that
+code's.
+
 The second figure, paired the same way (``--plain-pairs``, default 3; 0 leaves it out):
 ``bench/straightforward.py`` (the same job done the straightforward way: the file read
 line by line, one ``least_squares`` per sphere, one ``align_vectors`` per step, one
@@ -20,6 +26,7 @@ and the median of ``straightforward / process``.
 from __future__ import annotations
 
 import argparse
+import os
 import resource
 import statistics
 import subprocess
@@ -32,11 +39,20 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from speed import CACHE, hexatherm_script, session  # noqa: E402
 
 
-def timed(command: list[str]) -> tuple[float, float]:
-    """Wall time and CPU time (user + system, of the child) of one run, s."""
+def timed(command: list[str], code: Path | None = None) -> tuple[float, float]:
+    """Wall time and CPU time (user + system, of the child) of one run, s; ``code``: a
+    checkout to run from (``PYTHONPATH``)."""
+    env = None if code is None else dict(os.environ, PYTHONPATH=str(code))
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
-    subprocess.run(command, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    subprocess.run(
+        command,
+        check=True,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        env=env,
+        cwd=code,
+    )
     wall = time.perf_counter() - start
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
@@ -48,6 +64,7 @@ def main() -> None:
     parser.add_argument("--targets", type=int, default=1000)
     parser.add_argument("--pairs", type=int, default=7)
     parser.add_argument("--plain-pairs", type=int, default=3)
+    parser.add_argument("--baseline", type=Path, help="a checkout of the code before")
     args = parser.parse_args()
     folder = session(args.targets, "points")
     measurement = [p for p in folder.glob("*.csv") if p.name != "temperatures.csv"]
@@ -57,6 +74,9 @@ def main() -> None:
     ours = [*hexatherm_script(), "process", str(folder), "-o", str(CACHE / "floor-out")]
     ours.append("--overwrite")
     timed(ours)  # warm the file cache and write the output once
+    if args.baseline is not None:
+        baseline(args, floor, folder, points.name)
+        return
     pairs = []
     for _ in range(args.pairs):
         pairs.append((timed(floor), timed(ours)))
@@ -77,6 +97,34 @@ def main() -> None:
         print(f"{what}: median ratio {median:.2f} (min {min(ratios):.2f}, max {max(ratios):.2f})")
     if args.plain_pairs > 0:
         straightforward(folder, ours, args.plain_pairs)
+
+
+def baseline(args: argparse.Namespace, floor: list[str], folder: Path, name: str) -> None:
+    """Alternating triples: the floor, the code at ``args.baseline``, this code."""
+    out = str(CACHE / "floor-out")
+    command = [sys.executable, "-m", "hexatherm", "process", str(folder), "-o", out, "--overwrite"]
+    here = Path(__file__).resolve().parents[1]
+    timed(command, args.baseline)
+    triples = [
+        (timed(floor), timed(command, args.baseline), timed(command, here))
+        for _ in range(args.pairs)
+    ]
+    print(f"process against its floor, {args.targets} targets ({name}), {len(triples)} triples")
+    print(f"baseline: {args.baseline}; load average at the end {os.getloadavg()[0]:.1f}")
+    print(f"{'CPU floor':>10} {'before':>8} {'now':>8} {'before/floor':>13} {'now/floor':>10}")
+    for (_, floor_cpu), (_, before), (_, now) in triples:
+        print(
+            f"{floor_cpu:10.3f} {before:8.3f} {now:8.3f} "
+            f"{before / floor_cpu:13.2f} {now / floor_cpu:10.2f}"
+        )
+    for what, k in (("wall", 0), ("CPU", 1)):
+        before_r = statistics.median(t[1][k] / t[0][k] for t in triples)
+        now_r = statistics.median(t[2][k] / t[0][k] for t in triples)
+        paired = statistics.median(t[2][k] / t[1][k] for t in triples)
+        print(
+            f"{what}: median ratio to the floor, before {before_r:.2f}, now {now_r:.2f}; "
+            f"now / before {paired:.2f}"
+        )
 
 
 def straightforward(folder: Path, ours: list[str], n_pairs: int) -> None:

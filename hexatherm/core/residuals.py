@@ -27,13 +27,14 @@ trend's and correlations' p-values assume independent residuals: read them as
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
+from hexatherm.core.ranktests import chi2_sf, t_sf
+from hexatherm.core.ranktests import spearman as rank_correlation
 from hexatherm.typing import FloatArray
 
 #: names and units of the six pose components (residuals in um and urad)
@@ -197,9 +198,7 @@ def ljung_box(x: npt.ArrayLike, lags: int | None = None) -> LjungBox:
         return LjungBox(float("nan"), h, float("nan"))
     k = np.arange(1, h + 1)
     q = float(n * (n + 2) * np.sum(r**2 / (n - k)))
-    from scipy import stats  # here: scipy.stats takes ~1 s to import; rms() needs none
-
-    return LjungBox(q, h, float(stats.chi2.sf(q, h)))
+    return LjungBox(q, h, chi2_sf(q, h))
 
 
 def linear_trend(times_s: npt.ArrayLike, y: npt.ArrayLike) -> Trend:
@@ -228,9 +227,7 @@ def linear_trend(times_s: npt.ArrayLike, y: npt.ArrayLike) -> Trend:
             slope, 0.0, float("inf") if slope else float("nan"), 0.0 if slope else float("nan")
         )
     t_value = slope / se
-    from scipy import stats
-
-    return Trend(slope, se, t_value, float(2 * stats.t.sf(abs(t_value), n - 2)))
+    return Trend(slope, se, t_value, 2 * t_sf(abs(t_value), n - 2))
 
 
 def spearman(x: npt.ArrayLike, y: npt.ArrayLike) -> Correlation:
@@ -239,12 +236,7 @@ def spearman(x: npt.ArrayLike, y: npt.ArrayLike) -> Correlation:
     y = np.asarray(y, dtype=float).reshape(-1)
     if x.size < 3 or np.ptp(x) == 0 or np.ptp(y) == 0:
         return Correlation(float("nan"), float("nan"))
-    from scipy import stats
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        result = stats.spearmanr(x, y)
-    return Correlation(float(result.statistic), float(result.pvalue))
+    return Correlation(*rank_correlation(x, y))
 
 
 # ---------------------------------------------------------------- the summary

@@ -35,7 +35,6 @@ from dataclasses import dataclass, replace
 import numpy as np
 import numpy.typing as npt
 
-from hexatherm.core.calibration.model import split_parameters
 from hexatherm.core.effects import Effect, ThermocoupleLog, check_distinct
 from hexatherm.core.geometry import (
     apply_transform,
@@ -382,6 +381,10 @@ class _TrueGeometry:
         zeros = np.zeros(6)
         if true_parameters is None:
             return cls(hexapod, zeros, zeros, zeros)
+        # here, not at the top: the calibration package imports its fit and scipy.stats
+        # (0.35 s of CPU), which a twin of the nominal geometry (diagnose) never needs
+        from hexatherm.core.calibration.model import split_parameters
+
         base, platform, offsets, gains = split_parameters(true_parameters)
         solver = replace(hexapod, base_joints_mm=base, platform_joints_mm=platform)
         return cls(solver, offsets, gains, hexapod.zero_pose_leg_length_mm())

@@ -9,12 +9,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
 from hexatherm.core.diagnosis.model import Fit, Observations, rms_um
 from hexatherm.core.effects import Effect
 from hexatherm.core.geometry import invert_transform, pose_from_transform
 from hexatherm.core.hexapod import Hexapod
+from hexatherm.core.ranktests import kruskal_wallis
 from hexatherm.core.registration import register
 from hexatherm.core.residuals import (
     LEG_NAMES,
@@ -324,8 +324,8 @@ def adequacy(hexapod: Hexapod, obs: Observations, fit: Fit) -> Adequacy:
     groups = [step_ms[[k == kind for k in kinds]] for kind in sorted(set(kinds))]
     groups = [g for g in groups if g.size >= 2]
     if len(groups) >= 2 and np.ptp(step_ms) > 0:
-        h = stats.kruskal(*groups)
-        tests.append(Finding("steps", "differs by step kind", float(h.statistic), float(h.pvalue)))
+        h, p = kruskal_wallis(groups)
+        tests.append(Finding("steps", "differs by step kind", h, p))
     n_tests = len(tests)
     cut = STRUCTURE_ALPHA / max(n_tests, 1)
     findings = tuple(

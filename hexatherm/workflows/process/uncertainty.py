@@ -344,11 +344,22 @@ def point_sampler(result: ProcessResult, cov_mm2: FloatArray) -> CentreSampler |
                     if radius is None
                     else np.broadcast_to(radius, (n_spheres,))
                 )
+                # x, y and z apart, each contiguous over the spheres' points: broadcast
+                # against the draws along a last axis of 3, the sums ran 10x slower
+                xyz_c = [np.ascontiguousarray(xyz_s[..., i]) for i in range(3)]
+                noise_c = [np.ascontiguousarray(noise_s[..., i]) for i in range(3)]
                 for first in range(0, size, chunk):
                     d = min(chunk, size - first)
-                    moved = xyz_s + noise_s * rng.standard_normal((d, *per[:2]))[..., None]
+                    z = rng.standard_normal((d, *per[:2]))
+                    moved = np.empty((3, d, *per[:2]))  # moved[i] = xyz + noise z, coordinate i
+                    for i in range(3):
+                        np.add(xyz_c[i], np.multiply(noise_c[i], z, out=moved[i]), out=moved[i])
                     centre, _ = refine_spheres(
-                        moved, start, r0, fixed_radius=radius is not None, normal_points_mm=xyz_s
+                        np.moveaxis(moved, 0, -1),
+                        start,
+                        r0,
+                        fixed_radius=radius is not None,
+                        normal_points_mm=xyz_s,
                     )
                     put(drawn, slice(first, first + d), step, ball, centre[:, ok])
                 continue
