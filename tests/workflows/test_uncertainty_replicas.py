@@ -14,7 +14,7 @@ largest along the cap axis (Tz, Rx, Ry).
 from __future__ import annotations
 
 import io
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -54,6 +54,12 @@ class Parts:
 #: simulated files per (seed, spec): a campaign's noise replicas are simulated once and
 #: processed by every test that reads them (each writes its own copy to edit)
 _SIMULATED: dict[tuple[int, tuple[tuple[str, object], ...]], dict[str, str]] = {}
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _forget_the_simulations() -> Iterator[None]:
+    yield
+    _SIMULATED.clear()  # some 40 MB of points files: not kept past this module
 
 
 def simulated_files(seed: int, spec: dict[str, object]) -> dict[str, str]:
@@ -385,5 +391,5 @@ def test_a_scalar_u_um_is_read_as_isotropic_and_said_so(
     observed = np.sqrt(np.var(points_replicas[0], axis=0, ddof=1).mean(axis=0))
     ratio = np.sqrt((claimed**2).mean(axis=(0, 1))) / observed
     assert "read as isotropic" in description
-    # found 0.59-0.73 (with 40 replicas of their own), far below the 0.85 asserted
+    # found 0.58-0.69 (0.59-0.73 with 40 replicas of their own), far below the 0.85 asserted
     assert np.all(ratio[[2, 3, 4]] < 0.85), ratio.round(3)
