@@ -39,6 +39,7 @@ from hexatherm.io.atomic import (
 )
 from hexatherm.io.manifest import MANIFEST_NAME, foreign_entries, read_manifest
 from hexatherm.io.outputs import check_not_input, check_output, output_dir, write_output_file
+from tests.conftest import REAL_FSYNC
 from tests.waiting import SAFETY_S
 
 SESSION_FILES = {
@@ -411,7 +412,7 @@ def test_legacy_functions_keep_their_behaviour(tmp_path):
 @pytest.mark.skipif(not Path("/proc/self/fd").is_dir(), reason="needs /proc")
 def test_files_and_folders_are_fsynced_before_the_swap_and_the_parent_after(tmp_path, monkeypatch):
     synced: list[str] = []
-    real = os.fsync
+    real = REAL_FSYNC  # the disk flush itself (tests/conftest.py flushes nothing elsewhere)
 
     def spy(fd: int) -> None:
         synced.append(os.readlink(f"/proc/self/fd/{fd}"))
@@ -782,3 +783,16 @@ def test_no_sequence_of_writes_ever_modifies_or_removes_an_input(monkeypatch, op
                 assert path.is_file() and path.read_bytes() == data, f"input {path} changed"
         assert leftovers(root) == []
         assert not (root / "nowhere").exists()
+
+
+def test_the_suites_fsync_still_refuses_a_bad_descriptor(tmp_path):
+    """tests/conftest.py leaves out the flush to disk, not fsync's checks: the product's
+    calls on a closed descriptor fail here as they would for real."""
+    assert os.fsync is not REAL_FSYNC
+    fd = os.open(tmp_path, os.O_RDONLY)
+    os.close(fd)
+    with pytest.raises(OSError):
+        os.fsync(fd)
+    with open(tmp_path / "x", "w") as handle:
+        os.fsync(handle)
+        os.fsync(handle.fileno())

@@ -31,6 +31,7 @@ from hexatherm.workflows.diagnose.report import report_markdown
 from hexatherm.workflows.diagnose.run import DiagnosisResult, read_for_diagnosis, run_diagnosis
 from hexatherm.workflows.simulate.campaigns import NOMINAL_HIDDEN, diagnosis_campaign
 from hexatherm.workflows.simulate.twinsession import write_twin_session
+from tests.workflows.conftest import Diagnosed
 
 
 class PlatformTiltWithAir(Effect):
@@ -72,12 +73,6 @@ PlatformTiltWithAir.name = "test_platform_tilt_air"
 LegErrorQuadraticInCommand.name = "test_leg_quadratic_command"
 
 
-def diagnosed(folder: Path, hidden: tuple[Effect, ...], seed: int, **kw: object) -> DiagnosisResult:
-    spec = diagnosis_campaign(hidden, seed, **kw)  # type: ignore[arg-type]
-    write_twin_session(spec, folder)
-    return run_diagnosis(read_for_diagnosis(folder))
-
-
 def test_the_test_effects_are_not_in_the_registry() -> None:
     assert PlatformTiltWithAir.name not in EFFECTS
     assert LegErrorQuadraticInCommand.name not in EFFECTS
@@ -89,9 +84,9 @@ def test_the_test_effects_are_not_in_the_registry() -> None:
     ids=lambda e: e.name,
 )
 def test_an_effect_outside_the_registry_is_reported_as_unexplained(
-    tmp_path: Path, effect: Effect
+    diagnosed_campaign: Diagnosed, effect: Effect
 ) -> None:
-    result = diagnosed(tmp_path / effect.name, (effect,), seed=31)
+    result = diagnosed_campaign((effect,), 31)
     d, verdict = result.diagnosis, result.diagnosis.adequacy
     assert verdict is not None
     doc = json.loads(json.dumps(diagnosis_document(result)))
@@ -124,15 +119,17 @@ def test_an_effect_outside_the_registry_is_reported_as_unexplained(
         assert (f"caution: {addition.effect.name}'s parameters move" in text) == moved
     # the floor (from consecutive references) is the noise the simulator added:
     # the same campaign without the hidden effect leaves it alone
-    null = diagnosed(tmp_path / "null", (), seed=31)
+    null = diagnosed_campaign((), 31)
     assert null.diagnosis.adequacy is not None
     assert verdict.noise_floor_um == pytest.approx(null.diagnosis.final_rms_um, rel=0.2)
 
 
-def test_a_tilt_below_the_rms_limit_is_caught_by_its_structure(tmp_path: Path) -> None:
+def test_a_tilt_below_the_rms_limit_is_caught_by_its_structure(
+    diagnosed_campaign: Diagnosed,
+) -> None:
     # 10 urad/K about the platform's x axis: the final RMS stays within 1.3x the floor,
     # but the residual tilts with the air: Rx (the tilt's own component) is named
-    result = diagnosed(tmp_path / "tilt", (PlatformTiltWithAir(urad_per_K=10.0),), seed=5)
+    result = diagnosed_campaign((PlatformTiltWithAir(urad_per_K=10.0),), 5)
     verdict = result.diagnosis.adequacy
     assert verdict is not None
     assert result.diagnosis.final_rms_um < RMS_RATIO_LIMIT * verdict.noise_floor_um
@@ -142,10 +139,12 @@ def test_a_tilt_below_the_rms_limit_is_caught_by_its_structure(tmp_path: Path) -
     assert first.startswith("NOT ADEQUATE") and "components Rx" in first
 
 
-def test_null_campaigns_are_adequate_over_10_seeds(tmp_path: Path) -> None:
+def test_null_campaigns_are_adequate_over_20_seeds(
+    null_campaigns: dict[int, DiagnosisResult],
+) -> None:
+    """The 20 null campaigns of the false-effect test (tests/workflows/conftest.py)."""
     ratios = []
-    for seed in range(10):
-        result = diagnosed(tmp_path / f"null{seed}", (), seed=200 + seed, n_targets=8)
+    for seed, result in null_campaigns.items():
         verdict = result.diagnosis.adequacy
         assert verdict is not None
         assert verdict.adequate, (seed, verdict.summary())
@@ -153,6 +152,7 @@ def test_null_campaigns_are_adequate_over_10_seeds(tmp_path: Path) -> None:
         # no false alarm: nothing named is called a stand-in (issue 24, item 7)
         assert result.diagnosis.cautions() == [], (seed, result.diagnosis.cautions())
         ratios.append(result.diagnosis.final_rms_um / verdict.noise_floor_um)
+    assert len(ratios) == 20
     # the floor estimated from the references is the noise: the ratio is about 1
     assert 0.85 < float(np.mean(ratios)) < 1.15, ratios
 
@@ -172,9 +172,11 @@ def test_with_centre_uncertainties_the_floor_is_theirs(tmp_path: Path) -> None:
     assert verdict.adequate, verdict.summary()
 
 
-def test_a_registry_effect_once_added_leaves_an_adequate_model(tmp_path: Path) -> None:
+def test_a_registry_effect_once_added_leaves_an_adequate_model(
+    diagnosed_campaign: Diagnosed,
+) -> None:
     hidden = make_effect("leg_thermal_lag", NOMINAL_HIDDEN["leg_thermal_lag"])
-    result = diagnosed(tmp_path / "lag", (hidden,), seed=21)
+    result = diagnosed_campaign((hidden,), 21)  # as test_diagnosis's leg_thermal_lag
     d = result.diagnosis
     assert [a.effect.name for a in d.added] == ["leg_thermal_lag"]
     assert d.adequacy is not None

@@ -21,25 +21,26 @@ from hexatherm.core.diagnosis import (
     fit_model,
     rms_um,
 )
-from hexatherm.core.effects import EFFECTS, make_effect
+from hexatherm.core.effects import EFFECTS, Effect, make_effect
 from hexatherm.core.residuals import time_blocks
 from hexatherm.errors import InputError
 from hexatherm.io.config import read_hexapod_text
 from hexatherm.workflows.diagnose.outputs import diagnosed_hexapod_yaml, diagnosis_document
-from hexatherm.workflows.diagnose.run import DiagnosisResult, read_for_diagnosis, run_diagnosis
+from hexatherm.workflows.diagnose.run import DiagnosisResult, read_for_diagnosis
 from hexatherm.workflows.simulate.campaigns import NOMINAL_HIDDEN, diagnosis_campaign
 from hexatherm.workflows.simulate.twinsession import write_twin_session
+from tests.workflows.conftest import Diagnosed
 
 
-def campaign(folder: Path, names: tuple[str, ...], seed: int, **kwargs: object) -> DiagnosisResult:
-    hidden = tuple(make_effect(n, NOMINAL_HIDDEN[n]) for n in names)
-    write_twin_session(diagnosis_campaign(hidden, seed, **kwargs), folder)  # type: ignore[arg-type]
-    return run_diagnosis(read_for_diagnosis(folder))
+def nominal(*names: str) -> tuple[Effect, ...]:
+    return tuple(make_effect(n, NOMINAL_HIDDEN[n]) for n in names)
 
 
 @pytest.mark.parametrize("name", sorted(NOMINAL_HIDDEN))
-def test_each_hidden_effect_is_named_first_and_sized(tmp_path: Path, name: str) -> None:
-    result = campaign(tmp_path / name, (name,), seed=21)
+def test_each_hidden_effect_is_named_first_and_sized(
+    diagnosed_campaign: Diagnosed, name: str
+) -> None:
+    result = diagnosed_campaign(nominal(name), 21)
     d = result.diagnosis
     assert d.added, f"nothing added; round 1: {[(c.name, c.delta_bic) for c in d.rounds[0]]}"
     first = d.added[0]
@@ -67,8 +68,8 @@ def test_each_hidden_effect_is_named_first_and_sized(tmp_path: Path, name: str) 
     assert d.final_rms_um < 1.0
 
 
-def test_two_hidden_effects_are_both_named(tmp_path: Path) -> None:
-    result = campaign(tmp_path / "two", ("leg_thermal_lag", "cmm_drift"), seed=4)
+def test_two_hidden_effects_are_both_named(diagnosed_campaign: Diagnosed) -> None:
+    result = diagnosed_campaign(nominal("leg_thermal_lag", "cmm_drift"), 4)
     d = result.diagnosis
     assert {a.effect.name for a in d.added} == {"leg_thermal_lag", "cmm_drift"}
     # the joint refit recovers both
@@ -83,13 +84,15 @@ def test_two_hidden_effects_are_both_named(tmp_path: Path) -> None:
     assert model.effects[0]["parameters"] == pytest.approx(d.final.effects[0].values)
 
 
-def test_null_campaigns_add_at_most_one_false_effect_over_20_seeds(tmp_path: Path) -> None:
-    false = {}
-    for seed in range(20):
-        folder = tmp_path / f"null{seed}"
-        result = campaign(folder, (), seed=100 + seed, n_targets=8)
-        if result.diagnosis.added:
-            false[seed] = [a.effect.name for a in result.diagnosis.added]
+def test_null_campaigns_add_at_most_one_false_effect_over_20_seeds(
+    null_campaigns: dict[int, DiagnosisResult],
+) -> None:
+    false = {
+        seed: [a.effect.name for a in result.diagnosis.added]
+        for seed, result in null_campaigns.items()
+        if result.diagnosis.added
+    }
+    assert len(null_campaigns) == 20
     assert sum(len(v) for v in false.values()) <= 1, false
 
 
@@ -182,8 +185,9 @@ def test_the_effects_of_the_model_are_kept_and_not_tried_again(tmp_path: Path) -
     assert d.baseline_rms_um < 1.0
 
 
-def test_the_json_document_has_the_spec_keys(tmp_path: Path) -> None:
-    result = campaign(tmp_path / "drift", ("cmm_drift",), seed=3, n_targets=6)
+def test_the_json_document_has_the_spec_keys(diagnosed_campaign: Diagnosed) -> None:
+    # the named-first test's cmm_drift campaign (diagnosed once)
+    result = diagnosed_campaign(nominal("cmm_drift"), 21)
     doc = json.loads(json.dumps(diagnosis_document(result)))
     assert list(doc)[:3] == ["baseline_rms_um", "added", "final_rms_um"]
     entry = doc["added"][0]

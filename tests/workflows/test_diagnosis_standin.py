@@ -28,6 +28,7 @@ from hexatherm.workflows.diagnose.report import report_html, report_markdown
 from hexatherm.workflows.diagnose.run import DiagnosisResult, read_for_diagnosis, run_diagnosis
 from hexatherm.workflows.simulate.campaigns import NOMINAL_HIDDEN, diagnosis_campaign
 from hexatherm.workflows.simulate.twinsession import write_twin_session
+from tests.workflows.conftest import Diagnosed
 
 
 class HeatedStem(Effect):
@@ -164,9 +165,11 @@ def test_a_cancelling_pair_says_the_overheat_size_is_not_trustworthy(
 
 
 @pytest.mark.parametrize("name", ["leg_cte_error", "steel_overheat"])
-def test_a_registry_effect_hidden_alone_raises_no_caution(tmp_path: Path, name: str) -> None:
-    hidden = make_effect(name, NOMINAL_HIDDEN[name])
-    result = diagnosed(tmp_path / name, (hidden,), seed=31)
+def test_a_registry_effect_hidden_alone_raises_no_caution(
+    diagnosed_campaign: Diagnosed, name: str
+) -> None:
+    # the campaigns of test_diagnosis.py's named-first test (seed 21), diagnosed once
+    result = diagnosed_campaign((make_effect(name, NOMINAL_HIDDEN[name]),), 21)
     d = result.diagnosis
     assert [a.effect.name for a in d.added] == [name]
     assert d.cautions() == []

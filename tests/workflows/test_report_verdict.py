@@ -42,6 +42,21 @@ def hidden():
     return result, pose_uncertainty(result), quality_checks(result)
 
 
+STAMP = "2026-11-25T14:00:00+01:00"
+
+
+@pytest.fixture(scope="module")
+def pages(hidden) -> dict[float, str]:
+    """The report page of the session with k = 2 (the default) and k = 3, each rendered
+    once (its figures are most of a report's time) and read by every test below; no
+    facts (not run from the command line)."""
+    result, u, quality = hidden
+    return {
+        2.0: report_html(result, u, quality, generated=STAMP),
+        3.0: report_html(result, u, quality, coverage_factor=3.0, generated=STAMP),
+    }
+
+
 def expected(name: str) -> pd.DataFrame:
     return pd.read_csv(SESSIONS / "with-hidden-effect" / "expected" / name)
 
@@ -91,12 +106,12 @@ def test_verdict_is_the_largest_deviation_of_poses_csv_with_k_times_u(hidden, k)
         verdict(result, u, quality, coverage_factor=float("nan"))
 
 
-def test_page_starts_with_the_verdict_and_states_k_wherever_u_appears(hidden):
+def test_page_starts_with_the_verdict_and_states_k_wherever_u_appears(hidden, pages):
     result, u, quality = hidden
     # the poses.csv table in memory: the page's 3 decimals of the exact numbers (the file's
     # 4 decimals, rounded again, may differ in the last digit)
     poses = poses_frame(result, u)
-    page = report_html(result, u, quality, coverage_factor=3.0, generated="2026-11-25T14:00+01:00")
+    page = pages[3.0]
     body = page[page.index("<body>") :]
     assert body.index("Verdict") < body.index("<figure>")
     value, label, name, u_std = largest(poses, T_NAMES, "corr", "um")
@@ -108,12 +123,12 @@ def test_page_starts_with_the_verdict_and_states_k_wherever_u_appears(hidden):
     assert "k = 2" not in page and "k = 1" not in page
 
 
-def test_provenance_block_names_the_run_and_hashes_every_input(hidden):
+def test_provenance_block_names_the_run_and_hashes_every_input(hidden, pages):
     result, u, quality = hidden
     facts = RunFacts(
         "report", ("sessions/with-hidden-effect", "--mc", "0"), {"mc": 0, "seed": 0}, "x"
     )
-    stamp = "2026-11-25T14:00:00+01:00"
+    stamp = STAMP
     page = report_html(result, u, quality, facts=facts, generated=stamp)
     block = page[page.index("<h2>Provenance</h2>") :]
     assert f"<td>{stamp}</td>" in block and f"<td>{__version__}</td>" in block
@@ -128,14 +143,15 @@ def test_provenance_block_names_the_run_and_hashes_every_input(hidden):
         digest = hashlib.sha256(path.read_bytes()).hexdigest()
         row = f'<td>{path.name}</td><td class="num">{path.stat().st_size}</td>'
         assert f'{row}<td class="num">{digest}</td>' in block, path.name
-    outside = report_html(result, u, quality, generated=stamp)
+    outside = pages[2.0]
+    assert f"<td>{stamp}</td>" in outside
     assert outside.count("not run from the command line") == 2  # command line, options
 
 
-def test_pose_tables_print_exact_commanded_values_and_fixed_decimals(hidden):
+def test_pose_tables_print_exact_commanded_values_and_fixed_decimals(hidden, pages):
     result, u, quality = hidden
     plan = (SESSIONS / "with-hidden-effect" / "plan.yaml").read_text()
-    page = report_html(result, u, quality)
+    page = pages[2.0]
     # the commanded values as the plan file writes them (-16.441, not -16.44)
     for text in ("-16.441", "-13.004", "14.19", "-0.051"):
         assert re.search(rf"(?<![\d.]){re.escape(text)}(?![\d])", plan), text
@@ -159,9 +175,9 @@ def test_zero_commanded_columns_are_dropped():
     assert "(mm)" not in table and 'colspan="6">conventional − commanded' in table
 
 
-def test_failing_targets_are_marked_in_every_table_and_the_pose_figure(hidden):
+def test_failing_targets_are_marked_in_every_table_and_the_pose_figure(hidden, pages):
     result, u, quality = hidden
-    page = report_html(result, u, quality)
+    page = pages[2.0]
     for label in ("S2", "S14", "S25"):
         # conventional, corrected and quality tables
         assert page.count(f'<tr class="fail"><td>{label} ✗</td>') == 3, label
@@ -185,9 +201,8 @@ def test_numbers_text():
 
 
 @pytest.mark.parametrize("k", [2.0, 3.0])
-def test_the_common_and_own_parts_are_those_of_poses_csv_times_k(hidden, k):
-    result, uncertainty, quality = hidden
-    page = report_html(result, uncertainty, quality, coverage_factor=k)
+def test_the_common_and_own_parts_are_those_of_poses_csv_times_k(pages, k):
+    page = pages[k]
     poses = expected("poses.csv")
     start = page.rindex("<table", 0, page.index("part of U"))
     table = page[start : page.index("</table>", start)]

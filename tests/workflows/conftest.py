@@ -1,0 +1,52 @@
+"""Diagnosed twin campaigns shared by the diagnosis tests (simulated and diagnosed once).
+
+A campaign is its hidden effects (name and parameter values), its seed and the
+options of :func:`~hexatherm.workflows.simulate.campaigns.diagnosis_campaign`: two
+tests asking for the same one read the same session folder and the same
+:class:`~hexatherm.workflows.diagnose.run.DiagnosisResult`, which none of them changes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import pytest
+
+from hexatherm.core.effects import Effect
+from hexatherm.workflows.diagnose.run import DiagnosisResult, read_for_diagnosis, run_diagnosis
+from hexatherm.workflows.simulate.campaigns import diagnosis_campaign
+from hexatherm.workflows.simulate.twinsession import write_twin_session
+
+Diagnosed = Callable[..., DiagnosisResult]
+
+#: the null campaigns (nothing hidden, 8 targets) of the false-effect and adequacy tests
+NULL_SEEDS = tuple(range(100, 120))
+
+
+@pytest.fixture(scope="session")
+def diagnosed_campaign(tmp_path_factory: pytest.TempPathFactory) -> Diagnosed:
+    """``diagnosed_campaign(hidden, seed, **options)``: the campaign written by the twin
+    with ``hidden`` applied to the truth (the session's hexapod file does not name
+    them), read back as ``hexatherm diagnose`` reads it and diagnosed."""
+    done: dict[object, DiagnosisResult] = {}
+    root = tmp_path_factory.mktemp("campaigns")
+
+    def diagnosed(hidden: Sequence[Effect], seed: int, **options: object) -> DiagnosisResult:
+        key = (
+            tuple((e.name, tuple(sorted(e.values.items()))) for e in hidden),
+            seed,
+            tuple(sorted(options.items())),
+        )
+        if key not in done:
+            folder = root / f"c{len(done)}"
+            write_twin_session(diagnosis_campaign(hidden, seed, **options), folder)  # type: ignore[arg-type]
+            done[key] = run_diagnosis(read_for_diagnosis(folder))
+        return done[key]
+
+    return diagnosed
+
+
+@pytest.fixture(scope="session")
+def null_campaigns(diagnosed_campaign: Diagnosed) -> dict[int, DiagnosisResult]:
+    """The diagnoses of the 20 null campaigns of :data:`NULL_SEEDS`."""
+    return {seed: diagnosed_campaign((), seed, n_targets=8) for seed in NULL_SEEDS}
