@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import sys
 
 import numpy as np
@@ -16,6 +17,19 @@ REFERENCE_POSE = [0.0, 0.0, -40.0, 0.0, 0.0, 0.0]
 
 #: the operating system's fsync, for the tests that want the disk flush itself
 REAL_FSYNC = os.fsync
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Ctrl-C reaches the suite and the processes it starts, however it was launched.
+
+    A job started in the background by a shell without job control inherits SIGINT
+    ignored, and so would every ``hexatherm`` process the tests start (``serve-twin``,
+    ``run``): the tests that stop them with SIGINT would then wait for their safety net.
+    A Python handler is not inherited across exec (the child gets SIGINT's default, on
+    which Python installs its own KeyboardInterrupt), an ignored signal is.
+    """
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def _fsync_without_the_flush(fd: object) -> None:

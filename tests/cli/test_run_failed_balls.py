@@ -47,10 +47,13 @@ def test_every_ball_off_exits_3_naming_the_balls_also_after_a_resume(
         f"{', '.join(names)} (first: O B1: radius -"
     ), line
     # the truth: the points fit the twin's 25.4 mm balls, 3000 um below the nominal 31.4
+    # (within 20 um: this twin heats while it probes, on a clock 100 times real time, so a
+    # stalled test process moves the platform during a ball by a few um; 3000 um is the
+    # point)
     points = pd.read_csv(session / "points.csv")
     groups = points.groupby(["label", "ball"], sort=False).ngroup().to_numpy()
     fits = fit_spheres(points[["x", "y", "z"]].to_numpy(), groups)
-    np.testing.assert_allclose(fits.radius_mm, 12.7, atol=1e-3)
+    np.testing.assert_allclose(fits.radius_mm, 12.7, atol=0.02)
     said = float(re.search(r"radius (-\d+\.\d) um off", line).group(1))  # type: ignore[union-attr]
     assert abs(said - 1e3 * (fits.radius_mm[0] - 15.7)) < 0.1
     # the session is recorded all the same (nothing lost), every ball once
