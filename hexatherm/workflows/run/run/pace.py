@@ -59,14 +59,15 @@ class Pace:
 
     Examples
     --------
-    6 points a ball (18 s in the model), 30 s a move. The first move, commanded at
+    6 points a ball at 3 s a point (18 s in the model), 30 s a move (given here; the
+    defaults are ``plan``'s). The first move, commanded at
     t = 1000 s, is in position at 1015 s: 3 balls on this step and 3 more steps left
     (3 x 30 + 12 x 18 = 306 model seconds) end at 1321 s, the model's pace (no ball yet).
     Its 3 balls accepted at 1141 s (141 s for 30 + 54 = 84 model seconds, 1.68 times
     slower), the next step in position at 1183 s (113 model seconds done), the rest (2
     moves, 9 balls: 222 model seconds) ends at 1183 + 222 x 183 / 114 = 1539.4 s.
 
-    >>> pace = Pace(6)
+    >>> pace = Pace(6, seconds_per_point=3.0, seconds_per_move=30.0)
     >>> pace.move_started(1000.0)
     >>> pace.moved()
     >>> pace.eta_s(1015.0, moves_left=3, balls_left=12)
