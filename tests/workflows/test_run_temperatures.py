@@ -303,3 +303,25 @@ def test_a_silent_logger_is_waited_for_then_said_and_the_run_goes_on(
     ]
     assert pd.read_csv(b.session / "points.csv").shape[0] > 0
     assert not (b.session / "temperatures.csv").exists()
+
+
+def test_the_run_waits_on_its_clock_for_a_first_row_that_comes_late(tmp_path: Path) -> None:
+    """The logger's first line comes one period after the port opens (as when the line
+    that arrived while the port opened was discarded by it): on a rehearsal's clock, which
+    moves only when the run sleeps, the run waits on that clock, so the first row is
+    recorded before the first move and nothing is said."""
+    b = make_bench(tmp_path, **SHORT)  # type: ignore[arg-type]
+    logger = b.machines.thermocouples
+    logger._start_s += 10.0  # its first sample is due 10 s on the twin's clock
+    try:
+        b.run(temperature_port=PortSettings(b.machines.thermocouples_url))
+        first_sent = logger.sent[0][1]
+    finally:
+        b.machines.close()
+    assert not [m for _, m in b.messages if "no temperature row" in m]
+    times, _ = read_rows(b.session)
+    assert times[0] >= first_sent >= START + 10.0
+    log = (b.session / "controller.log").read_text().splitlines()
+    first_move = next(line for line in log if line.endswith(' * "run move O"'))
+    points = pd.read_csv(b.session / "points.csv")["time"].map(iso_to_seconds)
+    assert times[0] <= iso_to_seconds(first_move.split()[0]) <= points.min()

@@ -105,9 +105,10 @@ from hexatherm.workflows.run.run.support import (
 #: starts the note an interrupted run adds to its KeyboardInterrupt: what became of the
 #: hexapod (the command line prints it)
 STOPPED_NOTE = "hexatherm run: "
-#: real seconds a run waits, after opening the thermocouple port, for the logger's first
-#: temperature row before it moves anything (a logger samples every few seconds): the
-#: log then covers frame O
+#: seconds (of the run's clock) a run waits, after opening the thermocouple port, for the
+#: logger's first temperature row before it moves anything (a logger samples every few
+#: seconds; the line that arrives while the port opens is discarded by the port): the log
+#: then covers frame O
 FIRST_TEMPERATURE_WAIT_S = 120.0
 NOT_MOVED = "nothing was moved (the hexapod controller was not contacted)"
 #: every file a run writes in its session folder (its manifest lists only these)
@@ -392,7 +393,7 @@ class _Campaign:
                     folder, port, self.files, self.clock, options.reconnect_wait_s
                 )
                 self.reached = True
-                if not thermo.wait_first_row(FIRST_TEMPERATURE_WAIT_S):
+                if not self._wait_first_temperature(thermo):
                     self.notify(
                         "warn",
                         f"no temperature row from {port.describe()} within "
@@ -518,6 +519,19 @@ class _Campaign:
     def _controller_log(self, direction: str, line: str) -> None:
         assert self.clog is not None
         self.clog.entry(">" if direction == "tx" else "<", line)
+
+    def _wait_first_temperature(self, thermo: _Thermocouples) -> bool:
+        """Wait for the logger's first temperature row, up to
+        :data:`FIRST_TEMPERATURE_WAIT_S` of the run's clock, in steps of one second of it
+        (a rehearsal's clock moves only when the run sleeps, and its logger samples on
+        that clock), each after a quarter second of real time for the row to arrive."""
+        waited_s = 0.0
+        while not thermo.wait_first_row(0.25):
+            if waited_s >= FIRST_TEMPERATURE_WAIT_S:
+                return False
+            self.sleep(1.0)
+            waited_s += 1.0
+        return True
 
     def _connect_controller(self) -> None:
         options = self.options

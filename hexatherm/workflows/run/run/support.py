@@ -366,8 +366,8 @@ class _Thermocouples:
 
     def wait_first_row(self, timeout_s: float) -> bool:
         """Wait until the logger's first temperature row of this run is recorded (a data
-        row, not the header), at most ``timeout_s`` seconds of real time: the run moves
-        nothing before, so that the log covers frame O. False when none came."""
+        row, not the header), at most ``timeout_s`` seconds of real time. False when none
+        came."""
         return self.first_row.wait(timeout_s)
 
     def close(self, outcome: str = "interrupted") -> None:
