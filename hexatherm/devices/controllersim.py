@@ -316,17 +316,21 @@ class SimulatedController(TcpService):
                 data = sock.recv(4096)
                 if not data:
                     return
-                for line in buffer.feed(data):
-                    line = line.strip()
-                    if not line:
-                        continue
-                    with self._lock:
-                        self.received.append(line)
-                    self._write(sock, self.respond(line))
+                self._handle(sock, buffer.feed(data))
         except (_Drop, OSError):
             return
         finally:
             self._finished(sock)
+
+    def _handle(self, sock: socket.socket, lines: list[str]) -> None:
+        """Answer each non-blank line received (kept in :attr:`received`)."""
+        for line in lines:
+            line = line.strip()
+            if not line:
+                continue
+            with self._lock:
+                self.received.append(line)
+            self._write(sock, self.respond(line))
 
     def _drop_if_moving(self) -> None:
         if self.faults.drop_mid_move and self.model.moving():

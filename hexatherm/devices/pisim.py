@@ -204,15 +204,6 @@ class PISimulator(SimulatedController):
         finally:
             self._finished(sock)
 
-    def _handle(self, sock: socket.socket, lines: list[str]) -> None:
-        for line in lines:
-            line = line.strip()
-            if not line:
-                continue
-            with self._lock:
-                self.received.append(line)
-            self._write(sock, self.respond(line))
-
     # ------------------------------------------------------------ answers
     @staticmethod
     def _answer(pairs: list[tuple[str, str]]) -> list[str]:
