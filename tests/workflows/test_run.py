@@ -20,6 +20,7 @@ from hexatherm.core.heating import Mat, MatHeating
 from hexatherm.core.planning import build_plan
 from hexatherm.core.registration import register
 from hexatherm.core.spherefit import fit_spheres
+from hexatherm.core.twin import TwinSteps
 from hexatherm.devices.controller import InPositionCriteria
 from hexatherm.devices.controllersim import Faults, ManualClock
 from hexatherm.devices.ippserver import Fault
@@ -181,19 +182,29 @@ def check_complete(b: Bench, max_rms_um: float = 1.0) -> pd.DataFrame:
     return points
 
 
-# ------------------------------------------------------------------------ tests
-def test_run_then_process_gives_the_twins_truth(bench: Bench) -> None:
-    result = bench.run()
-    plan = bench.files.plan
+def run_to_the_truth(b: Bench) -> tuple[TwinSteps, np.ndarray]:
+    """Run the whole plan, check the session is complete, process it and check the
+    corrected poses against the twin's truth; the truth and the targets' step indices.
+
+    Noise free: what is left is the balls' drift while one step is probed (minutes),
+    within 0.3 um and 10 urad."""
+    result = b.run()
+    plan = b.files.plan
     assert result.n_points == len(plan.labels) * 3 * plan.points_per_ball
-    check_complete(bench)
-    processed = process_session(bench.session)
-    truth = bench.world.truth(plan, step_times(bench.session, plan.labels))
+    check_complete(b)
+    processed = process_session(b.session)
+    truth = b.world.truth(plan, step_times(b.session, plan.labels))
     idx = processed.correction.target_index
     err = processed.correction.corrected - truth.corrected_pose[idx]
-    # noise free: what is left is the balls' drift while one step is probed (minutes)
     assert np.abs(err[:, :3]).max() * 1e3 < 0.3
     assert np.abs(err[:, 3:]).max() * URAD < 10.0
+    return truth, idx
+
+
+# ------------------------------------------------------------------------ tests
+def test_run_then_process_gives_the_twins_truth(bench: Bench) -> None:
+    truth, idx = run_to_the_truth(bench)
+    plan = bench.files.plan
     thermal = truth.pose[idx] - truth.corrected_pose[idx]
     assert np.abs(thermal[:, :3]).max() * 1e3 > 3.0  # the correction took off micrometres
     # the controller's record of every step, with actuator lengths and leg temperatures

@@ -10,16 +10,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 import pytest
 import yaml
 
 from hexatherm.devices.ippserver import CMM_DIALECTS, Fault
 from hexatherm.errors import AcquisitionError, IncompleteSession
-from hexatherm.workflows.process.pipeline import process_session
 from hexatherm.workflows.run.resume import ProbeSettings, read_run_settings
-from tests.workflows.test_run import URAD, check_complete, make_bench, step_times
+from tests.workflows.test_run import check_complete, make_bench, run_to_the_truth
 
 SHORT = {"targets": [[5.0, -3.0, 4.0, 1.0, -2.0, 3.0]], "points_per_ball": 6}
 
@@ -28,16 +26,7 @@ SHORT = {"targets": [[5.0, -3.0, 4.0, 1.0, -2.0, 3.0]], "points_per_ball": 6}
 def test_run_then_process_against_each_cmm_dialect(tmp_path: Path, dialect: str) -> None:
     b = make_bench(tmp_path, cmm_dialect=dialect)
     try:
-        result = b.run()
-        plan = b.files.plan
-        assert result.n_points == len(plan.labels) * 3 * plan.points_per_ball
-        check_complete(b)
-        processed = process_session(b.session)
-        truth = b.world.truth(plan, step_times(b.session, plan.labels))
-        idx = processed.correction.target_index
-        err = processed.correction.corrected - truth.corrected_pose[idx]
-        assert np.abs(err[:, :3]).max() * 1e3 < 0.3
-        assert np.abs(err[:, 3:]).max() * URAD < 10.0
+        run_to_the_truth(b)
         commands = [c[6:] for c in b.machines.cmm.commands]
         # the version is the first question of the session, and only what it has is asked
         assert commands[:2] == ["StartSession()", "GetDMEVersion()"]
@@ -132,17 +121,7 @@ def test_a_plain_dme_1_4_server_with_each_controller_dialect(
     b = make_bench(tmp_path, **SHORT, cmm_dialect="dme-1.4")  # type: ignore[arg-type]
     b.restart(dialect=controller, cmm_dialect="dme-1.4")
     try:
-        result = b.run()
-        plan = b.files.plan
-        assert result.n_points == len(plan.labels) * 3 * plan.points_per_ball
-        check_complete(b)
-        processed = process_session(b.session)
-        truth = b.world.truth(plan, step_times(b.session, plan.labels))
-        err = (
-            processed.correction.corrected - truth.corrected_pose[processed.correction.target_index]
-        )
-        assert np.abs(err[:, :3]).max() * 1e3 < 0.3
-        assert np.abs(err[:, 3:]).max() * URAD < 10.0
+        run_to_the_truth(b)
         assert b.machines.cmm_url.startswith("ipp://")
         assert controller in b.machines.controller_url.split(":")[0]
     finally:
