@@ -17,9 +17,8 @@ ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = ROOT / "sessions" / "register-datums"
 
 
-def test_register_recovers_the_true_balls_from_the_sample(tmp_path: Path) -> None:
-    before = {p: p.read_bytes() for p in SAMPLE.rglob("*") if p.is_file()}
-    out = tmp_path / "balls.yaml"
+def register_sample(out: Path) -> None:
+    """``hexatherm register`` of the sample's points and datums into ``out`` (succeeds)."""
     result = CliRunner().invoke(
         main,
         [
@@ -32,6 +31,12 @@ def test_register_recovers_the_true_balls_from_the_sample(tmp_path: Path) -> Non
         ],
     )
     assert result.exit_code == 0, result.output
+
+
+def test_register_recovers_the_true_balls_from_the_sample(tmp_path: Path) -> None:
+    before = {p: p.read_bytes() for p in SAMPLE.rglob("*") if p.is_file()}
+    out = tmp_path / "balls.yaml"
+    register_sample(out)
     got, truth = read_balls(out), read_balls(SAMPLE / "truth" / "balls.yaml")
     assert got.names == truth.names
     error_um = np.linalg.norm(got.centres_mm - truth.centres_mm, axis=1) * 1e3
@@ -65,18 +70,7 @@ def test_balls_yaml_carries_each_centres_uncertainty_at_sane_digits(tmp_path: Pa
     from hexatherm.core.spherefit import fit_spheres
 
     out = tmp_path / "balls.yaml"
-    result = CliRunner().invoke(
-        main,
-        [
-            "register",
-            str(SAMPLE / "points.csv"),
-            "--datums",
-            str(SAMPLE / "datums.yaml"),
-            "-o",
-            str(out),
-        ],
-    )
-    assert result.exit_code == 0, result.output
+    register_sample(out)
     text = out.read_text()
     doc = yaml.safe_load(text)
     records = pd.read_csv(SAMPLE / "points.csv")
