@@ -11,6 +11,7 @@ from hexatherm.cli.options import (
     clean_errors,
     coverage_factor_option,
     echo_err,
+    imports_done,
     interpolation_option,
     lab_option,
     overwrite_option,
@@ -125,6 +126,7 @@ def command(
         read_campaign,
     )
 
+    imports_done()
     if poses == "twin" and twin_model is None:
         raise click.UsageError("--poses twin needs the twin's model: give --twin-model FILE")
     if poses != "twin" and twin_model is not None:

@@ -10,6 +10,7 @@ from hexatherm.cli.options import (
     ProgressBars,
     clean_errors,
     echo_err,
+    imports_done,
     overwrite_option,
     reading_options,
     template_dir_option,
@@ -68,6 +69,7 @@ def command(
     from hexatherm.workflows.diagnose.report import terminal_tables, write_report_files
     from hexatherm.workflows.diagnose.run import read_for_diagnosis, run_diagnosis
 
+    imports_done()
     folder = session if session.is_dir() else session.parent
     out_dir = Path(out) if out is not None else folder / "diagnosis"
     inputs = read_session(session).input_files()

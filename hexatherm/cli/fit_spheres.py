@@ -13,6 +13,7 @@ from hexatherm.cli.options import (
     ProgressBars,
     clean_errors,
     echo_err,
+    imports_done,
     overwrite_option,
     reading_options,
 )
@@ -77,6 +78,7 @@ def command(
     from hexatherm.io.records import Records, concat_records
     from hexatherm.workflows.process.measured import fit_points
 
+    imports_done()
     if out is not None:
         check_output_settled(out, kind="file", inputs=points, overwrite=overwrite)
     fitted: list[Records] = []

@@ -16,6 +16,7 @@ from hexatherm.cli.options import (
     clean_errors,
     coverage_factor_option,
     echo_err,
+    imports_done,
     interpolation_option,
     mc_option,
     output_dir_option,
@@ -145,6 +146,7 @@ def command(
     )
     from hexatherm.workflows.process.uncertainty import pose_uncertainty
 
+    imports_done()
     check_draws(mc)
     if hexapod_path is not None and "twin" not in methods:
         raise click.BadParameter(

@@ -12,6 +12,7 @@ from hexatherm.cli.options import (
     clean_errors,
     coverage_factor_option,
     echo_err,
+    imports_done,
     interpolation_option,
     lab_option,
     mc_option,
@@ -94,6 +95,7 @@ def command(
     from hexatherm.workflows.process.quality import parse_threshold, session_thresholds
     from hexatherm.workflows.report import Verdict, build_report, verdict_items
 
+    imports_done()
     check_draws(mc)
     lab_fields, lab_tolerances = read_lab(lab) if lab is not None else ({}, {})
     templates = template_folder(template_dir, lab)

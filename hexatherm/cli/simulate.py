@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from hexatherm.cli.options import MAX_SEED, clean_errors, echo_err, overwrite_option
+from hexatherm.cli.options import MAX_SEED, clean_errors, echo_err, imports_done, overwrite_option
 
 
 @click.command("simulate")
@@ -78,6 +78,7 @@ def command(
     from hexatherm.io.scenario import Scenario, plan_scenario
     from hexatherm.workflows.simulate.run import simulate_file
 
+    imports_done()
     source: Path | Scenario
     if (scenario is None) == (plan_path is None):
         raise click.UsageError("give a SCENARIO file or --plan PLAN, one of them")

@@ -46,3 +46,22 @@ def test_process_of_a_small_session_does_not_import_scipy_sparse(tmp_path: Path)
     )
     assert _loaded(code, ("scipy.sparse", "pandas")) == {"scipy.sparse": False, "pandas": True}
     assert (out / "covariance.csv").is_file()
+
+
+def test_process_keeps_the_collector_off_its_imports(tmp_path: Path) -> None:
+    """Once its modules are loaded, a command freezes them (gc.freeze: full collections
+    no longer walk numpy's, pandas' and scipy's objects); the results are the replay's."""
+    out = tmp_path / "out"
+    code = (
+        "import gc\n"
+        "from hexatherm.cli import main\n"
+        "assert gc.get_freeze_count() == 0\n"
+        "try:\n"
+        f"    main(['process', {str(SESSIONS / 'paper-zero-pose')!r}, '-o', {str(out)!r}])\n"
+        "except SystemExit as stop:\n"
+        "    assert not stop.code, stop.code\n"
+        "assert gc.get_freeze_count() > 10000, gc.get_freeze_count()\n"
+    )
+    assert _loaded(code, ("numpy",)) == {"numpy": True}
+    expected = SESSIONS / "paper-zero-pose" / "expected" / "poses.csv"
+    assert (out / "poses.csv").read_bytes() == expected.read_bytes()
