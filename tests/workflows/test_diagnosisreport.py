@@ -12,6 +12,7 @@ from __future__ import annotations
 import base64
 import dataclasses
 import hashlib
+import io
 import re
 from pathlib import Path
 
@@ -146,6 +147,25 @@ def test_report_html_is_the_same_story_with_the_figures_embedded(
 
 
 # -------------------------------------------------------------------- figures
+def test_written_figures_have_the_pixels_of_a_plain_savefig(
+    result: DiagnosisResult, written: list[Path]
+) -> None:
+    # the PNG written (figure_png: a faster zlib level) and a plain savefig of the same
+    # figure built afresh decode to the same pixels
+    from PIL import Image
+
+    folder = written[0].parent
+    for key, build in (("pose_time", dr.pose_time_figure), ("centre_rms", dr.centre_rms_figure)):
+        plain = io.BytesIO()
+        build(result).savefig(plain, format="png", dpi=50)  # the fixture's dpi
+        with (
+            Image.open(folder / dr.FIGURE_FILES[key]) as fast,
+            Image.open(plain) as slow,
+        ):
+            assert fast.size == slow.size and fast.mode == slow.mode == "RGBA"
+            np.testing.assert_array_equal(np.asarray(fast), np.asarray(slow))
+
+
 def test_pose_and_leg_figures_hold_the_residuals(result: DiagnosisResult) -> None:
     order, hours = _hours(result)
     for fig, attr in (

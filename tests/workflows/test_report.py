@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import base64
 import dataclasses
+import io
 import re
 from pathlib import Path
 
@@ -22,7 +23,9 @@ from hexatherm.workflows.process.pipeline import process_session
 from hexatherm.workflows.process.quality import quality_checks
 from hexatherm.workflows.process.uncertainty import pose_uncertainty
 from hexatherm.workflows.report import (
+    FIGURE_DPI,
     build_report,
+    figure_png,
     growth_figure,
     pose_figure,
     registration_figure,
@@ -102,6 +105,32 @@ def test_report_embeds_every_figure_as_a_png(hidden):
     # units as a reader writes them, not as the files' column names
     assert "µrad" in page and "°C" in page
     assert not re.search(r"\((um|urad|degC)\)", page)
+
+
+def _pixels(png: bytes) -> np.ndarray:
+    from PIL import Image  # matplotlib's own PNG codec
+
+    with Image.open(io.BytesIO(png)) as image:
+        return np.asarray(image)
+
+
+def _zlib_level_class(png: bytes) -> int:
+    """FLEVEL of the zlib stream of the PNG's first IDAT chunk (RFC 1950): 0 for zlib levels
+    0-1, 1 for 2-5, 2 for the default (6), 3 for 7-9."""
+    data = png.index(b"IDAT") + 4
+    return png[data + 1] >> 6
+
+
+def test_figure_png_has_the_pixels_of_a_plain_savefig(hidden):
+    # figure_png encodes at a faster zlib level than savefig's default: other bytes, the
+    # same pixels (each figure drawn fresh)
+    png = figure_png(pose_figure(hidden))
+    plain = io.BytesIO()
+    pose_figure(hidden).savefig(plain, format="png", dpi=FIGURE_DPI)
+    fast_pixels, plain_pixels = _pixels(png), _pixels(plain.getvalue())
+    assert fast_pixels.shape == (round(6.2 * FIGURE_DPI), round(9.5 * FIGURE_DPI), 4)
+    np.testing.assert_array_equal(fast_pixels, plain_pixels)
+    assert (_zlib_level_class(png), _zlib_level_class(plain.getvalue())) == (1, 2)
 
 
 def test_pose_figure_plots_every_trial_conventional_and_corrected(paper):

@@ -58,6 +58,11 @@ TRIAL_OFFSET = 0.12
 
 FIGURE_DPI = 150
 
+#: zlib level of the figures' PNGs (0-9). The pixels are the same at every level; 3
+#: encodes in about two thirds of the time of zlib's default (6) for about 10 % more bytes
+#: (diagnose's four figures: 0.30 -> 0.21 s, 1.36 -> 1.49 MB at 16 targets)
+PNG_COMPRESS_LEVEL = 3
+
 
 #: line style and marker of each leg (and of the further temperature columns), so
 #: that no line hides another where they overlap
@@ -391,7 +396,14 @@ def registration_figure(result: ProcessResult) -> Figure:
 
 
 def figure_png(fig: Figure, dpi: int = FIGURE_DPI) -> bytes:
-    """The figure as PNG bytes."""
+    """The figure as PNG bytes (RGBA, zlib level :data:`PNG_COMPRESS_LEVEL`): the pixels
+    of ``fig.savefig(format="png", dpi=dpi)``, drawn once."""
     buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=dpi, metadata={"Software": None})
+    fig.savefig(
+        buffer,
+        format="png",
+        dpi=dpi,
+        metadata={"Software": None},
+        pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL},
+    )
     return buffer.getvalue()
