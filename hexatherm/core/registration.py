@@ -140,6 +140,36 @@ def register(
     return Registration(platform2cmm=transforms, residuals_mm=residuals, rms_um=rms)
 
 
+def rigid_rows(centres_mm: FloatArray, balls_mm: FloatArray, weights: FloatArray) -> FloatArray:
+    """Rigid transforms (M, 4, 4) taking each row's balls onto its centres, weighted.
+
+    What :func:`register` computes (the same minimiser, Horn's rotation) for rows
+    that each have their own balls: ``centres_mm`` and ``balls_mm`` are (M, n, 3) (or
+    (1, n, 3), the same for every row), ``weights`` (n,) the points' weights, shared.
+    For the diagnosis, which places a twin's centres of many steps on the measured
+    ones for many parameter sets at once: it trusts its caller for the checks
+    ``register`` makes (finite numbers, non-negative weights, balls not collinear).
+    """
+    w = np.asarray(weights, dtype=float)
+    w_norm = w / w.sum()
+    centres = np.asarray(centres_mm, dtype=float)
+    balls = np.asarray(balls_mm, dtype=float)
+    balls_mean = w_norm @ balls
+    centres_mean = w_norm @ centres
+    b = balls - balls_mean[:, None]
+    c = centres - centres_mean[:, None]
+    cov = np.swapaxes(c * w_norm[:, None], 1, 2) @ b  # sum_k w_k c_k b_k^T
+    scale = 0.5 * (
+        np.einsum("k,nki,nki->n", w_norm, b, b) + np.einsum("k,nki,nki->n", w_norm, c, c)
+    )
+    rot = _rotations(cov, scale)
+    transforms = np.zeros((rot.shape[0], 4, 4))
+    transforms[:, :3, :3] = rot
+    transforms[:, :3, 3] = centres_mean - (rot @ balls_mean[..., None])[..., 0]
+    transforms[:, 3, 3] = 1.0
+    return transforms
+
+
 def _kabsch(cov: FloatArray) -> FloatArray:
     """Proper rotations maximising ``trace(R^T cov)``, by SVD (Kabsch/Umeyama)."""
     u, _, vt = np.linalg.svd(cov)

@@ -7,13 +7,13 @@ standard errors.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import numpy as np
 import numpy.typing as npt
 from scipy.optimize import least_squares
 
-from hexatherm.core.diagnosis.adequacy import Adequacy, _bound_note, adequacy, bound_flags
+from hexatherm.core.diagnosis.adequacy import _bound_note, adequacy, bound_flags
 from hexatherm.core.diagnosis.model import (
     _FD_STEP,
     DELTA_BIC_THRESHOLD,
@@ -26,70 +26,18 @@ from hexatherm.core.diagnosis.model import (
     Observations,
     RunnerUp,
     place,
+    place_many,
     rms_um,
     twin_centres,
 )
-from hexatherm.core.diagnosis.standin import cautions
+from hexatherm.core.diagnosis.outcome import Diagnosis
+from hexatherm.core.diagnosis.twins import TwinRuns
 from hexatherm.core.effects import EFFECTS, Effect
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.residuals import (
     time_blocks,
 )
 from hexatherm.typing import FloatArray
-
-
-@dataclass(frozen=True)
-class Diagnosis:
-    """The outcome of :func:`diagnose`.
-
-    Attributes
-    ----------
-    baseline : Fit
-        The current model (the hexapod's own effects), only ``C`` fitted.
-    final : Fit
-        The model with every added effect, fitted jointly.
-    added : tuple of Addition
-        In the order they were added.
-    rounds : tuple of tuple of Candidate
-        Every candidate of every round.
-    baseline_heldout_rms_um, final_heldout_rms_um : float
-    skipped : dict of str to str
-        Candidates not tried at all, and why (e.g. no air temperature).
-    adequacy : Adequacy or None
-        The verdict on the final model (None when not assessed).
-    """
-
-    baseline: Fit
-    final: Fit
-    added: tuple[Addition, ...]
-    rounds: tuple[tuple[Candidate, ...], ...]
-    baseline_heldout_rms_um: float
-    final_heldout_rms_um: float
-    skipped: dict[str, str] = field(default_factory=dict)
-    adequacy: Adequacy | None = None
-
-    @property
-    def baseline_rms_um(self) -> float:
-        return rms_um(self.baseline.residual_mm)
-
-    @property
-    def final_rms_um(self) -> float:
-        return rms_um(self.final.residual_mm)
-
-    def chosen_fits(self) -> tuple[Fit, ...]:
-        """The joint fit of each round that added an effect (every effect added up to it)."""
-        out = []
-        for round_, addition in zip(self.rounds, self.added, strict=False):
-            fit = next(c.fit for c in round_ if c.name == addition.effect.name)
-            if fit is not None:
-                out.append(fit)
-        return tuple(out)
-
-    def cautions(self) -> list[str]:
-        """Added effects that may stand in for a cause outside the registry, and pairs
-        that trade off, in words (:mod:`hexatherm.core.diagnosis.standin`)."""
-        return cautions(self.added, self.final, self.chosen_fits())
-
 
 # --------------------------------------------------------------------- the model
 
@@ -109,8 +57,10 @@ class _Problem:
         obs: Observations,
         fixed: Sequence[Effect],
         free: Sequence[type[Effect]],
+        runs: TwinRuns | None = None,
     ) -> None:
         self.hexapod, self.obs = hexapod, obs
+        self.runs = _runs(hexapod, obs) if runs is None else runs
         self.fixed, self.free = tuple(fixed), tuple(free)
         self.sizes = [len(cls.parameters) for cls in self.free]
 
@@ -143,11 +93,46 @@ class _Problem:
             i += size
         return self.fixed + tuple(out)
 
+    def _twin_key(self, theta: FloatArray) -> bytes:
+        return np.asarray(theta, dtype=float)[self._twin_sees].tobytes()
+
     def centres(self, theta: FloatArray) -> FloatArray:
-        key = np.asarray(theta, dtype=float)[self._twin_sees].tobytes()
+        key = self._twin_key(theta)
         if key not in self._cache:
-            self._cache[key] = twin_centres(self.hexapod, self.obs, self.effects(theta))
+            self._cache[key] = twin_centres(self.hexapod, self.obs, self.effects(theta), self.runs)
         return self._cache[key]
+
+    def prepare(self, thetas: Sequence[FloatArray], mask: BoolArray) -> None:
+        """Evaluate several parameter sets on ``mask`` at once (memoized as one by one):
+        the twins not yet run in one stacked run, the placements in one registration."""
+        twins: dict[bytes, FloatArray] = {}
+        for theta in thetas:
+            twin_key = self._twin_key(theta)
+            if twin_key not in self._cache:
+                twins.setdefault(twin_key, theta)
+        if len(twins) == 1:
+            self.centres(next(iter(twins.values())))
+        elif twins:
+            sets = [self.effects(theta) for theta in twins.values()]
+            for twin_key, centres in zip(twins, self.runs.centres(sets), strict=True):
+                self._cache[twin_key] = centres
+        mask_key = np.asarray(mask).tobytes()
+        todo: dict[tuple[bytes, bytes], FloatArray] = {}
+        for theta in thetas:
+            key = (np.asarray(theta, dtype=float).tobytes(), mask_key)
+            if key not in self._placed:
+                todo.setdefault(key, theta)
+        if not todo:
+            return
+        ys = [self.centres(theta) for theta in todo.values()]
+        effects = [self.effects(theta) for theta in todo.values()]
+        placed = (
+            [place(ys[0], self.obs, effects[0], mask)]
+            if len(todo) == 1
+            else place_many(ys, self.obs, effects, mask)
+        )
+        for key, (origin2cmm, predicted) in zip(todo, placed, strict=True):
+            self._placed[key] = (origin2cmm, predicted, self.obs.centres_mm - predicted)
 
     def evaluate(
         self, theta: FloatArray, mask: BoolArray
@@ -156,8 +141,7 @@ class _Problem:
         (memoized: the arrays returned are shared, never to be modified)."""
         key = (np.asarray(theta, dtype=float).tobytes(), np.asarray(mask).tobytes())
         if key not in self._placed:
-            origin2cmm, predicted = place(self.centres(theta), self.obs, self.effects(theta), mask)
-            self._placed[key] = (origin2cmm, predicted, self.obs.centres_mm - predicted)
+            self.prepare([theta], mask)
         return self._placed[key]
 
     def weighted(self, theta: FloatArray, mask: BoolArray) -> FloatArray:
@@ -167,16 +151,22 @@ class _Problem:
         return self._weighted[key].copy()  # the optimizer's own array
 
     def jacobian(self, theta: FloatArray, mask: BoolArray) -> FloatArray:
-        """Forward differences of the weighted residuals in units of each parameter's scale."""
-        r0 = self.weighted(theta, mask)
-        cols = []
+        """Forward differences of the weighted residuals in units of each parameter's scale
+        (the columns' twins run together, :meth:`prepare`)."""
+        steps, sizes = [], []
         for j in range(theta.size):
             h = _FD_STEP * self.scale[j]
             if theta[j] + h > self.hi[j]:
                 h = -h
             step = theta.copy()
             step[j] += h
-            cols.append((self.weighted(step, mask) - r0) / (h / self.scale[j]))
+            steps.append(step)
+            sizes.append(h / self.scale[j])
+        self.prepare([theta, *steps], mask)
+        r0 = self.weighted(theta, mask)
+        cols = [
+            (self.weighted(step, mask) - r0) / size for step, size in zip(steps, sizes, strict=True)
+        ]
         return np.column_stack(cols) if cols else np.zeros((r0.size, 0))
 
     def start(self, starts: Sequence[FloatArray | None], mask: BoolArray) -> FloatArray:
@@ -189,6 +179,7 @@ class _Problem:
         for opts in options:
             combos = [np.concatenate([c, o]) for c in combos for o in opts]
         combos = [np.clip(c, self.lo, self.hi) for c in combos]
+        self.prepare(combos, mask)
         costs = [float(np.sum(self.weighted(c, mask) ** 2)) for c in combos]
         return combos[int(np.argmin(costs))]
 
@@ -305,6 +296,10 @@ class _Problem:
         return cov_z * np.outer(self.scale, self.scale)
 
 
+def _runs(hexapod: Hexapod, obs: Observations) -> TwinRuns:
+    return TwinRuns(hexapod, obs.plan, obs.times_s, obs.log, obs.balls_mm)
+
+
 #: the stages of :class:`~hexatherm.core.effects.Effect` the twin's centres go through
 #: (all but the CMM's reading, ``cmm_coordinates_mm``)
 _TWIN_STAGES = (
@@ -331,6 +326,7 @@ def fit_model(
     free: Sequence[type[Effect]],
     start: Sequence[FloatArray | None] = (),
     mask: BoolArray | None = None,
+    runs: TwinRuns | None = None,
 ) -> Fit:
     """Fit the parameters of the ``free`` effects (and ``C``) to the steps in ``mask``.
 
@@ -346,12 +342,14 @@ def fit_model(
         A starting value per free effect (None: try the effect's start values).
     mask : ndarray of bool, shape (N,), optional
         The steps fitted (default all); residuals are returned for every step.
+    runs : TwinRuns, optional
+        The twin runs of ``hexapod`` and ``obs``, to share between fits (default: new).
 
     Returns
     -------
     Fit
     """
-    problem = _Problem(hexapod, obs, fixed, free)
+    problem = _Problem(hexapod, obs, fixed, free, runs)
     mask = np.ones(obs.n_steps, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
     starts = list(start) + [None] * (len(problem.free) - len(start))
     theta, seen = problem.solve(problem.start(starts, mask), mask)
@@ -382,8 +380,9 @@ def _fit_and_hold_out(
     free: Sequence[type[Effect]],
     start: Sequence[FloatArray | None],
     blocks: npt.NDArray[np.intp],
+    runs: TwinRuns,
 ) -> tuple[Fit, float]:
-    problem = _Problem(hexapod, obs, fixed, free)
+    problem = _Problem(hexapod, obs, fixed, free, runs)
     everything = np.ones(obs.n_steps, dtype=bool)
     starts = list(start) + [None] * (len(problem.free) - len(start))
     theta, seen = problem.solve(problem.start(starts, everything), everything)
@@ -441,7 +440,8 @@ def diagnose(
             skipped[name] = "needs the air temperature (an 'air' column in temperatures.csv)"
             names.remove(name)
     blocks = time_blocks(obs.times_s, n_blocks)
-    baseline, heldout = _fit_and_hold_out(hexapod, obs, current, (), (), blocks)
+    runs = _runs(hexapod, obs)  # shared by every fit
+    baseline, heldout = _fit_and_hold_out(hexapod, obs, current, (), (), blocks, runs)
     baseline_heldout = heldout
     model = baseline
     added: list[Addition] = []
@@ -453,7 +453,7 @@ def diagnose(
         for name in names:
             cls = EFFECTS[name]
             free = [*added_classes, cls]
-            fit, held = _fit_and_hold_out(hexapod, obs, current, free, starts, blocks)
+            fit, held = _fit_and_hold_out(hexapod, obs, current, free, starts, blocks, runs)
             delta = model.bic - fit.bic
             note = _bound_note(fit.effects[-1], fit.unseen_of(len(fit.effects) - 1))
             tried.append(
@@ -487,7 +487,9 @@ def diagnose(
             key=lambda c: -c.delta_bic,
         )
         runner = (
-            _runner_up(hexapod, obs, current, added_classes, best, others[0]) if others else None
+            _runner_up(hexapod, obs, current, added_classes, best, others[0], runs)
+            if others
+            else None
         )
         added.append(
             Addition(
@@ -509,7 +511,7 @@ def diagnose(
         model, heldout = best.fit, best.heldout_rms_um
         # the joint refit of everything added so far is ``best.fit`` itself
     # the flags are those of the final joint fit (the values written to hexapod.yaml)
-    folds = _folds(hexapod, obs, current, model, blocks)
+    folds = _folds(hexapod, obs, current, model, blocks, runs)
     added = [
         replace(a, flags=bound_flags(effect, model.unseen_of(k)), folds=folds[k])
         for k, (a, effect) in enumerate(zip(added, model.effects, strict=True))
@@ -532,11 +534,12 @@ def _folds(
     current: Sequence[Effect],
     final: Fit,
     blocks: npt.NDArray[np.intp],
+    runs: TwinRuns,
 ) -> list[Folds]:
     """The final fit's added effects refitted on each held-out fold (see :class:`Folds`)."""
     if not final.effects:
         return []
-    problem = _Problem(hexapod, obs, current, [type(e) for e in final.effects])
+    problem = _Problem(hexapod, obs, current, [type(e) for e in final.effects], runs)
     theta = np.concatenate([e.vector() for e in final.effects])
     values: list[list[dict[str, float]]] = [[] for _ in final.effects]
     errors: list[list[dict[str, float]]] = [[] for _ in final.effects]
@@ -557,13 +560,15 @@ def _runner_up(
     before: Sequence[type[Effect]],
     best: Candidate,
     runner: Candidate,
+    runs: TwinRuns,
 ) -> RunnerUp:
     """Refit the round's chosen effect together with its runner-up (see :class:`RunnerUp`)."""
     assert best.fit is not None and runner.fit is not None
     chosen = best.fit.effects[-1]
     free = [*before, type(chosen), EFFECTS[runner.name]]
     starts: list[FloatArray | None] = [e.vector() for e in best.fit.effects]
-    both = fit_model(hexapod, obs, current, free, [*starts, runner.fit.effects[-1].vector()])
+    runner_start = runner.fit.effects[-1].vector()
+    both = fit_model(hexapod, obs, current, free, [*starts, runner_start], runs=runs)
     return RunnerUp(
         runner.name,
         runner.delta_bic,
