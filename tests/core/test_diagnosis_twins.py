@@ -1,8 +1,9 @@
 """The diagnosis's fast paths against a second method (issue 26): the stacked twin runs
 (:class:`TwinRuns`) against ``predict`` one set at a time, the FGM from a kept first
 iteration against the FGM from the start poses, the rows' registration against
-``register`` row by row, the batched placements against one by one. All to the bit:
-the same operations on the same numbers."""
+``register`` row by row, the batched placements against one by one, the lag from the
+log's kept grid against ``first_order_lag``, the held-out folds refitted side by side
+against one by one. All to the bit: the same operations on the same numbers."""
 
 from __future__ import annotations
 
@@ -15,8 +16,9 @@ import hexatherm.core.diagnosis.fitting as fitting
 from hexatherm.core.diagnosis import place, twin_centres
 from hexatherm.core.diagnosis.model import place_many
 from hexatherm.core.diagnosis.twins import TwinRuns
-from hexatherm.core.effects import EFFECTS, Effect, make_effect
+from hexatherm.core.effects import EFFECTS, Effect, first_order_lag, make_effect
 from hexatherm.core.registration import register, rigid_rows
+from hexatherm.core.residuals import time_blocks
 from hexatherm.workflows.diagnose.run import SessionData, read_for_diagnosis
 from hexatherm.workflows.simulate.campaigns import NOMINAL_HIDDEN, diagnosis_campaign
 from hexatherm.workflows.simulate.twinsession import write_twin_session
@@ -127,3 +129,29 @@ def test_a_jacobian_runs_its_columns_twins_together_and_equals_one_by_one(
     slow = OneByOne(data.hexapod, obs, (), [cls], runs).jacobian(theta, every)
     assert np.array_equal(jac, slow)
     assert np.all(np.linalg.norm(jac, axis=0) > 0)
+
+
+def test_the_lag_from_the_logs_kept_grid_is_first_order_lag(data: SessionData) -> None:
+    log = data.observations.log
+    times = np.concatenate([[log.t0_s], data.observations.times_s])
+    grid = log.lag_grid(times)
+    assert log.lag_grid(times) is grid  # kept for these times
+    for tau in (5.0, 600.0, 86400.0):
+        effect = EFFECTS["leg_thermal_lag"].from_vector([tau])
+        lagged = effect.leg_temperature_C(log.legs_at(times), times, log)
+        assert np.array_equal(lagged, first_order_lag(log.times_s, log.legs_C, tau, times))
+    assert log.lag_grid(times[:-1]) is not grid
+    with pytest.raises(ValueError, match="time constant"):
+        grid.at(0.0)
+
+
+def test_the_folds_refitted_side_by_side_are_refitted_one_by_one(data: SessionData) -> None:
+    obs, cls = data.observations, EFFECTS["leg_thermal_lag"]
+    blocks = time_blocks(obs.times_s, 6)
+    trains = [blocks % 2 == parity for parity in (0, 1)]
+    theta = np.array([NOMINAL_HIDDEN["leg_thermal_lag"]["tau_s"] * 1.3])
+    together = fitting._Problem(data.hexapod, obs, (), [cls], _runs(data)).refit(theta, trains)
+    for train, refitted in zip(trains, together, strict=True):
+        alone = fitting._Problem(data.hexapod, obs, (), [cls]).refit(theta, [train])[0]
+        assert np.array_equal(refitted, alone)
+        assert abs(refitted[0] - theta[0]) > 1.0  # the chord iterations moved it

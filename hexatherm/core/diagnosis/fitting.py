@@ -25,6 +25,8 @@ from hexatherm.core.diagnosis.model import (
     Folds,
     Observations,
     RunnerUp,
+    _change,
+    _cosine,
     place,
     place_many,
     rms_um,
@@ -103,10 +105,14 @@ class _Problem:
         return self._cache[key]
 
     def prepare(self, thetas: Sequence[FloatArray], mask: BoolArray) -> None:
-        """Evaluate several parameter sets on ``mask`` at once (memoized as one by one):
-        the twins not yet run in one stacked run, the placements in one registration."""
+        """Evaluate several parameter sets on ``mask`` at once (:meth:`prepare_pairs`)."""
+        self.prepare_pairs([(theta, mask) for theta in thetas])
+
+    def prepare_pairs(self, pairs: Sequence[tuple[FloatArray, BoolArray]]) -> None:
+        """Evaluate (parameters, mask) pairs at once, memoized as one by one: the twins
+        not yet run in one stacked run, the placements of a mask in one registration."""
         twins: dict[bytes, FloatArray] = {}
-        for theta in thetas:
+        for theta, _ in pairs:
             twin_key = self._twin_key(theta)
             if twin_key not in self._cache:
                 twins.setdefault(twin_key, theta)
@@ -116,23 +122,22 @@ class _Problem:
             sets = [self.effects(theta) for theta in twins.values()]
             for twin_key, centres in zip(twins, self.runs.centres(sets), strict=True):
                 self._cache[twin_key] = centres
-        mask_key = np.asarray(mask).tobytes()
-        todo: dict[tuple[bytes, bytes], FloatArray] = {}
-        for theta in thetas:
+        by_mask: dict[bytes, tuple[BoolArray, dict[tuple[bytes, bytes], FloatArray]]] = {}
+        for theta, mask in pairs:
+            mask_key = np.asarray(mask).tobytes()
             key = (np.asarray(theta, dtype=float).tobytes(), mask_key)
             if key not in self._placed:
-                todo.setdefault(key, theta)
-        if not todo:
-            return
-        ys = [self.centres(theta) for theta in todo.values()]
-        effects = [self.effects(theta) for theta in todo.values()]
-        placed = (
-            [place(ys[0], self.obs, effects[0], mask)]
-            if len(todo) == 1
-            else place_many(ys, self.obs, effects, mask)
-        )
-        for key, (origin2cmm, predicted) in zip(todo, placed, strict=True):
-            self._placed[key] = (origin2cmm, predicted, self.obs.centres_mm - predicted)
+                by_mask.setdefault(mask_key, (mask, {}))[1].setdefault(key, theta)
+        for mask, todo in by_mask.values():
+            ys = [self.centres(theta) for theta in todo.values()]
+            effects = [self.effects(theta) for theta in todo.values()]
+            placed = (
+                [place(ys[0], self.obs, effects[0], mask)]
+                if len(todo) == 1
+                else place_many(ys, self.obs, effects, mask)
+            )
+            for key, (origin2cmm, predicted) in zip(todo, placed, strict=True):
+                self._placed[key] = (origin2cmm, predicted, self.obs.centres_mm - predicted)
 
     def evaluate(
         self, theta: FloatArray, mask: BoolArray
@@ -153,6 +158,16 @@ class _Problem:
     def jacobian(self, theta: FloatArray, mask: BoolArray) -> FloatArray:
         """Forward differences of the weighted residuals in units of each parameter's scale
         (the columns' twins run together, :meth:`prepare`)."""
+        steps, sizes = self._differences(theta)
+        self.prepare([theta, *steps], mask)
+        r0 = self.weighted(theta, mask)
+        cols = [
+            (self.weighted(step, mask) - r0) / size for step, size in zip(steps, sizes, strict=True)
+        ]
+        return np.column_stack(cols) if cols else np.zeros((r0.size, 0))
+
+    def _differences(self, theta: FloatArray) -> tuple[list[FloatArray], list[float]]:
+        """The points of :meth:`jacobian`'s forward differences and their steps in scales."""
         steps, sizes = [], []
         for j in range(theta.size):
             h = _FD_STEP * self.scale[j]
@@ -162,12 +177,17 @@ class _Problem:
             step[j] += h
             steps.append(step)
             sizes.append(h / self.scale[j])
-        self.prepare([theta, *steps], mask)
-        r0 = self.weighted(theta, mask)
-        cols = [
-            (self.weighted(step, mask) - r0) / size for step, size in zip(steps, sizes, strict=True)
-        ]
-        return np.column_stack(cols) if cols else np.zeros((r0.size, 0))
+        return steps, sizes
+
+    def prepare_jacobians(self, pairs: Sequence[tuple[FloatArray, BoolArray]]) -> None:
+        """Evaluate what the Jacobians at (parameters, mask) pairs need, all at once."""
+        self.prepare_pairs(
+            [
+                (point, mask)
+                for theta, mask in pairs
+                for point in [theta, *self._differences(theta)[0]]
+            ]
+        )
 
     def start(self, starts: Sequence[FloatArray | None], mask: BoolArray) -> FloatArray:
         """The best combination of start values (given ones, or each effect's own)."""
@@ -221,21 +241,27 @@ class _Problem:
         )
         return np.clip(theta_of(solution.x), self.lo, self.hi), seen
 
-    def refit(self, theta_hat: FloatArray, mask: BoolArray, iterations: int = 3) -> FloatArray:
-        """Refit from a nearby solution with its Jacobian kept (chord iterations).
+    def refit(
+        self, theta_hat: FloatArray, masks: Sequence[BoolArray], iterations: int = 3
+    ) -> list[FloatArray]:
+        """Refit on each mask from a nearby solution with its Jacobian kept (chord
+        iterations), the masks side by side (one stacked twin run per iteration).
 
         The held-out folds start from the fit on all steps; the twin at the
         Jacobian's points is already memoized, so each iteration costs one twin.
         """
         if theta_hat.size == 0:
-            return theta_hat
-        jac = self.jacobian(theta_hat, mask)
-        theta = theta_hat
+            return [theta_hat for _ in masks]
+        self.prepare_jacobians([(theta_hat, mask) for mask in masks])
+        jacs = [self.jacobian(theta_hat, mask) for mask in masks]
+        thetas = [theta_hat for _ in masks]
         for _ in range(iterations):
-            r = self.weighted(theta, mask)
-            dz = np.linalg.lstsq(jac, -r, rcond=None)[0]
-            theta = np.clip(theta + dz * self.scale, self.lo, self.hi)
-        return theta
+            self.prepare_pairs(list(zip(thetas, masks, strict=True)))
+            for k, (jac, mask) in enumerate(zip(jacs, masks, strict=True)):
+                r = self.weighted(thetas[k], mask)
+                dz = np.linalg.lstsq(jac, -r, rcond=None)[0]
+                thetas[k] = np.clip(thetas[k] + dz * self.scale, self.lo, self.hi)
+        return thetas
 
     def fit(self, theta: FloatArray, mask: BoolArray, seen: BoolArray | None = None) -> Fit:
         """The :class:`Fit` at ``theta`` (standard errors from the Jacobian there);
@@ -364,9 +390,10 @@ def heldout_rms_um(problem: _Problem, theta_hat: FloatArray, blocks: npt.NDArray
     steps); the RMS is over both held-out halves.
     """
     squares, count = 0.0, 0
-    for parity in (0, 1):
-        train = blocks % 2 == parity
-        theta = problem.refit(theta_hat, train)
+    trains = [blocks % 2 == parity for parity in (0, 1)]
+    thetas = problem.refit(theta_hat, trains)
+    problem.prepare_pairs(list(zip(thetas, trains, strict=True)))
+    for theta, train in zip(thetas, trains, strict=True):
         held = problem.evaluate(theta, train)[2][~train]
         squares += float(np.sum(held**2))
         count += held.size
@@ -387,16 +414,6 @@ def _fit_and_hold_out(
     starts = list(start) + [None] * (len(problem.free) - len(start))
     theta, seen = problem.solve(problem.start(starts, everything), everything)
     return problem.fit(theta, everything, seen), heldout_rms_um(problem, theta, blocks)
-
-
-def _change(before: Fit, after: Fit, obs: Observations) -> FloatArray:
-    """Weighted change of the residuals from one model to another (a direction)."""
-    return ((before.residual_mm - after.residual_mm) / obs.u_mm[..., None]).ravel()
-
-
-def _cosine(a: FloatArray, b: FloatArray) -> float:
-    na, nb = np.linalg.norm(a), np.linalg.norm(b)
-    return float(a @ b / (na * nb)) if na > 0 and nb > 0 else 0.0
 
 
 def diagnose(
@@ -543,9 +560,11 @@ def _folds(
     theta = np.concatenate([e.vector() for e in final.effects])
     values: list[list[dict[str, float]]] = [[] for _ in final.effects]
     errors: list[list[dict[str, float]]] = [[] for _ in final.effects]
-    for parity in (0, 1):
-        train = blocks % 2 == parity
-        fold = problem.fit(problem.refit(theta, train), train)
+    trains = [blocks % 2 == parity for parity in (0, 1)]
+    thetas = problem.refit(theta, trains)
+    problem.prepare_jacobians(list(zip(thetas, trains, strict=True)))  # the folds' covariances
+    for refitted, train in zip(thetas, trains, strict=True):
+        fold = problem.fit(refitted, train)
         for k, (effect, se) in enumerate(zip(fold.effects, fold.std_errors, strict=True)):
             unseen = final.unseen_of(k)
             values[k].append(dict(effect.values))

@@ -372,5 +372,15 @@ def place_many(
     return out
 
 
+def _change(before: Fit, after: Fit, obs: Observations) -> FloatArray:
+    """Weighted change of the residuals from one model to another (a direction)."""
+    return ((before.residual_mm - after.residual_mm) / obs.u_mm[..., None]).ravel()
+
+
+def _cosine(a: FloatArray, b: FloatArray) -> float:
+    na, nb = np.linalg.norm(a), np.linalg.norm(b)
+    return float(a @ b / (na * nb)) if na > 0 and nb > 0 else 0.0
+
+
 def _apply(transform: FloatArray, points: FloatArray) -> FloatArray:
     return points @ transform[:3, :3].T + transform[:3, 3]

@@ -100,9 +100,8 @@ class TwinRuns:
         for i, (q, base, _) in enumerate(runs):
             if base is not None:
                 poses[i] = self.hexapod.fgm(q, initial_poses=self.plan.poses, base_joints_mm=base)
-        eye = np.eye(4)
         convention = self.hexapod.convention
-        return [
-            apply_transform(eye @ transform_from_pose(pose, convention), balls)
+        return [  # (predict's origin2cmm, the identity, left out: the same numbers)
+            apply_transform(transform_from_pose(pose, convention), balls)
             for pose, (_, _, balls) in zip(poses, runs, strict=True)
         ]
