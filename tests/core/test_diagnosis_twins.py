@@ -56,6 +56,13 @@ def test_stacked_twin_runs_are_predict_one_set_at_a_time(data: SessionData) -> N
         assert np.array_equal(centres, alone), [e.name for e in effects]
     one = twin_centres(data.hexapod, data.observations, sets[1], _runs(data))
     assert np.array_equal(one, stacked[1])
+    # without an effect that moves the balls per step, the frames apply in one stack
+    still = [
+        s for s in sets if all(type(e).ball_positions_mm is Effect.ball_positions_mm for e in s)
+    ]
+    assert len(still) < len(sets)
+    for effects, centres in zip(still, _runs(data).centres(still), strict=True):
+        assert np.array_equal(centres, twin_centres(data.hexapod, data.observations, effects))
 
 
 def test_the_fgm_from_a_kept_first_iteration_is_the_fgm_from_the_start(

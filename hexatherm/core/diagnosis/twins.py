@@ -89,19 +89,24 @@ class TwinRuns:
         """
         runs = [self._legs_of(tuple(effects)) for effects in effect_sets]
         n = self.q_cmd.shape[0]
-        poses: list[FloatArray] = [np.zeros(0)] * len(runs)
+        poses = np.empty((len(runs) * n, 6))
         shared = [i for i, (_, base, _) in enumerate(runs) if base is None]
         if shared:
             stacked = self.hexapod.fgm(
                 np.concatenate([runs[i][0] for i in shared]), start=self.start
             )
             for j, i in enumerate(shared):
-                poses[i] = stacked[j * n : (j + 1) * n]
+                poses[i * n : (i + 1) * n] = stacked[j * n : (j + 1) * n]
         for i, (q, base, _) in enumerate(runs):
             if base is not None:
-                poses[i] = self.hexapod.fgm(q, initial_poses=self.plan.poses, base_joints_mm=base)
-        convention = self.hexapod.convention
-        return [  # (predict's origin2cmm, the identity, left out: the same numbers)
-            apply_transform(transform_from_pose(pose, convention), balls)
-            for pose, (_, _, balls) in zip(poses, runs, strict=True)
+                poses[i * n : (i + 1) * n] = self.hexapod.fgm(
+                    q, initial_poses=self.plan.poses, base_joints_mm=base
+                )
+        # (predict's origin2cmm, the identity, left out: the same numbers)
+        frames = transform_from_pose(poses, self.hexapod.convention).reshape(len(runs), n, 4, 4)
+        if all(balls.ndim == 2 for _, _, balls in runs):
+            balls = np.stack([balls for _, _, balls in runs])[:, None]  # (M, 1, k, 3)
+            return list(apply_transform(frames, balls))
+        return [
+            apply_transform(frame, balls) for frame, (_, _, balls) in zip(frames, runs, strict=True)
         ]
