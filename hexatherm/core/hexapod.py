@@ -365,8 +365,9 @@ class Hexapod:
             What the first iteration computes at the start poses, done once
             (:meth:`fgm_start`) for many calls from the same poses and base joints (a
             fit's twin runs): its poses are the start poses (``initial_poses`` must be
-            None) and ``q_mm`` may hold several sets of them (N a multiple of its
-            poses, set after set). The result is the same, bit for bit.
+            None; for ``stroke_check`` a start counts as start poses given) and ``q_mm``
+            may hold several sets of them (N a multiple of its poses, set after set).
+            The result is the same, bit for bit.
 
         Returns
         -------
@@ -407,7 +408,7 @@ class Hexapod:
             raise ValueError(f"tol_mm must be positive, got {tol_mm}")
         if max_iter < 0:
             raise ValueError(f"max_iter must be >= 0, got {max_iter}")
-        if stroke_check or (stroke_check is None and initial_poses is None):
+        if stroke_check or (stroke_check is None and initial_poses is None and start is None):
             self._check_fgm_stroke(q, stroke_tolerance_mm)
         n = q.shape[0]
         base = None

@@ -19,6 +19,7 @@ from hexatherm.core.diagnosis.twins import TwinRuns
 from hexatherm.core.effects import EFFECTS, Effect, first_order_lag, make_effect
 from hexatherm.core.registration import register, rigid_rows
 from hexatherm.core.residuals import time_blocks
+from hexatherm.errors import ConvergenceError
 from hexatherm.workflows.diagnose.run import SessionData, read_for_diagnosis
 from hexatherm.workflows.simulate.campaigns import NOMINAL_HIDDEN, diagnosis_campaign
 from hexatherm.workflows.simulate.twinsession import write_twin_session
@@ -162,3 +163,20 @@ def test_the_folds_refitted_side_by_side_are_refitted_one_by_one(data: SessionDa
         alone = fitting._Problem(data.hexapod, obs, (), [cls]).refit(theta, [train])[0]
         assert np.array_equal(refitted, alone)
         assert abs(refitted[0] - theta[0]) > 1.0  # the chord iterations moved it
+
+
+def test_stacked_runs_refuse_and_accept_what_predict_does(data: SessionData) -> None:
+    """Legs beyond the stroke: predict starts from the commanded poses and so does not
+    refuse them, nor does a stack; a twin that cannot be solved raises predict's error,
+    naming the step (not its place in the stack)."""
+    obs, cls = data.observations, EFFECTS["leg_offset"]
+    beyond = (cls.from_vector([50.0, 0, 0, 0, 0, 0]),)  # leg 1 beyond the stroke
+    assert data.hexapod.stroke_mm is not None
+    stacked = _runs(data).centres([(), beyond])
+    assert np.array_equal(stacked[1], twin_centres(data.hexapod, obs, beyond))
+    lost = (cls.from_vector([150.0, 0, 0, 0, 0, 0]),)  # no pose has these legs
+    with pytest.raises(ConvergenceError) as alone:
+        twin_centres(data.hexapod, obs, lost)
+    with pytest.raises(ConvergenceError) as together:
+        _runs(data).centres([(), lost])
+    assert str(together.value) == str(alone.value)

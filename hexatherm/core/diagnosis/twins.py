@@ -21,6 +21,7 @@ from hexatherm.core.geometry import apply_transform, transform_from_pose
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
 from hexatherm.core.twin import _leg_model, _TrueGeometry
+from hexatherm.errors import ConvergenceError
 from hexatherm.typing import FloatArray
 
 
@@ -92,9 +93,15 @@ class TwinRuns:
         poses = np.empty((len(runs) * n, 6))
         shared = [i for i, (_, base, _) in enumerate(runs) if base is None]
         if shared:
-            stacked = self.hexapod.fgm(
-                np.concatenate([runs[i][0] for i in shared]), start=self.start
-            )
+            try:
+                stacked = self.hexapod.fgm(
+                    np.concatenate([runs[i][0] for i in shared]), start=self.start
+                )
+            except ConvergenceError:
+                # the pose named is one of the stack: name the step, as predict would
+                for i in shared:
+                    self.hexapod.fgm(runs[i][0], start=self.start)
+                raise
             for j, i in enumerate(shared):
                 poses[i * n : (i + 1) * n] = stacked[j * n : (j + 1) * n]
         for i, (q, base, _) in enumerate(runs):
