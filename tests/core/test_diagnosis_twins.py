@@ -180,3 +180,34 @@ def test_stacked_runs_refuse_and_accept_what_predict_does(data: SessionData) -> 
     with pytest.raises(ConvergenceError) as together:
         _runs(data).centres([(), lost])
     assert str(together.value) == str(alone.value)
+
+
+def test_candidates_held_out_side_by_side_are_held_out_one_by_one(
+    data: SessionData, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A round's held-out refits run every candidate together: four stacked twin runs
+    whatever the number of candidates (one by one: four each); the RMS the same, to the
+    bit, as each candidate alone."""
+    obs = data.observations
+    blocks = time_blocks(obs.times_s, 6)
+    names = ["leg_thermal_lag", "leg_offset", "leg_cte_error"]
+    thetas = [EFFECTS[name].start_values()[0] + 0.2 * EFFECTS[name].scales() for name in names]
+    alone = [
+        fitting.heldout_rms_um(fitting._Problem(data.hexapod, obs, (), [EFFECTS[n]]), t, blocks)
+        for n, t in zip(names, thetas, strict=True)
+    ]
+    runs = _runs(data)
+    problems = [fitting._Problem(data.hexapod, obs, (), [EFFECTS[n]], runs) for n in names]
+    stacks: list[int] = []
+    real = TwinRuns.centres
+
+    def counted(self: TwinRuns, sets: list[tuple[Effect, ...]]) -> list[np.ndarray]:
+        stacks.append(len(sets))
+        return real(self, sets)
+
+    monkeypatch.setattr(TwinRuns, "centres", counted)
+    together = fitting.heldout_rms_many(list(zip(problems, thetas, strict=True)), blocks)
+    assert together == alone
+    # the Jacobians; the second and third chord iterations and the refitted values (the
+    # first starts where the Jacobians are): each both folds of every candidate
+    assert stacks == [sum(1 + t.size for t in thetas)] + [2 * len(names)] * 3

@@ -1,4 +1,4 @@
-"""The outcome of a diagnosis (:func:`hexatherm.core.diagnosis.fitting.diagnose`)."""
+"""The outcome of a diagnosis (:func:`hexatherm.core.diagnosis.search.diagnose`)."""
 
 from __future__ import annotations
 
