@@ -13,10 +13,11 @@ import numpy as np
 import pytest
 
 import hexatherm.core.diagnosis.fitting as fitting
-from hexatherm.core.diagnosis import place, twin_centres
+from hexatherm.core.diagnosis import place, twin_centres, twins
 from hexatherm.core.diagnosis.model import place_many
 from hexatherm.core.diagnosis.twins import TwinRuns
 from hexatherm.core.effects import EFFECTS, Effect, first_order_lag, make_effect
+from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.registration import register, rigid_rows
 from hexatherm.core.residuals import time_blocks
 from hexatherm.errors import ConvergenceError
@@ -211,3 +212,23 @@ def test_candidates_held_out_side_by_side_are_held_out_one_by_one(
     # the Jacobians; the second and third chord iterations and the refitted values (the
     # first starts where the Jacobians are): each both folds of every candidate
     assert stacks == [sum(1 + t.size for t in thetas)] + [2 * len(names)] * 3
+
+
+def test_stacks_split_at_their_size_limit_are_the_same(
+    data: SessionData, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    sets = _every_effect()
+    whole = _runs(data).centres(sets)
+    monkeypatch.setattr(twins, "MAX_STACKED_POSES", 2 * data.observations.n_steps)
+    calls: list[int] = []
+    real = Hexapod.fgm
+
+    def counted(self: Hexapod, q: np.ndarray, *args: object, **kwargs: object) -> np.ndarray:
+        calls.append(len(q))
+        return real(self, q, *args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(Hexapod, "fgm", counted)
+    split = _runs(data).centres(sets)
+    assert max(calls) == 2 * data.observations.n_steps < len(sets) * data.observations.n_steps
+    for a, b in zip(whole, split, strict=True):
+        assert np.array_equal(a, b)

@@ -124,6 +124,15 @@ class _Problem:
         ]
         return np.column_stack(cols) if cols else np.zeros((r0.size, 0))
 
+    def keep_only(self, theta: FloatArray) -> None:
+        """Forget what was memoized but the twins at ``theta`` and its Jacobian's points
+        (what the held-out refits from ``theta`` start with): a round keeps every
+        candidate's problem until its held-out refits."""
+        keep = {self._twin_key(t) for t in [theta, *self._differences(theta)[0]]}
+        self._cache = {k: v for k, v in self._cache.items() if k in keep}
+        self._placed.clear()
+        self._weighted.clear()
+
     def _differences(self, theta: FloatArray) -> tuple[list[FloatArray], list[float]]:
         """The points of :meth:`jacobian`'s forward differences and their steps in scales."""
         steps, sizes = [], []

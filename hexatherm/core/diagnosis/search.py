@@ -129,7 +129,9 @@ def diagnose(
         _prepare_starts(problems, starts)
         fitted: list[tuple[_Problem, FloatArray, Fit]] = []
         for problem in problems:
-            fitted.append((problem, *_fit(problem, starts)))
+            theta, fit = _fit(problem, starts)
+            problem.keep_only(theta)
+            fitted.append((problem, theta, fit))
             if progress is not None:
                 progress(len(rounds) + 1, len(fitted), len(names))
         # every candidate's held-out refits side by side (their twins run stacked)

@@ -24,6 +24,10 @@ from hexatherm.core.twin import _leg_model, _TrueGeometry
 from hexatherm.errors import ConvergenceError
 from hexatherm.typing import FloatArray
 
+#: most poses (steps times sets) one stacked FGM solves: beyond, the call overhead a
+#: stack saves is small and its arrays (a few kB a pose) only take memory
+MAX_STACKED_POSES = 8192
+
 
 class TwinRuns:
     """The twin's centres (N, k, 3) in frame O of a plan's steps, for sets of effects.
@@ -86,23 +90,25 @@ class TwinRuns:
         """The centres (N, k, 3) of every set of effects, in order.
 
         The sets that keep the nominal base joints share one FGM (their legs stacked,
-        from the FGM's first iteration kept); a set that moves them has its own.
+        from the FGM's first iteration kept; at most :data:`MAX_STACKED_POSES` poses a
+        stack); a set that moves them has its own.
         """
         runs = [self._legs_of(tuple(effects)) for effects in effect_sets]
         n = self.q_cmd.shape[0]
         poses = np.empty((len(runs) * n, 6))
         shared = [i for i, (_, base, _) in enumerate(runs) if base is None]
-        if shared:
+        per_stack = max(1, MAX_STACKED_POSES // n)
+        for chunk in (shared[k : k + per_stack] for k in range(0, len(shared), per_stack)):
             try:
                 stacked = self.hexapod.fgm(
-                    np.concatenate([runs[i][0] for i in shared]), start=self.start
+                    np.concatenate([runs[i][0] for i in chunk]), start=self.start
                 )
             except ConvergenceError:
                 # the pose named is one of the stack: name the step, as predict would
-                for i in shared:
+                for i in chunk:
                     self.hexapod.fgm(runs[i][0], start=self.start)
                 raise
-            for j, i in enumerate(shared):
+            for j, i in enumerate(chunk):
                 poses[i * n : (i + 1) * n] = stacked[j * n : (j + 1) * n]
         for i, (q, base, _) in enumerate(runs):
             if base is not None:
