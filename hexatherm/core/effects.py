@@ -44,7 +44,7 @@ to be in equilibrium.
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
@@ -84,6 +84,18 @@ class ThermocoupleLog:
     times_s: FloatArray
     legs_C: FloatArray
     air_C: FloatArray | None = None
+    _lag_grids: dict[bytes, LagGrid] = field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
+
+    def lag_grid(self, times_s: npt.ArrayLike) -> LagGrid:
+        """The legs' :class:`LagGrid` at ``times_s`` (kept for the last times asked)."""
+        t = np.asarray(times_s, dtype=float).reshape(-1)
+        key = t.tobytes()
+        if key not in self._lag_grids:
+            self._lag_grids.clear()
+            self._lag_grids[key] = LagGrid.of(self.times_s, self.legs_C, t)
+        return self._lag_grids[key]
 
     def __post_init__(self) -> None:
         times = np.asarray(self.times_s, dtype=float).reshape(-1)
@@ -159,44 +171,89 @@ def first_order_lag(
     >>> bool(np.allclose(y, [0.0, 10 - 10 * (1 - np.exp(-1)), 100 - 10 * (1 - np.exp(-10))]))
     True
     """
+    _check_tau(tau_s)
+    return LagGrid.of(times_s, values, query_s).at(tau_s)
+
+
+def _check_tau(tau_s: float) -> None:
     if not (np.isfinite(tau_s) and tau_s > 0):
         raise ValueError(f"the time constant must be positive, got {tau_s}")
-    t = np.asarray(times_s, dtype=float).reshape(-1)
-    x = np.asarray(values, dtype=float)
-    flat = x.ndim == 1
-    x = x.reshape(t.size, -1)
-    h = np.diff(t)
-    slope = np.zeros((t.size, x.shape[1]))  # the last "segment" holds: slope 0
-    moving = h > 0
-    slope[:-1][moving] = np.diff(x, axis=0)[moving] / h[moving, None]
 
-    def advance(y_j: FloatArray, x_j: FloatArray, b: FloatArray, d: FloatArray) -> FloatArray:
+
+@dataclass(frozen=True)
+class LagGrid:
+    """What :func:`first_order_lag` computes of a signal and query times whatever the
+    time constant: kept, the lags at many time constants (a fit's) cost only the
+    rest, with the same numbers.
+
+    Attributes
+    ----------
+    h : ndarray, shape (m - 1,)
+        Sample intervals.
+    x : ndarray, shape (m, L)
+        The samples.
+    slope : ndarray, shape (m, L)
+        Each segment's slope (0 after the last sample and on empty intervals).
+    seg : ndarray of int, shape (n,)
+        The segment of each query time.
+    d : ndarray, shape (n, 1)
+        Time of each query since its segment's start.
+    x_seg, slope_seg : ndarray, shape (n, L)
+        The samples and slopes of the query times' segments.
+    flat : bool
+        Whether the signal was one channel (m,).
+    """
+
+    h: FloatArray
+    x: FloatArray
+    slope: FloatArray
+    seg: npt.NDArray[np.intp]
+    d: FloatArray
+    x_seg: FloatArray
+    slope_seg: FloatArray
+    flat: bool
+
+    @classmethod
+    def of(cls, times_s: npt.ArrayLike, values: npt.ArrayLike, query_s: npt.ArrayLike) -> LagGrid:
+        t = np.asarray(times_s, dtype=float).reshape(-1)
+        x = np.asarray(values, dtype=float)
+        flat = x.ndim == 1
+        x = x.reshape(t.size, -1)
+        h = np.diff(t)
+        slope = np.zeros((t.size, x.shape[1]))  # the last "segment" holds: slope 0
+        moving = h > 0
+        slope[:-1][moving] = np.diff(x, axis=0)[moving] / h[moving, None]
+        q = np.asarray(query_s, dtype=float).reshape(-1)
+        seg = np.clip(np.searchsorted(t, q, side="right") - 1, 0, t.size - 1)
+        d = np.clip(q - t[seg], 0.0, None)[:, None]
+        return cls(h, x, slope, seg, d, x[seg], slope[seg], flat)
+
+    def at(self, tau_s: float) -> FloatArray:
+        """The lag with time constant ``tau_s`` at the query times, (n,) or (n, L)."""
+        _check_tau(tau_s)
+        h, x, slope, seg, d = self.h, self.x, self.slope, self.seg, self.d
+        # The recursion over the samples is linear, y_{j+1} = a_j y_j + c_j with
+        # a_j = exp(-h_j / tau) and c_j = x_j (1 - a_j) + b_j (h_j - tau (1 - a_j)), so
+        # its prefix compositions (a, c) o (a', c') = (a a', a c' + c) give every y_j
+        # at once: log2(m) passes of doubling span (a parallel prefix scan), no loop
+        # over the samples. The gains are the same for every channel: one column.
+        y_nodes = np.empty_like(x)
+        y_nodes[0] = x[0]
+        if h.size:
+            gain = np.exp(-h / tau_s)[:, None]
+            rise = -np.expm1(-h / tau_s)[:, None]
+            offset = x[:-1] * rise + slope[:-1] * (h[:, None] - tau_s * rise)
+            span = 1
+            while span < gain.shape[0]:
+                offset[span:] = gain[span:] * offset[:-span] + offset[span:]
+                gain[span:] = gain[span:] * gain[:-span]
+                span *= 2
+            y_nodes[1:] = gain * x[0] + offset
         decay = np.exp(-d / tau_s)
-        rise = -np.expm1(-d / tau_s)  # 1 - exp(-d/tau), accurate for d << tau
-        return x_j + b * (d - tau_s * rise) + (y_j - x_j) * decay
-
-    # The recursion over the samples is linear, y_{j+1} = a_j y_j + c_j with
-    # a_j = exp(-h_j / tau) and c_j = x_j (1 - a_j) + b_j (h_j - tau (1 - a_j)), so its
-    # prefix compositions
-    # (a, c) o (a', c') = (a a', a c' + c) give every y_j at once: log2(m) passes of
-    # doubling span (a parallel prefix scan), no loop over the samples.
-    y_nodes = np.empty_like(x)
-    y_nodes[0] = x[0]
-    if t.size > 1:
-        gain = np.broadcast_to(np.exp(-h / tau_s)[:, None], x[:-1].shape).copy()
-        rise = -np.expm1(-h / tau_s)[:, None]
-        offset = x[:-1] * rise + slope[:-1] * (h[:, None] - tau_s * rise)
-        span = 1
-        while span < gain.shape[0]:
-            offset[span:] = gain[span:] * offset[:-span] + offset[span:]
-            gain[span:] = gain[span:] * gain[:-span]
-            span *= 2
-        y_nodes[1:] = gain * x[0] + offset
-    q = np.asarray(query_s, dtype=float).reshape(-1)
-    seg = np.clip(np.searchsorted(t, q, side="right") - 1, 0, t.size - 1)
-    d = np.clip(q - t[seg], 0.0, None)[:, None]
-    out = advance(y_nodes[seg], x[seg], slope[seg], d)
-    return out[:, 0] if flat else out
+        rise_d = -np.expm1(-d / tau_s)  # 1 - exp(-d/tau), accurate for d << tau
+        y_j, x_j, b = y_nodes[seg], self.x_seg, self.slope_seg
+        out = x_j + b * (d - tau_s * rise_d) + (y_j - x_j) * decay
+        return out[:, 0] if self.flat else out
 
 
 # ---------------------------------------------------------------------- effects
@@ -455,7 +512,7 @@ class LegThermalLag(Effect):
         self, leg_C: FloatArray, times_s: FloatArray, log: ThermocoupleLog
     ) -> FloatArray:
         # the first stage: leg_C is the thermocouple log itself, which is what lags
-        return first_order_lag(log.times_s, log.legs_C, self.values["tau_s"], times_s)
+        return log.lag_grid(times_s).at(self.values["tau_s"])
 
 
 class SteelOverheat(Effect):

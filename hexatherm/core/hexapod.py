@@ -313,6 +313,7 @@ class Hexapod:
         base_joints_mm: npt.ArrayLike | None = None,
         stroke_check: bool | None = None,
         stroke_tolerance_mm: float = STROKE_TOLERANCE_MM,
+        start: FgmStart | None = None,
     ) -> FloatArray:
         """Platform poses (N, 6) from leg lengths (N, 6): the pose reached from the start.
 
@@ -360,6 +361,13 @@ class Hexapod:
             without a stroke is never checked.
         stroke_tolerance_mm : float
             mm beyond the stroke still accepted (thermal growth, say).
+        start : FgmStart, optional
+            What the first iteration computes at the start poses, done once
+            (:meth:`fgm_start`) for many calls from the same poses and base joints (a
+            fit's twin runs): its poses are the start poses (``initial_poses`` must be
+            None; for ``stroke_check`` a start counts as start poses given) and ``q_mm``
+            may hold several sets of them (N a multiple of its poses, set after set).
+            The result is the same, bit for bit.
 
         Returns
         -------
@@ -400,13 +408,21 @@ class Hexapod:
             raise ValueError(f"tol_mm must be positive, got {tol_mm}")
         if max_iter < 0:
             raise ValueError(f"max_iter must be >= 0, got {max_iter}")
-        if stroke_check or (stroke_check is None and initial_poses is None):
+        if stroke_check or (stroke_check is None and initial_poses is None and start is None):
             self._check_fgm_stroke(q, stroke_tolerance_mm)
         n = q.shape[0]
         base = None
         if base_joints_mm is not None:
             base = np.broadcast_to(self.base_joints_for(base_joints_mm, n), (n, 6, 3))
-        if initial_poses is None:
+        if start is not None:
+            if initial_poses is not None or base is not None or n % start.poses.shape[0]:
+                raise ValueError(
+                    "fgm: a start goes without initial_poses and base joints, and its "
+                    f"poses ({start.poses.shape[0]}) must divide the leg lengths ({n})"
+                )
+            start = start.repeated(n // start.poses.shape[0])
+            x = start.poses.copy()
+        elif initial_poses is None:
             x = np.zeros((n, 6))
         else:
             x = np.array(np.broadcast_to(check_poses(initial_poses), q.shape), dtype=float)
@@ -424,11 +440,16 @@ class Hexapod:
         floor_a = np.zeros(n)
         base_a = self.base_joints_mm if base is None else base
         for iteration in range(max_iter + 1):
-            legs, plat, cos, sin = self._legs(x_a, base_a)
-            lengths = self._lengths(legs)
+            frame: _PathFrame | None = None
+            if iteration == 0 and start is not None:
+                # every pose is on the path at s = 0: the frame is all start's
+                lengths, frame, jac = start.lengths, start.frame, start.jacobian
+            else:
+                legs, plat, cos, sin = self._legs(x_a, base_a)
+                lengths = self._lengths(legs)
+                jac = self._jacobian(legs, lengths, plat, cos, sin)
             if iteration == 0:
                 dq_a = q_a - lengths  # the path starts at the start pose's legs
-            jac = self._jacobian(legs, lengths, plat, cos, sin)
             resid = lengths - q_a
             worst = np.abs(resid).max(axis=1)
             on_path = s_a < 1.0
@@ -437,15 +458,14 @@ class Hexapod:
             if to_end.any():  # certified earlier: Newton converges inside the ball
                 rcond[to_end] = self._final_rcond(jac[to_end], floor_a[to_end], bound)
             if on_path.any():
+                if frame is None:
+                    frame = self._path_frame(jac[on_path], lengths[on_path], sin[on_path, 1], bound)
                 path = self._path_step(
-                    jac[on_path],
-                    lengths[on_path],
-                    sin[on_path, 1],
+                    frame,
                     resid[on_path] + (1.0 - s_a[on_path, None]) * dq_a[on_path],
                     dq_a[on_path],
                     s_a[on_path],
                     e_a[on_path],
-                    bound,
                 )
                 rcond[on_path] = path.rcond
                 self._raise_singular(rcond, active)
@@ -525,22 +545,21 @@ class Hexapod:
             gradient=float(np.sqrt(1.0 + 2.0 * ratio_sq.max())),
         )
 
-    def _path_step(
-        self,
-        jac: FloatArray,
-        lengths: FloatArray,
-        sin_b: FloatArray,
-        err: FloatArray,
-        dq: FloatArray,
-        s: FloatArray,
-        e: FloatArray,
-        bound: _Curvature,
-    ) -> _PathStep:
-        """The certified Newton step along the leg path of poses (M,) (see :meth:`fgm`).
+    def fgm_start(self, initial_poses: npt.ArrayLike) -> FgmStart:
+        """What :meth:`fgm`'s first iteration computes at the start poses (N, 6) with
+        the hexapod's own base joints, for ``fgm(q, start=...)`` (see there)."""
+        x = np.array(np.atleast_2d(check_poses(initial_poses)), dtype=float)
+        legs, plat, cos, sin = self._legs(x, self.base_joints_mm)
+        lengths = self._lengths(legs)
+        jac = self._jacobian(legs, lengths, plat, cos, sin)
+        frame = self._path_frame(jac, lengths, sin[:, 1], self._curvature_bound())
+        return FgmStart(x, lengths, jac, frame)
 
-        ``err`` (M, 6) is ``IGM(x) - q(s)``, ``dq`` (M, 6) the leg change of the whole
-        path, ``e`` (M,) the bound on the distance from ``x`` to the exact path point.
-        """
+    def _path_frame(
+        self, jac: FloatArray, lengths: FloatArray, sin_b: FloatArray, bound: _Curvature
+    ) -> _PathFrame:
+        """What a path step (:meth:`_path_step`) needs of the iterates' Jacobians (M,):
+        their conditioning, inverses and the certified ball, whatever the target."""
         rcond, _, inverse = self._conditioning(jac)
         if inverse is None:  # exactly singular: rcond 0, the caller raises
             inverse = np.zeros_like(jac)
@@ -556,7 +575,21 @@ class Hexapod:
             ) + (2.0 + sb)[:, None] * bound.ratio_rho
             lip = np.maximum(np.sqrt(np.einsum("ni,ni->n", hess, hess)), 1.0 / (beta * ball_cap))
             radius = 1.0 / (beta * lip)
-            allowed = _KANTOROVICH_H * radius
+        return _PathFrame(rcond, inverse, scaled_inv, beta, lip, radius, _KANTOROVICH_H * radius)
+
+    @staticmethod
+    def _path_step(
+        frame: _PathFrame, err: FloatArray, dq: FloatArray, s: FloatArray, e: FloatArray
+    ) -> _PathStep:
+        """The certified Newton step along the leg path of poses (M,) (see :meth:`fgm`).
+
+        ``frame`` is :meth:`_path_frame`'s at the iterates, ``err`` (M, 6) is ``IGM(x) -
+        q(s)``, ``dq`` (M, 6) the leg change of the whole path, ``e`` (M,) the bound on
+        the distance from ``x`` to the exact path point.
+        """
+        scaled_inv, beta, lip = frame.scaled_inverse, frame.beta, frame.lip
+        radius, allowed = frame.radius, frame.allowed
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             corr = np.einsum("nij,nj->ni", scaled_inv, err)  # Newton step to stay at s
             tang = np.einsum("nij,nj->ni", scaled_inv, dq)  # per unit of s
             corr_norm = np.sqrt(np.einsum("ni,ni->n", corr, corr))
@@ -573,8 +606,8 @@ class Hexapod:
             root = np.sqrt(np.maximum(1.0 - 2.0 * h, 0.0))
             error_bound = 2.0 * h**2 / (1.0 + root) ** 2 / (beta * lip)  # r- minus the step
         return _PathStep(
-            rcond=rcond,
-            inverse=inverse,
+            rcond=frame.rcond,
+            inverse=frame.inverse,
             target=err - d[:, None] * dq,
             d=d,
             to_end=to_end,
@@ -720,6 +753,52 @@ class _Curvature(NamedTuple):
     ratio_rho: FloatArray  # (6,) P_i / rho^2, 1/mm
     rho: float  # mm
     gradient: float  # bound on |dq_i / dx| in scaled coordinates
+
+
+class _PathFrame(NamedTuple):
+    """What a certified path step needs of the Jacobians at poses (M,), any target."""
+
+    rcond: FloatArray  # reciprocal condition of J (inf: surely regular)
+    inverse: FloatArray  # (M, 6, 6) J^-1
+    scaled_inverse: FloatArray  # (M, 6, 6) D J^-1
+    beta: FloatArray  # bound on |D J^-1|
+    lip: FloatArray  # Lipschitz constant of J in the ball
+    radius: FloatArray  # radius of the certified ball, scaled mm
+    allowed: FloatArray  # largest certified step, scaled mm
+
+    def repeated(self, times: int) -> _PathFrame:
+        return _PathFrame(*(np.tile(a, (times,) + (1,) * (a.ndim - 1)) for a in self))
+
+
+@dataclass(frozen=True)
+class FgmStart:
+    """:meth:`Hexapod.fgm`'s first iteration at start poses (N,), for many calls.
+
+    Attributes
+    ----------
+    poses : ndarray, shape (N, 6)
+    lengths : ndarray, shape (N, 6)
+        Their leg lengths.
+    jacobian : ndarray, shape (N, 6, 6)
+    frame : _PathFrame
+        The path step's conditioning, inverses and certified ball there.
+    """
+
+    poses: FloatArray
+    lengths: FloatArray
+    jacobian: FloatArray
+    frame: _PathFrame
+
+    def repeated(self, times: int) -> FgmStart:
+        """The same start for ``times`` sets of the poses, set after set."""
+        if times == 1:
+            return self
+        return FgmStart(
+            np.tile(self.poses, (times, 1)),
+            np.tile(self.lengths, (times, 1)),
+            np.tile(self.jacobian, (times, 1, 1)),
+            self.frame.repeated(times),
+        )
 
 
 class _PathStep(NamedTuple):

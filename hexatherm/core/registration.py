@@ -140,6 +140,36 @@ def register(
     return Registration(platform2cmm=transforms, residuals_mm=residuals, rms_um=rms)
 
 
+def rigid_rows(centres_mm: FloatArray, balls_mm: FloatArray, weights: FloatArray) -> FloatArray:
+    """Rigid transforms (M, 4, 4) taking each row's balls onto its centres, weighted.
+
+    What :func:`register` computes (the same minimiser, Horn's rotation) for rows
+    that each have their own balls: ``centres_mm`` and ``balls_mm`` are (M, n, 3) (or
+    (1, n, 3), the same for every row), ``weights`` (n,) the points' weights, shared.
+    For the diagnosis, which places a twin's centres of many steps on the measured
+    ones for many parameter sets at once: it trusts its caller for the checks
+    ``register`` makes (finite numbers, non-negative weights, balls not collinear).
+    """
+    w = np.asarray(weights, dtype=float)
+    w_norm = w / w.sum()
+    centres = np.asarray(centres_mm, dtype=float)
+    balls = np.asarray(balls_mm, dtype=float)
+    balls_mean = w_norm @ balls
+    centres_mean = w_norm @ centres
+    b = balls - balls_mean[:, None]
+    c = centres - centres_mean[:, None]
+    cov = np.swapaxes(c * w_norm[:, None], 1, 2) @ b  # sum_k w_k c_k b_k^T
+    scale = 0.5 * (
+        np.einsum("k,nki,nki->n", w_norm, b, b) + np.einsum("k,nki,nki->n", w_norm, c, c)
+    )
+    rot = _rotations(cov, scale)
+    transforms = np.zeros((rot.shape[0], 4, 4))
+    transforms[:, :3, :3] = rot
+    transforms[:, :3, 3] = centres_mean - (rot @ balls_mean[..., None])[..., 0]
+    transforms[:, 3, 3] = 1.0
+    return transforms
+
+
 def _kabsch(cov: FloatArray) -> FloatArray:
     """Proper rotations maximising ``trace(R^T cov)``, by SVD (Kabsch/Umeyama)."""
     u, _, vt = np.linalg.svd(cov)
@@ -167,6 +197,44 @@ def _det3(
     i: FloatArray,
 ) -> FloatArray:
     return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+
+
+#: the first row's and the upper triangle's (row, column) pairs of a 4x4 matrix, and the
+#: signs of the upper triangle's cofactors
+_FIRST_ROW = ((0, 0), (0, 1), (0, 2), (0, 3))
+_UPPER = tuple((i, j) for i in range(4) for j in range(i, 4))
+#: flat indices of the upper triangle's entries of a 4x4 matrix, and of their mirrors
+_UPPER_AT = np.array([4 * i + j for i, j in _UPPER])
+_LOWER_AT = np.array([4 * j + i for i, j in _UPPER])
+_UPPER_SIGNS = np.array([(-1.0) ** (i + j) for i, j in _UPPER])
+
+
+def _minor_entries(pairs: tuple[tuple[int, int], ...]) -> npt.NDArray[np.intp]:
+    """Where (flat index of a 4x4 matrix) each entry of the 3x3 minors at (row, column)
+    ``pairs`` (P) is, shape (P * 9,)."""
+    rows = np.array([[r for r in range(4) if r != i] for i, _ in pairs])
+    cols = np.array([[c for c in range(4) if c != j] for _, j in pairs])
+    return (4 * rows[:, :, None] + cols[:, None, :]).reshape(-1)
+
+
+_FIRST_ROW_ENTRIES = _minor_entries(_FIRST_ROW)
+_UPPER_ENTRIES = _minor_entries(_UPPER)
+
+
+#: matrices up to which :func:`_minors` gathers every minor's entries into one array (the
+#: operations are then few, on small arrays); beyond, it takes each minor's entries as
+#: they lie (no copy). The same products either way.
+_GATHER_UP_TO = 32
+
+
+def _minors(entries: FloatArray, where: npt.NDArray[np.intp]) -> FloatArray:
+    """The 3x3 minors (P, N) of matrices given by their entries (4, 4, N), each the
+    products of :func:`_det3`; ``where`` from :func:`_minor_entries`."""
+    flat = entries.reshape(16, -1)
+    if flat.shape[1] <= _GATHER_UP_TO:
+        sub = flat[where].reshape(-1, 3, 3, flat.shape[1])  # (P, 3, 3, N)
+        return _det3(*(sub[:, r, c] for r in range(3) for c in range(3)))
+    return np.stack([_det3(*(flat[i] for i in minor)) for minor in where.reshape(-1, 9)])
 
 
 def _rotations(cov: FloatArray, scale: FloatArray) -> FloatArray:
@@ -199,22 +267,15 @@ def _rotations(cov: FloatArray, scale: FloatArray) -> FloatArray:
         k[:, i, i] = diagonal[i]
     for (i, j), value in upper.items():
         k[:, i, j] = k[:, j, i] = value
-    m = [
-        [diagonal[i] if i == j else upper[min(i, j), max(i, j)] for j in range(4)] for i in range(4)
-    ]
     c2 = -2.0 * np.einsum("nij,nij->n", cov, cov)
     c1 = -8.0 * _det3(sxx, sxy, sxz, syx, syy, syz, szx, szy, szz)
-
-    def minor(i: int, j: int) -> FloatArray:
-        rows = [r for r in range(4) if r != i]
-        cols = [c for c in range(4) if c != j]
-        return _det3(*(m[r][c] for r in rows for c in cols))
-
+    entries = k.transpose(1, 2, 0).copy()  # (4, 4, N), its own (K is kept)
+    first = _minors(entries, _FIRST_ROW_ENTRIES)
     c0 = (
-        m[0][0] * minor(0, 0)
-        - m[0][1] * minor(0, 1)
-        + m[0][2] * minor(0, 2)
-        - m[0][3] * minor(0, 3)
+        entries[0, 0] * first[0]
+        - entries[0, 1] * first[1]
+        + entries[0, 2] * first[2]
+        - entries[0, 3] * first[3]
     )
     lam = scale.astype(float, copy=True)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -229,12 +290,13 @@ def _rotations(cov: FloatArray, scale: FloatArray) -> FloatArray:
                 break
         for refine in range(2):
             for i in range(4):
-                m[i][i] = diagonal[i] - lam
+                entries[i, i] = diagonal[i] - lam
             # the adjugate of K - l I is (product of the other eigenvalue gaps) q q^T
-            adj = np.empty((lam.size, 4, 4))
-            for i in range(4):
-                for j in range(i, 4):
-                    adj[:, i, j] = adj[:, j, i] = (-1) ** (i + j) * minor(i, j)
+            cofactors = _minors(entries, _UPPER_ENTRIES) * _UPPER_SIGNS[:, None]
+            adj_entries = np.empty((16, lam.size))
+            adj_entries[_UPPER_AT] = cofactors
+            adj_entries[_LOWER_AT] = cofactors
+            adj = adj_entries.reshape(4, 4, -1).transpose(2, 0, 1)  # (N, 4, 4), symmetric
             best = np.argmax(np.abs(np.einsum("nii->ni", adj)), axis=1)
             q = adj[np.arange(lam.size), best]
             size = np.sqrt(np.einsum("ni,ni->n", q, q))

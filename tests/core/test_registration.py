@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hexatherm.core import registration
 from hexatherm.core.geometry import apply_transform, transform_from_pose
 from hexatherm.core.registration import check_ball_layout, register
 from hexatherm.errors import RegistrationError
@@ -69,3 +70,23 @@ def test_preconditions_have_messages():
         register(np.zeros((2, 4, 3)), BALLS)
     with pytest.raises(RegistrationError, match="step index 1 have a non-finite"):
         register(np.stack([BALLS, BALLS * np.nan]), BALLS)
+
+
+def test_many_rows_register_as_each_row_alone(rng):
+    """Horn's minors are gathered into one array for a few rows and taken in place for
+    many (registration._minors): the same products, so a row's transform does not
+    depend on how many rows come with it; and both are Kabsch's SVD solution."""
+    truth = random_transforms(rng, 40)
+    centres = apply_transform(truth, BALLS) + rng.normal(scale=1e-2, size=(40, 3, 3))
+    together = register(centres, BALLS).platform2cmm
+    assert len(together) > registration._GATHER_UP_TO
+    for k in range(len(centres)):
+        assert np.array_equal(register(centres[k], BALLS).platform2cmm[0], together[k])
+    entries = rng.normal(size=(4, 4, 40))
+    gathered = registration._minors(entries[..., :5], registration._UPPER_ENTRIES)
+    in_place = registration._minors(entries, registration._UPPER_ENTRIES)[:, :5]
+    assert np.array_equal(gathered, in_place)
+    b = BALLS - BALLS.mean(axis=0)
+    c = centres - centres.mean(axis=1, keepdims=True)
+    kabsch = registration._kabsch(np.swapaxes(c, 1, 2) @ b / 3)
+    np.testing.assert_allclose(together[:, :3, :3], kabsch, atol=1e-12)

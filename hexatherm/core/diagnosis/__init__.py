@@ -49,8 +49,6 @@ from hexatherm.core.diagnosis.adequacy import (
     pose_residuals,
 )
 from hexatherm.core.diagnosis.fitting import (
-    Diagnosis,
-    diagnose,
     fit_model,
     heldout_rms_um,
 )
@@ -69,6 +67,8 @@ from hexatherm.core.diagnosis.model import (
     rms_um,
     twin_centres,
 )
+from hexatherm.core.diagnosis.outcome import Diagnosis
+from hexatherm.core.diagnosis.search import diagnose
 from hexatherm.core.diagnosis.standin import (
     TRADE_OFF_SE,
     cautions,

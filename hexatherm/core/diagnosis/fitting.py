@@ -6,90 +6,25 @@ standard errors.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from collections.abc import Sequence
 
 import numpy as np
 import numpy.typing as npt
 from scipy.optimize import least_squares
 
-from hexatherm.core.diagnosis.adequacy import Adequacy, _bound_note, adequacy, bound_flags
 from hexatherm.core.diagnosis.model import (
     _FD_STEP,
-    DELTA_BIC_THRESHOLD,
-    SIMILARITY_THRESHOLD,
-    Addition,
     BoolArray,
-    Candidate,
     Fit,
-    Folds,
     Observations,
-    RunnerUp,
     place,
-    rms_um,
+    place_many,
     twin_centres,
 )
-from hexatherm.core.diagnosis.standin import cautions
-from hexatherm.core.effects import EFFECTS, Effect
+from hexatherm.core.diagnosis.twins import TwinRuns
+from hexatherm.core.effects import Effect
 from hexatherm.core.hexapod import Hexapod
-from hexatherm.core.residuals import (
-    time_blocks,
-)
 from hexatherm.typing import FloatArray
-
-
-@dataclass(frozen=True)
-class Diagnosis:
-    """The outcome of :func:`diagnose`.
-
-    Attributes
-    ----------
-    baseline : Fit
-        The current model (the hexapod's own effects), only ``C`` fitted.
-    final : Fit
-        The model with every added effect, fitted jointly.
-    added : tuple of Addition
-        In the order they were added.
-    rounds : tuple of tuple of Candidate
-        Every candidate of every round.
-    baseline_heldout_rms_um, final_heldout_rms_um : float
-    skipped : dict of str to str
-        Candidates not tried at all, and why (e.g. no air temperature).
-    adequacy : Adequacy or None
-        The verdict on the final model (None when not assessed).
-    """
-
-    baseline: Fit
-    final: Fit
-    added: tuple[Addition, ...]
-    rounds: tuple[tuple[Candidate, ...], ...]
-    baseline_heldout_rms_um: float
-    final_heldout_rms_um: float
-    skipped: dict[str, str] = field(default_factory=dict)
-    adequacy: Adequacy | None = None
-
-    @property
-    def baseline_rms_um(self) -> float:
-        return rms_um(self.baseline.residual_mm)
-
-    @property
-    def final_rms_um(self) -> float:
-        return rms_um(self.final.residual_mm)
-
-    def chosen_fits(self) -> tuple[Fit, ...]:
-        """The joint fit of each round that added an effect (every effect added up to it)."""
-        out = []
-        for round_, addition in zip(self.rounds, self.added, strict=False):
-            fit = next(c.fit for c in round_ if c.name == addition.effect.name)
-            if fit is not None:
-                out.append(fit)
-        return tuple(out)
-
-    def cautions(self) -> list[str]:
-        """Added effects that may stand in for a cause outside the registry, and pairs
-        that trade off, in words (:mod:`hexatherm.core.diagnosis.standin`)."""
-        return cautions(self.added, self.final, self.chosen_fits())
-
 
 # --------------------------------------------------------------------- the model
 
@@ -109,8 +44,10 @@ class _Problem:
         obs: Observations,
         fixed: Sequence[Effect],
         free: Sequence[type[Effect]],
+        runs: TwinRuns | None = None,
     ) -> None:
         self.hexapod, self.obs = hexapod, obs
+        self.runs = _runs(hexapod, obs) if runs is None else runs
         self.fixed, self.free = tuple(fixed), tuple(free)
         self.sizes = [len(cls.parameters) for cls in self.free]
 
@@ -143,11 +80,22 @@ class _Problem:
             i += size
         return self.fixed + tuple(out)
 
+    def _twin_key(self, theta: FloatArray) -> bytes:
+        return np.asarray(theta, dtype=float)[self._twin_sees].tobytes()
+
     def centres(self, theta: FloatArray) -> FloatArray:
-        key = np.asarray(theta, dtype=float)[self._twin_sees].tobytes()
+        key = self._twin_key(theta)
         if key not in self._cache:
-            self._cache[key] = twin_centres(self.hexapod, self.obs, self.effects(theta))
+            self._cache[key] = twin_centres(self.hexapod, self.obs, self.effects(theta), self.runs)
         return self._cache[key]
+
+    def prepare(self, thetas: Sequence[FloatArray], mask: BoolArray) -> None:
+        """Evaluate several parameter sets on ``mask`` at once (:meth:`prepare_pairs`)."""
+        self.prepare_pairs([(theta, mask) for theta in thetas])
+
+    def prepare_pairs(self, pairs: Sequence[tuple[FloatArray, BoolArray]]) -> None:
+        """Evaluate (parameters, mask) pairs at once (:func:`_prepare_across`)."""
+        _prepare_across([(self, theta, mask) for theta, mask in pairs])
 
     def evaluate(
         self, theta: FloatArray, mask: BoolArray
@@ -156,8 +104,7 @@ class _Problem:
         (memoized: the arrays returned are shared, never to be modified)."""
         key = (np.asarray(theta, dtype=float).tobytes(), np.asarray(mask).tobytes())
         if key not in self._placed:
-            origin2cmm, predicted = place(self.centres(theta), self.obs, self.effects(theta), mask)
-            self._placed[key] = (origin2cmm, predicted, self.obs.centres_mm - predicted)
+            self.prepare([theta], mask)
         return self._placed[key]
 
     def weighted(self, theta: FloatArray, mask: BoolArray) -> FloatArray:
@@ -167,20 +114,44 @@ class _Problem:
         return self._weighted[key].copy()  # the optimizer's own array
 
     def jacobian(self, theta: FloatArray, mask: BoolArray) -> FloatArray:
-        """Forward differences of the weighted residuals in units of each parameter's scale."""
+        """Forward differences of the weighted residuals in units of each parameter's scale
+        (the columns' twins run together, :meth:`prepare`)."""
+        steps, sizes = self._differences(theta)
+        self.prepare([theta, *steps], mask)
         r0 = self.weighted(theta, mask)
-        cols = []
+        cols = [
+            (self.weighted(step, mask) - r0) / size for step, size in zip(steps, sizes, strict=True)
+        ]
+        return np.column_stack(cols) if cols else np.zeros((r0.size, 0))
+
+    def keep_only(self, theta: FloatArray) -> None:
+        """Forget what was memoized but the twins at ``theta`` and its Jacobian's points
+        (what the held-out refits from ``theta`` start with): a round keeps every
+        candidate's problem until its held-out refits."""
+        keep = {self._twin_key(t) for t in [theta, *self._differences(theta)[0]]}
+        self._cache = {k: v for k, v in self._cache.items() if k in keep}
+        self._placed.clear()
+        self._weighted.clear()
+
+    def _differences(self, theta: FloatArray) -> tuple[list[FloatArray], list[float]]:
+        """The points of :meth:`jacobian`'s forward differences and their steps in scales."""
+        steps, sizes = [], []
         for j in range(theta.size):
             h = _FD_STEP * self.scale[j]
             if theta[j] + h > self.hi[j]:
                 h = -h
             step = theta.copy()
             step[j] += h
-            cols.append((self.weighted(step, mask) - r0) / (h / self.scale[j]))
-        return np.column_stack(cols) if cols else np.zeros((r0.size, 0))
+            steps.append(step)
+            sizes.append(h / self.scale[j])
+        return steps, sizes
 
-    def start(self, starts: Sequence[FloatArray | None], mask: BoolArray) -> FloatArray:
-        """The best combination of start values (given ones, or each effect's own)."""
+    def prepare_jacobians(self, pairs: Sequence[tuple[FloatArray, BoolArray]]) -> None:
+        """Evaluate what the Jacobians at (parameters, mask) pairs need, all at once."""
+        _prepare_jacobians_across([(self, theta, mask) for theta, mask in pairs])
+
+    def start_combinations(self, starts: Sequence[FloatArray | None]) -> list[FloatArray]:
+        """The combinations of start values :meth:`start` chooses from."""
         options = [
             [s] if s is not None else cls.start_values()
             for cls, s in zip(self.free, starts, strict=True)
@@ -188,7 +159,12 @@ class _Problem:
         combos = [np.zeros(0)]
         for opts in options:
             combos = [np.concatenate([c, o]) for c in combos for o in opts]
-        combos = [np.clip(c, self.lo, self.hi) for c in combos]
+        return [np.clip(c, self.lo, self.hi) for c in combos]
+
+    def start(self, starts: Sequence[FloatArray | None], mask: BoolArray) -> FloatArray:
+        """The best combination of start values (given ones, or each effect's own)."""
+        combos = self.start_combinations(starts)
+        self.prepare(combos, mask)
         costs = [float(np.sum(self.weighted(c, mask) ** 2)) for c in combos]
         return combos[int(np.argmin(costs))]
 
@@ -230,21 +206,11 @@ class _Problem:
         )
         return np.clip(theta_of(solution.x), self.lo, self.hi), seen
 
-    def refit(self, theta_hat: FloatArray, mask: BoolArray, iterations: int = 3) -> FloatArray:
-        """Refit from a nearby solution with its Jacobian kept (chord iterations).
-
-        The held-out folds start from the fit on all steps; the twin at the
-        Jacobian's points is already memoized, so each iteration costs one twin.
-        """
-        if theta_hat.size == 0:
-            return theta_hat
-        jac = self.jacobian(theta_hat, mask)
-        theta = theta_hat
-        for _ in range(iterations):
-            r = self.weighted(theta, mask)
-            dz = np.linalg.lstsq(jac, -r, rcond=None)[0]
-            theta = np.clip(theta + dz * self.scale, self.lo, self.hi)
-        return theta
+    def refit(
+        self, theta_hat: FloatArray, masks: Sequence[BoolArray], iterations: int = 3
+    ) -> list[FloatArray]:
+        """Refit on each mask from a nearby solution (:func:`_refit_across`)."""
+        return _refit_across([(self, theta_hat)], masks, iterations)[0]
 
     def fit(self, theta: FloatArray, mask: BoolArray, seen: BoolArray | None = None) -> Fit:
         """The :class:`Fit` at ``theta`` (standard errors from the Jacobian there);
@@ -305,6 +271,10 @@ class _Problem:
         return cov_z * np.outer(self.scale, self.scale)
 
 
+def _runs(hexapod: Hexapod, obs: Observations) -> TwinRuns:
+    return TwinRuns(hexapod, obs.plan, obs.times_s, obs.log, obs.balls_mm)
+
+
 #: the stages of :class:`~hexatherm.core.effects.Effect` the twin's centres go through
 #: (all but the CMM's reading, ``cmm_coordinates_mm``)
 _TWIN_STAGES = (
@@ -331,6 +301,7 @@ def fit_model(
     free: Sequence[type[Effect]],
     start: Sequence[FloatArray | None] = (),
     mask: BoolArray | None = None,
+    runs: TwinRuns | None = None,
 ) -> Fit:
     """Fit the parameters of the ``free`` effects (and ``C``) to the steps in ``mask``.
 
@@ -346,16 +317,132 @@ def fit_model(
         A starting value per free effect (None: try the effect's start values).
     mask : ndarray of bool, shape (N,), optional
         The steps fitted (default all); residuals are returned for every step.
+    runs : TwinRuns, optional
+        The twin runs of ``hexapod`` and ``obs``, to share between fits (default: new).
 
     Returns
     -------
     Fit
     """
-    problem = _Problem(hexapod, obs, fixed, free)
+    problem = _Problem(hexapod, obs, fixed, free, runs)
     mask = np.ones(obs.n_steps, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
     starts = list(start) + [None] * (len(problem.free) - len(start))
     theta, seen = problem.solve(problem.start(starts, mask), mask)
     return problem.fit(theta, mask, seen)
+
+
+def _prepare_across(requests: Sequence[tuple[_Problem, FloatArray, BoolArray]]) -> None:
+    """Evaluate (problem, parameters, mask) requests at once, memoized in each problem as
+    one by one: the twins not yet run in one stacked run (the problems share their
+    :class:`TwinRuns`), the placements of a mask in one registration."""
+    Todo = dict[tuple[int, bytes], tuple[_Problem, FloatArray]]
+    twins: dict[int, tuple[TwinRuns, Todo]] = {}
+    for problem, theta, _ in requests:
+        twin_key = problem._twin_key(theta)
+        if twin_key not in problem._cache:
+            todo = twins.setdefault(id(problem.runs), (problem.runs, {}))[1]
+            todo.setdefault((id(problem), twin_key), (problem, theta))
+    for runs, todo in twins.values():
+        if len(todo) == 1:
+            problem, theta = next(iter(todo.values()))
+            problem.centres(theta)
+            continue
+        sets = [problem.effects(theta) for problem, theta in todo.values()]
+        for (_, twin_key), (problem, _), centres in zip(
+            todo, todo.values(), runs.centres(sets), strict=True
+        ):
+            problem._cache[twin_key] = centres
+    by_mask: dict[tuple[int, bytes], tuple[Observations, BoolArray, Todo]] = {}
+    for problem, theta, mask in requests:
+        mask_key = np.asarray(mask).tobytes()
+        key = (np.asarray(theta, dtype=float).tobytes(), mask_key)
+        if key not in problem._placed:
+            group = (id(problem.obs), mask_key)
+            todo = by_mask.setdefault(group, (problem.obs, mask, {}))[2]
+            todo.setdefault((id(problem), key[0]), (problem, theta))
+    for (_, mask_key), (obs, mask, todo) in by_mask.items():
+        ys = [problem.centres(theta) for problem, theta in todo.values()]
+        effects = [problem.effects(theta) for problem, theta in todo.values()]
+        placed = (
+            [place(ys[0], obs, effects[0], mask)]
+            if len(todo) == 1
+            else place_many(ys, obs, effects, mask)
+        )
+        for (_, theta_key), (problem, _), (origin2cmm, predicted) in zip(
+            todo, todo.values(), placed, strict=True
+        ):
+            residual = problem.obs.centres_mm - predicted
+            problem._placed[(theta_key, mask_key)] = (origin2cmm, predicted, residual)
+
+
+def _prepare_jacobians_across(requests: Sequence[tuple[_Problem, FloatArray, BoolArray]]) -> None:
+    """Evaluate what the Jacobians of (problem, parameters, mask) requests need, at once."""
+    _prepare_across(
+        [
+            (problem, point, mask)
+            for problem, theta, mask in requests
+            for point in [theta, *problem._differences(theta)[0]]
+        ]
+    )
+
+
+def _refit_across(
+    items: Sequence[tuple[_Problem, FloatArray]], masks: Sequence[BoolArray], iterations: int = 3
+) -> list[list[FloatArray]]:
+    """Refit each (problem, solution) on each mask from the solution with its Jacobian
+    kept (chord iterations), all side by side: each iteration's twins in one stacked run.
+
+    The held-out folds start from the fit on all steps; the twin at the
+    Jacobian's points is already memoized, so each iteration costs one twin.
+    """
+    free = [(problem, theta) for problem, theta in items if theta.size]
+    _prepare_jacobians_across([(problem, theta, mask) for problem, theta in free for mask in masks])
+    jacs = [
+        [problem.jacobian(theta, mask) for mask in masks] if theta.size else []
+        for problem, theta in items
+    ]
+    thetas = [[theta for _ in masks] for _, theta in items]
+    for _ in range(iterations if free else 0):
+        _prepare_across(
+            [
+                (problem, thetas[i][k], mask)
+                for i, (problem, theta) in enumerate(items)
+                if theta.size
+                for k, mask in enumerate(masks)
+            ]
+        )
+        for i, (problem, theta) in enumerate(items):
+            if not theta.size:
+                continue
+            for k, (jac, mask) in enumerate(zip(jacs[i], masks, strict=True)):
+                r = problem.weighted(thetas[i][k], mask)
+                dz = np.linalg.lstsq(jac, -r, rcond=None)[0]
+                thetas[i][k] = np.clip(thetas[i][k] + dz * problem.scale, problem.lo, problem.hi)
+    return thetas
+
+
+def heldout_rms_many(
+    items: Sequence[tuple[_Problem, FloatArray]], blocks: npt.NDArray[np.intp]
+) -> list[float]:
+    """:func:`heldout_rms_um` of several (problem, fit on all steps), side by side."""
+    trains = [blocks % 2 == parity for parity in (0, 1)]
+    refitted = _refit_across(items, trains)
+    _prepare_across(
+        [
+            (problem, theta, train)
+            for (problem, _), thetas in zip(items, refitted, strict=True)
+            for theta, train in zip(thetas, trains, strict=True)
+        ]
+    )
+    out = []
+    for (problem, _), thetas in zip(items, refitted, strict=True):
+        squares, count = 0.0, 0
+        for theta, train in zip(thetas, trains, strict=True):
+            held = problem.evaluate(theta, train)[2][~train]
+            squares += float(np.sum(held**2))
+            count += held.size
+        out.append(float(np.sqrt(squares / count) * 1e3))
+    return out
 
 
 def heldout_rms_um(problem: _Problem, theta_hat: FloatArray, blocks: npt.NDArray[np.intp]) -> float:
@@ -365,212 +452,4 @@ def heldout_rms_um(problem: _Problem, theta_hat: FloatArray, blocks: npt.NDArray
     the other way round (each fold refitted from ``theta_hat``, the fit on all
     steps); the RMS is over both held-out halves.
     """
-    squares, count = 0.0, 0
-    for parity in (0, 1):
-        train = blocks % 2 == parity
-        theta = problem.refit(theta_hat, train)
-        held = problem.evaluate(theta, train)[2][~train]
-        squares += float(np.sum(held**2))
-        count += held.size
-    return float(np.sqrt(squares / count) * 1e3)
-
-
-def _fit_and_hold_out(
-    hexapod: Hexapod,
-    obs: Observations,
-    fixed: Sequence[Effect],
-    free: Sequence[type[Effect]],
-    start: Sequence[FloatArray | None],
-    blocks: npt.NDArray[np.intp],
-) -> tuple[Fit, float]:
-    problem = _Problem(hexapod, obs, fixed, free)
-    everything = np.ones(obs.n_steps, dtype=bool)
-    starts = list(start) + [None] * (len(problem.free) - len(start))
-    theta, seen = problem.solve(problem.start(starts, everything), everything)
-    return problem.fit(theta, everything, seen), heldout_rms_um(problem, theta, blocks)
-
-
-def _change(before: Fit, after: Fit, obs: Observations) -> FloatArray:
-    """Weighted change of the residuals from one model to another (a direction)."""
-    return ((before.residual_mm - after.residual_mm) / obs.u_mm[..., None]).ravel()
-
-
-def _cosine(a: FloatArray, b: FloatArray) -> float:
-    na, nb = np.linalg.norm(a), np.linalg.norm(b)
-    return float(a @ b / (na * nb)) if na > 0 and nb > 0 else 0.0
-
-
-def diagnose(
-    hexapod: Hexapod,
-    obs: Observations,
-    current: Sequence[Effect] = (),
-    candidates: Sequence[str] | None = None,
-    *,
-    n_blocks: int = 6,
-    max_additions: int = 3,
-    progress: Callable[[int, int, int], None] | None = None,
-) -> Diagnosis:
-    """Find the effects missing from the model, one by one (see the module's text).
-
-    Parameters
-    ----------
-    hexapod : Hexapod
-        Nominal geometry and leg model.
-    obs : Observations
-    current : sequence of Effect
-        The model's effects (the hexapod file's ``thermal_model``), kept fixed.
-    candidates : sequence of str, optional
-        Names of the effects to try (default: every registered one not in ``current``).
-    n_blocks : int
-        Blocks of time for the held-out check.
-    max_additions : int
-        Stop after adding this many effects.
-    progress : callable, optional
-        Called as ``progress(round, done, total)`` after every candidate fitted.
-
-    Returns
-    -------
-    Diagnosis
-    """
-    current = tuple(current)
-    in_model = {e.name for e in current}
-    names = [n for n in (candidates if candidates is not None else EFFECTS) if n not in in_model]
-    skipped: dict[str, str] = {}
-    for name in list(names):
-        if EFFECTS[name].needs_air and obs.log.air_C is None:
-            skipped[name] = "needs the air temperature (an 'air' column in temperatures.csv)"
-            names.remove(name)
-    blocks = time_blocks(obs.times_s, n_blocks)
-    baseline, heldout = _fit_and_hold_out(hexapod, obs, current, (), (), blocks)
-    baseline_heldout = heldout
-    model = baseline
-    added: list[Addition] = []
-    rounds: list[tuple[Candidate, ...]] = []
-    added_classes: list[type[Effect]] = []
-    while names and len(added) < max_additions:
-        starts: list[FloatArray | None] = [e.vector() for e in model.effects]
-        tried: list[Candidate] = []
-        for name in names:
-            cls = EFFECTS[name]
-            free = [*added_classes, cls]
-            fit, held = _fit_and_hold_out(hexapod, obs, current, free, starts, blocks)
-            delta = model.bic - fit.bic
-            note = _bound_note(fit.effects[-1], fit.unseen_of(len(fit.effects) - 1))
-            tried.append(
-                Candidate(
-                    name,
-                    fit,
-                    delta,
-                    rms_um(fit.residual_mm),
-                    held,
-                    bool(delta > DELTA_BIC_THRESHOLD and held < heldout),
-                    note,
-                )
-            )
-            if progress is not None:
-                progress(len(rounds) + 1, len(tried), len(names))
-        rounds.append(tuple(tried))
-        passing = sorted((c for c in tried if c.passes), key=lambda c: -c.delta_bic)
-        if not passing:
-            break
-        best = passing[0]
-        assert best.fit is not None
-        direction = _change(model, best.fit, obs)
-        alternatives = []
-        for other in passing[1:]:
-            assert other.fit is not None
-            cos = _cosine(direction, _change(model, other.fit, obs))
-            if abs(cos) > SIMILARITY_THRESHOLD:
-                alternatives.append((other.name, other.delta_bic, cos))
-        others = sorted(
-            (c for c in tried if c is not best and c.fit is not None and np.isfinite(c.delta_bic)),
-            key=lambda c: -c.delta_bic,
-        )
-        runner = (
-            _runner_up(hexapod, obs, current, added_classes, best, others[0]) if others else None
-        )
-        added.append(
-            Addition(
-                best.fit.effects[-1],
-                best.fit.std_errors[-1],
-                best.delta_bic,
-                rms_um(model.residual_mm),
-                best.rms_um,
-                heldout,
-                best.heldout_rms_um,
-                tuple(alternatives),
-                adequacy(hexapod, obs, best.fit).adequate,
-                (),
-                runner,
-            )
-        )
-        added_classes.append(EFFECTS[best.name])
-        names.remove(best.name)
-        model, heldout = best.fit, best.heldout_rms_um
-        # the joint refit of everything added so far is ``best.fit`` itself
-    # the flags are those of the final joint fit (the values written to hexapod.yaml)
-    folds = _folds(hexapod, obs, current, model, blocks)
-    added = [
-        replace(a, flags=bound_flags(effect, model.unseen_of(k)), folds=folds[k])
-        for k, (a, effect) in enumerate(zip(added, model.effects, strict=True))
-    ]
-    return Diagnosis(
-        baseline,
-        model,
-        tuple(added),
-        tuple(rounds),
-        baseline_heldout,
-        heldout,
-        skipped,
-        adequacy(hexapod, obs, model),
-    )
-
-
-def _folds(
-    hexapod: Hexapod,
-    obs: Observations,
-    current: Sequence[Effect],
-    final: Fit,
-    blocks: npt.NDArray[np.intp],
-) -> list[Folds]:
-    """The final fit's added effects refitted on each held-out fold (see :class:`Folds`)."""
-    if not final.effects:
-        return []
-    problem = _Problem(hexapod, obs, current, [type(e) for e in final.effects])
-    theta = np.concatenate([e.vector() for e in final.effects])
-    values: list[list[dict[str, float]]] = [[] for _ in final.effects]
-    errors: list[list[dict[str, float]]] = [[] for _ in final.effects]
-    for parity in (0, 1):
-        train = blocks % 2 == parity
-        fold = problem.fit(problem.refit(theta, train), train)
-        for k, (effect, se) in enumerate(zip(fold.effects, fold.std_errors, strict=True)):
-            unseen = final.unseen_of(k)
-            values[k].append(dict(effect.values))
-            errors[k].append({p: float("nan") if p in unseen else v for p, v in se.items()})
-    return [Folds((v[0], v[1]), (e[0], e[1])) for v, e in zip(values, errors, strict=True)]
-
-
-def _runner_up(
-    hexapod: Hexapod,
-    obs: Observations,
-    current: Sequence[Effect],
-    before: Sequence[type[Effect]],
-    best: Candidate,
-    runner: Candidate,
-) -> RunnerUp:
-    """Refit the round's chosen effect together with its runner-up (see :class:`RunnerUp`)."""
-    assert best.fit is not None and runner.fit is not None
-    chosen = best.fit.effects[-1]
-    free = [*before, type(chosen), EFFECTS[runner.name]]
-    starts: list[FloatArray | None] = [e.vector() for e in best.fit.effects]
-    both = fit_model(hexapod, obs, current, free, [*starts, runner.fit.effects[-1].vector()])
-    return RunnerUp(
-        runner.name,
-        runner.delta_bic,
-        dict(chosen.values),
-        dict(best.fit.std_errors[-1]),
-        dict(both.effects[-2].values),
-        dict(both.std_errors[-2]),
-        dict(both.effects[-1].values),
-        dict(both.std_errors[-1]),
-    )
+    return heldout_rms_many([(problem, theta_hat)], blocks)[0]

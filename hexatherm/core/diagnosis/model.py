@@ -11,10 +11,11 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from hexatherm.core.diagnosis.twins import TwinRuns
 from hexatherm.core.effects import Effect, ThermocoupleLog
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
-from hexatherm.core.registration import register
+from hexatherm.core.registration import rigid_rows
 from hexatherm.core.twin import cmm_readings, predict
 from hexatherm.typing import FloatArray
 
@@ -302,8 +303,20 @@ def rms_um(residual_mm: npt.ArrayLike) -> float:
     return float(np.sqrt(np.mean(r**2)) * 1e3) if r.size else float("nan")
 
 
-def twin_centres(hexapod: Hexapod, obs: Observations, effects: Sequence[Effect]) -> FloatArray:
-    """The twin's ball centres (N, k, 3) of every step in the nominal frame O."""
+def twin_centres(
+    hexapod: Hexapod,
+    obs: Observations,
+    effects: Sequence[Effect],
+    runs: TwinRuns | None = None,
+) -> FloatArray:
+    """The twin's ball centres (N, k, 3) of every step in the nominal frame O.
+
+    ``runs`` (:class:`~hexatherm.core.diagnosis.twins.TwinRuns` of the same hexapod and
+    observations) computes them with what does not depend on the effects kept; the
+    same centres, bit for bit.
+    """
+    if runs is not None:
+        return runs.centres([effects])[0]
     steps = predict(
         hexapod,
         obs.plan,
@@ -326,19 +339,47 @@ def place(
     of the steps in ``mask`` onto the measured ones, less what the CMM-side
     effects add (recomputed once with the first ``C``: exact for additive ones).
     """
-    w = (1.0 / obs.u_mm**2)[mask].reshape(1, -1)
-    y_fit = y_mm[mask].reshape(1, -1, 3)[0]
+    return place_many([y_mm], obs, [effects], mask)[0]
+
+
+def place_many(
+    y_mm: Sequence[FloatArray],
+    obs: Observations,
+    effects: Sequence[Sequence[Effect]],
+    mask: BoolArray,
+) -> list[tuple[FloatArray, FloatArray]]:
+    """:func:`place` for several twins' centres (each with its effects) at once: the
+    registrations of all of them in one :func:`~hexatherm.core.registration.rigid_rows`."""
+    w = (1.0 / obs.u_mm**2)[mask].reshape(-1)
     x_fit = obs.centres_mm[mask].reshape(1, -1, 3)
-    t = obs.times_per_ball_s
-    origin2cmm = register(x_fit, y_fit, w).platform2cmm[0]
-    cmm_side = [e for e in effects if type(e).cmm_coordinates_mm is not Effect.cmm_coordinates_mm]
-    if cmm_side:
-        placed = _apply(origin2cmm, y_mm)
-        shift = cmm_readings(placed, t, obs.log, cmm_side) - placed
-        origin2cmm = register(x_fit - shift[mask].reshape(1, -1, 3), y_fit, w).platform2cmm[0]
-        placed = _apply(origin2cmm, y_mm)
-        return origin2cmm, cmm_readings(placed, t, obs.log, cmm_side)
-    return origin2cmm, _apply(origin2cmm, y_mm)
+    y_fit = np.stack([y[mask].reshape(-1, 3) for y in y_mm])
+    first = rigid_rows(x_fit, y_fit, w)
+    out = []
+    for origin2cmm, y, y_row, row_effects in zip(first, y_mm, y_fit, effects, strict=True):
+        cmm_side = [
+            e for e in row_effects if type(e).cmm_coordinates_mm is not Effect.cmm_coordinates_mm
+        ]
+        if cmm_side:
+            t = obs.times_per_ball_s
+            placed = _apply(origin2cmm, y)
+            shift = cmm_readings(placed, t, obs.log, cmm_side) - placed
+            x_shifted = x_fit - shift[mask].reshape(1, -1, 3)
+            origin2cmm = rigid_rows(x_shifted, y_row[None], w)[0]
+            placed = _apply(origin2cmm, y)
+            out.append((origin2cmm, cmm_readings(placed, t, obs.log, cmm_side)))
+        else:
+            out.append((origin2cmm, _apply(origin2cmm, y)))
+    return out
+
+
+def _change(before: Fit, after: Fit, obs: Observations) -> FloatArray:
+    """Weighted change of the residuals from one model to another (a direction)."""
+    return ((before.residual_mm - after.residual_mm) / obs.u_mm[..., None]).ravel()
+
+
+def _cosine(a: FloatArray, b: FloatArray) -> float:
+    na, nb = np.linalg.norm(a), np.linalg.norm(b)
+    return float(a @ b / (na * nb)) if na > 0 and nb > 0 else 0.0
 
 
 def _apply(transform: FloatArray, points: FloatArray) -> FloatArray:
