@@ -131,10 +131,7 @@ def register(
         np.einsum("nk,nki,nki->n", w_norm, b, b) + np.einsum("nk,nki,nki->n", w_norm, c, c)
     )
     rot = _rotations(cov, scale)
-    transforms = np.zeros((centres.shape[0], 4, 4))
-    transforms[:, :3, :3] = rot
-    transforms[:, :3, 3] = centres_mean - (rot @ balls_mean[..., None])[..., 0]
-    transforms[:, 3, 3] = 1.0
+    transforms = _transforms(rot, centres_mean, balls_mean)
     residuals = centres - (balls @ np.swapaxes(rot, 1, 2) + transforms[:, None, :3, 3])
     rms = np.sqrt((residuals**2).sum(axis=-1).mean(axis=-1)) * 1e3
     return Registration(platform2cmm=transforms, residuals_mm=residuals, rms_um=rms)
@@ -162,7 +159,12 @@ def rigid_rows(centres_mm: FloatArray, balls_mm: FloatArray, weights: FloatArray
     scale = 0.5 * (
         np.einsum("k,nki,nki->n", w_norm, b, b) + np.einsum("k,nki,nki->n", w_norm, c, c)
     )
-    rot = _rotations(cov, scale)
+    return _transforms(_rotations(cov, scale), centres_mean, balls_mean)
+
+
+def _transforms(rot: FloatArray, centres_mean: FloatArray, balls_mean: FloatArray) -> FloatArray:
+    """The (M, 4, 4) transforms of rotations ``rot`` taking the balls' weighted mean onto
+    the centres' (each (M, 3))."""
     transforms = np.zeros((rot.shape[0], 4, 4))
     transforms[:, :3, :3] = rot
     transforms[:, :3, 3] = centres_mean - (rot @ balls_mean[..., None])[..., 0]

@@ -39,6 +39,20 @@ def _runs(data: SessionData) -> TwinRuns:
     return TwinRuns(data.hexapod, obs.plan, obs.times_s, obs.log, obs.balls_mm)
 
 
+def _count_stacks(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """The size of each stack of parameter sets TwinRuns runs from now on (a list that
+    fills as they run)."""
+    stacks: list[int] = []
+    real = TwinRuns.centres
+
+    def counted(self: TwinRuns, sets: list[tuple[Effect, ...]]) -> list[np.ndarray]:
+        stacks.append(len(sets))
+        return real(self, sets)
+
+    monkeypatch.setattr(TwinRuns, "centres", counted)
+    return stacks
+
+
 def _every_effect() -> list[tuple[Effect, ...]]:
     """No effect, each registered effect away from its start values, and a pair."""
     sets: list[tuple[Effect, ...]] = [()]
@@ -114,14 +128,7 @@ def test_a_jacobian_runs_its_columns_twins_together_and_equals_one_by_one(
     every = np.ones(obs.n_steps, dtype=bool)
     theta = cls.start_values()[0]
     runs = _runs(data)
-    stacks: list[int] = []
-    real = TwinRuns.centres
-
-    def counted(self: TwinRuns, sets: list[tuple[Effect, ...]]) -> list[np.ndarray]:
-        stacks.append(len(sets))
-        return real(self, sets)
-
-    monkeypatch.setattr(TwinRuns, "centres", counted)
+    stacks = _count_stacks(monkeypatch)
     jac = fitting._Problem(data.hexapod, obs, (), [cls], runs).jacobian(theta, every)
     assert stacks == [1 + theta.size]  # theta and every column: one stacked run
 
@@ -199,14 +206,7 @@ def test_candidates_held_out_side_by_side_are_held_out_one_by_one(
     ]
     runs = _runs(data)
     problems = [fitting._Problem(data.hexapod, obs, (), [EFFECTS[n]], runs) for n in names]
-    stacks: list[int] = []
-    real = TwinRuns.centres
-
-    def counted(self: TwinRuns, sets: list[tuple[Effect, ...]]) -> list[np.ndarray]:
-        stacks.append(len(sets))
-        return real(self, sets)
-
-    monkeypatch.setattr(TwinRuns, "centres", counted)
+    stacks = _count_stacks(monkeypatch)
     together = fitting.heldout_rms_many(list(zip(problems, thetas, strict=True)), blocks)
     assert together == alone
     # the Jacobians; the second and third chord iterations and the refitted values (the
