@@ -215,14 +215,17 @@ def _normal_equations(
     nt = ia.size
     p = d + 1 if free else d
     ncol = nt + d + (d + 1 if free else 0) + 1
-    w = np.empty((n_pts, ncol))
-    w[:, :nt] = u[:, ia] * u[:, ib]
-    w[:, nt : nt + d] = u * e[:, None]
+    # one row per quantity, the points along it: every row is written and summed
+    # contiguously (a column per quantity took three times as long; the same sums)
+    ut = np.ascontiguousarray(u.T)
+    w = np.empty((ncol, n_pts))
+    w[:nt] = ut[ia] * ut[ib]
+    w[nt : nt + d] = ut * e
     if free:
-        w[:, nt + d : nt + 2 * d] = u
-        w[:, nt + 2 * d] = e
-    w[:, -1] = e * e
-    s = np.add.reduceat(w, starts, axis=0)
+        w[nt + d : nt + 2 * d] = ut
+        w[nt + 2 * d] = e
+    w[-1] = e * e
+    s = np.add.reduceat(w, starts, axis=1).T
     m = counts.size
     a = np.empty((m, p, p))
     a[:, ia, ib] = s[:, :nt]
