@@ -57,29 +57,39 @@ def diagnosis_session(n_targets: int) -> Path:
     return folder
 
 
+def simulate_calibration(
+    n_targets: int, seed: int, name: str, scenario: Path, folder: Path
+) -> None:
+    """Simulate the bench's calibration campaign into ``folder`` (its scenario written to
+    ``scenario``): ``tests.sessions.calibration_scenario``'s hexapod with the geometry
+    errors of seed 11, ``n_targets`` targets drawn with ``seed``, 12 points per ball on a
+    70 deg cap at 0.3 um, 2 s a point, 20 s a move, thermocouples every 30 s at 0.02 K."""
+    from hexatherm.io.scenario import read_scenario
+    from hexatherm.workflows.simulate.run import simulate
+    from hexatherm.workflows.simulate.twinsession import write_files
+    from tests.sessions import calibration_scenario, calibration_targets
+
+    text = calibration_scenario(
+        calibration_targets(seed, n_targets),
+        geometry_seed=11,
+        seed=seed,
+        name=name,
+        points_per_ball=12,
+        cmm={"point_noise_um": 0.3, "cap_angle_deg": 70},
+        timing={"seconds_per_point": 2.0, "seconds_per_move": 20},
+        thermocouples={"period_s": 30, "noise_C": 0.02},
+    )
+    scenario.parent.mkdir(parents=True, exist_ok=True)
+    scenario.write_text(text)
+    shutil.rmtree(folder, ignore_errors=True)
+    write_files(simulate(read_scenario(scenario)).files, folder)
+
+
 def calibration_session(n_targets: int) -> Path:
     folder = CACHE / f"calibrate-{n_targets}"
     if not (folder / "session.yaml").is_file():
-        from hexatherm.io.scenario import read_scenario
-        from hexatherm.workflows.simulate.run import simulate
-        from hexatherm.workflows.simulate.twinsession import write_files
-        from tests.sessions import calibration_scenario, calibration_targets
-
-        text = calibration_scenario(
-            calibration_targets(7, n_targets),
-            geometry_seed=11,
-            seed=7,
-            name=f"calibrate-{n_targets}",
-            points_per_ball=12,
-            cmm={"point_noise_um": 0.3, "cap_angle_deg": 70},
-            timing={"seconds_per_point": 2.0, "seconds_per_move": 20},
-            thermocouples={"period_s": 30, "noise_C": 0.02},
-        )
-        CACHE.mkdir(parents=True, exist_ok=True)
-        scenario = CACHE / f"calibrate-{n_targets}.yaml"
-        scenario.write_text(text)
-        shutil.rmtree(folder, ignore_errors=True)
-        write_files(simulate(read_scenario(scenario)).files, folder)
+        name = f"calibrate-{n_targets}"
+        simulate_calibration(n_targets, 7, name, CACHE / f"{name}.yaml", folder)
     return folder
 
 

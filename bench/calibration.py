@@ -188,29 +188,15 @@ def split_sessions(n_targets: int, n_sessions: int) -> list[Path]:
     """``n_targets`` in ``n_sessions`` sessions of one true hexapod (cached in
     ``bench/.cache/``), each as ``bench/analyses.py``'s calibration session: seeds 7, 8,
     ..., the same geometry errors (seed 11)."""
-    from analyses import CACHE  # type: ignore[import-not-found]
-
-    from tests.sessions import calibration_scenario, calibration_targets
+    from analyses import CACHE, simulate_calibration  # type: ignore[import-not-found]
 
     root = CACHE / f"calibrate-{n_targets}-in-{n_sessions}"
     folders = []
     for i in range(n_sessions):
-        seed = 7 + i
         folder = root / f"s{i}"
         if not (folder / "session.yaml").is_file():
-            text = calibration_scenario(
-                calibration_targets(seed, n_targets // n_sessions),
-                geometry_seed=11,
-                seed=seed,
-                name=f"calibrate-{n_targets}-in-{n_sessions}-{i}",
-                points_per_ball=12,
-                cmm={"point_noise_um": 0.3, "cap_angle_deg": 70},
-                timing={"seconds_per_point": 2.0, "seconds_per_move": 20},
-                thermocouples={"period_s": 30, "noise_C": 0.02},
-            )
-            root.mkdir(parents=True, exist_ok=True)
-            (root / f"s{i}.yaml").write_text(text)
-            write_files(simulate(read_scenario(root / f"s{i}.yaml")).files, folder)
+            name = f"calibrate-{n_targets}-in-{n_sessions}-{i}"
+            simulate_calibration(n_targets // n_sessions, 7 + i, name, root / f"s{i}.yaml", folder)
         folders.append(folder)
     return folders
 
