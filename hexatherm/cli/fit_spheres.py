@@ -75,13 +75,13 @@ def command(
     from hexatherm.io.csvfile import centres_to_csv
     from hexatherm.io.measurements import read_measurements
     from hexatherm.io.outputs import check_output_settled, write_output_file
-    from hexatherm.io.records import Records, concat_records
+    from hexatherm.io.records import Records, concat_records, refuse_groups_in_two_files
     from hexatherm.workflows.process.measured import fit_points
 
     imports_done()
     if out is not None:
         check_output_settled(out, kind="file", inputs=points, overwrite=overwrite)
-    fitted: list[Records] = []
+    probed: list[Records] = []
     for path in points:
         with ProgressBars() as bars:
             records = read_measurements(
@@ -93,7 +93,10 @@ def command(
         found = [r for r in records if r.kind == "points"]
         if not found:
             echo_err(f"{path}: no probed points, skipped")
-        fitted.extend(fit_points(r, fixed_diameter_mm=fixed_diameter) for r in found)
+        probed.extend(found)
+    # a step's ball in two files would be two centres that process refuses: say so here
+    refuse_groups_in_two_files(probed)
+    fitted = [fit_points(r, fixed_diameter_mm=fixed_diameter) for r in probed]
     if not fitted:
         raise click.ClickException("no probed points in the given files")
     kinds = {r.time_kind for r in fitted}

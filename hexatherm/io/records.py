@@ -9,7 +9,7 @@ errors can point at it.
 from __future__ import annotations
 
 import warnings
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from typing import Literal, Protocol
@@ -301,6 +301,42 @@ def check_groups(records: Records, *, keep_later: bool = False) -> Records:
     if records.kind == "points" and number is not None:
         _refuse_repeated_numbers(records, np.asarray(number))
     return records
+
+
+def refuse_groups_in_two_files(records: Sequence[Records]) -> None:
+    """Refuse a step and ball that two of ``records`` (files read one after another, each
+    checked by :func:`check_groups`) both hold: one line naming the later file's first
+    row of the group, as ``process`` refuses a ball measured again in another file.
+
+    >>> import numpy as np
+    >>> def rec(path, labels):
+    ...     n = len(labels)
+    ...     return Records(path, "points", np.array(labels), np.array(["B1"] * n),
+    ...                    np.zeros((n, 3)), np.zeros(n), "seconds", np.arange(2, n + 2))
+    >>> refuse_groups_in_two_files([rec("a.csv", ["O", "O"]), rec("b.csv", ["R0"])])
+    >>> try:
+    ...     refuse_groups_in_two_files([rec("a.csv", ["O", "R0"]), rec("b.csv", ["S1", "R0"])])
+    ... except InputError as error:
+    ...     print(error)
+    b.csv:3: field 'label': step R0 ball B1 is measured again (already in a.csv)
+    """
+    seen: dict[tuple[str, str], str] = {}
+    for rec in records:
+        label, ball = rec.label, rec.ball
+        starts = np.flatnonzero(
+            np.concatenate(([True], (label[1:] != label[:-1]) | (ball[1:] != ball[:-1])))
+        )
+        groups = list(zip(label[starts].tolist(), ball[starts].tolist(), strict=True))
+        for row, group in zip(starts.tolist(), groups, strict=True):
+            if group in seen:
+                raise InputError(
+                    f"step {group[0]} ball {group[1]} is measured again (already in "
+                    f"{seen[group]})",
+                    path=rec.path,
+                    line=int(rec.line[row]),
+                    field="label",
+                )
+        seen.update(dict.fromkeys(groups, rec.path))
 
 
 def _refuse_repeated_numbers(records: Records, number: npt.NDArray[np.generic]) -> None:

@@ -112,3 +112,31 @@ def test_inspect_lists_a_cut_file_only_when_asked(tmp_path: Path) -> None:
     rows = [r for r in kept.stdout.splitlines() if r.startswith(f"{len(text.splitlines()) + 1},")]
     assert len(rows) == 1 and rows[0].split(",")[1] == "O_B1"
     assert not any(r.startswith("2,") for r in kept.stdout.splitlines())  # the earlier one
+
+
+def test_fit_spheres_refuses_a_ball_in_two_files(tmp_path: Path) -> None:
+    # a step's ball in two points files would be two centres rows that process refuses
+    # ("measured again (already in an earlier file)"): fit-spheres refuses them too, with
+    # or without --keep-later (which keeps the later of two within one file), as process
+    # does across the files of a session
+    points = ROOT / "sessions" / "serial-capture" / "points.csv"
+    header, *rows = points.read_text().splitlines(keepends=True)
+    again = tmp_path / "again.csv"
+    again.write_text(header + "".join(r for r in rows if r.startswith("R0,")))
+    for extra in ([], ["--keep-later"]):
+        refused = run("fit-spheres", points, again, "-o", tmp_path / "centres.csv", *extra)
+        assert refused.exit_code == 1
+        assert refused.output.strip().splitlines()[-1] == (
+            f"Error: {again}:2: field 'label': step R0 ball B1 is measured again "
+            f"(already in {points})"
+        )
+        assert not (tmp_path / "centres.csv").exists()
+    # the truth: the file split by steps into two gives the whole file's centres
+    first = tmp_path / "first.csv"
+    first.write_text(header + "".join(r for r in rows if r.startswith("O,")))
+    rest = tmp_path / "rest.csv"
+    rest.write_text(header + "".join(r for r in rows if not r.startswith("O,")))
+    split = run("fit-spheres", first, rest, "-o", tmp_path / "split.csv")
+    whole = run("fit-spheres", points, "-o", tmp_path / "whole.csv")
+    assert split.exit_code == whole.exit_code == 0, split.output + whole.output
+    assert (tmp_path / "split.csv").read_bytes() == (tmp_path / "whole.csv").read_bytes()
