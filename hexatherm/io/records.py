@@ -330,8 +330,7 @@ def refuse_groups_in_two_files(records: Sequence[Records]) -> None:
         for row, group in zip(starts.tolist(), groups, strict=True):
             if group in seen:
                 raise InputError(
-                    f"step {group[0]} ball {group[1]} is measured again (already in "
-                    f"{seen[group]})",
+                    f"step {group[0]} ball {group[1]} is measured again (already in {seen[group]})",
                     path=rec.path,
                     line=int(rec.line[row]),
                     field="label",
