@@ -5,7 +5,11 @@
    poses twice and shrink every parameter's uncertainty by sqrt(2). Sessions are compared
    by content: the SHA-256 of their measurement files (centres, points, DMIS), not their
    paths; one measurement file in two sessions is refused, naming both. (A temperatures
-   log may be shared: one long log can cover several sessions.)
+   log may be shared: one long log can cover several sessions.) The same measurements
+   in other bytes (a blank line added, CRLF line endings, rows reordered) are caught
+   once read (:func:`check_distinct_measurements`): independent measurements never
+   repeat a ball centre to the last digit, so two sessions of which half the centres of
+   either are those of the other are one session.
 2. **One hexapod file** (:func:`check_one_hexapod`): every number a session's poses rest
    on must be the same in every session's hexapod file: the convention, the base and
    platform joints, the stroke, and the legs' thermal model (segments, lengths, CTE,
@@ -35,6 +39,7 @@ from hexatherm.workflows.process.pipeline import ProcessResult
 
 __all__ = [
     "MAX_REFERENCE_STATE_K",
+    "check_distinct_measurements",
     "check_distinct_sessions",
     "check_one_hexapod",
     "check_reference_states",
@@ -69,6 +74,35 @@ def check_distinct_sessions(specs: Sequence[Session]) -> None:
                     field="measurements",
                 )
             seen[digest] = (spec, Path(path))
+
+
+#: two sessions are one when at least this share of either's measured ball centres are,
+#: to the last digit, centres of the other
+SHARED_CENTRES = 0.5
+
+
+def check_distinct_measurements(results: Sequence[ProcessResult]) -> None:
+    """Refuse two sessions that hold the same measurements in files whose bytes differ
+    (at least :data:`SHARED_CENTRES` of either's ball centres equal, to the last digit,
+    centres of the other)."""
+    seen: list[tuple[ProcessResult, set[tuple[float, ...]]]] = []
+    for result in results:
+        rows = np.asarray(result.centres.centres_mm, float).reshape(-1, 3) + 0.0  # -0 is 0
+        mine = {tuple(row) for row in rows[np.isfinite(rows).all(axis=1)].tolist()}
+        for other, theirs in seen:
+            shared = len(mine & theirs)
+            if mine and theirs and shared >= SHARED_CENTRES * min(len(mine), len(theirs)):
+                n = len(mine)
+                count = f"all {n} of its" if shared == n else f"{shared} of its {n}"
+                raise InputError(
+                    f"{count} measured ball centres are those of "
+                    f"{other.session.path}, to the last digit: the same measurements in "
+                    "another file (copied, re-saved, reordered?); a session given twice "
+                    "counts its poses twice; give each session once",
+                    path=str(result.session.path),
+                    field="measurements",
+                )
+        seen.append((result, mine))
 
 
 def _same(a: np.ndarray | None, b: np.ndarray | None) -> bool:

@@ -52,6 +52,7 @@ from hexatherm.io.manifest import sha256_file
 from hexatherm.io.yamlfile import YamlDoc
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.calibrate.checks import (
+    check_distinct_measurements,
     check_distinct_sessions,
     check_one_hexapod,
     check_reference_states,
@@ -225,6 +226,7 @@ def read_campaign(
     results = [
         process_session(path, interpolation, reading=reading, hexapod=geometry) for path in paths
     ]
+    check_distinct_measurements(results)
     nominal = specs[0].hexapod
     check_reference_states(results, warn=geometry is None)  # --iterate's rounds: said once
     labels: list[str] = []
