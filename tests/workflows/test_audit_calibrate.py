@@ -90,3 +90,59 @@ def test_two_sessions_that_share_only_their_hexapod_are_taken(tmp_path: Path) ->
     done = run("calibrate", a, b, "-o", tmp_path / "out", "--level", "offsets")
     assert done.exit_code == 0, done.output
     assert "calibrated from 90 corrected poses of 2 session(s)" in done.output
+
+
+# ------------------------------------------------------------------ one balls file
+# Sessions whose balls files put the balls elsewhere on the platform were pooled: their
+# poses are those of other platform frames (conjugated by the difference), and with
+# every ball moved 1 mm in X the fit came out with chi2/dof 5032 as a calibration.
+
+
+def moved_ball(session: Path, to: Path, old: str, new: str) -> Path:
+    copy = copy_session(session, to)
+    text = (copy / "balls.yaml").read_text()
+    assert old in text
+    (copy / "balls.yaml").write_text(text.replace(old, new))
+    return copy
+
+
+def test_sessions_whose_balls_files_differ_are_refused_naming_the_ball(tmp_path: Path) -> None:
+    a = copy_session(GEOMETRY, tmp_path / "a")
+    b = moved_ball(CAMPAIGN, tmp_path / "b", "[-73.6122, -42.5, 30.0]", "[-73.6122, -42.4, 30.0]")
+    before = digests(a, b)
+    line = refused_in_one_line(run("calibrate", a, b, "-o", tmp_path / "out"))
+    assert line == (
+        f"Error: {b / 'session.yaml'}: field 'balls: B2': its balls file puts ball B2 at "
+        f"[-73.6122, -42.4, 30] mm, {a / 'session.yaml'}'s at [-73.6122, -42.5, 30] mm: "
+        "the poses of the sessions of one calibration must refer to one platform frame; "
+        "give them one balls file"
+    )
+    assert not (tmp_path / "out").exists()
+    assert digests(a, b) == before
+
+
+def test_balls_that_differ_in_name_are_refused(tmp_path: Path) -> None:
+    a = copy_session(GEOMETRY, tmp_path / "a")
+    b = copy_session(CAMPAIGN, tmp_path / "b")
+    for name in ("balls.yaml", "centres.csv"):
+        text = (b / name).read_text()
+        (b / name).write_text(text.replace("B3", "B9"))
+    line = refused_in_one_line(run("calibrate", a, b, "-o", tmp_path / "out"))
+    assert "field 'balls': its balls file names the balls B1, B2, B9" in line
+    assert f"{a / 'session.yaml'}'s B1, B2, B3" in line
+
+
+def test_a_balls_file_that_differs_only_in_diameters_and_order_is_taken(tmp_path: Path) -> None:
+    a = copy_session(GEOMETRY, tmp_path / "a")
+    b = copy_session(CAMPAIGN, tmp_path / "b")
+    (b / "balls.yaml").write_text(
+        "format: hexatherm-balls/1\n"
+        "balls:\n"
+        "  B3: {centre: [82.2724, -47.5, 30.0], diameter: 25.4}\n"
+        "  B1: {centre: [0.0, 90.0, 30.0], diameter: 25.41}\n"
+        "  B2: {centre: [-73.6122, -42.5, 30.0], diameter: 25.4}\n"
+        "probe: {compensated: true, tip_diameter: 2.0}\n"
+    )
+    done = run("calibrate", a, b, "-o", tmp_path / "out", "--level", "offsets")
+    assert done.exit_code == 0, done.output
+    assert "calibrated from 90 corrected poses of 2 session(s)" in done.output

@@ -13,7 +13,10 @@
 2. **One hexapod file** (:func:`check_one_hexapod`): every number a session's poses rest
    on must be the same in every session's hexapod file: the convention, the base and
    platform joints, the stroke, and the legs' thermal model (segments, lengths, CTE,
-   reference temperature). The first field that differs is named.
+   reference temperature). The first field that differs is named. Likewise one balls
+   file (:func:`check_one_balls`): the balls define the platform frame the poses refer
+   to; their names and centres must be the same (the diameters and the order may
+   differ).
 3. **One reference state** (:func:`check_reference_states`): each session's corrected
    poses refer to the thermal state of its first reference R0; each leg's temperature at
    R0 (interpolated in the session's thermocouple log) must be within
@@ -41,6 +44,7 @@ __all__ = [
     "MAX_REFERENCE_STATE_K",
     "check_distinct_measurements",
     "check_distinct_sessions",
+    "check_one_balls",
     "check_one_hexapod",
     "check_reference_states",
     "hexapod_difference",
@@ -159,6 +163,37 @@ def check_one_hexapod(specs: Sequence[Session]) -> None:
                 path=str(spec.path),
                 field=f"hexapod: {field}",
             )
+
+
+def _numbers(values: np.ndarray) -> str:
+    return "[" + ", ".join(f"{v:.10g}" for v in values) + "]"
+
+
+def check_one_balls(specs: Sequence[Session]) -> None:
+    """Refuse sessions whose balls files differ in the balls' names or centres (the
+    platform frame their poses refer to), naming the first ball that differs."""
+    first = specs[0]
+    centres = dict(zip(first.balls.names, first.balls.centres_mm, strict=True))
+    for spec in specs[1:]:
+        balls = spec.balls
+        if sorted(balls.names) != sorted(centres):
+            raise InputError(
+                f"its balls file names the balls {', '.join(sorted(balls.names))}, "
+                f"{first.path}'s {', '.join(sorted(centres))}: the poses of the sessions of "
+                "one calibration must refer to one platform frame; give them one balls file",
+                path=str(spec.path),
+                field="balls",
+            )
+        for name, centre in zip(balls.names, balls.centres_mm, strict=True):
+            if not np.array_equal(centre, centres[name]):
+                raise InputError(
+                    f"its balls file puts ball {name} at {_numbers(centre)} mm, "
+                    f"{first.path}'s at {_numbers(centres[name])} mm: the poses of the "
+                    "sessions of one calibration must refer to one platform frame; give "
+                    "them one balls file",
+                    path=str(spec.path),
+                    field=f"balls: {name}",
+                )
 
 
 def _legs_at_r0(result: ProcessResult) -> np.ndarray | None:

@@ -54,6 +54,7 @@ from hexatherm.typing import FloatArray
 from hexatherm.workflows.calibrate.checks import (
     check_distinct_measurements,
     check_distinct_sessions,
+    check_one_balls,
     check_one_hexapod,
     check_reference_states,
 )
@@ -223,6 +224,7 @@ def read_campaign(
     specs = [read_session(path) for path in paths]
     check_distinct_sessions(specs)
     check_one_hexapod(specs)
+    check_one_balls(specs)
     results = [
         process_session(path, interpolation, reading=reading, hexapod=geometry) for path in paths
     ]
