@@ -146,3 +146,25 @@ def test_a_balls_file_that_differs_only_in_diameters_and_order_is_taken(tmp_path
     done = run("calibrate", a, b, "-o", tmp_path / "out", "--level", "offsets")
     assert done.exit_code == 0, done.output
     assert "calibrated from 90 corrected poses of 2 session(s)" in done.output
+
+
+# ------------------------------------------------------------------ sessions of one name
+# Two sessions of one name (day1/calibration and day2/calibration: acquire names a session
+# after its folder) wrote residuals.csv with every target twice under one label
+# (calibration:S1 ...), so a row could not be told to its session.
+
+
+def test_sessions_of_one_name_get_targets_that_can_be_told_apart(tmp_path: Path) -> None:
+    a = copy_session(GEOMETRY, tmp_path / "day1" / "calibration")
+    b = copy_session(CAMPAIGN, tmp_path / "day2" / "calibration")
+    for session in (a, b):
+        text = (session / "session.yaml").read_text()
+        name = text.splitlines()[1]
+        assert name.startswith("name: ")
+        (session / "session.yaml").write_text(text.replace(name, "name: calibration"))
+    done = run("calibrate", a, b, "-o", tmp_path / "out", "--level", "offsets")
+    assert done.exit_code == 0, done.output
+    rows = (tmp_path / "out" / "residuals.csv").read_text().splitlines()[1:]
+    targets = [row.split(",")[0] for row in rows]
+    assert len(targets) == 90 and len(set(targets)) == 90
+    assert targets[0] == "calibration#1:S1" and targets[30] == "calibration#2:S1"

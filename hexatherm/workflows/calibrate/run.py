@@ -155,7 +155,8 @@ class Campaign:
     nominal : Hexapod
         The hexapod file the sessions share.
     labels : list of str
-        ``session:step`` of every target.
+        ``session:step`` of every target (``session#k:step`` for sessions that share a
+        name, ``k`` their place in the order given).
     commanded, measured : ndarray, shape (N, 6)
         Commanded and measured (``poses``) poses relative to O, mm and deg.
     poses : {"corrected", "conventional", "twin"}
@@ -234,10 +235,13 @@ def read_campaign(
     labels: list[str] = []
     commanded, measured = [], []
     weights: list[BandedCovariance | FloatArray] = []
-    for result in results:
+    names = [result.session.name for result in results]
+    for k, result in enumerate(results, 1):
         corr = result.correction
         targets = corr.target_index
-        labels += [f"{result.session.name}:{result.session.plan.labels[i]}" for i in targets]
+        name = names[k - 1]
+        tag = f"{name}#{k}" if names.count(name) > 1 else name  # sessions of one name apart
+        labels += [f"{tag}:{result.session.plan.labels[i]}" for i in targets]
         commanded.append(result.session.plan.poses[targets])
         if twin is not None:
             measured.append(twin_poses(result, twin.with_geometry(geometry), twin.path))
