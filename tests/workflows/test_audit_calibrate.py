@@ -168,3 +168,33 @@ def test_sessions_of_one_name_get_targets_that_can_be_told_apart(tmp_path: Path)
     targets = [row.split(",")[0] for row in rows]
     assert len(targets) == 90 and len(set(targets)) == 90
     assert targets[0] == "calibration#1:S1" and targets[30] == "calibration#2:S1"
+
+
+# ------------------------------------------------------------------ options at their edges
+# --coverage-factor 1e308 passed (> 0 and finite): U = k u overflowed, numpy's overflow
+# warnings went to the screen and parameters.csv was written with U_um = inf.
+
+
+@pytest.mark.parametrize("k", ["1e308", "1001"])
+def test_a_coverage_factor_beyond_any_coverage_is_a_usage_error(tmp_path: Path, k: str) -> None:
+    session = copy_session(GEOMETRY, tmp_path / "s")
+    refused = run("calibrate", session, "-o", tmp_path / "out", "--coverage-factor", k)
+    assert refused.exit_code == 2, refused.output
+    assert f"Invalid value for '--coverage-factor': '{k}': must be <= 1000" in refused.output
+    assert not (tmp_path / "out").exists()
+
+
+def test_the_largest_coverage_factor_writes_finite_numbers(tmp_path: Path) -> None:
+    session = copy_session(GEOMETRY, tmp_path / "s")
+    done = run(
+        "calibrate", session, "-o", tmp_path / "out", "--level", "offsets",
+        "--coverage-factor", "1000",
+    )  # fmt: skip
+    assert done.exit_code == 0, done.output
+    assert "RuntimeWarning" not in done.output
+    params = (tmp_path / "out" / "parameters.csv").read_text()
+    assert "inf" not in params and "nan" not in params
+    row = params.splitlines()[1].split(",")
+    header = params.splitlines()[0].split(",")
+    u_um, big_u_um = float(row[header.index("u_um")]), float(row[header.index("U_um")])
+    assert big_u_um == pytest.approx(1000 * u_um, rel=1e-4)
