@@ -198,3 +198,31 @@ def test_the_largest_coverage_factor_writes_finite_numbers(tmp_path: Path) -> No
     header = params.splitlines()[0].split(",")
     u_um, big_u_um = float(row[header.index("u_um")]), float(row[header.index("U_um")])
     assert big_u_um == pytest.approx(1000 * u_um, rel=1e-4)
+
+
+# ------------------------------------------------------------------ a stroke that excludes
+# A hexapod file whose stroke excludes the campaign's commanded poses (process only warns):
+# no new pose drawn over the campaign's span was inside the stroke, and the claim's worst
+# over zero poses ended in numpy's "Mean of empty slice" warnings and a ValueError
+# traceback (zero-size array to reduction operation maximum).
+
+
+def test_a_stroke_that_excludes_every_pose_of_the_span_is_refused(tmp_path: Path) -> None:
+    session = copy_session(GEOMETRY, tmp_path / "s")
+    text = (session / "hexapod.yaml").read_text()
+    assert "stroke: [220.0, 310.0]" in text
+    (session / "hexapod.yaml").write_text(text.replace("[220.0, 310.0]", "[266.0, 270.0]"))
+    before = digests(session)
+    result = run("calibrate", session, "-o", tmp_path / "out", "--level", "offsets")
+    assert result.exit_code == 1, result.output
+    errors = [line for line in result.output.splitlines() if line.startswith("Error:")]
+    assert errors == [
+        f"Error: {session / 'hexapod.yaml'}: field 'stroke': none of 2000 poses drawn over "
+        "the span of the campaign's commanded poses keeps its legs inside the stroke "
+        "[266, 270] mm (30 of the 30 targets are outside it already): the claim for a new "
+        "pose cannot be evaluated; is this the stroke of the hexapod the poses were "
+        "commanded on?"
+    ], result.output
+    assert "Traceback" not in result.output and "RuntimeWarning" not in result.output
+    assert not (tmp_path / "out").exists()
+    assert digests(session) == before
