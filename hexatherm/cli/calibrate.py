@@ -114,6 +114,7 @@ def command(
     """
     from hexatherm.io.config import read_session
     from hexatherm.io.outputs import check_output_settled, output_dir
+    from hexatherm.workflows.calibrate.checks import session_warnings
     from hexatherm.workflows.calibrate.outputs import (
         claim_lines,
         output_files,
@@ -177,6 +178,8 @@ def command(
         f"calibrated from {len(run.campaign.labels)} {poses} poses{model} of "
         f"{len(sessions)} session(s)"
     )
+    for line in session_warnings(run.campaign.results):
+        echo_err(f"warning: {line}")
     files = output_files(run, inputs, out, lab_fields, coverage_factor, templates)
     with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
         for name, text in files.items():

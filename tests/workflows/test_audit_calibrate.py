@@ -226,3 +226,35 @@ def test_a_stroke_that_excludes_every_pose_of_the_span_is_refused(tmp_path: Path
     assert "Traceback" not in result.output and "RuntimeWarning" not in result.output
     assert not (tmp_path / "out").exists()
     assert digests(session) == before
+
+
+# ------------------------------------------------------------------ what process warns of
+# calibrate processed every session as process does but printed none of process's
+# warnings: a session whose quality checks failed at every target (process: "warning:
+# quality checks failed at 30 step(s)"), or whose commanded poses lie outside its hexapod
+# file's stroke, was calibrated without a word.
+
+
+def test_what_process_warns_of_a_session_calibrate_says_too(tmp_path: Path) -> None:
+    session = copy_session(GEOMETRY, tmp_path / "s")
+    with (session / "session.yaml").open("a") as file:
+        file.write("quality: {time_gap_s: 10}\n")
+    text = (session / "hexapod.yaml").read_text()
+    (session / "hexapod.yaml").write_text(text.replace("[220.0, 310.0]", "[220.0, 290.0]"))
+    done = run("calibrate", session, "-o", tmp_path / "out", "--level", "offsets")
+    assert done.exit_code == 0, done.output
+    warnings = [line for line in done.output.splitlines() if line.startswith("warning:")]
+    where = session / "session.yaml"
+    assert warnings[:2] == [
+        f"warning: {where}: step S2: commanded pose is outside the stroke [220.0, 290.0] mm",
+        f"warning: {where}: quality checks failed at 30 step(s) (S1, S2, S3, S4, S5 ...)",
+    ], done.output
+    assert (tmp_path / "out" / "hexapod.yaml").exists()
+
+
+def test_a_clean_session_calibrates_without_a_warning(tmp_path: Path) -> None:
+    session = copy_session(GEOMETRY, tmp_path / "s")
+    done = run("calibrate", session, "-o", tmp_path / "out", "--level", "offsets")
+    assert done.exit_code == 0, done.output
+    where = session / "session.yaml"
+    assert f"warning: {where}" not in done.output, done.output

@@ -23,6 +23,8 @@
    :data:`MAX_REFERENCE_STATE_K` of the first logged session's, leg by leg (a mean would
    let +1 K on three legs and -1 K on the others pass). A session without temperatures
    cannot be checked: a ``warning:`` says so (an :class:`~hexatherm.errors.InputWarning`).
+4. **What process warns of** (:func:`session_warnings`): each session's own warnings
+   and failed quality checks, as ``process`` prints them, for the screen.
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ from hexatherm.errors import InputError, InputWarning
 from hexatherm.io.manifest import sha256_file
 from hexatherm.session import Session
 from hexatherm.workflows.process.pipeline import ProcessResult
+from hexatherm.workflows.process.quality import quality_checks
 
 __all__ = [
     "MAX_REFERENCE_STATE_K",
@@ -48,6 +51,7 @@ __all__ = [
     "check_one_hexapod",
     "check_reference_states",
     "hexapod_difference",
+    "session_warnings",
 ]
 
 #: the largest difference of any leg's temperature at R0 between the sessions of one
@@ -239,3 +243,21 @@ def check_reference_states(results: Sequence[ProcessResult], *, warn: bool = Tru
                 path=str(result.session.path),
                 field="temperatures",
             )
+
+
+def session_warnings(results: Sequence[ProcessResult]) -> list[str]:
+    """What ``process`` warns of each session (its warnings, and the steps whose quality
+    checks failed at the session's limits), each line naming the session file: the
+    calibration rests on those poses."""
+    lines = []
+    for result in results:
+        where = result.session.path
+        lines += [f"{where}: {warning}" for warning in result.warnings]
+        quality = quality_checks(result)
+        if quality.any_failed:
+            steps = quality.failed_steps
+            lines.append(
+                f"{where}: quality checks failed at {len(steps)} step(s) "
+                f"({', '.join(steps[:5])}{' ...' if len(steps) > 5 else ''})"
+            )
+    return lines
