@@ -258,3 +258,66 @@ def test_a_clean_session_calibrates_without_a_warning(tmp_path: Path) -> None:
     assert done.exit_code == 0, done.output
     where = session / "session.yaml"
     assert f"warning: {where}" not in done.output, done.output
+
+
+# ------------------------------------------------------------------ poses that span nothing
+# Twelve targets within +-1 um and +-0.1 mdeg of O identify the six leg offsets only in
+# name: forced, calibrate wrote leg offsets of +45 and -58 mm with u = 46-172 mm
+# (chi2/dof 1.15, exit 0) as a calibrated hexapod.yaml; with --level auto a fold's fit
+# stepped so far that the model's FGM failed, and the run ended on "FGM did not converge
+# ... raise max_iter or start closer", which says nothing of the poses.
+CONFIGS = ROOT / "configs"
+TINY_BOX = ["--box", "Tx=-0.001:0.001", "--box", "Ty=-0.001:0.001", "--box", "Tz=-0.001:0.001"]
+TINY_BOX += ["--box", "Rx=-0.0001:0.0001", "--box", "Ry=-0.0001:0.0001"]
+TINY_BOX += ["--box", "Rz=-0.0001:0.0001"]
+
+
+def planned_session(tmp_path: Path, name: str, *plan_args: str) -> Path:
+    """A session the twin measures (6 points per ball) of a plan made with ``plan_args``."""
+    hexapod, balls = CONFIGS / "symetrie-like.yaml", CONFIGS / "balls-3.yaml"
+    plan = tmp_path / f"{name}.yaml"
+    made = run("plan", "--hexapod", hexapod, "--balls", balls, "--points-per-ball", 6,
+               *plan_args, "-o", plan)  # fmt: skip
+    assert made.exit_code == 0, made.output
+    session = tmp_path / name
+    made = run("simulate", "--plan", plan, "--hexapod", hexapod, "--balls", balls,
+               "-o", session, "--seed", 1)  # fmt: skip
+    assert made.exit_code == 0, made.output
+    return session
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("tiny")
+    return planned_session(root, "tiny", "--random", "12", "--seed", "4", *TINY_BOX)
+
+
+def test_offsets_the_poses_identify_only_in_name_are_refused(tiny: Path, tmp_path: Path) -> None:
+    before = digests(tiny)
+    line = refused_in_one_line(run("calibrate", tiny, "-o", tmp_path / "out", "--level", "offsets"))
+    assert line.startswith("Error: level offsets: the poses identify level 'offsets' only to ")
+    assert "u = 172 mm (leg4_offset_mm)" in line
+    assert "more than 1% of the legs' home length (2.68 mm)" in line
+    assert "the poses span Tx 0.00" in line and "spread them over the stroke" in line
+    assert not (tmp_path / "out").exists()
+    assert digests(tiny) == before
+
+
+def test_auto_says_why_no_level_fits_poses_that_span_nothing(tiny: Path, tmp_path: Path) -> None:
+    line = refused_in_one_line(run("calibrate", tiny, "-o", tmp_path / "out"))
+    assert line.startswith("Error: no calibration level can be fitted: offsets: the poses ")
+    assert "identify level 'offsets' only to u = 172 mm" in line and "FGM" not in line
+    assert not (tmp_path / "out").exists()
+
+
+def test_offsets_from_one_pose_repeated_are_still_calibrated(tmp_path: Path) -> None:
+    targets = tmp_path / "targets.csv"
+    targets.write_text("5,3,2,1,0.5,2\n" * 10)
+    session = planned_session(tmp_path, "same", "--targets", str(targets))
+    done = run("calibrate", session, "-o", tmp_path / "out")
+    assert done.exit_code == 0, done.output
+    assert "level offsets (chosen by BIC and held-out folds)" in done.output
+    assert "joints        not fitted: the poses do not identify level 'joints'" in done.output
+    u_um = [float(r.split(",")[7]) for r in
+            (tmp_path / "out" / "parameters.csv").read_text().splitlines()[1:]]  # fmt: skip
+    assert 20 < max(u_um) < 2680  # identified, poorly (0.2 mm), below the limit
