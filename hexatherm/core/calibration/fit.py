@@ -15,13 +15,13 @@ import numpy.typing as npt
 from scipy import special
 from scipy.optimize import least_squares
 
+from hexatherm.core.calibration.identified import refuse_unidentified
 from hexatherm.core.calibration.model import (
     BASE,
     GAINS,
     N_PARAMETERS,
     OFFSETS,
     PARAMETER_NAMES,
-    PARAMETER_UNITS,
     PLATFORM,
     CalibrationModel,
     Level,
@@ -46,10 +46,6 @@ _FLAT = 1e-9
 #: most rounds of the leg-space fit's reweighting
 _LEG_ROUNDS = 5
 _COMPONENTS = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
-#: the largest standard uncertainty of a fitted parameter, as a fraction of the legs' mean
-#: home length (a gain's times that length): beyond it the poses identify the level only
-#: in name, and the fit, linearised about the nominal geometry, means nothing
-MAX_U_FRACTION = 0.01
 #: significance of the chi-square test of a calibration: a chi-square that chance alone
 #: exceeds less often than this says the model does not explain the poses
 EXPLAINED_P = 1e-3
@@ -507,37 +503,6 @@ def fit_calibration(
         dof=6 * n - model.n_free,
         observability=obs,
         n_evaluations=evaluations,
-    )
-
-
-def refuse_unidentified(
-    model: CalibrationModel, covariance: FloatArray, commanded_poses: FloatArray
-) -> None:
-    """CalibrationError when a fitted parameter's standard uncertainty exceeds
-    :data:`MAX_U_FRACTION` of the legs' mean home length (a gain's, times that length):
-    poses of full rank that span too little (the rank is relative, this is not)."""
-    length = float(np.mean(model.home_leg_mm))
-    scale = np.where(np.array(PARAMETER_UNITS) == "mm", 1.0, length)
-    u = np.sqrt(np.maximum(np.diag(covariance), 0.0)) * scale
-    u[~model.mask] = 0.0
-    worst = int(np.argmax(u))
-    limit = MAX_U_FRACTION * length
-    if u[worst] <= limit:
-        return
-    value = (
-        f"{u[worst]:.3g} mm"
-        if PARAMETER_UNITS[worst] == "mm"
-        else f"{u[worst] / length * 1e6:.3g} ppm"
-    )
-    span = np.ptp(commanded_poses, axis=0)
-    units = ("mm",) * 3 + ("deg",) * 3
-    spans = ", ".join(f"{c} {v:.3g} {u}" for c, v, u in zip(_COMPONENTS, span, units, strict=True))
-    raise CalibrationError(
-        f"the poses identify level {model.level!r} only to u = {value} "
-        f"({PARAMETER_NAMES[worst]}), more than {MAX_U_FRACTION:.0%} of the legs' home "
-        f"length ({limit:.3g} mm): a fit "
-        f"linearised about the nominal geometry means nothing there; the poses span {spans}: "
-        "spread them over the stroke, rotations included"
     )
 
 
