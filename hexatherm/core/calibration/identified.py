@@ -2,7 +2,8 @@
 
 The rank test of :func:`~hexatherm.core.calibration.fit.observability` is relative (the
 singular values against the largest): poses that span almost nothing pass it, and the
-fit then returns parameters known only to metres. That is refused here, as a
+fit then either returns parameters known only to metres or steps, linearised, to a
+geometry where the model cannot stand the hexapod at all. Both are refused here, as a
 :class:`~hexatherm.errors.CalibrationError` naming the level, the span of the poses and
 what to add (``--level auto`` counts the level as not fitted).
 """
@@ -12,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from hexatherm.core.calibration.model import PARAMETER_NAMES, PARAMETER_UNITS, CalibrationModel
-from hexatherm.errors import CalibrationError
+from hexatherm.errors import CalibrationError, ConvergenceError
 from hexatherm.typing import FloatArray
 
 #: the largest standard uncertainty of a fitted parameter, as a fraction of the legs' mean
@@ -54,4 +55,17 @@ def refuse_unidentified(
         f"length ({limit:.3g} mm): a fit linearised about the nominal geometry means "
         f"nothing there; the poses span {pose_spans(commanded_poses)}: spread them over "
         "the stroke, rotations included"
+    )
+
+
+def diverged(
+    model: CalibrationModel, error: ConvergenceError, commanded_poses: FloatArray
+) -> CalibrationError:
+    """The error for a fit whose steps left the geometries the model can stand (its
+    forward model failed at a trial geometry: ``error``)."""
+    return CalibrationError(
+        f"the fit of level {model.level!r} diverged: at a trial geometry the model could "
+        f"not stand the hexapod ({error}); the poses identify the level too weakly: they "
+        f"span {pose_spans(commanded_poses)}: spread them over the stroke, rotations "
+        "included"
     )
