@@ -118,6 +118,7 @@ def command(
     from hexatherm.workflows.calibrate.outputs import (
         claim_lines,
         output_files,
+        span_lines,
         summary_lines,
     )
     from hexatherm.workflows.calibrate.run import (
@@ -184,7 +185,8 @@ def command(
     with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
         for name, text in files.items():
             (tmp / name).write_text(text, encoding="utf-8")
-    for line in summary_lines(run) + claim_lines(files["calibration.json"], coverage_factor):
+    claim = claim_lines(files["calibration.json"], coverage_factor) + span_lines(run)
+    for line in summary_lines(run) + claim:
         click.echo(line)
     for name in files:
         echo_err(f"wrote {out / name}")

@@ -393,3 +393,29 @@ def test_an_origin_step_off_the_zero_pose_is_refused(tmp_path: Path) -> None:
     )
     assert not (tmp_path / "out").exists()
     assert digests(session) == before
+
+
+# ------------------------------------------------------------------ a span of one axis
+# Twelve targets along Tx alone: the offsets are identified (u 0.1 mm) and the new-pose
+# claim is evaluated over poses drawn in the campaign's span, a segment of the Tx axis;
+# the screen printed its worst and typical U as for any new pose, without a word that no
+# pose of the campaign (nor of the claim) moved in Ty, Tz, Rx, Ry or Rz.
+
+
+def test_the_claim_says_which_components_the_poses_never_vary(tmp_path: Path) -> None:
+    session = planned_session(tmp_path, "tx", "--random", "12", "--seed", "3", "--box", "Tx=-10:10")
+    done = run("calibrate", session, "-o", tmp_path / "out", "--level", "offsets")
+    assert done.exit_code == 0, done.output
+    lines = done.output.splitlines()
+    floor = next(i for i, line in enumerate(lines) if line.startswith("  floor (k = 1)"))
+    assert lines[floor + 1] == (
+        "warning: the campaign's commanded poses never vary Ty, Tz, Rx, Ry, Rz: the claim "
+        "for a new pose holds only at their one value"
+    )
+
+
+def test_a_campaign_that_varies_every_component_has_no_such_warning(tmp_path: Path) -> None:
+    session = copy_session(GEOMETRY, tmp_path / "s")
+    done = run("calibrate", session, "-o", tmp_path / "out", "--level", "offsets")
+    assert done.exit_code == 0, done.output
+    assert "never vary" not in done.output
