@@ -175,16 +175,17 @@ def command(
         )
         run = calibrate(campaign, level, residuals)
     model = "" if twin_model is None else f" (twin model {twin_model})"
+    files = output_files(run, inputs, out, lab_fields, coverage_factor, templates)
+    with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
+        for name, text in files.items():
+            (tmp / name).write_text(text, encoding="utf-8")
+    # after the outputs: a run refused while computing or writing them says one line
     echo_err(
         f"calibrated from {len(run.campaign.labels)} {poses} poses{model} of "
         f"{len(sessions)} session(s)"
     )
     for line in session_warnings(run.campaign.results):
         echo_err(f"warning: {line}")
-    files = output_files(run, inputs, out, lab_fields, coverage_factor, templates)
-    with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
-        for name, text in files.items():
-            (tmp / name).write_text(text, encoding="utf-8")
     claim = claim_lines(files["calibration.json"], coverage_factor) + span_lines(run)
     for line in summary_lines(run) + claim:
         click.echo(line)
