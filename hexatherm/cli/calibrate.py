@@ -114,9 +114,11 @@ def command(
     """
     from hexatherm.io.config import read_session
     from hexatherm.io.outputs import check_output_settled, output_dir
+    from hexatherm.workflows.calibrate.checks import session_warnings
     from hexatherm.workflows.calibrate.outputs import (
         claim_lines,
         output_files,
+        span_lines,
         summary_lines,
     )
     from hexatherm.workflows.calibrate.run import (
@@ -173,15 +175,19 @@ def command(
         )
         run = calibrate(campaign, level, residuals)
     model = "" if twin_model is None else f" (twin model {twin_model})"
-    echo_err(
-        f"calibrated from {len(run.campaign.labels)} {poses} poses{model} of "
-        f"{len(sessions)} session(s)"
-    )
     files = output_files(run, inputs, out, lab_fields, coverage_factor, templates)
     with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
         for name, text in files.items():
             (tmp / name).write_text(text, encoding="utf-8")
-    for line in summary_lines(run) + claim_lines(files["calibration.json"], coverage_factor):
+    # after the outputs: a run refused while computing or writing them says one line
+    echo_err(
+        f"calibrated from {len(run.campaign.labels)} {poses} poses{model} of "
+        f"{len(sessions)} session(s)"
+    )
+    for line in session_warnings(run.campaign.results):
+        echo_err(f"warning: {line}")
+    claim = claim_lines(files["calibration.json"], coverage_factor) + span_lines(run)
+    for line in summary_lines(run) + claim:
         click.echo(line)
     for name in files:
         echo_err(f"wrote {out / name}")

@@ -386,14 +386,21 @@ tolerance_option = click.option(
 )
 
 
+#: the largest --coverage-factor: beyond any coverage (Student's t of one degree of
+#: freedom at 99.73 % is 236), and U = k u overflowed to inf at 1e308
+MAX_COVERAGE_FACTOR = 1000.0
+
+
 def coverage_factor_option(what: str) -> Callable[[F], F]:
-    """``--coverage-factor k`` (default 2, > 0) of the expanded uncertainties U = k u
-    ``what`` (the command's own words: where its U appear)."""
+    """``--coverage-factor k`` (default 2, > 0, at most :data:`MAX_COVERAGE_FACTOR`) of
+    the expanded uncertainties U = k u ``what`` (the command's own words: where its U
+    appear)."""
     return click.option(
         "--coverage-factor",
         "coverage_factor",
-        type=CheckedFloat(min=0, min_open=True),
+        type=CheckedFloat(min=0, max=MAX_COVERAGE_FACTOR, min_open=True),
         default=2.0,
         show_default=True,
-        help=f"Coverage factor k of the expanded uncertainties U = k u {what} (> 0).",
+        help=f"Coverage factor k of the expanded uncertainties U = k u {what} "
+        f"(> 0, <= {MAX_COVERAGE_FACTOR:g}).",
     )

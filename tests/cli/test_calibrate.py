@@ -277,5 +277,9 @@ def test_a_session_without_temperatures_is_said_unchecked(
     warnings = [line for line in result.stderr.splitlines() if line.startswith("warning:")]
     assert warnings == [
         f"warning: {bare / 'session.yaml'}: no temperatures, so the thermal state of its R0 "
-        "(which its corrected poses refer to) cannot be checked against the other sessions'"
+        "(which its corrected poses refer to) cannot be checked against the other sessions'",
+        # what process says of it too (test_audit_calibrate.py)
+        f"warning: {bare / 'session.yaml'}: no thermocouple log in the session (no "
+        "'temperatures:' in the session file): the correction rests on the references "
+        "alone, and the temperature check is n/a",
     ]

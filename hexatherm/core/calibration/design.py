@@ -125,7 +125,8 @@ def select_level(
     Raises
     ------
     CalibrationError
-        No level can be fitted (the reasons of each).
+        No level can be fitted, or none on every fold (the reasons of each): a level
+        whose held-out residuals are incomplete is not chosen.
     """
     x_cmd, x_meas = check_campaign(commanded_poses, measured_poses)
     n = x_cmd.shape[0]
@@ -141,8 +142,14 @@ def select_level(
             "no calibration level can be fitted: "
             + "; ".join(f"{s.level}: {s.note}" for s in scores)
         )
-    current = fitted[0]
-    for score in fitted[1:]:
+    checked = [s for s in fitted if np.isfinite(s.heldout_rms_w)]  # every fold fitted
+    if not checked:
+        raise CalibrationError(
+            "no calibration level can be checked on held-out folds of the poses (--level "
+            "fits one without them): " + "; ".join(f"{s.level}: {s.note}" for s in scores)
+        )
+    current = checked[0]
+    for score in checked[1:]:
         if (
             current.bic - score.bic > DELTA_BIC_THRESHOLD
             and score.heldout_rms_w < current.heldout_rms_w

@@ -15,6 +15,7 @@ import numpy.typing as npt
 from scipy import special
 from scipy.optimize import least_squares
 
+from hexatherm.core.calibration.identified import diverged, refuse_unidentified
 from hexatherm.core.calibration.model import (
     BASE,
     GAINS,
@@ -30,7 +31,7 @@ from hexatherm.core.calibration.model import (
 from hexatherm.core.calibration.weights import BandedCovariance, PoseWeights
 from hexatherm.core.geometry import check_poses, rotation_from_angles, to_um_urad
 from hexatherm.core.hexapod import Hexapod
-from hexatherm.errors import CalibrationError, RankDeficientError
+from hexatherm.errors import CalibrationError, ConvergenceError, RankDeficientError
 from hexatherm.typing import FloatArray, IntArray
 
 ResidualKind = Literal["pose", "leg"]
@@ -437,7 +438,9 @@ def fit_calibration(
     Raises
     ------
     CalibrationError
-        Bad input: shapes, a covariance that is not positive definite, too few poses.
+        Bad input: shapes, a covariance that is not positive definite, too few poses;
+        poses that identify the level only in name, or a fit that diverged
+        (:mod:`~hexatherm.core.calibration.identified`).
     RankDeficientError
         The poses do not identify the level's parameters (why, and what to add).
     """
@@ -459,37 +462,41 @@ def fit_calibration(
         raise CalibrationError(f"pose weights for {weights.n_poses} poses, {n} poses given")
     z = np.zeros(model.n_free) if start is None else model.coordinates(start)
     evaluations = 0
-    if kind == "pose":
-        problem = partial(_pose_problem, model, x_cmd, x_meas, weights)
-        first = problem(z)  # the optimizer's first evaluation too
-        # structural check at the start (rank deficiency is exact there)
-        refuse_rank_deficient(observability(model, -first[1], x_cmd), model.level)
-        z, evaluations, (r_w, j_w, pred) = _solve(model, problem, z, first)
-    else:
-        # structural check at the start (rank deficiency is exact there)
-        _, jac0 = model.predict(model.parameters(z), x_cmd)
-        refuse_rank_deficient(
-            observability(model, weights.whiten(jac0 @ model.basis), x_cmd), model.level
-        )
-        for _ in range(_LEG_ROUNDS):  # weights at the previous estimate
-            theta = model.parameters(z)
-            _, _, by_meas = model.leg_residuals(theta, x_cmd, x_meas)
-            leg_weights = weights.mapped(by_meas)
-            z_new, nfev, (r_w, j_w) = _solve(
-                model, partial(_leg_problem, model, x_cmd, x_meas, leg_weights), z
+    try:
+        if kind == "pose":
+            problem = partial(_pose_problem, model, x_cmd, x_meas, weights)
+            first = problem(z)  # the optimizer's first evaluation too
+            # structural check at the start (rank deficiency is exact there)
+            refuse_rank_deficient(observability(model, -first[1], x_cmd), model.level)
+            z, evaluations, (r_w, j_w, pred) = _solve(model, problem, z, first)
+        else:
+            # structural check at the start (rank deficiency is exact there)
+            _, jac0 = model.predict(model.parameters(z), x_cmd)
+            refuse_rank_deficient(
+                observability(model, weights.whiten(jac0 @ model.basis), x_cmd), model.level
             )
-            evaluations += nfev
-            step = z_new - z
-            z = z_new
-            if np.sum((j_w @ step) ** 2) < 1e-6:  # the step in units of its uncertainty
-                break
-        r_w, j_w = _leg_problem(model, x_cmd, x_meas, leg_weights, z)
-        pred, _ = model.predict(model.parameters(z), x_cmd)
+            for _ in range(_LEG_ROUNDS):  # weights at the previous estimate
+                theta = model.parameters(z)
+                _, _, by_meas = model.leg_residuals(theta, x_cmd, x_meas)
+                leg_weights = weights.mapped(by_meas)
+                z_new, nfev, (r_w, j_w) = _solve(
+                    model, partial(_leg_problem, model, x_cmd, x_meas, leg_weights), z
+                )
+                evaluations += nfev
+                step = z_new - z
+                z = z_new
+                if np.sum((j_w @ step) ** 2) < 1e-6:  # the step in units of its uncertainty
+                    break
+            r_w, j_w = _leg_problem(model, x_cmd, x_meas, leg_weights, z)
+            pred, _ = model.predict(model.parameters(z), x_cmd)
+    except ConvergenceError as error:  # a trial geometry the model cannot stand
+        raise diverged(model, error, x_cmd) from None
     theta = model.parameters(z)
     svd = _singular(j_w, model.n_free)
     obs = observability(model, j_w, x_cmd, svd)
     refuse_rank_deficient(obs, model.level)
     cov_z = _inverse_normal(*svd)
+    refuse_unidentified(model, model.basis @ cov_z @ model.basis.T, x_cmd)
     return CalibrationFit(
         model=model,
         parameters=theta,

@@ -5,17 +5,28 @@
    poses twice and shrink every parameter's uncertainty by sqrt(2). Sessions are compared
    by content: the SHA-256 of their measurement files (centres, points, DMIS), not their
    paths; one measurement file in two sessions is refused, naming both. (A temperatures
-   log may be shared: one long log can cover several sessions.)
+   log may be shared: one long log can cover several sessions.) The same measurements
+   in other bytes (a blank line added, CRLF line endings, rows reordered) are caught
+   once read (:func:`check_distinct_measurements`): independent measurements never
+   repeat a ball centre to the last digit, so two sessions of which half the centres of
+   either are those of the other are one session.
 2. **One hexapod file** (:func:`check_one_hexapod`): every number a session's poses rest
    on must be the same in every session's hexapod file: the convention, the base and
    platform joints, the stroke, and the legs' thermal model (segments, lengths, CTE,
-   reference temperature). The first field that differs is named.
+   reference temperature). The first field that differs is named. Likewise one balls
+   file (:func:`check_one_balls`): the balls define the platform frame the poses refer
+   to; their names and centres must be the same (the diameters and the order may
+   differ). And every plan's origin step must command the zero pose
+   (:func:`check_origin_at_zero`): the model's frame O is the platform at the zero
+   command (``process`` takes another, its poses relative to O's command).
 3. **One reference state** (:func:`check_reference_states`): each session's corrected
    poses refer to the thermal state of its first reference R0; each leg's temperature at
    R0 (interpolated in the session's thermocouple log) must be within
    :data:`MAX_REFERENCE_STATE_K` of the first logged session's, leg by leg (a mean would
    let +1 K on three legs and -1 K on the others pass). A session without temperatures
    cannot be checked: a ``warning:`` says so (an :class:`~hexatherm.errors.InputWarning`).
+4. **What process warns of** (:func:`session_warnings`): each session's own warnings
+   and failed quality checks, as ``process`` prints them, for the screen.
 """
 
 from __future__ import annotations
@@ -32,13 +43,18 @@ from hexatherm.errors import InputError, InputWarning
 from hexatherm.io.manifest import sha256_file
 from hexatherm.session import Session
 from hexatherm.workflows.process.pipeline import ProcessResult
+from hexatherm.workflows.process.quality import quality_checks
 
 __all__ = [
     "MAX_REFERENCE_STATE_K",
+    "check_distinct_measurements",
     "check_distinct_sessions",
+    "check_one_balls",
     "check_one_hexapod",
+    "check_origin_at_zero",
     "check_reference_states",
     "hexapod_difference",
+    "session_warnings",
 ]
 
 #: the largest difference of any leg's temperature at R0 between the sessions of one
@@ -69,6 +85,35 @@ def check_distinct_sessions(specs: Sequence[Session]) -> None:
                     field="measurements",
                 )
             seen[digest] = (spec, Path(path))
+
+
+#: two sessions are one when at least this share of either's measured ball centres are,
+#: to the last digit, centres of the other
+SHARED_CENTRES = 0.5
+
+
+def check_distinct_measurements(results: Sequence[ProcessResult]) -> None:
+    """Refuse two sessions that hold the same measurements in files whose bytes differ
+    (at least :data:`SHARED_CENTRES` of either's ball centres equal, to the last digit,
+    centres of the other)."""
+    seen: list[tuple[ProcessResult, set[tuple[float, ...]]]] = []
+    for result in results:
+        rows = np.asarray(result.centres.centres_mm, float).reshape(-1, 3) + 0.0  # -0 is 0
+        mine = {tuple(row) for row in rows[np.isfinite(rows).all(axis=1)].tolist()}
+        for other, theirs in seen:
+            shared = len(mine & theirs)
+            if mine and theirs and shared >= SHARED_CENTRES * min(len(mine), len(theirs)):
+                n = len(mine)
+                count = f"all {n} of its" if shared == n else f"{shared} of its {n}"
+                raise InputError(
+                    f"{count} measured ball centres are those of "
+                    f"{other.session.path}, to the last digit: the same measurements in "
+                    "another file (copied, re-saved, reordered?); a session given twice "
+                    "counts its poses twice; give each session once",
+                    path=str(result.session.path),
+                    field="measurements",
+                )
+        seen.append((result, mine))
 
 
 def _same(a: np.ndarray | None, b: np.ndarray | None) -> bool:
@@ -127,6 +172,54 @@ def check_one_hexapod(specs: Sequence[Session]) -> None:
             )
 
 
+def _numbers(values: np.ndarray) -> str:
+    return "[" + ", ".join(f"{v:.10g}" for v in values) + "]"
+
+
+def check_one_balls(specs: Sequence[Session]) -> None:
+    """Refuse sessions whose balls files differ in the balls' names or centres (the
+    platform frame their poses refer to), naming the first ball that differs."""
+    first = specs[0]
+    centres = dict(zip(first.balls.names, first.balls.centres_mm, strict=True))
+    for spec in specs[1:]:
+        balls = spec.balls
+        if sorted(balls.names) != sorted(centres):
+            raise InputError(
+                f"its balls file names the balls {', '.join(sorted(balls.names))}, "
+                f"{first.path}'s {', '.join(sorted(centres))}: the poses of the sessions of "
+                "one calibration must refer to one platform frame; give them one balls file",
+                path=str(spec.path),
+                field="balls",
+            )
+        for name, centre in zip(balls.names, balls.centres_mm, strict=True):
+            if not np.array_equal(centre, centres[name]):
+                raise InputError(
+                    f"its balls file puts ball {name} at {_numbers(centre)} mm, "
+                    f"{first.path}'s at {_numbers(centres[name])} mm: the poses of the "
+                    "sessions of one calibration must refer to one platform frame; give "
+                    "them one balls file",
+                    path=str(spec.path),
+                    field=f"balls: {name}",
+                )
+
+
+def check_origin_at_zero(specs: Sequence[Session]) -> None:
+    """Refuse a plan whose origin step commands a pose other than zero (to 1e-9 mm, deg):
+    the calibration model's frame O is the platform at the zero command."""
+    for spec in specs:
+        plan = spec.plan
+        pose = np.asarray(plan.poses[plan.origin_index], float)
+        if np.abs(pose).max() > 1e-9:
+            where = spec.config_files[2] if len(spec.config_files) > 2 else spec.path
+            raise InputError(
+                f"the origin step {plan.labels[plan.origin_index]} commands {_numbers(pose)}: "
+                "calibrate models frame O as the platform at the zero command (every "
+                "target's command is taken relative to it); measure O at the zero pose",
+                path=str(where),
+                field=f"steps[{plan.origin_index}].pose",
+            )
+
+
 def _legs_at_r0(result: ProcessResult) -> np.ndarray | None:
     """Each leg's temperature at the session's R0 (degC), or None without temperatures."""
     temps = result.temperatures
@@ -170,3 +263,21 @@ def check_reference_states(results: Sequence[ProcessResult], *, warn: bool = Tru
                 path=str(result.session.path),
                 field="temperatures",
             )
+
+
+def session_warnings(results: Sequence[ProcessResult]) -> list[str]:
+    """What ``process`` warns of each session (its warnings, and the steps whose quality
+    checks failed at the session's limits), each line naming the session file: the
+    calibration rests on those poses."""
+    lines = []
+    for result in results:
+        where = result.session.path
+        lines += [f"{where}: {warning}" for warning in result.warnings]
+        quality = quality_checks(result)
+        if quality.any_failed:
+            steps = quality.failed_steps
+            lines.append(
+                f"{where}: quality checks failed at {len(steps)} step(s) "
+                f"({', '.join(steps[:5])}{' ...' if len(steps) > 5 else ''})"
+            )
+    return lines

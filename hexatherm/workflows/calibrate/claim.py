@@ -13,6 +13,7 @@ import numpy as np
 from hexatherm.core.calibration.claim import ModelFloor, combined_sigma, model_floor
 from hexatherm.core.effects import ThermocoupleLog
 from hexatherm.core.residuals import rms
+from hexatherm.errors import InputError
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.calibrate.run import Calibration
 
@@ -24,12 +25,26 @@ TREND_MARGIN_S = 300.0
 
 def span_poses(run: Calibration, n: int = N_SPAN_POSES, seed: int = 0) -> FloatArray:
     """New poses drawn uniformly in the span of the campaign's commanded poses (its
-    smallest box, mm and deg), those whose legs stay inside the stroke (seeded)."""
+    smallest box, mm and deg), those whose legs stay inside the stroke (seeded).
+    InputError naming the hexapod file's stroke when none does (a stroke that excludes
+    the commanded poses themselves: no claim for a new pose can be evaluated)."""
     nominal = run.campaign.nominal
     commanded = run.campaign.commanded
     lower, upper = commanded.min(axis=0), commanded.max(axis=0)
     draws = np.random.default_rng(seed).uniform(lower, upper, (n, 6))
     inside = ~nominal.check_stroke(nominal.igm(draws)).any(axis=1)
+    if not inside.any():
+        out = int(nominal.check_stroke(nominal.igm(commanded)).any(axis=1).sum())
+        stroke = ", ".join(f"{v:g}" for v in np.asarray(nominal.stroke_mm, float))
+        session = run.campaign.results[0].session
+        raise InputError(
+            f"none of {n} poses drawn over the span of the campaign's commanded poses keeps "
+            f"its legs inside the stroke [{stroke}] mm ({out} of the {len(commanded)} "
+            "targets are outside it already): the claim for a new pose cannot be "
+            "evaluated; is this the stroke of the hexapod the poses were commanded on?",
+            path=str(session.config_files[0] if session.config_files else session.path),
+            field="stroke",
+        )
     return np.asarray(draws[inside], float)
 
 

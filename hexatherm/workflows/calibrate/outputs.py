@@ -299,6 +299,19 @@ def claim_lines(calibration_json_text: str, coverage_factor: float = 2.0) -> lis
     return lines
 
 
+def span_lines(run: Calibration) -> list[str]:
+    """A warning when the campaign's commanded poses never vary some components: the
+    new poses of the claim (drawn in their span) do not either."""
+    span = np.ptp(run.campaign.commanded, axis=0)
+    flat = [c for c, v in zip(("Tx", "Ty", "Tz", "Rx", "Ry", "Rz"), span, strict=True) if v < 1e-9]
+    if not flat:
+        return []
+    return [
+        f"warning: the campaign's commanded poses never vary {', '.join(flat)}: the claim "
+        "for a new pose holds only at their one value"
+    ]
+
+
 def summary_lines(run: Calibration) -> list[str]:
     """What the terminal shows: level, fit, residuals before and after."""
     fit = run.fit

@@ -52,8 +52,11 @@ from hexatherm.io.manifest import sha256_file
 from hexatherm.io.yamlfile import YamlDoc
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.calibrate.checks import (
+    check_distinct_measurements,
     check_distinct_sessions,
+    check_one_balls,
     check_one_hexapod,
+    check_origin_at_zero,
     check_reference_states,
 )
 from hexatherm.workflows.process.pipeline import ProcessResult, process_session
@@ -153,7 +156,8 @@ class Campaign:
     nominal : Hexapod
         The hexapod file the sessions share.
     labels : list of str
-        ``session:step`` of every target.
+        ``session:step`` of every target (``session#k:step`` for sessions that share a
+        name, ``k`` their place in the order given).
     commanded, measured : ndarray, shape (N, 6)
         Commanded and measured (``poses``) poses relative to O, mm and deg.
     poses : {"corrected", "conventional", "twin"}
@@ -222,18 +226,24 @@ def read_campaign(
     specs = [read_session(path) for path in paths]
     check_distinct_sessions(specs)
     check_one_hexapod(specs)
+    check_one_balls(specs)
+    check_origin_at_zero(specs)
     results = [
         process_session(path, interpolation, reading=reading, hexapod=geometry) for path in paths
     ]
+    check_distinct_measurements(results)
     nominal = specs[0].hexapod
     check_reference_states(results, warn=geometry is None)  # --iterate's rounds: said once
     labels: list[str] = []
     commanded, measured = [], []
     weights: list[BandedCovariance | FloatArray] = []
-    for result in results:
+    names = [result.session.name for result in results]
+    for k, result in enumerate(results, 1):
         corr = result.correction
         targets = corr.target_index
-        labels += [f"{result.session.name}:{result.session.plan.labels[i]}" for i in targets]
+        name = names[k - 1]
+        tag = f"{name}#{k}" if names.count(name) > 1 else name  # sessions of one name apart
+        labels += [f"{tag}:{result.session.plan.labels[i]}" for i in targets]
         commanded.append(result.session.plan.poses[targets])
         if twin is not None:
             measured.append(twin_poses(result, twin.with_geometry(geometry), twin.path))
