@@ -6,9 +6,43 @@ import os
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
+
+from hexatherm.errors import InputError
 from hexatherm.io.csvfile import read_measurement_csv, read_text
 from hexatherm.io.dmis import looks_like_dmis, read_dmis
 from hexatherm.io.records import Records
+
+#: the farthest a measured coordinate may lie from the CMM's origin, mm: 100 m, beyond any
+#: CMM or laser tracker (a file written in um, or a number run wild, lies beyond)
+COORDINATE_MAX_MM = 1e5
+
+
+def check_coordinates(records: Records) -> Records:
+    """``records``, or an InputError naming the first coordinate farther than
+    :data:`COORDINATE_MAX_MM` from the CMM's origin (file, line and field ``x``, ``y`` or
+    ``z``).
+
+    >>> import numpy as np
+    >>> rec = Records("c.csv", "centres", np.array(["O"]), np.array(["B1"]),
+    ...               np.array([[426.7, 406.9, 2.4e5]]), np.zeros(1), "seconds", np.array([2]))
+    >>> try:
+    ...     check_coordinates(rec)
+    ... except InputError as error:
+    ...     print(error)
+    c.csv:2: field 'z': 240000 mm: farther than 100 m from the CMM's origin (a file in um?)
+    """
+    far = ~(np.abs(records.xyz_mm) <= COORDINATE_MAX_MM)
+    if np.any(far):
+        row, axis = (int(i) for i in np.argwhere(far)[0])
+        raise InputError(
+            f"{records.xyz_mm[row, axis]:g} mm: farther than {COORDINATE_MAX_MM / 1e3:g} m "
+            "from the CMM's origin (a file in um?)",
+            path=records.path,
+            line=int(records.line[row]),
+            field="xyz"[axis],
+        )
+    return records
 
 
 def read_measurements(
@@ -29,16 +63,22 @@ def read_measurements(
     path = os.fspath(path)
     suffix = Path(path).suffix.lower()
     if suffix in (".dmo", ".dms", ".dmi"):
-        return read_dmis(
-            path, progress=progress, allow_truncated=allow_truncated, keep_later=keep_later
-        )
+        return [
+            check_coordinates(r)
+            for r in read_dmis(
+                path, progress=progress, allow_truncated=allow_truncated, keep_later=keep_later
+            )
+        ]
     if suffix != ".csv":
         text = read_text(path)
         if looks_like_dmis(text[:4096]):
-            return read_dmis(
-                path, progress=progress, allow_truncated=allow_truncated, keep_later=keep_later
-            )
+            return [
+                check_coordinates(r)
+                for r in read_dmis(
+                    path, progress=progress, allow_truncated=allow_truncated, keep_later=keep_later
+                )
+            ]
     records = [read_measurement_csv(path, allow_truncated=allow_truncated, keep_later=keep_later)]
     if progress is not None:
         progress(len(records[0]) + 1, len(records[0]) + 1)
-    return records
+    return [check_coordinates(r) for r in records]

@@ -488,6 +488,25 @@ CASES: list[Case] = [
         "diameter",
         "appears twice",
     ),
+    # finite, but no CMM coordinate (a number run wild, a file in um): read_measurements
+    case(
+        "centres-z-1e300",
+        "c.csv",
+        CENTRES.replace("O,B2,4,5,6,", "O,B2,4,5,1e300,", 1),
+        measurements,
+        3,
+        "z",
+        "farther than 100 m from the CMM's origin",
+    ),
+    case(
+        "dmis-points-in-um",
+        "r.dmo",
+        DMIS_HEAD + "FA(S1_B1_1)=FEAT/POINT,CART,426706.9,406933.4,240000.7\nENDFIL\n",
+        measurements,
+        5,
+        "x",
+        "426707 mm: farther than 100 m",
+    ),
     case(
         "dmis-x-1e999",
         "r.dmo",
