@@ -369,26 +369,29 @@ def test_the_offsets_of_poses_that_span_little_can_be_forced(small: Path, tmp_pa
 
 
 # ------------------------------------------------------------------ an origin off the zero pose
-# process takes an origin step that commands a pose other than zero (its poses relative to
-# O's command), but the calibration model's frame O is the platform at the zero command:
-# calibrate ignored the plan's O pose and fitted the targets' commands as if O were at
-# zero (calibration-geometry with O at [1, 0, 0, 0, 0, 0]: exit 0, the same fit as with O
-# at zero; a twin campaign measured with O at [5, 0, 3, 1, 0, 2]: chi2/dof 4.5e6).
+# frame O is the platform in the zero pose and every step's pose is relative to it, but a
+# plan whose origin step commanded another pose was read: process took its poses relative
+# to O's command while its IGM took O at zero, and calibrate fitted the targets' commands
+# as if O were at zero (calibration-geometry with O at [1, 0, 0, 0, 0, 0]: exit 0, the same
+# fit as with O at zero; a twin campaign measured with O at [5, 0, 3, 1, 0, 2]: chi2/dof
+# 4.5e6). The plan reader now refuses it, for every command that reads a plan file.
 
 
-def test_an_origin_step_off_the_zero_pose_is_refused(tmp_path: Path) -> None:
+@pytest.mark.parametrize("command", ["calibrate", "process"])
+def test_an_origin_step_off_the_zero_pose_is_refused(tmp_path: Path, command: str) -> None:
     session = copy_session(GEOMETRY, tmp_path / "s")
     plan = session / "plan.yaml"
     text = plan.read_text()
     old = "{label: O, kind: origin, pose: [0, 0, 0, 0, 0, 0]}"
     assert old in text
     plan.write_text(text.replace(old, "{label: O, kind: origin, pose: [1, 0, 0, 0, 0, 0]}"))
+    line_number = 1 + text.splitlines().index(next(t for t in text.splitlines() if old in t))
     before = digests(session)
-    line = refused_in_one_line(run("calibrate", session, "-o", tmp_path / "out"))
+    line = refused_in_one_line(run(command, session, "-o", tmp_path / "out"))
     assert line == (
-        f"Error: {plan}: field 'steps[0].pose': the origin step O commands [1, 0, 0, 0, 0, 0]: "
-        "calibrate models frame O as the platform at the zero command (every target's "
-        "command is taken relative to it); measure O at the zero pose"
+        f"Error: {plan}:{line_number}: field 'steps[0].pose': the origin step is frame O, "
+        "the platform in the zero pose, to which every other step's pose is relative: its "
+        "pose must be [0, 0, 0, 0, 0, 0], got [1, 0, 0, 0, 0, 0]"
     )
     assert not (tmp_path / "out").exists()
     assert digests(session) == before

@@ -28,9 +28,14 @@ def read_plan(path: str | os.PathLike[str]) -> Plan:
     """
     text = read_text(path)
     plan = _read_plan_fast(text)
-    if plan is not None:
+    if plan is not None and not _off_zero(plan.poses[plan.origin_index]):
         return plan
     return _plan_from_doc(YamlDoc.from_text(text, os.fspath(path)))
+
+
+def _off_zero(pose: object) -> bool:
+    """Whether an origin step's pose is not the zero pose (to 1e-9 mm, deg)."""
+    return bool(np.abs(np.asarray(pose, float)).max() > 1e-9)
 
 
 def _plan_from_doc(doc: YamlDoc) -> Plan:
@@ -52,6 +57,17 @@ def _plan_from_doc(doc: YamlDoc) -> Plan:
             raise doc.error(f"expected a label, got {label!r}", "steps", i, "label")
         kind = doc.string("steps", i, "kind", choices=STEP_KINDS)
         pose = doc.vector("steps", i, "pose", size=6)
+        if kind == "origin" and i == 0 and _off_zero(pose):
+            # the spec's frame O is the platform in the zero pose, and every step's pose
+            # is relative to it (process's IGM takes O at zero; calibrate's model too)
+            raise doc.error(
+                "the origin step is frame O, the platform in the zero pose, to which every "
+                "other step's pose is relative: its pose must be [0, 0, 0, 0, 0, 0], got "
+                f"[{', '.join(f'{v:g}' for v in pose)}]",
+                "steps",
+                i,
+                "pose",
+            )
         if kind == "reference" and np.abs(np.subtract(pose, reference)).max() > 1e-9:
             raise doc.error(
                 f"reference step pose {pose} differs from reference_pose {reference}",

@@ -16,9 +16,8 @@
    reference temperature). The first field that differs is named. Likewise one balls
    file (:func:`check_one_balls`): the balls define the platform frame the poses refer
    to; their names and centres must be the same (the diameters and the order may
-   differ). And every plan's origin step must command the zero pose
-   (:func:`check_origin_at_zero`): the model's frame O is the platform at the zero
-   command (``process`` takes another, its poses relative to O's command).
+   differ). (Every plan's origin step commands the zero pose: the plan reader refuses
+   another, :meth:`hexatherm.core.plan.Plan.validate`.)
 3. **One reference state** (:func:`check_reference_states`): each session's corrected
    poses refer to the thermal state of its first reference R0; each leg's temperature at
    R0 (interpolated in the session's thermocouple log) must be within
@@ -51,7 +50,6 @@ __all__ = [
     "check_distinct_sessions",
     "check_one_balls",
     "check_one_hexapod",
-    "check_origin_at_zero",
     "check_reference_states",
     "hexapod_difference",
     "session_warnings",
@@ -201,23 +199,6 @@ def check_one_balls(specs: Sequence[Session]) -> None:
                     path=str(spec.path),
                     field=f"balls: {name}",
                 )
-
-
-def check_origin_at_zero(specs: Sequence[Session]) -> None:
-    """Refuse a plan whose origin step commands a pose other than zero (to 1e-9 mm, deg):
-    the calibration model's frame O is the platform at the zero command."""
-    for spec in specs:
-        plan = spec.plan
-        pose = np.asarray(plan.poses[plan.origin_index], float)
-        if np.abs(pose).max() > 1e-9:
-            where = spec.config_files[2] if len(spec.config_files) > 2 else spec.path
-            raise InputError(
-                f"the origin step {plan.labels[plan.origin_index]} commands {_numbers(pose)}: "
-                "calibrate models frame O as the platform at the zero command (every "
-                "target's command is taken relative to it); measure O at the zero pose",
-                path=str(where),
-                field=f"steps[{plan.origin_index}].pose",
-            )
 
 
 def _legs_at_r0(result: ProcessResult) -> np.ndarray | None:

@@ -56,7 +56,6 @@ from hexatherm.workflows.calibrate.checks import (
     check_distinct_sessions,
     check_one_balls,
     check_one_hexapod,
-    check_origin_at_zero,
     check_reference_states,
 )
 from hexatherm.workflows.process.pipeline import ProcessResult, process_session
@@ -227,7 +226,6 @@ def read_campaign(
     check_distinct_sessions(specs)
     check_one_hexapod(specs)
     check_one_balls(specs)
-    check_origin_at_zero(specs)
     results = [
         process_session(path, interpolation, reading=reading, hexapod=geometry) for path in paths
     ]
