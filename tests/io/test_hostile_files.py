@@ -618,6 +618,16 @@ CASES: list[Case] = [
     ),
     case("dmis-features-no-endfil", "r.dmo", dmis_points(), read_dmis_features, 14, "k", "ENDFIL"),
     case("dmis-by-content", "run.txt", dmis_points(), measurements, 14, "k", "ENDFIL"),
+    # a fixed segment of 1e300 mm: named in a few digits, not the 300 of the number
+    case(
+        "hexapod-segment-1e300",
+        "h.yaml",
+        HEXAPOD_TEXT.replace("length: 160.0}", "length: 1e300}", 1),
+        read_hexapod,
+        25,
+        "legs",
+        "leg 1: the fixed segments (1e+300 mm) are longer than the leg in the zero pose",
+    ),
     # a hexapod file's calibration record (issue 22, "Also")
     case(
         "calibration-level-bogus",

@@ -110,8 +110,11 @@ def _hexapod_from_doc(doc: YamlDoc) -> Hexapod:
     variable = q0 - legs.total_fixed_length_mm
     if np.any(variable <= 0):
         leg = int(np.argmax(variable <= 0))
+        fixed = float(legs.total_fixed_length_mm[leg])
+        # 3 decimals of a mm, but not the 300 digits of a length of 1e300
+        fixed_text = f"{fixed:.3f}" if abs(fixed) < 1e9 else f"{fixed:.6g}"
         raise doc.error(
-            f"leg {leg + 1}: the fixed segments ({legs.total_fixed_length_mm[leg]:.3f} mm) are "
+            f"leg {leg + 1}: the fixed segments ({fixed_text} mm) are "
             f"longer than the leg in the zero pose ({q0[leg]:.3f} mm)",
             "legs",
         )
