@@ -120,6 +120,7 @@ def command(
         output_files,
         span_lines,
         summary_lines,
+        unexplained_claim_lines,
     )
     from hexatherm.workflows.calibrate.run import (
         TwinModel,
@@ -187,6 +188,7 @@ def command(
     for line in session_warnings(run.campaign.results):
         echo_err(f"warning: {line}")
     claim = claim_lines(files["calibration.json"], coverage_factor) + span_lines(run)
+    claim += unexplained_claim_lines(run)
     for line in summary_lines(run) + claim:
         click.echo(line)
     for name in files:

@@ -121,6 +121,15 @@ def test_calibrate_strict_is_3_when_the_model_does_not_explain_the_poses(tmp_pat
     facts = json.loads((tmp_path / "b" / "calibration.json").read_text())  # still written
     assert not facts["explains_poses"] and facts["chi_square_p"] < 1e-3
     assert facts["chi_square_per_dof"] > 100
+    # the new-pose claim (sub-um U here, where the held-out residuals are tens of um) is
+    # followed on screen by the caveat the report puts beside it; none when explained
+    lines = bad.output.splitlines()
+    claim = next(i for i, line in enumerate(lines) if line.startswith("new pose, U"))
+    caveat = lines[claim + 4]
+    assert caveat.startswith("warning: the model does not explain the poses"), lines[claim:]
+    assert "this U covers only what the model models" in caveat
+    assert "held-out RMS of the calibrated residuals" in caveat
+    assert "this U covers only" not in good.output
 
 
 def interrupt(*args: object, **kwargs: object) -> None:

@@ -312,6 +312,19 @@ def span_lines(run: Calibration) -> list[str]:
     ]
 
 
+def unexplained_claim_lines(run: Calibration) -> list[str]:
+    """A warning under the new-pose claim when the chi-square test fails: the U above
+    then covers only what the model models (the report says the same beside its claim)."""
+    if run.fit.explains_poses:
+        return []
+    after = "held-out" if run.heldout else "in-sample"
+    return [
+        "warning: the model does not explain the poses (chi-square, above): this U covers "
+        f"only what the model models; the {after} RMS of the calibrated residuals says "
+        "more of a new pose's error"
+    ]
+
+
 def summary_lines(run: Calibration) -> list[str]:
     """What the terminal shows: level, fit, residuals before and after."""
     fit = run.fit
