@@ -1,0 +1,200 @@
+"""A hostile-input audit of ``report`` and of the pages ``diagnose`` writes (session 10).
+
+A lab's templates that are not UTF-8, include or extend themselves, or ask ``asset()``
+for what is not an image of their folder; a template folder that is the session or
+the output folder; labels too long for the figures. Each is refused in one line naming
+file and line (exit status 1, no traceback, nothing written, no input touched) or
+printed as the reader needs it.
+"""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import shutil
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner, Result
+
+from hexatherm.cli import main
+from hexatherm.errors import InputError
+from hexatherm.workflows.report.render import render_page
+
+ROOT = Path(__file__).resolve().parents[2]
+SESSION = ROOT / "sessions" / "paper-zero-pose"
+
+
+def hashes(*folders: Path) -> dict[str, str]:
+    """SHA-256 of every file under ``folders``."""
+    return {
+        str(p): hashlib.sha256(p.read_bytes()).hexdigest()
+        for folder in folders
+        for p in sorted(folder.rglob("*"))
+        if p.is_file()
+    }
+
+
+def session_copy(tmp_path: Path, name: str = "paper-zero-pose") -> Path:
+    folder = tmp_path / name
+    shutil.copytree(ROOT / "sessions" / name, folder, ignore=shutil.ignore_patterns("expected"))
+    return folder
+
+
+def refusal(result: Result) -> str:
+    """The one line of a refusal: exit status 1, no traceback, click's ``Error:`` line."""
+    assert isinstance(result.exception, SystemExit), result.exception
+    assert result.exit_code == 1, result.output
+    assert "Traceback" not in result.output
+    lines = [line for line in result.output.splitlines() if line.startswith("Error: ")]
+    assert len(lines) == 1, result.output
+    return lines[0]
+
+
+def templates(folder: Path, files: dict[str, str | bytes]) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    for name, text in files.items():
+        data = text.encode("utf-8") if isinstance(text, str) else text
+        (folder / name).write_bytes(data)
+    return folder
+
+
+def report_refused(tmp_path: Path, folder: Path) -> str:
+    """``report`` of a copy of paper-zero-pose with the lab's templates ``folder``:
+    refused, nothing written, no input changed; its one line."""
+    session = session_copy(tmp_path)
+    before = hashes(session, folder)
+    out = tmp_path / "out" / "report.html"
+    result = CliRunner().invoke(
+        main, ["report", str(session), "--template-dir", str(folder), "-o", str(out)]
+    )
+    line = refusal(result)
+    assert not out.exists() and not out.parent.exists()
+    assert hashes(session, folder) == before
+    return line
+
+
+# ------------------------------------------------------------------ templates
+
+
+def test_a_template_that_is_not_utf8_is_refused_naming_its_file_and_line(tmp_path):
+    folder = templates(tmp_path / "t", {"closing.html.j2": b"<p>\nCaf\xe9 du Lac</p>\n"})
+    line = report_refused(tmp_path, folder)
+    assert line.startswith(f"Error: {folder / 'closing.html.j2'}:2: template: not UTF-8"), line
+
+
+def test_a_style_sheet_that_is_not_utf8_is_refused_too(tmp_path):
+    # style.css is a template too (base.html.j2 includes it), though not a .j2 file
+    folder = templates(tmp_path / "t", {"style.css": b"body { color: red; }\n/* \xff */\n"})
+    line = report_refused(tmp_path, folder)
+    assert line.startswith(f"Error: {folder / 'style.css'}:2: template: not UTF-8"), line
+
+
+@pytest.mark.parametrize(
+    ("files", "where", "line_no"),
+    [
+        # a template that includes itself
+        ({"closing.html.j2": '<p>\n{% include "closing.html.j2" %}\n'}, "closing.html.j2", 2),
+        # two that include each other
+        (
+            {
+                "closing.html.j2": '{% include "words.html.j2" %}\n',
+                "words.html.j2": '<p>\n\n{% include "closing.html.j2" %}\n',
+            },
+            "words.html.j2",
+            3,
+        ),
+        # the page extends the report that extends it
+        ({"base.html.j2": '{% extends "process.html.j2" %}\n'}, "base.html.j2", 1),
+        # the style sheet includes the page
+        ({"style.css": 'body {}\n{% include "base.html.j2" %}\n'}, "style.css", 2),
+    ],
+)
+def test_an_endless_include_or_extends_loop_is_refused_naming_file_and_line(
+    tmp_path, files, where, line_no
+):
+    folder = templates(tmp_path / "t", files)
+    line = report_refused(tmp_path, folder)
+    assert line.startswith(f"Error: {folder / where}:{line_no}: template: "), line
+    assert "loop" in line, line
+
+
+def test_a_loop_only_rendering_finds_is_refused_naming_the_template(tmp_path):
+    # the name comes from a variable: no reading of the templates can see the loop
+    folder = templates(
+        tmp_path / "t",
+        {"closing.html.j2": '{% set me = "closing" %}\n{% include me ~ ".html.j2" %}\n'},
+    )
+    with pytest.raises(InputError, match=r"closing\.html\.j2:2: template: .*loop") as caught:
+        render_page("closing.html.j2", folder.resolve(), title="t", header_rows=[])
+    assert str(folder.resolve() / "closing.html.j2") in str(caught.value)
+
+
+@pytest.mark.parametrize(
+    ("name", "why"),
+    [
+        ("../secret.svg", "outside the template folder"),
+        ("/SECRET", "outside the template folder"),
+        ("link.svg", "outside the template folder"),
+        ("a\x00.png", "not a file name"),
+    ],
+)
+def test_an_asset_outside_the_folder_is_refused_as_such(tmp_path, name, why):
+    secret = tmp_path / "secret.svg"
+    secret.write_text("<svg>secret</svg>", encoding="utf-8")
+    name = name.replace("/SECRET", str(secret))
+    call = "asset('" + name.replace("\x00", "\\x00") + "')"
+    folder = templates(tmp_path / "t", {"closing.html.j2": '<p>\n<img src="{{ ' + call + ' }}">\n'})
+    (folder / "link.svg").symlink_to(secret)
+    (folder / "logo.svg").write_text("<svg/>", encoding="utf-8")
+    line = report_refused(tmp_path, folder)
+    assert line.startswith(f"Error: {folder / 'closing.html.j2'}:2: template: asset "), line
+    assert why in line, line
+
+
+def test_an_asset_too_large_to_embed_is_refused(tmp_path):
+    from hexatherm.workflows.report.render import ASSET_MAX_BYTES
+
+    folder = templates(
+        tmp_path / "t", {"closing.html.j2": "\n<img src=\"{{ asset('big.png') }}\">"}
+    )
+    with (folder / "big.png").open("wb") as f:
+        f.truncate(ASSET_MAX_BYTES + 1)  # sparse: no disk used
+    line = report_refused(tmp_path, folder)
+    assert line.startswith(f"Error: {folder / 'closing.html.j2'}:2: template: asset 'big.png': "), (
+        line
+    )
+    assert f"{ASSET_MAX_BYTES + 1} bytes" in line, line
+    # one byte less is embedded, whole
+    (folder / "big.png").write_bytes(b"\x89PNG" + bytes(ASSET_MAX_BYTES - 4))
+    out = tmp_path / "ok.html"
+    result = CliRunner().invoke(
+        main, ["report", str(SESSION), "--template-dir", str(folder), "-o", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    page = out.read_text(encoding="utf-8")
+    uri = page.rsplit('<img src="data:image/png;base64,', 1)[1].split('"', 1)[0]  # the closing's
+    assert base64.b64decode(uri) == (folder / "big.png").read_bytes()
+
+
+def test_a_template_named_but_found_nowhere_is_refused_where_it_is_named(tmp_path):
+    text = '{% include "words.html.j2" ignore missing %}\n{% include "nowhere.j2" %}\n'
+    folder = templates(tmp_path / "t", {"closing.html.j2": text})
+    line = report_refused(tmp_path, folder)
+    assert line.startswith(
+        f"Error: {folder / 'closing.html.j2'}:2: template: 'nowhere.j2' not found"
+    ), line
+
+
+def test_diagnose_refuses_a_template_loop_before_any_work(tmp_path):
+    session = session_copy(tmp_path, "with-hidden-effect")
+    folder = templates(tmp_path / "t", {"diagnosis.html.j2": '{% extends "diagnosis.html.j2" %}\n'})
+    before = hashes(session, folder)
+    out = tmp_path / "diag"
+    result = CliRunner().invoke(
+        main, ["diagnose", str(session), "--template-dir", str(folder), "-o", str(out)]
+    )
+    line = refusal(result)
+    assert line.startswith(f"Error: {folder / 'diagnosis.html.j2'}:1: template: endless loop"), line
+    assert "diagnosing" not in result.output  # refused before the diagnosis ran
+    assert not out.exists() and hashes(session, folder) == before
