@@ -353,12 +353,17 @@ def template_folder(template_dir: Path | None, lab: Path | None) -> Path | None:
 
 
 def template_files(folder: Path | None, lab: Path | None = None) -> list[Path]:
-    """The files of the lab's template folder (but the lab file): inputs of the page (its
-    provenance, and never an output)."""
+    """The files of the lab's template folder (but the lab file, and what hexatherm wrote
+    there: a report, its manifest): inputs of the page (its provenance, and never an
+    output)."""
+    from hexatherm.io.outputs import hexatherms_own
+
     if folder is None:
         return []
     skip = None if lab is None else lab.resolve()
-    return sorted(p for p in folder.iterdir() if p.is_file() and p.resolve() != skip)
+    return sorted(
+        p for p in folder.iterdir() if p.is_file() and p.resolve() != skip and not hexatherms_own(p)
+    )
 
 
 def _tolerances(ctx: click.Context, param: click.Parameter, values: tuple[str, ...]) -> dict:

@@ -125,9 +125,9 @@ def input_entries(inputs: Iterable[str | os.PathLike[str]]) -> list[dict[str, An
     """Every input once, in order: ``{"path", "bytes", "sha256"}`` for a file (the
     absolute path), ``{"path", "folder": True}`` for a folder, ``{"path"}`` for neither."""
     files = []
-    for given in dict.fromkeys(os.fspath(p) for p in inputs):
+    for given in dict.fromkeys(os.path.abspath(p) for p in inputs):
         path = Path(given)
-        entry: dict[str, Any] = {"path": os.path.abspath(given)}
+        entry: dict[str, Any] = {"path": given}
         if path.is_file():
             entry["bytes"] = path.stat().st_size
             entry["sha256"] = _sha256(path)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import base64
 import hashlib
+import re
 import shutil
 from pathlib import Path
 
@@ -198,3 +199,43 @@ def test_diagnose_refuses_a_template_loop_before_any_work(tmp_path):
     assert line.startswith(f"Error: {folder / 'diagnosis.html.j2'}:1: template: endless loop"), line
     assert "diagnosing" not in result.output  # refused before the diagnosis ran
     assert not out.exists() and hashes(session, folder) == before
+
+
+# ------------------------------------------- a template folder that is the session or output folder
+
+
+def provenance_files(page: Path) -> list[str]:
+    """The input files the page's provenance lists, as shown."""
+    text = page.read_text(encoding="utf-8")
+    files = text.split("Input files, relative to", 1)[1].split("</tbody>", 1)[0]
+    return re.findall(r"<tr><td>([^<]*)</td>", files)
+
+
+@pytest.mark.parametrize("where", ["session", "separate"])
+def test_a_template_folder_that_holds_the_report_is_replaced_with_overwrite(tmp_path, where):
+    session = session_copy(tmp_path)
+    folder = session if where == "session" else templates(tmp_path / "t", {"closing.html.j2": "x"})
+    out = folder / "report.html"
+    inputs = hashes(session, folder)
+    args = ["report", str(session), "--template-dir", str(folder), "-o", str(out)]
+    first = CliRunner().invoke(main, args)
+    assert first.exit_code == 0, first.output
+    written = out.read_bytes()
+    # hexatherm's own report (and its record of it) are not inputs of the next page:
+    # --overwrite replaces them
+    again = CliRunner().invoke(main, [*args, "--overwrite"])
+    assert again.exit_code == 0, again.output
+    shown = provenance_files(out)
+    assert "report.html" not in shown and ".hexatherm-manifest.json" not in shown, shown
+    assert len(shown) == len(set(shown)), shown  # every input once
+    assert "session.yaml" in shown or str(session / "session.yaml") in shown
+    after = hashes(session, folder)
+    for name in ("report.html", ".hexatherm-manifest.json"):
+        after.pop(str(folder / name))
+    assert after == inputs
+    # a report edited since is the user's: an input, never replaced
+    out.write_bytes(written + b"<!-- checked, J. Doe -->")
+    edited = CliRunner().invoke(main, [*args, "--overwrite"])
+    line = refusal(edited)
+    assert str(out) in line, line
+    assert out.read_bytes() == written + b"<!-- checked, J. Doe -->"
