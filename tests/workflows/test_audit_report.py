@@ -239,3 +239,57 @@ def test_a_template_folder_that_holds_the_report_is_replaced_with_overwrite(tmp_
     line = refusal(edited)
     assert str(out) in line, line
     assert out.read_bytes() == written + b"<!-- checked, J. Doe -->"
+
+
+# ------------------------------------------------------------------ labels in the figures
+
+
+def relabelled(tmp_path: Path, rename: dict[str, str]) -> Path:
+    """A copy of paper-zero-pose with targets renamed (plan and centres)."""
+    session = session_copy(tmp_path)
+    for name in ("plan.yaml", "centres.csv"):
+        text = (session / name).read_text(encoding="utf-8")
+        for old, new in rename.items():
+            text = re.sub(rf"(?<![\w-]){old}(?![\w-])", new, text)
+        (session / name).write_text(text, encoding="utf-8")
+    return session
+
+
+def drawn_ticks(fig) -> tuple[list[str], list, object]:
+    """The pose figure drawn: its bottom panels' tick texts and extents, and the x labels'."""
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    bottom = fig.axes[3:6]
+    texts = [t.get_text() for t in bottom[0].get_xticklabels()]
+    boxes = [t.get_window_extent(renderer) for ax in bottom for t in ax.get_xticklabels()]
+    boxes += [ax.xaxis.label.get_window_extent(renderer) for ax in bottom]
+    return texts, boxes, fig.bbox
+
+
+@pytest.mark.parametrize(
+    "tail", ["-MW", "-WORKSPACE-CORNER-MWMW", "-" + "very-long-target-label-" * 8]
+)
+def test_long_target_labels_stay_on_the_pose_figure_and_tell_the_targets_apart(tmp_path, tail):
+    from hexatherm.workflows.process.pipeline import Checks, process_session
+    from hexatherm.workflows.report import pose_figure
+
+    labels = {f"S{i}": f"S{i}{tail}" for i in range(10, 0, -1)}
+    result = process_session(relabelled(tmp_path, labels), "linear", None, Checks())
+    texts, boxes, page = drawn_ticks(pose_figure(result))
+    for box in boxes:  # every tick label and the axis' title inside the figure
+        assert box.y0 >= 0 and box.x0 >= 0 and box.x1 <= page.x1, box
+    assert len(set(texts)) == 10  # each target told apart
+    for k, text in enumerate(texts):
+        full = labels[f"S{k + 1}"]
+        assert text == full or (text[:5] == full[:5] and text.endswith(full[-6:]) and "…" in text)
+
+
+def test_short_labels_keep_the_figure_as_it_was(tmp_path):
+    # the shipped sessions' labels (S1 .. S10): the layout of before, to the pixel
+    from hexatherm.workflows.process.pipeline import Checks, process_session
+    from hexatherm.workflows.report import pose_figure
+
+    fig = pose_figure(process_session(SESSION, "linear", None, Checks()))
+    assert fig.subplotpars.bottom == 0.1
+    texts, boxes, _ = drawn_ticks(fig)
+    assert texts == [f"S{i}" for i in range(1, 11)]
