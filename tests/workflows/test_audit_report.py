@@ -293,3 +293,33 @@ def test_short_labels_keep_the_figure_as_it_was(tmp_path):
     assert fig.subplotpars.bottom == 0.1
     texts, boxes, _ = drawn_ticks(fig)
     assert texts == [f"S{i}" for i in range(1, 11)]
+
+
+def test_a_long_unbroken_name_or_label_does_not_shrink_the_printed_page(tmp_path):
+    # a word wider than the paper (a session name, a target label without a hyphen)
+    # made Chromium shrink every page to fit it: the tables' numbers printed at ~5 pt
+    from tests.workflows.test_report_browser import A4_PT, PAGE, WORD, browser, print_pdf
+
+    if browser() is None:
+        pytest.skip("no Chromium (apt-get install -y chromium poppler-utils)")
+    session = relabelled(tmp_path, {f"S{i}": f"S{i}" + "X" * 60 for i in range(10, 0, -1)})
+    text = (session / "session.yaml").read_text(encoding="utf-8")
+    name = "N" * 120
+    (session / "session.yaml").write_text(text.replace("paper-zero-pose", name), encoding="utf-8")
+    out = tmp_path / "report.html"
+    result = CliRunner().invoke(main, ["report", str(session), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    pages = PAGE.findall(print_pdf(out, tmp_path / "report.pdf"))
+    heights = []
+    for width, height, body in pages:
+        assert (float(width), float(height)) == pytest.approx(A4_PT, abs=1.0)
+        for x0, y0, x1, y1, word in WORD.findall(body):
+            assert 0 <= float(x0) and float(x1) <= float(width), word
+            if re.fullmatch(r"-?\d+\.\d{3}", word):
+                heights.append(float(y1) - float(y0))
+    # the tables' numbers at their 7.5 pt (a DejaVu word box is ~1.16 em high), not shrunk
+    assert len(heights) > 100 and sorted(heights)[len(heights) // 2] >= 1.164 * 7.0
+    # the name and every label printed whole, in pieces
+    words = "".join(w[4] for _, _, body in pages for w in WORD.findall(body))
+    assert name in words
+    assert all(f"S{i}" + "X" * 60 in words for i in range(1, 11))

@@ -56,6 +56,16 @@ ASSET_TYPES = {
 ASSET_MAX_BYTES = 10 * 2**20
 
 
+#: a text cell with a run of more characters than this without a space (a long target
+#: label) may break anywhere (class ``wrap``): the browser would shrink the whole printed
+#: page to fit a table wider than the paper
+UNBROKEN_CHARS = 24
+
+
+def _unbroken(value: object) -> bool:
+    return any(len(word) > UNBROKEN_CHARS for word in str(value).split())
+
+
 @dataclass(frozen=True)
 class TableCell:
     """One cell as the table macro prints it: its CSS class, its text, and an expanded
@@ -108,6 +118,8 @@ class Table:
                     numeric = self.align[k] == "r" if self.align else k >= self.numeric_from
                     css = "num" if numeric else ""
                 value, u = cell if isinstance(cell, tuple) else (cell, "")
+                if not css and self.css != "meta" and _unbroken(value):
+                    css = "wrap"  # may break anywhere, or the browser shrinks the whole page
                 cells.append(TableCell(css, value, u))
             yield (self.row_classes[i] if self.row_classes is not None else ""), cells
 
