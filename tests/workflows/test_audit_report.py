@@ -323,3 +323,30 @@ def test_a_long_unbroken_name_or_label_does_not_shrink_the_printed_page(tmp_path
     words = "".join(w[4] for _, _, body in pages for w in WORD.findall(body))
     assert name in words
     assert all(f"S{i}" + "X" * 60 in words for i in range(1, 11))
+
+
+def test_one_target_shows_its_common_band(tmp_path):
+    # a band over trials 1..M has no width when M = 1: the legend named a band not drawn
+    from hexatherm.core.geometry import to_um_urad
+    from hexatherm.workflows.process.pipeline import Checks, process_session
+    from hexatherm.workflows.process.uncertainty import pose_uncertainty
+    from hexatherm.workflows.report import pose_figure
+
+    session = session_copy(tmp_path)
+    plan = (session / "plan.yaml").read_text(encoding="utf-8").splitlines(keepends=True)
+    cut = [line for line in plan if not re.search(r"label: [SR]([2-9]|10)\b", line)]
+    (session / "plan.yaml").write_text("".join(cut), encoding="utf-8")
+    centres = (session / "centres.csv").read_text(encoding="utf-8").splitlines(keepends=True)
+    keep = [line for line in centres if not re.match(r"[SR]([2-9]|10),", line)]
+    (session / "centres.csv").write_text("".join(keep), encoding="utf-8")
+    result = process_session(session, "linear", None, Checks())
+    assert len(result.correction.target_index) == 1
+    uncertainty = pose_uncertainty(result)
+    assert uncertainty.common_u is not None
+    expected = 2.0 * to_um_urad(uncertainty.common_u[:, 6:12])[0]
+    fig = pose_figure(result, uncertainty, 2.0)
+    for j, ax in enumerate(fig.axes[:6]):
+        (band,) = [c for c in ax.collections if c.get_gid() == "common"]
+        xs, ys = band.get_paths()[0].vertices.T
+        assert xs.min() < 1.0 - 0.2 and xs.max() > 1.0 + 0.2, j  # wide enough to see
+        assert ys.max() == pytest.approx(expected[j]) and ys.min() == pytest.approx(-expected[j])

@@ -231,6 +231,9 @@ def pose_figure(
     common = None
     if uncertainty is not None and uncertainty.common_u is not None:
         common = coverage_factor * to_um_urad(uncertainty.common_u[:, 6:12])
+    band_x = trials
+    if common is not None and len(trials) == 1:  # one target: a band as wide as its trial
+        band_x, common = np.array([1.0 - 2 * TRIAL_OFFSET, 1.0 + 2 * TRIAL_OFFSET]), common[[0, 0]]
     bad = [i for i, label in enumerate(labels) if label in failing]
     fig = _new_figure(9.5, 6.2, left=0.08, bottom=0.1, top=0.84, wspace=0.36, hspace=0.2)
     axes = fig.subplots(2, 3, sharex=True)
@@ -239,7 +242,7 @@ def pose_figure(
             # the corrected poses' common part (O and R0, measured once): +-U_common about
             # zero, the shift every target shares
             ax.fill_between(
-                trials,
+                band_x,
                 -common[:, j],
                 common[:, j],
                 color=CORRECTED_COLOUR,
