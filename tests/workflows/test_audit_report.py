@@ -350,3 +350,22 @@ def test_one_target_shows_its_common_band(tmp_path):
         xs, ys = band.get_paths()[0].vertices.T
         assert xs.min() < 1.0 - 0.2 and xs.max() > 1.0 + 0.2, j  # wide enough to see
         assert ys.max() == pytest.approx(expected[j]) and ys.min() == pytest.approx(-expected[j])
+
+
+# ------------------------------------------------------------------ a template is not a program
+
+
+@pytest.mark.parametrize(
+    "expression",
+    [
+        "''.__class__.__mro__[1].__subclasses__()",
+        "asset.__globals__",
+        "header_rows.__class__.__init__.__globals__",
+    ],
+)
+def test_a_template_cannot_reach_python_internals(tmp_path, expression):
+    # the lab's templates are data: a folder passed around between labs must not run code
+    folder = templates(tmp_path / "t", {"closing.html.j2": "<p>\n{{ " + expression + " }}</p>\n"})
+    line = report_refused(tmp_path, folder)
+    assert line.startswith(f"Error: {folder / 'closing.html.j2'}:2: template: "), line
+    assert "unsafe" in line, line

@@ -35,6 +35,7 @@ from typing import Any
 import jinja2
 from jinja2 import nodes
 from jinja2.loaders import split_template_path
+from jinja2.sandbox import SandboxedEnvironment
 from markupsafe import Markup
 
 from hexatherm import __version__
@@ -211,9 +212,11 @@ class _Loader(jinja2.FileSystemLoader):
 
 @cache
 def environment(template_dir: Path | None = None) -> jinja2.Environment:
-    """The templates: ``template_dir``'s first (a lab's), then the package's."""
+    """The templates: ``template_dir``'s first (a lab's), then the package's; sandboxed (a
+    template prints the data it is given, and cannot reach Python's internals: ``__class__``,
+    ``__globals__`` ... are refused, a lab's folder is data, not a program)."""
     folders = (PACKAGE_TEMPLATES,) if template_dir is None else (template_dir, PACKAGE_TEMPLATES)
-    env = jinja2.Environment(
+    env = SandboxedEnvironment(
         loader=jinja2.ChoiceLoader([_Loader(str(f)) for f in folders]),
         autoescape=True,
         undefined=jinja2.StrictUndefined,
