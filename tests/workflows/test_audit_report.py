@@ -369,3 +369,13 @@ def test_a_template_cannot_reach_python_internals(tmp_path, expression):
     line = report_refused(tmp_path, folder)
     assert line.startswith(f"Error: {folder / 'closing.html.j2'}:2: template: "), line
     assert "unsafe" in line, line
+
+
+def test_a_mistake_that_fails_inside_hexatherms_macro_names_the_labs_line(tmp_path):
+    # the lab calls hexatherm's table macro with a text: it fails in macros.html.j2,
+    # a file the lab did not write; the line to fix is the lab's
+    text = '{% import "macros.html.j2" as m %}\n<p>x</p>\n{{ m.table(title) }}\n'
+    folder = templates(tmp_path / "t", {"closing.html.j2": text})
+    line = report_refused(tmp_path, folder)
+    assert line.startswith(f"Error: {folder / 'closing.html.j2'}:3: template: "), line
+    assert "has no attribute 'css'" in line and "hexatherm's macros.html.j2:" in line, line

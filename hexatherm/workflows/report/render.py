@@ -332,11 +332,21 @@ def template_error(exc: jinja2.TemplateError, env: jinja2.Environment) -> InputE
 def _in_template(message: str, exc: BaseException, env: jinja2.Environment) -> InputError:
     """An :class:`InputError` with ``message``, naming the file and line of the innermost
     template (a ``.j2`` file, or any other file the templates include: ``style.css``)
-    that ``exc`` passed through."""
-    for frame in reversed(traceback.extract_tb(exc.__traceback__)):
-        if not frame.filename.endswith(".py") and not frame.filename.startswith("<"):
-            return InputError(message, path=frame.filename, line=frame.lineno)
-    return InputError(message, path=_folders(env))
+    that ``exc`` passed through: the innermost of the lab's when the lab has templates
+    (the line to fix), with hexatherm's file and line where it failed, if deeper."""
+    frames = [
+        frame
+        for frame in traceback.extract_tb(exc.__traceback__)
+        if not frame.filename.endswith(".py") and not frame.filename.startswith("<")
+    ]
+    if not frames:
+        return InputError(message, path=_folders(env))
+    package = str(PACKAGE_TEMPLATES) + os.sep
+    labs = [f for f in frames if not f.filename.startswith(package)]
+    where = labs[-1] if labs else frames[-1]
+    if where is not frames[-1]:
+        message += f" (in hexatherm's {Path(frames[-1].filename).name}:{frames[-1].lineno})"
+    return InputError(message, path=where.filename, line=where.lineno)
 
 
 def _folders(env: jinja2.Environment) -> str:
