@@ -208,7 +208,7 @@ def provenance_files(page: Path) -> list[str]:
     """The input files the page's provenance lists, as shown."""
     text = page.read_text(encoding="utf-8")
     files = text.split("Input files, relative to", 1)[1].split("</tbody>", 1)[0]
-    return re.findall(r"<tr><td>([^<]*)</td>", files)
+    return re.findall(r"<tr><td[^>]*>([^<]*)</td>", files)
 
 
 @pytest.mark.parametrize("where", ["session", "separate"])
@@ -379,3 +379,32 @@ def test_a_mistake_that_fails_inside_hexatherms_macro_names_the_labs_line(tmp_pa
     line = report_refused(tmp_path, folder)
     assert line.startswith(f"Error: {folder / 'closing.html.j2'}:3: template: "), line
     assert "has no attribute 'css'" in line and "hexatherm's macros.html.j2:" in line, line
+
+
+def test_a_template_or_image_in_a_sub_folder_is_listed_in_the_provenance(tmp_path):
+    # the page is made from them: a signed report names every file it came from
+    folder = templates(
+        tmp_path / "t",
+        {
+            "closing.html.j2": '{% include "parts/words.html.j2" %}\n',
+            "letterhead.html.j2": "<img src=\"{{ asset('img/logo.svg') }}\">\n",
+        },
+    )
+    templates(folder / "parts", {"words.html.j2": "<p>Not to be reproduced.</p>\n"})
+    templates(folder / "img", {"logo.svg": "<svg>EML</svg>"})
+    templates(folder / ".git", {"HEAD": "ref: refs/heads/main\n"})  # a lab's own history
+    out = tmp_path / "report.html"
+    result = CliRunner().invoke(
+        main, ["report", str(SESSION), "--template-dir", str(folder), "-o", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    page = out.read_text(encoding="utf-8")
+    assert "Not to be reproduced." in page
+    files = page.split("Input files, relative to", 1)[1].split("</tbody>", 1)[0]
+    rows = dict(
+        (path, sha)
+        for path, sha in re.findall(r"<tr><td[^>]*>([^<]*)</td>.*?<td[^>]*>([0-9a-f]{64})<", files)
+    )
+    for name in ("closing.html.j2", "letterhead.html.j2", "parts/words.html.j2", "img/logo.svg"):
+        assert rows[str(folder / name)] == hashlib.sha256((folder / name).read_bytes()).hexdigest()
+    assert not any(".git" in path for path in rows)
