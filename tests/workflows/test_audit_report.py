@@ -408,3 +408,23 @@ def test_a_template_or_image_in_a_sub_folder_is_listed_in_the_provenance(tmp_pat
     for name in ("closing.html.j2", "letterhead.html.j2", "parts/words.html.j2", "img/logo.svg"):
         assert rows[str(folder / name)] == hashlib.sha256((folder / name).read_bytes()).hexdigest()
     assert not any(".git" in path for path in rows)
+
+
+# ------------------------------------------------------------------ provenance
+
+
+def test_the_command_line_in_the_provenance_runs_as_printed(tmp_path):
+    # a folder with a space (and a quote) in its name: printed joined by spaces, the
+    # command line named two arguments where there was one
+    import html
+    import shlex
+
+    session = session_copy(tmp_path / "Sessions 2026 'Zürich'")
+    out = tmp_path / "the report.html"
+    args = ["report", str(session), "-o", str(out), "--tolerance", "Tx=2um"]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    page = out.read_text(encoding="utf-8")
+    row = re.search(r"<tr><td>command line</td><td>([^<]*)</td>", page)
+    assert row is not None
+    assert shlex.split(html.unescape(row.group(1))) == ["hexatherm", *args]
