@@ -428,3 +428,21 @@ def test_the_command_line_in_the_provenance_runs_as_printed(tmp_path):
     row = re.search(r"<tr><td>command line</td><td>([^<]*)</td>", page)
     assert row is not None
     assert shlex.split(html.unescape(row.group(1))) == ["hexatherm", *args]
+
+
+# ------------------------------------------------------------------ -o
+
+
+@pytest.mark.parametrize(("given", "why"), [("new/", "a folder"), ("", "empty")])
+def test_an_output_that_is_no_file_name_is_a_usage_error(tmp_path, monkeypatch, given, why):
+    # "-o new/" wrote a file named "new"; "-o ''" was refused as "-o ." (the current folder)
+    monkeypatch.chdir(tmp_path)
+    session = session_copy(tmp_path)
+    before = hashes(tmp_path)
+    result = CliRunner().invoke(main, ["report", str(session), "-o", given])
+    assert result.exit_code == 2, result.output
+    assert isinstance(result.exception, SystemExit)
+    assert "'-o'" in result.output and why in result.output, result.output
+    assert hashes(tmp_path) == before and sorted(p.name for p in tmp_path.iterdir()) == [
+        "paper-zero-pose"
+    ]
