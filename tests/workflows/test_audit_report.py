@@ -446,3 +446,18 @@ def test_an_output_that_is_no_file_name_is_a_usage_error(tmp_path, monkeypatch, 
     assert hashes(tmp_path) == before and sorted(p.name for p in tmp_path.iterdir()) == [
         "paper-zero-pose"
     ]
+
+
+@pytest.mark.parametrize(
+    "text",
+    ["{{ text|safe }}", "{% filter safe %}{{ text }}{% endfilter %}"],
+)
+def test_a_template_cannot_print_the_data_as_markup(tmp_path, text):
+    # '|safe' let a session's "<script>" into the page through a lab's letterhead
+    letterhead = (
+        "<div>\n{% for name, text in header_rows %}<span>" + text + "</span>{% endfor %}</div>\n"
+    )
+    folder = templates(tmp_path / "t", {"letterhead.html.j2": letterhead})
+    line = report_refused(tmp_path, folder)
+    assert line.startswith(f"Error: {folder / 'letterhead.html.j2'}:2: template: "), line
+    assert "safe" in line, line

@@ -214,7 +214,8 @@ class _Loader(jinja2.FileSystemLoader):
 def environment(template_dir: Path | None = None) -> jinja2.Environment:
     """The templates: ``template_dir``'s first (a lab's), then the package's; sandboxed (a
     template prints the data it is given, and cannot reach Python's internals: ``__class__``,
-    ``__globals__`` ... are refused, a lab's folder is data, not a program)."""
+    ``__globals__`` ... are refused, a lab's folder is data, not a program); without the
+    ``safe`` filter (a value given by the data is never printed as markup)."""
     folders = (PACKAGE_TEMPLATES,) if template_dir is None else (template_dir, PACKAGE_TEMPLATES)
     env = SandboxedEnvironment(
         loader=jinja2.ChoiceLoader([_Loader(str(f)) for f in folders]),
@@ -225,6 +226,8 @@ def environment(template_dir: Path | None = None) -> jinja2.Environment:
         lstrip_blocks=True,
         finalize=_escaped,
     )
+    # every value the data gives prints as text: no template marks it as markup
+    del env.filters["safe"]
     env.globals["asset"] = lambda name: _asset(folders, str(name))
     env.globals["version"] = __version__
     return env
@@ -322,6 +325,8 @@ def _check_references(env: jinja2.Environment, roots: list[str], folder: Path) -
 def template_error(exc: jinja2.TemplateError, env: jinja2.Environment) -> InputError:
     """``exc`` as an :class:`InputError` naming the template's file and line."""
     message = str(exc.message if exc.message is not None else exc).splitlines()[0]
+    if message.startswith("No filter named 'safe'"):
+        message += " (hexatherm prints every value of the data as text, never as markup)"
     if isinstance(exc, jinja2.TemplateSyntaxError) and exc.filename:
         return InputError(f"template: {message}", path=exc.filename, line=exc.lineno)
     if isinstance(exc, jinja2.TemplateNotFound):
