@@ -461,3 +461,37 @@ def test_a_template_cannot_print_the_data_as_markup(tmp_path, text):
     line = report_refused(tmp_path, folder)
     assert line.startswith(f"Error: {folder / 'letterhead.html.j2'}:2: template: "), line
     assert "safe" in line, line
+
+
+# ------------------------------------------------------------------ a user's text in a figure
+
+
+@pytest.mark.parametrize(
+    "column", ["$\\notacommand{$ probe", "$x^2$ air", "_spare", "cost $5 and $6"]
+)
+def test_a_temperature_columns_name_is_printed_in_the_legend_as_it_is(tmp_path, column):
+    # matplotlib reads "$...$" as mathematics (a traceback, or x² for "$x^2$") and hides
+    # a label that starts with "_": the legend must name the column as the file does
+    from hexatherm.workflows.process.pipeline import Checks, process_session
+    from hexatherm.workflows.report import temperature_figure
+
+    session = session_copy(tmp_path)
+    lines = (session / "temperatures.csv").read_text(encoding="utf-8").splitlines()
+    lines = [lines[0] + "," + column] + [line + ",20.5" for line in lines[1:]]
+    (session / "temperatures.csv").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    out = tmp_path / "report.html"
+    result = CliRunner().invoke(main, ["report", str(session), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    fig = temperature_figure(process_session(session, "linear", None, Checks()))
+    fig.canvas.draw()
+    legend = fig.axes[0].get_legend()
+    shown = {t.get_text(): t for t in legend.get_texts()}
+    assert "air" in shown and len(shown) == 8
+    (text,) = [t for t in legend.get_texts() if t.get_text() not in {"air"}][6:]
+    # what a reader sees: the name's characters, no mathematics
+    from matplotlib import cbook
+
+    renderer = fig.canvas.get_renderer()
+    assert not cbook.is_math_text(text.get_text())
+    assert text.get_text().replace("\\$", "$") == column
+    assert text.get_window_extent(renderer).width > 0

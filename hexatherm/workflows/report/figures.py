@@ -320,6 +320,17 @@ def _styled_line(
     )
 
 
+def plain_text(text: str) -> str:
+    r"""A user's ``text`` (a column's name) as matplotlib prints it character for character:
+    its dollars escaped, so that no ``$...$`` is read as mathematics (``$x^2$`` printed as
+    x², ``$\foo$`` a parse error).
+
+    >>> plain_text("$x^2$ air")
+    '\\$x^2\\$ air'
+    """
+    return text.replace("$", "\\$")
+
+
 def temperature_figure(result: ProcessResult) -> Figure | None:
     """The paper's Figure 7: leg temperatures (and air, ...) over time; None without a log.
 
@@ -345,8 +356,9 @@ def temperature_figure(result: ProcessResult) -> Figure | None:
             linewidth=1.0,
             label=f"leg {leg + 1}",
         )
+    handles, names = ax.get_legend_handles_labels()  # the legs'
     for k, (name, values) in enumerate(temps.others_C.items()):
-        ax.plot(
+        (line,) = ax.plot(
             hours,
             values,
             color="#000000" if k == 0 else "#7f7f7f",
@@ -354,11 +366,13 @@ def temperature_figure(result: ProcessResult) -> Figure | None:
             linestyle=("--", ":", "-.")[k % 3],
             label=name,
         )
+        handles.append(line)
+        names.append(plain_text(name))  # the file's column, as it is: "_spare", "$x$"
     _mark_targets(ax, result)
     ax.set_xlabel("time since start (h)")
     ax.set_ylabel(f"temperature ({unit_text('degC')})")
     ax.grid(True, linewidth=0.3)
-    ax.legend(fontsize=8, ncols=2)
+    ax.legend(handles, names, fontsize=8, ncols=2)
     ax.set_title("Measured temperatures", fontsize=11)
     return fig
 
