@@ -495,3 +495,45 @@ def test_a_temperature_columns_name_is_printed_in_the_legend_as_it_is(tmp_path, 
     assert not cbook.is_math_text(text.get_text())
     assert text.get_text().replace("\\$", "$") == column
     assert text.get_window_extent(renderer).width > 0
+
+
+def test_only_a_run_no_browser_breaks_may_break_anywhere():
+    # a path that breaks at its hyphens keeps its cell (and its print) as before; one
+    # without a space or hyphen over 24 characters may break anywhere
+    from hexatherm.workflows.report import table
+
+    cells = [
+        "/srv/hexapod-lab/lab-templates/logo.svg",
+        "/home/jdoe/labdata/sessions/campaign2026/centres.csv",
+        "S1" + "X" * 60,
+        "S10",
+    ]
+    t = table([[("file", 1)]], [[c] for c in cells], numeric_from=9)
+    assert [cs[0].css for _, cs in t.body()] == ["", "long", "long", ""]
+    meta = table([[("file", 1)]], [[c] for c in cells], numeric_from=9, css="meta")
+    assert {cs[0].css for _, cs in meta.body()} == {""}  # meta tables wrap anyway
+
+
+def test_a_long_path_in_the_provenance_does_not_shrink_the_printed_page(tmp_path):
+    # a lab file in a folder whose path has no hyphen: listed whole in the provenance,
+    # wider than its column, it made Chromium shrink every page
+    from tests.workflows.test_report_browser import A4_PT, PAGE, WORD, browser, print_pdf
+
+    if browser() is None:
+        pytest.skip("no Chromium (apt-get install -y chromium poppler-utils)")
+    deep = tmp_path / "labdata" / "qualitymanagement" / "templatesandforms" / "hexapodlab2026"
+    deep.mkdir(parents=True)
+    (deep / "laboratoryfile.yaml").write_text(
+        "format: hexatherm-lab/1\nlab: Example Lab\n", encoding="utf-8"
+    )
+    out = tmp_path / "report.html"
+    args = ["report", str(SESSION), "--lab", str(deep / "laboratoryfile.yaml"), "-o", str(out)]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    pages = PAGE.findall(print_pdf(out, tmp_path / "report.pdf"))
+    title = max(
+        (float(y1) - float(y0), w) for _, _, b in pages[:1] for _, y0, _, y1, w in WORD.findall(b)
+    )
+    assert title[0] >= 0.97 * 1.164 * 14.25, title  # the title's 14.25 pt, not shrunk
+    for width, height, _ in pages:
+        assert (float(width), float(height)) == pytest.approx(A4_PT, abs=1.0)

@@ -25,6 +25,7 @@ from __future__ import annotations
 import base64
 import html
 import os
+import re
 import traceback
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -57,14 +58,15 @@ ASSET_TYPES = {
 ASSET_MAX_BYTES = 10 * 2**20
 
 
-#: a text cell with a run of more characters than this without a space (a long target
-#: label) may break anywhere (class ``wrap``): the browser would shrink the whole printed
-#: page to fit a table wider than the paper
+#: a text cell with a run of more characters than this that a browser may not break (no
+#: space, no hyphen: a long target label, a path) may break anywhere (class ``long``): the
+#: browser would shrink the whole printed page to fit a table wider than the paper
 UNBROKEN_CHARS = 24
+_BREAKS = re.compile(r"[\s-]+")
 
 
 def _unbroken(value: object) -> bool:
-    return any(len(word) > UNBROKEN_CHARS for word in str(value).split())
+    return any(len(word) > UNBROKEN_CHARS for word in _BREAKS.split(str(value)))
 
 
 @dataclass(frozen=True)
@@ -120,7 +122,7 @@ class Table:
                     css = "num" if numeric else ""
                 value, u = cell if isinstance(cell, tuple) else (cell, "")
                 if not css and self.css != "meta" and _unbroken(value):
-                    css = "wrap"  # may break anywhere, or the browser shrinks the whole page
+                    css = "long"  # may break anywhere, or the browser shrinks the whole page
                 cells.append(TableCell(css, value, u))
             yield (self.row_classes[i] if self.row_classes is not None else ""), cells
 
