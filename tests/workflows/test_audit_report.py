@@ -537,3 +537,23 @@ def test_a_long_path_in_the_provenance_does_not_shrink_the_printed_page(tmp_path
     assert title[0] >= 0.97 * 1.164 * 14.25, title  # the title's 14.25 pt, not shrunk
     for width, height, _ in pages:
         assert (float(width), float(height)) == pytest.approx(A4_PT, abs=1.0)
+
+
+@pytest.mark.parametrize(
+    "target",
+    ["centres.csv", "session.yaml", "plan.yaml", "temperatures.csv", "lab.yaml", "t/logo.svg"],
+)
+def test_report_onto_an_input_is_refused_whatever_the_overwrite(tmp_path, target):
+    # (found fine: kept as a guard) every file the page is made from, the lab's too
+    session = session_copy(tmp_path)
+    folder = templates(session / "t", {"closing.html.j2": "<p>closing</p>\n"})
+    (folder / "logo.svg").write_text("<svg/>", encoding="utf-8")
+    (session / "lab.yaml").write_text("format: hexatherm-lab/1\nlab: L\n", encoding="utf-8")
+    before = hashes(session)
+    out = session / target
+    for extra in ([], ["--overwrite"]):
+        args = ["report", str(session), "--lab", str(session / "lab.yaml")]
+        args += ["--template-dir", str(folder), "-o", str(out), *extra]
+        line = refusal(CliRunner().invoke(main, args))
+        assert "the output is the input" in line, line
+    assert hashes(session) == before and not (session / ".hexatherm-manifest.json").exists()
