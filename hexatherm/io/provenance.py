@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from hexatherm import __version__
+from hexatherm.errors import InputError
 
 #: the file's name in every output folder
 PROVENANCE_NAME = "provenance.json"
@@ -130,7 +131,10 @@ def input_entries(inputs: Iterable[str | os.PathLike[str]]) -> list[dict[str, An
         entry: dict[str, Any] = {"path": given}
         if path.is_file():
             entry["bytes"] = path.stat().st_size
-            entry["sha256"] = _sha256(path)
+            try:
+                entry["sha256"] = _sha256(path)
+            except OSError as exc:  # unreadable: its mode, a failing disk or share
+                raise InputError(f"cannot be read ({exc.strerror or exc})", path=given) from None
         elif path.is_dir():
             entry["folder"] = True
         files.append(entry)

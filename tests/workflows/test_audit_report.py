@@ -27,12 +27,12 @@ SESSION = ROOT / "sessions" / "paper-zero-pose"
 
 
 def hashes(*folders: Path) -> dict[str, str]:
-    """SHA-256 of every file under ``folders``."""
+    """SHA-256 of every file under ``folders`` (but links)."""
     return {
         str(p): hashlib.sha256(p.read_bytes()).hexdigest()
         for folder in folders
         for p in sorted(folder.rglob("*"))
-        if p.is_file()
+        if p.is_file() and not p.is_symlink()
     }
 
 
@@ -557,3 +557,17 @@ def test_report_onto_an_input_is_refused_whatever_the_overwrite(tmp_path, target
         line = refusal(CliRunner().invoke(main, args))
         assert "the output is the input" in line, line
     assert hashes(session) == before and not (session / ".hexatherm-manifest.json").exists()
+
+
+@pytest.mark.parametrize("name", ["closing.html.j2", "notes.txt"])
+def test_a_file_of_the_template_folder_that_cannot_be_read_is_one_line(tmp_path, name):
+    # /proc/self/mem reads as an I/O error (as an unreadable file or a failing share
+    # does; root reads any mode): a template, or a file hashed for the provenance
+    mem = Path("/proc/self/mem")
+    if not mem.is_file():
+        pytest.skip("no /proc/self/mem")
+    folder = templates(tmp_path / "t", {"letterhead.html.j2": "<div>{{ title }}</div>\n"})
+    (folder / name).symlink_to(mem)
+    line = report_refused(tmp_path, folder)
+    assert line.startswith(f"Error: {folder / name}: "), line
+    assert "cannot be read" in line and "Input/output error" in line, line

@@ -192,15 +192,16 @@ def _escaped(value: object) -> Markup:
 
 
 class _Loader(jinja2.FileSystemLoader):
-    """A folder of templates; a file that is not UTF-8 is a syntax error naming its line."""
+    """A folder of templates; a file that is not UTF-8 is a syntax error naming its line, one
+    that cannot be read an :class:`InputError` naming it."""
 
     def get_source(self, environment: jinja2.Environment, template: str) -> tuple[str, str, Any]:
         try:
             return super().get_source(environment, template)
+        except jinja2.TemplateNotFound:  # an OSError too: the next folder is searched
+            raise
         except UnicodeDecodeError as exc:
-            pieces = split_template_path(template)
-            paths = [os.path.join(folder, *pieces) for folder in self.searchpath]
-            path = next((p for p in paths if os.path.isfile(p)), paths[0])
+            path = self._file(template)
             data = bytes(exc.object)
             line = data.count(b"\n", 0, exc.start) + 1
             column = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
@@ -210,6 +211,15 @@ class _Loader(jinja2.FileSystemLoader):
                 template,
                 path,
             ) from None
+        except OSError as exc:  # unreadable: its mode, a failing disk or share
+            raise InputError(
+                f"template: cannot be read ({exc.strerror or exc})", path=self._file(template)
+            ) from None
+
+    def _file(self, template: str) -> str:
+        pieces = split_template_path(template)
+        paths = [os.path.join(folder, *pieces) for folder in self.searchpath]
+        return next((p for p in paths if os.path.isfile(p)), paths[0])
 
 
 @cache
