@@ -571,3 +571,25 @@ def test_a_file_of_the_template_folder_that_cannot_be_read_is_one_line(tmp_path,
     line = report_refused(tmp_path, folder)
     assert line.startswith(f"Error: {folder / name}: "), line
     assert "cannot be read" in line and "Input/output error" in line, line
+
+
+def test_diagnoses_page_lists_the_labs_templates_and_the_hexapod_file_it_was_made_from(
+    tmp_path,
+):
+    # its provenance.json did; the page (what a reader signs) listed the session's alone
+    session = session_copy(tmp_path, "with-hidden-effect")
+    folder = templates(tmp_path / "t", {"closing.html.j2": "<p>Not to be reproduced.</p>\n"})
+    model = tmp_path / "model" / "hexapod.yaml"
+    model.parent.mkdir()
+    shutil.copy(session / "hexapod.yaml", model)
+    out = tmp_path / "diag"
+    args = ["diagnose", str(session), "--template-dir", str(folder), "--hexapod", str(model)]
+    result = CliRunner().invoke(main, [*args, "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    page = (out / "report.html").read_text(encoding="utf-8")
+    assert "Not to be reproduced." in page
+    files = page.split("Input files, relative to", 1)[1].split("</tbody>", 1)[0]
+    rows = dict(re.findall(r"<tr><td[^>]*>([^<]*)</td>.*?<td[^>]*>([0-9a-f]{64})<", files))
+    for path in (folder / "closing.html.j2", model, session / "centres.csv"):
+        shown = str(path) if str(path) in rows else path.name
+        assert rows[shown] == hashlib.sha256(path.read_bytes()).hexdigest(), shown

@@ -12,7 +12,7 @@ header and the provenance block.
 from __future__ import annotations
 
 import re
-from collections.abc import Collection, Mapping
+from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -140,6 +140,7 @@ def report_html(
     facts: RunFacts | None = None,
     generated: str | None = None,
     template_dir: Path | None = None,
+    extra_inputs: Sequence[Path] = (),
 ) -> str:
     """The page ``report.html`` of a diagnosis.
 
@@ -155,6 +156,9 @@ def report_html(
         Generation time, ISO 8601 with UTC offset (default: now).
     template_dir : Path, optional
         A lab's templates, over the package's.
+    extra_inputs : sequence of Path
+        Further files the page was made from, listed in its provenance after the
+        session's (the ``--hexapod`` model, the lab's template files).
     """
     from hexatherm.io.provenance import current_run, now_iso
 
@@ -182,7 +186,7 @@ def report_html(
         story=Markup("".join(markdown_html(report_markdown(result, names), pngs, keep))),
         provenance=provenance(
             current_run() if facts is None else facts,
-            session.input_files(),
+            [*session.input_files(), *extra_inputs],
             session.path.parent,
             generated or now_iso(),
             extra=[("hexapod", result.data.hexapod_source)],
@@ -196,10 +200,11 @@ def write_report_files(
     *,
     dpi: int = FIGURE_DPI,
     template_dir: Path | None = None,
+    extra_inputs: Sequence[Path] = (),
 ) -> list[Path]:
     """Write ``report.md``, its PNG figures (:data:`FIGURE_FILES`) and ``report.html`` (the
-    same story, figures embedded; ``template_dir``: a lab's templates) into the folder
-    ``out_dir``.
+    same story, figures embedded; ``template_dir``: a lab's templates; ``extra_inputs``: as
+    :func:`report_html`) into the folder ``out_dir``.
 
     The folder must exist; files of the same names are replaced. Returns the
     paths written, ``report.md`` first and ``report.html`` last.
@@ -214,5 +219,6 @@ def write_report_files(
         written.append(path)
     written[0].write_text(report_markdown(result, FIGURE_FILES), encoding="utf-8")
     page = out_dir / REPORT_HTML
-    page.write_text(report_html(result, pngs, template_dir=template_dir), encoding="utf-8")
+    html = report_html(result, pngs, template_dir=template_dir, extra_inputs=extra_inputs)
+    page.write_text(html, encoding="utf-8")
     return [*written, page]
