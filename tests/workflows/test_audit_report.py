@@ -382,7 +382,8 @@ def test_a_mistake_that_fails_inside_hexatherms_macro_names_the_labs_line(tmp_pa
 
 
 def test_a_template_or_image_in_a_sub_folder_is_listed_in_the_provenance(tmp_path):
-    # the page is made from them: a signed report names every file it came from
+    # the page is made from them: a signed report names every file it came from (the
+    # files of sub-folders its templates name: a folder's other files are not read)
     folder = templates(
         tmp_path / "t",
         {
@@ -393,6 +394,7 @@ def test_a_template_or_image_in_a_sub_folder_is_listed_in_the_provenance(tmp_pat
     templates(folder / "parts", {"words.html.j2": "<p>Not to be reproduced.</p>\n"})
     templates(folder / "img", {"logo.svg": "<svg>EML</svg>"})
     templates(folder / ".git", {"HEAD": "ref: refs/heads/main\n"})  # a lab's own history
+    templates(folder / "archive", {"old.html.j2": "<p>2019</p>\n"})  # not named: not read
     out = tmp_path / "report.html"
     result = CliRunner().invoke(
         main, ["report", str(SESSION), "--template-dir", str(folder), "-o", str(out)]
@@ -407,7 +409,7 @@ def test_a_template_or_image_in_a_sub_folder_is_listed_in_the_provenance(tmp_pat
     )
     for name in ("closing.html.j2", "letterhead.html.j2", "parts/words.html.j2", "img/logo.svg"):
         assert rows[str(folder / name)] == hashlib.sha256((folder / name).read_bytes()).hexdigest()
-    assert not any(".git" in path for path in rows)
+    assert not any(".git" in path or "archive" in path for path in rows)
 
 
 # ------------------------------------------------------------------ provenance

@@ -291,6 +291,51 @@ def _named(env: jinja2.Environment, name: str) -> tuple[str, list[tuple[str, int
     return filename or name, found
 
 
+def named_files(template_dir: Path) -> list[Path]:
+    """The files of the lab's folder ``template_dir`` (checked by :func:`check_template_dir`)
+    that its pages are made from, as the templates name them by a constant: every template
+    reached from the lab's and the package's pages, every ``asset("...")``; sub-folders
+    too (a folder's other files are not read: a lab's ``.git``, its archive)."""
+    env = environment(template_dir)
+    assert env.loader is not None
+    top = template_dir.resolve()
+    names = [n for n in sorted(os.listdir(top)) if n.endswith(".j2")]
+    names += sorted(n for n in os.listdir(PACKAGE_TEMPLATES) if n.endswith(".j2"))
+    seen: set[str] = set()
+    found: set[Path] = set()
+    while names:
+        name = names.pop()
+        if name in seen:
+            continue
+        seen.add(name)
+        try:
+            source, filename, _ = env.loader.get_source(env, name)
+        except jinja2.TemplateNotFound:
+            continue
+        if filename is not None and Path(filename).resolve().is_relative_to(top):
+            found.add(Path(filename))
+        tree = env.parse(source, name, filename)
+        for node in tree.find_all(_NAMING):
+            target = getattr(node, "template", None)
+            if isinstance(target, nodes.Const) and isinstance(target.value, str):
+                names.append(target.value)
+        for call in tree.find_all(nodes.Call):
+            first = call.args[0] if call.args else None
+            if (
+                isinstance(call.node, nodes.Name)
+                and call.node.name == "asset"
+                and isinstance(first, nodes.Const)
+                and isinstance(first.value, str)
+            ):
+                path = template_dir / first.value
+                try:
+                    if top in path.resolve().parents and path.is_file():
+                        found.add(path)
+                except (OSError, ValueError):
+                    continue  # refused when the page is rendered
+    return sorted(found)
+
+
 def _check_references(env: jinja2.Environment, roots: list[str], folder: Path) -> None:
     """Every template reachable from ``roots`` compiled; a name found nowhere or a loop is
     a :class:`InputError` at the statement that names it (a loop: a statement of the
@@ -405,6 +450,7 @@ __all__ = [
     "Table",
     "TableCell",
     "check_template_dir",
+    "named_files",
     "environment",
     "render_macro",
     "render_page",
