@@ -73,9 +73,10 @@ def command(
     folder = session if session.is_dir() else session.parent
     out_dir = Path(out) if out is not None else folder / "diagnosis"
     inputs = read_session(session).input_files()
-    inputs += [hexapod_path] if hexapod_path is not None else []
+    extra_inputs = [hexapod_path] if hexapod_path is not None else []
     templates = template_folder(template_dir, None)
-    inputs += template_files(templates)
+    extra_inputs += template_files(templates)
+    inputs += extra_inputs
     # before any work: never into, around or onto the session's files (checked again
     # under the output's lock when the results are written)
     check_output_settled(out_dir, kind="folder", inputs=inputs, overwrite=overwrite)
@@ -95,7 +96,7 @@ def command(
         for name, text in files.items():
             (tmp / name).write_text(text, encoding="utf-8")
             written.append(out_dir / name)
-        pages = write_report_files(result, tmp, template_dir=templates)
+        pages = write_report_files(result, tmp, template_dir=templates, extra_inputs=extra_inputs)
         written += [out_dir / p.relative_to(tmp) for p in pages]
     click.echo(terminal_tables(result, tests=False))
     click.echo()

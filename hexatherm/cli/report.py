@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import click
@@ -29,13 +30,29 @@ from hexatherm.cli.options import (
 from hexatherm.io.files import ReadOptions
 
 
+def _file_name(ctx: click.Context, param: click.Parameter, value: str | None) -> Path | None:
+    """``-o`` as given: a file's name (not empty, not a folder's: ``new/``)."""
+    if value is None:
+        return None
+    if not value:
+        raise click.BadParameter("empty; give the report's file name", ctx, param)
+    if value.endswith(("/", os.sep)):
+        raise click.BadParameter(
+            f"{value!r} names a folder; give the report's file name ({value}report.html)",
+            ctx,
+            param,
+        )
+    return Path(value)
+
+
 @click.command("report")
 @click.argument("session", type=click.Path(exists=True, path_type=Path))
 @click.option(
     "-o",
     "--out",
     "out",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=click.Path(dir_okay=False),
+    callback=_file_name,
     default=None,
     help="Output HTML file [default: SESSION/report.html].",
 )

@@ -106,6 +106,7 @@ __all__ = [
     "check_not_input",
     "check_output",
     "check_output_settled",
+    "hexatherms_own",
     "output_dir",
     "session_entries",
     "write_output_file",
@@ -241,6 +242,16 @@ def _file_foreign(path: Path) -> str | None:
     if sha256_file(path) not in hashes:
         return "changed since hexatherm wrote it"
     return None
+
+
+def hexatherms_own(path: PathLike) -> bool:
+    """Whether the file ``path`` is an output hexatherm wrote there, unchanged since (not a
+    file a recording command recorded), or the manifest that records them: not an input
+    of a later run that reads its folder (a lab's templates beside the report)."""
+    path = Path(path)
+    if path.name == MANIFEST_NAME:
+        return path.is_file() and not path.is_symlink()
+    return os.path.lexists(path) and _file_foreign(path) is None
 
 
 def check_output(

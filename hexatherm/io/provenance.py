@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from hexatherm import __version__
+from hexatherm.errors import InputError
 
 #: the file's name in every output folder
 PROVENANCE_NAME = "provenance.json"
@@ -125,12 +126,15 @@ def input_entries(inputs: Iterable[str | os.PathLike[str]]) -> list[dict[str, An
     """Every input once, in order: ``{"path", "bytes", "sha256"}`` for a file (the
     absolute path), ``{"path", "folder": True}`` for a folder, ``{"path"}`` for neither."""
     files = []
-    for given in dict.fromkeys(os.fspath(p) for p in inputs):
+    for given in dict.fromkeys(os.path.abspath(p) for p in inputs):
         path = Path(given)
-        entry: dict[str, Any] = {"path": os.path.abspath(given)}
+        entry: dict[str, Any] = {"path": given}
         if path.is_file():
             entry["bytes"] = path.stat().st_size
-            entry["sha256"] = _sha256(path)
+            try:
+                entry["sha256"] = _sha256(path)
+            except OSError as exc:  # unreadable: its mode, a failing disk or share
+                raise InputError(f"cannot be read ({exc.strerror or exc})", path=given) from None
         elif path.is_dir():
             entry["folder"] = True
         files.append(entry)

@@ -362,3 +362,22 @@ def test_a_table_cell_is_text_too() -> None:
     assert cells == ["label", cell]
     html = dr.markdown_html(md, {})[-1]
     assert "<script>" not in html and "&lt;script&gt;x&lt;/script&gt; | `y` *z* &amp; \\" in html
+
+
+def test_report_html_writes_units_in_its_own_text_only(result: DiagnosisResult) -> None:
+    # "um" is German for "at" and a folder's name: the page turned a user's "um", "urad",
+    # "degC" into µm, µrad, °C, printing a path or a hexapod's name that is not theirs
+    import html
+
+    user = "Messung um 10 Uhr (urad, degC)"
+    path = Path("/data/um/urad") / "session.yaml"
+    data = result.data
+    session = dataclasses.replace(data.session, name=user, path=path)
+    hexapod = dataclasses.replace(data.hexapod, name=user)
+    data = dataclasses.replace(data, session=session, hexapod=hexapod, hexapod_source=user)
+    page = dr.report_html(dataclasses.replace(result, data=data), {}, generated="2026-01-01")
+    text = html.unescape(re.sub(r"<[^>]+>", "", page))
+    assert f"session: {path}" in text
+    assert f"hexapod: {user} ({user})" in text
+    # hexatherm's own text keeps its units as a reader writes them
+    assert "RMS (µm)" in text and "RMS (um)" not in text

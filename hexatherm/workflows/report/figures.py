@@ -144,13 +144,57 @@ def _new_figure(width_in: float, height_in: float, **margins: float) -> Figure:
     return fig
 
 
+#: the longest target label a tick of Figure 6 prints whole; a longer one keeps its first
+#: 5 and last 6 characters about an ellipsis (the tables print it whole)
+TICK_CHARS = 12
+
+
+def tick_labels(labels: Sequence[str]) -> list[str]:
+    """The targets' labels as ticks print them: whole up to :data:`TICK_CHARS`, else
+    shortened in the middle; the trial numbers 1..M if shortened ones would collide.
+
+    >>> tick_labels(["S1", "S2-WORKSPACE-CORNER-A", "S3-WORKSPACE-CORNER-B"])
+    ['S1', 'S2-WO…RNER-A', 'S3-WO…RNER-B']
+    >>> tick_labels(["A-WORKSPACE-1", "A-WORKSPACE-1-B-WORKSPACE-1"])
+    ['1', '2']
+    """
+    head, tail = TICK_CHARS // 2 - 1, TICK_CHARS // 2
+    shown = [s if len(s) <= TICK_CHARS else s[:head] + "\u2026" + s[-tail:] for s in labels]
+    if len(set(shown)) < len(set(labels)):
+        return [str(i) for i in range(1, len(labels) + 1)]
+    return shown
+
+
 def _trial_ticks(ax: Axes, labels: Sequence[str]) -> None:
-    """Trial positions 1..M labelled with the targets' labels (thinned when many)."""
+    """Trial positions 1..M labelled with the targets' labels (thinned when many; long
+    ones shortened, :func:`tick_labels`)."""
     every = max(1, int(np.ceil(len(labels) / 12)))
     positions = np.arange(1, len(labels) + 1)[::every]
-    shown = [labels[p - 1] for p in positions]
+    ticks = tick_labels(labels)
+    shown = [ticks[p - 1] for p in positions]
     ax.set_xticks(positions, shown, rotation=90 if sum(map(len, shown)) > 16 else 0, fontsize=8)
     ax.set_xlim(0.4, len(labels) + 0.6)
+
+
+def _room_below(fig: Figure, ax: Axes) -> None:
+    """Raise the bottom of ``fig``'s panels when ``ax``'s tick labels and x label need
+    more room than the figure's margin gives (measured, not drawn: long labels); as it
+    was otherwise."""
+    from matplotlib import rcParams
+
+    renderer = fig.canvas.get_renderer()  # type: ignore[attr-defined]
+    ticks = ax.get_xticklabels()
+    points = fig.dpi / 72.0
+    tick = max(t.get_tick_padding() for t in ax.xaxis.get_major_ticks())  # its length out
+    need = (
+        max((t.get_window_extent(renderer).height for t in ticks), default=0.0)
+        + ax.xaxis.label.get_window_extent(renderer).height
+        + (tick + float(rcParams["xtick.major.pad"]) + ax.xaxis.labelpad) * points
+    )
+    height = fig.bbox.height
+    bottom = fig.subplotpars.bottom
+    if need + 2.0 * points > bottom * height:
+        fig.subplots_adjust(bottom=(need + 2.0 * points) / height)
 
 
 def pose_figure(
@@ -187,6 +231,9 @@ def pose_figure(
     common = None
     if uncertainty is not None and uncertainty.common_u is not None:
         common = coverage_factor * to_um_urad(uncertainty.common_u[:, 6:12])
+    band_x = trials
+    if common is not None and len(trials) == 1:  # one target: a band as wide as its trial
+        band_x, common = np.array([1.0 - 2 * TRIAL_OFFSET, 1.0 + 2 * TRIAL_OFFSET]), common[[0, 0]]
     bad = [i for i, label in enumerate(labels) if label in failing]
     fig = _new_figure(9.5, 6.2, left=0.08, bottom=0.1, top=0.84, wspace=0.36, hspace=0.2)
     axes = fig.subplots(2, 3, sharex=True)
@@ -195,7 +242,7 @@ def pose_figure(
             # the corrected poses' common part (O and R0, measured once): +-U_common about
             # zero, the shift every target shares
             ax.fill_between(
-                trials,
+                band_x,
                 -common[:, j],
                 common[:, j],
                 color=CORRECTED_COLOUR,
@@ -240,6 +287,7 @@ def pose_figure(
         _trial_ticks(ax, labels)
         if j >= 3:
             ax.set_xlabel("trial (target step)", fontsize=9)
+    _room_below(fig, axes.flat[3])
     handles, names = axes.flat[0].get_legend_handles_labels()
     fig.legend(handles, names, loc="upper center", bbox_to_anchor=(0.5, 0.925), ncols=3, fontsize=9)
     bar_text = (
@@ -272,6 +320,17 @@ def _styled_line(
     )
 
 
+def plain_text(text: str) -> str:
+    r"""A user's ``text`` (a column's name) as matplotlib prints it character for character:
+    its dollars escaped, so that no ``$...$`` is read as mathematics (``$x^2$`` printed as
+    x², ``$\foo$`` a parse error).
+
+    >>> plain_text("$x^2$ air")
+    '\\$x^2\\$ air'
+    """
+    return text.replace("$", "\\$")
+
+
 def temperature_figure(result: ProcessResult) -> Figure | None:
     """The paper's Figure 7: leg temperatures (and air, ...) over time; None without a log.
 
@@ -297,8 +356,9 @@ def temperature_figure(result: ProcessResult) -> Figure | None:
             linewidth=1.0,
             label=f"leg {leg + 1}",
         )
+    handles, names = ax.get_legend_handles_labels()  # the legs'
     for k, (name, values) in enumerate(temps.others_C.items()):
-        ax.plot(
+        (line,) = ax.plot(
             hours,
             values,
             color="#000000" if k == 0 else "#7f7f7f",
@@ -306,11 +366,13 @@ def temperature_figure(result: ProcessResult) -> Figure | None:
             linestyle=("--", ":", "-.")[k % 3],
             label=name,
         )
+        handles.append(line)
+        names.append(plain_text(name))  # the file's column, as it is: "_spare", "$x$"
     _mark_targets(ax, result)
     ax.set_xlabel("time since start (h)")
     ax.set_ylabel(f"temperature ({unit_text('degC')})")
     ax.grid(True, linewidth=0.3)
-    ax.legend(fontsize=8, ncols=2)
+    ax.legend(handles, names, fontsize=8, ncols=2)
     ax.set_title("Measured temperatures", fontsize=11)
     return fig
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import html
 import os
+import shlex
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -104,7 +105,8 @@ def provenance(
     if facts is None:
         command = options = "not run from the command line"
     else:
-        command = " ".join(["hexatherm", facts.command, *facts.argv])
+        # quoted as a POSIX shell reads it: it runs as printed (a path with a space)
+        command = shlex.join(["hexatherm", facts.command, *facts.argv])
         options = "; ".join(f"{key} = {value}" for key, value in facts.options.items())
     rows: list[Sequence[Cell]] = [
         ["generated", generated],

@@ -25,6 +25,7 @@ from __future__ import annotations
 import base64
 import html
 import os
+import re
 import traceback
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -33,6 +34,9 @@ from pathlib import Path
 from typing import Any
 
 import jinja2
+from jinja2 import nodes
+from jinja2.loaders import split_template_path
+from jinja2.sandbox import SandboxedEnvironment
 from markupsafe import Markup
 
 from hexatherm import __version__
@@ -49,6 +53,20 @@ ASSET_TYPES = {
     ".gif": "image/gif",
     ".webp": "image/webp",
 }
+#: the largest asset embedded (a logo, a stamp, a signature: a larger file is a mistake,
+#: and would make a page no browser prints)
+ASSET_MAX_BYTES = 10 * 2**20
+
+
+#: a text cell with a run of more characters than this that a browser may not break (no
+#: space, no hyphen: a long target label, a path) may break anywhere (class ``long``): the
+#: browser would shrink the whole printed page to fit a table wider than the paper
+UNBROKEN_CHARS = 24
+_BREAKS = re.compile(r"[\s-]+")
+
+
+def _unbroken(value: object) -> bool:
+    return any(len(word) > UNBROKEN_CHARS for word in _BREAKS.split(str(value)))
 
 
 @dataclass(frozen=True)
@@ -103,6 +121,8 @@ class Table:
                     numeric = self.align[k] == "r" if self.align else k >= self.numeric_from
                     css = "num" if numeric else ""
                 value, u = cell if isinstance(cell, tuple) else (cell, "")
+                if not css and self.css != "meta" and _unbroken(value):
+                    css = "long"  # may break anywhere, or the browser shrinks the whole page
                 cells.append(TableCell(css, value, u))
             yield (self.row_classes[i] if self.row_classes is not None else ""), cells
 
@@ -121,16 +141,43 @@ class Figure:
 
 
 def _asset(folders: tuple[Path, ...], name: str) -> str:
-    """A file of the lab's template folder (or the package's) as a data URI."""
+    """A file of the lab's template folder (or the package's) as a data URI: an image,
+    inside the folder (no ``..``, absolute path or link out of it), of at most
+    :data:`ASSET_MAX_BYTES`."""
     kind = ASSET_TYPES.get(Path(name).suffix.lower())
     if kind is None:
         raise jinja2.TemplateRuntimeError(
             f"asset {name!r}: not an image ({', '.join(sorted(ASSET_TYPES))})"
         )
+    outside = False
     for folder in folders:
         path = folder / name
-        if folder.resolve() in path.resolve().parents and path.is_file():
-            return f"data:{kind};base64," + base64.b64encode(path.read_bytes()).decode("ascii")
+        try:
+            inside = folder.resolve() in path.resolve().parents
+            found = inside and path.is_file()
+        except (OSError, ValueError):
+            raise jinja2.TemplateRuntimeError(f"asset {name!r}: not a file name") from None
+        outside = outside or not inside
+        if not found:
+            continue
+        try:
+            size = path.stat().st_size
+            if size > ASSET_MAX_BYTES:
+                raise jinja2.TemplateRuntimeError(
+                    f"asset {name!r}: {size} bytes; an embedded image may have at most "
+                    f"{ASSET_MAX_BYTES} ({ASSET_MAX_BYTES // 2**20} MiB)"
+                )
+            data = path.read_bytes()
+        except OSError as exc:
+            raise jinja2.TemplateRuntimeError(
+                f"asset {name!r}: cannot be read ({exc.strerror})"
+            ) from None
+        return f"data:{kind};base64," + base64.b64encode(data).decode("ascii")
+    if outside:
+        raise jinja2.TemplateRuntimeError(
+            f"asset {name!r}: outside the template folder (an image in it: no '..', "
+            "absolute path or link out of it)"
+        )
     raise jinja2.TemplateRuntimeError(
         f"asset {name!r} not found in {', '.join(str(f) for f in folders)}"
     )
@@ -144,12 +191,46 @@ def _escaped(value: object) -> Markup:
     return Markup(html.escape(str(value), quote=True))
 
 
+class _Loader(jinja2.FileSystemLoader):
+    """A folder of templates; a file that is not UTF-8 is a syntax error naming its line, one
+    that cannot be read an :class:`InputError` naming it."""
+
+    def get_source(self, environment: jinja2.Environment, template: str) -> tuple[str, str, Any]:
+        try:
+            return super().get_source(environment, template)
+        except jinja2.TemplateNotFound:  # an OSError too: the next folder is searched
+            raise
+        except UnicodeDecodeError as exc:
+            path = self._file(template)
+            data = bytes(exc.object)
+            line = data.count(b"\n", 0, exc.start) + 1
+            column = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
+            raise jinja2.TemplateSyntaxError(
+                f"not UTF-8 text: byte 0x{data[exc.start]:02x} at column {column}",
+                line,
+                template,
+                path,
+            ) from None
+        except OSError as exc:  # unreadable: its mode, a failing disk or share
+            raise InputError(
+                f"template: cannot be read ({exc.strerror or exc})", path=self._file(template)
+            ) from None
+
+    def _file(self, template: str) -> str:
+        pieces = split_template_path(template)
+        paths = [os.path.join(folder, *pieces) for folder in self.searchpath]
+        return next((p for p in paths if os.path.isfile(p)), paths[0])
+
+
 @cache
 def environment(template_dir: Path | None = None) -> jinja2.Environment:
-    """The templates: ``template_dir``'s first (a lab's), then the package's."""
+    """The templates: ``template_dir``'s first (a lab's), then the package's; sandboxed (a
+    template prints the data it is given, and cannot reach Python's internals: ``__class__``,
+    ``__globals__`` ... are refused, a lab's folder is data, not a program); without the
+    ``safe`` filter (a value given by the data is never printed as markup)."""
     folders = (PACKAGE_TEMPLATES,) if template_dir is None else (template_dir, PACKAGE_TEMPLATES)
-    env = jinja2.Environment(
-        loader=jinja2.ChoiceLoader([jinja2.FileSystemLoader(str(f)) for f in folders]),
+    env = SandboxedEnvironment(
+        loader=jinja2.ChoiceLoader([_Loader(str(f)) for f in folders]),
         autoescape=True,
         undefined=jinja2.StrictUndefined,
         keep_trailing_newline=True,
@@ -157,13 +238,17 @@ def environment(template_dir: Path | None = None) -> jinja2.Environment:
         lstrip_blocks=True,
         finalize=_escaped,
     )
+    # every value the data gives prints as text: no template marks it as markup
+    del env.filters["safe"]
     env.globals["asset"] = lambda name: _asset(folders, str(name))
     env.globals["version"] = __version__
     return env
 
 
 def check_template_dir(template_dir: str | os.PathLike[str] | None) -> Path | None:
-    """``template_dir`` resolved, every template in it compiled: a syntax error is an
+    """``template_dir`` resolved, every template in it compiled, with every template they
+    and the package's pages name (``style.css`` too): a syntax error, a file that is not
+    UTF-8, a template named but found nowhere or a loop of includes or extends is an
     :class:`InputError` naming the file and line, before any work is done."""
     if template_dir is None:
         return None
@@ -171,26 +256,159 @@ def check_template_dir(template_dir: str | os.PathLike[str] | None) -> Path | No
     if not folder.is_dir():
         raise InputError("not a folder of templates", path=template_dir)
     env = environment(folder)
-    for name in sorted(os.listdir(folder)):
-        if name.endswith(".j2") and (folder / name).is_file():
-            try:
-                env.get_template(name)
-            except jinja2.TemplateError as exc:
-                raise template_error(exc, env) from None
+    names = [n for n in sorted(os.listdir(folder)) if n.endswith(".j2") and (folder / n).is_file()]
+    names += sorted(n for n in os.listdir(PACKAGE_TEMPLATES) if n.endswith(".j2"))
+    try:
+        _check_references(env, names, folder)
+    except jinja2.TemplateError as exc:
+        raise template_error(exc, env) from None
     return folder
+
+
+#: the statements that name another template
+_NAMING = (nodes.Extends, nodes.Include, nodes.Import, nodes.FromImport)
+
+
+def _named(env: jinja2.Environment, name: str) -> tuple[str, list[tuple[str, int]]]:
+    """The file of the template ``name`` (compiled), and the templates it names by a
+    constant: ``(name, line)``, in order (``include ... ignore missing`` left out when
+    the template does not exist)."""
+    assert env.loader is not None
+    source, filename, _ = env.loader.get_source(env, name)
+    env.get_template(name)  # compiles: a syntax error names its file and line
+    tree = env.parse(source, name, filename)
+    found = []
+    for node in tree.find_all(_NAMING):
+        target = getattr(node, "template", None)  # each of _NAMING has one
+        if not (isinstance(target, nodes.Const) and isinstance(target.value, str)):
+            continue  # a name computed while rendering: render_page stops a loop of those
+        if isinstance(node, nodes.Include) and node.ignore_missing:
+            try:
+                env.loader.get_source(env, target.value)
+            except jinja2.TemplateNotFound:
+                continue
+        found.append((target.value, node.lineno))
+    return filename or name, found
+
+
+def named_files(template_dir: Path) -> list[Path]:
+    """The files of the lab's folder ``template_dir`` (checked by :func:`check_template_dir`)
+    that its pages are made from, as the templates name them by a constant: every template
+    reached from the lab's and the package's pages, every ``asset("...")``; sub-folders
+    too (a folder's other files are not read: a lab's ``.git``, its archive)."""
+    env = environment(template_dir)
+    assert env.loader is not None
+    top = template_dir.resolve()
+    names = [n for n in sorted(os.listdir(top)) if n.endswith(".j2")]
+    names += sorted(n for n in os.listdir(PACKAGE_TEMPLATES) if n.endswith(".j2"))
+    seen: set[str] = set()
+    found: set[Path] = set()
+    while names:
+        name = names.pop()
+        if name in seen:
+            continue
+        seen.add(name)
+        try:
+            source, filename, _ = env.loader.get_source(env, name)
+        except jinja2.TemplateNotFound:
+            continue
+        if filename is not None and Path(filename).resolve().is_relative_to(top):
+            found.add(Path(filename))
+        tree = env.parse(source, name, filename)
+        for node in tree.find_all(_NAMING):
+            target = getattr(node, "template", None)
+            if isinstance(target, nodes.Const) and isinstance(target.value, str):
+                names.append(target.value)
+        for call in tree.find_all(nodes.Call):
+            first = call.args[0] if call.args else None
+            if (
+                isinstance(call.node, nodes.Name)
+                and call.node.name == "asset"
+                and isinstance(first, nodes.Const)
+                and isinstance(first.value, str)
+            ):
+                path = template_dir / first.value
+                try:
+                    if top in path.resolve().parents and path.is_file():
+                        found.add(path)
+                except (OSError, ValueError):
+                    continue  # refused when the page is rendered
+    return sorted(found)
+
+
+def _check_references(env: jinja2.Environment, roots: list[str], folder: Path) -> None:
+    """Every template reachable from ``roots`` compiled; a name found nowhere or a loop is
+    a :class:`InputError` at the statement that names it (a loop: a statement of the
+    lab's ``folder`` when one is on it, the last one)."""
+    files: dict[str, str] = {}
+    edges: dict[str, list[tuple[str, int]]] = {}
+    done: set[str] = set()
+
+    def visit(name: str, path: list[tuple[str, str, int]]) -> None:
+        # path: (template, its file, line of the statement naming the next one)
+        if name not in edges:
+            files[name], edges[name] = _named(env, name)
+        for target, line in edges[name]:
+            here = [*path, (name, files[name], line)]
+            on_path = [step[0] for step in here]
+            if target in on_path:
+                loop = here[on_path.index(target) :]
+                culprit = next((s for s in reversed(loop) if Path(s[1]).parent == folder), loop[-1])
+                chain = " -> ".join([*(s[0] for s in loop), target])
+                raise InputError(
+                    f"template: endless loop of includes/extends: {chain}",
+                    path=culprit[1],
+                    line=culprit[2],
+                )
+            if target in done:
+                continue
+            try:
+                visit(target, here)
+            except jinja2.TemplateNotFound:
+                if target in files:
+                    raise
+                raise InputError(
+                    f"template: {target!r} not found in {_folders(env)}",
+                    path=files[name],
+                    line=line,
+                ) from None
+        done.add(name)
+
+    for root in roots:
+        if root not in done:
+            visit(root, [])
 
 
 def template_error(exc: jinja2.TemplateError, env: jinja2.Environment) -> InputError:
     """``exc`` as an :class:`InputError` naming the template's file and line."""
     message = str(exc.message if exc.message is not None else exc).splitlines()[0]
+    if message.startswith("No filter named 'safe'"):
+        message += " (hexatherm prints every value of the data as text, never as markup)"
     if isinstance(exc, jinja2.TemplateSyntaxError) and exc.filename:
         return InputError(f"template: {message}", path=exc.filename, line=exc.lineno)
     if isinstance(exc, jinja2.TemplateNotFound):
         return InputError(f"template {exc.name!r} not found", path=_folders(env))
-    for frame in reversed(traceback.extract_tb(exc.__traceback__)):
-        if frame.filename.endswith(".j2"):
-            return InputError(f"template: {message}", path=frame.filename, line=frame.lineno)
-    return InputError(f"template: {message}", path=_folders(env))
+    return _in_template(f"template: {message}", exc, env)
+
+
+def _in_template(message: str, exc: BaseException, env: jinja2.Environment) -> InputError:
+    """An :class:`InputError` with ``message``, naming the file and line of the innermost
+    template (a ``.j2`` file, or any other file the templates include: ``style.css``)
+    that ``exc`` passed through: the innermost of the lab's when the lab has templates
+    (the line to fix), with hexatherm's file and line where it failed, if deeper."""
+    frames = [
+        frame
+        for frame in traceback.extract_tb(exc.__traceback__)
+        if not frame.filename.endswith(".py") and not frame.filename.startswith("<")
+    ]
+    if not frames:
+        return InputError(message, path=_folders(env))
+    package = str(PACKAGE_TEMPLATES) + os.sep
+    labs = [f for f in frames if not f.filename.startswith(package)]
+    where = labs[-1] if labs else frames[-1]
+    if where is not frames[-1]:
+        message += f" (in hexatherm's {Path(frames[-1].filename).name}:{frames[-1].lineno})"
+    return InputError(message, path=where.filename, line=where.lineno)
 
 
 def _folders(env: jinja2.Environment) -> str:
@@ -212,6 +430,12 @@ def render_page(name: str, template_dir: Path | None = None, **context: Any) -> 
         return env.get_template(name).render(**context)
     except jinja2.TemplateError as exc:
         raise template_error(exc, env) from None
+    except RecursionError as exc:  # a loop of includes whose names are computed
+        raise _in_template(
+            "template: endless loop of includes/extends (names computed while rendering)",
+            exc,
+            env,
+        ) from None
 
 
 def render_macro(name: str, *args: Any) -> str:
@@ -226,6 +450,7 @@ __all__ = [
     "Table",
     "TableCell",
     "check_template_dir",
+    "named_files",
     "environment",
     "render_macro",
     "render_page",

@@ -12,7 +12,7 @@ header and the provenance block.
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -32,29 +32,40 @@ if TYPE_CHECKING:
 #: the page's file name beside report.md
 REPORT_HTML = "report.html"
 
-_UNITS = (
-    (re.compile(r"\burad\b"), "µrad"),
-    (re.compile(r"\bum\b"), "µm"),
-    (re.compile(r"\bdegC\b"), "°C"),
-)
+#: a unit as hexatherm's text writes it -> as a reader does
+_UNITS = {"urad": "µrad", "um": "µm", "degC": "°C"}
+_UNIT_WORDS = re.compile(r"\b(?:urad|um|degC)\b")
 
 
-def units(text: str) -> str:
-    """``text`` with its units as a reader writes them (``um`` -> ``µm``, ``degC`` -> ``°C``).
+def units(text: str, keep: Collection[str] = ()) -> str:
+    """``text`` with its units as a reader writes them (``um`` -> ``µm``, ``degC`` -> ``°C``),
+    but in the texts ``keep`` (a user's: a name, a path, a label), printed as they are.
 
     >>> units("RMS 0.12 um, Rx in urad, 20 degC; umbrella")
     'RMS 0.12 µm, Rx in µrad, 20 °C; umbrella'
+    >>> units("hexapod: Messung um 10 (um); Bum", keep=["Messung um 10", "B"])
+    'hexapod: Messung um 10 (µm); Bum'
     """
-    for pattern, unit in _UNITS:
-        text = pattern.sub(unit, text)
-    return text
+    kept = sorted({k for k in keep if k}, key=len, reverse=True)
+    spans = []
+    if kept:
+        spans = [m.span() for m in re.finditer("|".join(map(re.escape, kept)), text)]
+
+    def unit(match: re.Match[str]) -> str:
+        if any(a <= match.start() < b for a, b in spans):
+            return match.group(0)
+        return _UNITS[match.group(0)]
+
+    return _UNIT_WORDS.sub(unit, text)
 
 
 def _text(token: Token) -> str:
     return "".join(c.content for c in token.children or () if c.type in ("text", "code_inline"))
 
 
-def _figure_token(inline: Token, figures: Mapping[str, bytes]) -> Token | None:
+def _figure_token(
+    inline: Token, figures: Mapping[str, bytes], keep: Collection[str] = ()
+) -> Token | None:
     """An ``html_block`` token holding the figure a paragraph of one image links to."""
     from markdown_it.token import Token
 
@@ -62,13 +73,15 @@ def _figure_token(inline: Token, figures: Mapping[str, bytes]) -> Token | None:
     if len(children) != 1 or children[0].type != "image":
         return None
     image = children[0]
-    caption = units(_text(image))
+    caption = units(_text(image), keep)
     png = figures.get(str(image.attrGet("src")))
     html = "" if png is None else render_macro("figure", figure(png, caption, caption)) + "\n"
     return Token("html_block", "", 0, content=html, block=True)
 
 
-def markdown_html(markdown: str, figures: Mapping[str, bytes]) -> list[str]:
+def markdown_html(
+    markdown: str, figures: Mapping[str, bytes], keep: Collection[str] = ()
+) -> list[str]:
     r"""``markdown`` (as :func:`report_markdown` writes it) as HTML, by markdown-it-py.
 
     Parameters
@@ -77,6 +90,9 @@ def markdown_html(markdown: str, figures: Mapping[str, bytes]) -> list[str]:
     figures : mapping of str to bytes
         Link target (``residuals_time.png``) -> its PNG, embedded in place of a paragraph
         that is that one image link; a link to anything else is left out.
+    keep : collection of str
+        A user's texts (names, paths, labels): printed as they are, their ``um`` not
+        turned into ``µm`` (:func:`units`).
 
     Returns
     -------
@@ -100,7 +116,7 @@ def markdown_html(markdown: str, figures: Mapping[str, bytes]) -> list[str]:
             k += 3  # open, inline, close: the page's title
             continue
         if token.type == "paragraph_open" and not token.hidden:
-            replaced = _figure_token(tokens[k + 1], figures)
+            replaced = _figure_token(tokens[k + 1], figures, keep)
             if replaced is not None:
                 out.append(replaced)
                 k += 3
@@ -112,7 +128,7 @@ def markdown_html(markdown: str, figures: Mapping[str, bytes]) -> list[str]:
                 token.attrSet("class", "num")
         for child in token.children or ():
             if child.type in ("text", "code_inline"):
-                child.content = units(child.content)
+                child.content = units(child.content, keep)
         out.append(token)
         k += 1
     return [parser.renderer.render(out, parser.options, {})]
@@ -124,6 +140,7 @@ def report_html(
     facts: RunFacts | None = None,
     generated: str | None = None,
     template_dir: Path | None = None,
+    extra_inputs: Sequence[Path] = (),
 ) -> str:
     """The page ``report.html`` of a diagnosis.
 
@@ -139,6 +156,9 @@ def report_html(
         Generation time, ISO 8601 with UTC offset (default: now).
     template_dir : Path, optional
         A lab's templates, over the package's.
+    extra_inputs : sequence of Path
+        Further files the page was made from, listed in its provenance after the
+        session's (the ``--hexapod`` model, the lab's template files).
     """
     from hexatherm.io.provenance import current_run, now_iso
 
@@ -146,6 +166,14 @@ def report_html(
     pngs = {FIGURE_FILES[key]: png for key, png in figures.items()}
     session = result.data.session
     title = f"Diagnosis of {session.name}"
+    keep = [  # a user's texts, printed as they are
+        session.name,
+        str(session.path),
+        result.data.hexapod.name,
+        result.data.hexapod_source,
+        *session.plan.labels,
+        *session.balls.names,
+    ]
     return render_page(
         "diagnosis.html.j2",
         template_dir,
@@ -155,10 +183,10 @@ def report_html(
             ("Hexapod", f"{result.data.hexapod.name} ({result.data.hexapod_source})"),
         ],
         signatures=None,
-        story=Markup("".join(markdown_html(report_markdown(result, names), pngs))),
+        story=Markup("".join(markdown_html(report_markdown(result, names), pngs, keep))),
         provenance=provenance(
             current_run() if facts is None else facts,
-            session.input_files(),
+            [*session.input_files(), *extra_inputs],
             session.path.parent,
             generated or now_iso(),
             extra=[("hexapod", result.data.hexapod_source)],
@@ -172,10 +200,11 @@ def write_report_files(
     *,
     dpi: int = FIGURE_DPI,
     template_dir: Path | None = None,
+    extra_inputs: Sequence[Path] = (),
 ) -> list[Path]:
     """Write ``report.md``, its PNG figures (:data:`FIGURE_FILES`) and ``report.html`` (the
-    same story, figures embedded; ``template_dir``: a lab's templates) into the folder
-    ``out_dir``.
+    same story, figures embedded; ``template_dir``: a lab's templates; ``extra_inputs``: as
+    :func:`report_html`) into the folder ``out_dir``.
 
     The folder must exist; files of the same names are replaced. Returns the
     paths written, ``report.md`` first and ``report.html`` last.
@@ -190,5 +219,6 @@ def write_report_files(
         written.append(path)
     written[0].write_text(report_markdown(result, FIGURE_FILES), encoding="utf-8")
     page = out_dir / REPORT_HTML
-    page.write_text(report_html(result, pngs, template_dir=template_dir), encoding="utf-8")
+    html = report_html(result, pngs, template_dir=template_dir, extra_inputs=extra_inputs)
+    page.write_text(html, encoding="utf-8")
     return [*written, page]
