@@ -24,6 +24,7 @@ import json
 import math
 import os
 import platform
+import shlex
 from collections.abc import Iterable, Iterator, Mapping
 from contextvars import ContextVar
 from datetime import datetime
@@ -141,6 +142,17 @@ def input_entries(inputs: Iterable[str | os.PathLike[str]]) -> list[dict[str, An
     return files
 
 
+def command_line(facts: RunFacts) -> str:
+    """The run's command line quoted as a POSIX shell reads it, so that it runs as printed
+    (a path with a space or a quote stays one argument; plain arguments are unchanged).
+
+    >>> facts = RunFacts("report", ("Sessions 2026/s1", "-o", "out"), {}, "")
+    >>> command_line(facts)
+    "hexatherm report 'Sessions 2026/s1' -o out"
+    """
+    return shlex.join(["hexatherm", facts.command, *facts.argv])
+
+
 def provenance_json(facts: RunFacts, inputs: Iterable[str | os.PathLike[str]]) -> str:
     """The content of ``provenance.json`` for a run that read ``inputs``."""
     files = input_entries(inputs)
@@ -148,7 +160,7 @@ def provenance_json(facts: RunFacts, inputs: Iterable[str | os.PathLike[str]]) -
         "format": PROVENANCE_FORMAT,
         "hexatherm": __version__,
         "command": facts.command,
-        "command_line": " ".join(["hexatherm", facts.command, *facts.argv]),
+        "command_line": command_line(facts),
         "argv": list(facts.argv),
         "options": facts.options,
         "started": facts.started,

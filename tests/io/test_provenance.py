@@ -38,7 +38,7 @@ def test_process_records_its_command_options_and_inputs(session: Path, tmp_path:
     assert result.exit_code == 0, result.output
     doc = json.loads((out / PROVENANCE_NAME).read_text())
     assert doc["format"] == "hexatherm-provenance/1" and doc["hexatherm"] == __version__
-    assert doc["command_line"] == "hexatherm " + " ".join(args)
+    assert doc["command_line"] == "hexatherm " + " ".join(args)  # plain arguments as typed
     assert doc["options"]["mc"] == 20 and doc["options"]["seed"] == 7
     assert doc["options"]["interpolation"] == "linear"  # defaults too
     inputs = {Path(entry["path"]).name: entry for entry in doc["inputs"]}
@@ -77,3 +77,19 @@ def test_values_are_made_json() -> None:
         "a": ["x", "inf"],
         "b": None,
     }
+
+
+def test_the_command_line_of_a_path_with_a_space_runs_as_written(tmp_path: Path) -> None:
+    # provenance.json's command_line is quoted as the report's page quotes it: a shell
+    # splits it back into the arguments the run was given (space-joined, a path with a
+    # space came back as two arguments)
+    import shlex
+
+    session = Path(shutil.copytree(ROOT / "sessions" / "paper-zero-pose", tmp_path / "my s"))
+    out = tmp_path / "out 'a'"
+    args = ["process", str(session), "-o", str(out)]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    doc = json.loads((out / PROVENANCE_NAME).read_text())
+    assert shlex.split(doc["command_line"]) == ["hexatherm", *args]
+    assert doc["argv"] == args[1:]

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import html
 import os
-import shlex
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -100,13 +99,12 @@ def provenance(
     """The provenance block's two tables: when, by what, how (``extra`` rows: limits ...),
     and from which files (size, SHA-256; paths relative to ``folder`` where they lie
     inside it)."""
-    from hexatherm.io.provenance import input_entries
+    from hexatherm.io.provenance import command_line, input_entries
 
     if facts is None:
         command = options = "not run from the command line"
     else:
-        # quoted as a POSIX shell reads it: it runs as printed (a path with a space)
-        command = shlex.join(["hexatherm", facts.command, *facts.argv])
+        command = command_line(facts)  # quoted: it runs as printed
         options = "; ".join(f"{key} = {value}" for key, value in facts.options.items())
     rows: list[Sequence[Cell]] = [
         ["generated", generated],
