@@ -706,3 +706,32 @@ def reference_scatter(
     e = v[1:-1] - ((1 - f)[:, None] * v[:-2] + f[:, None] * v[2:])
     factor = 1 / w[1:-1] + (1 - f) ** 2 / w[:-2] + f**2 / w[2:]
     return float((e**2 / factor[:, None]).mean()), int(e.size)
+
+
+#: chance below which the references' height scatter is held too small to be the CMM's noise
+HEIGHT_FLOOR_P = 1e-3
+
+
+def cap_height_floor(dof: int, shape: FloatArray) -> float:
+    """Smallest plausible z scale of the cap ``shape`` (3, 3) from repeated ball heights.
+
+    A free-radius sphere fit to points whose normals ``n`` point up (``n_z`` in [0, 1]),
+    noise along the normals, pattern symmetric in x and y, has centre information
+    ``var(n_z)`` per point along z (the radius takes the mean) and ``(1 - E n_z^2) / 2``
+    across; as ``n_z^2 <= n_z``, ``var(n_z) <= a (1 - a)`` with ``a = E n_z^2``, so the
+    centre's z variance is at least ``1 / (2a) >= 1/2`` of its lateral one, whatever the
+    touch pattern. A Type A variance of ``dof`` degrees of freedom falls below its
+    expectation times ``chi2.ppf(p, dof) / dof`` with chance ``p``
+    (:data:`HEIGHT_FLOOR_P`): the returned ratio (z variance over ``shape``'s) is half the
+    shape's lateral variance over its z variance, times that factor. (A fixed-radius fit
+    over a small cap can be surer along z: its centres then get the assumed cap, which
+    claims more.)
+
+    >>> import numpy as np
+    >>> round(cap_height_floor(27, np.diag([1.0, 1.0, 2.0])), 3)
+    0.091
+    """
+    from scipy.stats import chi2
+
+    lateral = 0.5 * (shape[0, 0] + shape[1, 1])
+    return float(0.5 * lateral / shape[2, 2] * chi2.ppf(HEIGHT_FLOOR_P, dof) / dof)

@@ -32,6 +32,7 @@ rest of the chain.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal
@@ -44,6 +45,7 @@ from hexatherm.core.propagation import (
     PoseChain,
     TargetJacobian,
     cap_centre_covariance,
+    cap_height_floor,
     covariance_root,
     draw_centres,
     monte_carlo_covariance,
@@ -224,6 +226,22 @@ def centre_covariance(result: ProcessResult) -> CentreCovariance:
         # along the cap's axis (z) the residuals see nothing: the references' heights,
         # measured again and again over the session, do (a Type A evaluation)
         height = reference_height_scale(result, scale * shape[2, 2])
+        floor = cap_height_floor(height.dof, shape) if height.used else 0.0
+        too_flat = height.ratio < floor
+        if too_flat:
+            height = dataclasses.replace(
+                height,
+                used=False,
+                ratio=1.0,
+                text="",
+                why=(
+                    f"the references' ball heights ({height.dof} degrees of freedom) "
+                    "scatter less than a free-radius fit over an upper cap allows (z part "
+                    f"{height.ratio:.3g} of the assumed cap's in variance, below "
+                    f"{floor:.3g}: references repeating the "
+                    "same centres?): not the CMM's noise"
+                ),
+            )
         if height.used:
             axis_scale = np.array([1.0, 1.0, np.sqrt(height.ratio)])
             shape = shape * np.outer(axis_scale, axis_scale)
@@ -237,7 +255,7 @@ def centre_covariance(result: ProcessResult) -> CentreCovariance:
             f"free-radius fit to {points} points over a {DEFAULT_CAP_ANGLE_DEG:g} deg cap"
             f"{height.text}: u {u_xyz[0]:.3g}, {u_xyz[1]:.3g}, {u_xyz[2]:.3g} um in x, y, z"
         )
-        if seen < 0.9 and not height.used:
+        if (seen < 0.9 or too_flat) and not height.used:
             parts.append(
                 f"warning: {height.why}; the residuals see {seen:.0%} of that shape (none "
                 "of a centre's error normal to the balls' plane): the uncertainty of Tz, Rx, "
