@@ -68,6 +68,32 @@ def _check_diameters(
     )
 
 
+#: smallest accepted ratio of the top face points' spread across their main line to
+#: their spread along it: below it the face's tilt about that line rests on the probe's
+#: noise (three points of one scan line tilt the frame by tens of degrees)
+MIN_PLANE_ASPECT = 0.1
+
+
+def _check_plane_spread(rec: Records, plane: str) -> None:
+    """InputError when the plane's points lie along a line (the frame's tilt about it is noise)."""
+    mask = rec.ball == plane
+    points = rec.xyz_mm[mask]
+    if len(points) < 3 or not np.all(np.isfinite(points)):
+        return  # the plane fit names these
+    spread = np.linalg.svd(points - points.mean(axis=0), compute_uv=False) / np.sqrt(len(points))
+    if spread[1] >= MIN_PLANE_ASPECT * spread[0]:
+        return
+    raise InputError(
+        f"plane {plane}: its {len(points)} points lie along a line ({spread[1]:.4f} mm RMS "
+        f"across it, {spread[0]:.3f} mm along it; at least {MIN_PLANE_ASPECT:g} of it "
+        "across): the face's tilt about that line is undetermined; probe the face over "
+        "its area",
+        path=rec.path,
+        line=int(rec.line[int(np.argmax(mask))]),
+        field="ball",
+    )
+
+
 def _points(path: str | os.PathLike[str], step: str | None, reading: ReadOptions) -> Records:
     read = read_measurements(
         path, allow_truncated=reading.allow_truncated, keep_later=reading.keep_later
@@ -170,6 +196,7 @@ def register_balls(
             if free is None or radius is not None
             else free
         )
+        _check_plane_spread(rec, datums.plane)
         towards = fits.centre_mm.mean(axis=0) - feature(datums.plane).mean(axis=0)
         frame = datum_frame(
             feature(datums.plane),
