@@ -19,6 +19,8 @@ from hexatherm.io.config import read_balls
 
 ROOT = Path(__file__).resolve().parents[2]
 DATUMS = ROOT / "sessions" / "register-datums"
+HEXAPOD = ROOT / "configs" / "symetrie-like.yaml"
+BALLS = ROOT / "configs" / "balls-3.yaml"
 
 
 def digests(paths: list[Path]) -> dict[Path, str]:
@@ -90,3 +92,22 @@ def test_register_takes_three_top_points_spread_over_the_face(tmp_path: Path) ->
     got, truth = read_balls(out), read_balls(DATUMS / "truth" / "balls.yaml")
     error_um = np.linalg.norm(got.centres_mm - truth.centres_mm, axis=1) * 1e3
     assert np.all(error_um < 20.0), error_um
+
+
+# ------------------------------------------------------------------------ plan
+def test_plan_names_the_option_whose_output_is_an_input(tmp_path: Path) -> None:
+    targets = tmp_path / "targets.csv"
+    targets.write_text("Tx,Ty,Tz,Rx,Ry,Rz\n1,0,0,0,0,0\n")
+    before = digests([targets, HEXAPOD, BALLS])
+    base = ["plan", "--hexapod", str(HEXAPOD), "--balls", str(BALLS), "--targets", str(targets)]
+    for option, extra in (
+        ("--dmis", ["--origin-on-cmm", "450,320,210,0,0,15"]),
+        ("--checklist", []),
+    ):
+        out = tmp_path / f"plan{option}.yaml"
+        result = CliRunner().invoke(main, [*base, "-o", str(out), option, str(targets), *extra])
+        assert result.exit_code == 1, result.output
+        line = one_line_error(result.output)
+        assert f"{option} {targets}" in line and "choose another " + option in line, line
+        assert not out.exists()
+    assert digests([targets, HEXAPOD, BALLS]) == before
