@@ -333,6 +333,15 @@ def command(
                 param_hint="--grid",
             )
     origin = None if origin_on_cmm is None else parse_pose(origin_on_cmm, "--origin-on-cmm")
+    if origin is not None:
+        from hexatherm.io.measurements import COORDINATE_MAX_MM
+
+        if max(abs(v) for v in origin[:3]) > COORDINATE_MAX_MM:
+            raise click.BadParameter(
+                f"{origin_on_cmm!r}: frame O farther than {COORDINATE_MAX_MM / 1e3:g} m from "
+                "the CMM's origin (a value in um?)",
+                param_hint="--origin-on-cmm",
+            )
     request = PlanRequest(
         hexapod_path=hexapod_path,
         balls_path=balls_path,

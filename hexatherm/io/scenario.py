@@ -82,6 +82,7 @@ from hexatherm.core.planning import (
 )
 from hexatherm.errors import InputError, PlanError
 from hexatherm.io.config import read_balls, read_hexapod_text, read_plan
+from hexatherm.io.measurements import COORDINATE_MAX_MM
 from hexatherm.io.records import iso_to_seconds
 from hexatherm.io.yamlfile import YamlDoc
 from hexatherm.session import Balls
@@ -270,6 +271,12 @@ def _scenario(doc: YamlDoc, doc_text: str | None) -> Scenario:
     origin = tuple(
         doc.vector("origin_on_cmm", size=6, default=[450.0, 320.0, 210.0, 0.0, 0.0, 15.0])
     )
+    if max(abs(v) for v in origin[:3]) > COORDINATE_MAX_MM:
+        raise doc.error(
+            f"frame O at {max(abs(v) for v in origin[:3]):g} mm: farther than "
+            f"{COORDINATE_MAX_MM / 1e3:g} m from the CMM's origin (a value in um?)",
+            "origin_on_cmm",
+        )
     start = _start(doc)
     seed = _whole(doc, "seed", default=0, minimum=0)
 

@@ -111,3 +111,72 @@ def test_plan_names_the_option_whose_output_is_an_input(tmp_path: Path) -> None:
         assert f"{option} {targets}" in line and "choose another " + option in line, line
         assert not out.exists()
     assert digests([targets, HEXAPOD, BALLS]) == before
+
+
+# ------------------------------------------------------------------------ origin_on_cmm
+def scenario_text(origin: str) -> str:
+    return (
+        "format: hexatherm-scenario/1\n"
+        f"hexapod: {HEXAPOD}\n"
+        f"balls: {BALLS}\n"
+        "plan: {targets: [[1, 0, 0, 0, 0, 0]], cycles: 1}\n"
+        f"origin_on_cmm: {origin}\n"
+        "cmm: {point_noise_um: 0.5}\n"
+    )
+
+
+def test_simulate_refuses_frame_o_placed_beyond_any_cmm(tmp_path: Path) -> None:
+    # 1e308 mm used to end in a numpy LinAlgError traceback; 450 m (a value in um) was
+    # simulated, and process then refused the centres it had written
+    for origin in ("[1.0e+308, 0, 0, 0, 0, 15]", "[450000, 320, 210, 0, 0, 15]"):
+        scenario = tmp_path / "scenario.yaml"
+        scenario.write_text(scenario_text(origin))
+        before = digests([scenario, HEXAPOD, BALLS])
+        out = tmp_path / "session"
+        result = CliRunner().invoke(main, ["simulate", str(scenario), "-o", str(out)])
+        assert result.exit_code == 1, result.output
+        line = one_line_error(result.output)
+        assert f"{scenario}:5: field 'origin_on_cmm'" in line, line
+        assert not out.exists()
+        assert digests([scenario, HEXAPOD, BALLS]) == before
+
+
+def test_simulate_takes_frame_o_far_out_but_on_a_cmm(tmp_path: Path) -> None:
+    # the control: frame O 90 m out (a laser tracker's range) simulates, and the twin's
+    # centres lie there
+    scenario = tmp_path / "scenario.yaml"
+    scenario.write_text(scenario_text("[90000, 320, 210, 0, 0, 15]"))
+    out = tmp_path / "session"
+    result = CliRunner().invoke(main, ["simulate", str(scenario), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    with (out / "centres.csv").open(newline="") as f:
+        x_mm = [float(row["x"]) for row in csv.DictReader(f)]
+    assert all(abs(x - 90000) < 200 for x in x_mm), x_mm
+
+
+def test_plan_refuses_frame_o_placed_beyond_any_cmm(tmp_path: Path) -> None:
+    # used to write a DMIS program driving the probe to x = 1e308 mm (308 digits)
+    targets = tmp_path / "targets.csv"
+    targets.write_text("1,0,0,0,0,0\n")
+    out, dmis = tmp_path / "plan.yaml", tmp_path / "prog.dmi"
+    result = CliRunner().invoke(
+        main,
+        [
+            "plan",
+            "--hexapod",
+            str(HEXAPOD),
+            "--balls",
+            str(BALLS),
+            "--targets",
+            str(targets),
+            "--origin-on-cmm",
+            "1e308,0,0,0,0,15",
+            "--dmis",
+            str(dmis),
+            "-o",
+            str(out),
+        ],
+    )
+    assert result.exit_code == 2, result.output
+    assert "--origin-on-cmm" in one_line_error(result.output)
+    assert not out.exists() and not dmis.exists()
