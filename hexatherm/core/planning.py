@@ -260,6 +260,11 @@ def _box(lower: Sequence[float], upper: Sequence[float]) -> tuple[FloatArray, Fl
 
 
 # ---------------------------------------------------------------------- sequence
+#: the most target steps (targets x cycles) of a plan: a campaign of a thousand targets is
+#: a week of measuring; beyond this the plan only fills the memory
+MAX_TARGET_STEPS = 100_000
+
+
 def sequence_steps(
     targets: npt.ArrayLike,
     reference_pose: Sequence[float],
@@ -317,6 +322,11 @@ def sequence_steps(
         )
     if not len(poses):
         raise PlanError("no target poses")
+    if len(poses) * cycles > MAX_TARGET_STEPS:
+        raise PlanError(
+            f"{len(poses):,} targets x {cycles:,} cycles: {len(poses) * cycles:,} target steps, "
+            f"at most {MAX_TARGET_STEPS:,} (a thousand are a week of measuring)"
+        )
     if origin_repeats < 1 or reference0_repeats < 1:
         raise PlanError(
             f"O and R0 are measured at least once, got {origin_repeats} and {reference0_repeats}"

@@ -180,3 +180,39 @@ def test_plan_refuses_frame_o_placed_beyond_any_cmm(tmp_path: Path) -> None:
     assert result.exit_code == 2, result.output
     assert "--origin-on-cmm" in one_line_error(result.output)
     assert not out.exists() and not dmis.exists()
+
+
+# ------------------------------------------------------------------------ campaign size
+def test_plan_refuses_more_target_steps_than_a_campaign_holds(tmp_path: Path) -> None:
+    # 200 targets x 1000 cycles (200,000 target steps; the limit of --random and --grid
+    # is 100,000 targets) used to be built; 20,000 x 1000 exhausted the memory
+    targets = tmp_path / "targets.csv"
+    targets.write_text("".join(f"{k / 100:.2f},0,0,0,0,0\n" for k in range(200)))
+    out = tmp_path / "plan.yaml"
+    base = ["plan", "--hexapod", str(HEXAPOD), "--balls", str(BALLS), "-o", str(out)]
+    for source in (
+        ["--targets", str(targets)],
+        ["--random", "200", "--seed", "1", "--box", "Tx=-1:1"],
+    ):
+        result = CliRunner().invoke(main, [*base, *source, "--cycles", "1000"])
+        assert result.exit_code in (1, 2), result.output
+        line = one_line_error(result.output)
+        assert "200 targets x 1,000 cycles" in line, line
+        assert not out.exists()
+    # the control: fewer cycles make a plan, every target measured in every cycle
+    result = CliRunner().invoke(main, [*base, "--targets", str(targets), "--cycles", "5"])
+    assert result.exit_code == 0, result.output
+    assert out.read_text().count("kind: target") == 200 * 5
+
+
+def test_simulate_refuses_an_inline_plan_beyond_a_campaign(tmp_path: Path) -> None:
+    scenario = tmp_path / "scenario.yaml"
+    scenario.write_text(
+        scenario_text("[450, 320, 210, 0, 0, 15]").replace("cycles: 1", "cycles: 200000")
+    )
+    out = tmp_path / "session"
+    result = CliRunner().invoke(main, ["simulate", str(scenario), "-o", str(out)])
+    assert result.exit_code == 1, result.output
+    line = one_line_error(result.output)
+    assert f"{scenario}:4: field 'plan" in line and "1 targets x 200,000 cycles" in line, line
+    assert not out.exists()
