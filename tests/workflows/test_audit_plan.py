@@ -216,3 +216,24 @@ def test_simulate_refuses_an_inline_plan_beyond_a_campaign(tmp_path: Path) -> No
     line = one_line_error(result.output)
     assert f"{scenario}:4: field 'plan" in line and "1 targets x 200,000 cycles" in line, line
     assert not out.exists()
+
+
+def test_plan_refuses_a_dmis_program_beyond_a_campaign(tmp_path: Path) -> None:
+    # 300 targets at 10,000 points per ball (602 steps, 18 million touch points, 500
+    # days of probing) filled the memory writing the program; 40 targets (2.5 million
+    # points, 68 days, a 180 MB program) were written. The touch points are capped now
+    targets = tmp_path / "targets.csv"
+    targets.write_text("".join(f"{k / 100:.2f},0,0,0,0,0\n" for k in range(40)))
+    out, dmis = tmp_path / "plan.yaml", tmp_path / "prog.dmi"
+    args = ["plan", "--hexapod", str(HEXAPOD), "--balls", str(BALLS), "--targets", str(targets)]
+    args += ["--origin-on-cmm", "450,320,210,0,0,15", "--dmis", str(dmis), "-o", str(out)]
+    result = CliRunner().invoke(main, [*args, "--points-per-ball", "10000"])
+    assert result.exit_code == 1, result.output
+    line = one_line_error(result.output)
+    assert "82 steps x 3 balls x 10,000 points" in line, line
+    assert not out.exists() and not dmis.exists()
+    # the control: the same plan with 25 points per ball has its program, a MEAS block
+    # of 25 touch points per step and ball
+    result = CliRunner().invoke(main, [*args, "--points-per-ball", "25"])
+    assert result.exit_code == 0, result.output
+    assert dmis.read_text().count("PTMEAS/") == (2 + 2 * 40) * 3 * 25
