@@ -264,6 +264,11 @@ def _box(lower: Sequence[float], upper: Sequence[float]) -> tuple[FloatArray, Fl
 #: a week of measuring; beyond this the plan only fills the memory
 MAX_TARGET_STEPS = 100_000
 
+#: the most touch points of a plan's DMIS program (``plan --dmis``) or a simulated
+#: session: 55 days of probing at 2.4 s a point, a 150 MB program; beyond it they only
+#: fill the memory
+MAX_TOUCH_POINTS = 2_000_000
+
 
 def sequence_steps(
     targets: npt.ArrayLike,

@@ -77,6 +77,7 @@ from hexatherm.core.planning import (
     DEFAULT_CAP_ANGLE_DEG,
     DEFAULT_SECONDS_PER_MOVE,
     DEFAULT_SECONDS_PER_POINT,
+    MAX_TOUCH_POINTS,
     ReferenceEvery,
     sequence_steps,
 )
@@ -306,6 +307,15 @@ def _scenario(doc: YamlDoc, doc_text: str | None) -> Scenario:
             f"the plan's points_per_ball ({plan.points_per_ball}) is below 4: a "
             "sphere needs at least 4 points",
             "plan",
+        )
+    n_points = len(plan.labels) * len(balls.names) * plan.points_per_ball
+    if n_points > MAX_TOUCH_POINTS:
+        given = doc.get("cmm", "points_per_ball", default=None) is not None
+        raise doc.error(
+            f"{len(plan.labels):,} steps x {len(balls.names)} balls x "
+            f"{plan.points_per_ball:,} points = {n_points:,} touch points: at most "
+            f"{MAX_TOUCH_POINTS:,}",
+            *(("cmm", "points_per_ball") if given else ("plan",)),
         )
     cap = doc.number("cmm", "cap_angle_deg", default=DEFAULT_CAP_ANGLE_DEG, positive=True)
     if cap > 90.0:

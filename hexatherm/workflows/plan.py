@@ -24,6 +24,7 @@ from hexatherm.core.planning import (
     DEFAULT_MIN_RCOND,
     DEFAULT_SECONDS_PER_MOVE,
     DEFAULT_SECONDS_PER_POINT,
+    MAX_TOUCH_POINTS,
     ReferenceGap,
     StepTiming,
     build_plan,
@@ -41,10 +42,6 @@ from hexatherm.io.checklist import checklist_markdown
 from hexatherm.io.config import plan_to_yaml, read_balls, read_hexapod
 from hexatherm.io.csvfile import read_text
 from hexatherm.io.dmisprog import dmis_program
-
-#: the most touch points of a DMIS program (``--dmis``): 55 days of probing at 2.4 s a
-#: point, a 150 MB program; beyond it the program only fills the memory
-MAX_DMIS_POINTS = 2_000_000
 
 #: random choices of as many candidates that ``plan --calibration`` compares its design with
 RANDOM_DESIGN_DRAWS = 20
@@ -200,12 +197,12 @@ def make_plan(request: PlanRequest) -> PlanTexts:
     if request.dmis_name is not None:
         assert request.origin_on_cmm is not None
         n_points = len(plan.labels) * len(balls.names) * request.points_per_ball
-        if n_points > MAX_DMIS_POINTS:
+        if n_points > MAX_TOUCH_POINTS:
             raise PlanError(
                 f"the DMIS program would hold {len(plan.labels):,} steps x "
                 f"{len(balls.names)} balls x {request.points_per_ball:,} points = "
                 f"{n_points:,} touch points, {timing.total_s / 86400:.0f} days of probing: "
-                f"at most {MAX_DMIS_POINTS:,}; fewer points per ball, targets or cycles"
+                f"at most {MAX_TOUCH_POINTS:,}; fewer points per ball, targets or cycles"
             )
         touch = touch_points(
             plan,

@@ -237,3 +237,18 @@ def test_plan_refuses_a_dmis_program_beyond_a_campaign(tmp_path: Path) -> None:
     result = CliRunner().invoke(main, [*args, "--points-per-ball", "25"])
     assert result.exit_code == 0, result.output
     assert dmis.read_text().count("PTMEAS/") == (2 + 2 * 40) * 3 * 25
+
+
+def test_simulate_refuses_more_touch_points_than_a_campaign_holds(tmp_path: Path) -> None:
+    # cmm.points_per_ball 100,000,000 (4 steps x 3 balls) used to end in a numpy
+    # _ArrayMemoryError traceback: the same cap as plan --dmis's, named at the field
+    scenario = tmp_path / "scenario.yaml"
+    text = scenario_text("[450, 320, 210, 0, 0, 15]")
+    scenario.write_text(text.replace("point_noise_um: 0.5", "points_per_ball: 200000"))
+    out = tmp_path / "session"
+    result = CliRunner().invoke(main, ["simulate", str(scenario), "-o", str(out)])
+    assert result.exit_code == 1, result.output
+    line = one_line_error(result.output)
+    assert f"{scenario}:6: field 'cmm.points_per_ball'" in line, line
+    assert "4 steps x 3 balls x 200,000 points" in line, line
+    assert not out.exists()
