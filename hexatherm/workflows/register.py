@@ -10,8 +10,9 @@ import numpy.typing as npt
 
 from hexatherm.core.datum import DatumFrame, datum_frame
 from hexatherm.core.geometry import apply_transform, invert_transform
+from hexatherm.core.registration import check_ball_layout
 from hexatherm.core.spherefit import fit_spheres, probe_radius_mm
-from hexatherm.errors import FitError, InputError
+from hexatherm.errors import FitError, InputError, RegistrationError
 from hexatherm.io.files import STRICT, ReadOptions
 from hexatherm.io.measurements import read_measurements
 from hexatherm.io.records import Records
@@ -92,6 +93,28 @@ def _check_plane_spread(rec: Records, plane: str) -> None:
         line=int(rec.line[int(np.argmax(mask))]),
         field="ball",
     )
+
+
+def _check_ball_places(
+    rec: Records, names: list[str], centres_mm: npt.NDArray[np.float64], datums: Datums
+) -> None:
+    """InputError for two balls overlapping (one ball probed twice) or balls in a row."""
+    diameters = np.array([datums.balls[n] for n in names])
+    distance = np.linalg.norm(centres_mm[:, None, :] - centres_mm[None, :, :], axis=2)
+    overlap = np.triu(distance < (diameters[:, None] + diameters[None, :]) / 2, k=1)
+    if np.any(overlap):
+        i, j = (int(k) for k in np.argwhere(overlap)[0])
+        raise InputError(
+            f"balls {names[i]} and {names[j]}: centres {distance[i, j]:.3f} mm apart, closer "
+            "than their radii add up to: one ball probed twice, or a label given twice",
+            path=rec.path,
+            line=int(rec.line[int(np.argmax(rec.ball == names[j]))]),
+            field="ball",
+        )
+    try:
+        check_ball_layout(centres_mm)
+    except RegistrationError as exc:
+        raise InputError(f"{exc}: the balls file could not be used", path=rec.path) from None
 
 
 def _points(path: str | os.PathLike[str], step: str | None, reading: ReadOptions) -> Records:
@@ -196,6 +219,7 @@ def register_balls(
             if free is None or radius is not None
             else free
         )
+        _check_ball_places(rec, names, fits.centre_mm, datums)
         _check_plane_spread(rec, datums.plane)
         towards = fits.centre_mm.mean(axis=0) - feature(datums.plane).mean(axis=0)
         frame = datum_frame(

@@ -15,6 +15,7 @@ import numpy as np
 from click.testing import CliRunner
 
 from hexatherm.cli import main
+from hexatherm.core.spherefit import fit_spheres
 from hexatherm.io.config import read_balls
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -251,4 +252,47 @@ def test_simulate_refuses_more_touch_points_than_a_campaign_holds(tmp_path: Path
     line = one_line_error(result.output)
     assert f"{scenario}:6: field 'cmm.points_per_ball'" in line, line
     assert "4 steps x 3 balls x 200,000 points" in line, line
+    assert not out.exists()
+
+
+def test_register_refuses_two_balls_in_one_place(tmp_path: Path) -> None:
+    # B2's points are B1's (the same ball probed twice, or a label typed twice): register
+    # used to write a balls file with two coinciding balls, which the balls reader then
+    # refused in plan and process ("the balls are collinear")
+    header, rows = datum_rows()
+    b1 = [r for r in rows if r[1] == "B1"]
+    measurement = tmp_path / "points.csv"
+    write_rows(
+        measurement, header, [r for r in rows if r[1] != "B2"] + [[r[0], "B2", *r[2:]] for r in b1]
+    )
+    out = tmp_path / "balls.yaml"
+    code, output = register(measurement, out)
+    assert code == 1, output
+    line = one_line_error(output)
+    first_b2 = len(rows) - len(b1) + 2  # the header, then the rows but B2's, then B2's
+    assert f"{measurement}:{first_b2}: field 'ball'" in line and "B2" in line, line
+    assert not out.exists()
+
+
+def test_register_refuses_balls_in_a_row(tmp_path: Path) -> None:
+    # B3 probed where B1 and B2 put it in a row (B1's points moved by twice the vector
+    # from B1's fitted centre to B2's):
+    # the balls file written used to be refused by the balls reader afterwards
+    header, rows = datum_rows()
+    xyz = {
+        b: np.array([[float(v) for v in r[2:5]] for r in rows if r[1] == b]) for b in ("B1", "B2")
+    }
+    fits = [fit_spheres(xyz[b], np.zeros(len(xyz[b]), dtype=int)) for b in ("B1", "B2")]
+    shift = 2 * (fits[1].centre_mm[0] - fits[0].centre_mm[0])
+    b1 = [r for r in rows if r[1] == "B1"]
+    moved = [
+        [r[0], "B3", *(f"{v:.6f}" for v in np.array([float(c) for c in r[2:5]]) + shift), r[5]]
+        for r in b1
+    ]
+    measurement = tmp_path / "points.csv"
+    write_rows(measurement, header, [r for r in rows if r[1] != "B3"] + moved)
+    out = tmp_path / "balls.yaml"
+    code, output = register(measurement, out)
+    assert code == 1, output
+    assert "collinear" in one_line_error(output)
     assert not out.exists()
