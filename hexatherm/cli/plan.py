@@ -319,7 +319,8 @@ def command(
             "--dmis needs --origin-on-cmm: where frame O nominally is on "
             "the CMM (the probe would otherwise go to made-up positions)"
         )
-    outputs = [p for p in (out, dmis_path, checklist_path) if p is not None]
+    named = [(out, "-o"), (dmis_path, "--dmis"), (checklist_path, "--checklist")]
+    outputs = [p for p, _ in named if p is not None]
     if len({os.path.realpath(p) for p in outputs}) != len(outputs):
         raise click.UsageError("-o, --dmis and --checklist must be different files")
     lower, upper = parse_box(box) if box else (None, None)
@@ -332,6 +333,15 @@ def command(
                 param_hint="--grid",
             )
     origin = None if origin_on_cmm is None else parse_pose(origin_on_cmm, "--origin-on-cmm")
+    if origin is not None:
+        from hexatherm.io.measurements import COORDINATE_MAX_MM
+
+        if max(abs(v) for v in origin[:3]) > COORDINATE_MAX_MM:
+            raise click.BadParameter(
+                f"{origin_on_cmm!r}: frame O farther than {COORDINATE_MAX_MM / 1e3:g} m from "
+                "the CMM's origin (a value in um?)",
+                param_hint="--origin-on-cmm",
+            )
     request = PlanRequest(
         hexapod_path=hexapod_path,
         balls_path=balls_path,
@@ -361,8 +371,11 @@ def command(
         calibration_criterion=calibration_criterion,
     )
     inputs = [p for p in (hexapod_path, balls_path, targets_path) if p is not None]
-    for path in outputs:
-        check_output_settled(path, kind="file", inputs=inputs, overwrite=overwrite)
+    for path, option in named:
+        if path is not None:
+            check_output_settled(
+                path, kind="file", inputs=inputs, overwrite=overwrite, option=option
+            )
     made = make_plan(request)
     if made.redrawn:
         echo_err(f"drew {made.redrawn} random pose(s) again: out of the stroke or near-singular")
@@ -398,14 +411,14 @@ def command(
             f"{gap.gap_s / 60:.1f} min apart (--max-gap {max_gap / 60:.1f} min): fewer "
             "points per ball or a faster CMM program keep the thermal state comparable"
         )
-    texts = [(out, made.plan_yaml), (dmis_path, made.dmis), (checklist_path, made.checklist)]
-    for target, text in texts:
+    texts = [made.plan_yaml, made.dmis, made.checklist]
+    for (target, option), text in zip(named, texts, strict=True):
         if text is None:
             continue
         if target is None:
             click.echo(text, nl=False)
         else:
-            write_output_file(target, text, inputs=inputs, overwrite=overwrite)
+            write_output_file(target, text, inputs=inputs, overwrite=overwrite, option=option)
             echo_err(f"wrote {target}")
     plan = made.plan
     repeats = find_repeats(plan)

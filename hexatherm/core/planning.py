@@ -260,6 +260,16 @@ def _box(lower: Sequence[float], upper: Sequence[float]) -> tuple[FloatArray, Fl
 
 
 # ---------------------------------------------------------------------- sequence
+#: the most target steps (targets x cycles) of a plan: a campaign of a thousand targets is
+#: a week of measuring; beyond this the plan only fills the memory
+MAX_TARGET_STEPS = 100_000
+
+#: the most touch points of a plan's DMIS program (``plan --dmis``) or a simulated
+#: session: 55 days of probing at 2.4 s a point, a 150 MB program; beyond it they only
+#: fill the memory
+MAX_TOUCH_POINTS = 2_000_000
+
+
 def sequence_steps(
     targets: npt.ArrayLike,
     reference_pose: Sequence[float],
@@ -317,6 +327,11 @@ def sequence_steps(
         )
     if not len(poses):
         raise PlanError("no target poses")
+    if len(poses) * cycles > MAX_TARGET_STEPS:
+        raise PlanError(
+            f"{len(poses):,} targets x {cycles:,} cycles: {len(poses) * cycles:,} target steps, "
+            f"at most {MAX_TARGET_STEPS:,} (a thousand are a week of measuring)"
+        )
     if origin_repeats < 1 or reference0_repeats < 1:
         raise PlanError(
             f"O and R0 are measured at least once, got {origin_repeats} and {reference0_repeats}"

@@ -77,11 +77,13 @@ from hexatherm.core.planning import (
     DEFAULT_CAP_ANGLE_DEG,
     DEFAULT_SECONDS_PER_MOVE,
     DEFAULT_SECONDS_PER_POINT,
+    MAX_TOUCH_POINTS,
     ReferenceEvery,
     sequence_steps,
 )
 from hexatherm.errors import InputError, PlanError
 from hexatherm.io.config import read_balls, read_hexapod_text, read_plan
+from hexatherm.io.measurements import COORDINATE_MAX_MM
 from hexatherm.io.records import iso_to_seconds
 from hexatherm.io.yamlfile import YamlDoc
 from hexatherm.session import Balls
@@ -270,6 +272,12 @@ def _scenario(doc: YamlDoc, doc_text: str | None) -> Scenario:
     origin = tuple(
         doc.vector("origin_on_cmm", size=6, default=[450.0, 320.0, 210.0, 0.0, 0.0, 15.0])
     )
+    if max(abs(v) for v in origin[:3]) > COORDINATE_MAX_MM:
+        raise doc.error(
+            f"frame O at {max(abs(v) for v in origin[:3]):g} mm: farther than "
+            f"{COORDINATE_MAX_MM / 1e3:g} m from the CMM's origin (a value in um?)",
+            "origin_on_cmm",
+        )
     start = _start(doc)
     seed = _whole(doc, "seed", default=0, minimum=0)
 
@@ -299,6 +307,15 @@ def _scenario(doc: YamlDoc, doc_text: str | None) -> Scenario:
             f"the plan's points_per_ball ({plan.points_per_ball}) is below 4: a "
             "sphere needs at least 4 points",
             "plan",
+        )
+    n_points = len(plan.labels) * len(balls.names) * plan.points_per_ball
+    if n_points > MAX_TOUCH_POINTS:
+        given = doc.get("cmm", "points_per_ball", default=None) is not None
+        raise doc.error(
+            f"{len(plan.labels):,} steps x {len(balls.names)} balls x "
+            f"{plan.points_per_ball:,} points = {n_points:,} touch points: at most "
+            f"{MAX_TOUCH_POINTS:,}",
+            *(("cmm", "points_per_ball") if given else ("plan",)),
         )
     cap = doc.number("cmm", "cap_angle_deg", default=DEFAULT_CAP_ANGLE_DEG, positive=True)
     if cap > 90.0:

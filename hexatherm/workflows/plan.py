@@ -24,6 +24,7 @@ from hexatherm.core.planning import (
     DEFAULT_MIN_RCOND,
     DEFAULT_SECONDS_PER_MOVE,
     DEFAULT_SECONDS_PER_POINT,
+    MAX_TOUCH_POINTS,
     ReferenceGap,
     StepTiming,
     build_plan,
@@ -36,6 +37,7 @@ from hexatherm.core.planning import (
     reference_gaps,
 )
 from hexatherm.core.touch import touch_points
+from hexatherm.errors import PlanError
 from hexatherm.io.checklist import checklist_markdown
 from hexatherm.io.config import plan_to_yaml, read_balls, read_hexapod
 from hexatherm.io.csvfile import read_text
@@ -194,6 +196,14 @@ def make_plan(request: PlanRequest) -> PlanTexts:
     dmis = None
     if request.dmis_name is not None:
         assert request.origin_on_cmm is not None
+        n_points = len(plan.labels) * len(balls.names) * request.points_per_ball
+        if n_points > MAX_TOUCH_POINTS:
+            raise PlanError(
+                f"the DMIS program would hold {len(plan.labels):,} steps x "
+                f"{len(balls.names)} balls x {request.points_per_ball:,} points = "
+                f"{n_points:,} touch points, {timing.total_s / 86400:.0f} days of probing: "
+                f"at most {MAX_TOUCH_POINTS:,}; fewer points per ball, targets or cycles"
+            )
         touch = touch_points(
             plan,
             balls.centres_mm,

@@ -10,8 +10,9 @@ import numpy.typing as npt
 
 from hexatherm.core.datum import DatumFrame, datum_frame
 from hexatherm.core.geometry import apply_transform, invert_transform
+from hexatherm.core.registration import check_ball_layout
 from hexatherm.core.spherefit import fit_spheres, probe_radius_mm
-from hexatherm.errors import FitError, InputError
+from hexatherm.errors import FitError, InputError, RegistrationError
 from hexatherm.io.files import STRICT, ReadOptions
 from hexatherm.io.measurements import read_measurements
 from hexatherm.io.records import Records
@@ -66,6 +67,54 @@ def _check_diameters(
         line=int(rec.line[first]),
         field="ball",
     )
+
+
+#: smallest accepted ratio of the top face points' spread across their main line to
+#: their spread along it: below it the face's tilt about that line rests on the probe's
+#: noise (three points of one scan line tilt the frame by tens of degrees)
+MIN_PLANE_ASPECT = 0.1
+
+
+def _check_plane_spread(rec: Records, plane: str) -> None:
+    """InputError when the plane's points lie along a line (the frame's tilt about it is noise)."""
+    mask = rec.ball == plane
+    points = rec.xyz_mm[mask]
+    if len(points) < 3 or not np.all(np.isfinite(points)):
+        return  # the plane fit names these
+    spread = np.linalg.svd(points - points.mean(axis=0), compute_uv=False) / np.sqrt(len(points))
+    if spread[1] >= MIN_PLANE_ASPECT * spread[0]:
+        return
+    raise InputError(
+        f"plane {plane}: its {len(points)} points lie along a line ({spread[1]:.4f} mm RMS "
+        f"across it, {spread[0]:.3f} mm along it; at least {MIN_PLANE_ASPECT:g} of it "
+        "across): the face's tilt about that line is undetermined; probe the face over "
+        "its area",
+        path=rec.path,
+        line=int(rec.line[int(np.argmax(mask))]),
+        field="ball",
+    )
+
+
+def _check_ball_places(
+    rec: Records, names: list[str], centres_mm: npt.NDArray[np.float64], datums: Datums
+) -> None:
+    """InputError for two balls overlapping (one ball probed twice) or balls in a row."""
+    diameters = np.array([datums.balls[n] for n in names])
+    distance = np.linalg.norm(centres_mm[:, None, :] - centres_mm[None, :, :], axis=2)
+    overlap = np.triu(distance < (diameters[:, None] + diameters[None, :]) / 2, k=1)
+    if np.any(overlap):
+        i, j = (int(k) for k in np.argwhere(overlap)[0])
+        raise InputError(
+            f"balls {names[i]} and {names[j]}: centres {distance[i, j]:.3f} mm apart, closer "
+            "than their radii add up to: one ball probed twice, or a label given twice",
+            path=rec.path,
+            line=int(rec.line[int(np.argmax(rec.ball == names[j]))]),
+            field="ball",
+        )
+    try:
+        check_ball_layout(centres_mm)
+    except RegistrationError as exc:
+        raise InputError(f"{exc}: the balls file could not be used", path=rec.path) from None
 
 
 def _points(path: str | os.PathLike[str], step: str | None, reading: ReadOptions) -> Records:
@@ -170,6 +219,8 @@ def register_balls(
             if free is None or radius is not None
             else free
         )
+        _check_ball_places(rec, names, fits.centre_mm, datums)
+        _check_plane_spread(rec, datums.plane)
         towards = fits.centre_mm.mean(axis=0) - feature(datums.plane).mean(axis=0)
         frame = datum_frame(
             feature(datums.plane),
