@@ -275,18 +275,21 @@ def test_same_seed_same_bytes_other_seed_other_bytes(tmp_path):
     assert c["plan.yaml"] == a["plan.yaml"]
 
 
-def test_the_twin_still_makes_the_recorded_calibration_geometry_to_the_byte(tmp_path):
+def test_the_twin_still_makes_the_recorded_calibration_geometry(tmp_path):
     # sessions/calibration-geometry was recorded from its scenario by the twin as it is:
-    # regenerated, its measurements, log and truth come out the same bytes. A change of
-    # the twin's draws (a touch pattern, a noise model) fails here, and then the recorded
-    # sessions stop being what their scenarios make: say so in docs/simulate.md (four
-    # older sessions already are not, since 081bd0e)
+    # regenerated, its measurements, log and truth come out the same (today to the byte
+    # on this machine; compared to 1e-9 of their unit, so that another numpy's last bits
+    # do not fail it, while a change of the twin's draws, 0.1-1 um, does). Then the
+    # recorded sessions stop being what their scenarios make: say so in docs/simulate.md
+    # (four older sessions already are not, since 081bd0e)
     recorded = ROOT / "sessions" / "calibration-geometry"
     scenario = ROOT / "configs" / "scenarios" / "calibration-geometry.yaml"
     result = run("simulate", scenario, "-o", tmp_path / "again")
     assert result.exit_code == 0, result.output
-    for name in ("centres.csv", "temperatures.csv", "plan.yaml", "truth/steps.csv"):
-        assert (tmp_path / "again" / name).read_bytes() == (recorded / name).read_bytes(), name
+    assert (tmp_path / "again" / "plan.yaml").read_bytes() == (recorded / "plan.yaml").read_bytes()
+    for name in ("centres.csv", "temperatures.csv", "truth/steps.csv"):
+        again, before = pd.read_csv(tmp_path / "again" / name), pd.read_csv(recorded / name)
+        pd.testing.assert_frame_equal(again, before, check_exact=False, rtol=0, atol=1e-9)
 
 
 def test_existing_output_is_kept_without_overwrite(tmp_path):
