@@ -16,7 +16,14 @@ from pathlib import Path
 
 import numpy as np
 
-from hexatherm.core.correction import Correction, Interpolation, StepPoses, correct, step_poses
+from hexatherm.core.correction import (
+    Correction,
+    Interpolation,
+    StepPoses,
+    choose_references,
+    correct,
+    step_poses,
+)
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import find_repeats, without_repeats
 from hexatherm.core.plausibility import (
@@ -244,6 +251,53 @@ def where_measured(records: Sequence[Records], label: str) -> str:
     return ""
 
 
+def check_target_times(
+    session: Session,
+    centres: StepCentres,
+    interpolation: Interpolation,
+    records: Sequence[Records] = (),
+) -> None:
+    """Refuse a target measured outside the times of its two references.
+
+    The linear (and smooth) correction weighs the reference after a target by
+    ``(t_S - t_b) / (t_a - t_b)``: a target measured before the reference before it, or
+    after the reference after it (times out of the plan's order: swapped labels, a clock
+    set during the session) would get a weight outside [0, 1], an extrapolation written
+    as a corrected pose. StepError naming the target, both references with their times
+    and the file and line of the target's first measurement in ``records``. The other
+    interpolations use one reference and are not checked; references at the same time
+    (a burst) are :func:`~hexatherm.core.correction.choose_references`' case.
+    """
+    if interpolation not in ("linear", "smooth"):
+        return
+    plan, t = session.plan, centres.times_s
+    before, after, _ = choose_references(plan, t, "linear")
+    targets = plan.target_indices
+    both = (before >= 0) & (after >= 0)
+    tb = np.where(both, t[before], np.nan)
+    ta = np.where(both, t[after], np.nan)
+    ts = t[targets]
+    outside = both & (ta > tb) & ((ts < tb) | (ts > ta))
+    if not np.any(outside):
+        return
+    j = int(np.argmax(outside))
+    i, b, a = int(targets[j]), int(before[j]), int(after[j])
+    more = int(outside.sum()) - 1
+    raise StepError(
+        f"measured at {centres.time_text(t[i])}"
+        + where_measured(records, plan.labels[i])
+        + f", outside the times of its references {plan.labels[b]} "
+        f"({centres.time_text(t[b])}) and {plan.labels[a]} ({centres.time_text(t[a])})"
+        + (f" ({more} more target(s) too)" if more else "")
+        + ": the times are not in the plan's order (swapped labels or times, a clock set "
+        "during the session?), and interpolating between the references would "
+        f"extrapolate (weight {(t[i] - t[b]) / (t[a] - t[b]):.3g} on {plan.labels[a]}); "
+        "--interpolation nearest uses one reference",
+        step=plan.labels[i],
+        index=i,
+    )
+
+
 def average_repeats(
     session: Session, centres: StepCentres
 ) -> tuple[Session, StepCentres, tuple[RepeatGroup, ...]]:
@@ -382,6 +436,7 @@ def process_session(
             f"step {plan.labels[outside[0]]}: commanded pose is outside the stroke "
             f"{session.hexapod.stroke_mm.tolist()} mm"
         )
+    check_target_times(session, centres, interpolation, records)
     steps, correction = correct(
         session.hexapod,
         session.plan,

@@ -1,0 +1,100 @@
+"""A hostile-input audit of ``process``'s options and ``diagnose``'s inputs (session 10).
+
+Session shapes the options meet (times out of the plan's order, sessions too short
+for the diagnosis' held-out check): each is refused in one line naming what is wrong
+(exit status 1, no traceback, nothing written, no input touched), or processed as
+before.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner, Result
+
+from hexatherm.cli import main
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def hashes(*folders: Path) -> dict[str, str]:
+    """SHA-256 of every file under ``folders``."""
+    return {
+        str(p): hashlib.sha256(p.read_bytes()).hexdigest()
+        for folder in folders
+        for p in sorted(folder.rglob("*"))
+        if p.is_file()
+    }
+
+
+def session_copy(tmp_path: Path, name: str = "paper-zero-pose") -> Path:
+    folder = tmp_path / name
+    shutil.copytree(ROOT / "sessions" / name, folder, ignore=shutil.ignore_patterns("expected"))
+    return folder
+
+
+def refusal(result: Result) -> str:
+    """The one line of a refusal: exit status 1, no traceback, click's ``Error:`` line."""
+    assert isinstance(result.exception, SystemExit), result.exception
+    assert result.exit_code == 1, result.output
+    assert "Traceback" not in result.output
+    lines = [line for line in result.output.splitlines() if line.startswith("Error: ")]
+    assert len(lines) == 1, result.output
+    return lines[0]
+
+
+def swap_step_times(centres: Path, a: str, b: str) -> int:
+    """Give the rows of step ``a`` the times of step ``b``'s and back (ball by ball);
+    the line number of ``a``'s first row."""
+    rows = list(csv.reader(centres.open(newline="")))
+    first_a = next(i for i, r in enumerate(rows) if r[0] == a) + 1
+    ra = [r for r in rows[1:] if r[0] == a]
+    rb = [r for r in rows[1:] if r[0] == b]
+    assert len(ra) == len(rb) > 0
+    for x, y in zip(ra, rb, strict=True):
+        x[5], y[5] = y[5], x[5]
+    with centres.open("w", newline="") as f:
+        csv.writer(f, lineterminator="\n").writerows(rows)
+    return first_a
+
+
+@pytest.mark.parametrize("interpolation", ["linear", "smooth"])
+def test_target_measured_after_its_later_reference_is_refused(
+    tmp_path: Path, interpolation: str
+) -> None:
+    # S2 stamped at R2's times: its time lies outside [t(R1), t(R2)], and the weight
+    # (t_S - t_b) / (t_a - t_b) of R2 was 2.0 (R1 -1.0): an extrapolation written as a
+    # corrected pose, with no word on screen (seen: weight_after 2.0, dt_after_s -200)
+    session = session_copy(tmp_path)
+    line = swap_step_times(session / "centres.csv", "S2", "R2")
+    before = hashes(session)
+    out = tmp_path / "out"
+    result = CliRunner().invoke(
+        main, ["process", str(session), "-o", str(out), "--interpolation", interpolation]
+    )
+    message = refusal(result)
+    assert "step S2" in message
+    assert f"centres.csv:{line}" in message
+    assert "R1" in message and "R2" in message
+    assert not out.exists()
+    assert hashes(session) == before
+
+
+def test_target_times_in_order_still_processed(tmp_path: Path) -> None:
+    # the control: the same session unswapped processes, every weight within [0, 1],
+    # and S2's weight is its time's place between its references' times
+    session = session_copy(tmp_path)
+    out = tmp_path / "out"
+    result = CliRunner().invoke(main, ["process", str(session), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    rows = {r["label"]: r for r in csv.DictReader((out / "poses.csv").open())}
+    w = np.array([float(r["weight_after"]) for r in rows.values()])
+    assert np.all((w >= 0) & (w <= 1))
+    s2 = rows["S2"]
+    dtb, dta = float(s2["dt_before_s"]), float(s2["dt_after_s"])
+    assert float(s2["weight_after"]) == pytest.approx(dtb / (dtb + dta))
