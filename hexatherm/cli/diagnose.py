@@ -10,6 +10,7 @@ from hexatherm.cli.options import (
     ProgressBars,
     clean_errors,
     echo_err,
+    folder_name,
     imports_done,
     overwrite_option,
     reading_options,
@@ -28,6 +29,7 @@ from hexatherm.io.files import ReadOptions
     "out",
     type=click.Path(file_okay=False),
     default=None,
+    callback=folder_name,
     help="Output folder [default: SESSION/diagnosis].",
 )
 @overwrite_option

@@ -98,3 +98,19 @@ def test_target_times_in_order_still_processed(tmp_path: Path) -> None:
     s2 = rows["S2"]
     dtb, dta = float(s2["dt_before_s"]), float(s2["dt_after_s"])
     assert float(s2["weight_after"]) == pytest.approx(dtb / (dtb + dta))
+
+
+@pytest.mark.parametrize("command", ["process", "diagnose"])
+def test_empty_output_folder_is_a_usage_error(tmp_path: Path, command: str) -> None:
+    # -o '' (an unset shell variable) was read as '.' and refused as
+    # "-o .: the output folder contains the input ..." with exit 1, naming a folder the
+    # user never gave; report -o '' is a usage error naming -o (exit 2) since ba86341
+    session = session_copy(tmp_path, "with-hidden-effect")
+    before = hashes(session)
+    result = CliRunner().invoke(main, [command, str(session), "-o", ""])
+    assert result.exit_code == 2, result.output
+    assert "Traceback" not in result.output
+    errors = [line for line in result.output.splitlines() if line.startswith("Error: ")]
+    assert len(errors) == 1 and "'-o'" in errors[0] and "empty" in errors[0], result.output
+    assert "-o ." not in result.output
+    assert hashes(session) == before
