@@ -114,3 +114,52 @@ def test_empty_output_folder_is_a_usage_error(tmp_path: Path, command: str) -> N
     assert len(errors) == 1 and "'-o'" in errors[0] and "empty" in errors[0], result.output
     assert "-o ." not in result.output
     assert hashes(session) == before
+
+
+def simulated_session(tmp_path: Path, n_targets: int, seed: int = 0) -> Path:
+    """A session with no hidden effect (truth/effects.yaml: none) of 2 + 2 n_targets
+    steps: ``plan --random`` then ``simulate --plan`` (legs warmed by mats, 0.5 um CMM
+    noise)."""
+    config = ROOT / "sessions" / "paper-zero-pose"
+    hexapod, balls = str(config / "hexapod.yaml"), str(config / "balls.yaml")
+    plan = tmp_path / f"plan{n_targets}.yaml"
+    common = ["--hexapod", hexapod, "--balls", balls]
+    result = CliRunner().invoke(
+        main,
+        ["plan", *common, "--random", str(n_targets), "--seed", "0"]
+        + ["--box", "Tx=-5:5", "--box", "Ry=-1:1", "-o", str(plan)],
+    )
+    assert result.exit_code == 0, result.output
+    session = tmp_path / f"s{n_targets}"
+    result = CliRunner().invoke(
+        main, ["simulate", "--plan", str(plan), *common, "-o", str(session), "--seed", str(seed)]
+    )
+    assert result.exit_code == 0, result.output
+    assert "effects: []" in (session / "truth" / "effects.yaml").read_text()
+    return session
+
+
+def test_diagnose_refuses_a_session_too_short_for_its_heldout_check(tmp_path: Path) -> None:
+    # 4 steps (O, R0, S1, R1) of a twin without any hidden effect: diagnose added
+    # leg_thermal_lag (tau_s 136 +- 28 s, held out on 2 steps) and wrote it into
+    # hexapod.yaml; over 8 seeds 1 added an effect and 6 said NOT ADEQUATE of pure noise
+    # (6 steps: 1 in 8 added one; 12 steps: none, all adequate)
+    session = simulated_session(tmp_path, 1)
+    before = hashes(session)
+    out = tmp_path / "diagnosis"
+    message = refusal(CliRunner().invoke(main, ["diagnose", str(session), "-o", str(out)]))
+    assert "4 steps" in message and "at least 12" in message
+    assert "session.yaml" in message
+    assert not out.exists()
+    assert hashes(session) == before
+
+
+def test_diagnose_takes_a_session_of_twelve_steps(tmp_path: Path) -> None:
+    # the control at the limit: 12 steps, no hidden effect; nothing added (the truth)
+    session = simulated_session(tmp_path, 5)
+    out = tmp_path / "diagnosis"
+    result = CliRunner().invoke(main, ["diagnose", str(session), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "diagnosing s5: 12 steps" in result.output
+    assert "result: added nothing" in result.output
+    assert "thermal_model" not in (out / "hexapod.yaml").read_text()

@@ -15,6 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from hexatherm.core.diagnosis import (
+    HELDOUT_BLOCKS,
+    MIN_STEPS,
     Diagnosis,
     Observations,
     diagnose,
@@ -90,6 +92,16 @@ def read_for_diagnosis(
     current = model_effects(hexapod, str(hexapod_path or session.path))
     _, _, centres, temperatures = read_measured(session, reading=reading)
     assert temperatures is not None  # the session names them (checked above)
+    # after the files are read: what is wrong in them is said first
+    n_steps = len(session.plan.labels)
+    if n_steps < MIN_STEPS:
+        raise InputError(
+            f"the session has {n_steps} steps; the diagnosis needs at least {MIN_STEPS} "
+            f"(two in each of the {HELDOUT_BLOCKS} blocks of time of its held-out check): "
+            "with fewer, an effect it adds or its verdict rests on chance",
+            path=str(session.path),
+            field="plan",
+        )
     log = thermocouple_log(temperatures)
     u_um = centres.u_um
     if np.all(np.isnan(u_um)):
