@@ -163,3 +163,32 @@ def test_diagnose_takes_a_session_of_twelve_steps(tmp_path: Path) -> None:
     assert "diagnosing s5: 12 steps" in result.output
     assert "result: added nothing" in result.output
     assert "thermal_model" not in (out / "hexapod.yaml").read_text()
+
+
+@pytest.mark.parametrize("fixed", [False, True])
+def test_smooth_interpolation_on_a_points_session(tmp_path: Path, fixed: bool) -> None:
+    # a session of probed points (DMIS) has a registration weight per step and ball;
+    # --interpolation smooth was a Python traceback (ValueError: operands could not be
+    # broadcast, (22,3) against (3,3,2,11,3), in the smooth fit's own error: the 11
+    # references' moved centres met the 22 steps' weights), with or without
+    # --fixed-diameter, after the whole processing
+    session = session_copy(tmp_path, "paper-zero-pose-dmis")
+    before = hashes(session)
+    out = tmp_path / "out"
+    args = ["process", str(session), "-o", str(out), "--interpolation", "smooth"]
+    result = CliRunner().invoke(main, args + (["--fixed-diameter"] if fixed else []))
+    assert result.exit_code == 0, result.output
+    assert "Traceback" not in result.output
+    assert "smooth fit's own error" in result.output
+    assert hashes(session) == before
+    # the twin's truth: every corrected translation within 3 u (k = 3) of the true pose
+    # in the reference thermal state
+    truth = {r["label"]: r for r in csv.DictReader((session / "truth" / "steps.csv").open())}
+    rows = list(csv.DictReader((out / "poses.csv").open()))
+    assert len(rows) == 10
+    for row in rows:
+        for axis in ("Tx", "Ty", "Tz"):
+            error = float(row[f"{axis}_corr_mm"]) - float(
+                truth[row["label"]][f"{axis}_truecorr_mm"]
+            )
+            assert abs(error) <= 3 * float(row[f"u_{axis}_corr_mm"]), (row["label"], axis)
