@@ -213,3 +213,27 @@ def test_seed_without_monte_carlo_is_a_usage_error(tmp_path: Path) -> None:
     )
     assert result.exit_code == 0, result.output
     assert "Monte Carlo (2 draws, seed 5)" in result.output
+
+
+def test_fixed_diameter_on_a_centres_session_says_it_changes_nothing(tmp_path: Path) -> None:
+    # --fixed-diameter on a session of ball centres: nothing to fit, the results are the
+    # same byte for byte, and nothing said so (the user believes the radius was fixed)
+    session = session_copy(tmp_path)
+    plain, fixed = tmp_path / "plain", tmp_path / "fixed"
+    assert CliRunner().invoke(main, ["process", str(session), "-o", str(plain)]).exit_code == 0
+    result = CliRunner().invoke(
+        main, ["process", str(session), "-o", str(fixed), "--fixed-diameter"]
+    )
+    assert result.exit_code == 0, result.output
+    assert (fixed / "poses.csv").read_bytes() == (plain / "poses.csv").read_bytes()
+    warnings = [line for line in result.output.splitlines() if "--fixed-diameter" in line]
+    assert len(warnings) == 1 and warnings[0].startswith("warning: "), result.output
+    assert "centres" in warnings[0]
+
+
+def test_fixed_diameter_on_a_points_session_says_nothing_more(tmp_path: Path) -> None:
+    session = session_copy(tmp_path, "paper-zero-pose-dmis")
+    out = tmp_path / "out"
+    result = CliRunner().invoke(main, ["process", str(session), "-o", str(out), "--fixed-diameter"])
+    assert result.exit_code == 0, result.output
+    assert "--fixed-diameter" not in result.output

@@ -406,6 +406,11 @@ def process_session(
         centres.centres_mm, balls.centres_mm, registration_weights(centres.u_um)
     )
     warnings = []
+    if fixed_diameter_mm is not None and all(p is None for p in points):
+        warnings.append(
+            "--fixed-diameter: the measurement files hold ball centres, no probed points to "
+            "fit spheres to: it changes nothing"
+        )
     if temperatures is None:
         warnings.append(
             "no thermocouple log in the session (no 'temperatures:' in the session file): the "
