@@ -60,12 +60,16 @@ def _thresholds(
     """Each ``NAME=VALUE`` checked before any work: a bad one is a usage error (status 2)."""
     from hexatherm.workflows.process.quality import parse_threshold
 
+    seen: set[str] = set()
     for value in values:
         try:
-            parse_threshold(value)
+            name, _ = parse_threshold(value)
         except HexathermError as exc:
             text = str(exc).removeprefix("--quality-threshold ")
             raise click.BadParameter(text, ctx=ctx, param=param) from None
+        if name in seen:
+            raise click.BadParameter(f"{value!r}: {name} is given twice", ctx=ctx, param=param)
+        seen.add(name)
     return values
 
 

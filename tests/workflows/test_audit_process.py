@@ -237,3 +237,58 @@ def test_fixed_diameter_on_a_points_session_says_nothing_more(tmp_path: Path) ->
     result = CliRunner().invoke(main, ["process", str(session), "-o", str(out), "--fixed-diameter"])
     assert result.exit_code == 0, result.output
     assert "--fixed-diameter" not in result.output
+
+
+@pytest.mark.parametrize(
+    ("args", "words"),
+    [
+        # a reciprocal condition number is at most 1: min_rcond=2 (or inf, after "inf
+        # disables a limit") failed every target's conditioning check (10 of 10)
+        (["--quality-threshold", "min_rcond=2"], ["min_rcond", "at most 1"]),
+        (["--quality-threshold", "min_rcond=inf"], ["min_rcond", "at most 1"]),
+        # the same limit twice: the last one was taken without a word (--tolerance Tx
+        # twice is refused)
+        (
+            ["--quality-threshold", "form_um=1", "--quality-threshold", "form_um=20"],
+            ["form_um", "twice"],
+        ),
+    ],
+)
+def test_quality_threshold_edges_are_usage_errors(
+    tmp_path: Path, args: list[str], words: list[str]
+) -> None:
+    session = session_copy(tmp_path)
+    out = tmp_path / "out"
+    result = CliRunner().invoke(main, ["process", str(session), "-o", str(out), *args])
+    assert result.exit_code == 2, result.output
+    errors = [line for line in result.output.splitlines() if line.startswith("Error: ")]
+    assert len(errors) == 1 and "'--quality-threshold'" in errors[0], result.output
+    assert all(w in errors[0] for w in words), errors[0]
+    assert not out.exists()
+
+
+def test_quality_min_rcond_above_one_in_the_session_file_is_refused(tmp_path: Path) -> None:
+    session = session_copy(tmp_path)
+    with (session / "session.yaml").open("a") as f:
+        f.write("quality:\n  min_rcond: 2\n")
+    before = hashes(session)
+    out = tmp_path / "out"
+    message = refusal(CliRunner().invoke(main, ["process", str(session), "-o", str(out)]))
+    assert "session.yaml:" in message and "quality.min_rcond" in message
+    assert "at most 1" in message
+    assert not out.exists()
+    assert hashes(session) == before
+
+
+def test_quality_min_rcond_one_and_zero_are_taken(tmp_path: Path) -> None:
+    # the edges: 1 fails every target (every Jacobian's rcond of paper-zero-pose is
+    # 0.25), 0 turns the check off
+    session = session_copy(tmp_path)
+    for limit, failing in (("1", True), ("0", False)):
+        out = tmp_path / f"out{limit}"
+        args = ["process", str(session), "-o", str(out), "--quality-threshold"]
+        result = CliRunner().invoke(main, [*args, f"min_rcond={limit}"])
+        assert result.exit_code == 0, result.output
+        rows = list(csv.DictReader((out / "quality.csv").open()))
+        targets = [r for r in rows if r["kind"] == "target"]
+        assert all((r["ok_conditioning"] == "False") == failing for r in targets)
