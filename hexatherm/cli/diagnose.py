@@ -84,6 +84,8 @@ def command(
     check_output_settled(out_dir, kind="folder", inputs=inputs, overwrite=overwrite)
     data = read_for_diagnosis(session, hexapod_path, reading)
     echo_err(f"diagnosing {data.session.name}: {data.observations.n_steps} steps")
+    for warning in data.warnings:
+        echo_err(f"warning: {warning}")
     with ProgressBars() as bars:
         result = run_diagnosis(
             data,

@@ -292,3 +292,34 @@ def test_quality_min_rcond_one_and_zero_are_taken(tmp_path: Path) -> None:
         rows = list(csv.DictReader((out / "quality.csv").open()))
         targets = [r for r in rows if r["kind"] == "target"]
         assert all((r["ok_conditioning"] == "False") == failing for r in targets)
+
+
+def flatten_legs(temperatures: Path, legs: tuple[int, ...] = (1, 2, 3, 4, 5, 6)) -> None:
+    """Every row of the ``legs`` columns at 20.0 C (a logger stuck, or not connected)."""
+    rows = list(csv.reader(temperatures.open(newline="")))
+    columns = [rows[0].index(f"leg{i}") for i in legs]
+    for row in rows[1:]:
+        for c in columns:
+            row[c] = "20.0"
+    with temperatures.open("w", newline="") as f:
+        csv.writer(f, lineterminator="\n").writerows(rows)
+
+
+def test_diagnose_and_process_say_when_thermocouples_never_change(tmp_path: Path) -> None:
+    # a log whose leg columns are constant all session (a stuck logger): the twin then
+    # predicts no thermal change at all, and diagnose named the heating's signature as
+    # cmm_drift and leg_offset (with-hidden-effect, NOT ADEQUATE) with no word on the log
+    session = simulated_session(tmp_path, 5)
+    control = CliRunner().invoke(main, ["diagnose", str(session), "-o", str(tmp_path / "d0")])
+    assert control.exit_code == 0, control.output
+    assert "never changes" not in control.output
+    flatten_legs(session / "temperatures.csv", (2, 5))
+    before = hashes(session)
+    for command, out in (("diagnose", "d1"), ("process", "p1")):
+        result = CliRunner().invoke(main, [command, str(session), "-o", str(tmp_path / out)])
+        assert result.exit_code == 0, result.output
+        lines = [line for line in result.output.splitlines() if "never changes" in line]
+        assert len(lines) == 1 and lines[0].startswith("warning: "), result.output
+        assert "temperatures.csv" in lines[0] and "leg2, leg5" in lines[0]
+        assert "leg1" not in lines[0]
+    assert hashes(session) == before

@@ -30,7 +30,7 @@ from hexatherm.io.config import read_hexapod, read_session
 from hexatherm.io.files import STRICT, ReadOptions
 from hexatherm.io.temperatures import Temperatures
 from hexatherm.session import Session
-from hexatherm.workflows.process.measured import read_measured
+from hexatherm.workflows.process.measured import constant_legs_warning, read_measured
 from hexatherm.workflows.process.twin import model_effects, thermocouple_log
 
 
@@ -51,6 +51,8 @@ class SessionData:
     temperatures : Temperatures
     uncertainty_source : str
         Where the centres' uncertainties come from, in words.
+    warnings : tuple of str
+        What the diagnosis rests on that the user should know (a constant log).
     """
 
     session: Session
@@ -60,6 +62,7 @@ class SessionData:
     observations: Observations
     temperatures: Temperatures
     uncertainty_source: str
+    warnings: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -121,7 +124,17 @@ def read_for_diagnosis(
         u_given=not np.all(np.isnan(u_um)),
     )
     source_hexapod = "the session's" if hexapod_path is None else str(hexapod_path)
-    return SessionData(session, hexapod, source_hexapod, current, obs, temperatures, source)
+    constant = constant_legs_warning(temperatures)
+    return SessionData(
+        session,
+        hexapod,
+        source_hexapod,
+        current,
+        obs,
+        temperatures,
+        source,
+        () if constant is None else (constant,),
+    )
 
 
 def run_diagnosis(

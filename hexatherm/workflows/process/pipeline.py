@@ -47,6 +47,7 @@ from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.measured import (
     FileProgress,
     StepCentres,
+    constant_legs_warning,
     read_measured,
     registration_weights,
 )
@@ -411,6 +412,9 @@ def process_session(
             "--fixed-diameter: the measurement files hold ball centres, no probed points to "
             "fit spheres to: it changes nothing"
         )
+    constant = None if temperatures is None else constant_legs_warning(temperatures)
+    if constant is not None:
+        warnings.append(constant)
     if temperatures is None:
         warnings.append(
             "no thermocouple log in the session (no 'temperatures:' in the session file): the "
