@@ -323,3 +323,30 @@ def test_diagnose_and_process_say_when_thermocouples_never_change(tmp_path: Path
         assert "temperatures.csv" in lines[0] and "leg2, leg5" in lines[0]
         assert "leg1" not in lines[0]
     assert hashes(session) == before
+
+
+def test_a_target_with_a_reference_on_one_side_only_is_said(tmp_path: Path) -> None:
+    # plan --reference-every before: the last target has no reference after it and is
+    # corrected from the one before alone (weight_after 0), the growth since left
+    # uncorrected; poses.csv's ref_after was empty, and the screen said nothing
+    session = session_copy(tmp_path)
+    plan = session / "plan.yaml"
+    lines = plan.read_text().splitlines(keepends=True)
+    assert lines[-1].lstrip().startswith("- {label: R10,")
+    plan.write_text("".join(lines[:-1]))
+    rows = [r for r in (session / "centres.csv").read_text().splitlines(keepends=True)]
+    (session / "centres.csv").write_text("".join(r for r in rows if not r.startswith("R10,")))
+    out = tmp_path / "out"
+    result = CliRunner().invoke(main, ["process", str(session), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    poses = {r["label"]: r for r in csv.DictReader((out / "poses.csv").open())}
+    assert poses["S10"]["ref_after"] == "" and float(poses["S10"]["weight_after"]) == 0
+    lines = [line for line in result.output.splitlines() if "one side" in line]
+    assert len(lines) == 1 and lines[0].startswith("warning: "), result.output
+    gap = float(poses["S10"]["dt_before_s"])
+    assert "S10" in lines[0] and "R9" in lines[0] and f"{gap:.0f} s" in lines[0]
+    # the whole session: no such line
+    full = CliRunner().invoke(
+        main, ["process", str(ROOT / "sessions" / "paper-zero-pose"), "-o", str(tmp_path / "f")]
+    )
+    assert full.exit_code == 0 and "one side" not in full.output

@@ -299,6 +299,34 @@ def check_target_times(
     )
 
 
+def one_sided(
+    session: Session, centres: StepCentres, correction: Correction, interpolation: Interpolation
+) -> list[str]:
+    """A warning for the targets with a reference on one side only (a plan with
+    ``--reference-every before``, a session cut short) when the interpolation would use
+    both: the target is corrected from that reference alone, the growth between them is
+    not corrected. Empty for ``before``, ``after`` and ``nearest`` (one side by choice).
+    """
+    if interpolation not in ("linear", "smooth"):
+        return []
+    before, after = correction.before_index, correction.after_index
+    single = (before >= 0) ^ (after >= 0)
+    if not np.any(single):
+        return []
+    j = int(np.argmax(single))
+    target = int(correction.target_index[j])
+    ref = int(before[j] if before[j] >= 0 else after[j])
+    side = "before" if before[j] >= 0 else "after"
+    gap = abs(float(centres.times_s[target] - centres.times_s[ref]))
+    labels = session.plan.labels
+    return [
+        f"{int(single.sum())} target(s), the first {labels[target]}: a reference on one side "
+        f"only ({labels[ref]}, {gap:.0f} s {side} it): corrected from it alone, the legs' "
+        "growth in between is not corrected (plan --reference-every both puts one on each "
+        "side)"
+    ]
+
+
 def average_repeats(
     session: Session, centres: StepCentres
 ) -> tuple[Session, StepCentres, tuple[RepeatGroup, ...]]:
@@ -454,6 +482,7 @@ def process_session(
         interpolation,
         centres.measurements,
     )
+    warnings.extend(one_sided(session, centres, correction, interpolation))
     both = (correction.before_index >= 0) & (correction.after_index >= 0)
     untimed = both & (
         centres.times_s[correction.after_index] <= centres.times_s[correction.before_index]
