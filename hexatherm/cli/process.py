@@ -257,6 +257,11 @@ def command(
         echo_err(f"warning: {what}")
 
 
+#: the largest relative standard uncertainty of a Monte Carlo u said without a warning
+#: (1/sqrt(2 (M - 1)): 10 % at 51 draws)
+MC_RELATIVE_LIMIT = 0.1
+
+
 def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
     """Screen lines: where the centre uncertainties came from, and the largest pose ones."""
     lines = [f"uncertainty: centres from {uncertainty.centres.description}"]
@@ -312,6 +317,14 @@ def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
                 f"  Monte Carlo ({uncertainty.draws} draws, seed {uncertainty.seed}) "
                 f"over linear propagation: {np.nanmin(ratio):.3f} to "
                 f"{np.nanmax(ratio):.3f} ({drawn})"
+            )
+        # a standard deviation of M draws is itself uncertain by 1/sqrt(2 (M - 1)) (k=1)
+        relative = 1 / np.sqrt(2 * (uncertainty.draws - 1))
+        if relative > MC_RELATIVE_LIMIT:
+            lines.append(
+                f"warning: {uncertainty.draws} Monte Carlo draws: every u written is the "
+                f"standard deviation of {uncertainty.draws} values, itself uncertain by "
+                f"about {relative * 100:.0f} % (k=1); --mc 1000 or more for a u to rely on"
             )
     return lines
 

@@ -350,3 +350,23 @@ def test_a_target_with_a_reference_on_one_side_only_is_said(tmp_path: Path) -> N
         main, ["process", str(ROOT / "sessions" / "paper-zero-pose"), "-o", str(tmp_path / "f")]
     )
     assert full.exit_code == 0 and "one side" not in full.output
+
+
+def test_few_monte_carlo_draws_are_said(tmp_path: Path) -> None:
+    # --mc 2: every u of poses.csv is the standard deviation of 2 draws (on
+    # paper-zero-pose 0.004 to 2.0 times the linear propagation's), written and printed
+    # like any other; the relative standard uncertainty of such a u is 1/sqrt(2 (M - 1)),
+    # 71 % for M = 2, 7.1 % for M = 101
+    session = session_copy(tmp_path)
+    result = CliRunner().invoke(
+        main, ["process", str(session), "-o", str(tmp_path / "a"), "--mc", "2"]
+    )
+    assert result.exit_code == 0, result.output
+    lines = [line for line in result.output.splitlines() if "Monte Carlo draws" in line]
+    assert len(lines) == 1 and lines[0].startswith("warning: "), result.output
+    assert "71 %" in lines[0]
+    result = CliRunner().invoke(
+        main, ["process", str(session), "-o", str(tmp_path / "b"), "--mc", "101"]
+    )
+    assert result.exit_code == 0, result.output
+    assert "Monte Carlo draws" not in result.output
