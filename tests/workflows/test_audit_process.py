@@ -370,3 +370,33 @@ def test_few_monte_carlo_draws_are_said(tmp_path: Path) -> None:
     )
     assert result.exit_code == 0, result.output
     assert "Monte Carlo draws" not in result.output
+
+
+def test_diagnose_model_needing_air_without_an_air_column_names_the_file(
+    tmp_path: Path,
+) -> None:
+    # --hexapod whose thermal_model has base_expansion, on a log without 'air': the
+    # refusal was "Error: field 'air': the temperatures have no 'air' column", naming no
+    # file (process --method twin names temperatures.csv:1)
+    session = simulated_session(tmp_path, 5)
+    rows = list(csv.reader((session / "temperatures.csv").open(newline="")))
+    assert rows[0][-1] == "air"
+    with (session / "temperatures.csv").open("w", newline="") as f:
+        csv.writer(f, lineterminator="\n").writerows(r[:-1] for r in rows)
+    hexapod = tmp_path / "model.yaml"
+    hexapod.write_text(
+        (session / "hexapod.yaml").read_text()
+        + "thermal_model:\n  effects:\n"
+        + "  - {name: base_expansion, parameters: {alpha_per_K: 1.0e-5}}\n"
+    )
+    before = hashes(session)
+    out = tmp_path / "d"
+    message = refusal(
+        CliRunner().invoke(
+            main, ["diagnose", str(session), "-o", str(out), "--hexapod", str(hexapod)]
+        )
+    )
+    assert "temperatures.csv:1: field 'air'" in message
+    assert "base_expansion" in message and "model.yaml" in message
+    assert not out.exists()
+    assert hashes(session) == before

@@ -106,6 +106,15 @@ def read_for_diagnosis(
             field="plan",
         )
     log = thermocouple_log(temperatures)
+    needing = [e.name for e in current if type(e).needs_air]
+    if log.air_C is None and needing:
+        raise InputError(
+            f"the model's {', '.join(needing)} ({hexapod_path or session.path}) needs the air "
+            "temperature: the temperatures have no 'air' column",
+            path=temperatures.path,
+            line=1,
+            field="air",
+        )
     u_um = centres.u_um
     if np.all(np.isnan(u_um)):
         u_mm = np.full(u_um.shape, 1e-3)
