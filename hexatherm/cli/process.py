@@ -165,8 +165,13 @@ def command(
     # before any work: never into, around or onto the session's files (checked again under
     # the output's lock when the results are written)
     session_file = read_session(session)
+    # the twin's model is an input too (diagnose's hexapod.yaml, in a folder of hexatherm's)
+    extra_inputs = [] if hexapod_path is None else [hexapod_path]
     check_output_settled(
-        out_dir, kind="folder", inputs=session_file.input_files(), overwrite=overwrite
+        out_dir,
+        kind="folder",
+        inputs=[*session_file.input_files(), *extra_inputs],
+        overwrite=overwrite,
     )
     checks = Checks(
         distance_tolerance_um, registration_tolerance_um, strict_registration, pose_tolerance
@@ -218,6 +223,7 @@ def command(
         quality=quality,
         twin=twin,
         conformity=judged,
+        extra_inputs=extra_inputs,
     )
     n = len(result.correction.target_index)
     averaged = "".join(

@@ -400,3 +400,24 @@ def test_diagnose_model_needing_air_without_an_air_column_names_the_file(
     assert "base_expansion" in message and "model.yaml" in message
     assert not out.exists()
     assert hashes(session) == before
+
+
+def test_process_overwrite_never_removes_its_twin_model(tmp_path: Path) -> None:
+    # diagnose S -o D, then process S --method twin --hexapod D/hexapod.yaml -o D
+    # --overwrite: D is hexatherm's (its manifest lists every file), so --overwrite
+    # replaced it, and the --hexapod file the run had just read was deleted (the
+    # model's file was not among the inputs the output was checked against)
+    session = simulated_session(tmp_path, 5)
+    folder = tmp_path / "D"
+    assert CliRunner().invoke(main, ["diagnose", str(session), "-o", str(folder)]).exit_code == 0
+    model = folder / "hexapod.yaml"
+    before = hashes(session, folder)
+    args = ["process", str(session), "--method", "twin", "--hexapod", str(model)]
+    for extra in ([], ["--overwrite"]):
+        message = refusal(CliRunner().invoke(main, [*args, "-o", str(folder), *extra]))
+        assert "hexapod.yaml" in message, message
+        assert hashes(session, folder) == before
+    # beside it, the same run writes
+    result = CliRunner().invoke(main, [*args, "-o", str(tmp_path / "P")])
+    assert result.exit_code == 0, result.output
+    assert hashes(session, folder) == before
