@@ -421,3 +421,26 @@ def test_process_overwrite_never_removes_its_twin_model(tmp_path: Path) -> None:
     result = CliRunner().invoke(main, [*args, "-o", str(tmp_path / "P")])
     assert result.exit_code == 0, result.output
     assert hashes(session, folder) == before
+
+
+def test_a_one_sided_target_under_the_smooth_fit_is_said_extrapolated(tmp_path: Path) -> None:
+    # with the smooth fit used, a target after the last reference gets the spline
+    # evaluated beyond the references' times: an extrapolation, not the reference alone
+    from tests.workflows.test_uncertainty_smooth import session as smooth_session
+
+    folder = smooth_session(tmp_path / "s", 1)
+    plan = folder / "plan.yaml"
+    lines = plan.read_text().splitlines(keepends=True)
+    assert lines[-1].lstrip().startswith("- {label: R6,")
+    plan.write_text("".join(lines[:-1]))
+    centres = folder / "centres.csv"
+    rows = centres.read_text().splitlines(keepends=True)
+    centres.write_text("".join(r for r in rows if not r.startswith("R6,")))
+    out = tmp_path / "out"
+    args = ["process", str(folder), "-o", str(out), "--interpolation", "smooth"]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    assert "smooth fit used" in result.output
+    lines = [line for line in result.output.splitlines() if "one side" in line]
+    assert len(lines) == 1 and "S6" in lines[0] and "R5" in lines[0], result.output
+    assert "extrapolated" in lines[0] and "alone" not in lines[0]

@@ -319,11 +319,16 @@ def one_sided(
     side = "before" if before[j] >= 0 else "after"
     gap = abs(float(centres.times_s[target] - centres.times_s[ref]))
     labels = session.plan.labels
+    smooth = correction.smooth is not None and correction.smooth.used
+    how = (
+        "the smooth fit of the growth is extrapolated to it"
+        if smooth
+        else "corrected from it alone, the legs' growth in between is not corrected"
+    )
     return [
         f"{int(single.sum())} target(s), the first {labels[target]}: a reference on one side "
-        f"only ({labels[ref]}, {gap:.0f} s {side} it): corrected from it alone, the legs' "
-        "growth in between is not corrected (plan --reference-every both puts one on each "
-        "side)"
+        f"only ({labels[ref]}, {gap:.0f} s {side} it): {how} (plan --reference-every both "
+        "puts one on each side)"
     ]
 
 
