@@ -209,6 +209,12 @@ def command(
     quality = quality_checks(result, session_thresholds(result.session, overrides))
     tolerances = {**result.session.tolerances, **tolerances}
     judged = None
+    given = click.get_current_context().get_parameter_source("coverage_factor")
+    if not tolerances and given is click.core.ParameterSource.COMMANDLINE:
+        echo_err(
+            "warning: --coverage-factor: no tolerance to judge against (--tolerance, or "
+            "tolerances: in the session file): it changes nothing"
+        )
     if tolerances:
         from hexatherm.workflows.process.conformity import conformity
 

@@ -444,3 +444,26 @@ def test_a_one_sided_target_under_the_smooth_fit_is_said_extrapolated(tmp_path: 
     lines = [line for line in result.output.splitlines() if "one side" in line]
     assert len(lines) == 1 and "S6" in lines[0] and "R5" in lines[0], result.output
     assert "extrapolated" in lines[0] and "alone" not in lines[0]
+
+
+def test_coverage_factor_without_tolerances_says_it_changes_nothing(tmp_path: Path) -> None:
+    # --coverage-factor 3 without any tolerance: nothing is judged, poses.csv is the
+    # same byte for byte, and nothing said so (U = 3u is written nowhere)
+    session = session_copy(tmp_path)
+    plain, k3 = tmp_path / "plain", tmp_path / "k3"
+    assert CliRunner().invoke(main, ["process", str(session), "-o", str(plain)]).exit_code == 0
+    result = CliRunner().invoke(
+        main, ["process", str(session), "-o", str(k3), "--coverage-factor", "3"]
+    )
+    assert result.exit_code == 0, result.output
+    assert (k3 / "poses.csv").read_bytes() == (plain / "poses.csv").read_bytes()
+    lines = [line for line in result.output.splitlines() if "--coverage-factor" in line]
+    assert len(lines) == 1 and lines[0].startswith("warning: "), result.output
+    # with a tolerance it is used, and nothing is said
+    result = CliRunner().invoke(
+        main,
+        ["process", str(session), "-o", str(tmp_path / "t"), "--coverage-factor", "3"]
+        + ["--tolerance", "Tx=2um"],
+    )
+    assert result.exit_code == 0, result.output
+    assert "k = 3" in result.output and "warning: --coverage-factor" not in result.output
