@@ -173,6 +173,15 @@ def command(
         inputs=[*session_file.input_files(), *extra_inputs],
         overwrite=overwrite,
     )
+    if "twin" in methods and session_file.temperatures is None:
+        from hexatherm.errors import InputError
+
+        raise InputError(
+            "the twin corrects from the thermocouple log: add 'temperatures: "
+            "temperatures.csv' to the session",
+            path=str(session_file.path),
+            field="temperatures",
+        )
     checks = Checks(
         distance_tolerance_um, registration_tolerance_um, strict_registration, pose_tolerance
     )

@@ -467,3 +467,20 @@ def test_coverage_factor_without_tolerances_says_it_changes_nothing(tmp_path: Pa
     )
     assert result.exit_code == 0, result.output
     assert "k = 3" in result.output and "warning: --coverage-factor" not in result.output
+
+
+def test_twin_without_a_thermocouple_log_is_one_line_before_any_work(tmp_path: Path) -> None:
+    # --method twin on a session without temperatures: the whole session was processed,
+    # a warning printed ("no thermocouple log ... the correction rests on the
+    # references alone"), and only then the refusal: two lines where one is the rule
+    session = session_copy(tmp_path)
+    text = (session / "session.yaml").read_text()
+    (session / "session.yaml").write_text(text.replace("temperatures: temperatures.csv\n", ""))
+    before = hashes(session)
+    out = tmp_path / "out"
+    result = CliRunner().invoke(main, ["process", str(session), "-o", str(out), "--method", "twin"])
+    message = refusal(result)
+    assert "session.yaml" in message and "temperatures" in message
+    assert result.output.strip() == message, result.output
+    assert not out.exists()
+    assert hashes(session) == before
