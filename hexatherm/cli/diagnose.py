@@ -10,6 +10,7 @@ from hexatherm.cli.options import (
     ProgressBars,
     clean_errors,
     echo_err,
+    folder_name,
     imports_done,
     overwrite_option,
     reading_options,
@@ -28,6 +29,7 @@ from hexatherm.io.files import ReadOptions
     "out",
     type=click.Path(file_okay=False),
     default=None,
+    callback=folder_name,
     help="Output folder [default: SESSION/diagnosis].",
 )
 @overwrite_option
@@ -82,6 +84,8 @@ def command(
     check_output_settled(out_dir, kind="folder", inputs=inputs, overwrite=overwrite)
     data = read_for_diagnosis(session, hexapod_path, reading)
     echo_err(f"diagnosing {data.session.name}: {data.observations.n_steps} steps")
+    for warning in data.warnings:
+        echo_err(f"warning: {warning}")
     with ProgressBars() as bars:
         result = run_diagnosis(
             data,

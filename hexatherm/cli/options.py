@@ -23,12 +23,23 @@ F = TypeVar("F", bound=Callable[..., Any])
 overwrite_option = click.option(
     "--overwrite", is_flag=True, help="Replace the output if it exists (never by default)."
 )
+
+
+def folder_name(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+    """``-o`` of an output folder as given: not empty (an unset shell variable would
+    otherwise be read as ``.``, and refused naming a folder never given)."""
+    if value is not None and not value:
+        raise click.BadParameter("empty; give the output folder", ctx, param)
+    return value
+
+
 output_dir_option = click.option(
     "-o",
     "--out",
     "out",
     type=click.Path(file_okay=False),
     default=None,
+    callback=folder_name,
     help="Output folder [default: SESSION/results].",
 )
 interpolation_option = click.option(
@@ -49,12 +60,16 @@ def _thresholds(
     """Each ``NAME=VALUE`` checked before any work: a bad one is a usage error (status 2)."""
     from hexatherm.workflows.process.quality import parse_threshold
 
+    seen: set[str] = set()
     for value in values:
         try:
-            parse_threshold(value)
+            name, _ = parse_threshold(value)
         except HexathermError as exc:
             text = str(exc).removeprefix("--quality-threshold ")
             raise click.BadParameter(text, ctx=ctx, param=param) from None
+        if name in seen:
+            raise click.BadParameter(f"{value!r}: {name} is given twice", ctx=ctx, param=param)
+        seen.add(name)
     return values
 
 

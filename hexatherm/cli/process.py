@@ -148,6 +148,13 @@ def command(
 
     imports_done()
     check_draws(mc)
+    source = click.get_current_context().get_parameter_source("seed")
+    if mc == 0 and source is click.core.ParameterSource.COMMANDLINE:
+        raise click.BadParameter(
+            "--seed is the Monte Carlo draws': use it with --mc N (without, the linear "
+            "propagation draws nothing)",
+            param_hint="'--seed'",
+        )
     if hexapod_path is not None and "twin" not in methods:
         raise click.BadParameter(
             "--hexapod is the twin's model: use it with --method twin", param_hint="'--hexapod'"
@@ -158,9 +165,23 @@ def command(
     # before any work: never into, around or onto the session's files (checked again under
     # the output's lock when the results are written)
     session_file = read_session(session)
+    # the twin's model is an input too (diagnose's hexapod.yaml, in a folder of hexatherm's)
+    extra_inputs = [] if hexapod_path is None else [hexapod_path]
     check_output_settled(
-        out_dir, kind="folder", inputs=session_file.input_files(), overwrite=overwrite
+        out_dir,
+        kind="folder",
+        inputs=[*session_file.input_files(), *extra_inputs],
+        overwrite=overwrite,
     )
+    if "twin" in methods and session_file.temperatures is None:
+        from hexatherm.errors import InputError
+
+        raise InputError(
+            "the twin corrects from the thermocouple log: add 'temperatures: "
+            "temperatures.csv' to the session",
+            path=str(session_file.path),
+            field="temperatures",
+        )
     checks = Checks(
         distance_tolerance_um, registration_tolerance_um, strict_registration, pose_tolerance
     )
@@ -197,6 +218,12 @@ def command(
     quality = quality_checks(result, session_thresholds(result.session, overrides))
     tolerances = {**result.session.tolerances, **tolerances}
     judged = None
+    given = click.get_current_context().get_parameter_source("coverage_factor")
+    if not tolerances and given is click.core.ParameterSource.COMMANDLINE:
+        echo_err(
+            "warning: --coverage-factor: no tolerance to judge against (--tolerance, or "
+            "tolerances: in the session file): it changes nothing"
+        )
     if tolerances:
         from hexatherm.workflows.process.conformity import conformity
 
@@ -211,6 +238,7 @@ def command(
         quality=quality,
         twin=twin,
         conformity=judged,
+        extra_inputs=extra_inputs,
     )
     n = len(result.correction.target_index)
     averaged = "".join(
@@ -248,6 +276,11 @@ def command(
             echo_err(f"error: {what}; exit status {CHECK_FAILED_EXIT} (--strict)")
             raise SystemExit(CHECK_FAILED_EXIT)
         echo_err(f"warning: {what}")
+
+
+#: the largest relative standard uncertainty of a Monte Carlo u said without a warning
+#: (1/sqrt(2 (M - 1)): 10 % at 51 draws)
+MC_RELATIVE_LIMIT = 0.1
 
 
 def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
@@ -305,6 +338,14 @@ def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
                 f"  Monte Carlo ({uncertainty.draws} draws, seed {uncertainty.seed}) "
                 f"over linear propagation: {np.nanmin(ratio):.3f} to "
                 f"{np.nanmax(ratio):.3f} ({drawn})"
+            )
+        # a standard deviation of M draws is itself uncertain by 1/sqrt(2 (M - 1)) (k=1)
+        relative = 1 / np.sqrt(2 * (uncertainty.draws - 1))
+        if relative > MC_RELATIVE_LIMIT:
+            lines.append(
+                f"warning: {uncertainty.draws} Monte Carlo draws: every u written is the "
+                f"standard deviation of {uncertainty.draws} values, itself uncertain by "
+                f"about {relative * 100:.0f} % (k=1); --mc 1000 or more for a u to rely on"
             )
     return lines
 

@@ -20,7 +20,7 @@ standardized ones 0.95x.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -136,6 +136,10 @@ def own_leg_covariance(
     n, k = c.shape[:2]
     hexapod = chain.hexapod
     o2cmm_inv = invert_transform(chain.frames(c)[chain.plan.origin_index])
+    # the registration weights of ``steps`` only (per step and ball for probed points)
+    weights = chain.weights
+    if weights is not None and np.ndim(weights) == 2:
+        chain = replace(chain, weights=np.asarray(weights)[idx])
     moved = np.broadcast_to(c[idx], (k, 3, 2, idx.size, k, 3)).copy()
     for ball in range(k):
         for axis in range(3):

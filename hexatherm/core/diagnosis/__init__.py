@@ -68,7 +68,7 @@ from hexatherm.core.diagnosis.model import (
     twin_centres,
 )
 from hexatherm.core.diagnosis.outcome import Diagnosis
-from hexatherm.core.diagnosis.search import diagnose
+from hexatherm.core.diagnosis.search import HELDOUT_BLOCKS, MIN_STEPS, diagnose
 from hexatherm.core.diagnosis.standin import (
     TRADE_OFF_SE,
     cautions,
@@ -86,6 +86,8 @@ __all__ = [
     "Diagnosis",
     "Finding",
     "FOLD_SIGMAS",
+    "HELDOUT_BLOCKS",
+    "MIN_STEPS",
     "Fit",
     "Folds",
     "Observations",

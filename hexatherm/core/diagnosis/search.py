@@ -42,6 +42,14 @@ from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.residuals import time_blocks
 from hexatherm.typing import FloatArray
 
+#: blocks of time of the held-out check (steps in time order, even blocks against odd)
+HELDOUT_BLOCKS = 6
+#: the fewest steps a diagnosis is made from: two in every block of the held-out check.
+#: Sessions of a twin with no hidden effect (``plan --random N``, ``simulate --plan``,
+#: 8 seeds each): 4 steps, an effect added once and NOT ADEQUATE six times, of noise
+#: alone; 6 steps, an effect added once; 12 and 18 steps, nothing added, all adequate
+MIN_STEPS = 2 * HELDOUT_BLOCKS
+
 
 def _starts(problem: _Problem, start: Sequence[FloatArray | None]) -> list[FloatArray | None]:
     return list(start) + [None] * (len(problem.free) - len(start))
@@ -77,7 +85,7 @@ def diagnose(
     current: Sequence[Effect] = (),
     candidates: Sequence[str] | None = None,
     *,
-    n_blocks: int = 6,
+    n_blocks: int = HELDOUT_BLOCKS,
     max_additions: int = 3,
     progress: Callable[[int, int, int], None] | None = None,
 ) -> Diagnosis:

@@ -210,6 +210,13 @@ def _read_quality(doc: YamlDoc) -> dict[str, float]:
             raise doc.error(
                 f"expected a number >= 0 (.inf turns the check off), got {value!r}", "quality", name
             )
+        if name == "min_rcond" and value > 1:
+            raise doc.error(
+                f"a reciprocal condition number is at most 1, got {value!r} (it would fail "
+                "every target; 0 turns the check off)",
+                "quality",
+                name,
+            )
         if name in QUALITY_ALIASES:
             new, factor = QUALITY_ALIASES[name]
             if new in doc.get("quality"):

@@ -15,6 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from hexatherm.core.diagnosis import (
+    HELDOUT_BLOCKS,
+    MIN_STEPS,
     Diagnosis,
     Observations,
     diagnose,
@@ -28,7 +30,7 @@ from hexatherm.io.config import read_hexapod, read_session
 from hexatherm.io.files import STRICT, ReadOptions
 from hexatherm.io.temperatures import Temperatures
 from hexatherm.session import Session
-from hexatherm.workflows.process.measured import read_measured
+from hexatherm.workflows.process.measured import constant_legs_warning, read_measured
 from hexatherm.workflows.process.twin import model_effects, thermocouple_log
 
 
@@ -49,6 +51,8 @@ class SessionData:
     temperatures : Temperatures
     uncertainty_source : str
         Where the centres' uncertainties come from, in words.
+    warnings : tuple of str
+        What the diagnosis rests on that the user should know (a constant log).
     """
 
     session: Session
@@ -58,6 +62,7 @@ class SessionData:
     observations: Observations
     temperatures: Temperatures
     uncertainty_source: str
+    warnings: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -90,7 +95,26 @@ def read_for_diagnosis(
     current = model_effects(hexapod, str(hexapod_path or session.path))
     _, _, centres, temperatures = read_measured(session, reading=reading)
     assert temperatures is not None  # the session names them (checked above)
+    # after the files are read: what is wrong in them is said first
+    n_steps = len(session.plan.labels)
+    if n_steps < MIN_STEPS:
+        raise InputError(
+            f"the session has {n_steps} steps; the diagnosis needs at least {MIN_STEPS} "
+            f"(two in each of the {HELDOUT_BLOCKS} blocks of time of its held-out check): "
+            "with fewer, an effect it adds or its verdict rests on chance",
+            path=str(session.path),
+            field="plan",
+        )
     log = thermocouple_log(temperatures)
+    needing = [e.name for e in current if type(e).needs_air]
+    if log.air_C is None and needing:
+        raise InputError(
+            f"the model's {', '.join(needing)} ({hexapod_path or session.path}) needs the air "
+            "temperature: the temperatures have no 'air' column",
+            path=temperatures.path,
+            line=1,
+            field="air",
+        )
     u_um = centres.u_um
     if np.all(np.isnan(u_um)):
         u_mm = np.full(u_um.shape, 1e-3)
@@ -109,7 +133,17 @@ def read_for_diagnosis(
         u_given=not np.all(np.isnan(u_um)),
     )
     source_hexapod = "the session's" if hexapod_path is None else str(hexapod_path)
-    return SessionData(session, hexapod, source_hexapod, current, obs, temperatures, source)
+    constant = constant_legs_warning(temperatures)
+    return SessionData(
+        session,
+        hexapod,
+        source_hexapod,
+        current,
+        obs,
+        temperatures,
+        source,
+        () if constant is None else (constant,),
+    )
 
 
 def run_diagnosis(

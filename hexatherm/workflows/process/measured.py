@@ -384,6 +384,24 @@ def _format_time(seconds: float, kind: TimeKind) -> str:
     return seconds_to_iso(seconds) if kind == "iso" else f"{seconds:g} s"
 
 
+def constant_legs_warning(temperatures: Temperatures) -> str | None:
+    """A warning when a leg's thermocouple column holds one value in every row (a logger
+    stuck or not connected: the twin then sees no thermal change of that leg), or None."""
+    legs = temperatures.legs_C
+    if len(legs) < 2:
+        return None
+    flat = np.flatnonzero(np.ptp(legs, axis=0) == 0)
+    if flat.size == 0:
+        return None
+    names = ", ".join(f"leg{i + 1}" for i in flat)
+    values = ", ".join(sorted({f"{legs[0, i]:g}" for i in flat}))
+    return (
+        f"{temperatures.path}: the log of {names} never changes ({values} C in all "
+        f"{len(legs)} rows): the twin sees no thermal change there; a thermocouple stuck "
+        "or not connected?"
+    )
+
+
 def check_log_span(times_s: FloatArray, labels: Sequence[str], temperatures: Temperatures) -> None:
     """Refuse steps whose time is outside the thermocouple log's span.
 

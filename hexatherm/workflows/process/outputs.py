@@ -35,6 +35,7 @@ reference steps, the growth since R0 ``dq_leg1_um`` ..
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -249,9 +250,11 @@ def write_results(
     quality: QualityReport | None = None,
     twin: np.ndarray | None = None,
     conformity: Conformity | None = None,
+    extra_inputs: Sequence[Path] = (),
 ) -> list[Path]:
     """Write ``poses.csv``, ``legs.csv``, ``fits.csv``, ``covariance.csv`` (and
-    ``quality.csv``) into ``out``.
+    ``quality.csv``) into ``out``; ``extra_inputs`` are files read besides the session's
+    (the ``--hexapod`` model of ``--method twin``), never replaced either.
 
     The folder is replaced atomically. ``uncertainty`` defaults to linear
     propagation (:func:`hexatherm.workflows.process.uncertainty.pose_uncertainty`); ``quality.csv``
@@ -273,7 +276,8 @@ def write_results(
     if quality is not None:
         tables["quality.csv"] = quality_file_frame(quality)
     texts = {name: csv_text(frame) for name, frame in tables.items()}
-    with output_dir(out, inputs=session_inputs(result), overwrite=overwrite) as tmp:
+    inputs = [*session_inputs(result), *extra_inputs]
+    with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
         for name, text in texts.items():
             (tmp / name).write_text(text, encoding="utf-8", newline="")
     return [Path(out) / name for name in texts]

@@ -16,7 +16,14 @@ from pathlib import Path
 
 import numpy as np
 
-from hexatherm.core.correction import Correction, Interpolation, StepPoses, correct, step_poses
+from hexatherm.core.correction import (
+    Correction,
+    Interpolation,
+    StepPoses,
+    choose_references,
+    correct,
+    step_poses,
+)
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import find_repeats, without_repeats
 from hexatherm.core.plausibility import (
@@ -40,6 +47,7 @@ from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.measured import (
     FileProgress,
     StepCentres,
+    constant_legs_warning,
     read_measured,
     registration_weights,
 )
@@ -244,6 +252,86 @@ def where_measured(records: Sequence[Records], label: str) -> str:
     return ""
 
 
+def check_target_times(
+    session: Session,
+    centres: StepCentres,
+    interpolation: Interpolation,
+    records: Sequence[Records] = (),
+) -> None:
+    """Refuse a target measured outside the times of its two references.
+
+    The linear (and smooth) correction weighs the reference after a target by
+    ``(t_S - t_b) / (t_a - t_b)``: a target measured before the reference before it, or
+    after the reference after it (times out of the plan's order: swapped labels, a clock
+    set during the session) would get a weight outside [0, 1], an extrapolation written
+    as a corrected pose. StepError naming the target, both references with their times
+    and the file and line of the target's first measurement in ``records``. The other
+    interpolations use one reference and are not checked; references at the same time
+    (a burst) are :func:`~hexatherm.core.correction.choose_references`' case.
+    """
+    if interpolation not in ("linear", "smooth"):
+        return
+    plan, t = session.plan, centres.times_s
+    before, after, _ = choose_references(plan, t, "linear")
+    targets = plan.target_indices
+    both = (before >= 0) & (after >= 0)
+    tb = np.where(both, t[before], np.nan)
+    ta = np.where(both, t[after], np.nan)
+    ts = t[targets]
+    outside = both & (ta > tb) & ((ts < tb) | (ts > ta))
+    if not np.any(outside):
+        return
+    j = int(np.argmax(outside))
+    i, b, a = int(targets[j]), int(before[j]), int(after[j])
+    more = int(outside.sum()) - 1
+    raise StepError(
+        f"measured at {centres.time_text(t[i])}"
+        + where_measured(records, plan.labels[i])
+        + f", outside the times of its references {plan.labels[b]} "
+        f"({centres.time_text(t[b])}) and {plan.labels[a]} ({centres.time_text(t[a])})"
+        + (f" ({more} more target(s) too)" if more else "")
+        + ": the times are not in the plan's order (swapped labels or times, a clock set "
+        "during the session?), and interpolating between the references would "
+        f"extrapolate (weight {(t[i] - t[b]) / (t[a] - t[b]):.3g} on {plan.labels[a]}); "
+        "--interpolation nearest uses one reference",
+        step=plan.labels[i],
+        index=i,
+    )
+
+
+def one_sided(
+    session: Session, centres: StepCentres, correction: Correction, interpolation: Interpolation
+) -> list[str]:
+    """A warning for the targets with a reference on one side only (a plan with
+    ``--reference-every before``, a session cut short) when the interpolation would use
+    both: the target is corrected from that reference alone, the growth between them is
+    not corrected. Empty for ``before``, ``after`` and ``nearest`` (one side by choice).
+    """
+    if interpolation not in ("linear", "smooth"):
+        return []
+    before, after = correction.before_index, correction.after_index
+    single = (before >= 0) ^ (after >= 0)
+    if not np.any(single):
+        return []
+    j = int(np.argmax(single))
+    target = int(correction.target_index[j])
+    ref = int(before[j] if before[j] >= 0 else after[j])
+    side = "before" if before[j] >= 0 else "after"
+    gap = abs(float(centres.times_s[target] - centres.times_s[ref]))
+    labels = session.plan.labels
+    smooth = correction.smooth is not None and correction.smooth.used
+    how = (
+        "the smooth fit of the growth is extrapolated to it"
+        if smooth
+        else "corrected from it alone, the legs' growth in between is not corrected"
+    )
+    return [
+        f"{int(single.sum())} target(s), the first {labels[target]}: a reference on one side "
+        f"only ({labels[ref]}, {gap:.0f} s {side} it): {how} (plan --reference-every both "
+        "puts one on each side)"
+    ]
+
+
 def average_repeats(
     session: Session, centres: StepCentres
 ) -> tuple[Session, StepCentres, tuple[RepeatGroup, ...]]:
@@ -352,6 +440,14 @@ def process_session(
         centres.centres_mm, balls.centres_mm, registration_weights(centres.u_um)
     )
     warnings = []
+    if fixed_diameter_mm is not None and all(p is None for p in points):
+        warnings.append(
+            "--fixed-diameter: the measurement files hold ball centres, no probed points to "
+            "fit spheres to: it changes nothing"
+        )
+    constant = None if temperatures is None else constant_legs_warning(temperatures)
+    if constant is not None:
+        warnings.append(constant)
     if temperatures is None:
         warnings.append(
             "no thermocouple log in the session (no 'temperatures:' in the session file): the "
@@ -382,6 +478,7 @@ def process_session(
             f"step {plan.labels[outside[0]]}: commanded pose is outside the stroke "
             f"{session.hexapod.stroke_mm.tolist()} mm"
         )
+    check_target_times(session, centres, interpolation, records)
     steps, correction = correct(
         session.hexapod,
         session.plan,
@@ -390,6 +487,7 @@ def process_session(
         interpolation,
         centres.measurements,
     )
+    warnings.extend(one_sided(session, centres, correction, interpolation))
     both = (correction.before_index >= 0) & (correction.after_index >= 0)
     untimed = both & (
         centres.times_s[correction.after_index] <= centres.times_s[correction.before_index]

@@ -217,6 +217,11 @@ def parse_threshold(text: str) -> tuple[str, float]:
         raise HexathermError(
             f"--quality-threshold {text!r}: must be a number >= 0 (inf disables a limit)"
         )
+    if name == "min_rcond" and number > 1:
+        raise HexathermError(
+            f"--quality-threshold {text!r}: a reciprocal condition number is at most 1, and "
+            "a min_rcond above it fails every target (0 turns the check off)"
+        )
     if factor != 1.0:
         warnings.warn(
             InputWarning(
