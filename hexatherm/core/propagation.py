@@ -685,8 +685,9 @@ def reference_scatter(
     mean of ``e_i^2`` over that factor, pooled over the columns of ``values``, with
     ``dof = (n - 2) * columns`` (neighbouring differences share measurements: unbiased,
     with somewhat fewer effective degrees of freedom). A drift that bends between two
-    neighbours adds to ``s^2``: the estimate errs on the safe side. ``(nan, 0)`` for
-    fewer than 3 measurements.
+    neighbours adds to ``s^2``: the estimate errs on the safe side. A measurement whose
+    two neighbours share one time is left out (no line through them; ``dof`` counts the
+    rest). ``(nan, 0)`` for fewer than 3 measurements, or none left.
 
     >>> import numpy as np
     >>> rng = np.random.default_rng(1)
@@ -695,6 +696,8 @@ def reference_scatter(
     >>> s2, dof = reference_scatter(t, v)
     >>> bool(abs(np.sqrt(s2) * 1e3 - 1.0) < 0.05), dof
     (True, 1194)
+    >>> reference_scatter(np.zeros(5), np.ones((5, 3)))
+    (nan, 0)
     """
     t = np.asarray(times_s, dtype=float)
     v = np.asarray(values, dtype=float)
@@ -702,9 +705,13 @@ def reference_scatter(
     w = np.ones(len(t)) if weights is None else np.asarray(weights, dtype=float)
     if len(t) < 3:
         return float("nan"), 0
-    f = (t[1:-1] - t[:-2]) / (t[2:] - t[:-2])
-    e = v[1:-1] - ((1 - f)[:, None] * v[:-2] + f[:, None] * v[2:])
-    factor = 1 / w[1:-1] + (1 - f) ** 2 / w[:-2] + f**2 / w[2:]
+    keep = np.flatnonzero(t[2:] - t[:-2] > 0)  # neighbours at one time draw no line
+    if not keep.size:
+        return float("nan"), 0
+    before, mid, after = keep, keep + 1, keep + 2
+    f = (t[mid] - t[before]) / (t[after] - t[before])
+    e = v[mid] - ((1 - f)[:, None] * v[before] + f[:, None] * v[after])
+    factor = 1 / w[mid] + (1 - f) ** 2 / w[before] + f**2 / w[after]
     return float((e**2 / factor[:, None]).mean()), int(e.size)
 
 
