@@ -221,9 +221,18 @@ def reading_options(func: F) -> F:
 
 
 def check_draws(mc: int) -> None:
-    """A usage error for ``--mc 1`` (a standard deviation needs two draws)."""
+    """A usage error for ``--mc 1`` (a standard deviation needs two draws), and for
+    ``--seed`` given without ``--mc`` (the linear propagation draws nothing: the seed
+    would be ignored without a word)."""
     if mc == 1:
         raise click.BadParameter("Monte Carlo needs at least 2 draws", param_hint="'--mc'")
+    source = click.get_current_context().get_parameter_source("seed")
+    if mc == 0 and source is click.core.ParameterSource.COMMANDLINE:
+        raise click.BadParameter(
+            "--seed is the Monte Carlo draws': use it with --mc N (without, the linear "
+            "propagation draws nothing)",
+            param_hint="'--seed'",
+        )
 
 
 max_gap_option = click.option(

@@ -147,14 +147,7 @@ def command(
     from hexatherm.workflows.process.uncertainty import pose_uncertainty
 
     imports_done()
-    check_draws(mc)
-    source = click.get_current_context().get_parameter_source("seed")
-    if mc == 0 and source is click.core.ParameterSource.COMMANDLINE:
-        raise click.BadParameter(
-            "--seed is the Monte Carlo draws': use it with --mc N (without, the linear "
-            "propagation draws nothing)",
-            param_hint="'--seed'",
-        )
+    check_draws(mc)  # and --seed without --mc
     if hexapod_path is not None and "twin" not in methods:
         raise click.BadParameter(
             "--hexapod is the twin's model: use it with --method twin", param_hint="'--hexapod'"

@@ -194,19 +194,22 @@ def test_smooth_interpolation_on_a_points_session(tmp_path: Path, fixed: bool) -
             assert abs(error) <= 3 * float(row[f"u_{axis}_corr_mm"]), (row["label"], axis)
 
 
-def test_seed_without_monte_carlo_is_a_usage_error(tmp_path: Path) -> None:
+@pytest.mark.parametrize("command", ["process", "report"])
+def test_seed_without_monte_carlo_is_a_usage_error(tmp_path: Path, command: str) -> None:
     # --seed 5 without --mc: the linear propagation draws nothing, and the seed was
     # ignored without a word (results identical to --seed 0), as --hexapod without
-    # --method twin is not
+    # --method twin is not; report takes the same two options
     session = session_copy(tmp_path)
     before = hashes(session)
     out = tmp_path / "out"
-    result = CliRunner().invoke(main, ["process", str(session), "-o", str(out), "--seed", "5"])
+    result = CliRunner().invoke(main, [command, str(session), "-o", str(out), "--seed", "5"])
     assert result.exit_code == 2, result.output
     errors = [line for line in result.output.splitlines() if line.startswith("Error: ")]
     assert len(errors) == 1 and "'--seed'" in errors[0] and "--mc" in errors[0]
     assert not out.exists()
     assert hashes(session) == before
+    if command == "report":
+        return
     # with draws the seed is taken, and said
     result = CliRunner().invoke(
         main, ["process", str(session), "-o", str(out), "--seed", "5", "--mc", "2"]
