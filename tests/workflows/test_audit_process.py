@@ -9,43 +9,16 @@ before.
 from __future__ import annotations
 
 import csv
-import hashlib
-import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner, Result
+from click.testing import CliRunner
 
 from hexatherm.cli import main
+from tests.audit import hashes, refusal, session_copy
 
 ROOT = Path(__file__).resolve().parents[2]
-
-
-def hashes(*folders: Path) -> dict[str, str]:
-    """SHA-256 of every file under ``folders``."""
-    return {
-        str(p): hashlib.sha256(p.read_bytes()).hexdigest()
-        for folder in folders
-        for p in sorted(folder.rglob("*"))
-        if p.is_file()
-    }
-
-
-def session_copy(tmp_path: Path, name: str = "paper-zero-pose") -> Path:
-    folder = tmp_path / name
-    shutil.copytree(ROOT / "sessions" / name, folder, ignore=shutil.ignore_patterns("expected"))
-    return folder
-
-
-def refusal(result: Result) -> str:
-    """The one line of a refusal: exit status 1, no traceback, click's ``Error:`` line."""
-    assert isinstance(result.exception, SystemExit), result.exception
-    assert result.exit_code == 1, result.output
-    assert "Traceback" not in result.output
-    lines = [line for line in result.output.splitlines() if line.startswith("Error: ")]
-    assert len(lines) == 1, result.output
-    return lines[0]
 
 
 def swap_step_times(centres: Path, a: str, b: str) -> int:

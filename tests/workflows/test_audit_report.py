@@ -16,40 +16,15 @@ import shutil
 from pathlib import Path
 
 import pytest
-from click.testing import CliRunner, Result
+from click.testing import CliRunner
 
 from hexatherm.cli import main
 from hexatherm.errors import InputError
 from hexatherm.workflows.report.render import render_page
+from tests.audit import hashes, refusal, session_copy
 
 ROOT = Path(__file__).resolve().parents[2]
 SESSION = ROOT / "sessions" / "paper-zero-pose"
-
-
-def hashes(*folders: Path) -> dict[str, str]:
-    """SHA-256 of every file under ``folders`` (but links)."""
-    return {
-        str(p): hashlib.sha256(p.read_bytes()).hexdigest()
-        for folder in folders
-        for p in sorted(folder.rglob("*"))
-        if p.is_file() and not p.is_symlink()
-    }
-
-
-def session_copy(tmp_path: Path, name: str = "paper-zero-pose") -> Path:
-    folder = tmp_path / name
-    shutil.copytree(ROOT / "sessions" / name, folder, ignore=shutil.ignore_patterns("expected"))
-    return folder
-
-
-def refusal(result: Result) -> str:
-    """The one line of a refusal: exit status 1, no traceback, click's ``Error:`` line."""
-    assert isinstance(result.exception, SystemExit), result.exception
-    assert result.exit_code == 1, result.output
-    assert "Traceback" not in result.output
-    lines = [line for line in result.output.splitlines() if line.startswith("Error: ")]
-    assert len(lines) == 1, result.output
-    return lines[0]
 
 
 def templates(folder: Path, files: dict[str, str | bytes]) -> Path:
