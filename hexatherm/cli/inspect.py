@@ -23,7 +23,7 @@ def command(file: Path, as_csv: bool, reading: ReadOptions) -> None:
     and time. For DMIS files every actual feature FA(...) is listed, whatever its
     label; for CSV files every row is a feature (SPHERE centres or POINTs).
     """
-    from hexatherm.workflows.inspect import feature_table
+    from hexatherm.workflows.inspect import feature_table, program_without_actuals
 
     table = feature_table(file, reading)
     if as_csv:
@@ -40,3 +40,9 @@ def command(file: Path, as_csv: bool, reading: ReadOptions) -> None:
         + ", ".join(f"{n} {kind}" for kind, n in counts.items())
         + ")"
     )
+    if program_without_actuals(file, table):
+        echo_err(
+            f"{file} is a DMIS program (nominal features and MEAS statements, as plan --dmis "
+            "writes), not the CMM's output of running it: inspect lists the actual "
+            "features FA(...) of that output"
+        )

@@ -53,3 +53,18 @@ def feature_table(path: str | os.PathLike[str], reading: ReadOptions = STRICT) -
             "time": times,
         }
     )[COLUMNS]
+
+
+def program_without_actuals(path: str | os.PathLike[str], table: pd.DataFrame) -> bool:
+    """Whether ``path`` is a DMIS program (nominal ``F(...)`` features and ``MEAS``
+    statements, as ``plan --dmis`` writes) rather than a CMM's output: it has no actual
+    feature ``FA(...)`` to list."""
+    if len(table):
+        return False
+    text = read_text(Path(path))
+    if not looks_like_dmis(text[:4096]):
+        return False
+    lines = [line.lstrip().upper() for line in text.splitlines()]
+    return any(line.startswith("MEAS/") for line in lines) and not any(
+        line.startswith("FA(") for line in lines
+    )

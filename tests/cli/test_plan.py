@@ -200,6 +200,16 @@ def test_dmis_program_read_back_gives_the_planned_poses(tmp_path, actuals):
     np.testing.assert_allclose(poses[:, :3], plan.poses[:, :3], atol=1e-4)
     np.testing.assert_allclose(poses[:, 3:], plan.poses[:, 3:], atol=1e-5)
 
+    # inspect lists the answer's actual features; given the program itself (it has none,
+    # only nominals and MEAS), it says what the file is instead of a bare "0 features"
+    program = CliRunner().invoke(main, ["inspect", str(tmp_path / "prog.dmi")])
+    assert program.exit_code == 0, program.output
+    assert "0 features" in program.output
+    assert "is a DMIS program (nominal features and MEAS statements" in program.output
+    answer = CliRunner().invoke(main, ["inspect", str(tmp_path / "answer.dmo")])
+    assert answer.exit_code == 0, answer.output
+    assert f"{len(records)} features" in answer.output and "DMIS program" not in answer.output
+
 
 def test_bad_targets_line_names_file_line_field_and_writes_nothing(tmp_path):
     outputs = [tmp_path / "plan.yaml", tmp_path / "prog.dmi", tmp_path / "check.md"]
