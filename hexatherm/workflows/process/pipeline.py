@@ -20,7 +20,6 @@ from hexatherm.core.correction import (
     Correction,
     Interpolation,
     StepPoses,
-    choose_references,
     correct,
     step_poses,
 )
@@ -255,7 +254,7 @@ def where_measured(records: Sequence[Records], label: str) -> str:
 def check_target_times(
     session: Session,
     centres: StepCentres,
-    interpolation: Interpolation,
+    correction: Correction,
     records: Sequence[Records] = (),
 ) -> None:
     """Refuse a target measured outside the times of its two references.
@@ -265,15 +264,14 @@ def check_target_times(
     after the reference after it (times out of the plan's order: swapped labels, a clock
     set during the session) would get a weight outside [0, 1], an extrapolation written
     as a corrected pose. StepError naming the target, both references with their times
-    and the file and line of the target's first measurement in ``records``. The other
-    interpolations use one reference and are not checked; references at the same time
-    (a burst) are :func:`~hexatherm.core.correction.choose_references`' case.
+    and the file and line of the target's first measurement in ``records``. Only targets
+    that ``correction`` corrects from both references are checked (the other
+    interpolations use one); references at the same time (a burst) are
+    :func:`~hexatherm.core.correction.choose_references`' case.
     """
-    if interpolation not in ("linear", "smooth"):
-        return
     plan, t = session.plan, centres.times_s
-    before, after, _ = choose_references(plan, t, "linear")
-    targets = plan.target_indices
+    before, after = correction.before_index, correction.after_index
+    targets = correction.target_index
     both = (before >= 0) & (after >= 0)
     tb = np.where(both, t[before], np.nan)
     ta = np.where(both, t[after], np.nan)
@@ -478,7 +476,6 @@ def process_session(
             f"step {plan.labels[outside[0]]}: commanded pose is outside the stroke "
             f"{session.hexapod.stroke_mm.tolist()} mm"
         )
-    check_target_times(session, centres, interpolation, records)
     steps, correction = correct(
         session.hexapod,
         session.plan,
@@ -487,6 +484,7 @@ def process_session(
         interpolation,
         centres.measurements,
     )
+    check_target_times(session, centres, correction, records)
     warnings.extend(one_sided(session, centres, correction, interpolation))
     both = (correction.before_index >= 0) & (correction.after_index >= 0)
     untimed = both & (
