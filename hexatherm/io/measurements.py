@@ -62,23 +62,17 @@ def read_measurements(
     """
     path = os.fspath(path)
     suffix = Path(path).suffix.lower()
-    if suffix in (".dmo", ".dms", ".dmi"):
-        return [
-            check_coordinates(r)
-            for r in read_dmis(
-                path, progress=progress, allow_truncated=allow_truncated, keep_later=keep_later
-            )
+    dmis = suffix in (".dmo", ".dms", ".dmi") or (
+        suffix != ".csv" and looks_like_dmis(read_text(path)[:4096])
+    )
+    if dmis:
+        records = read_dmis(
+            path, progress=progress, allow_truncated=allow_truncated, keep_later=keep_later
+        )
+    else:
+        records = [
+            read_measurement_csv(path, allow_truncated=allow_truncated, keep_later=keep_later)
         ]
-    if suffix != ".csv":
-        text = read_text(path)
-        if looks_like_dmis(text[:4096]):
-            return [
-                check_coordinates(r)
-                for r in read_dmis(
-                    path, progress=progress, allow_truncated=allow_truncated, keep_later=keep_later
-                )
-            ]
-    records = [read_measurement_csv(path, allow_truncated=allow_truncated, keep_later=keep_later)]
-    if progress is not None:
-        progress(len(records[0]) + 1, len(records[0]) + 1)
+        if progress is not None:
+            progress(len(records[0]) + 1, len(records[0]) + 1)
     return [check_coordinates(r) for r in records]
