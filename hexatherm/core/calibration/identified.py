@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from hexatherm.core.calibration.model import PARAMETER_NAMES, PARAMETER_UNITS, CalibrationModel
+from hexatherm.core.residuals import POSE_COMPONENTS
 from hexatherm.errors import CalibrationError, ConvergenceError
 from hexatherm.typing import FloatArray
 
@@ -20,14 +21,16 @@ from hexatherm.typing import FloatArray
 #: home length (a gain's times that length): beyond it the poses identify the level only
 #: in name, and the fit, linearised about the nominal geometry, means nothing
 MAX_U_FRACTION = 0.01
-_COMPONENTS = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
+#: the units of a commanded pose's components
 _UNITS = ("mm",) * 3 + ("deg",) * 3
 
 
 def pose_spans(commanded_poses: FloatArray) -> str:
     """How far the poses spread in each component, in words (mm, deg)."""
     span = np.ptp(np.atleast_2d(commanded_poses), axis=0)
-    return ", ".join(f"{c} {v:.3g} {u}" for c, v, u in zip(_COMPONENTS, span, _UNITS, strict=True))
+    return ", ".join(
+        f"{c} {v:.3g} {u}" for c, v, u in zip(POSE_COMPONENTS, span, _UNITS, strict=True)
+    )
 
 
 def refuse_unidentified(

@@ -17,7 +17,7 @@
    file (:func:`check_one_balls`): the balls define the platform frame the poses refer
    to; their names and centres must be the same (the diameters and the order may
    differ). (Every plan's origin step commands the zero pose: the plan reader refuses
-   another, :meth:`hexatherm.core.plan.Plan.validate`.)
+   another, :func:`hexatherm.io.config.read_plan`.)
 3. **One reference state** (:func:`check_reference_states`): each session's corrected
    poses refer to the thermal state of its first reference R0; each leg's temperature at
    R0 (interpolated in the session's thermocouple log) must be within

@@ -33,7 +33,7 @@ import pandas as pd
 
 from hexatherm import __version__
 from hexatherm.core.calibration import PARAMETER_NAMES, PARAMETER_UNITS
-from hexatherm.core.residuals import rms
+from hexatherm.core.residuals import POSE_COMPONENTS, rms
 from hexatherm.io.config import hexapod_to_yaml
 from hexatherm.io.csvout import csv_text
 from hexatherm.io.provenance import now_iso
@@ -303,7 +303,7 @@ def span_lines(run: Calibration) -> list[str]:
     """A warning when the campaign's commanded poses never vary some components: the
     new poses of the claim (drawn in their span) do not either."""
     span = np.ptp(run.campaign.commanded, axis=0)
-    flat = [c for c, v in zip(("Tx", "Ty", "Tz", "Rx", "Ry", "Rz"), span, strict=True) if v < 1e-9]
+    flat = [c for c, v in zip(POSE_COMPONENTS, span, strict=True) if v < 1e-9]
     if not flat:
         return []
     return [
