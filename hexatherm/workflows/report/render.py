@@ -256,17 +256,32 @@ def check_template_dir(template_dir: str | os.PathLike[str] | None) -> Path | No
     if not folder.is_dir():
         raise InputError("not a folder of templates", path=template_dir)
     env = environment(folder)
-    names = [n for n in sorted(os.listdir(folder)) if n.endswith(".j2") and (folder / n).is_file()]
-    names += sorted(n for n in os.listdir(PACKAGE_TEMPLATES) if n.endswith(".j2"))
     try:
-        _check_references(env, names, folder)
+        _check_references(env, _pages(folder), folder)
     except jinja2.TemplateError as exc:
         raise template_error(exc, env) from None
     return folder
 
 
+def _pages(folder: Path) -> list[str]:
+    """The templates a page may start from: the lab's ``.j2`` files in ``folder``, then
+    the package's."""
+    names = [n for n in sorted(os.listdir(folder)) if n.endswith(".j2") and (folder / n).is_file()]
+    return names + sorted(n for n in os.listdir(PACKAGE_TEMPLATES) if n.endswith(".j2"))
+
+
 #: the statements that name another template
 _NAMING = (nodes.Extends, nodes.Include, nodes.Import, nodes.FromImport)
+
+
+def _names_in(tree: nodes.Template) -> Iterator[tuple[nodes.Node, str]]:
+    """Each statement of ``tree`` that names another template by a constant, with that
+    name, in order (a name computed while rendering is left out: render_page stops a
+    loop of those)."""
+    for node in tree.find_all(_NAMING):
+        target = getattr(node, "template", None)  # each of _NAMING has one
+        if isinstance(target, nodes.Const) and isinstance(target.value, str):
+            yield node, target.value
 
 
 def _named(env: jinja2.Environment, name: str) -> tuple[str, list[tuple[str, int]]]:
@@ -278,16 +293,13 @@ def _named(env: jinja2.Environment, name: str) -> tuple[str, list[tuple[str, int
     env.get_template(name)  # compiles: a syntax error names its file and line
     tree = env.parse(source, name, filename)
     found = []
-    for node in tree.find_all(_NAMING):
-        target = getattr(node, "template", None)  # each of _NAMING has one
-        if not (isinstance(target, nodes.Const) and isinstance(target.value, str)):
-            continue  # a name computed while rendering: render_page stops a loop of those
+    for node, target in _names_in(tree):
         if isinstance(node, nodes.Include) and node.ignore_missing:
             try:
-                env.loader.get_source(env, target.value)
+                env.loader.get_source(env, target)
             except jinja2.TemplateNotFound:
                 continue
-        found.append((target.value, node.lineno))
+        found.append((target, node.lineno))
     return filename or name, found
 
 
@@ -299,8 +311,7 @@ def named_files(template_dir: Path) -> list[Path]:
     env = environment(template_dir)
     assert env.loader is not None
     top = template_dir.resolve()
-    names = [n for n in sorted(os.listdir(top)) if n.endswith(".j2")]
-    names += sorted(n for n in os.listdir(PACKAGE_TEMPLATES) if n.endswith(".j2"))
+    names = _pages(top)
     seen: set[str] = set()
     found: set[Path] = set()
     while names:
@@ -315,10 +326,7 @@ def named_files(template_dir: Path) -> list[Path]:
         if filename is not None and Path(filename).resolve().is_relative_to(top):
             found.add(Path(filename))
         tree = env.parse(source, name, filename)
-        for node in tree.find_all(_NAMING):
-            target = getattr(node, "template", None)
-            if isinstance(target, nodes.Const) and isinstance(target.value, str):
-                names.append(target.value)
+        names += [target for _, target in _names_in(tree)]
         for call in tree.find_all(nodes.Call):
             first = call.args[0] if call.args else None
             if (
