@@ -65,7 +65,9 @@ URAD_PER_DEG = np.pi / 180 * 1e6
 
 
 # ----------------------------------------------------------------------------- sessions
-def scenario_text(n_targets: int, output: str) -> str:
+def scenario_text(
+    n_targets: int, output: str, points_per_ball: int = 25, seconds_per_point: float = 2.0
+) -> str:
     rng = np.random.default_rng(20240607)
     targets = np.round(rng.uniform(-1, 1, (n_targets, 6)) * HALF_RANGE, 3)
     rows = "\n".join(f"    - [{', '.join(f'{v:g}' for v in t)}]" for t in targets)
@@ -80,29 +82,31 @@ balls: {ROOT / "configs" / "balls-3.yaml"}
 plan:
   reference_pose: [0, 0, -40, 0, 0, 0]
   references: both
-  points_per_ball: 25
+  points_per_ball: {points_per_ball}
   targets:
 {rows}
 origin_on_cmm: [450, 320, 210, 0, 0, 15]
 start: "2024-03-05T07:30:00"
 seed: 7
-timing: {{seconds_per_point: 2.0, seconds_per_move: 20}}
+timing: {{seconds_per_point: {seconds_per_point:g}, seconds_per_move: 20}}
 heating:
   air_C: 20.0
   mats:
 {mats}
 thermocouples: {{period_s: 30, noise_C: 0.02}}
-cmm: {{point_noise_um: 0.5, points_per_ball: 25, cap_angle_deg: 70}}
+cmm: {{point_noise_um: 0.5, points_per_ball: {points_per_ball}, cap_angle_deg: 70}}
 hexapod_repeatability_um: 0.1
 output: {output}
 """
 
 
-def session(n_targets: int, output: str) -> Path:
+def session(
+    n_targets: int, output: str, points_per_ball: int = 25, seconds_per_point: float = 2.0
+) -> Path:
     """The simulated session folder (made once, then taken from the cache)."""
     from hexatherm.workflows.simulate.run import simulate_file
 
-    text = scenario_text(n_targets, output)
+    text = scenario_text(n_targets, output, points_per_ball, seconds_per_point)
     key = hashlib.sha256(text.encode()).hexdigest()[:12]
     folder = CACHE / f"speed-{n_targets}-{output}-{key}"
     if not (folder / "session" / "session.yaml").exists():
@@ -111,6 +115,25 @@ def session(n_targets: int, output: str) -> Path:
         note(f"simulating {n_targets} targets as {output} into {folder} ...")
         simulate_file(folder / "scenario.yaml", folder / "session", overwrite=True)
     return folder / "session"
+
+
+def scanning_session(n_targets: int, points_per_ball: int = 400) -> Path:
+    """A scanning probe's session (issue 37): ``points_per_ball`` points per ball taken at
+    100 points a second, written as a CMM exports them: ``label,ball,x,y,z,time`` with the
+    coordinates at 4 decimals (0.1 um), no normals. Made once from the twin's points
+    session, then taken from the cache."""
+    import pandas as pd
+
+    source = session(n_targets, "points", points_per_ball, seconds_per_point=0.01)
+    folder = source.parent / f"scan-{points_per_ball}"
+    if (folder / "session.yaml").exists():
+        return folder
+    folder.mkdir(exist_ok=True)
+    for name in ("session.yaml", "hexapod.yaml", "balls.yaml", "plan.yaml", "temperatures.csv"):
+        (folder / name).write_bytes((source / name).read_bytes())
+    points = pd.read_csv(source / "points.csv", usecols=["label", "ball", "x", "y", "z", "time"])
+    points.to_csv(folder / "points.csv", index=False, float_format="%.4f")
+    return folder
 
 
 # ----------------------------------------------------------------------------- timing

@@ -267,7 +267,7 @@ MAX_TARGET_STEPS = 100_000
 #: the most touch points of a plan's DMIS program (``plan --dmis``) or a simulated
 #: session: 55 days of probing at 2.4 s a point, a 150 MB program; beyond it they only
 #: fill the memory
-MAX_TOUCH_POINTS = 2_000_000
+MAX_TOUCH_POINTS = 30_000_000
 
 
 def sequence_steps(

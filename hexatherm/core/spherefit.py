@@ -60,8 +60,10 @@ micrometres.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -163,7 +165,6 @@ class _Solution:
     centre: NDArray[np.float64]  # (m, d), in the centred coordinates
     radius: NDArray[np.float64]  # (m,)
     residuals: NDArray[np.float64]  # (N,), sorted order
-    directions: NDArray[np.float64]  # (N, d) unit vectors from centre to points
     normal_matrix: NDArray[np.float64]  # (m, p, p) J^T J at the solution
     cost: NDArray[np.float64]  # (m,) sum of squared residuals
     iterations: NDArray[np.int64]  # (m,)
@@ -293,10 +294,16 @@ def _coverage_deg(u: NDArray[np.float64], counts: NDArray, starts: NDArray) -> N
 
 def _ill_conditioned(
     cond: NDArray[np.float64],
-    coverage: NDArray[np.float64],
+    coverage: NDArray[np.float64] | Callable[[], NDArray[np.float64]],
     label: str,
     free: bool,
 ) -> None:
+    """Refuse the first group whose normal equations are ill-conditioned; ``coverage``
+    (the cap or arc half-angles, or what computes them) is read for the message only."""
+    bad = ~(cond <= COND_MAX)
+    if not bad.any():
+        return
+    cover = coverage() if callable(coverage) else coverage
     region = "cap" if label == "sphere" else "arc"
     what = "centre and radius" if free else "centre"
     # Only the sphere fit offers a fixed radius (the circle fit does not).
@@ -309,10 +316,10 @@ def _ill_conditioned(
         return (
             f"the normal equations are ill-conditioned (condition number {cond[k]:.3g} > "
             f"{COND_MAX:.0e}): the points cover a {region} of half-angle "
-            f"{coverage[k]:.3g} deg, too small to determine the {what}; {advice}"
+            f"{cover[k]:.3g} deg, too small to determine the {what}; {advice}"
         )
 
-    _raise_first(~(cond <= COND_MAX), label, describe)
+    _raise_first(bad, label, describe)
 
 
 def _fit_nspheres(
@@ -417,7 +424,7 @@ def _fit_nspheres(
         u = _unit(v, dist)
         a, b, cost = _normal_equations(u, e, cnt, st, free)
         if first:
-            _ill_conditioned(_condition(a), _coverage_deg(u, cnt, st), label, free)
+            _ill_conditioned(_condition(a), partial(_coverage_deg, u, cnt, st), label, free)
             first = False
         # Gauss-Newton converges only linearly when the residuals are large compared
         # with the curvature of the data (noise ~ sagitta); spheres that are still
@@ -502,11 +509,67 @@ def _fit_nspheres(
         centre=c,
         radius=r,
         residuals=e,
-        directions=u,
         normal_matrix=a,
         cost=cost,
         iterations=iterations,
         coverage_deg=coverage,
+    )
+
+
+#: points of the spheres fitted together in one block: a block's arrays (a few MB) stay in
+#: the CPU's caches, and a scanning probe's millions of points are fitted block after block
+#: in bounded memory (every sphere's fit depends on its own points only)
+BLOCK_POINTS = 1 << 15
+
+
+def _fit_in_blocks(
+    points: NDArray[np.float64],
+    centroid: NDArray[np.float64],
+    counts: NDArray[np.int64],
+    radius: NDArray[np.float64] | None,
+    *,
+    tol_mm: float,
+    max_iter: int,
+    block_points: int = BLOCK_POINTS,
+) -> _Solution:
+    """:func:`_fit_nspheres` of the spheres, ``points`` sorted by sphere and centred on
+    their sphere's ``centroid`` block by block, in blocks of about ``block_points`` points
+    (one sphere's points always in one block). A sphere that cannot be fitted makes the
+    whole set be fitted at once, so that the error names the same sphere, with the same
+    others, as a fit of all of them in one go."""
+    ends = np.cumsum(counts)
+
+    def at_once() -> _Solution:
+        q = points - np.repeat(centroid, counts, axis=0)
+        return _fit_nspheres(q, counts, radius, tol_mm=tol_mm, max_iter=max_iter, label="sphere")
+
+    if ends.size == 0 or ends[-1] <= block_points:
+        return at_once()
+    cuts = np.unique(np.searchsorted(ends, np.arange(block_points, ends[-1], block_points)))
+    bounds = np.concatenate(([0], cuts[cuts < counts.size], [counts.size]))
+    bounds = np.unique(bounds)
+    parts = []
+    try:
+        for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True):
+            first = int(ends[a - 1]) if a else 0
+            q = points[first : int(ends[b - 1])] - np.repeat(centroid[a:b], counts[a:b], axis=0)
+            parts.append(
+                _fit_nspheres(
+                    q,
+                    counts[a:b],
+                    None if radius is None else radius[a:b],
+                    tol_mm=tol_mm,
+                    max_iter=max_iter,
+                    label="sphere",
+                )
+            )
+    except FitError:
+        return at_once()
+    return _Solution(
+        **{
+            f.name: np.concatenate([getattr(part, f.name) for part in parts])
+            for f in dataclasses.fields(_Solution)
+        }
     )
 
 
@@ -658,8 +721,10 @@ def fit_spheres(
         )
         radius = rad.copy()
 
-    order = np.argsort(g, kind="stable")
-    ps = pts[order]
+    # points already in group order (a file's spheres one after the other) need no sort
+    in_order = bool(np.all(g[1:] >= g[:-1]))
+    order = None if in_order else np.argsort(g, kind="stable")
+    ps = pts if order is None else pts[order]
     need = 4 if radius is None else 3
     kind = "free-radius" if radius is None else "fixed-radius"
     _raise_first(
@@ -669,14 +734,13 @@ def fit_spheres(
     )
     starts = _starts(counts)
     centroid = np.add.reduceat(ps, starts, axis=0) / counts[:, None]
-    q = ps - np.repeat(centroid, counts, axis=0)
+    sol = _fit_in_blocks(ps, centroid, counts, radius, tol_mm=float(tol_mm), max_iter=int(max_iter))
 
-    sol = _fit_nspheres(
-        q, counts, radius, tol_mm=float(tol_mm), max_iter=int(max_iter), label="sphere"
-    )
-
-    residuals = np.empty(n_points)
-    residuals[order] = sol.residuals
+    if order is None:
+        residuals = sol.residuals
+    else:
+        residuals = np.empty(n_points)
+        residuals[order] = sol.residuals
     e = sol.residuals
     form = np.maximum.reduceat(e, starts) - np.minimum.reduceat(e, starts)
     cov = _covariance(sol, counts)[:, :3, :3]

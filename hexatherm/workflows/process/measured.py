@@ -89,13 +89,34 @@ def nominal_fit_diameter_mm(balls: Balls) -> FloatArray:
 
 def point_groups(records: Records) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
     """The ``(label, ball)`` group of every point record, numbered in file order, and the
-    first record of each group: the spheres of :func:`fit_points`, in its order."""
-    keys = np.char.add(np.char.add(records.label.astype(str), "\x1f"), records.ball.astype(str))
-    _, first, groups = np.unique(keys, return_index=True, return_inverse=True)
-    order = np.argsort(first)  # groups in file order
+    first record of each group: the spheres of :func:`fit_points`, in its order.
+
+    A file's groups are runs of consecutive rows (:func:`~hexatherm.io.records.check_groups`
+    refuses a ball probed twice in one step), so the groups are found where the label or
+    the ball changes; a key that comes back in a later run (records joined from several
+    files) joins its first run's group.
+
+    >>> rec = Records("p.csv", "points", np.array(["O", "O", "O", "R0", "O"]),
+    ...               np.array(["B1", "B1", "B2", "B1", "B1"]), np.zeros((5, 3)), np.zeros(5),
+    ...               "seconds", np.arange(2, 7))
+    >>> [a.tolist() for a in point_groups(rec)]
+    [[0, 0, 1, 2, 0], [0, 2, 3]]
+    """
+    label, ball = records.label, records.ball
+    n = len(records)
+    if n == 0:
+        return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
+    change = (label[1:] != label[:-1]) | (ball[1:] != ball[:-1])
+    starts = np.concatenate(([0], np.flatnonzero(change) + 1))
+    run = np.cumsum(np.concatenate(([False], change)), dtype=np.intp)
+    keys = np.char.add(np.char.add(label[starts].astype(str), "\x1f"), ball[starts].astype(str))
+    _, first_run, groups = np.unique(keys, return_index=True, return_inverse=True)
+    if first_run.size == starts.size:  # every key one run: the runs are the groups
+        return run, starts.astype(np.intp)
+    order = np.argsort(first_run)  # groups in file order
     rank = np.empty_like(order)
     rank[order] = np.arange(order.size)
-    return rank[groups.reshape(-1)], first[order]
+    return rank[groups.reshape(-1)][run], starts[first_run[order]].astype(np.intp)
 
 
 def fit_radii(
