@@ -11,7 +11,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from hexatherm.errors import InputError
-from hexatherm.io.csvfile import ASCII_BLANKS, column_numbers, column_times, drop_blank_rows
+from hexatherm.io.csvcolumns import ASCII_BLANKS, column_numbers, column_times, drop_blank_rows
 from hexatherm.io.csvtext import complete_lines, csv_frame, read_text
 from hexatherm.io.records import TimeKind
 

@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from hexatherm.io.csvfile import ISO_TIME, _iso_layout
+from hexatherm.io.csvcolumns import ISO_TIME, _iso_layout
 from hexatherm.io.records import Records
 from hexatherm.workflows.process.measured import point_groups
 

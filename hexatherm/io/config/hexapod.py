@@ -15,7 +15,7 @@ from hexatherm.core.geometry import CONVENTIONS
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.thermal import LegThermalModel, SegmentSpec
 from hexatherm.io.config.yamlout import _dump
-from hexatherm.io.csvfile import ISO_TIME
+from hexatherm.io.csvcolumns import ISO_TIME
 from hexatherm.io.temperatures import TEMPERATURE_RANGE_C
 from hexatherm.io.yamlfile import YamlDoc
 
