@@ -43,7 +43,8 @@ from hexatherm.core.plan import NAME_PATTERN
 from hexatherm.errors import InputError
 from hexatherm.io.csvcolumns import ASCII_BLANKS, column_numbers, column_times, drop_blank_rows
 from hexatherm.io.csvout import csv_text
-from hexatherm.io.csvtext import complete_lines, csv_frame, read_text
+from hexatherm.io.csvtext import complete_lines, csv_frame, decode_text
+from hexatherm.io.files import read_bytes
 from hexatherm.io.records import RecordKind, Records, check_groups, seconds_to_iso
 
 BASE_COLUMNS = ("label", "ball", "x", "y", "z", "time")
@@ -94,18 +95,20 @@ def _names(frame: pd.DataFrame, column: str, path: str) -> npt.NDArray[np.str_]:
     return values
 
 
-def _kind(frame: pd.DataFrame, path: str) -> RecordKind:
-    columns = set(frame.columns[6:])
-    if columns & set(CENTRE_EXTRA):
+def _kind(columns: list[str], path: str, label: npt.ArrayLike, ball: npt.ArrayLike) -> RecordKind:
+    """Centres or points, told by the extra columns, the file's name, or at least half of
+    the steps' balls with one row (centres)."""
+    extra = set(columns[6:])
+    if extra & set(CENTRE_EXTRA):
         return "centres"
-    if columns & set(POINT_EXTRA):
+    if extra & set(POINT_EXTRA):
         return "points"
     name = Path(path).name.lower()
     if "centre" in name or "center" in name:
         return "centres"
     if "point" in name:
         return "points"
-    counts = frame.groupby(["label", "ball"]).size()
+    counts = pd.DataFrame({"label": label, "ball": ball}).groupby(["label", "ball"]).size()
     return "centres" if len(counts) and (counts == 1).mean() >= 0.5 else "points"
 
 
@@ -138,16 +141,17 @@ def read_measurement_csv(
         Naming the file, the line and the field (see the module's list).
     """
     path = os.fspath(path)
-    text = complete_lines(read_text(path), path, allow_truncated)
-    fast = _fast_measurement_csv(text, path, kind)
+    raw = read_bytes(path)
+    fast = _fast_measurement_csv(raw, path, kind)
     if fast is not None:
         return check_groups(fast, keep_later=keep_later)
+    text = complete_lines(decode_text(raw, path), path, allow_truncated)
     frame = csv_frame(text, path)
     _check_header(frame, path, CENTRE_EXTRA + POINT_EXTRA)
     frame = drop_blank_rows(frame)
     if frame.empty:
         raise InputError("no data rows", path=path, line=2)
-    kind = kind or _kind(frame, path)
+    kind = kind or _kind(list(frame.columns), path, frame["label"], frame["ball"])
     extras = CENTRE_EXTRA if kind == "centres" else POINT_EXTRA
     misplaced = [c for c in frame.columns[6:] if c not in extras]
     if misplaced:
@@ -304,22 +308,34 @@ def _check_centre_columns(
             )
 
 
-def _fast_measurement_csv(text: str, path: str, kind: RecordKind | None) -> Records | None:
+#: rows of a measurement file parsed at a time: a scanning probe's millions of points are
+#: read in bounded memory (their times and names are Python strings only a chunk at a time)
+CHUNK_ROWS = 1 << 17
+
+
+class _Unclean(Exception):
+    """A chunk the fast reader leaves to the general one."""
+
+
+def _fast_measurement_csv(raw: bytes, path: str, kind: RecordKind | None) -> Records | None:
     """:func:`read_measurement_csv` for a clean file, or None: then the general reader must.
 
-    Clean: a header of known column names without blanks, no quotes, no blank lines, and
-    every value that the general reader would take without complaint and without
-    stripping blanks (names, times), with no empty or non-finite number. The numbers are
-    parsed by pandas' C parser straight to floats (the converter of ``pd.to_numeric``,
-    correctly rounded), instead of strings that are stripped and converted one column
-    after the other. Anything else (and any error) is left to the general reader, so that
-    results and errors are the same.
+    Clean: ASCII without NUL or quotes, every line ended (LF or CRLF), a header of known
+    column names without blanks, and every value that the general reader would take
+    without complaint and without stripping blanks (names, times), with no empty or
+    non-finite number. The file is parsed from its bytes by pandas' C parser, the numbers
+    straight to floats (the converter of ``pd.to_numeric``, correctly rounded), in chunks
+    of :data:`CHUNK_ROWS` rows whose strings are turned into arrays at once. Anything else
+    (and any error) is left to the general reader, so that results and errors are the
+    same.
     """
-    if '"' in text:
+    if not raw.endswith(b"\n") or b'"' in raw or b"\x00" in raw or not raw.isascii():
         return None
-    if "\r" in text:
-        text = text.replace("\r\n", "\n").replace("\r", "\n")
-    columns = text[: text.find("\n")].split(",")  # (not partition: a copy of 20 MB)
+    if b"\r" in raw:
+        raw = raw.replace(b"\r\n", b"\n")
+        if b"\r" in raw:
+            return None
+    columns = raw[: raw.find(b"\n")].decode("ascii").split(",")
     known = set(BASE_COLUMNS + CENTRE_EXTRA + POINT_EXTRA)
     if (
         tuple(columns[:6]) != BASE_COLUMNS
@@ -329,11 +345,10 @@ def _fast_measurement_csv(text: str, path: str, kind: RecordKind | None) -> Reco
         return None
     numeric = [c for c in columns if c not in ("label", "ball", "time")]
     # no value can hold a blank to strip: the parser need not look for them
-    blank_free = text.isascii() and not any(c in text for c in ASCII_BLANKS)
+    blank_free = not any(c.encode() in raw for c in ASCII_BLANKS)
     try:
-        frame = pd.read_csv(
-            # bytes: a StringIO of a 20 MB text costs half as much as the parsing
-            io.BytesIO(text.encode("utf-8")),
+        chunks = pd.read_csv(
+            io.BytesIO(raw),  # shares the bytes, no copy
             encoding="utf-8",
             dtype={
                 "label": object,
@@ -346,51 +361,36 @@ def _fast_measurement_csv(text: str, path: str, kind: RecordKind | None) -> Reco
             skipinitialspace=not blank_free,
             skip_blank_lines=False,
             engine="c",
+            chunksize=CHUNK_ROWS,
         )
-    except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError):
+        parts = []
+        with chunks:
+            for frame in chunks:
+                parts.append(_clean_chunk(frame, columns, numeric, blank_free, path))
+    except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError, _Unclean, InputError):
         return None
-    if frame.empty or list(frame.columns) != columns:
-        return None
-    frame.index = np.arange(len(frame)) + 2
-    named: dict[str, npt.NDArray[np.str_]] = {}
-    for column in ("label", "ball"):
-        codes, names = pd.factorize(frame[column].to_numpy())
-        if not all(isinstance(v, str) and NAME_PATTERN.fullmatch(v) for v in names):
-            return None
-        # each name converted once, then spread (not 150,000 conversions)
-        named[column] = np.asarray(names, dtype=str)[codes]
-    if frame["time"].isna().any():
-        return None  # a short row
-    if not blank_free:
-        # a blank somewhere in the file (or a character beyond ASCII): is it in a time?
-        times = frame["time"].to_numpy()
-        if not all(isinstance(v, str) and v and v == v.strip() for v in times):
-            return None
-    # else no value can hold a blank to strip; an empty time is refused by column_times
-    values = {c: frame[c].to_numpy(dtype=np.float64) for c in numeric}
-    if not all(np.isfinite(v).all() for v in values.values()):
-        return None  # empty or non-finite numbers: the general reader tells them apart
-    kind = kind or _kind(frame, path)
+    if not parts or len({(p["time_kind"], p["aware"]) for p in parts}) != 1:
+        return None  # no rows, or times of different kinds: the general reader says
+    joined = {key: np.concatenate([p[key] for p in parts]) for key in ("label", "ball", "time")}
+    values = {c: np.concatenate([p["values"][c] for p in parts]) for c in numeric}
+    lines = np.arange(joined["time"].size, dtype=np.int64) + 2
+    label, ball = joined["label"], joined["ball"]
+    kind = kind or _kind(columns, path, label, ball)
     extras = CENTRE_EXTRA if kind == "centres" else POINT_EXTRA
     if any(c not in extras for c in columns[6:]):
         return None
-    label, ball = named["label"], named["ball"]
-    lines = frame.index.to_numpy(dtype=np.int64)
-    try:
-        time, time_kind, aware = column_times(frame, path)
-        if kind == "centres":
-            _check_centre_columns({c: values.get(c) for c in CENTRE_EXTRA}, lines, path)
-    except InputError:
-        return None
     diameter = ijk = None
     extra: dict[str, object] = {}
-    if kind == "centres":
-        if "diameter" in values:
-            diameter = values["diameter"]
-        extra = _centre_extra(values, lines, path)
-    elif all(c in values for c in POINT_EXTRA):
+    try:
+        if kind == "centres":
+            _check_centre_columns({c: values.get(c) for c in CENTRE_EXTRA}, lines, path)
+            diameter = values.get("diameter")
+            extra = _centre_extra(values, lines, path)
+    except InputError:
+        return None
+    if kind == "points" and all(c in values for c in POINT_EXTRA):
         ijk = np.column_stack([values[c] for c in POINT_EXTRA])
-    elif any(c in values for c in POINT_EXTRA):
+    elif kind == "points" and any(c in values for c in POINT_EXTRA):
         return None
     xyz = np.column_stack([values[c] for c in ("x", "y", "z")])
     return Records(
@@ -399,14 +399,41 @@ def _fast_measurement_csv(text: str, path: str, kind: RecordKind | None) -> Reco
         label=label,
         ball=ball,
         xyz_mm=xyz,
-        time_s=time,
-        time_kind=time_kind,
+        time_s=joined["time"],
+        time_kind=parts[0]["time_kind"],
         line=lines,
         diameter_mm=diameter,
         ijk=ijk,
         extra=extra,
-        time_aware=aware,
+        time_aware=parts[0]["aware"],
     )
+
+
+def _clean_chunk(
+    frame: pd.DataFrame, columns: list[str], numeric: list[str], blank_free: bool, path: str
+) -> dict:
+    """One chunk of :func:`_fast_measurement_csv` as arrays; :class:`_Unclean` (or an
+    InputError) when the general reader must read the file."""
+    if frame.empty or list(frame.columns) != columns or frame["time"].isna().any():
+        raise _Unclean  # a short row
+    named: dict[str, npt.NDArray[np.str_]] = {}
+    for column in ("label", "ball"):
+        codes, names = pd.factorize(frame[column].to_numpy())
+        if not all(isinstance(v, str) and NAME_PATTERN.fullmatch(v) for v in names):
+            raise _Unclean
+        # each name converted once, then spread (not a million conversions)
+        named[column] = np.asarray(names, dtype=str)[codes]
+    if not blank_free:
+        # a blank somewhere in the file: is it in a time?
+        times = frame["time"].to_numpy()
+        if not all(isinstance(v, str) and v and v == v.strip() for v in times):
+            raise _Unclean
+    # else no value can hold a blank to strip; an empty time is refused by column_times
+    values = {c: frame[c].to_numpy(dtype=np.float64) for c in numeric}
+    if not all(np.isfinite(v).all() for v in values.values()):
+        raise _Unclean  # empty or non-finite numbers: the general reader tells them apart
+    time, time_kind, aware = column_times(frame, path)  # (its lines are not used: clean)
+    return {**named, "values": values, "time": time, "time_kind": time_kind, "aware": aware}
 
 
 def centres_to_csv(records: Records) -> str:

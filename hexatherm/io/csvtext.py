@@ -22,7 +22,11 @@ def read_text(path: str | os.PathLike[str]) -> str:
     (:func:`semicolons_to_commas`); InputError when it is not a regular file of a sane
     size, unreadable, UTF-16 or otherwise not UTF-8, or binary."""
     path = os.fspath(path)
-    raw = read_bytes(path)
+    return decode_text(read_bytes(path), path)
+
+
+def decode_text(raw: bytes, path: str) -> str:
+    """:func:`read_text` of a file's bytes read before."""
     refuse_utf16(raw, path)
     try:
         text = raw.decode("utf-8-sig")

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from hexatherm.errors import InputError
-from hexatherm.io.csvfile import read_measurement_csv, read_text
+from hexatherm.io.csvfile import read_measurement_csv
+from hexatherm.io.csvtext import read_text
 from hexatherm.io.dmis import looks_like_dmis, read_dmis
 from hexatherm.io.records import Records
 

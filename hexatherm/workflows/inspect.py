@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from hexatherm.io.csvfile import read_measurement_csv, read_text
+from hexatherm.io.csvfile import read_measurement_csv
+from hexatherm.io.csvtext import read_text
 from hexatherm.io.dmis import DMIS_SUFFIXES, looks_like_dmis, read_dmis_features
 from hexatherm.io.files import STRICT, ReadOptions
 from hexatherm.io.records import seconds_to_iso

@@ -40,7 +40,7 @@ from hexatherm.core.touch import touch_points
 from hexatherm.errors import PlanError
 from hexatherm.io.checklist import checklist_markdown
 from hexatherm.io.config import plan_to_yaml, read_balls, read_hexapod
-from hexatherm.io.csvfile import read_text
+from hexatherm.io.csvtext import read_text
 from hexatherm.io.dmisprog import dmis_program
 
 #: random choices of as many candidates that ``plan --calibration`` compares its design with

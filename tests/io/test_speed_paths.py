@@ -429,7 +429,7 @@ def check_csv(path: Path, fast: bool | None = None, kind=None) -> None:
         outcome(general_csv, path, kind),
     )
     if fast is not None:
-        used = csvfile._fast_measurement_csv(csvfile.read_text(path), str(path), kind)
+        used = csvfile._fast_measurement_csv(path.read_bytes(), str(path), kind)
         assert (used is not None) == fast
 
 
@@ -458,7 +458,10 @@ def centres_csv() -> str:
 
 @pytest.mark.parametrize("seconds", [False, True])
 @pytest.mark.parametrize("ijk", [True, False])
-def test_csv_clean_files_take_the_fast_path(tmp_path, seconds, ijk):
+@pytest.mark.parametrize("chunk_rows", [None, 1])
+def test_csv_clean_files_take_the_fast_path(tmp_path, seconds, ijk, chunk_rows, monkeypatch):
+    if chunk_rows is not None:  # in chunks of one row, the fast path still reads them
+        monkeypatch.setattr(csvfile, "CHUNK_ROWS", chunk_rows)
     check_csv(write(tmp_path, points_csv(seconds, ijk), "points.csv"), fast=True)
     check_csv(
         write(tmp_path, points_csv(seconds, ijk).replace("\n", "\r\n"), "points.csv"), fast=True
@@ -500,8 +503,11 @@ CLEAN = points_csv()
         ("label,ball", "Label,ball"),
     ],
 )
-def test_csv_variants_read_as_the_general_reader(tmp_path, old, new):
+@pytest.mark.parametrize("chunk_rows", [None, 1, 2])
+def test_csv_variants_read_as_the_general_reader(tmp_path, old, new, chunk_rows, monkeypatch):
     assert old in CLEAN
+    if chunk_rows is not None:  # a scanning probe's file is read in chunks (issue 37)
+        monkeypatch.setattr(csvfile, "CHUNK_ROWS", chunk_rows)
     check_csv(write(tmp_path, CLEAN.replace(old, new, 1), "points.csv"))
 
 
@@ -523,7 +529,10 @@ def test_csv_variants_read_as_the_general_reader(tmp_path, old, new):
     ],
 )
 @pytest.mark.parametrize("name", ["points.csv", "centres.csv", "data.csv"])
-def test_csv_small_files_read_as_the_general_reader(tmp_path, text, name):
+@pytest.mark.parametrize("chunk_rows", [None, 1])
+def test_csv_small_files_read_as_the_general_reader(tmp_path, text, name, chunk_rows, monkeypatch):
+    if chunk_rows is not None:
+        monkeypatch.setattr(csvfile, "CHUNK_ROWS", chunk_rows)
     check_csv(write(tmp_path, text, name))
 
 

@@ -48,7 +48,7 @@ class SessionFiles:
 def load_files(plan_path: Path, hexapod_path: Path, balls_path: Path) -> SessionFiles:
     """Read and validate the plan, hexapod and balls files."""
     from hexatherm.io.config import read_balls, read_hexapod, read_plan
-    from hexatherm.io.csvfile import read_text
+    from hexatherm.io.csvtext import read_text
 
     plan = read_plan(plan_path)
     hexapod = read_hexapod(hexapod_path)
