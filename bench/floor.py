@@ -45,7 +45,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from speed import CACHE, hexatherm_script, session  # noqa: E402
+from speed import CACHE, hexatherm_script, scanning_session, session  # noqa: E402
 
 #: as ``hexatherm.cli`` sets them for itself (unless the environment does)
 BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
@@ -53,9 +53,20 @@ BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXI
 BYTECODE = False
 
 
+#: runs a command and prints its peak resident memory (kB): ``ru_maxrss`` of the children
+#: of this small process is that one command's
+_PEAK = (
+    "import resource, subprocess, sys; subprocess.run(sys.argv[1:], check=True); "
+    "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)"
+)
+#: the peak memory (MB) of the last run of :func:`timed`
+LAST_PEAK_MB = [0.0]
+
+
 def timed(command: list[str], code: Path | None = None) -> tuple[float, float]:
     """Wall time and CPU time (user + system, of the child) of one run, s; ``code``: a
-    checkout to run from (``PYTHONPATH``). One BLAS thread unless the environment says."""
+    checkout to run from (``PYTHONPATH``). One BLAS thread unless the environment says.
+    The run's peak resident memory goes to :data:`LAST_PEAK_MB`."""
     env = dict(os.environ)
     for name in BLAS_THREAD_VARIABLES:
         env.setdefault(name, "1")
@@ -66,15 +77,17 @@ def timed(command: list[str], code: Path | None = None) -> tuple[float, float]:
         env["PYTHONPYCACHEPREFIX"] = str(CACHE / "pycache")
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
-    subprocess.run(
-        command,
+    done = subprocess.run(
+        [sys.executable, "-c", _PEAK, *command],
         check=True,
-        stdout=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
         stderr=subprocess.DEVNULL,
         env=env,
         cwd=code,
+        text=True,
     )
     wall = time.perf_counter() - start
+    LAST_PEAK_MB[0] = int(done.stdout.split()[-1]) / 1024
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     return wall, cpu
@@ -87,10 +100,19 @@ def main() -> None:
     parser.add_argument("--plain-pairs", type=int, default=3)
     parser.add_argument("--baseline", type=Path, help="a checkout of the code before")
     parser.add_argument("--bytecode", action="store_true", help="compiled modules, as installed")
+    parser.add_argument(
+        "--points-per-ball",
+        type=int,
+        default=25,
+        help="a scanning probe's session when above 25 (issue 37: 400, 4 decimals)",
+    )
     args = parser.parse_args()
     global BYTECODE
     BYTECODE = args.bytecode
-    folder = session(args.targets, "points")
+    if args.points_per_ball == 25:
+        folder = session(args.targets, "points")
+    else:
+        folder = scanning_session(args.targets, args.points_per_ball)
     measurement = [p for p in folder.glob("*.csv") if p.name != "temperatures.csv"]
     assert measurement, f"no measurement CSV in {folder}"
     points = measurement[0]
@@ -138,10 +160,16 @@ def baseline(args: argparse.Namespace, floor: list[str], folder: Path, name: str
     here = Path(__file__).resolve().parents[1]
     timed(command, args.baseline)  # warm (and compile) both once
     timed(command, here)
-    triples = [
-        (timed(floor), timed(command, args.baseline), timed(command, here))
-        for _ in range(args.pairs)
-    ]
+    triples = []
+    peaks = []  # MB: floor, before, now
+    for _ in range(args.pairs):
+        runs = []
+        peak = []
+        for code in (None, args.baseline, here):
+            runs.append(timed(floor) if code is None else timed(command, code))
+            peak.append(LAST_PEAK_MB[0])
+        triples.append(tuple(runs))
+        peaks.append(peak)
     print(f"process against its floor, {args.targets} targets ({name}), {len(triples)} triples")
     print(f"baseline: {args.baseline}; load average at the end {os.getloadavg()[0]:.1f}")
     print(f"{'CPU floor':>10} {'before':>8} {'now':>8} {'before/floor':>13} {'now/floor':>10}")
@@ -158,6 +186,11 @@ def baseline(args: argparse.Namespace, floor: list[str], folder: Path, name: str
             f"{what}: median ratio to the floor, before {before_r:.2f}, now {now_r:.2f}; "
             f"now / before {paired:.2f}"
         )
+    floor_mb, before_mb, now_mb = (statistics.median(p[k] for p in peaks) for k in range(3))
+    print(
+        f"peak memory: floor {floor_mb:.0f} MB, before {before_mb:.0f} MB "
+        f"({before_mb / floor_mb:.2f}x), now {now_mb:.0f} MB ({now_mb / floor_mb:.2f}x)"
+    )
 
 
 def straightforward(folder: Path, ours: list[str], n_pairs: int) -> None:
