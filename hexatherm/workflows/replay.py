@@ -5,7 +5,8 @@ the default options; each CSV of ``expected/`` is compared with the new one:
 same columns, same rows, text cells equal, numbers within a tolerance chosen by
 the column's unit (:func:`~hexatherm.io.csvout.column_unit`: ``_mm``, ``_deg``,
 ``_um``, ``_urad``, ``_um2``, ``_urad2``, ``_ppm``, ``_C``, ``_s``; others relative
-1e-9), at least 1.5 steps of the resolution the files are written at.
+1e-9; ``parameters.csv``'s values by the unit of their row), at least 1.5 steps of the
+resolution the files are written at.
 """
 
 from __future__ import annotations
@@ -15,10 +16,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 import pandas as pd
 
-from hexatherm.io.csvout import column_unit
-from hexatherm.workflows.calibrate.outputs import output_files
+from hexatherm.io.csvout import ROW_RESOLUTION, column_unit
+from hexatherm.workflows.calibrate.outputs import (
+    CORRELATION_RESOLUTION,
+    ROW_UNIT_COLUMNS,
+    output_files,
+)
 from hexatherm.workflows.calibrate.run import calibrate, read_campaign
 from hexatherm.workflows.process.outputs import write_results
 from hexatherm.workflows.process.pipeline import process_session
@@ -68,6 +74,25 @@ def tolerance_for(column: str, tolerances: dict[str, float]) -> tuple[str, float
     return "rel", 1e-9
 
 
+def written_limits(column: str, expected: pd.DataFrame) -> npt.NDArray[np.float64] | None:
+    """Absolute tolerances, row by row, of a column written at a resolution its name does
+    not carry: ``parameters.csv``'s values in each row's unit (1.5 steps of that unit's
+    resolution, :data:`~hexatherm.io.csvout.ROW_RESOLUTION`) and its correlations; None
+    for any other column.
+
+    >>> table = pd.DataFrame({"unit": ["mm", "mm/mm"], "calibrated": [31.2721083, 1.0]})
+    >>> written_limits("calibrated", table).tolist()
+    [1.5e-07, 1.5e-10]
+    """
+    if column in ROW_UNIT_COLUMNS and "unit" in expected:
+        units = expected["unit"].astype(str)
+        if units.isin(list(ROW_RESOLUTION)).all():
+            return np.asarray(1.5 * units.map(ROW_RESOLUTION).to_numpy(dtype=float), np.float64)
+    if column == "max_abs_correlation":
+        return np.full(len(expected), 1.5 * CORRELATION_RESOLUTION, dtype=np.float64)
+    return None
+
+
 def compare_tables(
     name: str,
     expected: pd.DataFrame,
@@ -98,6 +123,9 @@ def compare_tables(
             both_nan = np.isnan(x) & np.isnan(y)
             diff = np.where(both_nan, 0.0, np.abs(x - y))
             limit = tol if unit != "rel" else tol * np.maximum(np.abs(x), 1.0)
+            written = written_limits(column, expected) if unit == "rel" else None
+            if written is not None:  # written at a resolution per row: a flip of its last digit
+                limit = np.maximum(limit, written)
             bad = ~(diff <= limit) & ~both_nan
             finite = diff[np.isfinite(diff)]
             if finite.size and unit != "rel":
@@ -107,7 +135,7 @@ def compare_tables(
                 result.mismatches.append(
                     f"{result.session}/{name}: {row_name(i)}, column {column}: "
                     f"expected {float(x[i])!r}, got {float(y[i])!r} "
-                    f"(|diff| {diff[i]:.3g} > {tol:g})"
+                    f"(|diff| {diff[i]:.3g} > {float(np.broadcast_to(limit, x.shape)[i]):g})"
                 )
         else:
             sa, sb = a.fillna("").astype(str), b.fillna("").astype(str)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import shutil
 
+import pandas as pd
 from click.testing import CliRunner
 
 from hexatherm.cli import main
@@ -79,3 +80,34 @@ def test_serial_capture_replays_to_the_same_points_byte_for_byte(tmp_path):
     )
     assert result.exit_code == 0, result.output
     assert (tmp_path / "again" / "points.csv").read_bytes() == (folder / "points.csv").read_bytes()
+
+
+def test_parameters_are_compared_at_the_resolution_of_their_row_unit():
+    """parameters.csv writes its values at the resolution of each row's unit (1e-7 mm,
+    1e-10 mm/mm): a last digit that flips on another CPU is within replay's tolerance, two
+    steps are not (found on an AMD EPYC: calibration-geometry's base4_y_mm 31.2721083 came
+    out 31.2721084)."""
+    from hexatherm.workflows.replay import Comparison, compare_tables
+
+    expected = pd.DataFrame(
+        {
+            "parameter": ["base4_y_mm", "gain1"],
+            "unit": ["mm", "mm/mm"],
+            "calibrated": [31.2721083, 1.0000000001],
+            "max_abs_correlation": [0.8208, 0.5],
+        }
+    )
+    for change, ok in (
+        ((1e-7, 0.0, 0.0), True),
+        ((0.0, 1e-10, 1e-4), True),
+        ((2e-7, 0.0, 0.0), False),
+        ((0.0, 3e-9, 0.0), False),
+        ((0.0, 0.0, 2e-4), False),
+    ):
+        got = expected.copy()
+        got.loc[0, "calibrated"] += change[0]
+        got.loc[1, "calibrated"] += change[1]
+        got.loc[0, "max_abs_correlation"] += change[2]
+        result = Comparison("s")
+        compare_tables("parameters.csv", expected, got, {}, result)
+        assert result.ok is ok, (change, result.mismatches)
