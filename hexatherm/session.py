@@ -183,6 +183,10 @@ class MeasurementFormat:
         against the plan's order, with a warning).
     where : str
         ``session.yaml:LINE`` of the entry, for messages.
+    column_lines : dict of str to int
+        Table: the line of ``session.yaml`` that maps each role, for messages.
+    key : str
+        The entry's field in ``session.yaml`` (``measurements[2]``), for messages.
     """
 
     kind: str
@@ -197,6 +201,8 @@ class MeasurementFormat:
     balls: dict[str, str] = dataclasses.field(default_factory=dict)
     step_field: str | None = None
     where: str = ""
+    column_lines: dict[str, int] = dataclasses.field(default_factory=dict)
+    key: str = "measurements"
 
 
 @dataclass(frozen=True)

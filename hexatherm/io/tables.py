@@ -59,8 +59,8 @@ def decode(raw: bytes, path: str, encoding: str) -> str:
     >>> try:
     ...     decode(b"a\\nMa\\xdf;1\\n", "t.csv", "utf-8")
     ... except InputError as error:
-    ...     print(error)
-    t.csv:2: not utf-8 text (invalid continuation byte): give the entry's encoding (encoding: latin-1?)
+    ...     print(error)  # doctest: +ELLIPSIS
+    t.csv:2: not utf-8 text (invalid continuation byte): give the entry's encoding ...
     """
     for bom, name in (
         (b"\xef\xbb\xbf", "utf-8-sig"),
@@ -199,6 +199,7 @@ def _column_index(header: Row, spec: MeasurementFormat, path: str) -> dict[str, 
                     f"{os.path.basename(path)} has no column {column!r} (its columns: {shown})",
                     spec,
                     field=f"columns.{role}",
+                    line=spec.column_lines.get(role),
                 )
         index[role] = [names.index(c) for c in columns]
     return index

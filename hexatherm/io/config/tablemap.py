@@ -156,6 +156,8 @@ def read_format(doc: YamlDoc, index: int, ball_names: tuple[str, ...]) -> Measur
         encoding=encoding,
         balls=balls,
         where=where,
+        column_lines={role: doc.line(*at, "columns", role) or 0 for role in columns},
+        key=f"measurements[{index}]",
     )
 
 
@@ -244,8 +246,12 @@ def _balls_map(doc: YamlDoc, at: tuple[Any, ...], ball_names: tuple[str, ...]) -
     return out
 
 
-def refuse(message: str, spec: MeasurementFormat, field: str | None = None) -> InputError:
-    """An InputError at the session file's entry ``spec`` (``where`` is ``path:line``)."""
-    path, _, line = spec.where.rpartition(":")
-    number = int(line) if line.isdigit() else None
-    return InputError(message, path=path or spec.where, line=number, field=field)
+def refuse(
+    message: str, spec: MeasurementFormat, field: str | None = None, line: int | None = None
+) -> InputError:
+    """An InputError at the session file's entry ``spec`` (``where`` is ``path:line``),
+    or at ``line`` of it."""
+    path, _, at = spec.where.rpartition(":")
+    number = line or (int(at) if at.isdigit() else None)
+    where = spec.key if field is None else f"{spec.key}.{field}"
+    return InputError(message, path=path or spec.where, line=number, field=where)
