@@ -364,3 +364,54 @@ def test_the_cli_says_one_line_and_no_traceback(tmp_path: Path) -> None:
     lines = [line for line in result.output.splitlines() if line.strip()]
     assert len(lines) == 1 and "run003_hdr.txt" in lines[0]
     assert not os.path.exists(tmp_path / "out")
+
+
+def test_inspect_says_what_a_session_reads_before_processing(tmp_path: Path) -> None:
+    from click.testing import CliRunner
+
+    from hexatherm.cli import main
+
+    folder = calypso_session(tmp_path, step_in_header=False)
+    text = (folder / "session.yaml").read_text().replace(" step_field: partnb,", "")
+    (folder / "session.yaml").write_text(text)
+    result = CliRunner().invoke(main, ["inspect", str(folder), "--csv"])
+    assert result.exit_code == 0, result.output
+    said = result.stderr.splitlines()
+    assert any("time order" in line and "run001 -> O" in line for line in said)
+    entry = next(line for line in said if line.startswith("calypso: Calypso runs"))
+    for words in (
+        "22 runs",
+        "steps by the runs' time order",
+        "Kugel_1 -> B1",
+        "unit mm",
+        "66 centres",
+        "22 steps (O, R0, S1 ...)",
+        "balls B1, B2, B3",
+        "2019-12-20T09:01:30.000000 .. 2019-12-20T10:11:30.000000",
+    ):
+        assert words in entry, words
+    import io
+
+    import pandas as pd
+
+    table = pd.read_csv(io.StringIO(result.stdout))
+    rec = centres(folder)
+    assert len(table) == len(rec) and set(table["file"]) == {
+        f"run{k:03d}_chr.txt" for k in range(1, 23)
+    }
+    assert np.abs(table[["x_mm", "y_mm", "z_mm"]].to_numpy() - rec.xyz_mm).max() < 5.1e-8
+
+    table_folder = table_session(tmp_path, "t")
+    result = CliRunner().invoke(main, ["inspect", str(table_folder / "session.yaml")])
+    assert result.exit_code == 0, result.output
+    entry = next(line for line in result.stderr.splitlines() if line.startswith("export.csv"))
+    for words in (
+        "feature <- Merkmal",
+        "time <- Datum+Uhrzeit",
+        "delimiter ';'",
+        "decimal ','",
+        "unit inch",
+        "time %d.%m.%Y %H:%M:%S",
+        "66 centres",
+    ):
+        assert words in entry, words
