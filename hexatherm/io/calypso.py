@@ -77,6 +77,12 @@ def _header(path: str, text: str) -> dict[str, tuple[str, int]]:
     if not lines:
         raise InputError("empty run header", path=path, line=1)
     first = lines[0][1]
+    if len(lines) == 1 and len(first) > 2:
+        raise InputError(
+            "the run header has a line of field names but no line of values (cut short?)",
+            path=path,
+            line=2,
+        )
     if len(lines) >= 2 and len(first) > 2:
         number_, values = lines[1]
         return {

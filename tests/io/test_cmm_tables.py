@@ -415,3 +415,26 @@ def test_inspect_says_what_a_session_reads_before_processing(tmp_path: Path) -> 
         "66 centres",
     ):
         assert words in entry, words
+
+
+def test_a_run_header_without_its_values_is_refused(tmp_path: Path) -> None:
+    folder = calypso_session(tmp_path)
+    hdr = folder / "calypso" / "run007_hdr.txt"
+    hdr.write_bytes(hdr.read_bytes().split(b"\r\n")[0] + b"\r\n")
+    error = refused(folder)
+    assert (error.path, error.line) == (str(hdr), 2) and "no line of values" in error.message
+
+
+def test_calypso_runs_in_utf16_with_decimal_commas_read_the_same(tmp_path: Path) -> None:
+    plain = calypso_session(tmp_path)
+    other = calypso_session(tmp_path, "u")
+    for path in sorted((other / "calypso").glob("*.txt")):
+        text = path.read_bytes().decode("latin-1")
+        if path.name.endswith("_chr.txt"):
+            text = text.replace(".", ",")
+        path.write_bytes(text.encode("utf-16"))  # with its byte order mark
+    a = read_measurements(plain / "calypso", spec=read_session(plain).formats[plain / "calypso"])
+    b = read_measurements(other / "calypso", spec=read_session(other).formats[other / "calypso"])
+    assert [list(r.label) for r in a] == [list(r.label) for r in b]
+    for x, y in zip(a, b, strict=True):
+        assert np.array_equal(x.xyz_mm, y.xyz_mm) and np.array_equal(x.time_s, y.time_s)
