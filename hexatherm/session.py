@@ -24,7 +24,15 @@ from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
 from hexatherm.core.planning import DEFAULT_MIN_RCOND
 
-__all__ = ["Balls", "CmmNoise", "Datums", "Identification", "QualityLimits", "Session"]
+__all__ = [
+    "Balls",
+    "CmmNoise",
+    "Datums",
+    "Identification",
+    "MeasurementFormat",
+    "QualityLimits",
+    "Session",
+]
 
 
 @dataclass(frozen=True)
@@ -135,6 +143,68 @@ class QualityLimits:
                 raise ValueError(f"quality threshold {f.name} must be a number >= 0, got {value!r}")
 
 
+#: length units a mapped table or a Calypso run may be written in -> mm per unit
+LENGTH_UNITS: dict[str, float] = {"mm": 1.0, "um": 1e-3, "inch": 25.4}
+
+
+@dataclass(frozen=True)
+class MeasurementFormat:
+    """How one ``measurements:`` entry of ``session.yaml`` is read when it is not
+    hexatherm's own CSV or DMIS (an extension, :mod:`hexatherm.io.config.tablemap`).
+
+    Attributes
+    ----------
+    kind : {"table", "calypso"}
+        A delimited table through a column map, or a folder of Zeiss Calypso runs
+        (``<name>_chr.txt`` beside ``<name>_hdr.txt``), one run per step.
+    columns : dict of str to tuple of str
+        Table: role (``label``, ``ball``, ``feature``, ``x``, ``y``, ``z``, ``time``,
+        ``diameter``, ``u``) -> the file's column names (``time`` may join two: a date
+        and a time column).
+    feature_pattern : str or None
+        A regular expression with the named groups ``step`` and ``ball`` that splits
+        the ``feature`` column (table), or names the ball in a Calypso feature name.
+    delimiter, decimal : str
+        Table: the field delimiter and the decimal mark.
+    unit : {"mm", "um", "inch"}
+        The length unit of the coordinates, diameters and ``u`` (Calypso: the file's
+        ``unit`` column wins, this is for runs without one).
+    time_format : str
+        ``iso``, ``seconds``, or a :func:`time.strptime` format (``%d.%m.%Y %H:%M:%S``).
+    utc_offset_s : float or None
+        Seconds east of UTC of the file's times that carry no offset (None: the
+        session's ``utc_offset``, else naive).
+    encoding : str
+        The text encoding when the file has no byte order mark.
+    balls : dict of str to str
+        Ball name or feature name in the file -> ball of the balls file.
+    step_field : str or None
+        Calypso: the header field naming each run's step (None: runs in time order
+        against the plan's order, with a warning).
+    where : str
+        ``session.yaml:LINE`` of the entry, for messages.
+    column_lines : dict of str to int
+        Table: the line of ``session.yaml`` that maps each role, for messages.
+    key : str
+        The entry's field in ``session.yaml`` (``measurements[2]``), for messages.
+    """
+
+    kind: str
+    columns: dict[str, tuple[str, ...]] = dataclasses.field(default_factory=dict)
+    feature_pattern: str | None = None
+    delimiter: str = ","
+    decimal: str = "."
+    unit: str = "mm"
+    time_format: str = "iso"
+    utc_offset_s: float | None = None
+    encoding: str = "utf-8"
+    balls: dict[str, str] = dataclasses.field(default_factory=dict)
+    step_field: str | None = None
+    where: str = ""
+    column_lines: dict[str, int] = dataclasses.field(default_factory=dict)
+    key: str = "measurements"
+
+
 @dataclass(frozen=True)
 class Session:
     """A session folder as described by its ``session.yaml``.
@@ -167,6 +237,11 @@ class Session:
     tolerances : dict of str to float
         The optional ``tolerances:`` mapping: ``Tx_um`` .. ``Rz_urad`` -> half-width of
         the tolerance zone of that deviation from the commanded pose.
+    formats : dict of Path to MeasurementFormat
+        The measurement entries given as a mapping (a column map, Calypso runs): how
+        each is read; the others are hexatherm's CSV or DMIS.
+    measurement_files : tuple of Path
+        The files inside measurement folders (a Calypso folder's runs), read too.
     """
 
     path: Path
@@ -182,12 +257,14 @@ class Session:
     utc_offset_s: float | None = None
     identification: dict[str, object] = dataclasses.field(default_factory=dict)
     tolerances: dict[str, float] = dataclasses.field(default_factory=dict)
+    formats: dict[Path, MeasurementFormat] = dataclasses.field(default_factory=dict)
+    measurement_files: tuple[Path, ...] = ()
 
     def input_files(self) -> list[Path]:
         """Every file a run on this session reads: the session file, the hexapod, balls
         and plan files, the measurements and the temperatures (an output may never be,
         contain or sit inside any of them)."""
-        files = [self.path, *self.config_files, *self.measurements]
+        files = [self.path, *self.config_files, *self.measurements, *self.measurement_files]
         if self.temperatures is not None:
             files.append(self.temperatures)
         return files

@@ -22,10 +22,24 @@ def command(file: Path, as_csv: bool, reading: ReadOptions) -> None:
     One row per feature: line, label, type, x, y, z (mm), size (diameter, mm)
     and time. For DMIS files every actual feature FA(...) is listed, whatever its
     label; for CSV files every row is a feature (SPHERE centres or POINTs).
-    """
-    from hexatherm.workflows.inspect import feature_table, program_without_actuals
 
-    table = feature_table(file, reading)
+    Given a session (its folder or session.yaml), it says what each measurement entry
+    reads (its format and column map, units, steps, balls, times: Calypso runs, mapped
+    tables) and lists every centre read, with its file.
+    """
+    from hexatherm.workflows.inspect import (
+        feature_table,
+        is_session,
+        program_without_actuals,
+        session_reading,
+    )
+
+    if is_session(file):
+        lines, table = session_reading(file, reading)
+        for line in lines:
+            echo_err(line)
+    else:
+        table = feature_table(file, reading)
     if as_csv:
         table.to_csv(sys.stdout, index=False, lineterminator="\n")
     else:
@@ -40,7 +54,7 @@ def command(file: Path, as_csv: bool, reading: ReadOptions) -> None:
         + ", ".join(f"{n} {kind}" for kind, n in counts.items())
         + ")"
     )
-    if program_without_actuals(file, table):
+    if not is_session(file) and program_without_actuals(file, table):
         echo_err(
             f"{file} is a DMIS program (nominal features and MEAS statements, as plan --dmis "
             "writes), not the CMM's output of running it: inspect lists the actual "

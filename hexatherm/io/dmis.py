@@ -161,7 +161,9 @@ _DATE_VALUE = re.compile(r"([0-9]{4})\s*([/.-])\s*([0-9]{1,2})\s*\2\s*([0-9]{1,2
 _TIME_VALUE = re.compile(r"([0-9]{1,2}):([0-9]{2})(?::([0-9]{2})(?:[.,]([0-9]+))?)?")
 # A line that visibly starts a new statement: WORD/..., WORD(...)..., WORD=..., ENDxxx.
 _STATEMENT_START = re.compile(r"\s*(?:[A-Za-z][A-Za-z0-9]*\s*[(/=]|END[A-Za-z]*\s*$)")
-_HEXATHERM_NAME = "[A-Za-z0-9-]+"
+# A name part of a hexatherm label: [A-Za-z0-9-]+, where a DMIS label may write "-" as
+# "__" (DMIS labels hold letters, digits and "_": ``plan --dmis`` writes O-2 as O__2)
+_HEXATHERM_NAME = "(?:[A-Za-z0-9-]|__)+"
 _CENTRE_LABEL = re.compile(rf"({_HEXATHERM_NAME})_({_HEXATHERM_NAME})")
 _POINT_LABEL = re.compile(rf"({_HEXATHERM_NAME})_({_HEXATHERM_NAME})_({_HEXATHERM_NAME})")
 
@@ -633,9 +635,9 @@ def _feature_row(feature: Feature, where: str) -> tuple[str, _Row] | None:
     if feature.xyz_mm is None:  # pragma: no cover - spheres and points always have one
         raise InputError(f"FA({feature.label}) has no position", path=where, line=feature.line)
     return kind, _Row(
-        step=match.group(1),
-        ball=match.group(2),
-        n=match.group(3) if kind == "points" else "",
+        step=match.group(1).replace("__", "-"),
+        ball=match.group(2).replace("__", "-"),
+        n=match.group(3).replace("__", "-") if kind == "points" else "",
         xyz=feature.xyz_mm,
         seconds=feature.time.replace(tzinfo=UTC).timestamp(),
         line=feature.line,

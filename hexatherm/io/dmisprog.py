@@ -7,7 +7,10 @@ position on the CMM, measures it with a ``MEAS/SPHERE`` block of
 ``PTMEAS/CART,x,y,z,i,j,k`` touch points spread over the ball's upper cap and
 ``ENDMES``, and asks for the actual with ``OUTPUT/FA(<label>_<ball>)``. The
 labels are the spec's, so the CMM's output file (``FA(S1_B2)=FEAT/SPHERE,...``)
-reads straight back with :func:`hexatherm.io.dmis.read_dmis`.
+reads straight back with :func:`hexatherm.io.dmis.read_dmis`. A DMIS label holds
+letters, digits and ``_`` only (a ``-`` would read as a minus sign, and CMM software
+refuses it): a ``-`` of a step or ball name is written ``__`` (``O-2_B1`` is
+``O__2_B1``, :func:`dmis_label`), which the reader turns back.
 
 ``i,j,k`` of a ``PTMEAS`` is the nominal outward surface normal at the point;
 the probe approaches along its opposite. Between balls the probe is taken up
@@ -44,6 +47,7 @@ import numpy as np
 from hexatherm.core.plan import Plan
 from hexatherm.core.planning import StepTiming
 from hexatherm.core.touch import TouchPoints
+from hexatherm.errors import PlanError
 from hexatherm.session import Balls
 from hexatherm.text import format_pose
 
@@ -62,6 +66,26 @@ def _ijk(values: Sequence[float]) -> str:
 def _text(value: str) -> str:
     """A DMIS string literal (single quotes doubled)."""
     return "'" + value.replace("'", "''") + "'"
+
+
+def dmis_label(*names: str) -> str:
+    """A DMIS label of hexatherm names joined by ``_``, each ``-`` written ``__``.
+
+    >>> dmis_label("O-2", "B1")
+    'O__2_B1'
+    >>> try:
+    ...     dmis_label("O-", "B1")
+    ... except PlanError as error:
+    ...     print(error)
+    'O-' begins or ends with '-': its DMIS label (where '-' is written '__') would be ambiguous
+    """
+    for name in names:
+        if name.startswith("-") or name.endswith("-"):
+            raise PlanError(
+                f"{name!r} begins or ends with '-': its DMIS label (where '-' is written "
+                "'__') would be ambiguous"
+            )
+    return "_".join(name.replace("-", "__") for name in names)
 
 
 def dmis_program(
@@ -126,7 +150,7 @@ def dmis_program(
             "PAUSE",
         ]
         for j, ball in enumerate(balls.names):
-            feature = f"{label}_{ball}"
+            feature = dmis_label(label, ball)
             lines.append(
                 f"F({feature})=FEAT/SPHERE,OUTER,CART,{_xyz(centres[j])},"
                 f"{balls.diameters_mm[j]:.5f}"

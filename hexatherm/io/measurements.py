@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +13,7 @@ from hexatherm.io.csvfile import read_measurement_csv
 from hexatherm.io.csvtext import read_text
 from hexatherm.io.dmis import looks_like_dmis, read_dmis
 from hexatherm.io.records import Records
+from hexatherm.session import MeasurementFormat
 
 #: the farthest a measured coordinate may lie from the CMM's origin, mm: 100 m, beyond any
 #: CMM or laser tracker (a file written in um, or a number run wild, lies beyond)
@@ -52,8 +53,13 @@ def read_measurements(
     progress: Callable[[int, int], None] | None = None,
     allow_truncated: bool = False,
     keep_later: bool = False,
+    spec: MeasurementFormat | None = None,
+    labels: Sequence[str] | None = None,
 ) -> list[Records]:
     """Read any measurement file: centres/points CSV or DMIS output (by extension or content).
+
+    ``spec``: the session's format of a mapped entry (a column map, a folder of Calypso
+    runs; :func:`read_mapped`), ``labels`` the plan's steps it may need.
 
     ``progress(lines_done, lines_total)``, when given, is called now and then while a
     DMIS file is read the slow way (one with continuations or comments: seconds for
@@ -62,6 +68,8 @@ def read_measurements(
     :func:`~hexatherm.io.dmis.read_dmis` (a DMIS file without ``ENDFIL``).
     """
     path = os.fspath(path)
+    if spec is not None:
+        return read_mapped(path, spec, labels, allow_truncated, keep_later)
     suffix = Path(path).suffix.lower()
     dmis = suffix in (".dmo", ".dms", ".dmi") or (
         suffix != ".csv" and looks_like_dmis(read_text(path)[:4096])
@@ -77,3 +85,25 @@ def read_measurements(
         if progress is not None:
             progress(len(records[0]) + 1, len(records[0]) + 1)
     return [check_coordinates(r) for r in records]
+
+
+def read_mapped(
+    path: str,
+    spec: MeasurementFormat,
+    labels: Sequence[str] | None,
+    allow_truncated: bool,
+    keep_later: bool,
+) -> list[Records]:
+    """A measurement entry that ``session.yaml`` maps (an extension): a table through a
+    column map (:mod:`hexatherm.io.tables`) or a folder of Calypso runs
+    (:mod:`hexatherm.io.calypso`), coordinates checked."""
+    from hexatherm.io.calypso import read_calypso
+    from hexatherm.io.tables import read_table
+
+    if spec.kind == "calypso":
+        found = read_calypso(
+            path, spec, labels, allow_truncated=allow_truncated, keep_later=keep_later
+        )
+    else:
+        found = [read_table(path, spec, allow_truncated=allow_truncated, keep_later=keep_later)]
+    return [check_coordinates(r) for r in found]

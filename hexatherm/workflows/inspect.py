@@ -12,7 +12,8 @@ from hexatherm.io.csvfile import read_measurement_csv
 from hexatherm.io.csvtext import read_text
 from hexatherm.io.dmis import DMIS_SUFFIXES, looks_like_dmis, read_dmis_features
 from hexatherm.io.files import STRICT, ReadOptions
-from hexatherm.io.records import seconds_to_iso
+from hexatherm.io.records import Records, seconds_to_iso
+from hexatherm.session import MeasurementFormat
 
 COLUMNS = ["line", "label", "type", "x_mm", "y_mm", "z_mm", "size_mm", "time"]
 
@@ -41,6 +42,67 @@ def feature_table(path: str | os.PathLike[str], reading: ReadOptions = STRICT) -
     rec = read_measurement_csv(
         path, allow_truncated=reading.allow_truncated, keep_later=reading.keep_later
     )
+    return _records_table(rec)
+
+
+def program_without_actuals(path: str | os.PathLike[str], table: pd.DataFrame) -> bool:
+    """Whether ``path`` is a DMIS program (nominal ``F(...)`` features and ``MEAS``
+    statements, as ``plan --dmis`` writes) rather than a CMM's output: it has no actual
+    feature ``FA(...)`` to list."""
+    if len(table):
+        return False
+    text = read_text(Path(path))
+    if not looks_like_dmis(text[:4096]):
+        return False
+    lines = [line.lstrip().upper() for line in text.splitlines()]
+    return any(line.startswith("MEAS/") for line in lines) and not any(
+        line.startswith("FA(") for line in lines
+    )
+
+
+def is_session(path: str | os.PathLike[str]) -> bool:
+    """Whether ``path`` is a session folder or its ``session.yaml`` (then ``inspect``
+    says what each measurement entry reads: :func:`session_reading`)."""
+    path = Path(path)
+    return (path.is_dir() and (path / "session.yaml").is_file()) or (
+        path.is_file() and path.suffix.lower() in (".yaml", ".yml")
+    )
+
+
+def session_reading(
+    path: str | os.PathLike[str], reading: ReadOptions = STRICT
+) -> tuple[list[str], pd.DataFrame]:
+    """What a session's measurement entries read, before anything is processed: one
+    line per entry (its format and mapping, units, steps, balls, times) and the table
+    of every centre read (``file`` and the columns of :func:`feature_table`), in mm and
+    UTC when an offset is known. Runs given a step by their time order are warned of
+    by the reader (an :class:`~hexatherm.errors.InputWarning`)."""
+    from hexatherm.io.config import read_session
+    from hexatherm.io.measurements import read_measurements
+
+    session = read_session(path)
+    lines: list[str] = []
+    frames = []
+    for file in session.measurements:
+        spec = session.formats.get(file)
+        found = read_measurements(
+            file,
+            allow_truncated=reading.allow_truncated,
+            keep_later=reading.keep_later,
+            spec=spec,
+            labels=session.plan.labels,
+        )
+        for rec in found:
+            table = _records_table(rec)
+            table.insert(0, "file", Path(rec.path).name)
+            frames.append(table)
+        lines.append(_entry_line(file, spec, found, session.utc_offset_s))
+    table = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+    return lines, table
+
+
+def _records_table(rec: Records) -> pd.DataFrame:
+    """A file's records, one row each (times in UTC when the file gave offsets)."""
     times = [seconds_to_iso(t) for t in rec.time_s] if rec.time_kind == "iso" else rec.time_s
     return pd.DataFrame(
         {
@@ -56,16 +118,57 @@ def feature_table(path: str | os.PathLike[str], reading: ReadOptions = STRICT) -
     )[COLUMNS]
 
 
-def program_without_actuals(path: str | os.PathLike[str], table: pd.DataFrame) -> bool:
-    """Whether ``path`` is a DMIS program (nominal ``F(...)`` features and ``MEAS``
-    statements, as ``plan --dmis`` writes) rather than a CMM's output: it has no actual
-    feature ``FA(...)`` to list."""
-    if len(table):
-        return False
-    text = read_text(Path(path))
-    if not looks_like_dmis(text[:4096]):
-        return False
-    lines = [line.lstrip().upper() for line in text.splitlines()]
-    return any(line.startswith("MEAS/") for line in lines) and not any(
-        line.startswith("FA(") for line in lines
+def _entry_line(
+    file: Path, spec: MeasurementFormat | None, found: list[Records], offset_s: float | None
+) -> str:
+    """One entry's summary: what it is, how it is mapped, what it holds."""
+    labels = list(dict.fromkeys(str(s) for r in found for s in r.label))
+    balls = sorted({str(b) for r in found for b in r.ball})
+    times = np.concatenate([r.time_s for r in found]) if found else np.zeros(0)
+    kind = found[0].time_kind if found else "seconds"
+    span = ""
+    if times.size:
+        first, last = (
+            (seconds_to_iso(times.min()), seconds_to_iso(times.max()))
+            if kind == "iso"
+            else (f"{times.min():g} s", f"{times.max():g} s")
+        )
+        aware = any(r.time_aware for r in found)
+        zone = (
+            " UTC"
+            if aware
+            else (
+                ""
+                if kind != "iso"
+                else (
+                    " naive (the session's utc_offset applies)"
+                    if offset_s is not None
+                    else " naive (taken as UTC)"
+                )
+            )
+        )
+        span = f", times {first} .. {last}{zone}"
+    steps = f"{len(labels)} steps ({', '.join(labels[:3])}{' ...' if len(labels) > 3 else ''})"
+    held = f"{sum(len(r) for r in found)} centres, {steps}, balls {', '.join(balls)}{span}"
+    if spec is None:
+        return f"{file.name}: hexatherm's own format: {held}"
+    units = f"unit {spec.unit}"
+    if spec.kind == "calypso":
+        step = (
+            f"step from header field {spec.step_field}"
+            if spec.step_field is not None
+            else "steps by the runs' time order"
+        )
+        mapping = ", ".join(f"{k} -> {v}" for k, v in spec.balls.items()) or (
+            f"feature_pattern {spec.feature_pattern}" if spec.feature_pattern else "feature names"
+        )
+        return (
+            f"{file.name}: Calypso runs ({len(found)} runs, {step}; balls: {mapping}; "
+            f"{units} unless a row says; {spec.encoding}): {held}"
+        )
+    columns = ", ".join(f"{role} <- {'+'.join(names)}" for role, names in spec.columns.items())
+    split = f", feature_pattern {spec.feature_pattern}" if spec.feature_pattern else ""
+    return (
+        f"{file.name}: table (columns: {columns}{split}; delimiter {spec.delimiter!r}, "
+        f"decimal {spec.decimal!r}, {units}, time {spec.time_format}): {held}"
     )

@@ -330,3 +330,38 @@ def test_time_gap_warning(tmp_path):
         tmp_path / "plan2.yaml",
     )
     assert "warning:" not in quiet.stderr
+
+
+def test_dmis_program_labels_hold_no_minus_and_read_back(tmp_path):
+    """A DMIS label holds letters, digits and '_': the repeats O-2, R0-2 are written
+    O__2, R0__2, and the CMM's answer with those labels reads back as O-2, R0-2 (and
+    an older output that wrote O-2_B1 still reads)."""
+    result = run(
+        *base_args(tmp_path),
+        "--origin-repeats",
+        2,
+        "--points-per-ball",
+        4,
+        "-o",
+        tmp_path / "plan.yaml",
+        "--dmis",
+        tmp_path / "prog.dmi",
+        "--origin-on-cmm",
+        "450,320,210,0,0,15",
+    )
+    assert result.exit_code == 0, result.output
+    plan = read_plan(tmp_path / "plan.yaml")
+    assert "O-2" in plan.labels
+    text = (tmp_path / "prog.dmi").read_text()
+    labels = re.findall(r"\bFA?\(([^)]*)\)", text)
+    assert labels and all(re.fullmatch(r"[A-Za-z0-9_]+", label) for label in labels)
+    assert "O__2_B1" in labels and "R0__2_B3" in labels
+    answer = ["DMISMN/'CMM answer',05.2", "UNITS/MM,ANGDEC", "DATE=2024/05/01", "TIME=10:00:00"]
+    sphere, point = "SPHERE,CART,1,2,3,25.4", "POINT,CART,1,2,3"
+    for label, kind in (("O__2_B1", sphere), ("O-2_B2", sphere), ("O__2_B3_7", point)):
+        answer.append(f"FA({label})=FEAT/{kind}")
+    answer.append("ENDFIL")
+    (tmp_path / "answer.dmo").write_text("\r\n".join(answer) + "\r\n")
+    centres, points = read_dmis(tmp_path / "answer.dmo")
+    assert list(centres.label) == ["O-2", "O-2"] and list(centres.ball) == ["B1", "B2"]
+    assert list(points.label) == ["O-2"] and list(points.ball) == ["B3"]

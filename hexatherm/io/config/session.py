@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import re
 import warnings
 from pathlib import Path
 from typing import Any
@@ -18,9 +17,16 @@ from hexatherm.io.config.identity import (
     read_tolerances,
 )
 from hexatherm.io.config.plan import read_plan
+from hexatherm.io.config.tablemap import read_format, read_utc_offset
 from hexatherm.io.config.yamlout import _dump
 from hexatherm.io.yamlfile import YamlDoc
-from hexatherm.session import QUALITY_ALIASES, CmmNoise, QualityLimits, Session
+from hexatherm.session import (
+    QUALITY_ALIASES,
+    CmmNoise,
+    MeasurementFormat,
+    QualityLimits,
+    Session,
+)
 
 SESSION_FORMAT = "hexatherm-session/1"
 
@@ -69,7 +75,7 @@ def read_session(path: str | os.PathLike[str]) -> Session:
         raise doc.error("expected a list of files, e.g. [centres.csv]", "measurements")
     if not isinstance(files, list) or not files:
         raise doc.error("expected a non-empty list of measurement files", "measurements")
-    measurements = tuple(existing("measurements", i) for i in range(len(files)))
+    measurements, formats, inside = _measurements(doc, files, balls.names, existing)
     temperatures = None
     if doc.get("temperatures", default=None) is not None:
         temperatures = existing("temperatures")
@@ -94,6 +100,8 @@ def read_session(path: str | os.PathLike[str]) -> Session:
         _read_utc_offset(doc),
         ident,
         tolerances,
+        formats,
+        inside,
     )
 
 
@@ -174,26 +182,54 @@ def _read_pose_check(doc: YamlDoc) -> dict[str, Any] | None:
     return found
 
 
-#: ``utc_offset:``: ``+HH:MM``, ``-HH:MM`` or ``Z``
-_UTC_OFFSET = re.compile(r"(?:Z|([+-])(\d\d):(\d\d))")
-
-
 def _read_utc_offset(doc: YamlDoc) -> float | None:
     """The optional ``utc_offset:`` of a session file, in seconds east of UTC."""
-    value = doc.get("utc_offset", default=None)
-    if value is None:
-        return None
-    match = _UTC_OFFSET.fullmatch(value) if isinstance(value, str) else None
-    if match is None:
-        raise doc.error(
-            f"expected an offset as +HH:MM, -HH:MM or Z (quoted), got {value!r}", "utc_offset"
-        )
-    if match.group(1) is None:
-        return 0.0
-    hours, minutes = int(match.group(2)), int(match.group(3))
-    if hours > 14 or minutes > 59:
-        raise doc.error(f"no place on Earth is {value} from UTC", "utc_offset")
-    return (1.0 if match.group(1) == "+" else -1.0) * (hours * 3600 + minutes * 60)
+    return read_utc_offset(doc, "utc_offset")
+
+
+def _measurements(
+    doc: YamlDoc,
+    files: list[Any],
+    ball_names: tuple[str, ...],
+    existing: Any,
+) -> tuple[tuple[Path, ...], dict[Path, MeasurementFormat], tuple[Path, ...]]:
+    """The ``measurements:`` entries: each a file name (hexatherm's CSV or DMIS) or a
+    mapping (a table through a column map, a folder of Calypso runs: an extension).
+    Returns the paths, the formats of the mapped ones, and the files inside folders."""
+    paths: list[Path] = []
+    formats: dict[Path, MeasurementFormat] = {}
+    inside: list[Path] = []
+    for i, entry in enumerate(files):
+        if not isinstance(entry, dict):
+            paths.append(existing("measurements", i))
+            continue
+        spec = read_format(doc, i, ball_names)
+        target = doc.resolve(doc.string("measurements", i, "file"))
+        if spec.kind == "calypso":
+            if not target.is_dir():
+                raise doc.error(
+                    f"not a folder: {target} (format: calypso reads a folder of "
+                    "<name>_chr.txt and <name>_hdr.txt runs)",
+                    "measurements",
+                    i,
+                    "file",
+                )
+            runs = sorted(target.glob("*_chr.txt"))
+            inside += [p for r in runs for p in _run_files(r)]
+        elif not target.is_file():
+            raise doc.error(f"file not found: {target}", "measurements", i, "file")
+        if target in formats:
+            raise doc.error(f"{target.name} is given twice", "measurements", i, "file")
+        paths.append(target)
+        formats[target] = spec
+    return tuple(paths), formats, tuple(inside)
+
+
+def _run_files(chr_file: Path) -> list[Path]:
+    """A Calypso run's files that exist: ``_chr``, ``_hdr``, ``_fet``."""
+    stem = chr_file.name[: -len("_chr.txt")]
+    files = (chr_file.parent / f"{stem}_{kind}.txt" for kind in ("chr", "hdr", "fet"))
+    return [p for p in files if p.is_file()]
 
 
 def _read_quality(doc: YamlDoc) -> dict[str, float]:

@@ -17,7 +17,7 @@ from hexatherm.core.spherefit import fit_spheres, probe_radius_mm
 from hexatherm.errors import FitError, InputError, PlanError
 from hexatherm.io.files import STRICT, ReadOptions
 from hexatherm.io.measurements import read_measurements
-from hexatherm.io.records import Records, TimeKind, seconds_to_iso
+from hexatherm.io.records import Records, TimeKind, refuse_groups_in_two_files, seconds_to_iso
 from hexatherm.io.temperatures import Temperatures, read_temperatures
 from hexatherm.session import Balls, Session
 from hexatherm.typing import FloatArray
@@ -344,7 +344,11 @@ def read_measured(
             progress=report,
             allow_truncated=reading.allow_truncated,
             keep_later=reading.keep_later,
+            spec=session.formats.get(file),
+            labels=session.plan.labels,
         )
+        if len(found) > 1:  # a folder of runs: one step's ball in two runs is refused
+            refuse_groups_in_two_files(found)
         for rec in found:
             records.append(
                 rec if rec.kind == "centres" else fit_points(rec, session.balls, fixed_diameter_mm)
