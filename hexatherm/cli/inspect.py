@@ -17,11 +17,13 @@ from hexatherm.io.files import ReadOptions
 @reading_options
 @clean_errors
 def command(file: Path, as_csv: bool, reading: ReadOptions) -> None:
-    """List the actual features of FILE (DMIS output, centres or points CSV).
+    """List the actual features of FILE (DMIS output, centres or points CSV, QIF results).
 
     One row per feature: line, label, type, x, y, z (mm), size (diameter, mm)
     and time. For DMIS files every actual feature FA(...) is listed, whatever its
-    label; for CSV files every row is a feature (SPHERE centres or POINTs).
+    label; for CSV files every row is a feature (SPHERE centres or POINTs); for a
+    QIF 3 results file every sphere, with what was read (unit, steps, balls, times,
+    names).
     """
     from hexatherm.workflows.inspect import feature_table, program_without_actuals
 
@@ -34,6 +36,8 @@ def command(file: Path, as_csv: bool, reading: ReadOptions) -> None:
             if len(table)
             else "(no features)"
         )
+    for note in table.attrs.get("notes", []):
+        echo_err(note)
     counts = table["type"].value_counts()
     echo_err(
         f"{file}: {len(table)} features ("

@@ -1,16 +1,19 @@
-"""Any measurement file: centres or points CSV, or DMIS output (by extension or content)."""
+"""Any measurement file: centres or points CSV, DMIS output or QIF results (by extension or
+content)."""
 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
 import numpy as np
 
 from hexatherm.errors import InputError
 from hexatherm.io.csvfile import read_measurement_csv, read_text
-from hexatherm.io.dmis import looks_like_dmis, read_dmis
+from hexatherm.io.dmis import DMIS_SUFFIXES, looks_like_dmis, read_dmis
+from hexatherm.io.files import open_bounded
+from hexatherm.io.qif import QIF_SUFFIXES, looks_like_qif, read_qif
 from hexatherm.io.records import Records
 
 #: the farthest a measured coordinate may lie from the CMM's origin, mm: 100 m, beyond any
@@ -51,17 +54,26 @@ def read_measurements(
     progress: Callable[[int, int], None] | None = None,
     allow_truncated: bool = False,
     keep_later: bool = False,
+    names: Mapping[str, str | None] | None = None,
 ) -> list[Records]:
-    """Read any measurement file: centres/points CSV or DMIS output (by extension or content).
+    """Read any measurement file: centres/points CSV, DMIS output or QIF 3 results (by
+    extension or content: :func:`is_qif`).
 
     ``progress(lines_done, lines_total)``, when given, is called now and then while a
     DMIS file is read the slow way (one with continuations or comments: seconds for
     a hundred thousand points); a CSV file or a plain DMIS file reports once, done.
     ``allow_truncated`` and ``keep_later``: as for :func:`read_measurement_csv` and
     :func:`~hexatherm.io.dmis.read_dmis` (a DMIS file without ``ENDFIL``).
+    ``names``: a QIF file's feature names to ``<step>_<ball>`` (session.yaml's
+    ``feature_names``; :func:`~hexatherm.io.qif.read_qif`).
     """
     path = os.fspath(path)
     suffix = Path(path).suffix.lower()
+    if is_qif(path):
+        records = read_qif(path, names=names, keep_later=keep_later)
+        if progress is not None:
+            progress(1, 1)
+        return [check_coordinates(r) for r in records]
     dmis = suffix in (".dmo", ".dms", ".dmi") or (
         suffix != ".csv" and looks_like_dmis(read_text(path)[:4096])
     )
@@ -76,3 +88,15 @@ def read_measurements(
         if progress is not None:
             progress(len(records[0]) + 1, len(records[0]) + 1)
     return [check_coordinates(r) for r in records]
+
+
+def is_qif(path: str | os.PathLike[str]) -> bool:
+    """Whether a measurement file is read as QIF: suffix ``.qif`` (any case), or, unless it
+    is ``.csv`` or a DMIS suffix, a first 4 KiB that opens a ``QIFDocument``."""
+    suffix = Path(path).suffix.lower()
+    if suffix in QIF_SUFFIXES:
+        return True
+    if suffix == ".csv" or suffix in DMIS_SUFFIXES:
+        return False
+    with open_bounded(path) as stream:
+        return looks_like_qif(stream.read(4096))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +12,8 @@ import pandas as pd
 from hexatherm.io.csvfile import read_measurement_csv, read_text
 from hexatherm.io.dmis import DMIS_SUFFIXES, looks_like_dmis, read_dmis_features
 from hexatherm.io.files import STRICT, ReadOptions
+from hexatherm.io.measurements import is_qif
+from hexatherm.io.qif import scan_qif
 from hexatherm.io.records import seconds_to_iso
 
 COLUMNS = ["line", "label", "type", "x_mm", "y_mm", "z_mm", "size_mm", "time"]
@@ -18,8 +21,11 @@ COLUMNS = ["line", "label", "type", "x_mm", "y_mm", "z_mm", "size_mm", "time"]
 
 def feature_table(path: str | os.PathLike[str], reading: ReadOptions = STRICT) -> pd.DataFrame:
     """Every feature of a DMIS output or a centres/points CSV, one row each (``reading``:
-    a file cut short, a ball probed twice in one step, as the other commands read it)."""
+    a file cut short, a ball probed twice in one step, as the other commands read it).
+    A QIF file's table carries what was read in ``attrs["notes"]`` (:func:`qif_table`)."""
     path = Path(path)
+    if is_qif(path):
+        return qif_table(path, reading)
     if path.suffix.lower() in DMIS_SUFFIXES or (
         path.suffix.lower() != ".csv" and looks_like_dmis(read_text(path)[:4096])
     ):
@@ -68,3 +74,68 @@ def program_without_actuals(path: str | os.PathLike[str], table: pd.DataFrame) -
     return any(line.startswith("MEAS/") for line in lines) and not any(
         line.startswith("FA(") for line in lines
     )
+
+
+def qif_table(
+    path: str | os.PathLike[str],
+    reading: ReadOptions = STRICT,
+    names: Mapping[str, str | None] | None = None,
+) -> pd.DataFrame:
+    """Every sphere of a QIF 3 results file, one row each (``type`` ``SPHERE``, or
+    ``SPHERE+n`` for one measured by ``n`` points, fitted as a points file is), and in
+    ``attrs["notes"]`` what was read: the unit, the steps, balls and times, the names and
+    how they map to steps and balls, what was read past."""
+    read = scan_qif(path, names=names, keep_later=reading.keep_later)
+    spheres = read.spheres
+    rows = [
+        [
+            s.line,
+            f"{s.step}_{s.ball}",
+            "SPHERE" if not s.point_sets else f"SPHERE+{s.points}",
+            *(s.xyz_mm if s.xyz_mm is not None else (np.nan,) * 3),
+            s.diameter_mm,
+            s.time or "",
+        ]
+        for s in spheres
+    ]
+    table = pd.DataFrame(rows, columns=COLUMNS)
+    notes = [f"{path}: QIF 3 results; length unit {read.unit}, converted to mm"]
+    if spheres:
+        steps = list(dict.fromkeys(s.step for s in spheres))
+        balls = sorted({s.ball for s in spheres})
+        times = sorted(s.time for s in spheres if s.time)
+        shown = ", ".join(steps[:6]) + (f", ... ({len(steps)} steps)" if len(steps) > 6 else "")
+        notes.append(
+            f"{len(spheres)} spheres: steps {shown}; balls {', '.join(balls)}; "
+            f"times {times[0]} to {times[-1]}"
+        )
+        renamed = [
+            (s.name, f"{s.step}_{s.ball}") for s in spheres if s.name != f"{s.step}_{s.ball}"
+        ]
+        if renamed:
+            pairs = ", ".join(f"{a!r} -> {b}" for a, b in renamed[:4])
+            more = f", ... ({len(renamed)} names)" if len(renamed) > 4 else ""
+            notes.append(f"names mapped by feature_names: {pairs}{more}")
+        else:
+            notes.append("names: hexatherm's <step>_<ball>, as the file gives them")
+        pointed = sum(1 for s in spheres if s.point_sets)
+        if pointed:
+            notes.append(
+                f"{pointed} spheres with measured points ({sum(s.points for s in spheres)} "
+                "points): hexatherm fits them as a points file, the file's centres unused"
+            )
+        per_axis = sum(1 for s in spheres if s.u_mm is not None)
+        combined = sum(1 for s in spheres if not np.isnan(s.u_combined_mm))
+        if per_axis or combined:
+            notes.append(
+                f"centre uncertainties stated: per axis on {per_axis}, combined on "
+                f"{combined} of {len(spheres)} spheres"
+            )
+    else:
+        notes.append("no sphere feature measured: nothing hexatherm reads")
+    past = [f"{n} {kind}" for kind, n in read.others.items()]
+    past += [f"sphere {name!r} (line {line}, mapped to nothing)" for line, name in read.skipped]
+    if past:
+        notes.append("read past: " + ", ".join(past))
+    table.attrs["notes"] = notes
+    return table
