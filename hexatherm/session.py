@@ -167,6 +167,9 @@ class Session:
     tolerances : dict of str to float
         The optional ``tolerances:`` mapping: ``Tx_um`` .. ``Rz_urad`` -> half-width of
         the tolerance zone of that deviation from the commanded pose.
+    feature_names : dict of str to str or None
+        The optional ``feature_names:`` mapping (an extension): a CMM's feature name in a
+        QIF results file -> ``<step>_<ball>``, or None for a feature read past.
     """
 
     path: Path
@@ -182,6 +185,7 @@ class Session:
     utc_offset_s: float | None = None
     identification: dict[str, object] = dataclasses.field(default_factory=dict)
     tolerances: dict[str, float] = dataclasses.field(default_factory=dict)
+    feature_names: dict[str, str | None] = dataclasses.field(default_factory=dict)
 
     def input_files(self) -> list[Path]:
         """Every file a run on this session reads: the session file, the hexapod, balls

@@ -35,7 +35,7 @@ import numpy as np
 from hexatherm.errors import InputError
 from hexatherm.io.csvfile import U_UM_MAX
 from hexatherm.io.files import MAX_MEASUREMENT_BYTES
-from hexatherm.io.qifrecords import Sphere, sphere_records
+from hexatherm.io.qifrecords import STEP_BALL, Sphere, sphere_records
 from hexatherm.io.qifschema import QIF_NS, check_element, iter_elements, local_name
 from hexatherm.io.records import Records, check_groups
 
@@ -60,7 +60,6 @@ LENGTH_UNITS_MM = {
     "foot": 304.8,
     "feet": 304.8,
 }
-_NAMING = re.compile(r"([A-Za-z0-9-]+)_([A-Za-z0-9-]+)")
 _QIF_ROOT = re.compile(rb"<(?:[A-Za-z_][\w.-]*:)?QIFDocument[\s/>]")
 #: The elements read whole: nothing inside them is dropped before they end
 _WHOLE = frozenset(
@@ -357,7 +356,7 @@ class _Reader:
         if target is None:
             self.skipped.append((line, name))
             return
-        match = _NAMING.fullmatch(target)
+        match = STEP_BALL.fullmatch(target)
         if match is None:
             where = "session.yaml's feature_names maps it to" if name in self.names else "named"
             raise InputError(

@@ -15,6 +15,8 @@ from hexatherm.io.records import Records, iso_to_seconds
 from hexatherm.typing import FloatArray, IntArray
 
 _FRACTION = re.compile(r"(\.\d{6})\d+")
+#: hexatherm's feature names: ``<step>_<ball>``, each part ``[A-Za-z0-9-]+`` (as in DMIS)
+STEP_BALL = re.compile(r"([A-Za-z0-9-]+)_([A-Za-z0-9-]+)")
 
 
 @dataclass

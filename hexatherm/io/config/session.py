@@ -48,6 +48,7 @@ def read_session(path: str | os.PathLike[str]) -> Session:
             "utc_offset",
             "identification",
             "tolerances",
+            "feature_names",
         ]
     )
     name = doc.string("name", default=path.parent.name)
@@ -94,6 +95,7 @@ def read_session(path: str | os.PathLike[str]) -> Session:
         _read_utc_offset(doc),
         ident,
         tolerances,
+        _read_feature_names(doc),
     )
 
 
@@ -194,6 +196,34 @@ def _read_utc_offset(doc: YamlDoc) -> float | None:
     if hours > 14 or minutes > 59:
         raise doc.error(f"no place on Earth is {value} from UTC", "utc_offset")
     return (1.0 if match.group(1) == "+" else -1.0) * (hours * 3600 + minutes * 60)
+
+
+def _read_feature_names(doc: YamlDoc) -> dict[str, str | None]:
+    """The optional ``feature_names:`` of a session file: a CMM's feature name (as its QIF
+    results file gives it) -> hexatherm's ``<step>_<ball>``, or null to read it past."""
+    from hexatherm.io.qifrecords import STEP_BALL
+
+    names = doc.get("feature_names", default=None)
+    if names is None:
+        return {}
+    if not isinstance(names, dict) or not names:
+        raise doc.error(
+            "expected a mapping of feature names to <step>_<ball> (or null), "
+            "e.g. {'Kugel 1 Pos 0': O_B1}",
+            "feature_names",
+        )
+    out: dict[str, str | None] = {}
+    for key, value in names.items():
+        if not isinstance(key, str):
+            raise doc.error(f"a feature name must be text (quote it), got {key!r}", "feature_names")
+        if value is not None and not (isinstance(value, str) and STEP_BALL.fullmatch(value)):
+            raise doc.error(
+                f"expected <step>_<ball> (each part [A-Za-z0-9-]+) or null, got {value!r}",
+                "feature_names",
+                key,
+            )
+        out[key] = value
+    return out
 
 
 def _read_quality(doc: YamlDoc) -> dict[str, float]:

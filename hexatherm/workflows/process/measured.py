@@ -323,6 +323,7 @@ def read_measured(
             progress=report,
             allow_truncated=reading.allow_truncated,
             keep_later=reading.keep_later,
+            names=session.feature_names,
         )
         for rec in found:
             records.append(
