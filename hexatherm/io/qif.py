@@ -4,12 +4,12 @@ What is read from a ``QIFDocument`` (docs/formats.md section 7.6):
 
 * ``FileUnits/PrimaryUnits/LinearUnit``: the length unit (``UnitName``, and its
   ``UnitConversion`` to metres when given); every length is converted to mm;
-* ``Features/FeatureItems/SphereFeatureItem`` (and ``FeatureNominals/SphereFeatureNominal``):
-  the feature's name, for the measurements that name their item by ``FeatureItemId``;
+* ``Features/FeatureItems/SphereFeatureItem``: the feature's name (required there), for
+  the measurements that name their item by ``FeatureItemId``;
 * ``Results/MeasurementResultsSet/MeasurementResults/MeasuredFeatures/SphereFeatureMeasurement``:
   the centre (``Location``, with its per-axis or combined uncertainty when stated), the
   diameter, the time (``TimeStamp``, else the results' ``InspectionTraceability/
-  InspectionStart``), the name (``FeatureName``, else its item's, else its nominal's) and
+  InspectionStart``), the name (``FeatureName``, else its item's) and
   the measured points (``PointList``, pointing into ``MeasuredPointSets``);
 * the name is mapped to hexatherm's step and ball: by a map (session.yaml's
   ``feature_names``) when it names the feature, else by hexatherm's ``<step>_<ball>``.
@@ -38,6 +38,7 @@ from hexatherm.io.files import MAX_MEASUREMENT_BYTES
 from hexatherm.io.qifrecords import STEP_BALL, Sphere, sphere_records
 from hexatherm.io.qifschema import QIF_NS, check_element, iter_elements, local_name
 from hexatherm.io.records import Records, check_groups
+from hexatherm.typing import FloatArray, IntArray
 
 #: File suffixes taken as QIF whatever the content (any case)
 QIF_SUFFIXES = (".qif",)
@@ -68,7 +69,6 @@ _WHOLE = frozenset(
         "SphereFeatureMeasurement",
         "MeasuredPointSet",
         "SphereFeatureItem",
-        "SphereFeatureNominal",
         "InspectionTraceability",
     )
 )
@@ -76,7 +76,6 @@ _CONTAINERS = {
     "SphereFeatureMeasurement": "MeasuredFeatures",
     "MeasuredPointSet": "MeasuredPointSets",
     "SphereFeatureItem": "FeatureItems",
-    "SphereFeatureNominal": "FeatureNominals",
 }
 
 
@@ -170,8 +169,7 @@ class _Reader:
         self.mm_per_unit: float | None = None
         self.units_mm: dict[str, float] = {}
         self.unit = "not stated"
-        self.item_names: dict[str, tuple[str | None, str | None]] = {}
-        self.nominal_names: dict[str, str] = {}
+        self.item_names: dict[str, str | None] = {}
         self.spheres: list[Sphere] = []
         self.skipped: list[tuple[int, str]] = []
         self.others: dict[str, int] = {}
@@ -252,15 +250,9 @@ class _Reader:
         if name == "FileUnits" and within == "QIFDocument":
             check_element(element, self.path)
             self._units(element)
-        elif name == "SphereFeatureNominal":
-            check_element(element, self.path)
-            text = _child_text(element, "FeatureName")
-            if text is not None:
-                self.nominal_names[element.get("id", "")] = text
         elif name == "SphereFeatureItem":
             check_element(element, self.path)
-            item = (_child_text(element, "FeatureName"), _child_text(element, "FeatureNominalId"))
-            self.item_names[element.get("id", "")] = item
+            self.item_names[element.get("id", "")] = _child_text(element, "FeatureName")
         elif name == "Results" and within == "QIFDocument":
             self.results_seen = True
         elif name == "InspectionTraceability" and within in ("Results", "MeasurementResults"):
@@ -412,12 +404,11 @@ class _Reader:
         name = _child_text(element, "FeatureName")
         item_id = _child_text(element, "FeatureItemId")
         if name is None and item_id is not None:
-            item_name, nominal_id = self.item_names.get(item_id, (None, None))
-            name = item_name or (self.nominal_names.get(nominal_id) if nominal_id else None)
+            name = self.item_names.get(item_id)
         if name is None:
             raise InputError(
                 "a sphere without a name: neither its FeatureName nor its "
-                f"SphereFeatureItem{f' {item_id}' if item_id else ''} (or nominal) names it",
+                f"SphereFeatureItem{f' {item_id}' if item_id else ''} names it",
                 path=self.path,
                 line=element.sourceline,
                 field="FeatureName",
@@ -453,6 +444,31 @@ class _Reader:
                 )
         return per_axis, u_combined
 
+    def _numbers(self, points: Any) -> tuple[FloatArray, IntArray]:
+        """The points of a ``Points`` element (x y z ...), and each point's line (that of
+        its first number)."""
+        text = points.text or ""
+        try:
+            values = np.array(text.split(), dtype=np.float64)
+        except ValueError:
+            values = np.array([np.nan])
+        if values.size % 3 or not np.all(np.isfinite(values)):
+            raise InputError(
+                f"{values.size} numbers, not all finite or not a whole number of points "
+                "(x y z ...)",
+                path=self.path,
+                line=points.sourceline,
+                field="Points",
+            )
+        rows = text.split("\n")
+        counts = np.array([len(row.split()) for row in rows], dtype=np.int64)
+        if np.all((counts == 0) | (counts == 3)):  # a point a line, as CMM software writes
+            lines = np.flatnonzero(counts == 3)
+        else:  # the line of each point's first number
+            token_rows = np.repeat(np.arange(len(rows)), counts)
+            lines = token_rows[0::3]
+        return values.reshape(-1, 3), points.sourceline + lines.astype(np.int64)
+
     def _point_set(self, element: Any) -> None:
         points = _find(element, "Points")
         if points is None:
@@ -462,36 +478,13 @@ class _Reader:
                 line=element.sourceline,
                 field="MeasuredPointSet",
             )
-        units = _find(element, "Units")
-        scale = self._scale(points) if units is None else 1.0
-        if units is not None:
-            unit = _child_text(units, "LinearUnit") or ""
-            scale = self.units_mm.get(unit.lower(), LENGTH_UNITS_MM.get(unit.lower(), math.nan))
-            if math.isnan(scale):
-                raise InputError(
-                    f"unknown length unit {unit!r}",
-                    path=self.path,
-                    line=units.sourceline,
-                    field="Units",
-                )
-        text = points.text or ""
-        starts = [m.start() for m in re.finditer(r"\S+", text)]
-        values = np.array(text.split(), dtype=np.float64)
-        if values.size % 3:
-            raise InputError(
-                f"{values.size} numbers: not a whole number of points (x y z)",
-                path=self.path,
-                line=points.sourceline,
-                field="Points",
-            )
-        newlines = np.cumsum([c == "\n" for c in text], dtype=np.int64)
-        token_lines = np.where(
-            np.array(starts, dtype=np.int64) > 0,
-            newlines[np.maximum(np.array(starts, dtype=np.int64) - 1, 0)],
-            0,
-        )
-        lines = points.sourceline + token_lines[0::3]
-        self.point_sets[element.get("id")] = (values.reshape(-1, 3) * scale, lines)
+        linear = _find(element, "Units", "LinearUnit")
+        if linear is not None:  # the set's own unit (an OtherUnitsType)
+            scale = self._unit_mm(linear, _child_text(linear, "UnitName") or "")
+        else:
+            scale = self._scale(points)
+        values, lines = self._numbers(points)
+        self.point_sets[element.get("id")] = (values * scale, lines)
 
 
 def _find(element: Any, *names: str) -> Any:

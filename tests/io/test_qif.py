@@ -263,3 +263,22 @@ def test_content_sniffing_and_a_refusal_on_the_command_line(tmp_path, centres):
     result = CliRunner().invoke(main, ["inspect", str(bad)])
     assert result.exit_code != 0 and "Traceback" not in result.output
     assert len(result.output.strip().splitlines()) == 1 and str(bad) in result.output
+
+
+def test_a_range_of_a_point_set_and_a_range_out_of_it(tmp_path, points):
+    text = results_qif(points).decode()
+    first = re.search(r"<WholePointSetId>(\d+)</WholePointSetId>", text)
+    ranged = text.replace(
+        first.group(0), f'<RangePointSetId range="3 12">{first.group(1)}</RangePointSetId>'
+    )
+    qif = write(tmp_path / "r.qif", ranged.encode())
+    check_document(qif)
+    (rec,) = read_measurements(qif)
+    assert len(rec) == len(points) - 15  # points 3 to 12 of the first ball's 25
+    np.testing.assert_array_equal(rec.xyz_mm[:10], points.xyz_mm[2:12])
+    assert rec.extra["n"][0] == f"{first.group(1)}-3"
+    beyond = text.replace(
+        first.group(0), f'<RangePointSetId range="3 40">{first.group(1)}</RangePointSetId>'
+    )
+    message = refusal(write(tmp_path / "b.qif", beyond.encode()))
+    assert "field 'PointList': points 3 to 40 of MeasuredPointSet" in message
