@@ -14,9 +14,14 @@ from hexatherm.io.files import ReadOptions
 @click.command("inspect")
 @click.argument("file", type=click.Path(path_type=Path))
 @click.option("--csv", "as_csv", is_flag=True, help="Write the table as CSV instead of text.")
+@click.option(
+    "--session",
+    type=click.Path(path_type=Path),
+    help="A session (file or folder) whose feature_names map a QIF file's feature names.",
+)
 @reading_options
 @clean_errors
-def command(file: Path, as_csv: bool, reading: ReadOptions) -> None:
+def command(file: Path, as_csv: bool, session: Path | None, reading: ReadOptions) -> None:
     """List the actual features of FILE (DMIS output, centres or points CSV, QIF results).
 
     One row per feature: line, label, type, x, y, z (mm), size (diameter, mm)
@@ -27,7 +32,7 @@ def command(file: Path, as_csv: bool, reading: ReadOptions) -> None:
     """
     from hexatherm.workflows.inspect import feature_table, program_without_actuals
 
-    table = feature_table(file, reading)
+    table = feature_table(file, reading, session)
     if as_csv:
         table.to_csv(sys.stdout, index=False, lineterminator="\n")
     else:

@@ -155,17 +155,23 @@ def scan_qif(
     names: Mapping[str, str | None] | None = None,
     keep_later: bool = False,
     limit: int = MAX_MEASUREMENT_BYTES,
+    unmapped: bool = False,
 ) -> QifRead:
-    """As :func:`read_qif`, with what was read beside the records (for ``inspect``)."""
-    return _Reader(os.fspath(path), names or {}).read(keep_later, limit)
+    """As :func:`read_qif`, with what was read beside the records (for ``inspect``).
+
+    ``unmapped``: a sphere whose name is off the map and off ``<step>_<ball>`` is kept in
+    :attr:`QifRead.spheres` with an empty step and ball (and left out of the records)
+    instead of being refused: ``inspect`` lists a file before its names are mapped."""
+    return _Reader(os.fspath(path), names or {}, unmapped).read(keep_later, limit)
 
 
 class _Reader:
     """The state of one streamed read."""
 
-    def __init__(self, path: str, names: Mapping[str, str | None]) -> None:
+    def __init__(self, path: str, names: Mapping[str, str | None], unmapped: bool) -> None:
         self.path = path
         self.names = names
+        self.unmapped = unmapped
         self.mm_per_unit: float | None = None
         self.units_mm: dict[str, float] = {}
         self.unit = "not stated"
@@ -227,6 +233,12 @@ class _Reader:
             check_groups(r, keep_later=keep_later)
             for r in sphere_records(self.path, self.spheres, self.point_sets)
         ]
+        for sphere in self.spheres:  # the unnamed ones inspect lists: their point counts
+            if not sphere.step:
+                sphere.points = sum(
+                    (len(self.point_sets.get(set_id, ())) if last is None else last) - first + 1
+                    for set_id, first, last, _ in sphere.point_sets
+                )
         return QifRead(records, self.unit, self.spheres, self.skipped, self.others)
 
     # -- the elements read ---------------------------------------------------------
@@ -349,7 +361,11 @@ class _Reader:
             self.skipped.append((line, name))
             return
         match = STEP_BALL.fullmatch(target)
-        if match is None:
+        if match is not None:
+            step, ball = match.group(1), match.group(2)
+        elif self.unmapped and name not in self.names:
+            step = ball = ""  # kept for inspect, out of the records
+        else:
             where = "session.yaml's feature_names maps it to" if name in self.names else "named"
             raise InputError(
                 f"sphere {where} {target!r}: not hexatherm's <step>_<ball> (each part "
@@ -363,8 +379,8 @@ class _Reader:
         sphere = Sphere(
             line=line,
             name=name,
-            step=match.group(1),
-            ball=match.group(2),
+            step=step,
+            ball=ball,
             xyz_mm=None,
             diameter_mm=math.nan,
             time=_child_text(element, "TimeStamp"),

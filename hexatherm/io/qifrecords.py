@@ -41,6 +41,7 @@ def sphere_records(
 ) -> list[Records]:
     """The centres records of the spheres without points and the points records of those
     with, from what :mod:`hexatherm.io.qif` read (InputError naming file, line and element)."""
+    spheres = [s for s in spheres if s.step]  # those named (inspect keeps the others)
     centres = [s for s in spheres if not s.point_sets]
     pointed = [s for s in spheres if s.point_sets]
     times = {s.time for s in spheres if s.time is not None}

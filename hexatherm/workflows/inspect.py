@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from hexatherm.io.config.session import read_feature_names
 from hexatherm.io.csvfile import read_measurement_csv, read_text
 from hexatherm.io.dmis import DMIS_SUFFIXES, looks_like_dmis, read_dmis_features
 from hexatherm.io.files import STRICT, ReadOptions
@@ -19,13 +20,19 @@ from hexatherm.io.records import seconds_to_iso
 COLUMNS = ["line", "label", "type", "x_mm", "y_mm", "z_mm", "size_mm", "time"]
 
 
-def feature_table(path: str | os.PathLike[str], reading: ReadOptions = STRICT) -> pd.DataFrame:
+def feature_table(
+    path: str | os.PathLike[str],
+    reading: ReadOptions = STRICT,
+    session: str | os.PathLike[str] | None = None,
+) -> pd.DataFrame:
     """Every feature of a DMIS output or a centres/points CSV, one row each (``reading``:
     a file cut short, a ball probed twice in one step, as the other commands read it).
-    A QIF file's table carries what was read in ``attrs["notes"]`` (:func:`qif_table`)."""
+    A QIF file's table carries what was read in ``attrs["notes"]`` (:func:`qif_table`),
+    its names mapped by the ``feature_names`` of ``session`` (a session file or folder)."""
     path = Path(path)
     if is_qif(path):
-        return qif_table(path, reading)
+        names = None if session is None else read_feature_names(session)
+        return qif_table(path, reading, names)
     if path.suffix.lower() in DMIS_SUFFIXES or (
         path.suffix.lower() != ".csv" and looks_like_dmis(read_text(path)[:4096])
     ):
@@ -85,18 +92,19 @@ def qif_table(
     ``SPHERE+n`` for one measured by ``n`` points, fitted as a points file is), and in
     ``attrs["notes"]`` what was read: the unit, the steps, balls and times, the names and
     how they map to steps and balls, what was read past."""
-    read = scan_qif(path, names=names, keep_later=reading.keep_later)
-    spheres = read.spheres
+    read = scan_qif(path, names=names, keep_later=reading.keep_later, unmapped=True)
+    unnamed = [s for s in read.spheres if not s.step]
+    spheres = [s for s in read.spheres if s.step]
     rows = [
         [
             s.line,
-            f"{s.step}_{s.ball}",
+            f"{s.step}_{s.ball}" if s.step else s.name,
             "SPHERE" if not s.point_sets else f"SPHERE+{s.points}",
             *(s.xyz_mm if s.xyz_mm is not None else (np.nan,) * 3),
             s.diameter_mm,
             s.time or "",
         ]
-        for s in spheres
+        for s in read.spheres
     ]
     table = pd.DataFrame(rows, columns=COLUMNS)
     notes = [f"{path}: QIF 3 results; length unit {read.unit}, converted to mm"]
@@ -131,8 +139,16 @@ def qif_table(
                 f"centre uncertainties stated: per axis on {per_axis}, combined on "
                 f"{combined} of {len(spheres)} spheres"
             )
-    else:
+    elif not unnamed:
         notes.append("no sphere feature measured: nothing hexatherm reads")
+    if unnamed:
+        shown = ", ".join(repr(s.name) for s in unnamed[:4])
+        more = f", ... ({len(unnamed)} names)" if len(unnamed) > 4 else ""
+        notes.append(
+            f"{len(unnamed)} spheres named neither <step>_<ball> nor by a map ({shown}{more}): "
+            "process refuses them; map them in session.yaml's feature_names "
+            "(inspect --session shows a session's map at work)"
+        )
     past = [f"{n} {kind}" for kind, n in read.others.items()]
     past += [f"sphere {name!r} (line {line}, mapped to nothing)" for line, name in read.skipped]
     if past:

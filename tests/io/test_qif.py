@@ -282,3 +282,23 @@ def test_a_range_of_a_point_set_and_a_range_out_of_it(tmp_path, points):
     )
     message = refusal(write(tmp_path / "b.qif", beyond.encode()))
     assert "field 'PointList': points 3 to 40 of MeasuredPointSet" in message
+
+
+def test_inspect_lists_foreign_names_and_shows_a_sessions_map(tmp_path, centres):
+    def german(step, ball):
+        return f"Kugel {ball[1:]} Pos {step}"
+
+    qif = write(tmp_path / "c.qif", results_qif(centres, names=german))
+    plain = CliRunner().invoke(main, ["inspect", str(qif)])
+    assert plain.exit_code == 0, plain.output
+    assert f"{len(centres)} spheres named neither <step>_<ball> nor by a map" in plain.output
+    assert "'Kugel 1 Pos O'" in plain.output and "process refuses them" in plain.output
+    names = "".join(
+        f'  "{german(s, b)}": {s}_{b}\n' for s, b in zip(centres.label, centres.ball, strict=True)
+    )
+    session = tmp_path / "session.yaml"
+    session.write_text(f"format: hexatherm-session/1\nfeature_names:\n{names}")
+    mapped = CliRunner().invoke(main, ["inspect", str(qif), "--session", str(session)])
+    assert mapped.exit_code == 0, mapped.output
+    assert "names mapped by feature_names: 'Kugel 1 Pos O' -> O_B1" in mapped.output
+    assert "neither" not in mapped.output and " O_B1 " in mapped.output

@@ -198,6 +198,15 @@ def _read_utc_offset(doc: YamlDoc) -> float | None:
     return (1.0 if match.group(1) == "+" else -1.0) * (hours * 3600 + minutes * 60)
 
 
+def read_feature_names(path: str | os.PathLike[str]) -> dict[str, str | None]:
+    """The ``feature_names:`` map of a session file (or folder) alone, the rest of it
+    unchecked (for ``inspect --session``)."""
+    path = Path(path)
+    doc = YamlDoc.load(path / "session.yaml" if path.is_dir() else path)
+    _check_session_format(doc)
+    return _read_feature_names(doc)
+
+
 def _read_feature_names(doc: YamlDoc) -> dict[str, str | None]:
     """The optional ``feature_names:`` of a session file: a CMM's feature name (as its QIF
     results file gives it) -> hexatherm's ``<step>_<ball>``, or null to read it past."""
