@@ -155,6 +155,7 @@ def iter_elements(
 def _syntax_error(exc: Any, path: str | os.PathLike[str]) -> InputError:
     message = str(exc.msg if getattr(exc, "msg", None) else exc)
     message = message.split(" (line ")[0].split(", line ")[0]
+    message = message.replace(", use XML_PARSE_HUGE option", "")  # lxml's, not ours
     if "Document is empty" in message or "Start tag expected" in message:
         message = "not XML (no element found)"
     elif "Premature end of data" in message or "EndTag" in message or "end of data" in message:

@@ -302,3 +302,9 @@ def test_inspect_lists_foreign_names_and_shows_a_sessions_map(tmp_path, centres)
     assert mapped.exit_code == 0, mapped.output
     assert "names mapped by feature_names: 'Kugel 1 Pos O' -> O_B1" in mapped.output
     assert "neither" not in mapped.output and " O_B1 " in mapped.output
+
+
+def test_deep_nesting_is_refused_not_recursed(tmp_path):
+    deep = b'<QIFDocument xmlns="http://qifstandards.org/xsd/qif3">' + b"<a>" * 100_000
+    message = refusal(write(tmp_path / "d.qif", deep))
+    assert message.endswith("not well-formed XML: Excessive depth in document: 256")
