@@ -149,6 +149,32 @@ def refusal(
     return None
 
 
+def _open_regular(where: str, limit: int) -> tuple[int, os.stat_result]:
+    """A descriptor of the regular file ``where`` of at most ``limit`` bytes, opened
+    without blocking, and its status: checked before opening (:func:`refusal`) and on
+    the opened file (a file swapped for a FIFO between the two); InputError else."""
+    refused = refusal(where, limit=limit)
+    if refused is not None:
+        raise refused
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0)
+    flags |= getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_BINARY", 0)
+    try:
+        fd = os.open(where, flags)
+    except OSError as exc:
+        raise _os_error(exc, where) from None
+    try:
+        info = os.fstat(fd)
+        kind = _kind_of(info.st_mode)
+        if kind is not None:  # swapped after the first look
+            raise InputError(kind, path=where)
+        if info.st_size > limit:
+            raise _too_large(info.st_size, limit, where)
+    except BaseException:
+        os.close(fd)
+        raise
+    return fd, info
+
+
 def read_bytes(path: str | os.PathLike[str], *, limit: int = MAX_MEASUREMENT_BYTES) -> bytes:
     """The bytes of a regular file of at most ``limit`` bytes.
 
@@ -174,22 +200,8 @@ def read_bytes(path: str | os.PathLike[str], *, limit: int = MAX_MEASUREMENT_BYT
     if limit < 0:
         raise ValueError(f"limit must be >= 0, got {limit}")
     where = os.fspath(path)
-    refused = refusal(where, limit=limit)
-    if refused is not None:
-        raise refused
-    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0)
-    flags |= getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_BINARY", 0)
+    fd, info = _open_regular(where, limit)
     try:
-        fd = os.open(where, flags)
-    except OSError as exc:
-        raise _os_error(exc, where) from None
-    try:
-        info = os.fstat(fd)
-        kind = _kind_of(info.st_mode)
-        if kind is not None:  # swapped after the first look
-            raise InputError(kind, path=where)
-        if info.st_size > limit:
-            raise _too_large(info.st_size, limit, where)
         parts: list[bytes] = []
         total = 0
         want = info.st_size + 1  # one read for a file that does not change
@@ -257,25 +269,7 @@ def open_bounded(path: str | os.PathLike[str], *, limit: int = MAX_MEASUREMENT_B
     the file is 5 bytes, above the limit of 4 bytes for this kind of file
     """
     where = os.fspath(path)
-    refused = refusal(where, limit=limit)
-    if refused is not None:
-        raise refused
-    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0)
-    flags |= getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_BINARY", 0)
-    try:
-        fd = os.open(where, flags)
-    except OSError as exc:
-        raise _os_error(exc, where) from None
-    try:
-        info = os.fstat(fd)
-        kind = _kind_of(info.st_mode)
-        if kind is not None:  # swapped after the first look
-            raise InputError(kind, path=where)
-        if info.st_size > limit:
-            raise _too_large(info.st_size, limit, where)
-    except BaseException:
-        os.close(fd)
-        raise
+    fd, _ = _open_regular(where, limit)
     return io.BufferedReader(_BoundedReader(fd, where, limit), buffer_size=1 << 16)
 
 
