@@ -242,6 +242,9 @@ class Session:
         each is read; the others are hexatherm's CSV or DMIS.
     measurement_files : tuple of Path
         The files inside measurement folders (a Calypso folder's runs), read too.
+    feature_names : dict of str to str or None
+        The optional ``feature_names:`` mapping (an extension): a CMM's feature name in a
+        QIF results file -> ``<step>_<ball>``, or None for a feature read past.
     """
 
     path: Path
@@ -259,6 +262,7 @@ class Session:
     tolerances: dict[str, float] = dataclasses.field(default_factory=dict)
     formats: dict[Path, MeasurementFormat] = dataclasses.field(default_factory=dict)
     measurement_files: tuple[Path, ...] = ()
+    feature_names: dict[str, str | None] = dataclasses.field(default_factory=dict)
 
     def input_files(self) -> list[Path]:
         """Every file a run on this session reads: the session file, the hexapod, balls

@@ -102,3 +102,16 @@ def test_diagnose_runs_from_the_wheel_on_a_shipped_session(installed: Path, tmp_
     truth = yaml.safe_load((session / "truth" / "effects.yaml").read_text("utf-8"))
     # the session's hidden effect (its truth) is the one diagnose names first
     assert diagnosis["added"][0]["effect"] == truth["effects"][0]["name"]
+
+
+def test_the_wheel_carries_the_qif_schema_and_compiles_it(installed: Path, tmp_path: Path) -> None:
+    code = (
+        "from hexatherm.io.qifschema import SCHEMA_DIR, schema; schema(); print(SCHEMA_DIR);"
+        "print(sorted(p.name for p in SCHEMA_DIR.iterdir()))"
+    )
+    done = _run(installed, tmp_path, "-c", code)
+    assert done.returncode == 0, done.stderr
+    where, listing = done.stdout.splitlines()
+    assert Path(where).is_relative_to(installed)
+    for name in ("LICENSE-QIF.md", "LICENSE-W3C-xmldsig.txt", "QIFApplications", "QIFLibrary"):
+        assert name in listing

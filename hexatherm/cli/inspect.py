@@ -14,14 +14,21 @@ from hexatherm.io.files import ReadOptions
 @click.command("inspect")
 @click.argument("file", type=click.Path(path_type=Path))
 @click.option("--csv", "as_csv", is_flag=True, help="Write the table as CSV instead of text.")
+@click.option(
+    "--session",
+    type=click.Path(path_type=Path),
+    help="A session (file or folder) whose feature_names map a QIF file's feature names.",
+)
 @reading_options
 @clean_errors
-def command(file: Path, as_csv: bool, reading: ReadOptions) -> None:
-    """List the actual features of FILE (DMIS output, centres or points CSV).
+def command(file: Path, as_csv: bool, session: Path | None, reading: ReadOptions) -> None:
+    """List the actual features of FILE (DMIS output, centres or points CSV, QIF results).
 
     One row per feature: line, label, type, x, y, z (mm), size (diameter, mm)
     and time. For DMIS files every actual feature FA(...) is listed, whatever its
-    label; for CSV files every row is a feature (SPHERE centres or POINTs).
+    label; for CSV files every row is a feature (SPHERE centres or POINTs); for a
+    QIF 3 results file every sphere, with what was read (unit, steps, balls, times,
+    names).
 
     Given a session (its folder or session.yaml), it says what each measurement entry
     reads (its format and column map, units, steps, balls, times: Calypso runs, mapped
@@ -39,7 +46,7 @@ def command(file: Path, as_csv: bool, reading: ReadOptions) -> None:
         for line in lines:
             echo_err(line)
     else:
-        table = feature_table(file, reading)
+        table = feature_table(file, reading, session)
     if as_csv:
         table.to_csv(sys.stdout, index=False, lineterminator="\n")
     else:
@@ -48,6 +55,8 @@ def command(file: Path, as_csv: bool, reading: ReadOptions) -> None:
             if len(table)
             else "(no features)"
         )
+    for note in table.attrs.get("notes", []):
+        echo_err(note)
     counts = table["type"].value_counts()
     echo_err(
         f"{file}: {len(table)} features ("

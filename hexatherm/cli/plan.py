@@ -205,9 +205,16 @@ def parse_levels(text: str) -> list[int]:
     help="Also write a DMIS measurement program for the CMM.",
 )
 @click.option(
+    "--qif",
+    "qif_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Also write the plan as a QIF 3 document (the balls of every step as sphere "
+    "features named <step>_<ball> at their nominal centres on the CMM).",
+)
+@click.option(
     "--origin-on-cmm",
     metavar="Tx,Ty,Tz,Rx,Ry,Rz",
-    help="Nominal placement of frame O on the CMM (needed by --dmis).",
+    help="Nominal placement of frame O on the CMM (needed by --dmis and --qif).",
 )
 @click.option(
     "--cap-angle",
@@ -283,6 +290,7 @@ def command(
     max_gap: float,
     min_rcond: float | None,
     dmis_path: Path | None,
+    qif_path: Path | None,
     origin_on_cmm: str | None,
     cap_angle: float,
     clearance: float,
@@ -298,8 +306,8 @@ def command(
     Targets come from --targets (a CSV file), --grid or --random over a --box.
     Every commanded pose is checked against the legs' stroke and for a
     near-singular Jacobian; nothing is written when one fails. The plan goes to
-    OUT (or standard output); --dmis and --checklist add the CMM program and the
-    operator's sheet.
+    OUT (or standard output); --dmis, --checklist and --qif add the CMM program, the
+    operator's sheet and the plan as QIF 3 sphere features.
     """
     from hexatherm.core.plan import find_repeats
     from hexatherm.io.outputs import check_output_settled, write_output_file
@@ -319,10 +327,16 @@ def command(
             "--dmis needs --origin-on-cmm: where frame O nominally is on "
             "the CMM (the probe would otherwise go to made-up positions)"
         )
+    if qif_path is not None and origin_on_cmm is None:
+        raise click.UsageError(
+            "--qif needs --origin-on-cmm: where frame O nominally is on the CMM (the "
+            "spheres' nominal centres)"
+        )
     named = [(out, "-o"), (dmis_path, "--dmis"), (checklist_path, "--checklist")]
+    named.append((qif_path, "--qif"))
     outputs = [p for p, _ in named if p is not None]
     if len({os.path.realpath(p) for p in outputs}) != len(outputs):
-        raise click.UsageError("-o, --dmis and --checklist must be different files")
+        raise click.UsageError("-o, --dmis, --checklist and --qif must be different files")
     lower, upper = parse_box(box) if box else (None, None)
     if grid is not None and lower is not None and upper is not None:
         varied = [n for n, lo, hi in zip(parse_levels(grid), lower, upper, strict=True) if hi > lo]
@@ -366,6 +380,7 @@ def command(
         clearance_mm=clearance,
         dmis_name=None if dmis_path is None else Path(dmis_path).stem,
         checklist=checklist_path is not None,
+        qif=qif_path is not None,
         calibration_poses=calibration_poses,
         calibration_level=calibration_level,
         calibration_criterion=calibration_criterion,
@@ -411,7 +426,7 @@ def command(
             f"{gap.gap_s / 60:.1f} min apart (--max-gap {max_gap / 60:.1f} min): fewer "
             "points per ball or a faster CMM program keep the thermal state comparable"
         )
-    texts = [made.plan_yaml, made.dmis, made.checklist]
+    texts = [made.plan_yaml, made.dmis, made.checklist, made.qif]
     for (target, option), text in zip(named, texts, strict=True):
         if text is None:
             continue

@@ -96,6 +96,19 @@ class TouchPoints:
     normals: FloatArray
 
 
+def nominal_centres(
+    plan: Plan,
+    ball_centres_mm: npt.ArrayLike,
+    origin_on_cmm: Sequence[float],
+    convention: str = "symetrie",
+) -> FloatArray:
+    """Nominal ball centres of every step in the CMM frame, shape (N, k, 3):
+    ``origin2cmm @ platform2origin(X_k) @ b`` (see :func:`touch_points`)."""
+    balls = np.asarray(ball_centres_mm, dtype=float).reshape(-1, 3)
+    origin2cmm = transform_from_pose(np.asarray(origin_on_cmm, dtype=float), convention)
+    return apply_transform(origin2cmm @ transform_from_pose(plan.poses, convention), balls)
+
+
 def touch_points(
     plan: Plan,
     ball_centres_mm: npt.ArrayLike,
@@ -125,11 +138,8 @@ def touch_points(
     >>> bool(np.allclose(np.linalg.norm(tp.points_mm - tp.centres_mm[:, :, None], axis=-1), 10))
     True
     """
-    balls = np.asarray(ball_centres_mm, dtype=float).reshape(-1, 3)
     radii = np.asarray(ball_diameters_mm, dtype=float).reshape(-1) / 2.0
-    origin2cmm = transform_from_pose(np.asarray(origin_on_cmm, dtype=float), convention)
-    platform2cmm = origin2cmm @ transform_from_pose(plan.poses, convention)
-    centres = apply_transform(platform2cmm, balls)
+    centres = nominal_centres(plan, ball_centres_mm, origin_on_cmm, convention)
     u = cap_directions(plan.points_per_ball, cap_half_angle_deg)
     normals = np.broadcast_to(u, centres.shape[:2] + u.shape).copy()
     points = centres[:, :, None, :] + radii[None, :, None, None] * normals

@@ -33,9 +33,11 @@ cut short, an earlier group of records) are :class:`InputWarning`, issued with t
 from __future__ import annotations
 
 import errno
+import io
 import os
 import stat
 from dataclasses import dataclass
+from typing import Any, BinaryIO
 
 from hexatherm.errors import InputError, InputWarning
 
@@ -44,6 +46,7 @@ __all__ = [
     "MAX_YAML_BYTES",
     "InputWarning",
     "read_bytes",
+    "open_bounded",
     "refusal",
     "refuse_utf16",
 ]
@@ -146,6 +149,32 @@ def refusal(
     return None
 
 
+def _open_regular(where: str, limit: int) -> tuple[int, os.stat_result]:
+    """A descriptor of the regular file ``where`` of at most ``limit`` bytes, opened
+    without blocking, and its status: checked before opening (:func:`refusal`) and on
+    the opened file (a file swapped for a FIFO between the two); InputError else."""
+    refused = refusal(where, limit=limit)
+    if refused is not None:
+        raise refused
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0)
+    flags |= getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_BINARY", 0)
+    try:
+        fd = os.open(where, flags)
+    except OSError as exc:
+        raise _os_error(exc, where) from None
+    try:
+        info = os.fstat(fd)
+        kind = _kind_of(info.st_mode)
+        if kind is not None:  # swapped after the first look
+            raise InputError(kind, path=where)
+        if info.st_size > limit:
+            raise _too_large(info.st_size, limit, where)
+    except BaseException:
+        os.close(fd)
+        raise
+    return fd, info
+
+
 def read_bytes(path: str | os.PathLike[str], *, limit: int = MAX_MEASUREMENT_BYTES) -> bytes:
     """The bytes of a regular file of at most ``limit`` bytes.
 
@@ -171,22 +200,8 @@ def read_bytes(path: str | os.PathLike[str], *, limit: int = MAX_MEASUREMENT_BYT
     if limit < 0:
         raise ValueError(f"limit must be >= 0, got {limit}")
     where = os.fspath(path)
-    refused = refusal(where, limit=limit)
-    if refused is not None:
-        raise refused
-    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0)
-    flags |= getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_BINARY", 0)
+    fd, info = _open_regular(where, limit)
     try:
-        fd = os.open(where, flags)
-    except OSError as exc:
-        raise _os_error(exc, where) from None
-    try:
-        info = os.fstat(fd)
-        kind = _kind_of(info.st_mode)
-        if kind is not None:  # swapped after the first look
-            raise InputError(kind, path=where)
-        if info.st_size > limit:
-            raise _too_large(info.st_size, limit, where)
         parts: list[bytes] = []
         total = 0
         want = info.st_size + 1  # one read for a file that does not change
@@ -204,6 +219,58 @@ def read_bytes(path: str | os.PathLike[str], *, limit: int = MAX_MEASUREMENT_BYT
     finally:
         os.close(fd)
     return b"".join(parts)
+
+
+class _BoundedReader(io.RawIOBase):
+    """A regular file's bytes, read in order, refusing more than ``limit`` (see
+    :func:`open_bounded`)."""
+
+    def __init__(self, fd: int, path: str, limit: int) -> None:
+        self._fd, self._path, self._limit, self._total = fd, path, limit, 0
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, buffer: Any) -> int:
+        view = memoryview(buffer).cast("B")
+        want = max(1, min(len(view), self._limit + 1 - self._total))
+        try:
+            chunk = os.read(self._fd, want)
+        except OSError as exc:
+            raise _os_error(exc, self._path) from None
+        self._total += len(chunk)
+        if self._total > self._limit:
+            raise _too_large(self._limit, self._limit, self._path, more=True)
+        view[: len(chunk)] = chunk
+        return len(chunk)
+
+    def close(self) -> None:
+        if not self.closed:
+            os.close(self._fd)
+        super().close()
+
+
+def open_bounded(path: str | os.PathLike[str], *, limit: int = MAX_MEASUREMENT_BYTES) -> BinaryIO:
+    """A regular file of at most ``limit`` bytes, opened for reading in a stream (for the
+    readers that parse as they read, such as QIF's): the checks of :func:`read_bytes`
+    before opening and on the opened file, and the bound again while reading (an
+    :class:`~hexatherm.errors.InputError` from ``read``). Close it (``with``).
+
+    >>> import tempfile
+    >>> with tempfile.NamedTemporaryFile() as file:
+    ...     _ = file.write(b"12345"); file.flush()
+    ...     with open_bounded(file.name) as stream:
+    ...         stream.read()
+    ...     try:
+    ...         open_bounded(file.name, limit=4)
+    ...     except InputError as error:
+    ...         print(error.message)
+    b'12345'
+    the file is 5 bytes, above the limit of 4 bytes for this kind of file
+    """
+    where = os.fspath(path)
+    fd, _ = _open_regular(where, limit)
+    return io.BufferedReader(_BoundedReader(fd, where, limit), buffer_size=1 << 16)
 
 
 _UTF16_BOMS = {

@@ -1,9 +1,10 @@
-"""Any measurement file: centres or points CSV, or DMIS output (by extension or content)."""
+"""Any measurement file: centres or points CSV, DMIS output or QIF results (by extension or
+content)."""
 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +12,9 @@ import numpy as np
 from hexatherm.errors import InputError
 from hexatherm.io.csvfile import read_measurement_csv
 from hexatherm.io.csvtext import read_text
-from hexatherm.io.dmis import looks_like_dmis, read_dmis
+from hexatherm.io.dmis import DMIS_SUFFIXES, looks_like_dmis, read_dmis
+from hexatherm.io.files import open_bounded
+from hexatherm.io.qif import QIF_SUFFIXES, looks_like_qif, read_qif
 from hexatherm.io.records import Records
 from hexatherm.session import MeasurementFormat
 
@@ -55,8 +58,10 @@ def read_measurements(
     keep_later: bool = False,
     spec: MeasurementFormat | None = None,
     labels: Sequence[str] | None = None,
+    names: Mapping[str, str | None] | None = None,
 ) -> list[Records]:
-    """Read any measurement file: centres/points CSV or DMIS output (by extension or content).
+    """Read any measurement file: centres/points CSV, DMIS output or QIF 3 results (by
+    extension or content: :func:`is_qif`).
 
     ``spec``: the session's format of a mapped entry (a column map, a folder of Calypso
     runs; :func:`read_mapped`), ``labels`` the plan's steps it may need.
@@ -66,11 +71,18 @@ def read_measurements(
     a hundred thousand points); a CSV file or a plain DMIS file reports once, done.
     ``allow_truncated`` and ``keep_later``: as for :func:`read_measurement_csv` and
     :func:`~hexatherm.io.dmis.read_dmis` (a DMIS file without ``ENDFIL``).
+    ``names``: a QIF file's feature names to ``<step>_<ball>`` (session.yaml's
+    ``feature_names``; :func:`~hexatherm.io.qif.read_qif`).
     """
     path = os.fspath(path)
     if spec is not None:
         return read_mapped(path, spec, labels, allow_truncated, keep_later)
     suffix = Path(path).suffix.lower()
+    if is_qif(path):
+        records = read_qif(path, names=names, keep_later=keep_later)
+        if progress is not None:
+            progress(1, 1)
+        return [check_coordinates(r) for r in records]
     dmis = suffix in (".dmo", ".dms", ".dmi") or (
         suffix != ".csv" and looks_like_dmis(read_text(path)[:4096])
     )
@@ -107,3 +119,15 @@ def read_mapped(
     else:
         found = [read_table(path, spec, allow_truncated=allow_truncated, keep_later=keep_later)]
     return [check_coordinates(r) for r in found]
+
+
+def is_qif(path: str | os.PathLike[str]) -> bool:
+    """Whether a measurement file is read as QIF: suffix ``.qif`` (any case), or, unless it
+    is ``.csv`` or a DMIS suffix, a first 4 KiB that opens a ``QIFDocument``."""
+    suffix = Path(path).suffix.lower()
+    if suffix in QIF_SUFFIXES:
+        return True
+    if suffix == ".csv" or suffix in DMIS_SUFFIXES:
+        return False
+    with open_bounded(path) as stream:
+        return looks_like_qif(stream.read(4096))

@@ -3,25 +3,38 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from hexatherm.io.config.session import read_feature_names
 from hexatherm.io.csvfile import read_measurement_csv
 from hexatherm.io.csvtext import read_text
 from hexatherm.io.dmis import DMIS_SUFFIXES, looks_like_dmis, read_dmis_features
 from hexatherm.io.files import STRICT, ReadOptions
+from hexatherm.io.measurements import is_qif
+from hexatherm.io.qif import scan_qif
 from hexatherm.io.records import Records, seconds_to_iso
 from hexatherm.session import MeasurementFormat
 
 COLUMNS = ["line", "label", "type", "x_mm", "y_mm", "z_mm", "size_mm", "time"]
 
 
-def feature_table(path: str | os.PathLike[str], reading: ReadOptions = STRICT) -> pd.DataFrame:
+def feature_table(
+    path: str | os.PathLike[str],
+    reading: ReadOptions = STRICT,
+    session: str | os.PathLike[str] | None = None,
+) -> pd.DataFrame:
     """Every feature of a DMIS output or a centres/points CSV, one row each (``reading``:
-    a file cut short, a ball probed twice in one step, as the other commands read it)."""
+    a file cut short, a ball probed twice in one step, as the other commands read it).
+    A QIF file's table carries what was read in ``attrs["notes"]`` (:func:`qif_table`),
+    its names mapped by the ``feature_names`` of ``session`` (a session file or folder)."""
     path = Path(path)
+    if is_qif(path):
+        names = None if session is None else read_feature_names(session)
+        return qif_table(path, reading, names)
     if path.suffix.lower() in DMIS_SUFFIXES or (
         path.suffix.lower() != ".csv" and looks_like_dmis(read_text(path)[:4096])
     ):
@@ -172,3 +185,77 @@ def _entry_line(
         f"{file.name}: table (columns: {columns}{split}; delimiter {spec.delimiter!r}, "
         f"decimal {spec.decimal!r}, {units}, time {spec.time_format}): {held}"
     )
+
+
+def qif_table(
+    path: str | os.PathLike[str],
+    reading: ReadOptions = STRICT,
+    names: Mapping[str, str | None] | None = None,
+) -> pd.DataFrame:
+    """Every sphere of a QIF 3 results file, one row each (``type`` ``SPHERE``, or
+    ``SPHERE+n`` for one measured by ``n`` points, fitted as a points file is), and in
+    ``attrs["notes"]`` what was read: the unit, the steps, balls and times, the names and
+    how they map to steps and balls, what was read past."""
+    read = scan_qif(path, names=names, keep_later=reading.keep_later, unmapped=True)
+    unnamed = [s for s in read.spheres if not s.step]
+    spheres = [s for s in read.spheres if s.step]
+    rows = [
+        [
+            s.line,
+            f"{s.step}_{s.ball}" if s.step else s.name,
+            "SPHERE" if not s.point_sets else f"SPHERE+{s.points}",
+            *(s.xyz_mm if s.xyz_mm is not None else (np.nan,) * 3),
+            s.diameter_mm,
+            s.time or "",
+        ]
+        for s in read.spheres
+    ]
+    table = pd.DataFrame(rows, columns=COLUMNS)
+    notes = [f"{path}: QIF 3 results; length unit {read.unit}, converted to mm"]
+    if spheres:
+        steps = list(dict.fromkeys(s.step for s in spheres))
+        balls = sorted({s.ball for s in spheres})
+        times = sorted(s.time for s in spheres if s.time)
+        shown = ", ".join(steps[:6]) + (f", ... ({len(steps)} steps)" if len(steps) > 6 else "")
+        notes.append(
+            f"{len(spheres)} spheres: steps {shown}; balls {', '.join(balls)}; "
+            f"times {times[0]} to {times[-1]}"
+        )
+        renamed = [
+            (s.name, f"{s.step}_{s.ball}") for s in spheres if s.name != f"{s.step}_{s.ball}"
+        ]
+        if renamed:
+            pairs = ", ".join(f"{a!r} -> {b}" for a, b in renamed[:4])
+            more = f", ... ({len(renamed)} names)" if len(renamed) > 4 else ""
+            notes.append(f"names mapped by feature_names: {pairs}{more}")
+        else:
+            notes.append("names: hexatherm's <step>_<ball>, as the file gives them")
+        pointed = sum(1 for s in spheres if s.point_sets)
+        if pointed:
+            notes.append(
+                f"{pointed} spheres with measured points ({sum(s.points for s in spheres)} "
+                "points): hexatherm fits them as a points file, the file's centres unused"
+            )
+        per_axis = sum(1 for s in spheres if s.u_mm is not None)
+        combined = sum(1 for s in spheres if not np.isnan(s.u_combined_mm))
+        if per_axis or combined:
+            notes.append(
+                f"centre uncertainties stated: per axis on {per_axis}, combined on "
+                f"{combined} of {len(spheres)} spheres"
+            )
+    elif not unnamed:
+        notes.append("no sphere feature measured: nothing hexatherm reads")
+    if unnamed:
+        shown = ", ".join(repr(s.name) for s in unnamed[:4])
+        more = f", ... ({len(unnamed)} names)" if len(unnamed) > 4 else ""
+        notes.append(
+            f"{len(unnamed)} spheres named neither <step>_<ball> nor by a map ({shown}{more}): "
+            "process refuses them; map them in session.yaml's feature_names "
+            "(inspect --session shows a session's map at work)"
+        )
+    past = [f"{n} {kind}" for kind, n in read.others.items()]
+    past += [f"sphere {name!r} (line {line}, mapped to nothing)" for line, name in read.skipped]
+    if past:
+        notes.append("read past: " + ", ".join(past))
+    table.attrs["notes"] = notes
+    return table

@@ -36,12 +36,13 @@ from hexatherm.core.planning import (
     random_targets,
     reference_gaps,
 )
-from hexatherm.core.touch import touch_points
+from hexatherm.core.touch import nominal_centres, touch_points
 from hexatherm.errors import PlanError
 from hexatherm.io.checklist import checklist_markdown
 from hexatherm.io.config import plan_to_yaml, read_balls, read_hexapod
 from hexatherm.io.csvtext import read_text
 from hexatherm.io.dmisprog import dmis_program
+from hexatherm.io.qifout import NominalSphere, qif_plan
 
 #: random choices of as many candidates that ``plan --calibration`` compares its design with
 RANDOM_DESIGN_DRAWS = 20
@@ -53,7 +54,8 @@ class PlanRequest:
 
     Exactly one target source: ``targets_path`` (a CSV file), ``grid_levels`` or
     ``n_random`` (both over the box ``box_lower``..``box_upper``, mm and deg).
-    ``origin_on_cmm`` (where frame O nominally is on the CMM) is needed for a DMIS program.
+    ``origin_on_cmm`` (where frame O nominally is on the CMM) is needed for a DMIS program
+    and for a QIF plan (``qif``).
     """
 
     hexapod_path: Path
@@ -78,6 +80,7 @@ class PlanRequest:
     cap_angle_deg: float = DEFAULT_CAP_ANGLE_DEG
     clearance_mm: float = 10.0
     dmis_name: str | None = None
+    qif: bool = False
     checklist: bool = False
     calibration_poses: int | None = None
     calibration_level: str = "joints"
@@ -101,6 +104,9 @@ class PlanTexts:
     plan_yaml : str
     dmis : str or None
     checklist : str or None
+    qif : bytes or None
+        The QIF 3 plan document (``plan --qif``): every ball of every step as a sphere
+        feature named ``<step>_<ball>`` at its nominal centre in CMM coordinates.
     selection : PoseSelection or None
         With ``calibration_poses``: the targets chosen from the candidates (the
         targets, grid or random poses asked for) for a calibration.
@@ -115,6 +121,7 @@ class PlanTexts:
     dmis: str | None
     checklist: str | None
     selection: PoseSelection | None = None
+    qif: bytes | None = None
 
 
 def make_plan(request: PlanRequest) -> PlanTexts:
@@ -122,8 +129,8 @@ def make_plan(request: PlanRequest) -> PlanTexts:
     sources = [request.targets_path, request.grid_levels, request.n_random]
     if sum(s is not None for s in sources) != 1:
         raise ValueError("give exactly one of targets_path, grid_levels and n_random")
-    if request.dmis_name is not None and request.origin_on_cmm is None:
-        raise ValueError("a DMIS program needs origin_on_cmm")
+    if (request.dmis_name is not None or request.qif) and request.origin_on_cmm is None:
+        raise ValueError("a DMIS program or a QIF plan needs origin_on_cmm")
     rcond = DEFAULT_MIN_RCOND if request.min_rcond is None else request.min_rcond
     hexapod = read_hexapod(request.hexapod_path)
     balls = read_balls(request.balls_path)
@@ -221,6 +228,16 @@ def make_plan(request: PlanRequest) -> PlanTexts:
             clearance_mm=request.clearance_mm,
             timing=timing,
         )
+    qif = None
+    if request.qif:
+        assert request.origin_on_cmm is not None
+        centres = nominal_centres(plan, balls.centres_mm, request.origin_on_cmm, hexapod.convention)
+        spheres = [
+            NominalSphere(f"{label}_{ball}", tuple(centres[i, j]), float(balls.diameters_mm[j]))
+            for i, label in enumerate(plan.labels)
+            for j, ball in enumerate(balls.names)
+        ]
+        qif = qif_plan(spheres, application=f"hexatherm plan ({len(plan.labels)} steps)")
     checklist = None
     if request.checklist:
         checklist = checklist_markdown(
@@ -241,4 +258,5 @@ def make_plan(request: PlanRequest) -> PlanTexts:
         dmis,
         checklist,
         selection,
+        qif,
     )

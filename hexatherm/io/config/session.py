@@ -54,6 +54,7 @@ def read_session(path: str | os.PathLike[str]) -> Session:
             "utc_offset",
             "identification",
             "tolerances",
+            "feature_names",
         ]
     )
     name = doc.string("name", default=path.parent.name)
@@ -102,6 +103,7 @@ def read_session(path: str | os.PathLike[str]) -> Session:
         tolerances,
         formats,
         inside,
+        _read_feature_names(doc),
     )
 
 
@@ -230,6 +232,43 @@ def _run_files(chr_file: Path) -> list[Path]:
     stem = chr_file.name[: -len("_chr.txt")]
     files = (chr_file.parent / f"{stem}_{kind}.txt" for kind in ("chr", "hdr", "fet"))
     return [p for p in files if p.is_file()]
+
+
+def read_feature_names(path: str | os.PathLike[str]) -> dict[str, str | None]:
+    """The ``feature_names:`` map of a session file (or folder) alone, the rest of it
+    unchecked (for ``inspect --session``)."""
+    path = Path(path)
+    doc = YamlDoc.load(path / "session.yaml" if path.is_dir() else path)
+    _check_session_format(doc)
+    return _read_feature_names(doc)
+
+
+def _read_feature_names(doc: YamlDoc) -> dict[str, str | None]:
+    """The optional ``feature_names:`` of a session file: a CMM's feature name (as its QIF
+    results file gives it) -> hexatherm's ``<step>_<ball>``, or null to read it past."""
+    from hexatherm.io.qifrecords import STEP_BALL
+
+    names = doc.get("feature_names", default=None)
+    if names is None:
+        return {}
+    if not isinstance(names, dict) or not names:
+        raise doc.error(
+            "expected a mapping of feature names to <step>_<ball> (or null), "
+            "e.g. {'Kugel 1 Pos 0': O_B1}",
+            "feature_names",
+        )
+    out: dict[str, str | None] = {}
+    for key, value in names.items():
+        if not isinstance(key, str):
+            raise doc.error(f"a feature name must be text (quote it), got {key!r}", "feature_names")
+        if value is not None and not (isinstance(value, str) and STEP_BALL.fullmatch(value)):
+            raise doc.error(
+                f"expected <step>_<ball> (each part [A-Za-z0-9-]+) or null, got {value!r}",
+                "feature_names",
+                key,
+            )
+        out[key] = value
+    return out
 
 
 def _read_quality(doc: YamlDoc) -> dict[str, float]:

@@ -346,6 +346,7 @@ def read_measured(
             keep_later=reading.keep_later,
             spec=session.formats.get(file),
             labels=session.plan.labels,
+            names=session.feature_names,
         )
         if len(found) > 1:  # a folder of runs: one step's ball in two runs is refused
             refuse_groups_in_two_files(found)
