@@ -92,6 +92,7 @@ from hexatherm.workflows.run.resume import (
 from hexatherm.workflows.run.run.cmmfacts import dme_version, tip_radius
 from hexatherm.workflows.run.run.options import BallResult, Notify, RunOptions, RunResult
 from hexatherm.workflows.run.run.pace import Pace, clock_text, duration_text
+from hexatherm.workflows.run.run.reconnect import reopen
 from hexatherm.workflows.run.run.support import (
     _Geometry,
     _Thermocouples,
@@ -550,13 +551,30 @@ class _Campaign:
         self.reached = self.controller_connected = True
         self._check_controller()
 
-    def _reconnect_controller(self, why: str) -> None:
-        assert self.controller is not None and self.clog is not None
+    def _reconnect_controller(self, why: str, tries: int) -> int:
+        """Reopen the controller's connection (:func:`.reconnect.reopen`); the tries used."""
+        controller, clog = self.controller, self.clog
+        assert controller is not None and clog is not None
         self.notify("warn", f"controller connection lost ({why}); reconnecting")
-        self.clog.note(f"reconnect after {why}")
-        self.sleep(self.options.reconnect_wait_s)
-        self.controller.connect()
-        self._check_controller()
+        clog.note(f"reconnect after {why}")
+
+        def connect() -> None:
+            controller.connect()
+            self._check_controller()
+
+        def failed(exc: Exception, wait_s: float) -> None:
+            clog.note(f"reconnect failed {exc}")
+            self.notify("warn", f"controller reconnection failed ({exc}); again in {wait_s:g} s")
+
+        return reopen(
+            connect,
+            (ControllerConnectionError,),
+            tries=tries,
+            budget=self.options.reconnects,
+            first_wait_s=self.options.reconnect_wait_s,
+            sleep=self.sleep,
+            failed=failed,
+        )
 
     def _check_controller(self) -> None:
         """Servo, referencing, readiness, coordinate system (PI): checked before any move
@@ -606,13 +624,28 @@ class _Campaign:
     def _on_warning(self, result: TransactionResult, warning: ErrorReport) -> None:
         self.notify("warn", f"CMM warning on {result.tag} {result.command}: {warning}")
 
-    def _reconnect_cmm(self, why: str) -> None:
+    def _reconnect_cmm(self, why: str, tries: int) -> int:
+        """Reopen the CMM's connection (:func:`.reconnect.reopen`); the tries used."""
         self.notify("warn", f"CMM connection lost ({why}); reconnecting")
-        if self.cmm is not None:
-            self.cmm.close()
-            self.cmm = None
-        self.sleep(self.options.reconnect_wait_s)
-        self._connect_cmm()
+
+        def connect() -> None:
+            if self.cmm is not None:
+                self.cmm.close()
+                self.cmm = None
+            self._connect_cmm()
+
+        def failed(exc: Exception, wait_s: float) -> None:
+            self.notify("warn", f"CMM reconnection failed ({exc}); again in {wait_s:g} s")
+
+        return reopen(
+            connect,
+            (IppConnectionLost, IppTimeout),
+            tries=tries,
+            budget=self.options.reconnects,
+            first_wait_s=self.options.reconnect_wait_s,
+            sleep=self.sleep,
+            failed=failed,
+        )
 
     def _lift(self, z_mm: float) -> None:
         """Probe straight up to ``z_mm`` (if below)."""
@@ -707,7 +740,7 @@ class _Campaign:
                 tries += 1
                 if tries > self.options.reconnects:
                     raise
-                self._reconnect_controller(str(exc))
+                tries = self._reconnect_controller(str(exc), tries)
             except PoseRefusedError as exc:
                 raise ControllerError(f"step {label}: {exc}") from exc
         self.state.positionings[label] += 1
@@ -743,7 +776,7 @@ class _Campaign:
                 tries += 1
                 if tries > self.options.reconnects:
                     raise
-                self._reconnect_cmm(str(exc))
+                tries = self._reconnect_cmm(str(exc), tries)
 
     def _measure_ball(self, i: int, j: int, travel: float) -> None:
         label, name = self.plan.labels[i], self.balls.names[j]
@@ -773,7 +806,7 @@ class _Campaign:
                 losses += 1
                 if losses > self.options.reconnects:
                     raise
-                self._reconnect_cmm(str(exc))
+                losses = self._reconnect_cmm(str(exc), losses)
                 continue
             except IppDmeError:
                 self.tlog.note(f"abandon {label} {name} error")
