@@ -89,7 +89,7 @@ from hexatherm.workflows.run.resume import (
     record_controller,
     write_run_settings,
 )
-from hexatherm.workflows.run.run.cmmfacts import dme_version, tip_radius
+from hexatherm.workflows.run.run.cmmfacts import changed_tool, dme_version, tip_radius
 from hexatherm.workflows.run.run.options import BallResult, Notify, RunOptions, RunResult
 from hexatherm.workflows.run.run.pace import Pace, clock_text, duration_text
 from hexatherm.workflows.run.run.reconnect import reopen
@@ -332,6 +332,8 @@ class _Campaign:
         self.controller_connected = False
         #: what became of the hexapod when the run stopped (:meth:`_stop`)
         self.stopped = ""
+        #: the CMM's event that changed its tool away from the run's (:meth:`_restore_tool`)
+        self.tool_event: IppEvent | None = None
 
     # ------------------------------------------------------------------ state
     def _fit_centre(self, xyz: FloatArray) -> FloatArray:
@@ -593,7 +595,37 @@ class _Campaign:
             )
 
     def _on_event(self, event: IppEvent) -> None:
+        """An event line (on the reader thread): said; a tool change is undone before the
+        next probing (:meth:`_restore_tool`); one not understood is a warning (the open
+        transaction's own lines stay strict, and the line is in the transcript)."""
+        if event.problem is not None:
+            line = event.line.encode("ascii", "backslashreplace").decode("ascii")
+            problem = event.problem.encode("ascii", "backslashreplace").decode("ascii")
+            self.notify(
+                "warn", f"CMM event not understood ({problem}), kept in the transcript: {line}"
+            )
+            return
+        tool = changed_tool(event)
+        if tool is not None and tool != self.settings.probe.tool:
+            self.tool_event = event  # said when it is undone
+            return
         self.notify("warn", f"CMM event: {event.line}")
+
+    def _restore_tool(self) -> None:
+        """Change back to the run's tool if the CMM changed it (said once, in the transcript
+        too)."""
+        event = self.tool_event
+        if event is None or self.cmm is None:
+            return
+        tool = self.settings.probe.tool
+        self.cmm.change_tool(tool)
+        self.tool_event = None
+        assert self.tlog is not None
+        self.tlog.note(f"tool changed back to {tool} after {event.time}")
+        self.notify(
+            "warn",
+            f"the CMM changed its tool ({event.line}, at {event.time}): changed back to {tool}",
+        )
 
     def _connect_cmm(self) -> None:
         options = self.options
@@ -616,6 +648,7 @@ class _Campaign:
             self.notify("info", "homing the CMM")
             cmm.home()
         cmm.change_tool(self.settings.probe.tool)
+        self.tool_event = None
         cmm.on_pt_meas_report("X", "Y", "Z", "IJK", "ER")
         tool, tip = self.settings.probe.tool, self.balls.tip_diameter_mm
         tip_radius(cmm, facts, tool, tip, self.notify)
@@ -783,7 +816,7 @@ class _Campaign:
         assert self.tlog is not None
         predicted = self.predicted(i, j)
         centre = predicted
-        attempt, losses = 1, 0
+        attempt, losses, tool_changes = 1, 0, 0
         probe = self.settings.probe
         while True:
             self.tlog.note(f"begin {label} {name} attempt {attempt}")
@@ -798,6 +831,7 @@ class _Campaign:
             )
             try:
                 assert self.cmm is not None
+                self._restore_tool()
                 self._lift(travel)
                 self.cmm.goto(touch.safe_mm[0], touch.safe_mm[1], travel)
                 measured = probe_cap(self.cmm, touch)
@@ -811,6 +845,16 @@ class _Campaign:
             except IppDmeError:
                 self.tlog.note(f"abandon {label} {name} error")
                 raise
+            if self.tool_event is not None:  # the CMM changed its tool while probing
+                self.tlog.note(f"abandon {label} {name} tool changed")
+                tool_changes += 1
+                if tool_changes > 1:
+                    raise IppDmeError(
+                        f"the CMM changed its tool again while {label} {name} was probed "
+                        f"({self.tool_event.line}): the run does not probe with a tool it "
+                        "did not choose"
+                    )
+                continue
             try:
                 check_probed(measured.probed)
             except IppDmeError:
