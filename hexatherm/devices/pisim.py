@@ -34,11 +34,15 @@ first (checked with PI's own Python library, ``pipython``, in the tests):
   the wire (``MOV``, ``MOV?``, ``POS?``, ``VMO?``) is in it (*choice*: the offset pose
   ``D`` composes as ``T(zero) = T(D) T(user)``, the pi convention): a client that
   ignores it commands the platform somewhere else.
+* ``SPI R r S s T t`` / ``SPI?``: the pivot point (mm) about which U V W rotate: a pose
+  on the wire ``T`` moves the platform by ``Tr(p) T Tr(-p)``, so that the platform's
+  point ``p`` stays where the translation alone takes it (before a user system's offset).
 * ``STR?`` (strut lengths) and ``TEM?`` (temperatures): hexatherm's, as
   :mod:`hexatherm.devices.pi` describes.
 
 :class:`PIStart` gives the state the controller starts in: servo off, not referenced,
-busy, or a user coordinate system enabled (the twin's ``--fault pi-...``).
+busy, a user coordinate system enabled, or a pivot point off zero (the twin's ``--fault
+pi-...``).
 """
 
 from __future__ import annotations
@@ -52,7 +56,7 @@ from hexatherm import __version__
 from hexatherm.core.geometry import pose_from_transform, transform_from_pose
 from hexatherm.devices.controller import LineBuffer, convert_pose
 from hexatherm.devices.controllersim import SimulatedController, SimulatedHexapod, _Drop
-from hexatherm.devices.pi import AXES
+from hexatherm.devices.pi import AXES, PIVOT_AXES
 from hexatherm.typing import FloatArray
 
 #: the identification, ``manufacturer, model, serial, firmware``
@@ -82,6 +86,8 @@ HELP = (
     ("ONT?", "Get On Target State"),
     ("POS?", "Get Real Position"),
     ("SAI?", "Get List Of Current Axis Identifiers"),
+    ("SPI", "Set Pivot Point"),
+    ("SPI?", "Get Pivot Point"),
     ("STP", "Stop All Axes"),
     ("STR?", "Get Strut Lengths (hexatherm)"),
     ("SVO", "Set Servo Mode"),
@@ -113,6 +119,8 @@ class PIStart:
         system of type ``KSD`` defined with :attr:`offset`.
     offset : tuple of 6 floats
         The user system's offset pose (X Y Z mm, U V W deg).
+    pivot : tuple of 3 floats
+        The pivot point ``R S T`` (``SPI``, mm) about which U V W rotate.
     """
 
     servo_on: bool = True
@@ -120,6 +128,7 @@ class PIStart:
     busy: bool = False
     coordinate_system: str = "ZERO"
     offset: tuple[float, ...] = (0.0, 0.0, 10.0, 0.0, 0.0, 1.0)
+    pivot: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 def fixed(value: float) -> str:
@@ -177,6 +186,7 @@ class PISimulator(SimulatedController):
             name = start.coordinate_system.upper()
             self.systems[name] = ("KSD", np.asarray(start.offset, dtype=float))
             self.enabled = name
+        self.pivot = np.asarray(start.pivot, dtype=float)
         self.travel = _travel(model)
         super().__init__(model, host, port)
 
@@ -226,13 +236,13 @@ class PISimulator(SimulatedController):
         return axes
 
     @staticmethod
-    def _pairs(args: list[str]) -> dict[str, float]:
+    def _pairs(args: list[str], axes: tuple[str, ...] = AXES) -> dict[str, float]:
         """``AXIS value`` pairs of a command."""
         if not args or len(args) % 2:
             raise _GcsError(24)
         out: dict[str, float] = {}
         for axis, value in zip(args[::2], args[1::2], strict=True):
-            if axis.upper() not in AXES:
+            if axis.upper() not in axes:
                 raise _GcsError(15)
             try:
                 number = float(value)
@@ -253,19 +263,32 @@ class PISimulator(SimulatedController):
             return None
         return self.systems[self.enabled][1]
 
+    def _shift(self, sign: float) -> FloatArray:
+        shift = np.eye(4)
+        shift[:3, 3] = sign * self.pivot
+        return shift
+
     def _to_zero(self, native: FloatArray) -> FloatArray:
-        """A pose of the enabled system as a pose of ZERO (the pi convention)."""
-        offset = self._offset()
-        if offset is None:
+        """A pose of the wire as a pose of the platform (the pi convention): U V W rotate
+        about the pivot point ``p`` (``T = Tr(p) T(wire) Tr(-p)``: the platform's point
+        ``p`` goes where the translation alone takes it), in the enabled system (its offset
+        pose ``D``: ``T(zero) = T(D) T``)."""
+        if self._offset() is None and not self.pivot.any():
             return native
-        frame = transform_from_pose(offset, "pi") @ transform_from_pose(native, "pi")
+        frame = self._shift(1.0) @ transform_from_pose(native, "pi") @ self._shift(-1.0)
+        offset = self._offset()
+        if offset is not None:
+            frame = transform_from_pose(offset, "pi") @ frame
         return np.asarray(pose_from_transform(frame, "pi"), dtype=float)
 
     def _from_zero(self, native: FloatArray) -> FloatArray:
-        offset = self._offset()
-        if offset is None:
+        if self._offset() is None and not self.pivot.any():
             return native
-        frame = np.linalg.inv(transform_from_pose(offset, "pi")) @ transform_from_pose(native, "pi")
+        frame = transform_from_pose(native, "pi")
+        offset = self._offset()
+        if offset is not None:
+            frame = np.linalg.inv(transform_from_pose(offset, "pi")) @ frame
+        frame = self._shift(-1.0) @ frame @ self._shift(1.0)
         return np.asarray(pose_from_transform(frame, "pi"), dtype=float)
 
     def _wire(self, model_pose: FloatArray) -> FloatArray:
@@ -394,6 +417,16 @@ class PISimulator(SimulatedController):
                 raise _GcsError(2)
             q = m.actuators_mm()
             return self._answer([(str(i + 1), fixed(float(v))) for i, v in enumerate(q)])
+        if cmd == "SPI?":
+            axes = [a.upper() for a in args] or list(PIVOT_AXES)
+            if any(a not in PIVOT_AXES for a in axes):
+                raise _GcsError(15)
+            return self._answer([(a, fixed(self.pivot[PIVOT_AXES.index(a)])) for a in axes])
+        if cmd == "SPI":
+            values = self._pairs(args, PIVOT_AXES)
+            for axis, value in values.items():
+                self.pivot[PIVOT_AXES.index(axis)] = value
+            return []
         if cmd == "TEM?":
             temps = m.temperatures()
             if temps is None:
