@@ -100,6 +100,7 @@ from hexatherm.workflows.run.run.support import (
     _validate_plan,
     check_cmm_coordinates,
     check_probed,
+    check_processable,
 )
 
 # ------------------------------------------------------------------------ the run
@@ -393,7 +394,7 @@ class _Campaign:
             if options.temperature_port is not None:
                 port = options.temperature_port
                 thermo = _Thermocouples(
-                    folder, port, self.files, self.clock, options.reconnect_wait_s
+                    folder, port, self.files, self.clock, options.reconnect_wait_s, self.notify
                 )
                 self.reached = True
                 if not self._wait_first_temperature(thermo):
@@ -449,6 +450,7 @@ class _Campaign:
             self.tlog.close()
             self.clog.close()
         session_file = finish_session(folder, self.notify, None)
+        check_processable(folder)
         return RunResult(
             folder,
             self._n_points(),
