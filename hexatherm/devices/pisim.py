@@ -34,6 +34,15 @@ first (checked with PI's own Python library, ``pipython``, in the tests):
   the wire (``MOV``, ``MOV?``, ``POS?``, ``VMO?``) is in it (*choice*: the offset pose
   ``D`` composes as ``T(zero) = T(D) T(user)``, the pi convention): a client that
   ignores it commands the platform somewhere else.
+* ``MVR`` (relative to the current target, the same checks as ``MOV``), ``NLM``/``PLM``
+  and ``NLM?``/``PLM?`` (soft limits per axis, the travel until set; a limit beyond the
+  travel or past the other one: error 17; ``MOV``/``MVR`` beyond them: error 7, ``VMO?``
+  0), ``CCL``/``CCL?`` (command level 0, or 1 with PI's password ``advanced``, *choice*:
+  nothing here needs level 1), ``VER?`` (the versions, multi-line), ``ECO?`` (echo).
+  A reference move ends with the motion, whatever is asked meanwhile (not only when
+  ``FRF?`` or ``#7`` polls it). A command or query this controller does not know sets
+  error 2 and answers nothing, as a C-887 does (a client waiting for an answer times
+  out).
 * ``SPI R r S s T t`` / ``SPI?``: the pivot point (mm) about which U V W rotate: a pose
   on the wire ``T`` moves the platform by ``Tr(p) T Tr(-p)``, so that the platform's
   point ``p`` stays where the translation alone takes it (before a user system's offset).
@@ -71,7 +80,10 @@ HELP = (
     ("#7", "Request Controller Ready Status"),
     ("#24", "Stop All Axes"),
     ("*IDN?", "Get Device Identification"),
+    ("CCL", "Set Command Level"),
+    ("CCL?", "Get Command Level"),
     ("CSV?", "Get Current Syntax Version"),
+    ("ECO?", "Echo A String"),
     ("ERR?", "Get Error Number"),
     ("FRF", "Fast Reference Move To Reference Switch"),
     ("FRF?", "Get Referencing Result"),
@@ -83,6 +95,11 @@ HELP = (
     ("KSD", "Set KSD Coordinate System"),
     ("MOV", "Set Target Position"),
     ("MOV?", "Get Target Position"),
+    ("MVR", "Set Target Relative To Current Position"),
+    ("NLM", "Set Low Position Soft Limit"),
+    ("NLM?", "Get Low Position Soft Limit"),
+    ("PLM", "Set High Position Soft Limit"),
+    ("PLM?", "Get High Position Soft Limit"),
     ("ONT?", "Get On Target State"),
     ("POS?", "Get Real Position"),
     ("SAI?", "Get List Of Current Axis Identifiers"),
@@ -95,6 +112,7 @@ HELP = (
     ("TEM?", "Get Temperatures (hexatherm)"),
     ("TMN?", "Get Minimum Commandable Position"),
     ("TMX?", "Get Maximum Commandable Position"),
+    ("VER?", "Get Versions Of Firmware And Drivers"),
     ("VEL?", "Get Closed-Loop Velocity"),
     ("VLS", "Set System Velocity"),
     ("VLS?", "Get System Velocity"),
@@ -188,6 +206,9 @@ class PISimulator(SimulatedController):
             self.enabled = name
         self.pivot = np.asarray(start.pivot, dtype=float)
         self.travel = _travel(model)
+        #: the soft limits (NLM, PLM) per axis, wire; the travel until set
+        self.soft = (self.travel[0].copy(), self.travel[1].copy())
+        self.command_level = 0
         super().__init__(model, host, port)
 
     # ------------------------------------------------------------ the stream
@@ -298,6 +319,13 @@ class PISimulator(SimulatedController):
     def _model(self, wire: FloatArray) -> FloatArray:
         return convert_pose(self._to_zero(wire), "pi", self.model.convention)
 
+    def _relative(self, args: list[str]) -> FloatArray:
+        """The pose of ``AXIS step`` pairs added to the current target (``MVR``), wire."""
+        native = self._wire(self.model.target)
+        for axis, value in self._pairs(args).items():
+            native[AXES.index(axis)] += value
+        return native
+
     def _target(self, args: list[str]) -> FloatArray:
         """The pose of ``AXIS value`` pairs (missing axes: the current target), wire."""
         native = self._wire(self.model.target)
@@ -319,6 +347,7 @@ class PISimulator(SimulatedController):
         if cmd == "ERR?":
             code, self.error_code = self.error_code, 0
             return [str(code)]
+        self.is_busy()  # a reference move ends with the motion, whoever asks
         injected = self.faults.take_error(cmd)
         if injected is not None:
             return self._set_error(injected)
@@ -401,17 +430,48 @@ class PISimulator(SimulatedController):
             m.start_move(convert_pose(np.zeros(6), "pi", m.convention))
             self.referenced, self.referencing, self.busy = False, True, True
             return []
-        if cmd in ("MOV", "VMO?"):
-            wire = self._target(args)
+        if cmd in ("MOV", "VMO?", "MVR"):
+            wire = self._target(args) if cmd != "MVR" else self._relative(args)
             stroke_ok, rule_ok = m.check(self._model(wire))
+            soft_ok = bool(np.all((wire >= self.soft[0]) & (wire <= self.soft[1])))
             if cmd == "VMO?":
-                return ["1" if stroke_ok and rule_ok else "0"]
+                return ["1" if stroke_ok and rule_ok and soft_ok else "0"]
             if not (self.servo_on and self.referenced) or self.is_busy():
                 raise _GcsError(5)
-            if not (stroke_ok and rule_ok):
+            if not (stroke_ok and rule_ok and soft_ok):
                 raise _GcsError(7)
             m.start_move(self._model(wire))
             return []
+        if cmd in ("NLM?", "PLM?"):
+            self._axes(args)
+            return self._per_axis(args, self.soft[0 if cmd == "NLM?" else 1])
+        if cmd in ("NLM", "PLM"):
+            side = 0 if cmd == "NLM" else 1
+            values = self._pairs(args)
+            for axis, value in values.items():
+                k = AXES.index(axis)
+                low, high = self.travel[0][k], self.travel[1][k]
+                other = self.soft[1 - side][k]
+                if not low <= value <= high or (value > other if side == 0 else value < other):
+                    raise _GcsError(17)  # beyond the travel, or crossing the other limit
+            for axis, value in values.items():
+                self.soft[side][AXES.index(axis)] = value
+            return []
+        if cmd == "CCL?":
+            return [str(self.command_level)]
+        if cmd == "CCL":
+            if len(args) not in (1, 2) or args[0] not in ("0", "1"):
+                raise _GcsError(17)
+            if args[0] == "1" and args[1:] != ["advanced"]:
+                raise _GcsError(17)  # *choice*: level 1 needs PI's documented password
+            self.command_level = int(args[0])
+            return []
+        if cmd == "VER?":
+            lines = [f"{IDENTIFICATION.split(', ')[1]}: hexatherm twin {__version__}"]
+            lines.append(f"hexatherm: {__version__}")
+            return [line + " " for line in lines[:-1]] + lines[-1:]
+        if cmd == "ECO?":
+            return [" ".join(args)]
         if cmd == "STR?":
             if not m.report_actuators:
                 raise _GcsError(2)
