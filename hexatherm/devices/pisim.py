@@ -64,7 +64,12 @@ import numpy as np
 from hexatherm import __version__
 from hexatherm.core.geometry import pose_from_transform, transform_from_pose
 from hexatherm.devices.controller import LineBuffer, convert_pose
-from hexatherm.devices.controllersim import SimulatedController, SimulatedHexapod, _Drop
+from hexatherm.devices.controllersim import (
+    SimulatedController,
+    SimulatedHexapod,
+    _Drop,
+    single_axis_travel,
+)
 from hexatherm.devices.pi import AXES, PIVOT_AXES
 from hexatherm.typing import FloatArray
 
@@ -205,7 +210,7 @@ class PISimulator(SimulatedController):
             self.systems[name] = ("KSD", np.asarray(start.offset, dtype=float))
             self.enabled = name
         self.pivot = np.asarray(start.pivot, dtype=float)
-        self.travel = _travel(model)
+        self.travel = single_axis_travel(model)
         #: the soft limits (NLM, PLM) per axis, wire; the travel until set
         self.soft = (self.travel[0].copy(), self.travel[1].copy())
         self.command_level = 0
@@ -535,24 +540,3 @@ def _number(text: str) -> float:
     if not np.isfinite(value):
         raise _GcsError(25)
     return value
-
-
-def _travel(model: SimulatedHexapod) -> tuple[FloatArray, FloatArray]:
-    """``(TMN, TMX)`` per axis (pi convention): the single-axis travel from the zero pose
-    that the struts' stroke allows (bisection to 1 nm / 1 udeg)."""
-    hexapod = model.hexapod
-    out = np.zeros((2, 6))
-    for k in range(6):
-        for side, sign in ((0, -1.0), (1, 1.0)):
-            low, high = 0.0, 1000.0 if k < 3 else 90.0
-            while high - low > 1e-6:
-                mid = 0.5 * (low + high)
-                pose = np.zeros(6)
-                pose[k] = sign * mid
-                native = convert_pose(pose, "pi", hexapod.convention)
-                if hexapod.check_stroke(hexapod.igm(native)).any():
-                    high = mid
-                else:
-                    low = mid
-            out[side, k] = sign * np.floor(low * 1e6) / 1e6  # inside, as written
-    return out[0], out[1]
