@@ -256,12 +256,24 @@ class SimulatedHexapod:
 def single_axis_travel(model: SimulatedHexapod) -> tuple[FloatArray, FloatArray]:
     """The lower and upper single-axis travel from the zero pose that the struts' stroke
     allows, per axis (mm, deg; a pose with one component is the same in every convention):
+    the first pose out of stroke on the way out (steps of 1 mm / 0.5 deg: past it, the
+    legs may come back within their stroke through poses no motion reaches), then
     bisection to 1 nm / 1 udeg, written inside."""
     hexapod = model.hexapod
     out = np.zeros((2, 6))
+
+    def inside(k: int, value: float) -> bool:
+        pose = np.zeros(6)
+        pose[k] = value
+        return not hexapod.check_stroke(hexapod.igm(pose)).any()
+
     for k in range(6):
+        step, largest = (1.0, 1000.0) if k < 3 else (0.5, 90.0)
         for side, sign in ((0, -1.0), (1, 1.0)):
-            low, high = 0.0, 1000.0 if k < 3 else 90.0
+            low = 0.0
+            while low + step <= largest and inside(k, sign * (low + step)):
+                low += step
+            high = min(low + step, largest)
             while high - low > 1e-6:
                 mid = 0.5 * (low + high)
                 pose = np.zeros(6)
