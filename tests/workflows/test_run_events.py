@@ -4,6 +4,7 @@ what was probed with the other tool is probed again."""
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -11,7 +12,7 @@ import numpy as np
 import pytest
 
 from hexatherm.devices.ippserver import Fault, IppSimServer
-from hexatherm.errors import IncompleteSession
+from hexatherm.errors import AcquisitionError, IncompleteSession
 from hexatherm.workflows.run.files import accepted_balls
 from tests.workflows.test_run import Bench, check_complete, make_bench
 
@@ -86,5 +87,18 @@ def test_a_tool_changed_again_while_the_ball_is_probed_again_stops_the_run(
         with pytest.raises(IncompleteSession, match="changed its tool again while O B2"):
             b.run()
         assert "STOP" in b.machines.controller.received
+    finally:
+        b.machines.close()
+
+
+@pytest.mark.parametrize("resume", [False, True])
+def test_a_fifo_in_place_of_the_transcript_is_named_as_such(tmp_path: Path, resume: bool) -> None:
+    b = make_bench(tmp_path, **SHORT)  # type: ignore[arg-type]
+    try:
+        b.session.mkdir()
+        os.mkfifo(b.session / "ipp.transcript")
+        with pytest.raises(AcquisitionError, match="ipp.transcript is not a regular file"):
+            b.run(resume=resume)
+        assert b.machines.cmm.commands == [] and b.world.model.moves == 0
     finally:
         b.machines.close()

@@ -200,6 +200,11 @@ def run_campaign(
     """
     folder = options.session
     transcript = folder / TRANSCRIPT_NAME
+    if os.path.lexists(transcript) and not stat.S_ISREG(os.lstat(transcript).st_mode):
+        raise AcquisitionError(
+            f"{transcript} is not a regular file (a FIFO, a device, a folder or a link): a "
+            "run records into a file of its own; remove it or choose another --session"
+        )
     if options.resume:
         if not transcript.is_file():
             raise AcquisitionError(f"nothing to resume: {transcript} does not exist")
