@@ -363,7 +363,11 @@ class SimulatedController(TcpService):
                 continue
             with self._lock:
                 self.received.append(line)
-            self._write(sock, self.respond(line))
+            self._reply_to(sock, line)
+
+    def _reply_to(self, sock: socket.socket, line: str) -> None:
+        """Send the answer to one line."""
+        self._write(sock, self.respond(line))
 
     def _drop_if_moving(self) -> None:
         if self.faults.drop_mid_move and self.model.moving():
@@ -446,24 +450,18 @@ class SymetrieSimulator(SimulatedController):
         with self._wire_lock:  # a reply's bytes are never mixed with another's
             self._write(sock, lines)
 
-    def _handle(self, sock: socket.socket, lines: list[str]) -> None:
-        """Answer each line: an acknowledged command's ``:1`` at once, its ``:2`` a cycle
-        later (``MOVE#ABS``: when the motion ends)."""
-        for line in lines:
-            line = line.strip()
-            if not line:
-                continue
-            with self._lock:
-                self.received.append(line)
-            replies = self.respond(line)
-            if len(replies) >= 2 and replies[0].endswith(":1"):
-                self._send_replies(sock, replies[:1])
-                if replies[0] == "MOVE#ABS:1":
-                    self._moves[sock] = True
-                    continue
-                time.sleep(self.CYCLE_S)
-                replies = replies[1:]
-            self._send_replies(sock, replies)
+    def _reply_to(self, sock: socket.socket, line: str) -> None:
+        """An acknowledged command's ``:1`` at once, its ``:2`` a cycle later
+        (``MOVE#ABS``: when the motion ends)."""
+        replies = self.respond(line)
+        if len(replies) >= 2 and replies[0].endswith(":1"):
+            self._send_replies(sock, replies[:1])
+            if replies[0] == "MOVE#ABS:1":
+                self._moves[sock] = True
+                return
+            time.sleep(self.CYCLE_S)
+            replies = replies[1:]
+        self._send_replies(sock, replies)
 
     def greeting(self) -> list[str]:
         return [

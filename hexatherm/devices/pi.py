@@ -308,13 +308,20 @@ class PIController(SocketController):
             self._raise("#7", parse_error(first))
         raise ControllerError(f"unexpected answer to #7: {text!r} (expected 0xB1 or 0xB0)")
 
-    def _coordinate_system(self, problems: list[str]) -> str:
-        answer, code = self._keyed("KEN?")
+    def _state_query(self, query: str) -> dict[str, str] | None:
+        """The answer to a readiness query; None when the controller does not know it
+        (error 2: no such state), another error raised."""
+        answer, code = self._keyed(query)
         if answer is None and code == UNKNOWN_COMMAND:
-            return "unknown (KEN? not known)"
+            return None
         if code or answer is None:
-            self._raise("KEN?", code)
-        assert answer is not None
+            self._raise(query, code)
+        return answer
+
+    def _coordinate_system(self, problems: list[str]) -> str:
+        answer = self._state_query("KEN?")
+        if answer is None:
+            return "unknown (KEN? not known)"
         enabled = " ".join(f"{name}={kind}" for name, kind in answer.items())
         others = [name for name in answer if name.upper() != ZERO_SYSTEM]
         if others or not answer:
@@ -325,12 +332,9 @@ class PIController(SocketController):
         return enabled
 
     def _pivot_point(self, problems: list[str]) -> str:
-        answer, code = self._keyed("SPI?")
-        if answer is None and code == UNKNOWN_COMMAND:
+        answer = self._state_query("SPI?")
+        if answer is None:
             return "unknown (SPI? not known)"
-        if code or answer is None:
-            self._raise("SPI?", code)
-        assert answer is not None
         pivot = keyed_floats(answer, PIVOT_AXES, "SPI?")
         text = " ".join(f"{a}={answer[a]}" for a in PIVOT_AXES)
         if np.any(np.abs(pivot) > PIVOT_TOLERANCE_MM):
