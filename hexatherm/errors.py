@@ -240,6 +240,10 @@ class IppConnectionLost(IppDmeError):
     """The connection to the server is closed or broken."""
 
 
+class IppConnectError(IppConnectionLost):
+    """The connection to the server could not be opened (refused, unreachable)."""
+
+
 # calibration (hexatherm.core.calibration)
 class CalibrationError(HexathermError):
     """A calibration that cannot be done as asked (bad input, too few poses)."""

@@ -24,11 +24,26 @@ from __future__ import annotations
 
 import importlib
 import os
+import sys
 from typing import Any
 
-import click
+from hexatherm.cli.signals import exit_on_signals
 
-from hexatherm import __version__
+
+def _command_of(argv: list[str]) -> str | None:
+    """The command named on a command line (its first word that is not an option)."""
+    return next((word for word in argv if not word.startswith("-")), None)
+
+
+# ``run`` drives machines: a signal from its first moments on exits 130 like any other
+# interruption (click and numpy take a quarter of a second to import, during which the
+# default action would kill the process: exit -15 or -1)
+if _command_of(sys.argv[1:]) == "run":
+    exit_on_signals()
+
+import click  # noqa: E402
+
+from hexatherm import __version__  # noqa: E402
 
 #: BLAS threads, one unless the user's environment says otherwise (set here, before
 #: numpy is imported: nothing above imports it). The matrices are small (6x6 per pose,

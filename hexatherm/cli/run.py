@@ -208,7 +208,8 @@ def _numbers(text: str | None, n: int, what: str) -> tuple[float, ...] | None:
     type=click.IntRange(min=0, max=1000),
     default=3,
     show_default=True,
-    help="Reopenings of a dropped connection per ball or move.",
+    help="Attempts to reopen a dropped connection per ball or move (waiting 1 s before the "
+    "first, twice as long before each next).",
 )
 @click.option(
     "--ipp-timeout",

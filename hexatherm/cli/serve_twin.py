@@ -63,7 +63,7 @@ from hexatherm.cli.options import CheckedFloat, clean_errors, echo_err
     "ipp-split:method=PtMeas,nth=1; late-in-position:seconds=30; controller-drop; "
     "controller-split; controller-error:command=MOVE#ABS,code=-104; "
     "refuse:axis=Tz,max=5; pi-servo-off; pi-unreferenced; pi-busy; "
-    "pi-coordinate-system:name=SAMPLE.",
+    "pi-coordinate-system:name=SAMPLE; pi-pivot:t=100.",
 )
 @click.option(
     "--origin-on-cmm",

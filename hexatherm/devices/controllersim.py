@@ -253,6 +253,39 @@ class SimulatedHexapod:
             self._late = 0.0
 
 
+def single_axis_travel(model: SimulatedHexapod) -> tuple[FloatArray, FloatArray]:
+    """The lower and upper single-axis travel from the zero pose that the struts' stroke
+    allows, per axis (mm, deg; a pose with one component is the same in every convention):
+    the first pose out of stroke on the way out (steps of 1 mm / 0.5 deg: past it, the
+    legs may come back within their stroke through poses no motion reaches), then
+    bisection to 1 nm / 1 udeg, written inside."""
+    hexapod = model.hexapod
+    out = np.zeros((2, 6))
+
+    def inside(k: int, value: float) -> bool:
+        pose = np.zeros(6)
+        pose[k] = value
+        return not hexapod.check_stroke(hexapod.igm(pose)).any()
+
+    for k in range(6):
+        step, largest = (1.0, 1000.0) if k < 3 else (0.5, 90.0)
+        for side, sign in ((0, -1.0), (1, 1.0)):
+            low = 0.0
+            while low + step <= largest and inside(k, sign * (low + step)):
+                low += step
+            high = min(low + step, largest)
+            while high - low > 1e-6:
+                mid = 0.5 * (low + high)
+                pose = np.zeros(6)
+                pose[k] = sign * mid
+                if hexapod.check_stroke(hexapod.igm(pose)).any():
+                    high = mid
+                else:
+                    low = mid
+            out[side, k] = sign * np.floor(low * 1e6) / 1e6  # inside, as written
+    return out[0], out[1]
+
+
 class _Drop(Exception):
     """Raised by a dialect to close the connection (fault injection)."""
 
@@ -330,7 +363,11 @@ class SimulatedController(TcpService):
                 continue
             with self._lock:
                 self.received.append(line)
-            self._write(sock, self.respond(line))
+            self._reply_to(sock, line)
+
+    def _reply_to(self, sock: socket.socket, line: str) -> None:
+        """Send the answer to one line."""
+        self._write(sock, self.respond(line))
 
     def _drop_if_moving(self) -> None:
         if self.faults.drop_mid_move and self.model.moving():
@@ -371,6 +408,60 @@ class SymetrieSimulator(SimulatedController):
     native_convention: Convention = "symetrie"
     line_end = "\r\n"
     _COMMAND = re.compile(r"^(?P<name>[A-Z#]+\??)(?P<args>.*)$")
+    #: wall-clock pause between a command's acceptance (``:1``) and its completion
+    #: (``:2``), and the poll of a move's end: a controller's cycle, so that the two
+    #: replies never travel in one packet (ESRF's BLISS reads them one at a time)
+    CYCLE_S = 0.005
+    #: accelerations reported by ``CFG#ACC?`` (m/s2, rad/s2): *choice*, the twin's
+    #: motion has no acceleration phase (it moves at its speed from the start)
+    ACCELERATIONS = (0.01, 0.005)
+
+    def __init__(self, model: SimulatedHexapod, host: str = "127.0.0.1", port: int = 0) -> None:
+        self._wire_lock = threading.Lock()
+        #: per connection: a ``MOVE#ABS`` accepted whose ``:2`` waits for the motion's end
+        self._moves: dict[socket.socket, bool] = {}
+        self.travel = single_axis_travel(model)
+        super().__init__(model, host, port)
+
+    def _serve(self, sock: socket.socket) -> None:
+        closed = threading.Event()
+        self._moves[sock] = False
+        watcher = threading.Thread(
+            target=self._move_ends, args=(sock, closed), name="symetrie-sim-moves", daemon=True
+        )
+        watcher.start()
+        try:
+            super()._serve(sock)
+        finally:
+            closed.set()
+            self._moves.pop(sock, None)
+
+    def _move_ends(self, sock: socket.socket, closed: threading.Event) -> None:
+        """Send ``MOVE#ABS:2`` when an accepted move has ended (polled each cycle)."""
+        while not closed.wait(self.CYCLE_S):
+            if self._moves.get(sock) and not self.model.moving():
+                self._moves[sock] = False
+                try:
+                    self._send_replies(sock, ["MOVE#ABS:2"])
+                except OSError:
+                    return
+
+    def _send_replies(self, sock: socket.socket, lines: list[str]) -> None:
+        with self._wire_lock:  # a reply's bytes are never mixed with another's
+            self._write(sock, lines)
+
+    def _reply_to(self, sock: socket.socket, line: str) -> None:
+        """An acknowledged command's ``:1`` at once, its ``:2`` a cycle later
+        (``MOVE#ABS``: when the motion ends)."""
+        replies = self.respond(line)
+        if len(replies) >= 2 and replies[0].endswith(":1"):
+            self._send_replies(sock, replies[:1])
+            if replies[0] == "MOVE#ABS:1":
+                self._moves[sock] = True
+                return
+            time.sleep(self.CYCLE_S)
+            replies = replies[1:]
+        self._send_replies(sock, replies)
 
     def greeting(self) -> list[str]:
         return [
@@ -415,6 +506,18 @@ class SymetrieSimulator(SimulatedController):
             if temps is None:  # not a command of the API: Panel_UnknownStaCmd
                 return [f"{short}:-23"]
             return [f"{short}:2,{temps.size}" + "".join(f",{v!r}" for v in temps.tolist())]
+        if name in ("CFG#SPD?", "CFG#ACC?"):  # current then largest, m/s and rad/s (/s)
+            speeds = [m.speed_mm_s * 1e-3, float(np.deg2rad(m.speed_deg_s))]
+            numbers = (speeds if name == "CFG#SPD?" else list(self.ACCELERATIONS)) * 2
+            return [f"{short}:1", f"{short}:2," + ",".join(repr(float(v)) for v in numbers)]
+        if name in ("CFG#LIM#WS?", "CFG#LIM#ENABLE?"):  # 1 machine limits, 2 user limits
+            if args not in ("1", "2"):
+                return [f"{short}:-9"]
+            if name == "CFG#LIM#ENABLE?":
+                enabled = args == "1" or self.faults.refuse is not None
+                return [f"{short}:1", f"{short}:2,{args},{int(enabled)}"]
+            limits = pose_to_wire(np.array(self.travel)).ravel()
+            return [f"{short}:1", f"{short}:2,{args}," + ",".join(repr(float(v)) for v in limits)]
         if name == "CFG#CS?":  # CFG#CS?CS: that CS first, then user and object frames
             if not re.fullmatch(r"\d+", args):
                 return [f"{short}:-9"]

@@ -21,7 +21,10 @@ choose, it says *choice*, and the simulator speaks exactly this):
   answer byte 0xB1, busy 0xB0) and ``KEN?`` (the enabled coordinate system must be
   ``ZERO``, the default: a pose commanded in a user system lands elsewhere), each with
   ``ERR?``. A controller that does not know ``#7`` or ``KEN?`` (error 2) has no such
-  state: recorded as unknown, not refused.
+  state: recorded as unknown, not refused. Then ``SPI?``: the pivot point ``R S T`` (mm)
+  about which ``MOV`` U V W rotate; hexatherm's poses rotate about the origin of the
+  convention, so a pivot other than ``0 0 0`` (within 1 nm) is refused with the command
+  that sets it back (``SPI R 0 S 0 T 0``; a controller without ``SPI?``: unknown).
 * ``VMO? X x Y y Z z U u V v W w``: ``1`` when the move is allowed, ``0`` when not (the
   controller's check; nothing moves). A controller that does not know it leaves
   hexatherm's stroke check, which then requires the hexapod geometry.
@@ -85,6 +88,9 @@ READY_BYTE, BUSY_BYTE = "\xb1", "\xb0"
 REQUEST_READY, STOP_ALL = 7, 24
 #: the default coordinate system of a C-887
 ZERO_SYSTEM = "ZERO"
+#: the pivot point's axes (``SPI``/``SPI?``, mm) and the largest one taken as zero, mm
+PIVOT_AXES = ("R", "S", "T")
+PIVOT_TOLERANCE_MM = 1e-6
 
 
 def describe_error(code: int) -> str:
@@ -249,11 +255,12 @@ class PIController(SocketController):
 
     # ---------------------------------------------------------------- checks
     def check_ready(self) -> None:
-        """Servo on, referenced, ready and the default coordinate system, or refuse.
+        """Servo on, referenced, ready, the default coordinate system and the pivot point at
+        zero, or refuse.
 
         Every state found goes in :attr:`readiness` (``servo``, ``referenced``,
-        ``ready``, ``coordinate_system``), then :class:`ControllerError` names every
-        problem. Nothing moves.
+        ``ready``, ``coordinate_system``, ``pivot_point``), then :class:`ControllerError`
+        names every problem. Nothing moves.
         """
         with self._lock:
             found: dict[str, str] = {}
@@ -273,6 +280,7 @@ class PIController(SocketController):
                     problems.append(f"{what} on {' '.join(off)}: {fix} first")
             found["ready"] = self._ready_state(problems)
             found["coordinate_system"] = self._coordinate_system(problems)
+            found["pivot_point"] = self._pivot_point(problems)
             self.readiness = found
         if problems:
             raise ControllerError(
@@ -300,13 +308,20 @@ class PIController(SocketController):
             self._raise("#7", parse_error(first))
         raise ControllerError(f"unexpected answer to #7: {text!r} (expected 0xB1 or 0xB0)")
 
-    def _coordinate_system(self, problems: list[str]) -> str:
-        answer, code = self._keyed("KEN?")
+    def _state_query(self, query: str) -> dict[str, str] | None:
+        """The answer to a readiness query; None when the controller does not know it
+        (error 2: no such state), another error raised."""
+        answer, code = self._keyed(query)
         if answer is None and code == UNKNOWN_COMMAND:
-            return "unknown (KEN? not known)"
+            return None
         if code or answer is None:
-            self._raise("KEN?", code)
-        assert answer is not None
+            self._raise(query, code)
+        return answer
+
+    def _coordinate_system(self, problems: list[str]) -> str:
+        answer = self._state_query("KEN?")
+        if answer is None:
+            return "unknown (KEN? not known)"
         enabled = " ".join(f"{name}={kind}" for name, kind in answer.items())
         others = [name for name in answer if name.upper() != ZERO_SYSTEM]
         if others or not answer:
@@ -315,6 +330,19 @@ class PIController(SocketController):
                 f"poses would be commanded in it; enable {ZERO_SYSTEM} first (KEN {ZERO_SYSTEM})"
             )
         return enabled
+
+    def _pivot_point(self, problems: list[str]) -> str:
+        answer = self._state_query("SPI?")
+        if answer is None:
+            return "unknown (SPI? not known)"
+        pivot = keyed_floats(answer, PIVOT_AXES, "SPI?")
+        text = " ".join(f"{a}={answer[a]}" for a in PIVOT_AXES)
+        if np.any(np.abs(pivot) > PIVOT_TOLERANCE_MM):
+            problems.append(
+                f"pivot point {text} mm (SPI?): MOV U V W would rotate about it, not about "
+                "the origin the poses are given in; set it to zero first (SPI R 0 S 0 T 0)"
+            )
+        return text
 
     # ---------------------------------------------------------------- dialect
     def _validate_wire(self, native: FloatArray, pose: FloatArray) -> None:

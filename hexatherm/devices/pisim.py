@@ -34,11 +34,24 @@ first (checked with PI's own Python library, ``pipython``, in the tests):
   the wire (``MOV``, ``MOV?``, ``POS?``, ``VMO?``) is in it (*choice*: the offset pose
   ``D`` composes as ``T(zero) = T(D) T(user)``, the pi convention): a client that
   ignores it commands the platform somewhere else.
+* ``MVR`` (relative to the current target, the same checks as ``MOV``), ``NLM``/``PLM``
+  and ``NLM?``/``PLM?`` (soft limits per axis, the travel until set; a limit beyond the
+  travel or past the other one: error 17; ``MOV``/``MVR`` beyond them: error 7, ``VMO?``
+  0), ``CCL``/``CCL?`` (command level 0, or 1 with PI's password ``advanced``, *choice*:
+  nothing here needs level 1), ``VER?`` (the versions, multi-line), ``ECO?`` (echo).
+  A reference move ends with the motion, whatever is asked meanwhile (not only when
+  ``FRF?`` or ``#7`` polls it). A command or query this controller does not know sets
+  error 2 and answers nothing, as a C-887 does (a client waiting for an answer times
+  out).
+* ``SPI R r S s T t`` / ``SPI?``: the pivot point (mm) about which U V W rotate: a pose
+  on the wire ``T`` moves the platform by ``Tr(p) T Tr(-p)``, so that the platform's
+  point ``p`` stays where the translation alone takes it (before a user system's offset).
 * ``STR?`` (strut lengths) and ``TEM?`` (temperatures): hexatherm's, as
   :mod:`hexatherm.devices.pi` describes.
 
 :class:`PIStart` gives the state the controller starts in: servo off, not referenced,
-busy, or a user coordinate system enabled (the twin's ``--fault pi-...``).
+busy, a user coordinate system enabled, or a pivot point off zero (the twin's ``--fault
+pi-...``).
 """
 
 from __future__ import annotations
@@ -51,8 +64,13 @@ import numpy as np
 from hexatherm import __version__
 from hexatherm.core.geometry import pose_from_transform, transform_from_pose
 from hexatherm.devices.controller import LineBuffer, convert_pose
-from hexatherm.devices.controllersim import SimulatedController, SimulatedHexapod, _Drop
-from hexatherm.devices.pi import AXES
+from hexatherm.devices.controllersim import (
+    SimulatedController,
+    SimulatedHexapod,
+    _Drop,
+    single_axis_travel,
+)
+from hexatherm.devices.pi import AXES, PIVOT_AXES
 from hexatherm.typing import FloatArray
 
 #: the identification, ``manufacturer, model, serial, firmware``
@@ -67,7 +85,10 @@ HELP = (
     ("#7", "Request Controller Ready Status"),
     ("#24", "Stop All Axes"),
     ("*IDN?", "Get Device Identification"),
+    ("CCL", "Set Command Level"),
+    ("CCL?", "Get Command Level"),
     ("CSV?", "Get Current Syntax Version"),
+    ("ECO?", "Echo A String"),
     ("ERR?", "Get Error Number"),
     ("FRF", "Fast Reference Move To Reference Switch"),
     ("FRF?", "Get Referencing Result"),
@@ -79,9 +100,16 @@ HELP = (
     ("KSD", "Set KSD Coordinate System"),
     ("MOV", "Set Target Position"),
     ("MOV?", "Get Target Position"),
+    ("MVR", "Set Target Relative To Current Position"),
+    ("NLM", "Set Low Position Soft Limit"),
+    ("NLM?", "Get Low Position Soft Limit"),
+    ("PLM", "Set High Position Soft Limit"),
+    ("PLM?", "Get High Position Soft Limit"),
     ("ONT?", "Get On Target State"),
     ("POS?", "Get Real Position"),
     ("SAI?", "Get List Of Current Axis Identifiers"),
+    ("SPI", "Set Pivot Point"),
+    ("SPI?", "Get Pivot Point"),
     ("STP", "Stop All Axes"),
     ("STR?", "Get Strut Lengths (hexatherm)"),
     ("SVO", "Set Servo Mode"),
@@ -89,6 +117,7 @@ HELP = (
     ("TEM?", "Get Temperatures (hexatherm)"),
     ("TMN?", "Get Minimum Commandable Position"),
     ("TMX?", "Get Maximum Commandable Position"),
+    ("VER?", "Get Versions Of Firmware And Drivers"),
     ("VEL?", "Get Closed-Loop Velocity"),
     ("VLS", "Set System Velocity"),
     ("VLS?", "Get System Velocity"),
@@ -113,6 +142,8 @@ class PIStart:
         system of type ``KSD`` defined with :attr:`offset`.
     offset : tuple of 6 floats
         The user system's offset pose (X Y Z mm, U V W deg).
+    pivot : tuple of 3 floats
+        The pivot point ``R S T`` (``SPI``, mm) about which U V W rotate.
     """
 
     servo_on: bool = True
@@ -120,6 +151,7 @@ class PIStart:
     busy: bool = False
     coordinate_system: str = "ZERO"
     offset: tuple[float, ...] = (0.0, 0.0, 10.0, 0.0, 0.0, 1.0)
+    pivot: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 def fixed(value: float) -> str:
@@ -177,7 +209,11 @@ class PISimulator(SimulatedController):
             name = start.coordinate_system.upper()
             self.systems[name] = ("KSD", np.asarray(start.offset, dtype=float))
             self.enabled = name
-        self.travel = _travel(model)
+        self.pivot = np.asarray(start.pivot, dtype=float)
+        self.travel = single_axis_travel(model)
+        #: the soft limits (NLM, PLM) per axis, wire; the travel until set
+        self.soft = (self.travel[0].copy(), self.travel[1].copy())
+        self.command_level = 0
         super().__init__(model, host, port)
 
     # ------------------------------------------------------------ the stream
@@ -226,13 +262,13 @@ class PISimulator(SimulatedController):
         return axes
 
     @staticmethod
-    def _pairs(args: list[str]) -> dict[str, float]:
+    def _pairs(args: list[str], axes: tuple[str, ...] = AXES) -> dict[str, float]:
         """``AXIS value`` pairs of a command."""
         if not args or len(args) % 2:
             raise _GcsError(24)
         out: dict[str, float] = {}
         for axis, value in zip(args[::2], args[1::2], strict=True):
-            if axis.upper() not in AXES:
+            if axis.upper() not in axes:
                 raise _GcsError(15)
             try:
                 number = float(value)
@@ -253,19 +289,32 @@ class PISimulator(SimulatedController):
             return None
         return self.systems[self.enabled][1]
 
+    def _shift(self, sign: float) -> FloatArray:
+        shift = np.eye(4)
+        shift[:3, 3] = sign * self.pivot
+        return shift
+
     def _to_zero(self, native: FloatArray) -> FloatArray:
-        """A pose of the enabled system as a pose of ZERO (the pi convention)."""
-        offset = self._offset()
-        if offset is None:
+        """A pose of the wire as a pose of the platform (the pi convention): U V W rotate
+        about the pivot point ``p`` (``T = Tr(p) T(wire) Tr(-p)``: the platform's point
+        ``p`` goes where the translation alone takes it), in the enabled system (its offset
+        pose ``D``: ``T(zero) = T(D) T``)."""
+        if self._offset() is None and not self.pivot.any():
             return native
-        frame = transform_from_pose(offset, "pi") @ transform_from_pose(native, "pi")
+        frame = self._shift(1.0) @ transform_from_pose(native, "pi") @ self._shift(-1.0)
+        offset = self._offset()
+        if offset is not None:
+            frame = transform_from_pose(offset, "pi") @ frame
         return np.asarray(pose_from_transform(frame, "pi"), dtype=float)
 
     def _from_zero(self, native: FloatArray) -> FloatArray:
-        offset = self._offset()
-        if offset is None:
+        if self._offset() is None and not self.pivot.any():
             return native
-        frame = np.linalg.inv(transform_from_pose(offset, "pi")) @ transform_from_pose(native, "pi")
+        frame = transform_from_pose(native, "pi")
+        offset = self._offset()
+        if offset is not None:
+            frame = np.linalg.inv(transform_from_pose(offset, "pi")) @ frame
+        frame = self._shift(-1.0) @ frame @ self._shift(1.0)
         return np.asarray(pose_from_transform(frame, "pi"), dtype=float)
 
     def _wire(self, model_pose: FloatArray) -> FloatArray:
@@ -274,6 +323,13 @@ class PISimulator(SimulatedController):
 
     def _model(self, wire: FloatArray) -> FloatArray:
         return convert_pose(self._to_zero(wire), "pi", self.model.convention)
+
+    def _relative(self, args: list[str]) -> FloatArray:
+        """The pose of ``AXIS step`` pairs added to the current target (``MVR``), wire."""
+        native = self._wire(self.model.target)
+        for axis, value in self._pairs(args).items():
+            native[AXES.index(axis)] += value
+        return native
 
     def _target(self, args: list[str]) -> FloatArray:
         """The pose of ``AXIS value`` pairs (missing axes: the current target), wire."""
@@ -296,6 +352,7 @@ class PISimulator(SimulatedController):
         if cmd == "ERR?":
             code, self.error_code = self.error_code, 0
             return [str(code)]
+        self.is_busy()  # a reference move ends with the motion, whoever asks
         injected = self.faults.take_error(cmd)
         if injected is not None:
             return self._set_error(injected)
@@ -378,22 +435,63 @@ class PISimulator(SimulatedController):
             m.start_move(convert_pose(np.zeros(6), "pi", m.convention))
             self.referenced, self.referencing, self.busy = False, True, True
             return []
-        if cmd in ("MOV", "VMO?"):
-            wire = self._target(args)
+        if cmd in ("MOV", "VMO?", "MVR"):
+            wire = self._target(args) if cmd != "MVR" else self._relative(args)
             stroke_ok, rule_ok = m.check(self._model(wire))
+            soft_ok = bool(np.all((wire >= self.soft[0]) & (wire <= self.soft[1])))
             if cmd == "VMO?":
-                return ["1" if stroke_ok and rule_ok else "0"]
+                return ["1" if stroke_ok and rule_ok and soft_ok else "0"]
             if not (self.servo_on and self.referenced) or self.is_busy():
                 raise _GcsError(5)
-            if not (stroke_ok and rule_ok):
+            if not (stroke_ok and rule_ok and soft_ok):
                 raise _GcsError(7)
             m.start_move(self._model(wire))
             return []
+        if cmd in ("NLM?", "PLM?"):
+            self._axes(args)
+            return self._per_axis(args, self.soft[0 if cmd == "NLM?" else 1])
+        if cmd in ("NLM", "PLM"):
+            side = 0 if cmd == "NLM" else 1
+            values = self._pairs(args)
+            for axis, value in values.items():
+                k = AXES.index(axis)
+                low, high = self.travel[0][k], self.travel[1][k]
+                other = self.soft[1 - side][k]
+                if not low <= value <= high or (value > other if side == 0 else value < other):
+                    raise _GcsError(17)  # beyond the travel, or crossing the other limit
+            for axis, value in values.items():
+                self.soft[side][AXES.index(axis)] = value
+            return []
+        if cmd == "CCL?":
+            return [str(self.command_level)]
+        if cmd == "CCL":
+            if len(args) not in (1, 2) or args[0] not in ("0", "1"):
+                raise _GcsError(17)
+            if args[0] == "1" and args[1:] != ["advanced"]:
+                raise _GcsError(17)  # *choice*: level 1 needs PI's documented password
+            self.command_level = int(args[0])
+            return []
+        if cmd == "VER?":
+            lines = [f"{IDENTIFICATION.split(', ')[1]}: hexatherm twin {__version__}"]
+            lines.append(f"hexatherm: {__version__}")
+            return [line + " " for line in lines[:-1]] + lines[-1:]
+        if cmd == "ECO?":
+            return [" ".join(args)]
         if cmd == "STR?":
             if not m.report_actuators:
                 raise _GcsError(2)
             q = m.actuators_mm()
             return self._answer([(str(i + 1), fixed(float(v))) for i, v in enumerate(q)])
+        if cmd == "SPI?":
+            axes = [a.upper() for a in args] or list(PIVOT_AXES)
+            if any(a not in PIVOT_AXES for a in axes):
+                raise _GcsError(15)
+            return self._answer([(a, fixed(self.pivot[PIVOT_AXES.index(a)])) for a in axes])
+        if cmd == "SPI":
+            values = self._pairs(args, PIVOT_AXES)
+            for axis, value in values.items():
+                self.pivot[PIVOT_AXES.index(axis)] = value
+            return []
         if cmd == "TEM?":
             temps = m.temperatures()
             if temps is None:
@@ -442,24 +540,3 @@ def _number(text: str) -> float:
     if not np.isfinite(value):
         raise _GcsError(25)
     return value
-
-
-def _travel(model: SimulatedHexapod) -> tuple[FloatArray, FloatArray]:
-    """``(TMN, TMX)`` per axis (pi convention): the single-axis travel from the zero pose
-    that the struts' stroke allows (bisection to 1 nm / 1 udeg)."""
-    hexapod = model.hexapod
-    out = np.zeros((2, 6))
-    for k in range(6):
-        for side, sign in ((0, -1.0), (1, 1.0)):
-            low, high = 0.0, 1000.0 if k < 3 else 90.0
-            while high - low > 1e-6:
-                mid = 0.5 * (low + high)
-                pose = np.zeros(6)
-                pose[k] = sign * mid
-                native = convert_pose(pose, "pi", hexapod.convention)
-                if hexapod.check_stroke(hexapod.igm(native)).any():
-                    high = mid
-                else:
-                    low = mid
-            out[side, k] = sign * np.floor(low * 1e6) / 1e6  # inside, as written
-    return out[0], out[1]

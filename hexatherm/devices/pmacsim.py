@@ -24,16 +24,26 @@ Commands: writing ``c_cmd=C_NAME`` runs one (its parameters in ``c_par(i)``, ``c
 0 "get" / 1 "set"); ``c_cmd`` then reads ``1`` once (running), then the return code:
 0 success, negative an error (:data:`hexatherm.devices.symetriepmac.RETURN_CODES`); a
 "get" leaves its answer in ``c_par``. The numbers of the constants are the twin's own:
-clients send the names. Served: ``C_MOVE_PTP`` (``c_par(0)`` 0 = absolute, then the
-object pose in the user frame, mm and deg, Symétrie convention), ``C_VALID_PTP``
-(``vm=1, cm=0``, pose; the limits broken in ``c_par(0)``, bits of
-:data:`~hexatherm.devices.symetriepmac.VALIDATION_LIMITS`), ``C_STOP``,
+clients send the names. Served: ``C_MOVE_PTP`` (``c_par(0)`` 0 = absolute, 1 relative
+in the object frame, 2 relative in the user frame (*choice*: ``T(step) T(now)``), then
+the pose or the step, mm and deg, Symétrie convention), ``C_VALID_PTP`` (``vm=1``, ``cm``
+0, 1 or 2, pose; the limits broken in ``c_par(0)``, bits of
+:data:`~hexatherm.devices.symetriepmac.VALIDATION_LIMITS`), ``C_MOVE_SPECIFICPOS``
+(``c_par(0)`` 1 user zero, 2 retracted: the lowest Tz the struts allow, 3 machine zero),
+``C_CFG_LIMIT`` (get: ``c_par(1..12)`` the low then high limits of workspace
+``c_par(0)`` 0 factory, 1 machine, 2 user; set 1 or 2; factory: -31) and
+``C_CFG_LIMITENABLE`` (``c_par(1)``; machine and user limits start disabled: the twin's
+struts are its limits), ``C_STOP``,
 ``C_CLEARERROR``, ``C_CONTROLON``, ``C_CONTROLOFF``, ``C_HOME``, ``C_VERSION``,
 ``C_CFG_CS`` (get: 12 zeros, the twin's frames), ``C_CFG_SPEED`` (get). Status:
 ``s_hexa`` (general state bits), ``s_ax_1..6``, ``s_uto_tx..rz`` and ``s_mtp_tx..rz``
 (mm, deg), ``s_pos_ax_1..6`` (the twin serves the IGM's leg lengths, mm; a real
 controller's actuator positions may be counted from another zero), ``s_ai_1..6``,
-``s_err_nr``.
+``s_err_nr``. ``vers`` answers the firmware's version. ``C_JOG``, ``C_MAINTENANCE`` and
+``C_CFG_DEFAULT`` are known and refused (-46, not served); an undefined constant
+(``c_cmd=C_NO_SUCH``) is ``error #20`` and leaves ``c_cmd`` at -30 (unknown command
+number, *choice*), so that a client never reads an earlier command's ``c_par`` as its
+result.
 """
 
 from __future__ import annotations
@@ -44,9 +54,15 @@ import threading
 
 import numpy as np
 
-from hexatherm.core.geometry import Convention
-from hexatherm.devices.controller import LineBuffer
-from hexatherm.devices.controllersim import SimulatedController, SimulatedHexapod, _Drop
+from hexatherm.core.geometry import Convention, pose_from_transform, transform_from_pose
+from hexatherm.devices.controller import LineBuffer, convert_pose
+from hexatherm.devices.controllersim import (
+    SimulatedController,
+    SimulatedHexapod,
+    _Drop,
+    single_axis_travel,
+)
+from hexatherm.typing import FloatArray
 
 IAC, WILL, WONT, DO, DONT, SB, SE = 255, 251, 252, 253, 254, 250, 240
 ECHO, SGA = 1, 3
@@ -68,6 +84,11 @@ COMMANDS = {
             "CFG_CS",
             "CFG_SPEED",
             "MOVE_SPECIFICPOS",
+            "CFG_LIMIT",
+            "CFG_LIMITENABLE",
+            "JOG",
+            "MAINTENANCE",
+            "CFG_DEFAULT",
         )
     )
 }
@@ -157,6 +178,12 @@ class SymetriePmacSimulator(SimulatedController):
         self.error = False
         self.emergency_stop = False
         self.speeds = np.array([1.0, 1.0, 0.01, 0.01, 5.0, 5.0])
+        #: workspace limits (low 6, high 6; mm, deg): 0 factory, 1 machine, 2 user; the
+        #: single-axis travel the struts allow until set, disabled until enabled (the
+        #: twin's struts are its limits)
+        travel = np.concatenate(single_axis_travel(model))
+        self.limits = {k: travel.copy() for k in (0, 1, 2)}
+        self.limits_enabled = {1: False, 2: False}
         self._state_lock = threading.RLock()
         super().__init__(model, host, port)
 
@@ -280,6 +307,8 @@ class SymetriePmacSimulator(SimulatedController):
         if re.fullmatch(r"echo\d+", line):
             session.bare = int(line[4:]) != 0
             return out
+        if line.lower() == "vers":  # the firmware's version (C_VERSION's software numbers)
+            return ["5.3.0.0"]
         for stmt in line.split():
             match = _STATEMENT.match(stmt)
             if match is None or not self._statement(session, match, out):
@@ -319,6 +348,10 @@ class SymetriePmacSimulator(SimulatedController):
                 try:
                     code = int(value)
                 except ValueError:
+                    # an undefined constant: the statement is illegal, and c_cmd reads
+                    # -30 (unknown command number) so that no client takes the c_par
+                    # of an earlier command for this one's result (*choice*)
+                    self.c_cmd, self._running_reads = -30, 0
                     return False
             self._run(code)
             return True
@@ -383,14 +416,22 @@ class SymetriePmacSimulator(SimulatedController):
         if name == "VALID_PTP":
             if p[0] != 1:
                 return -10
-            if p[1] != 0:
+            if p[1] not in (0, 1, 2):
                 return -11
-            stroke_ok, rule_ok = m.check(self._model_pose(p[2:8].copy()))
-            p[0] = (0 if rule_ok else 1 << 2) | (0 if stroke_ok else 1 << 3)
+            p[0] = self._broken(self._target(int(p[1]), p[2:8]))
             return 0
-        if name == "MOVE_PTP":
-            if p[0] != 0:
-                return -10  # only absolute moves are served by the twin
+        if name in ("CFG_LIMIT", "CFG_LIMITENABLE"):
+            return self._limits(name)
+        if name == "MOVE_SPECIFICPOS":  # 1 user zero, 2 retracted, 3 machine zero
+            if p[0] not in (1, 2, 3):
+                return -10
+            retracted = np.zeros(6)
+            retracted[2] = self.limits[0][2]  # the lowest Tz the struts allow
+            p[1:7] = retracted if p[0] == 2 else np.zeros(6)
+            p[0] = 0
+        if name in ("MOVE_PTP", "MOVE_SPECIFICPOS"):
+            if p[0] not in (0, 1, 2):
+                return -10
             if self.emergency_stop:
                 return -37
             if self.error:
@@ -401,10 +442,63 @@ class SymetriePmacSimulator(SimulatedController):
                 return -35
             if m.moving():
                 return -38
-            pose = self._model_pose(p[1:7].copy())
-            stroke_ok, rule_ok = m.check(pose)
-            if not (stroke_ok and rule_ok):
+            wire = self._target(int(p[0]), p[1:7])
+            if self._broken(wire):
                 return -40
-            m.start_move(pose)
+            m.start_move(self._model_pose(wire))
             return 0
-        return -46  # MOVE_SPECIFICPOS: not served by the twin
+        return -46  # JOG, MAINTENANCE, CFG_DEFAULT: not served by the twin
+
+    def _target(self, mode: int, pose: FloatArray) -> FloatArray:
+        """The absolute pose (wire: mm, deg, Symétrie convention) of a move in ``mode``: 0
+        absolute, 1 relative in the object frame (``T = T(now) T(step)``), 2 relative in
+        the user frame (``T = T(step) T(now)``, *choice*)."""
+        step = np.array(pose, dtype=float)
+        if mode == 0:
+            return step
+        now = transform_from_pose(self._wire(self.model.target), "symetrie")
+        move = transform_from_pose(step, "symetrie")
+        frame = now @ move if mode == 1 else move @ now
+        return np.asarray(pose_from_transform(frame, "symetrie"), dtype=float)
+
+    def _wire(self, model_pose: FloatArray) -> FloatArray:
+        return convert_pose(model_pose, self.model.convention, self.native_convention)
+
+    def _broken(self, wire: FloatArray) -> int:
+        """The validation bits a pose breaks (0: it can be reached): machine and user
+        workspace limits when enabled, the rule (user), the struts (actuators)."""
+        stroke_ok, rule_ok = self.model.check(self._model_pose(wire.copy()))
+        bits = (0 if rule_ok else 1 << 2) | (0 if stroke_ok else 1 << 3)
+        for k, bit in ((1, 1), (2, 2)):
+            low, high = self.limits[k][:6], self.limits[k][6:]
+            if self.limits_enabled[k] and not np.all((wire >= low) & (wire <= high)):
+                bits |= 1 << bit
+        return bits
+
+    def _limits(self, name: str) -> int:
+        """``C_CFG_LIMIT`` (get: ``c_par(1..12)`` the low then high limits of workspace
+        ``c_par(0)``, 0 factory, 1 machine, 2 user; set: 1 or 2 from ``c_par(1..12)``) and
+        ``C_CFG_LIMITENABLE`` (get: ``c_par(1)``; set: ``c_par(1)`` 0 or 1)."""
+        p, lim = self.c_par, int(self.c_par[0])
+        if p[0] not in (0, 1, 2):
+            return -10
+        if name == "CFG_LIMIT":
+            if self.c_cfg == 0:
+                p[1:13] = self.limits[lim]
+                return 0
+            if lim == 0:
+                return -31  # the factory limits are "get" only
+            low, high = p[1:7].copy(), p[7:13].copy()
+            if np.any(low > high):
+                return -11
+            self.limits[lim] = np.concatenate([low, high])
+            return 0
+        if lim == 0:
+            return -10
+        if self.c_cfg == 0:
+            p[1] = float(self.limits_enabled[lim])
+            return 0
+        if p[1] not in (0, 1):
+            return -11
+        self.limits_enabled[lim] = bool(p[1])
+        return 0

@@ -100,7 +100,7 @@ class PortReader(threading.Thread):
                 try:
                     data = self.port.read(1)
                     while data and len(data) < 65536 and (waiting := self.port.in_waiting):
-                        data += self.port.read(waiting)
+                        data += self._read_waiting(waiting, 65536 - len(data))
                 except (serial.SerialException, OSError) as exc:
                     self.out.put(("lost", self.source, self.stamp(), str(exc)))
                     self._close()
@@ -110,6 +110,20 @@ class PortReader(threading.Thread):
                     self.out.put(("rx", self.source, self.stamp(), bytes(data)))
         finally:
             self._close()
+
+    def _read_waiting(self, waiting: int, room: int) -> bytes:
+        """The bytes waiting, in one read: a serial port counts them (``in_waiting``); a
+        pyserial ``socket://`` port only says whether there are any (1), so it is read
+        without waiting (timeout 0) for as many as there are (one byte at a time, a logger
+        that floods would outrun the reader)."""
+        if not self.settings.url.startswith("socket://"):
+            return bytes(self.port.read(min(waiting, room)))
+        timeout = self.port.timeout
+        self.port.timeout = 0
+        try:
+            return bytes(self.port.read(room))
+        finally:
+            self.port.timeout = timeout
 
     def _close(self) -> None:
         if self.port is not None:

@@ -47,7 +47,7 @@ PROBE, TEMPERATURE = "probe", "temperature"
 
 
 #: log entry kinds
-KINDS = ("open", "rx", "lost", "reopen", "event", "mode", "config", "resume", "end", "note")
+KINDS = ("open", "rx", "lost", "reopen", "skip", "event", "mode", "config", "resume", "end", "note")
 
 
 # --------------------------------------------------------------------- log format

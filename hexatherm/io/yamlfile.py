@@ -310,11 +310,15 @@ class YamlDoc:
         The file (for messages).
     lines : dict
         ``tuple(keys) -> 1-based line`` for every mapping value and sequence item.
+    scalars : dict
+        ``tuple(keys) -> text`` of every scalar as written (``007``, which YAML reads as
+        the number 7: a message can quote what the file says).
     """
 
     data: dict[str, Any]
     path: str
     lines: dict[tuple[Key, ...], int] = field(default_factory=dict)
+    scalars: dict[tuple[Key, ...], str] = field(default_factory=dict)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> YamlDoc:
@@ -376,6 +380,8 @@ class YamlDoc:
             return [
                 self._build(item, keys + (i,), constructor) for i, item in enumerate(node.value)
             ]
+        if isinstance(node, yaml.ScalarNode):
+            self.scalars[keys] = str(node.value)
         try:
             return constructor.construct_object(node, deep=True)
         except (yaml.YAMLError, ValueError, TypeError) as exc:

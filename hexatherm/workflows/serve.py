@@ -324,6 +324,7 @@ _FAULT_KEYS = {
     "pi-unreferenced": set(),
     "pi-busy": set(),
     "pi-coordinate-system": {"name"},
+    "pi-pivot": {"r", "s", "t"},
 }
 
 
@@ -348,6 +349,8 @@ def parse_fault(text: str, into: ServeFaults | None = None) -> ServeFaults:
       (mm, deg) refused by the controller (a user limit);
     - ``pi-servo-off``, ``pi-unreferenced``, ``pi-busy``: the PI controller starts with the
       servo off, not referenced, or busy (``#7``);
+    - ``pi-pivot[:r=0,s=0,t=100]``: the PI controller starts with its pivot point (``SPI``,
+      mm) there;
     - ``pi-coordinate-system[:name=SAMPLE]``: the PI controller starts with a user
       coordinate system (type KSD, offset Z 10 mm, W 1 deg) enabled.
 
@@ -433,6 +436,8 @@ def parse_fault(text: str, into: ServeFaults | None = None) -> ServeFaults:
             if not name.isalnum() or name == "ZERO":
                 raise InputError(f"fault {kind}: name must be letters and digits, not ZERO")
             out.pi.coordinate_system = name
+        elif kind == "pi-pivot":
+            out.pi.pivot = (number("r", 0.0), number("s", 0.0), number("t", 100.0))
         elif kind == "controller-error":
             command = values.get("command")
             if not command:

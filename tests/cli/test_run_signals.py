@@ -87,3 +87,25 @@ def test_a_signal_stops_the_hexapod_and_resume_completes(
     counts = points.groupby(["label", "ball"]).size()
     assert len(counts) == 4 * 3 and (counts == 6).all()
     assert (session / "session.yaml").is_file()
+
+
+@pytest.mark.parametrize("name", ["SIGTERM", "SIGHUP", "SIGINT"])
+def test_a_signal_in_the_first_moments_exits_130(tmp_path: Path, name: str) -> None:
+    """The signal arrives right after the command line module is imported (before the
+    options are read, click and numpy loaded): exit status 130, said in one line."""
+    code = (
+        "import os, signal, sys; sys.argv = ['hexatherm', 'run', '--help']; "
+        "import hexatherm.cli; "
+        f"os.kill(os.getpid(), signal.{name}); "
+        "print('not interrupted')"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code],
+        stdin=subprocess.DEVNULL,
+        capture_output=True,
+        text=True,
+        timeout=SAFETY_S,
+    )
+    how = "Ctrl-C" if name == "SIGINT" else name
+    assert proc.returncode == 130, proc.stderr
+    assert proc.stderr == f"interrupted ({how})\n" and "not interrupted" not in proc.stdout

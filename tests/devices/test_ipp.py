@@ -836,3 +836,51 @@ def test_warnings_are_said_not_dropped():
         np.testing.assert_allclose(point.point_mm, top, atol=1e-9)
     assert said == [("SetProp", 0, 1), ("GoTo", 1, 1005), ("PtMeas", 1, 1005)]
     assert sum(" ! Error(1, 1005" in line for line in lines) == 2
+
+
+#: event lines a CMM may send that cannot be parsed: a truncated call, and an informational
+#: error whose text has one Latin-1 character (a European CMM's software)
+BAD_EVENTS = ("E0000 # Blah(", 'E0000 ! Error(1, 0, "Info", "Temp\xe9rature stable")')
+
+
+def test_an_unparsable_event_line_is_an_event_and_fails_no_open_transaction():
+    rows = [
+        (">", "00003 PtMeas(X(1), Y(2), Z(3), IJK(0, 0, 1))"),
+        ("<", "00003 &"),
+        ("<", BAD_EVENTS[0]),
+        ("<", "00003 # X(1), Y(2), Z(3)"),
+        ("<", BAD_EVENTS[1]),
+        ("<", "00003 %"),
+        (">", "00004 PtMeas(X(1), Y(2), Z(3), IJK(0, 0, 1))"),
+        ("<", "00004 &"),
+        ("<", "00004 # X(1), Y(2), Z(3\xe9)"),  # the transaction's own line: strict
+        ("<", "00004 %"),
+    ]
+    replay = replay_transcript(_transcript(rows))
+    assert [p.tag for p in replay.points] == ["00003"]
+    assert replay.results[0].protocol_error is None and replay.results[1].protocol_error
+    assert [e.line for e in replay.events[:2]] == list(BAD_EVENTS)
+    assert all(e.response is None and e.problem for e in replay.events)
+
+
+def test_bad_event_lines_from_the_server_leave_the_command_and_the_transcript_whole():
+    lines: list[str] = []
+    got: list[IppEvent] = []
+    fault = Fault("event", nth=2, method="PtMeas", events=("Blah(", BAD_EVENTS[1][6:]))
+    with _server(faults=[fault]) as server:
+        with IppClient(
+            "127.0.0.1",
+            server.port,
+            timeout_s=SAFETY_S,
+            transcript=lines.append,
+            on_event=got.append,
+        ) as cmm:
+            _prepare(cmm)
+            m = _probe(cmm, CENTRES_MM[0], n_points=4)
+    assert len(m.probed) == 4
+    assert [e.line for e in got] == list(BAD_EVENTS)
+    # the Latin-1 character is kept in the transcript (escaped), which replays to the same
+    text = TRANSCRIPT_MAGIC + "\n" + "".join(lines)
+    assert "Temp\\xe9rature" in text
+    replay = replay_transcript(text)
+    assert [p.point_mm for p in replay.points] == [p.point_mm for p in m.probed]

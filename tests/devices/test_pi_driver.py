@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
+from hexatherm.core.geometry import transform_from_pose
 from hexatherm.devices.controllersim import ManualClock, SimulatedHexapod
 from hexatherm.devices.pi import PIController
 from hexatherm.devices.pisim import PISimulator, PIStart
@@ -53,8 +54,9 @@ def test_identification_fields_and_a_ready_controller() -> None:
             "referenced": "yes (FRF? X=1 Y=1 Z=1 U=1 V=1 W=1)",
             "ready": "yes (#7 0xB1)",
             "coordinate_system": "ZERO=ZERO",
+            "pivot_point": "R=0.000000 S=0.000000 T=0.000000",
         }
-        assert {"SVO?", "FRF?", "#7", "KEN?"} <= set(s.sim.received)
+        assert {"SVO?", "FRF?", "#7", "KEN?", "SPI?"} <= set(s.sim.received)
         assert s.sim.error_code == 0 and s.model.moves == 0
 
 
@@ -70,6 +72,12 @@ def test_identification_fields_and_a_ready_controller() -> None:
             "TOOL1=KSD",
             r"coordinate system TOOL1 enabled .*enable ZERO first",
         ),
+        (
+            PIStart(pivot=(0.0, 0.0, 100.0)),
+            "pivot_point",
+            "R=0.000000 S=0.000000 T=100.000000",
+            r"pivot point R=0.000000 S=0.000000 T=100.000000 mm \(SPI\?\).*SPI R 0 S 0 T 0",
+        ),
     ],
 )
 def test_a_controller_not_ready_is_refused_and_recorded(
@@ -79,7 +87,7 @@ def test_a_controller_not_ready_is_refused_and_recorded(
         with pytest.raises(ControllerError, match=message + r".*Nothing was moved"):
             s.driver.check_ready()
         assert s.driver.readiness[key].startswith(state)
-        assert len(s.driver.readiness) == 4  # every state found is recorded
+        assert len(s.driver.readiness) == 5  # every state found is recorded
         assert s.model.moves == 0 and not any(c.startswith("MOV") for c in s.sim.received)
 
 
@@ -111,3 +119,24 @@ def test_stop_sends_stop_all_then_stp() -> None:
         assert tail == ["#24", "STP", "ERR?"], tail
         assert "error_at_stop" not in s.driver.info and s.sim.error_code == 0
         np.testing.assert_allclose(s.model.true_pose()[2], 1.0, atol=1e-12)  # 1 mm/s, 1 s
+
+
+def test_the_twins_pivot_point_is_what_u_v_w_rotate_about() -> None:
+    """Truth: the platform's point at the pivot goes where the translation alone takes it,
+    whatever the rotation (C-887, SPI); with the pivot at zero the pose is the wire's."""
+    pivot = np.array([10.0, -20.0, 100.0])
+    wire = np.array([1.0, 2.0, -3.0, 2.0, -1.5, 3.0])
+    with setup(PIStart(pivot=tuple(pivot))) as s:
+        s.sim.respond("MOV " + " ".join(f"{a} {v}" for a, v in zip("XYZUVW", wire, strict=True)))
+        assert s.sim.error_code == 0
+        frame = transform_from_pose(s.model.target, s.model.convention)
+        np.testing.assert_allclose(
+            frame[:3, :3] @ pivot + frame[:3, 3], pivot + wire[:3], atol=1e-9
+        )
+        # the wire reads back what was commanded (the inverse composition)
+        read = [float(x.split("=")[1]) for x in s.sim.respond("MOV?")]
+        np.testing.assert_allclose(read, wire, atol=1e-6)
+        s.sim.respond("SPI R 0 S 0 T 0")
+        assert s.sim.respond("SPI?") == ["R=0.000000 ", "S=0.000000 ", "T=0.000000"]
+        s.driver.check_ready()
+        assert s.driver.readiness["pivot_point"] == "R=0.000000 S=0.000000 T=0.000000"

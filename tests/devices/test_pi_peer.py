@@ -250,3 +250,59 @@ def test_serve_twin_speaks_to_pipython(tmp_path: Path) -> None:
     finally:
         proc.terminate()
         proc.wait()
+
+
+def test_a_reference_move_ends_with_the_motion_without_polling() -> None:
+    """FRF, a plain wait (nothing asked meanwhile), then MOV: accepted, as a C-887 does."""
+    with peer(PIStart(referenced=False)) as p:
+        p.model.start_move(POSE)
+        p.settle()
+        p.device.FRF()
+        p.settle()  # simulated time passes; neither FRF? nor #7 is asked
+        p.device.MOV("X", 1.0)
+        p.settle()
+        assert p.truth()[0] == 1.0 and p.device.qERR() == 0
+
+
+def test_relative_moves_soft_limits_and_the_pivot_point() -> None:
+    with peer() as p:
+        p.device.MOV(["X", "W"], [1.0, 2.0])
+        p.settle()
+        p.device.MVR(["X", "W"], [0.5, -0.5])
+        p.settle()
+        np.testing.assert_allclose(p.truth()[[0, 5]], [1.5, 1.5], atol=1e-12)
+        assert p.device.qMOV("X") == {"X": 1.5}
+        # soft limits: the travel until set; a move beyond one is refused (error 7)
+        assert p.device.qNLM("Z") == p.device.qTMN("Z") and p.device.qPLM() == p.device.qTMX()
+        p.device.PLM("X", 2.0)
+        p.device.NLM("X", -2.0)
+        assert p.device.qPLM("X") == {"X": 2.0} and p.device.qNLM("X") == {"X": -2.0}
+        for move in (lambda: p.device.MOV("X", 2.5), lambda: p.device.MVR("X", 0.75)):
+            with pytest.raises(GCSError) as err:
+                move()
+            assert err.value.val == 7
+        assert p.device.qVMO(["X"], [2.5]) is False
+        with pytest.raises(GCSError) as err:
+            p.device.PLM("X", 1e6)  # beyond the travel
+        assert err.value.val == 17
+        p.device.MVR("X", 0.5)
+        p.settle()
+        assert p.truth()[0] == 2.0
+        # the pivot point: U V W rotate about it (C-887, SPI)
+        assert p.device.qSPI() == {"R": 0.0, "S": 0.0, "T": 0.0}
+        p.device.SPI(["T"], [50.0])
+        assert p.device.qSPI("T") == {"T": 50.0}
+
+
+def test_command_level_versions_and_echo() -> None:
+    with peer() as p:
+        assert p.device.qCCL() == 0
+        with pytest.raises(GCSError) as err:
+            p.device.CCL(1, "wrong")
+        assert err.value.val == 17
+        p.device.CCL(1, "advanced")
+        assert p.device.qCCL() == 1
+        p.device.CCL(0)
+        versions = p.device.qVER()
+        assert "C-887" in versions and "PIPython" in versions
+        assert p.device.qECO("hello").strip() == "hello"

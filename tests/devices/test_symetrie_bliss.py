@@ -48,37 +48,77 @@ def make_hexapod() -> Hexapod:
 
 
 class BlissLikeClient:
-    """What BLISS sends and how it parses the answers (see the module docstring)."""
+    """What BLISS sends and how it reads the answers (see the module docstring): a reader
+    hands each reply to the oldest result waiting for that command's name; a reply for a
+    command nothing waits for is an error; a command's ``:2`` that came in the same read
+    as its ``:1`` fails it with "Error 2" (BLISS's reader sets the acknowledgement twice
+    before the caller takes it); ``MOVE#ABS`` may be sent without waiting for its ``:2``
+    (``async_``), which the reader keeps until asked for."""
 
     def __init__(self, port: int) -> None:
         self.sock = socket.create_connection(("127.0.0.1", port), timeout=10)
         self.buffer = LineBuffer()
-        self.lines: list[str] = []
-        greeting = [self.readline() for _ in range(4)]
+        self.lines: list[tuple[int, str]] = []  # (read number, line)
+        self.reads = 0
+        self.waiting: dict[str, list[tuple[int, str]]] = {}
+        greeting = [self.readline()[1] for _ in range(4)]
         self.api_version = greeting[1].split(":", 1)[1].strip()
         self.project = greeting[2].split(":", 1)[1].strip()
 
-    def readline(self) -> str:
+    def readline(self) -> tuple[int, str]:
         while not self.lines:
             data = self.sock.recv(4096)
             assert data, "the twin closed the connection"
-            self.lines.extend(self.buffer.feed(data))
+            self.reads += 1
+            self.lines.extend((self.reads, line) for line in self.buffer.feed(data))
         return self.lines.pop(0)
 
-    def reply(self, cmd_id: str, expected: int) -> str:
-        match = REPLY.match(self.readline())
+    def reply(self, cmd_id: str) -> tuple[int, int, str]:
+        """The next reply to ``cmd_id``: (read number, code, data); the replies to other
+        commands waited for are kept for them."""
+        while not self.waiting.get(cmd_id):
+            read, line = self.readline()
+            match = REPLY.match(line)
+            assert match is not None, line
+            assert match["cmd"] in self.waiting, f"a reply to {match['cmd']!r}, none pending"
+            self.waiting[match["cmd"]].append((read, line))
+        read, line = self.waiting[cmd_id].pop(0)
+        match = REPLY.match(line)
         assert match is not None
-        assert match["cmd"] == cmd_id, f"a reply to {match['cmd']!r}, none pending"
-        assert int(match["code"]) == expected, f"code {match['code']} to {cmd_id}"
-        return match["data"]
+        return read, int(match["code"]), match["data"]
 
-    def __call__(self, cmd: str, *args: object, ack: bool = True) -> str:
+    def __call__(self, cmd: str, *args: object, ack: bool = True, async_: bool = False) -> str:
         cmd_id = cmd.split("?", 1)[0]
+        self.waiting.setdefault(cmd_id, [])
         self.sock.sendall(f"{cmd}{','.join(map(str, args))}\r\n".encode())
         if ack:
-            self.reply(cmd_id, 1)
-        data = self.reply(cmd_id, 2)
+            read, code, _ = self.reply(cmd_id)
+            assert code == 1, f"Error {code} to {cmd_id}"
+            if async_:  # a move's :2 comes when it ends (a query's a controller cycle
+                # after its :1, which a loaded client may still read at once)
+                late = [r for r, line in self.lines if line.startswith(f"{cmd_id}:")]
+                assert read not in late, f"Error 2: {cmd_id}'s :2 came with its :1"
+        if async_:
+            return ""
+        _, code, data = self.reply(cmd_id)
+        assert code == 2, f"Error {code} to {cmd_id}"
         return data[1:] if "?" in cmd and data else data
+
+    def done(self, cmd_id: str) -> bool:
+        """Whether the ``:2`` of an asynchronous command has arrived (reads what is there)."""
+        self.sock.settimeout(0.0)
+        try:
+            while True:
+                self.lines.extend((self.reads, x) for x in self.buffer.feed(self.sock.recv(4096)))
+        except BlockingIOError:
+            pass
+        finally:
+            self.sock.settimeout(10)
+        for read, line in list(self.lines):
+            if line.startswith(f"{cmd_id}:2"):
+                self.lines.remove((read, line))
+                return True
+        return False
 
     def status(self) -> tuple[int, np.ndarray]:
         data = self("STA#HEXAPOD?", ack=False).split(",")
@@ -114,7 +154,9 @@ def test_bliss_like_client_moves_the_twin(
     assert status >> 1 & 1 and status >> 4 & 1  # ready, in position
     target = np.array([1.5, -0.75, 2.0, 0.2, -0.1, 0.5])
     wire = np.concatenate([target[:3] * 1e-3, np.deg2rad(target[3:])])
-    client("MOVE#ABS", ",".join(map(str, wire)))
+    client("MOVE#ABS", ",".join(map(str, wire)), async_=True)  # :1 when accepted
+    status, _ = client.status()
+    assert status >> 5 & 1 and not client.done("MOVE#ABS")  # moving: no :2 yet
     for _ in range(1000):
         status, pose = client.status()
         if not status >> 5 & 1 and status >> 4 & 1:  # not moving, in position
@@ -122,6 +164,9 @@ def test_bliss_like_client_moves_the_twin(
         clock.sleep(0.25)
     else:
         pytest.fail("the twin never reported in position")
+    # the :2 comes when the motion has ended, on its own (BLISS's move waits for it)
+    _, code, _ = client.reply("MOVE#ABS")
+    assert code == 2 and not model.moving()
     np.testing.assert_allclose(pose, target, atol=1e-9)
     np.testing.assert_allclose(model.true_pose(), target, atol=1e-12)
     axes = client("STA#AXES?", ack=False).split(",")
@@ -131,3 +176,31 @@ def test_bliss_like_client_moves_the_twin(
     np.testing.assert_allclose(lengths_mm, model.hexapod.igm(target)[0], atol=1e-9)
     client("STOP")
     assert not model.moving()
+
+
+def test_bliss_reads_speeds_accelerations_and_limits(
+    twin: tuple[SimulatedHexapod, ManualClock, BlissLikeClient],
+) -> None:
+    """CFG#SPD?, CFG#ACC?, CFG#LIM#WS? and CFG#LIM#ENABLE? as BLISS reads them: current
+    then largest (m/s, rad/s), the limits' CS first then low and high poses (m, rad)."""
+    model, clock, client = twin
+    speeds = [float(v) for v in client("CFG#SPD?").split(",")]
+    np.testing.assert_allclose(
+        speeds, [model.speed_mm_s * 1e-3, np.deg2rad(model.speed_deg_s)] * 2, rtol=1e-15
+    )
+    assert len(client("CFG#ACC?").split(",")) == 4
+    for cs in (1, 2):
+        data = client("CFG#LIM#WS?", cs).split(",")
+        assert data[0] == str(cs) and len(data) == 13
+        low, high = np.array(data[1:7], dtype=float), np.array(data[7:], dtype=float)
+        hexapod = model.hexapod
+        for k in range(6):  # the truth: the stroke allows each limit and not 1 % beyond
+            for edge in (low, high):
+                pose = np.zeros(6)
+                pose[k] = edge[k] * (1e3 if k < 3 else np.rad2deg(1.0))
+                assert not hexapod.check_stroke(hexapod.igm(pose)).any()
+                pose[k] *= 1.01
+                assert hexapod.check_stroke(hexapod.igm(pose)).any()
+    assert client("CFG#LIM#ENABLE?", 1).rsplit(",", 1)[-1] == "1"
+    assert client("CFG#LIM#ENABLE?", 2).rsplit(",", 1)[-1] == "0"
+    client("STOP")

@@ -7,6 +7,7 @@ exchanges CGSE's ``symetrie-hexapod`` documents (written here by hand from its r
 
 from __future__ import annotations
 
+import math
 import socket
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -256,3 +257,139 @@ def test_emergency_stop_while_moving_is_an_error(rig: Callable[..., Rig]) -> Non
     with pytest.raises(ControllerError, match="in error or its emergency stop is pressed"):
         r.driver.move_absolute(np.zeros(6))
     assert r.model.moves == 1
+
+
+class Gpascii:
+    """A bare gpascii session on the twin, as CGSE's interface opens one (login,
+    ``gpascii -2``, ``echo7``): each line's answer values, a command's return code."""
+
+    def __init__(self, port: int) -> None:
+        self.sock = socket.create_connection(("127.0.0.1", port), timeout=10)
+        self.received = b""
+        self.until(b"login: ")
+        self.sock.sendall(b"root\r\n")
+        self.until(b"Password: ")
+        self.sock.sendall(b"deltatau\r\n")
+        self.until(b"ppmac# ")
+        self.sock.sendall(b"gpascii -2\r\necho7\r\n")
+        self.until(b"\x06\r\n")
+
+    def until(self, marker: bytes) -> bytes:
+        while marker not in self.received:
+            data = self.sock.recv(4096)
+            assert data, f"closed before {marker!r}"
+            self.received += data
+        end = self.received.index(marker) + len(marker)
+        head, self.received = self.received[:end], self.received[end:]
+        return strip_telnet(head)[0]
+
+    def ask(self, line: str) -> list[str]:
+        """The lines answered to ``line`` (its echo and the acknowledge left out)."""
+        self.sock.sendall(line.encode() + b"\r\n")
+        return self.until(b"\x06\r\n").decode().split("\r\n")[1:-2]
+
+    def command(self, line: str) -> int:
+        """Send a command line, then read ``c_cmd`` until it is no longer running."""
+        assert not any("error #" in x for x in self.ask(line))
+        code = 1
+        while code > 0:
+            code = int(self.ask("c_cmd")[0])
+        return code
+
+    def pars(self, count: int) -> np.ndarray:
+        return np.array([float(v) for v in self.ask(f"c_par(0),{count},1")])
+
+    def move(self, mode: int, pose: Any) -> int:
+        values = " ".join(f"c_par({k + 1})={v!r}" for k, v in enumerate(map(float, pose)))
+        return self.command(f"c_par(0)={mode} {values} c_cmd=C_MOVE_PTP")
+
+    def valid(self, mode: int, pose: Any) -> int:
+        values = " ".join(f"c_par({k + 2})={v!r}" for k, v in enumerate(map(float, pose)))
+        assert self.command(f"c_par(0)=1 c_par(1)={mode} {values} c_cmd=C_VALID_PTP") == 0
+        return int(self.pars(1)[0])
+
+
+@pytest.fixture
+def gpascii() -> Iterator[tuple[SimulatedHexapod, ManualClock, Gpascii]]:
+    clock = ManualClock(500.0)
+    model = SimulatedHexapod(make_hexapod(), clock=clock)
+    sim = SymetriePmacSimulator(model)
+    client = Gpascii(sim.port)
+    yield model, clock, client
+    client.sock.close()
+    sim.close()
+
+
+def settle(model: SimulatedHexapod, clock: ManualClock) -> None:
+    while not model.in_position():
+        clock.sleep(0.5)
+
+
+def test_relative_moves_in_the_object_and_the_user_frame(
+    gpascii: tuple[SimulatedHexapod, ManualClock, Gpascii],
+) -> None:
+    """Truth by geometry: with the platform turned 15 deg about Z, a step of +1 mm along
+    the object's X goes along (cos 15, sin 15) of the user's frame; a step along the
+    user's X along X."""
+    model, clock, g = gpascii
+    c, s = math.cos(math.radians(15.0)), math.sin(math.radians(15.0))
+    assert g.move(0, [1.0, 2.0, 0.5, 0.0, 0.0, 15.0]) == 0
+    settle(model, clock)
+    assert g.move(1, [1.0, 0, 0, 0, 0, 0]) == 0  # object relative
+    settle(model, clock)
+    np.testing.assert_allclose(model.true_pose(), [1 + c, 2 + s, 0.5, 0, 0, 15.0], atol=1e-9)
+    assert g.move(2, [1.0, 0, 0, 0, 0, 0]) == 0  # user relative
+    settle(model, clock)
+    np.testing.assert_allclose(model.true_pose(), [2 + c, 2 + s, 0.5, 0, 0, 15.0], atol=1e-9)
+    # checks: a relative step beyond the stroke breaks the actuator limits (bit 3) and is
+    # refused as a move (-40: not feasible); nothing moves
+    assert g.valid(1, [0, 0, 0, 0, 0, 0]) == 0
+    assert g.valid(1, OUT_OF_STROKE) == 1 << 3
+    moves = model.moves
+    assert g.move(2, OUT_OF_STROKE) == -40 and model.moves == moves
+
+
+def test_workspace_limits_specific_positions_and_version(
+    gpascii: tuple[SimulatedHexapod, ManualClock, Gpascii],
+) -> None:
+    model, clock, g = gpascii
+    assert g.command("c_cfg=0 c_par(0)=1 c_cmd=C_CFG_LIMIT") == 0
+    limits = g.pars(13)[1:]
+    hexapod = model.hexapod
+    for k in range(6):  # the truth: the struts allow each limit, not 1 % beyond it
+        for edge in (limits[k], limits[6 + k]):
+            pose = np.zeros(6)
+            pose[k] = edge
+            assert not hexapod.check_stroke(hexapod.igm(pose)).any()
+            pose[k] *= 1.01
+            assert hexapod.check_stroke(hexapod.igm(pose)).any()
+    # user limits: Tz within [-1, 1] mm, enabled: a pose at Tz 2 breaks them (bit 2)
+    user = limits.copy()
+    user[2], user[8] = -1.0, 1.0
+    values = " ".join(f"c_par({k + 1})={float(v)!r}" for k, v in enumerate(user))
+    assert g.command(f"c_cfg=1 c_par(0)=2 {values} c_cmd=C_CFG_LIMIT") == 0
+    assert g.command("c_cfg=1 c_par(0)=2 c_par(1)=1 c_cmd=C_CFG_LIMITENABLE") == 0
+    assert g.command("c_cfg=0 c_par(0)=2 c_cmd=C_CFG_LIMITENABLE") == 0 and g.pars(2)[1] == 1
+    assert g.valid(0, [0, 0, 2.0, 0, 0, 0]) == 1 << 2
+    assert g.move(0, [0, 0, 2.0, 0, 0, 0]) == -40
+    assert g.command("c_cfg=1 c_par(0)=0 c_cmd=C_CFG_LIMIT") == -31  # factory: get only
+    assert g.command("c_cfg=1 c_par(0)=2 c_par(1)=0 c_cmd=C_CFG_LIMITENABLE") == 0
+    assert g.valid(0, [0, 0, 2.0, 0, 0, 0]) == 0  # disabled: the struts alone
+    # specific positions: 2 retracted (the lowest Tz), 1 the user zero
+    assert g.command("c_par(0)=2 c_cmd=C_MOVE_SPECIFICPOS") == 0
+    settle(model, clock)
+    assert model.true_pose()[2] == limits[2] and not np.any(model.true_pose()[[0, 1, 3, 4, 5]])
+    assert g.command("c_par(0)=1 c_cmd=C_MOVE_SPECIFICPOS") == 0
+    settle(model, clock)
+    np.testing.assert_allclose(model.true_pose(), 0.0, atol=1e-12)
+    assert g.ask("vers") == ["5.3.0.0"]
+
+
+def test_an_illegal_command_constant_leaves_no_stale_success(
+    gpascii: tuple[SimulatedHexapod, ManualClock, Gpascii],
+) -> None:
+    _, _, g = gpascii
+    assert g.command("c_cmd=C_VERSION") == 0  # c_cmd 0, c_par the version
+    answer = g.ask("c_cmd=C_NO_SUCH_COMMAND")
+    assert any("error #20: ILLEGAL CMD" in x for x in answer)
+    assert int(g.ask("c_cmd")[0]) == -30  # unknown command number, not the last 0

@@ -188,3 +188,10 @@ def test_calibration_report_names_hexapod_dates_and_identification_on_every_page
     check_every_page(pages, [*EXPECTED, hexapod, min(times), "calibration-geometry"])
     text = " ".join(pages)
     assert "Signatures" in text and f"Hexapod {hexapod} (hexapod.yaml); sessions" in text
+
+
+def test_a_serial_number_with_leading_zeros_is_quoted_as_written(tmp_path):
+    """``serial: 007`` reads as the number 7: the hint says to quote '007', not '7'."""
+    session = session_copy("paper-zero-pose", tmp_path, "identification:\n  cmm: {serial: 007}\n")
+    with pytest.raises(InputError, match=r"quote it: '007'\)"):
+        read_session(session)

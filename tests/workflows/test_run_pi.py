@@ -22,6 +22,7 @@ FAULTS = [
     ("pi-unreferenced", "referenced", r"not referenced on X Y Z U V W"),
     ("pi-busy", "ready", r"busy \(#7 answers 0xB0"),
     ("pi-coordinate-system:name=SAMPLE", "coordinate_system", r"coordinate system SAMPLE"),
+    ("pi-pivot:t=100", "pivot_point", r"pivot point R=0.000000 S=0.000000 T=100.000000 mm"),
 ]
 
 
@@ -55,8 +56,9 @@ def test_run_refuses_a_controller_not_ready_before_any_move(
             "referenced",
             "ready",
             "coordinate_system",
+            "pivot_point",
         }
-        assert not str(checks[key]).startswith(("yes", "ZERO=ZERO"))
+        assert not str(checks[key]).startswith(("yes", "ZERO=ZERO", "R=0.000000 S=0.000000 T=0."))
         assert record["model"] == "C-887" and str(record["url"]).startswith("pi://")
     finally:
         b.machines.close()
@@ -88,6 +90,7 @@ def test_referenced_by_pi_software_then_resumed(tmp_path: Path) -> None:
             "referenced": "yes (FRF? X=1 Y=1 Z=1 U=1 V=1 W=1)",
             "ready": "yes (#7 0xB1)",
             "coordinate_system": "ZERO=ZERO",
+            "pivot_point": "R=0.000000 S=0.000000 T=0.000000",
         }
     finally:
         b.machines.close()

@@ -35,6 +35,7 @@ from hexatherm.devices.ipp.transcript import (
 )
 from hexatherm.errors import (
     IppCommandError,
+    IppConnectError,
     IppConnectionLost,
     IppDmeError,
     IppErrorState,
@@ -125,7 +126,7 @@ class IppClient:
         try:
             self._sock = socket.create_connection((host, port), timeout=connect_timeout_s)
         except OSError as exc:
-            raise IppDmeError(f"cannot connect to the CMM at {host}:{port}: {exc}") from None
+            raise IppConnectError(f"cannot connect to the CMM at {host}:{port}: {exc}") from None
         self._sock.settimeout(None)
         self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         with self._lock:

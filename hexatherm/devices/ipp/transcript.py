@@ -17,6 +17,7 @@ from typing import IO
 import numpy as np
 
 from hexatherm.devices.ipp.protocol import (
+    _TAG,
     DEFAULT_REPORT,
     REPORT_ARITY,
     TRANSCRIPT_MAGIC,
@@ -376,6 +377,17 @@ class Recorder:
         try:
             response = parse_response(line)
         except IppProtocolError as exc:
+            tag = line[:5]
+            if _TAG.fullmatch(tag) and line[5:6] == " " and tag not in self.open:
+                # an event line (E0000, a server's informational text in Latin-1) or a line
+                # of a tag no transaction has open: whose it is can be read, and it is none
+                # of the open transactions', so it disturbs none of them (a warning, kept in
+                # the transcript); an abandoned tag's late line is ignored as ever
+                if tag in self.abandoned:
+                    return None, None
+                event = IppEvent(stamp, line, None, str(exc))
+                self.events.append(event)
+                return None, event
             # A line we cannot read may belong to any open transaction: none of them can be
             # trusted any more (they still complete at their '%').
             for pending in self.open.values():

@@ -143,7 +143,8 @@ class Fault:
         Of an ``error`` (number by default 1011 "Unable to move" for severity 2, 2504
         "Collision" for 3).
     events : tuple of str
-        Bodies of the ``E0000 #`` lines of an ``event`` fault.
+        Bodies of the ``E0000 #`` lines of an ``event`` fault (a body ``! Error(...)``
+        makes an ``E0000 !`` line; Latin-1 characters are sent as such).
     after_lines : int
         Lines of the response sent before a ``drop`` closes the connection (1: after ``&``).
     chunk_bytes : int

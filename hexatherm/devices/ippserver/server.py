@@ -234,7 +234,20 @@ class IppSimServer:
                     lines = [f"{tag} &", *warning, *self._execute(tag, session, call), f"{tag} %"]
             else:
                 lines = [f"{tag} &", *self._execute(tag, session, call), f"{tag} %"]
+            if fault is not None and fault.kind == "event":
+                self._tool_events(fault.events)
         return self._send(conn, lines, fault)
+
+    def _tool_events(self, bodies: Iterable[str]) -> None:
+        """A ``ChangeTool("name")`` event of a known tool is the machine's own change (an
+        operator's, a tool changer's): the tool is active from the next command on."""
+        for body in bodies:
+            try:
+                _, call = parse_command(f"00001 {body}")
+            except IppProtocolError:
+                continue
+            if call.name == "ChangeTool" and len(call.args) == 1 and call.args[0] in self._tools:
+                self.active_tool = str(call.args[0])
 
     def _fault_for(self, method: str) -> Fault | None:
         self._total += 1
@@ -251,7 +264,8 @@ class IppSimServer:
 
     def _send(self, conn: socket.socket, lines: list[str], fault: Fault | None) -> bool:
         if fault is not None and fault.kind == "event":
-            events = [f"E0000 # {body}" for body in fault.events]
+            # a body "! Error(...)" is an error event; the others are data ("#") events
+            events = [f"E0000 {body if body[:2] == '! ' else '# ' + body}" for body in fault.events]
             out = [lines[0]]
             for line in lines[1:-1]:
                 if events:
@@ -267,7 +281,8 @@ class IppSimServer:
                 if fault is not None and fault.kind == "delay" and index == 1:
                     if self._stop.wait(fault.delay_s):
                         return False
-                data = line.encode("ascii") + b"\r\n"
+                # ASCII but for an injected event's text (a European CMM's Latin-1 message)
+                data = line.encode("latin-1") + b"\r\n"
                 if fault is not None and fault.kind == "split":
                     for start in range(0, len(data), fault.chunk_bytes):
                         conn.sendall(data[start : start + fault.chunk_bytes])

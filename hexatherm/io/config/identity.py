@@ -37,7 +37,8 @@ IDENTIFICATION_KEYS = (*_TEXTS, *_GROUPS, "ambient", "signatures")
 def _text(doc: YamlDoc, *keys: Any) -> str:
     value = doc.get(*keys)
     if not isinstance(value, str):
-        hint = f" (quote it: '{value}')" if isinstance(value, int | float | bool) else ""
+        written = doc.scalars.get(tuple(keys), str(value))  # 007 as the file says it
+        hint = f" (quote it: '{written}')" if isinstance(value, int | float | bool) else ""
         raise doc.error(f"expected a text{hint}, got {value!r}", *keys)
     if not value.strip():
         raise doc.error("expected a text, got an empty one", *keys)

@@ -388,6 +388,10 @@ class Recorder:
                     self._probe_line(line, when)
                 else:
                     self._temperature_line(line, when)
+        elif kind == "skip":  # lines left out by the writer (a flood): the partial one too
+            splitter = self._splitters.get(item.source)
+            if splitter is not None:
+                splitter.reset()
         elif kind in ("lost", "open", "reopen"):
             splitter = self._splitters.get(item.source)
             dropped = splitter.reset() if splitter is not None else b""

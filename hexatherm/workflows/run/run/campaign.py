@@ -89,9 +89,10 @@ from hexatherm.workflows.run.resume import (
     record_controller,
     write_run_settings,
 )
-from hexatherm.workflows.run.run.cmmfacts import dme_version, tip_radius
+from hexatherm.workflows.run.run.cmmfacts import changed_tool, dme_version, tip_radius
 from hexatherm.workflows.run.run.options import BallResult, Notify, RunOptions, RunResult
 from hexatherm.workflows.run.run.pace import Pace, clock_text, duration_text
+from hexatherm.workflows.run.run.reconnect import reopen
 from hexatherm.workflows.run.run.support import (
     _Geometry,
     _Thermocouples,
@@ -99,6 +100,7 @@ from hexatherm.workflows.run.run.support import (
     _validate_plan,
     check_cmm_coordinates,
     check_probed,
+    check_processable,
 )
 
 # ------------------------------------------------------------------------ the run
@@ -198,6 +200,11 @@ def run_campaign(
     """
     folder = options.session
     transcript = folder / TRANSCRIPT_NAME
+    if os.path.lexists(transcript) and not stat.S_ISREG(os.lstat(transcript).st_mode):
+        raise AcquisitionError(
+            f"{transcript} is not a regular file (a FIFO, a device, a folder or a link): a "
+            "run records into a file of its own; remove it or choose another --session"
+        )
     if options.resume:
         if not transcript.is_file():
             raise AcquisitionError(f"nothing to resume: {transcript} does not exist")
@@ -331,6 +338,8 @@ class _Campaign:
         self.controller_connected = False
         #: what became of the hexapod when the run stopped (:meth:`_stop`)
         self.stopped = ""
+        #: the CMM's event that changed its tool away from the run's (:meth:`_restore_tool`)
+        self.tool_event: IppEvent | None = None
 
     # ------------------------------------------------------------------ state
     def _fit_centre(self, xyz: FloatArray) -> FloatArray:
@@ -390,7 +399,7 @@ class _Campaign:
             if options.temperature_port is not None:
                 port = options.temperature_port
                 thermo = _Thermocouples(
-                    folder, port, self.files, self.clock, options.reconnect_wait_s
+                    folder, port, self.files, self.clock, options.reconnect_wait_s, self.notify
                 )
                 self.reached = True
                 if not self._wait_first_temperature(thermo):
@@ -446,6 +455,7 @@ class _Campaign:
             self.tlog.close()
             self.clog.close()
         session_file = finish_session(folder, self.notify, None)
+        check_processable(folder)
         return RunResult(
             folder,
             self._n_points(),
@@ -550,13 +560,30 @@ class _Campaign:
         self.reached = self.controller_connected = True
         self._check_controller()
 
-    def _reconnect_controller(self, why: str) -> None:
-        assert self.controller is not None and self.clog is not None
+    def _reconnect_controller(self, why: str, tries: int) -> int:
+        """Reopen the controller's connection (:func:`.reconnect.reopen`); the tries used."""
+        controller, clog = self.controller, self.clog
+        assert controller is not None and clog is not None
         self.notify("warn", f"controller connection lost ({why}); reconnecting")
-        self.clog.note(f"reconnect after {why}")
-        self.sleep(self.options.reconnect_wait_s)
-        self.controller.connect()
-        self._check_controller()
+        clog.note(f"reconnect after {why}")
+
+        def connect() -> None:
+            controller.connect()
+            self._check_controller()
+
+        def failed(exc: Exception, wait_s: float) -> None:
+            clog.note(f"reconnect failed {exc}")
+            self.notify("warn", f"controller reconnection failed ({exc}); again in {wait_s:g} s")
+
+        return reopen(
+            connect,
+            (ControllerConnectionError,),
+            tries=tries,
+            budget=self.options.reconnects,
+            first_wait_s=self.options.reconnect_wait_s,
+            sleep=self.sleep,
+            failed=failed,
+        )
 
     def _check_controller(self) -> None:
         """Servo, referencing, readiness, coordinate system (PI): checked before any move
@@ -575,7 +602,37 @@ class _Campaign:
             )
 
     def _on_event(self, event: IppEvent) -> None:
+        """An event line (on the reader thread): said; a tool change is undone before the
+        next probing (:meth:`_restore_tool`); one not understood is a warning (the open
+        transaction's own lines stay strict, and the line is in the transcript)."""
+        if event.problem is not None:
+            line = event.line.encode("ascii", "backslashreplace").decode("ascii")
+            problem = event.problem.encode("ascii", "backslashreplace").decode("ascii")
+            self.notify(
+                "warn", f"CMM event not understood ({problem}), kept in the transcript: {line}"
+            )
+            return
+        tool = changed_tool(event)
+        if tool is not None and tool != self.settings.probe.tool:
+            self.tool_event = event  # said when it is undone
+            return
         self.notify("warn", f"CMM event: {event.line}")
+
+    def _restore_tool(self) -> None:
+        """Change back to the run's tool if the CMM changed it (said once, in the transcript
+        too)."""
+        event = self.tool_event
+        if event is None or self.cmm is None:
+            return
+        tool = self.settings.probe.tool
+        self.cmm.change_tool(tool)
+        self.tool_event = None
+        assert self.tlog is not None
+        self.tlog.note(f"tool changed back to {tool} after {event.time}")
+        self.notify(
+            "warn",
+            f"the CMM changed its tool ({event.line}, at {event.time}): changed back to {tool}",
+        )
 
     def _connect_cmm(self) -> None:
         options = self.options
@@ -598,6 +655,7 @@ class _Campaign:
             self.notify("info", "homing the CMM")
             cmm.home()
         cmm.change_tool(self.settings.probe.tool)
+        self.tool_event = None
         cmm.on_pt_meas_report("X", "Y", "Z", "IJK", "ER")
         tool, tip = self.settings.probe.tool, self.balls.tip_diameter_mm
         tip_radius(cmm, facts, tool, tip, self.notify)
@@ -606,13 +664,28 @@ class _Campaign:
     def _on_warning(self, result: TransactionResult, warning: ErrorReport) -> None:
         self.notify("warn", f"CMM warning on {result.tag} {result.command}: {warning}")
 
-    def _reconnect_cmm(self, why: str) -> None:
+    def _reconnect_cmm(self, why: str, tries: int) -> int:
+        """Reopen the CMM's connection (:func:`.reconnect.reopen`); the tries used."""
         self.notify("warn", f"CMM connection lost ({why}); reconnecting")
-        if self.cmm is not None:
-            self.cmm.close()
-            self.cmm = None
-        self.sleep(self.options.reconnect_wait_s)
-        self._connect_cmm()
+
+        def connect() -> None:
+            if self.cmm is not None:
+                self.cmm.close()
+                self.cmm = None
+            self._connect_cmm()
+
+        def failed(exc: Exception, wait_s: float) -> None:
+            self.notify("warn", f"CMM reconnection failed ({exc}); again in {wait_s:g} s")
+
+        return reopen(
+            connect,
+            (IppConnectionLost, IppTimeout),
+            tries=tries,
+            budget=self.options.reconnects,
+            first_wait_s=self.options.reconnect_wait_s,
+            sleep=self.sleep,
+            failed=failed,
+        )
 
     def _lift(self, z_mm: float) -> None:
         """Probe straight up to ``z_mm`` (if below)."""
@@ -707,7 +780,7 @@ class _Campaign:
                 tries += 1
                 if tries > self.options.reconnects:
                     raise
-                self._reconnect_controller(str(exc))
+                tries = self._reconnect_controller(str(exc), tries)
             except PoseRefusedError as exc:
                 raise ControllerError(f"step {label}: {exc}") from exc
         self.state.positionings[label] += 1
@@ -743,14 +816,14 @@ class _Campaign:
                 tries += 1
                 if tries > self.options.reconnects:
                     raise
-                self._reconnect_cmm(str(exc))
+                tries = self._reconnect_cmm(str(exc), tries)
 
     def _measure_ball(self, i: int, j: int, travel: float) -> None:
         label, name = self.plan.labels[i], self.balls.names[j]
         assert self.tlog is not None
         predicted = self.predicted(i, j)
         centre = predicted
-        attempt, losses = 1, 0
+        attempt, losses, tool_changes = 1, 0, 0
         probe = self.settings.probe
         while True:
             self.tlog.note(f"begin {label} {name} attempt {attempt}")
@@ -765,6 +838,7 @@ class _Campaign:
             )
             try:
                 assert self.cmm is not None
+                self._restore_tool()
                 self._lift(travel)
                 self.cmm.goto(touch.safe_mm[0], touch.safe_mm[1], travel)
                 measured = probe_cap(self.cmm, touch)
@@ -773,11 +847,21 @@ class _Campaign:
                 losses += 1
                 if losses > self.options.reconnects:
                     raise
-                self._reconnect_cmm(str(exc))
+                losses = self._reconnect_cmm(str(exc), losses)
                 continue
             except IppDmeError:
                 self.tlog.note(f"abandon {label} {name} error")
                 raise
+            if self.tool_event is not None:  # the CMM changed its tool while probing
+                self.tlog.note(f"abandon {label} {name} tool changed")
+                tool_changes += 1
+                if tool_changes > 1:
+                    raise IppDmeError(
+                        f"the CMM changed its tool again while {label} {name} was probed "
+                        f"({self.tool_event.line}): the run does not probe with a tool it "
+                        "did not choose"
+                    )
+                continue
             try:
                 check_probed(measured.probed)
             except IppDmeError:

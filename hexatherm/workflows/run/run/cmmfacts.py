@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from hexatherm.devices.ipp import Call, IppClient
+from hexatherm.devices.ipp import Call, IppClient, IppEvent
 from hexatherm.errors import AcquisitionError
 from hexatherm.workflows.run.run.options import Notify
 
@@ -83,3 +83,22 @@ def check_tool(cmm: IppClient, tool: str) -> None:
     found = cmm.get_prop("FoundTool.Name")["FoundTool.Name"]
     if tuple(found) != (tool,):
         raise AcquisitionError(f"the CMM has no tool {tool!r} (FoundTool is {found!r})")
+
+
+def changed_tool(event: IppEvent) -> str | None:
+    """The tool an event says the CMM changed to (``E0000 # ChangeTool("RefTool")``: an
+    operator's or a tool changer's change), or None.
+
+    >>> from hexatherm.devices.ipp import parse_response
+    >>> line = 'E0000 # ChangeTool("RefTool")'
+    >>> changed_tool(IppEvent("t", line, parse_response(line)))
+    'RefTool'
+    """
+    response = event.response
+    if response is None or response.kind != "#":
+        return None
+    for item in response.data:
+        if isinstance(item, Call) and item.name in ("ChangeTool", "SetTool") and item.args:
+            if len(item.args) == 1 and isinstance(item.args[0], str):
+                return str(item.args[0])
+    return None

@@ -66,10 +66,11 @@ class RunOptions:
     durable : bool
         fsync every log line (the default); flushing alone survives a killed process.
     reconnects : int
-        Reopenings of a dropped connection per ball or per move.
+        Attempts to reopen a dropped connection per ball or per move (each failed attempt,
+        a refused connection or a cut during the greeting, counts).
     reconnect_wait_s : float
-        Wait before reopening a connection, s (the thermocouple port: between attempts,
-        at least 0.05 s).
+        Wait before the first attempt to reopen a connection, s, doubled before each next
+        (:mod:`.reconnect`; the thermocouple port: between attempts, at least 0.05 s).
     ipp_timeout_s : float
         Longest I++ transaction, s.
     reply_timeout_s : float

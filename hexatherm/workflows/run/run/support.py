@@ -22,7 +22,7 @@ from hexatherm.devices.ipp import (
     cap_touch_plan,
     parse_ipp_url,
 )
-from hexatherm.devices.probestream import format_number
+from hexatherm.devices.probestream import LineSplitter, format_number, parse_numbers
 from hexatherm.devices.serialport import PortReader, PortSettings
 from hexatherm.devices.urls import controller_from_url
 from hexatherm.errors import (
@@ -276,6 +276,20 @@ def dry_run(
 
 
 # ------------------------------------------------------------------- temperatures
+#: items (reads of the port) the queue between the port's reader and the log holds at most:
+#: a full queue makes the reader wait (the port's own buffer holds the rest)
+QUEUE_ITEMS = 1000
+#: a batch of reads completing more lines than this is a flood: only its newest row is kept
+FLOOD_LINES = 10
+#: reads taken from the queue at once
+BATCH_ITEMS = 256
+
+
+def _newest_row(lines: list[bytes]) -> bytes:
+    """The newest line that is a temperature row (six or more numbers), else the newest."""
+    return next((x for x in reversed(lines) if parse_numbers(x, 6) is not None), lines[-1])
+
+
 class _Thermocouples:
     """A thermocouple logger on a serial port: ``serial.log`` and ``temperatures.csv``.
 
@@ -284,6 +298,14 @@ class _Thermocouples:
     stamped with ``clock`` (the run's clock, which also stamps the transcript, hence the
     points: one time line). A lost port is reopened every ``reopen_interval_s`` (at least
     0.05 s) until it opens.
+
+    A logger that sends faster than the log can be written (a flood, a logger misconfigured
+    to stream) must not leave the log behind the run: the queue between the reader and the
+    log is bounded (:data:`QUEUE_ITEMS`), the reads waiting are taken together, and a batch
+    that completes more than :data:`FLOOD_LINES` lines keeps only its newest row: a ``skip``
+    entry (how many lines were left out) then the newest line, in ``serial.log``, so that a
+    replay rebuilds the same ``temperatures.csv``; said once (``notify``). So is a logger
+    that sends rows with NaN (an open thermocouple), at its first such row.
     """
 
     def __init__(
@@ -293,19 +315,28 @@ class _Thermocouples:
         files: SessionFiles,
         clock: Callable[[], float] = time.time,
         reopen_interval_s: float = 1.0,
+        notify: Notify | None = None,
     ):
         self.folder, self.settings = folder, settings
+        self.notify: Notify = notify if notify is not None else (lambda level, message: None)
+        #: lines left out in floods; rows of NaN seen
+        self.skipped_lines = 0
+        self._said: set[str] = set()
 
         def stamp() -> str:
             return seconds_to_iso(clock())
 
         self.stamp = stamp
-        self.items: queue.Queue[Any] = queue.Queue()
+        self.items: queue.Queue[Any] = queue.Queue(maxsize=QUEUE_ITEMS)
         self.stop_event = threading.Event()
         log_path = folder / LOG_NAME
         self.sink = FileSink(folder / TEMPERATURES_NAME)
         self.recorder = StreamRecorder(
-            files.plan, files.balls, points=MemorySink(), temperatures=MemorySink()
+            files.plan,
+            files.balls,
+            points=MemorySink(),
+            temperatures=MemorySink(),
+            notify=self._recorder_said,
         )
         # a log there already (a resume, or a new run in a folder where an attempt stopped
         # before its first I++ command) is continued, never replaced: what it recorded stays
@@ -352,17 +383,62 @@ class _Thermocouples:
         self.log.append(item)
         self.recorder.apply(item)
 
+    def _recorder_said(self, level: str, message: str) -> None:
+        """The recorder's words about the logger's lines: a row of NaN said at once (the
+        first), the other skipped lines once."""
+        if "temperature line skipped" in message and "nan" in message.lower():
+            self._say_once("nan", f"the thermocouple logger sends NaN ({message})")
+        elif "skipped" in message:
+            self._say_once("skipped", message + " (said once)")
+
+    def _say_once(self, key: str, message: str) -> None:
+        if key not in self._said:
+            self._said.add(key)
+            self.notify("warn", message)
+
     def _drain(self) -> None:
         while not (self.stop_event.is_set() and self.items.empty()):
             try:
-                item = self.items.get(timeout=0.1)
+                batch = [self.items.get(timeout=0.1)]
             except queue.Empty:
                 continue
-            kind, source, when, data = item
-            payload = data if isinstance(data, bytes) else str(data).encode("utf-8", "replace")
-            self._record(LogEntry(when, kind, source, payload))
+            with contextlib.suppress(queue.Empty):
+                while len(batch) < BATCH_ITEMS:
+                    batch.append(self.items.get_nowait())
+            start = 0
+            for k in range(len(batch) + 1):  # runs of reads, each thinned, between the others
+                if k == len(batch) or batch[k][0] != "rx":
+                    self._record_reads(batch[start:k])
+                    if k < len(batch):
+                        kind, source, when, data = batch[k]
+                        text = str(data).encode("utf-8", "replace")
+                        self._record(LogEntry(when, kind, source, text))
+                    start = k + 1
             if len(self.recorder.temperatures.lines) > self._rows_before:
                 self.first_row.set()
+
+    def _record_reads(self, reads: list[Any]) -> None:
+        """Log and apply a run of reads; a flood's only by its newest row."""
+        if not reads:
+            return
+        data = b"".join(item[3] for item in reads)
+        splitter = LineSplitter()
+        lines = splitter.feed(data)
+        if len(lines) <= FLOOD_LINES:
+            for kind, source, when, payload in reads:
+                self._record(LogEntry(when, kind, source, payload))
+            return
+        when, source = reads[-1][2], reads[-1][1]
+        self.skipped_lines += len(lines) - 1
+        self._say_once(
+            "flood",
+            f"the thermocouple logger at {self.settings.url} sends faster than the log can be "
+            f"written ({len(lines)} lines waiting): only the newest row of each read is kept "
+            "(serial.log says how many lines each time)",
+        )
+        why = f"{len(lines) - 1} lines left out: the logger sends faster than they are logged"
+        self._record(LogEntry(when, "skip", source, why.encode("ascii")))
+        self._record(LogEntry(when, "rx", source, _newest_row(lines) + b"\n" + splitter.pending))
 
     def wait_first_row(self, timeout_s: float) -> bool:
         """Wait until the logger's first temperature row of this run is recorded (a data
@@ -380,3 +456,24 @@ class _Thermocouples:
         finally:
             self.log.close()
             self.sink.close()
+
+
+def check_processable(folder: Path) -> None:
+    """Read the recorded session as ``process`` reads it (its session file, every ball's
+    points fitted, the thermocouple log and its span over the steps); a run never calls a
+    session complete that ``process`` would refuse.
+
+    Raises
+    ------
+    AcquisitionError
+        Naming what ``process`` would say (everything recorded is kept).
+    """
+    from hexatherm.io.config import read_session
+    from hexatherm.workflows.process.measured import read_measured
+
+    try:
+        read_measured(read_session(folder))
+    except HexathermError as exc:
+        raise AcquisitionError(
+            f"every step was measured, but process would refuse {folder}: {exc}"
+        ) from exc
