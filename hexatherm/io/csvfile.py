@@ -20,12 +20,10 @@ Errors name the file, the line (header = line 1) and the column. What is refused
   ``2019-12-2`` and a date alone are refused rather than guessed; a file mixing times
   with and without a UTC offset (:func:`~hexatherm.io.records.check_time_zones`
   compares files); any year from 1 to 9999;
-* non-finite numbers (``nan``, ``inf``, ``1e400``); ``u_um`` (and ``u_x_um`` ..
-  ``u_z_um``) outside [0.001, 1000] um (below a nanometre no CMM knows a centre: a
-  ``1e-9`` or ``1e-300`` would make every pose's U zero and every target conform
-  without a guard band; the registration's weights are bounded there too),
-  a ``diameter`` <= 0, a ``form_um`` < 0, an ``n`` that is not a whole number >= 1;
-  temperatures outside [-60, 150] degC (kelvin?);
+* non-finite numbers (``nan``, ``inf``, ``1e400``); a ``u_um`` or ``u_x_um`` ..
+  ``u_z_um`` outside [:data:`U_UM_MIN`, :data:`U_UM_MAX`] um, a ``diameter`` <= 0,
+  a ``form_um`` < 0, an ``n`` that is not a whole number >= 1; temperatures outside
+  [-60, 150] degC (kelvin?);
 * a ball measured twice in one step (two groups of rows, or two centre rows) and
   a point label seen twice (:func:`~hexatherm.io.records.check_groups`;
   ``keep_later`` keeps the later group).
@@ -62,12 +60,10 @@ POINT_EXTRA = ("i", "j", "k")
 CORRELATION_DECIMALS = 6
 CORRELATION_SLACK = 1e-5
 
-#: The largest standard uncertainty ``u_um`` of a centre accepted, um
-U_UM_MAX = 1000.0
-#: The smallest, um: a nanometre, far below what any CMM knows a ball centre to (0.1 um
-#: probing noise over a few dozen points: 0.02 um), and the floor of the registration's
-#: weights (:func:`hexatherm.workflows.process.measured.registration_weights`)
-U_UM_MIN = 1e-3
+#: The largest and smallest standard uncertainty ``u_um`` of a centre accepted, um: below a
+#: nanometre no CMM knows a centre (1e-9 made every U 0 and every target conform; the
+#: registration's weights stop there too)
+U_UM_MAX, U_UM_MIN = 1000.0, 1e-3
 
 
 def drop_blank_rows(frame: pd.DataFrame) -> pd.DataFrame:
