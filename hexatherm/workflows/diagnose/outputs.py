@@ -61,11 +61,6 @@ RMS_DEFINITION = (
 )
 
 
-#: a named effect's parameter moving by more than this many standard errors when the
-#: round's runner-up is fitted with it is not pinned down by the data (story: "caution")
-RUNNER_UP_SHIFT_SE = 2.0
-
-
 def _number(value: float) -> float | None:
     return float(value) if math.isfinite(value) else None
 
@@ -286,13 +281,6 @@ def story(result: DiagnosisResult) -> str:
                     for p, shift in r.shift_in_se().items()
                 )
                 lines.append(f"   with the runner-up {r.name} fitted too: {moves}")
-                shifts = [abs(v) for v in r.shift_in_se().values() if math.isfinite(v)]
-                if shifts and max(shifts) > RUNNER_UP_SHIFT_SE:
-                    lines.append(
-                        f"   caution: {a.effect.name}'s parameters move by up to "
-                        f"{max(shifts):.1f} SE when {r.name} is fitted with it: the data "
-                        "do not pin them down"
-                    )
             for name, delta, cos in a.alternatives:
                 lines.append(
                     f"   note: {name} explains much the same residual (ΔBIC {delta:.1f}, "
