@@ -20,9 +20,10 @@ Errors name the file, the line (header = line 1) and the column. What is refused
   ``2019-12-2`` and a date alone are refused rather than guessed; a file mixing times
   with and without a UTC offset (:func:`~hexatherm.io.records.check_time_zones`
   compares files); any year from 1 to 9999;
-* non-finite numbers (``nan``, ``inf``, ``1e400``); ``u_um`` outside (0, 1000] um,
-  a ``diameter`` <= 0, a ``form_um`` < 0, an ``n`` that is not a whole number >= 1;
-  temperatures outside [-60, 150] degC (kelvin?);
+* non-finite numbers (``nan``, ``inf``, ``1e400``); a ``u_um`` or ``u_x_um`` ..
+  ``u_z_um`` outside [:data:`U_UM_MIN`, :data:`U_UM_MAX`] um, a ``diameter`` <= 0,
+  a ``form_um`` < 0, an ``n`` that is not a whole number >= 1; temperatures outside
+  [-60, 150] degC (kelvin?);
 * a ball measured twice in one step (two groups of rows, or two centre rows) and
   a point label seen twice (:func:`~hexatherm.io.records.check_groups`;
   ``keep_later`` keeps the later group).
@@ -59,8 +60,10 @@ POINT_EXTRA = ("i", "j", "k")
 CORRELATION_DECIMALS = 6
 CORRELATION_SLACK = 1e-5
 
-#: The largest standard uncertainty ``u_um`` of a centre accepted, um
-U_UM_MAX = 1000.0
+#: The largest and smallest standard uncertainty ``u_um`` of a centre accepted, um: below a
+#: nanometre no CMM knows a centre (1e-9 made every U 0 and every target conform; the
+#: registration's weights stop there too)
+U_UM_MAX, U_UM_MIN = 1000.0, 1e-3
 
 
 def _check_header(frame: pd.DataFrame, path: str, extras: tuple[str, ...]) -> None:
@@ -206,8 +209,9 @@ _CENTRE_RULES: dict[str, tuple[Callable[[npt.NDArray[np.float64]], npt.NDArray[n
     **dict.fromkeys(
         ("u_um", "u_x_um", "u_y_um", "u_z_um"),
         (
-            lambda v: (v > 0) & (v <= U_UM_MAX),
-            f"a standard uncertainty must be > 0 and <= {U_UM_MAX:g} um",
+            lambda v: (v >= U_UM_MIN) & (v <= U_UM_MAX),
+            f"a standard uncertainty must be >= {U_UM_MIN:g} um (no CMM knows a ball "
+            f"centre better than a nanometre) and <= {U_UM_MAX:g} um",
         ),
     ),
     **dict.fromkeys(

@@ -53,7 +53,9 @@ def calibrated(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, ob
 def test_the_level_is_chosen_and_the_truth_recovered(calibrated) -> None:
     session, out, result = calibrated
     doc = json.loads((out / "calibration.json").read_text())
-    assert doc["level"] == "joints" and doc["level_chosen"]  # no gain errors in the truth
+    assert doc["level"] == "joints"  # no gain errors in the truth
+    # the level's name, not a flag (issue 35, item 5); the flag is level_auto
+    assert doc["level_chosen"] == "joints" and doc["level_auto"] is True
     assert doc["rank"] == doc["n_parameters"] == 42
     params = pd.read_csv(out / "parameters.csv").set_index("parameter")
     truth = pd.read_csv(session / "truth" / "geometry.csv")

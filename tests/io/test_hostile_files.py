@@ -397,10 +397,14 @@ CASES: list[Case] = [
             message,
         )
         for text, message in (
-            ("0", "> 0 and <= 1000 um"),
-            ("-1", "> 0 and <= 1000 um"),
-            ("1e300", "> 0 and <= 1000 um"),
-            ("1000.5", "> 0 and <= 1000 um"),
+            ("0", ">= 0.001 um"),
+            ("-1", ">= 0.001 um"),
+            # issue 36, item 2: taken, a pose's U was 0.0000 and every target conformed
+            ("1e-9", "no CMM knows a ball centre better than a nanometre"),
+            ("1e-300", ">= 0.001 um"),
+            ("0.00099", ">= 0.001 um"),
+            ("1e300", "<= 1000 um"),
+            ("1000.5", "<= 1000 um"),
             ("nan", "not a finite number"),
             ("inf", "not a finite number"),
             ("1e400", "not a finite number"),

@@ -19,14 +19,11 @@ import numpy.typing as npt
 import pytest
 
 from hexatherm.core.diagnosis import RMS_RATIO_LIMIT, adequacy, fit_model, rms_um
+from hexatherm.core.diagnosis.standin import RUNNER_UP_SHIFT_SE
 from hexatherm.core.effects import EFFECTS, Effect, ThermocoupleLog, make_effect
 from hexatherm.core.plan import StepKind
 from hexatherm.typing import FloatArray
-from hexatherm.workflows.diagnose.outputs import (
-    RUNNER_UP_SHIFT_SE,
-    diagnosis_document,
-    story,
-)
+from hexatherm.workflows.diagnose.outputs import diagnosis_document, story
 from hexatherm.workflows.diagnose.report import report_markdown
 from hexatherm.workflows.diagnose.run import DiagnosisResult, read_for_diagnosis, run_diagnosis
 from hexatherm.workflows.simulate.campaigns import NOMINAL_HIDDEN, diagnosis_campaign
@@ -117,6 +114,10 @@ def test_an_effect_outside_the_registry_is_reported_as_unexplained(
         assert runner is not None
         moved = max(abs(v) for v in runner.shift_in_se().values()) > RUNNER_UP_SHIFT_SE
         assert (f"caution: {addition.effect.name}'s parameters move" in text) == moved
+        # one list feeds every output (issue 35, item 7): the story's cautions are
+        # diagnosis.json's
+        said = f"{addition.effect.name}'s parameters move"
+        assert any(said in c for c in doc["cautions"]) == moved
     # the floor (from consecutive references) is the noise the simulator added:
     # the same campaign without the hidden effect leaves it alone
     null = diagnosed_campaign((), 31)

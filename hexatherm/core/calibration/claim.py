@@ -40,6 +40,7 @@ show as a chi-square per degree of freedom above its limit.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -75,7 +76,10 @@ class ModelFloor:
     Attributes
     ----------
     sigma_um_urad : ndarray, shape (6,)
-        ``f_c`` of Tx .. Rz, um and urad.
+        ``f_c`` of Tx .. Rz, um and urad: the RMS over the new poses.
+    at_poses_um_urad : ndarray, shape (M, 6)
+        ``f_c(X_m)`` at each new pose (RMS over the sessions): what the growth leaves at
+        that pose, larger towards the stroke's ends (empty without a floor).
     growth_um_urad : ndarray, shape (6,)
         RMS of the pose change the growth makes at the new poses (what the floor would
         be if the level absorbed none of it), um and urad.
@@ -98,12 +102,20 @@ class ModelFloor:
     reference_temperature_C: float
     method: str = FLOOR_METHOD
     note: str = ""
+    at_poses_um_urad: FloatArray = dataclasses.field(default_factory=lambda: np.zeros((0, 6)))
 
     @classmethod
     def none(cls, note: str) -> ModelFloor:
         """No floor (``note`` says why): zero in every component."""
         none = np.zeros((0, 6))
         return cls(np.zeros(6), np.zeros(6), none, none, float("nan"), note=note)
+
+    def at(self, n_poses: int) -> FloatArray:
+        """The floor (n_poses, 6) at each of the ``n_poses`` new poses it was evaluated at
+        (its RMS at every pose when it was evaluated elsewhere, or there is none)."""
+        if self.at_poses_um_urad.shape == (n_poses, 6):
+            return self.at_poses_um_urad
+        return np.broadcast_to(self.sigma_um_urad, (n_poses, 6))
 
 
 def growth_as_parameters(
@@ -184,6 +196,7 @@ def model_floor(
         temps,
         at_origin,
         float(legs.reference_temperature_C),
+        at_poses_um_urad=np.sqrt(np.mean(to_um_urad(left) ** 2, axis=0)),
     )
 
 
@@ -201,6 +214,9 @@ def _jacobians(fit: CalibrationFit, poses: FloatArray) -> tuple[FloatArray, Floa
 
 def combined_sigma(parameters_um_urad: npt.ArrayLike, floor: ModelFloor) -> FloatArray:
     """The claimed standard uncertainty ``sqrt(sigma^2 + f^2)`` per component, ``sigma``
-    (..., 6) the parameters' part (um and urad)."""
+    (M, 6) the parameters' part (um and urad) at the M poses the floor was evaluated at
+    (``f`` the floor at each, :meth:`ModelFloor.at`), or (6,) or (M', 6) elsewhere (``f``
+    its RMS)."""
     sigma = np.asarray(parameters_um_urad, dtype=float)
-    return np.asarray(np.sqrt(sigma**2 + floor.sigma_um_urad**2), float)
+    f = floor.at(sigma.shape[0]) if sigma.ndim == 2 else floor.sigma_um_urad
+    return np.asarray(np.sqrt(sigma**2 + f**2), float)

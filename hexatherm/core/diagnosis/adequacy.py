@@ -403,13 +403,12 @@ def _bound_note(effect: Effect, unseen: Sequence[str] = (), blind_note: bool = T
     notes = []
     for p, (lo, hi) in zip(effect.parameters, effect.ranges, strict=True):
         value = effect.values[p]
-        span = hi - lo
         if p in unseen:
             if blind_note:
                 notes.append(
                     f"{p} has no effect on these data (not identifiable: kept at its start "
                     f"value {value:g})"
                 )
-        elif value <= lo + 1e-6 * span or value >= hi - 1e-6 * span:
+        elif effect.at_bound(p):
             notes.append(f"{p} at the bound of its range [{lo:g}, {hi:g}]")
     return "; ".join(notes)

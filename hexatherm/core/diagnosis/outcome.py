@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from hexatherm.core.diagnosis.adequacy import Adequacy
+from hexatherm.core.diagnosis.guard import TwinCheck
 from hexatherm.core.diagnosis.model import Addition, Candidate, Fit, rms_um
 from hexatherm.core.diagnosis.standin import cautions
 
@@ -28,6 +29,9 @@ class Diagnosis:
         Candidates not tried at all, and why (e.g. no air temperature).
     adequacy : Adequacy or None
         The verdict on the final model (None when not assessed).
+    twin_check : TwinCheck or None
+        The held-out twin correction of the targets with the session's model and the
+        diagnosed one (None: nothing added, or no target held out).
     """
 
     baseline: Fit
@@ -38,6 +42,13 @@ class Diagnosis:
     final_heldout_rms_um: float
     skipped: dict[str, str] = field(default_factory=dict)
     adequacy: Adequacy | None = None
+    twin_check: TwinCheck | None = None
+
+    @property
+    def writes_diagnosed(self) -> bool:
+        """Whether the diagnosed model is written (else the session's own): not when it
+        corrects the held-out targets worse (:mod:`hexatherm.core.diagnosis.guard`)."""
+        return self.twin_check is None or not self.twin_check.worse
 
     @property
     def baseline_rms_um(self) -> float:
@@ -58,5 +69,10 @@ class Diagnosis:
 
     def cautions(self) -> list[str]:
         """Added effects that may stand in for a cause outside the registry, and pairs
-        that trade off, in words (:mod:`hexatherm.core.diagnosis.standin`)."""
-        return cautions(self.added, self.final, self.chosen_fits())
+        that trade off, in words (:mod:`hexatherm.core.diagnosis.standin`); and why the
+        diagnosed model is not written, when it is not."""
+        out = cautions(self.added, self.final, self.chosen_fits())
+        if not self.writes_diagnosed:
+            assert self.twin_check is not None
+            out.append(self.twin_check.sentence([a.effect.name for a in self.added]))
+        return out

@@ -22,6 +22,7 @@ from hexatherm.core.diagnosis.fitting import (
     heldout_rms_many,
     heldout_rms_um,
 )
+from hexatherm.core.diagnosis.guard import twin_check
 from hexatherm.core.diagnosis.model import (
     DELTA_BIC_THRESHOLD,
     SIMILARITY_THRESHOLD,
@@ -215,6 +216,7 @@ def diagnose(
         heldout,
         skipped,
         adequacy(hexapod, obs, model),
+        twin_check(hexapod, obs, current, model, folds, blocks, runs),
     )
 
 

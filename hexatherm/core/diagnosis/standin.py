@@ -17,6 +17,10 @@ import numpy as np
 from hexatherm.core.diagnosis.model import Addition, Fit
 from hexatherm.core.effects import Effect
 
+#: a named effect's parameter moving by more than this many standard errors when the
+#: round's runner-up is fitted with it is not pinned down by the data (a caution)
+RUNNER_UP_SHIFT_SE = 2.0
+
 #: an added effect's parameters moving by more than this many of their standard errors
 #: (those of the round that added it) when a later effect joins the joint fit: the two
 #: trade off, and neither size is to be trusted
@@ -80,9 +84,28 @@ def trade_offs(added: Sequence[Addition], chosen: Sequence[Fit]) -> list[tuple[i
     return out
 
 
+def runner_up_caution(addition: Addition) -> str | None:
+    """The sentence saying that an added effect's parameters move by more than
+    :data:`RUNNER_UP_SHIFT_SE` when its round's runner-up is fitted with it, or None."""
+    runner = addition.runner_up
+    if runner is None:
+        return None
+    shifts = [abs(v) for v in runner.shift_in_se().values() if np.isfinite(v)]
+    if not shifts or max(shifts) <= RUNNER_UP_SHIFT_SE:
+        return None
+    return (
+        f"{addition.effect.name}'s parameters move by up to {max(shifts):.1f} SE when "
+        f"{runner.name} is fitted with it: the data do not pin them down"
+    )
+
+
 def cautions(added: Sequence[Addition], final: Fit, chosen: Sequence[Fit]) -> list[str]:
-    """The sentences that say an added effect may stand in for another cause, or that
-    two added effects trade off (one per effect or pair; empty: none)."""
+    """Every caution of a diagnosis, the one list that the story, its verdict line,
+    ``report.md``/``report.html`` and ``diagnosis.json``'s ``cautions`` print: an added
+    effect that may stand in for another cause (a parameter at a bound of its range or
+    far from its physical prior, :meth:`~hexatherm.core.effects.Effect.implausible`, or
+    unstable between folds), one whose parameters the runner-up moves, and two added
+    effects that trade off (empty: none)."""
     out = []
     for k, addition in enumerate(added):
         why = stand_in_reasons(addition, final.effects[k], final.unseen_of(k))
@@ -93,6 +116,9 @@ def cautions(added: Sequence[Addition], final: Fit, chosen: Sequence[Fit]) -> li
                 f"parameters {' and '.join(why)}); read it as the shape of the "
                 "disagreement, not its physical cause"
             )
+        moved = runner_up_caution(addition)
+        if moved is not None:
+            out.append(moved)
     for earlier, later, shift in trade_offs(added, chosen):
         a, b = added[earlier].effect.name, added[later].effect.name
         out.append(

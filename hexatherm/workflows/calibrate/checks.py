@@ -6,10 +6,13 @@
    by content: the SHA-256 of their measurement files (centres, points, DMIS), not their
    paths; one measurement file in two sessions is refused, naming both. (A temperatures
    log may be shared: one long log can cover several sessions.) The same measurements
-   in other bytes (a blank line added, CRLF line endings, rows reordered) are caught
-   once read (:func:`check_distinct_measurements`): independent measurements never
-   repeat a ball centre to the last digit, so two sessions of which half the centres of
-   either are those of the other are one session.
+   in other bytes or other digits (a blank line added, CRLF line endings, rows
+   reordered, re-saved by a spreadsheet with 15 digits, rounded to 1 nm, shifted by
+   1 nm) are caught once read (:func:`check_distinct_measurements`), by what was
+   measured: independent measurements of a ball centre differ by the CMM's noise, so
+   centres that agree far closer than that are one measurement; a tenth of either
+   session's centres shared is one session given twice (refused), fewer but at least
+   two a warning.
 2. **One hexapod file** (:func:`check_one_hexapod`): every number a session's poses rest
    on must be the same in every session's hexapod file: the convention, the base and
    platform joints, the stroke, and the legs' thermal model (segments, lengths, CTE,
@@ -46,6 +49,7 @@ from hexatherm.workflows.process.quality import quality_checks
 
 __all__ = [
     "MAX_REFERENCE_STATE_K",
+    "SHARED_CENTRES",
     "check_distinct_measurements",
     "check_distinct_sessions",
     "check_one_balls",
@@ -85,33 +89,82 @@ def check_distinct_sessions(specs: Sequence[Session]) -> None:
             seen[digest] = (spec, Path(path))
 
 
-#: two sessions are one when at least this share of either's measured ball centres are,
-#: to the last digit, centres of the other
-SHARED_CENTRES = 0.5
+#: two ball centres are one measurement when every coordinate agrees within this share of
+#: the centres' combined standard uncertainty (independent measurements of a centre differ
+#: by the CMM's noise: all three coordinates within 5 % of it by chance, about 2e-5) ...
+SAME_CENTRE_SHARE = 0.05
+#: ... or within this, mm (what a spreadsheet's 15 digits, a rounding to 1 nm or a shift
+#: by 1 nm change)
+SAME_CENTRE_FLOOR_MM = 2e-6
+#: two sessions are one when at least this share of either's measured ball centres are
+#: centres of the other (refused) ...
+SHARED_CENTRES = 0.1
+#: ... and share too many when at least this many are, below that share (a warning)
+MIN_SHARED_CENTRES = 2
+
+
+def _centre_noise_mm(result: ProcessResult) -> float:
+    """The typical standard uncertainty per coordinate of a session's centres (mm): the
+    median over its centres of the covariance ``process`` propagates (fits, file, cmm:
+    or the registration residuals); 0 when none is finite."""
+    from hexatherm.workflows.process.uncertainty import centre_covariance
+
+    u_um = centre_covariance(result).u_um
+    u_um = u_um[np.isfinite(u_um)]
+    return float(np.median(u_um)) * 1e-3 if u_um.size else 0.0
+
+
+def _finite_centres(result: ProcessResult) -> np.ndarray:
+    rows = np.asarray(result.centres.centres_mm, float).reshape(-1, 3)
+    return rows[np.isfinite(rows).all(axis=1)]
 
 
 def check_distinct_measurements(results: Sequence[ProcessResult]) -> None:
-    """Refuse two sessions that hold the same measurements in files whose bytes differ
-    (at least :data:`SHARED_CENTRES` of either's ball centres equal, to the last digit,
-    centres of the other)."""
-    seen: list[tuple[ProcessResult, set[tuple[float, ...]]]] = []
+    """Refuse two sessions that hold the same measurements in other files or other digits,
+    compared by what they measured, not by their bytes: a ball centre of one is a centre
+    of the other when every coordinate agrees within :data:`SAME_CENTRE_SHARE` of their
+    combined standard uncertainty (at least :data:`SAME_CENTRE_FLOOR_MM`), far closer
+    than two measurements of one ball ever come (the same pose measured twice differs by
+    the CMM's noise). At least :data:`SHARED_CENTRES` of either session's centres shared:
+    refused, naming both sessions; :data:`MIN_SHARED_CENTRES` or more below that share: a
+    ``warning:`` (an :class:`~hexatherm.errors.InputWarning`) naming both."""
+    from scipy.spatial import cKDTree
+
+    seen: list[tuple[ProcessResult, np.ndarray, float]] = []
     for result in results:
-        rows = np.asarray(result.centres.centres_mm, float).reshape(-1, 3) + 0.0  # -0 is 0
-        mine = {tuple(row) for row in rows[np.isfinite(rows).all(axis=1)].tolist()}
-        for other, theirs in seen:
-            shared = len(mine & theirs)
-            if mine and theirs and shared >= SHARED_CENTRES * min(len(mine), len(theirs)):
-                n = len(mine)
-                count = f"all {n} of its" if shared == n else f"{shared} of its {n}"
+        mine = _finite_centres(result)
+        noise = _centre_noise_mm(result)
+        for other, theirs, their_noise in seen:
+            if not (mine.size and theirs.size):
+                continue
+            tol = max(SAME_CENTRE_FLOOR_MM, SAME_CENTRE_SHARE * float(np.hypot(noise, their_noise)))
+            found = cKDTree(theirs).query_ball_point(mine, r=tol, p=np.inf, return_length=True)
+            shared = int(np.count_nonzero(found))
+            if shared < MIN_SHARED_CENTRES:
+                continue
+            n = len(mine)
+            count = f"all {n} of its" if shared == n else f"{shared} of its {n}"
+            what = (
+                f"{count} measured ball centres are those of {other.session.path} "
+                f"(every coordinate within {tol * 1e6:.3g} nm; two measurements of a ball "
+                f"differ by the CMM's noise, {np.hypot(noise, their_noise) * 1e3:.2g} um here)"
+            )
+            if shared >= SHARED_CENTRES * min(n, len(theirs)):
                 raise InputError(
-                    f"{count} measured ball centres are those of "
-                    f"{other.session.path}, to the last digit: the same measurements in "
-                    "another file (copied, re-saved, reordered?); a session given twice "
-                    "counts its poses twice; give each session once",
+                    f"{what}: the same measurements in another file (copied, re-saved, "
+                    "rounded, shifted?); a session given twice counts its poses twice; "
+                    "give each session once",
                     path=str(result.session.path),
                     field="measurements",
                 )
-        seen.append((result, mine))
+            warnings.warn(
+                InputWarning(
+                    f"{result.session.path}: {what}: those measurements count twice "
+                    "(copied from one session into the other?); give each once"
+                ),
+                stacklevel=2,
+            )
+        seen.append((result, mine, noise))
 
 
 def _same(a: np.ndarray | None, b: np.ndarray | None) -> bool:

@@ -2,6 +2,14 @@
 at poses drawn over the campaign's span and the level's model floor
 (:mod:`hexatherm.core.calibration.claim`), from the sessions' thermocouple logs at
 their first reference R0.
+
+The claim is a function of the pose (:func:`pose_claim` at any commanded poses): the
+parameters' part grows towards the ends of the stroke, and so does the floor (what the
+legs' growth leaves there). One number for the whole stroke over-claims the inner poses
+and under-claims the outer ones (1.4x and 0.76x on the twin's campaigns), so the claim
+is also given by stroke region (:func:`claim_regions`: inner, middle and outer thirds of
+the poses by their distance from the centre of the campaign's box) and along each axis
+of the box (:func:`claim_along_axes`).
 """
 
 from __future__ import annotations
@@ -9,6 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from hexatherm.core.calibration.claim import ModelFloor, combined_sigma, model_floor
 from hexatherm.core.effects import ThermocoupleLog
@@ -152,3 +161,107 @@ def pose_claim(
             poses,
         )
     return PoseClaim(poses, parameters_um_urad, floor)
+
+
+#: the stroke regions of :func:`claim_regions`: thirds of the new poses by their radius
+REGIONS = ("inner", "middle", "outer")
+#: where :func:`claim_along_axes` evaluates the claim: fractions of the box's half-width
+AXIS_STEPS = (-1.0, -0.5, 0.0, 0.5, 1.0)
+
+
+def _box(run: Calibration) -> tuple[FloatArray, FloatArray]:
+    """The centre and half-widths (6,) of the campaign's box (its commanded poses' span)."""
+    commanded = run.campaign.commanded
+    lower, upper = commanded.min(axis=0), commanded.max(axis=0)
+    return (lower + upper) / 2, (upper - lower) / 2
+
+
+def stroke_radius(run: Calibration, poses: FloatArray) -> FloatArray:
+    """Each pose's distance (M,) from the centre of the campaign's box in units of its
+    half-widths, RMS over the components the campaign varies: 0 at the centre, 1 at a
+    corner, 1/sqrt(6) at the end of one axis."""
+    centre, half = _box(run)
+    varied = half > 1e-12
+    if not varied.any():
+        return np.zeros(len(poses))
+    scaled = (np.atleast_2d(poses)[:, varied] - centre[varied]) / half[varied]
+    return np.asarray(np.sqrt(np.mean(scaled**2, axis=1)), float)
+
+
+@dataclass(frozen=True)
+class ClaimRegions:
+    """The claim by stroke region (:data:`REGIONS`).
+
+    Attributes
+    ----------
+    bounds : ndarray, shape (2,)
+        The radii (:func:`stroke_radius`) between inner and middle, middle and outer:
+        the thirds of the claim's new poses.
+    counts : ndarray of int, shape (3,)
+        New poses in each region.
+    rms_um_urad, worst_um_urad : ndarray, shape (3, 6)
+        RMS and largest claimed standard uncertainty (k = 1) of the new poses in each.
+    """
+
+    bounds: FloatArray
+    counts: npt.NDArray[np.intp]
+    rms_um_urad: FloatArray
+    worst_um_urad: FloatArray
+
+    def region_of(self, radius: FloatArray) -> npt.NDArray[np.intp]:
+        """The region (0 inner, 1 middle, 2 outer) of poses at ``radius``."""
+        return np.asarray(np.digitize(radius, self.bounds), np.intp)
+
+
+def claim_regions(run: Calibration, claim: PoseClaim) -> ClaimRegions:
+    """The claim over its new poses by stroke region (thirds by radius)."""
+    radius = stroke_radius(run, claim.poses)
+    bounds = np.quantile(radius, [1 / 3, 2 / 3])
+    region = np.digitize(radius, bounds)
+    sigma = claim.sigma_um_urad
+    rms_rows, worst_rows, counts = [], [], []
+    for k in range(len(REGIONS)):
+        mine = sigma[region == k]
+        counts.append(len(mine))
+        rms_rows.append(rms(mine, axis=0) if len(mine) else np.full(6, np.nan))
+        worst_rows.append(mine.max(axis=0) if len(mine) else np.full(6, np.nan))
+    return ClaimRegions(
+        np.asarray(bounds, float),
+        np.asarray(counts, np.intp),
+        np.asarray(rms_rows, float),
+        np.asarray(worst_rows, float),
+    )
+
+
+@dataclass(frozen=True)
+class ClaimAxes:
+    """The claim along each axis of the campaign's box, the other components at its
+    centre.
+
+    Attributes
+    ----------
+    positions : ndarray, shape (6, len(AXIS_STEPS))
+        The commanded value of the axis (mm, deg) at each step.
+    sigma_um_urad : ndarray, shape (6, len(AXIS_STEPS), 6)
+        The claimed standard uncertainty (k = 1) of every component there (NaN: out of
+        the stroke).
+    """
+
+    positions: FloatArray
+    sigma_um_urad: FloatArray
+
+
+def claim_along_axes(run: Calibration) -> ClaimAxes:
+    """The claim (:func:`pose_claim`) along each axis of the campaign's box."""
+    centre, half = _box(run)
+    steps = np.asarray(AXIS_STEPS)
+    poses = np.tile(centre, (6, len(steps), 1))
+    for axis in range(6):
+        poses[axis, :, axis] = centre[axis] + steps * half[axis]
+    flat = poses.reshape(-1, 6)
+    nominal = run.campaign.nominal
+    inside = ~nominal.check_stroke(nominal.igm(flat)).any(axis=1)
+    sigma = np.full(flat.shape, np.nan)
+    if inside.any():
+        sigma[inside] = pose_claim(run, flat[inside]).sigma_um_urad
+    return ClaimAxes(poses[np.arange(6), :, np.arange(6)], sigma.reshape(6, len(steps), 6))

@@ -16,7 +16,8 @@
   observability indices O1..O5, the pairs of parameters with |rho| > 0.9, the
   predicted-pose standard uncertainty at the targets (worst and RMS), and the claim for
   a new pose over the campaign's span (``new_pose_claim``: worst and typical standard
-  uncertainty, the level's model floor and how it was estimated; see
+  uncertainty, the level's model floor and how it was estimated, and the claim by stroke
+  region and along each axis of the campaign's box; see
   :mod:`hexatherm.workflows.calibrate.claim`).
 """
 
@@ -37,7 +38,15 @@ from hexatherm.core.residuals import POSE_COMPONENTS, rms
 from hexatherm.io.config import hexapod_to_yaml
 from hexatherm.io.csvout import csv_text
 from hexatherm.io.provenance import now_iso
-from hexatherm.workflows.calibrate.claim import PoseClaim, pose_claim
+from hexatherm.workflows.calibrate.claim import (
+    REGIONS,
+    ClaimAxes,
+    ClaimRegions,
+    PoseClaim,
+    claim_along_axes,
+    claim_regions,
+    pose_claim,
+)
 from hexatherm.workflows.calibrate.report import (
     StrokeMap,
     not_explained,
@@ -141,14 +150,54 @@ def _finite(value: float) -> float | None:
     return float(value) if math.isfinite(value) else None
 
 
-def claim_record(claim: PoseClaim) -> dict[str, Any]:
+def _per_component(values: Any) -> dict[str, float | None]:
+    return dict(zip(COMPONENTS, map(_finite, values), strict=True))
+
+
+def claim_map_record(regions: ClaimRegions, axes: ClaimAxes) -> dict[str, Any]:
+    """``new_pose_claim``'s ``by_region`` and ``along_axes`` (k = 1)."""
+    edges = [0.0, *map(float, regions.bounds), None]
+    return {
+        "by_region": {
+            "radius": "a pose's distance from the centre of the campaign's box in units of "
+            "its half-widths, RMS over the components the campaign varies (0 at the centre, "
+            "1 at a corner); the regions are thirds of the new poses",
+            "regions": [
+                {
+                    "region": name,
+                    "radius_from": edges[k],
+                    "radius_to": edges[k + 1],
+                    "n_poses": int(regions.counts[k]),
+                    "rms_um_urad": _per_component(regions.rms_um_urad[k]),
+                    "worst_um_urad": _per_component(regions.worst_um_urad[k]),
+                }
+                for k, name in enumerate(REGIONS)
+            ],
+        },
+        "along_axes": [
+            {
+                "axis": axis,
+                "unit": "mm" if k < 3 else "deg",
+                "positions": [float(v) for v in axes.positions[k]],
+                "u_um_urad": [
+                    None if np.isnan(row).any() else _per_component(row)
+                    for row in axes.sigma_um_urad[k]
+                ],
+            }
+            for k, axis in enumerate(POSE_COMPONENTS)
+        ],
+    }
+
+
+def claim_record(
+    claim: PoseClaim, regions: ClaimRegions | None = None, axes: ClaimAxes | None = None
+) -> dict[str, Any]:
     """``calibration.json``'s ``new_pose_claim``: what the calibration claims for a pose
-    it was not fitted to, over the campaign's span (standard uncertainties, k = 1)."""
+    it was not fitted to, over the campaign's span (standard uncertainties, k = 1), with
+    ``regions`` and ``axes`` by stroke region and along each axis."""
     floor = claim.floor
-
-    def per_component(values: Any) -> dict[str, float]:
-        return dict(zip(COMPONENTS, map(float, values), strict=True))
-
+    per_component = _per_component
+    extra = {} if regions is None or axes is None else claim_map_record(regions, axes)
     return {
         "meaning": "standard uncertainty (k = 1) of a pose the calibrated model predicts "
         "for a new commanded pose (not one of the campaign's), relative to O in the "
@@ -166,14 +215,19 @@ def claim_record(claim: PoseClaim) -> dict[str, Any]:
         "leg_temperature_R0_C": [[float(v) for v in row] for row in floor.leg_temperature_C],
         "leg_temperature_O_C": [[float(v) for v in row] for row in floor.origin_temperature_C],
         "leg_reference_temperature_C": _finite(floor.reference_temperature_C),
+        **extra,
     }
 
 
 def calibration_json(
-    run: Calibration, stroke: StrokeMap | None = None, claim: PoseClaim | None = None
+    run: Calibration,
+    stroke: StrokeMap | None = None,
+    claim: PoseClaim | None = None,
+    claim_map: tuple[ClaimRegions, ClaimAxes] | None = None,
 ) -> str:
     """``calibration.json`` (see the module text); with ``stroke``, the predicted
-    uncertainty over the campaign's span too; with ``claim``, the claim for new poses."""
+    uncertainty over the campaign's span too; with ``claim``, the claim for new poses
+    (by region and along the axes: ``claim_map``, computed when not given)."""
     fit = run.fit
     obs = fit.observability
     sigma = fit.predicted_sigma_um_urad(run.campaign.commanded)
@@ -197,7 +251,8 @@ def calibration_json(
     doc = {
         "format": "hexatherm-calibration/1",
         "level": fit.level,
-        "level_chosen": run.choice is not None,
+        "level_chosen": fit.level if run.choice is not None else None,
+        "level_auto": run.choice is not None,
         "levels": levels,
         "poses": run.campaign.poses,
         "n_poses": len(run.campaign.labels),
@@ -237,7 +292,9 @@ def calibration_json(
             "span_upper": [float(v) for v in stroke.upper],
         }
     if claim is not None:
-        doc["new_pose_claim"] = claim_record(claim)
+        if claim_map is None:
+            claim_map = (claim_regions(run, claim), claim_along_axes(run))
+        doc["new_pose_claim"] = claim_record(claim, *claim_map)
     return json.dumps(doc, indent=1, allow_nan=False) + "\n"
 
 
@@ -261,11 +318,12 @@ def output_files(
         claim = pose_claim(run)
     else:
         claim = pose_claim(run, stroke.poses, stroke.sigma_um_urad)
+    claim_map = (claim_regions(run, claim), claim_along_axes(run))
     files = {
         "hexapod.yaml": calibrated_hexapod_yaml(run),
         "parameters.csv": parameters_csv(run, coverage_factor),
         "residuals.csv": csv_text(residuals_frame(run)),
-        "calibration.json": calibration_json(run, stroke, claim),
+        "calibration.json": calibration_json(run, stroke, claim, claim_map),
     }
     if stroke is not None and inputs is not None:
         files["report.html"] = report_html(
@@ -277,6 +335,7 @@ def output_files(
             coverage_factor,
             claim,
             template_dir,
+            claim_map,
         )
     return files
 
@@ -291,6 +350,11 @@ def claim_lines(calibration_json_text: str, coverage_factor: float = 2.0) -> lis
     for name, key in (("worst", "worst_um_urad"), ("typical", "typical_rms_um_urad")):
         values = [k * v for v in record[key].values()]
         lines.append(f"{'  ' + name:19} " + " ".join(f"{v:9.3f}" for v in values))
+    for region in record.get("by_region", {}).get("regions", []):
+        cells = " ".join(
+            f"{'':>9}" if v is None else f"{k * v:9.3f}" for v in region["rms_um_urad"].values()
+        )
+        lines.append(f"{'  ' + region['region'] + ' third':19} {cells}   (RMS)")
     floor = " ".join(f"{v:9.3f}" for v in record["floor_um_urad"].values())
     lines.append(
         f"{'  floor (k = 1)':19} {floor}"

@@ -9,7 +9,9 @@ the level was chosen; the parameters with their expanded uncertainty ``U = k u``
 largest correlation, pairs above 0.9 flagged; the observability (singular values,
 condition number, O1..O5); the map of the predicted uncertainty of a calibrated pose
 over Tx, Ty (the other components at zero) and its worst value over the poses the
-campaign spans; the residuals of every target before and after; the provenance.
+campaign spans; the claim for a new pose by stroke region and along each axis of the
+campaign's box (the template's own block ``claim_map``); the residuals of every target
+before and after; the provenance.
 """
 
 from __future__ import annotations
@@ -27,9 +29,23 @@ from hexatherm.core.residuals import rms
 from hexatherm.io.csvout import ROW_RESOLUTION, fixed_text
 from hexatherm.io.provenance import current_run, now_iso
 from hexatherm.typing import FloatArray
-from hexatherm.workflows.calibrate.claim import PoseClaim, span_poses
+from hexatherm.workflows.calibrate.claim import (
+    AXIS_STEPS,
+    REGIONS,
+    ClaimAxes,
+    ClaimRegions,
+    PoseClaim,
+    span_poses,
+)
 from hexatherm.workflows.calibrate.run import Calibration
-from hexatherm.workflows.report.page import Cell, figure, provenance, signature_table, table
+from hexatherm.workflows.report.page import (
+    Cell,
+    Table,
+    figure,
+    provenance,
+    signature_table,
+    table,
+)
 from hexatherm.workflows.report.render import render_page
 from hexatherm.workflows.report.text import exact, fixed, unit_text
 
@@ -247,6 +263,63 @@ def claim_lines(
     return lines
 
 
+def claim_map_tables(
+    claim_map: tuple[ClaimRegions, ClaimAxes] | None, k: float
+) -> tuple[Table | None, Table | None]:
+    """The claim for a new pose by stroke region and along each axis of the campaign's
+    box, U = k u (the report's own block, ``claim_map``), or None without a claim."""
+    if claim_map is None:
+        return None, None
+    regions, axes = claim_map
+    edges = [0.0, *regions.bounds, np.inf]
+    rows: list[list[Cell]] = []
+    for i, name in enumerate(REGIONS):
+        upper = "" if not np.isfinite(edges[i + 1]) else f"{edges[i + 1]:.2f}"
+        reach = f"{edges[i]:.2f} – {upper}" if upper else f"above {edges[i]:.2f}"
+        for what, values in (("RMS", regions.rms_um_urad[i]), ("worst", regions.worst_um_urad[i])):
+            row: list[Cell] = [f"{name} third, {what}", reach, str(int(regions.counts[i]))]
+            rows.append(row + [fixed(k * v, u) for v, u in zip(values, UNITS, strict=True)])
+    by_region = table(
+        [
+            [("stroke region", 1), ("radius", 1), ("poses", 1)]
+            + [
+                (f"{c} ({'µm' if u == 'um' else 'µrad'})", 1)
+                for c, u in zip(COMPONENTS, UNITS, strict=True)
+            ]
+        ],
+        rows,
+        caption=f"Claimed uncertainty U (k = {exact(k)}) of a new calibrated pose by stroke "
+        "region: the new poses over the campaign's box in thirds by their distance from "
+        "its centre (radius: in units of the box's half-widths, RMS over the components; "
+        "0 at the centre, 1 at a corner). Each pose's claim is the parameters' "
+        "uncertainty propagated to it and the model floor at it: both grow towards the "
+        "ends of the stroke.",
+    )
+    arows: list[list[Cell]] = []
+    for a, axis in enumerate(COMPONENTS):
+        unit = "mm" if a < 3 else "deg"
+        cells: list[Cell] = [axis]
+        for j in range(len(AXIS_STEPS)):
+            sigma = axes.sigma_um_urad[a, j]
+            where = f"{axes.positions[a, j]:+.3g} {unit}"
+            if np.isnan(sigma).any():
+                cells.append(f"{where}: out of the stroke")
+            else:
+                cells.append(
+                    f"{where}: {fixed(k * sigma[:3].max(), 'um')} µm, "
+                    f"{fixed(k * sigma[3:].max(), 'urad')} µrad"
+                )
+        arows.append(cells)
+    along = table(
+        [[("axis", 1)] + [(f"{step:+g} × half-width", 1) for step in AXIS_STEPS]],
+        arows,
+        caption=f"Claimed uncertainty U (k = {exact(k)}) of a new calibrated pose along each "
+        "axis of the campaign's box, the other components at its centre: the largest of "
+        "Tx, Ty, Tz (µm) and of Rx, Ry, Rz (µrad) at each commanded value.",
+    )
+    return by_region, along
+
+
 def sessions_text(run: Calibration) -> tuple[str, str]:
     """The hexapod (its name and file) and every session with the dates it was measured."""
     from hexatherm.workflows.report.html import session_dates
@@ -266,12 +339,14 @@ def report_html(
     coverage_factor: float = COVERAGE_FACTOR,
     claim: PoseClaim | None = None,
     template_dir: Path | None = None,
+    claim_map: tuple[ClaimRegions, ClaimAxes] | None = None,
 ) -> str:
     """The calibration's report page (see the module text); ``lab_fields``: a lab file's
     identification (the sessions' own ``identification:`` over it, in the order given);
     ``coverage_factor``: k of every expanded uncertainty ``U = k u`` it prints; ``claim``:
     the claim for new poses (the parameters' part alone, over ``stroke``, without it);
-    ``template_dir``: a lab's templates, over the package's."""
+    ``template_dir``: a lab's templates, over the package's; ``claim_map``: the claim by
+    stroke region and along the axes (its tables)."""
     from hexatherm.io.config.identity import identification
     from hexatherm.workflows.report.html import header_rows
 
@@ -355,6 +430,7 @@ def report_html(
         merged.update(result.session.identification)
     ident = identification(merged, lab_fields)
     title = "hexatherm calibration"
+    claim_regions_table, claim_axes_table = claim_map_tables(claim_map, k)
     return render_page(
         "calibration.html.j2",
         template_dir,
@@ -416,5 +492,7 @@ def report_html(
             "over the product of their standard uncertainties); near ±1: the campaign "
             "does not tell the two apart.",
         ),
+        claim_regions=claim_regions_table,
+        claim_axes=claim_axes_table,
         provenance=provenance(current_run(), inputs, folder, now_iso()),
     )

@@ -33,6 +33,10 @@ these extensions, documented in docs/diagnose.md:
   their range or outside it) and ``runner_up`` (the round's runner-up fitted
   with it: the effect's parameters and standard errors without and with it).
 
+* ``written_model`` (``"diagnosed"``, or ``"session"`` when the diagnosed model corrects
+  the held-out targets worse than the session's own: then ``hexapod.yaml`` is the
+  session's model and a caution says why) and ``twin_check`` (issue 35: the held-out
+  twin correction of the targets, :mod:`hexatherm.core.diagnosis.guard`);
 * ``cautions`` (issue 24): the sentences saying that an added effect may stand in
   for a cause outside the registry, or that two added effects trade off
   (:mod:`hexatherm.core.diagnosis.standin`); in each ``added`` entry, ``folds``:
@@ -51,6 +55,7 @@ from typing import Any
 
 from hexatherm import __version__
 from hexatherm.core.diagnosis import Adequacy, Candidate, Folds, RunnerUp
+from hexatherm.core.diagnosis.guard import TwinCheck
 from hexatherm.io.config import hexapod_to_yaml
 from hexatherm.workflows.diagnose.run import DiagnosisResult
 
@@ -59,11 +64,6 @@ RMS_DEFINITION = (
     "predicted ball centre, um; frame O fitted to all steps (held out: fitted on "
     "every other block of time, evaluated on the others)"
 )
-
-
-#: a named effect's parameter moving by more than this many standard errors when the
-#: round's runner-up is fitted with it is not pinned down by the data (story: "caution")
-RUNNER_UP_SHIFT_SE = 2.0
 
 
 def _number(value: float) -> float | None:
@@ -142,6 +142,17 @@ def _folds(folds: Folds | None) -> dict[str, Any] | None:
     }
 
 
+def _twin_check(check: TwinCheck | None) -> dict[str, Any] | None:
+    if check is None:
+        return None
+    return {
+        "own_heldout_um": _number(check.own_um),
+        "diagnosed_heldout_um": _number(check.diagnosed_um),
+        "n_targets": check.n_targets,
+        "diagnosed_worse": check.worse,
+    }
+
+
 def diagnosis_document(result: DiagnosisResult) -> dict[str, Any]:
     """The content of ``diagnosis.json`` (spec keys first, then the extensions)."""
     diagnosis = result.diagnosis
@@ -184,6 +195,8 @@ def diagnosis_document(result: DiagnosisResult) -> dict[str, Any]:
         "unexplained_rms_um": None if verdict is None else _number(verdict.unexplained_rms_um),
         "adequacy": None if verdict is None else _adequacy(verdict),
         "cautions": diagnosis.cautions(),
+        "written_model": "diagnosed" if diagnosis.writes_diagnosed else "session",
+        "twin_check": _twin_check(diagnosis.twin_check),
         "baseline_heldout_rms_um": _number(diagnosis.baseline_heldout_rms_um),
         "final_heldout_rms_um": _number(diagnosis.final_heldout_rms_um),
         "rounds": [[_candidate(c) for c in round_] for round_ in diagnosis.rounds],
@@ -203,8 +216,12 @@ def diagnosis_json(result: DiagnosisResult) -> str:
 
 
 def diagnosed_hexapod_yaml(result: DiagnosisResult) -> str:
-    """The hexapod file with the added effects (their joint fit) appended to ``thermal_model``."""
+    """The hexapod file with the added effects (their joint fit) appended to ``thermal_model``;
+    the session's own model when the diagnosed one corrects the held-out targets worse
+    (:attr:`~hexatherm.core.diagnosis.Diagnosis.writes_diagnosed`: a caution says so)."""
     hexapod = result.data.hexapod
+    if not result.diagnosis.writes_diagnosed:
+        return hexapod_to_yaml(hexapod)
     added = tuple(e.as_dict() for e in result.diagnosis.final.effects)
     effects = tuple(hexapod.effects) + added
     return hexapod_to_yaml(dataclasses.replace(hexapod, effects=effects))
@@ -286,13 +303,6 @@ def story(result: DiagnosisResult) -> str:
                     for p, shift in r.shift_in_se().items()
                 )
                 lines.append(f"   with the runner-up {r.name} fitted too: {moves}")
-                shifts = [abs(v) for v in r.shift_in_se().values() if math.isfinite(v)]
-                if shifts and max(shifts) > RUNNER_UP_SHIFT_SE:
-                    lines.append(
-                        f"   caution: {a.effect.name}'s parameters move by up to "
-                        f"{max(shifts):.1f} SE when {r.name} is fitted with it: the data "
-                        "do not pin them down"
-                    )
             for name, delta, cos in a.alternatives:
                 lines.append(
                     f"   note: {name} explains much the same residual (ΔBIC {delta:.1f}, "
