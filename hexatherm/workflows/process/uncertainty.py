@@ -55,6 +55,7 @@ from hexatherm.core.propagation import (
 from hexatherm.core.smoothbias import GrowthExcess
 from hexatherm.core.spherefit import fit_spheres, refine_spheres
 from hexatherm.typing import FloatArray
+from hexatherm.workflows.process.carryerror import CarryError, add_common, carry_error
 from hexatherm.workflows.process.heights import reference_height_scale
 from hexatherm.workflows.process.measured import fit_radii, point_groups, registration_weights
 from hexatherm.workflows.process.pipeline import ProcessResult
@@ -142,6 +143,9 @@ class PoseUncertainty:
         With ``--interpolation smooth`` when the smooth fit is used: the fit's own error
         of the growth at R beyond the references' noise (:func:`smooth_excess`), in
         ``covariance``, ``linear_covariance`` and the corrected poses' own part.
+    carry : CarryError, optional
+        The error of carrying O and R0 to R0's thermal state (common to all targets), in
+        ``covariance``, ``linear_covariance``, the common part and ``between_covariance``.
     """
 
     conventional_u: FloatArray
@@ -158,6 +162,7 @@ class PoseUncertainty:
     between_covariance: FloatArray | None = None
     repeats: tuple[RepeatCheck, ...] = ()
     smooth_excess: GrowthExcess | None = None
+    carry: CarryError | None = None
 
     def ratio_to_linear(self) -> FloatArray:
         """Reported over linear standard uncertainty, (M, 12) (1 for the linear method)."""
@@ -414,6 +419,7 @@ def pose_chain(result: ProcessResult) -> PoseChain:
         weights=registration_weights(result.centres.u_um),
         initial_poses=corr.corrected,
         growth_weights=corr.growth_weights,
+        origin_shift=None if result.carry is None else result.carry.shift,
     )
 
 
@@ -472,6 +478,11 @@ def pose_uncertainty(
     if between is None:
         between = len(result.correction.target_index) <= BETWEEN_MAX_TARGETS
     common_u, own_u, pairs = shared_parts(jacobian, centres.cov_mm2, u, linear, between)
+    carried = carry_error(result, chain, jacobian, centres.cov_mm2)  # common
+    covariance, linear, common_u, own_u, pairs = add_common(
+        carried, covariance, linear, common_u, own_u, pairs
+    )
+    u = np.sqrt(np.clip(np.diagonal(covariance, axis1=1, axis2=2), 0.0, None))
     excess = smooth_excess(result, chain, centres.cov_mm2)
     if excess is not None:
         # the smooth fit's own error: a target's own part, independent between targets
@@ -499,6 +510,7 @@ def pose_uncertainty(
         between_covariance=pairs,
         repeats=repeat_checks(result, centres.cov_mm2),
         smooth_excess=None if excess is None else excess[1],
+        carry=carried,
     )
 
 
