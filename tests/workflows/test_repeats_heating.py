@@ -18,54 +18,22 @@ import pytest
 from click.testing import CliRunner
 
 from hexatherm.cli import main
-from hexatherm.core.plan import Plan
-from hexatherm.core.planning import sequence_steps
 from hexatherm.workflows.process.pipeline import process_session
 from hexatherm.workflows.process.uncertainty import pose_uncertainty
-from hexatherm.workflows.simulate.twinsession import (
-    Heating,
-    TwinSessionSpec,
-    simulate_session,
-    write_files,
-)
-from tests.sessions import BALLS, REFERENCE, ROOT
+from hexatherm.workflows.simulate.twinsession import simulate_session, write_files
+from tests.workflows.test_repeats import CMM, spec
 
-HEXAPOD_TEXT = (ROOT / "configs" / "symetrie-like.yaml").read_text()
-GAIN = (3.0, 7.0, 2.0, 3.0, 9.0, 3.5)
 SEEDS = 20
 SCALE = np.array([1e3] * 3 + [np.pi / 180 * 1e6] * 3)  # um, urad
 
 
-def spec(seed: int, repeats: int = 4) -> TwinSessionSpec:
-    rng = np.random.default_rng(1)
-    targets = rng.uniform(-1, 1, (6, 6)) * [10, 10, 5, 1, 1, 2]
-    plan = Plan.from_steps(
-        sequence_steps(targets, REFERENCE, origin_repeats=repeats, reference0_repeats=repeats),
-        reference_pose=REFERENCE,
-    )
-    return TwinSessionSpec(
-        name="s",
-        hexapod_text=HEXAPOD_TEXT,
-        balls=BALLS,
-        plan=plan,
-        heating=Heating(on_s=0.0, tau_s=2400.0, gain_C=GAIN),
-        seed=seed,
-        output="centres",
-        fit_centres=True,
-        point_noise_mm=1e-3,
-        points_per_ball=25,
-        cap_half_angle_deg=70.0,
-    )
-
-
 def write(folder: Path, seed: int) -> tuple[Path, np.ndarray]:
-    """The session folder and the twin's corrected truth of its targets."""
-    s = spec(seed)
+    """The session folder (O and R0 x4, 6 targets) and the twin's corrected truth of its
+    targets."""
+    s = spec(folder, seed, repeats=4, n_targets=6)
     simulated = simulate_session(s)
     write_files(simulated.files, folder)
-    (folder / "session.yaml").write_text(
-        (folder / "session.yaml").read_text() + "cmm: {point_noise_um: 1.0, points_per_ball: 25}\n"
-    )
+    (folder / "session.yaml").write_text((folder / "session.yaml").read_text() + CMM)
     targets = [i for i, label in enumerate(s.plan.labels) if label.startswith("S")]
     return folder, simulated.truth.corrected_pose[targets]
 
