@@ -2,7 +2,8 @@
 replaces only that.
 
 ``.hexatherm-manifest.json`` lists the files hexatherm wrote in a folder (relative
-path, SHA-256, size, time), the sub-folders it made, and the hexatherm version.
+path, SHA-256, size, time, and the command that wrote it), the sub-folders it made,
+and the hexatherm version.
 :func:`foreign_entries` names what a folder holds beyond that: files not listed,
 files changed since they were written, folders nobody vouches for. The rules that
 use it are in :mod:`hexatherm.io.outputs`.
@@ -64,6 +65,10 @@ class Manifest:
     recorded : tuple of str
         The files the recording command wrote (JSON ``recorded_files``): measured data,
         which no ``--overwrite`` replaces.
+    commands : dict of str to str
+        Relative path -> the command that wrote it (JSON ``command`` of its entry:
+        ``process``, ``report``); absent for a file written outside a command line, or
+        by a hexatherm that did not say.
     """
 
     files: dict[str, tuple[str, ...]] = field(default_factory=dict)
@@ -73,6 +78,7 @@ class Manifest:
     version: str = __version__
     recorder: str | None = None
     recorded: tuple[str, ...] = ()
+    commands: dict[str, str] = field(default_factory=dict)
 
     def to_json(self) -> bytes:
         """The manifest file's content (JSON, UTF-8)."""
@@ -86,6 +92,8 @@ class Manifest:
                 entry["bytes"] = self.sizes[name]
             if name in self.times:
                 entry["written_utc"] = self.times[name]
+            if name in self.commands:
+                entry["command"] = self.commands[name]
             files[name] = entry
         doc = {
             "format": MANIFEST_FORMAT,
@@ -129,14 +137,28 @@ class Manifest:
                 manifest.sizes[str(name)] = entry["bytes"]
             if isinstance(entry.get("written_utc"), str):
                 manifest.times[str(name)] = entry["written_utc"]
+            if isinstance(entry.get("command"), str):
+                manifest.commands[str(name)] = entry["command"]
         manifest.folders = tuple(str(f) for f in raw_folders)
         return manifest
 
-    def record(self, name: str, digest: str, size: int, replaces: str | None = None) -> None:
-        """Record that ``name`` is written with content ``digest`` (replacing ``replaces``)."""
+    def record(
+        self,
+        name: str,
+        digest: str,
+        size: int,
+        replaces: str | None = None,
+        command: str | None = None,
+    ) -> None:
+        """Record that ``name`` is written with content ``digest`` (replacing ``replaces``),
+        by the command ``command`` (``None``: outside a command line)."""
         self.files[name] = (digest,) if replaces is None else (digest, replaces)
         self.sizes[name] = size
         self.times[name] = _now_utc()
+        if command is None:
+            self.commands.pop(name, None)
+        else:
+            self.commands[name] = command
 
 
 def read_regular_bytes(path: Path, limit: int) -> bytes:
@@ -160,13 +182,14 @@ def read_manifest(folder: PathLike) -> Manifest | None:
     """The manifest of ``folder``, or ``None`` when it has none (or an unreadable one).
 
     An unreadable manifest vouches for nothing: the folder is then treated as
-    holding only foreign files.
+    holding only foreign files. So does one nested deeper than JSON is read (a
+    hand-made ``[[[[...]]]]``: Python's parser recurses).
     """
     try:
         return Manifest.from_json(
             read_regular_bytes(Path(folder) / MANIFEST_NAME, MANIFEST_MAX_BYTES)
         )
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return None
 
 
@@ -244,8 +267,9 @@ def _foreign_walk(
             found.append((rel, "changed since hexatherm wrote it"))
 
 
-def manifest_for_tree(folder: Path) -> Manifest:
-    """A manifest of every file and folder under ``folder`` (a freshly written output)."""
+def manifest_for_tree(folder: Path, command: str | None = None) -> Manifest:
+    """A manifest of every file and folder under ``folder`` (a freshly written output),
+    each file written by ``command``."""
     manifest = Manifest()
     folders: list[str] = []
     for top, dirs, files in os.walk(folder):
@@ -259,6 +283,6 @@ def manifest_for_tree(folder: Path) -> Manifest:
             full = Path(top) / name
             digest = sha256_file(full)
             if digest is not None:
-                manifest.record(rel, digest, full.lstat().st_size)
+                manifest.record(rel, digest, full.lstat().st_size, command=command)
     manifest.folders = tuple(sorted(folders))
     return manifest

@@ -17,6 +17,13 @@ Three rules, for every output of every command:
    manifest of its folder lists it with its current SHA-256. Anything else is refused
    with :class:`ForeignFilesError`, naming the files.
 
+   And only what the *same command* wrote: each file's entry names the command that
+   wrote it (``provenance.json`` says it for a folder whose manifest does not), and
+   ``report -o plan.yaml``, ``diagnose -o SESSION/results`` or ``process -o`` a
+   diagnosis refuse another command's output, as they refuse a file with no such
+   record (:func:`other_commands`). A run outside the command line (a script) is a
+   command of its own: it replaces only what such a run wrote.
+
    A file *changed* since hexatherm wrote it counts as foreign: once a person has
    edited a result (a note, a corrected row), it is their data, and ``--overwrite``
    (which means "replace my previous run") must not destroy it silently. Moving it
@@ -99,7 +106,12 @@ from hexatherm.io.manifest import (
     read_regular_bytes,
     sha256_file,
 )
-from hexatherm.io.provenance import PROVENANCE_NAME, current_run, provenance_json
+from hexatherm.io.provenance import (
+    PROVENANCE_NAME,
+    current_run,
+    provenance_json,
+    recorded_command,
+)
 
 __all__ = [
     "SESSION_FILE",
@@ -107,6 +119,7 @@ __all__ = [
     "check_output",
     "check_output_settled",
     "hexatherms_own",
+    "other_commands",
     "output_dir",
     "session_entries",
     "write_output_file",
@@ -202,9 +215,66 @@ def session_entries(folder: PathLike) -> list[tuple[str, str]]:
     return sorted(found)
 
 
+def _writer() -> str | None:
+    """The command writing now (``None`` outside a command line)."""
+    facts = current_run()
+    return None if facts is None else facts.command
+
+
+def _written_by(folder: Path, manifest: Manifest, name: str) -> str | None:
+    """The command that wrote ``name`` of ``folder``: its manifest entry's, else the one
+    ``provenance.json`` names when the manifest vouches for it (a folder written whole)."""
+    command = manifest.commands.get(name)
+    if command is None and PROVENANCE_NAME in manifest.files:
+        path = folder / PROVENANCE_NAME
+        if sha256_file(path) in manifest.files[PROVENANCE_NAME]:
+            command = recorded_command(path)
+    return command
+
+
+def _not_by(command: str | None, writer: str | None) -> str:
+    if command is None:
+        return "written by hexatherm with no record of its command"
+    if writer is None:
+        return f"written by hexatherm {command}"
+    return f"written by hexatherm {command}, not {writer}"
+
+
+def other_commands(folder: PathLike, writer: str | None) -> list[tuple[str, str]]:
+    """The files of ``folder`` its manifest lists that another command than ``writer``
+    wrote (or with no record of which), as foreign entries: ``--overwrite`` replaces
+    only an output of the same command (``report -o plan.yaml``, ``diagnose -o``
+    process's results are refused).
+
+    >>> import tempfile
+    >>> from hexatherm.io.provenance import run_context
+    >>> top = Path(tempfile.mkdtemp())
+    >>> with run_context("process", [], {}), output_dir(top / "results") as tmp:
+    ...     _ = (tmp / "poses.csv").write_text("Tx_mm\\n")
+    >>> other_commands(top / "results", "diagnose")
+    [('poses.csv', 'written by hexatherm process, not diagnose'), \
+('provenance.json', 'written by hexatherm process, not diagnose')]
+    >>> other_commands(top / "results", "process")
+    []
+    """
+    top = Path(folder)
+    manifest = read_manifest(top)
+    if manifest is None:
+        return []  # nothing vouched for: foreign_entries names it
+    found = []
+    for name in sorted(manifest.files):
+        if not os.path.lexists(top / name):
+            continue
+        command = _written_by(top, manifest, name)
+        if command != writer:
+            found.append((name, _not_by(command, writer)))
+    return found
+
+
 def _replace_entries(target: Path, sessions: bool) -> list[tuple[str, str]]:
     """What keeps ``--overwrite`` from replacing the folder ``target``: foreign entries,
-    a session (unless the output is one), the files a recording command recorded there."""
+    a session (unless the output is one), the files a recording command recorded there,
+    another command's output."""
     found = set(foreign_entries(target))
     if not sessions:
         found |= set(session_entries(target))
@@ -212,11 +282,22 @@ def _replace_entries(target: Path, sessions: bool) -> list[tuple[str, str]]:
     if manifest is not None and manifest.recorder is not None:
         why = f"recorded by hexatherm {manifest.recorder}"
         found |= {(name, why) for name in manifest.recorded} or {(MANIFEST_NAME, why)}
-    return sorted(found)
+        return sorted(found)
+    named = {name for name, _ in found}
+    others = [e for e in other_commands(target, _writer()) if e[0] not in named]
+    return sorted(found) + others  # what is not hexatherm's first, then another's output
 
 
 def _foreign_message(option: str, output: str, entries: list[tuple[str, str]]) -> str:
-    named = ", ".join(f"{name} ({why})" for name, why in entries[:_NAMED])
+    """The refusal's line: the first :data:`_NAMED` entries, another command's files
+    together (``a.csv, b.csv (written by hexatherm process, not diagnose)``)."""
+    groups: dict[str, list[str]] = {}
+    for name, why in entries[:_NAMED]:
+        key = why if why.startswith("written by hexatherm") else f"{name}\0{why}"
+        groups.setdefault(key, []).append(name)
+    named = ", ".join(
+        f"{', '.join(names)} ({key.rpartition(chr(0))[2]})" for key, names in groups.items()
+    )
     more = f" and {len(entries) - _NAMED} more" if len(entries) > _NAMED else ""
     return (
         f"{option} {output}: --overwrite replaces only what hexatherm wrote, and it holds "
@@ -227,8 +308,9 @@ def _foreign_message(option: str, output: str, entries: list[tuple[str, str]]) -
 # --------------------------------------------------------------------------- checks
 
 
-def _file_foreign(path: Path) -> str | None:
-    """Why the existing file ``path`` is not hexatherm's to replace, or ``None``."""
+def _file_foreign(path: Path, same_command: bool = False) -> str | None:
+    """Why the existing file ``path`` is not hexatherm's to replace, or ``None``; nor the
+    command's writing now (``same_command``)."""
     if path.is_symlink() or not path.is_file():
         return "not a regular file"
     manifest = read_manifest(path.parent)
@@ -241,6 +323,11 @@ def _file_foreign(path: Path) -> str | None:
         return f"recorded by hexatherm {manifest.recorder}"
     if sha256_file(path) not in hashes:
         return "changed since hexatherm wrote it"
+    if same_command:
+        writer = _writer()
+        command = _written_by(path.parent, manifest, path.name)
+        if command != writer:
+            return _not_by(command, writer)
     return None
 
 
@@ -322,7 +409,7 @@ def check_output(
     else:
         if target.is_dir():
             raise OutputExistsError(f"{given} exists and is a folder")
-        why = _file_foreign(target)
+        why = _file_foreign(target, same_command=True)
         entries = [] if why is None else [(target.name, why)]
     if entries:
         raise ForeignFilesError(_foreign_message(option, given, entries), entries=entries)
@@ -417,7 +504,7 @@ def output_dir(
         facts = current_run()
         if facts is not None:  # a command line's run: where the folder came from
             (tmp / PROVENANCE_NAME).write_text(provenance_json(facts, inputs), encoding="utf-8")
-        (tmp / MANIFEST_NAME).write_bytes(manifest_for_tree(tmp).to_json())
+        (tmp / MANIFEST_NAME).write_bytes(manifest_for_tree(tmp, _writer()).to_json())
 
     with atomic_output_dir(
         given,
@@ -494,7 +581,10 @@ def _write_recorded(target: Path, payload: bytes) -> None:
             del manifest.files[name]  # pruned: no longer there
     old = sha256_file(target) if target.exists() else None
     new = hashlib.sha256(payload).hexdigest()
-    manifest.record(target.name, new, len(payload), replaces=old if old != new else None)
+    writer = _writer()
+    manifest.record(
+        target.name, new, len(payload), replaces=old if old != new else None, command=writer
+    )
     atomic_write_bytes(manifest_path, manifest.to_json())
     try:
         atomic_write_bytes(target, payload)
@@ -505,5 +595,5 @@ def _write_recorded(target: Path, payload: bytes) -> None:
             elif before is not None:
                 atomic_write_bytes(manifest_path, before)
         raise
-    manifest.record(target.name, new, len(payload))
+    manifest.record(target.name, new, len(payload), command=writer)
     atomic_write_bytes(manifest_path, manifest.to_json())

@@ -142,6 +142,27 @@ def input_entries(inputs: Iterable[str | os.PathLike[str]]) -> list[dict[str, An
     return files
 
 
+#: the largest provenance.json read back (bytes): hexatherm writes a few kilobytes
+PROVENANCE_MAX_BYTES = 16 * 2**20
+
+
+def recorded_command(path: str | os.PathLike[str]) -> str | None:
+    """The command a ``provenance.json`` says wrote its folder, or ``None`` when it is
+    not one (unreadable, too large, not JSON, nested past the parser, not hexatherm's)."""
+    try:
+        with open(path, "rb") as handle:
+            data = handle.read(PROVENANCE_MAX_BYTES + 1)
+        if len(data) > PROVENANCE_MAX_BYTES:
+            return None
+        doc = json.loads(data.decode("utf-8"))
+    except (OSError, ValueError, RecursionError):
+        return None
+    if not isinstance(doc, dict) or doc.get("format") != PROVENANCE_FORMAT:
+        return None
+    command = doc.get("command")
+    return command if isinstance(command, str) else None
+
+
 def command_line(facts: RunFacts) -> str:
     """The run's command line quoted as a POSIX shell reads it, so that it runs as printed
     (a path with a space or a quote stays one argument; plain arguments are unchanged).
