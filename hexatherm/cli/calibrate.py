@@ -10,6 +10,7 @@ from hexatherm.cli.options import (
     CHECK_FAILED_EXIT,
     clean_errors,
     coverage_factor_option,
+    document_options,
     echo_err,
     imports_done,
     interpolation_option,
@@ -85,6 +86,7 @@ from hexatherm.io.files import ReadOptions
 @overwrite_option
 @lab_option
 @template_dir_option
+@document_options
 @reading_options
 @clean_errors
 def command(
@@ -101,6 +103,8 @@ def command(
     overwrite: bool,
     lab: Path | None,
     template_dir: Path | None,
+    report_number: str | None,
+    title: str | None,
     reading: ReadOptions,
 ) -> None:
     """Calibrate the geometry of the hexapod of SESSIONS from their measured poses.
@@ -176,7 +180,9 @@ def command(
         )
         run = calibrate(campaign, level, residuals)
     model = "" if twin_model is None else f" (twin model {twin_model})"
-    files = output_files(run, inputs, out, lab_fields, coverage_factor, templates)
+    files = output_files(
+        run, inputs, out, lab_fields, coverage_factor, templates, report_number, title
+    )
     with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
         for name, text in files.items():
             (tmp / name).write_text(text, encoding="utf-8")

@@ -20,7 +20,7 @@ from hexatherm.io.config.identity import (
 from hexatherm.io.config.plan import read_plan
 from hexatherm.io.config.yamlout import _dump
 from hexatherm.io.yamlfile import YamlDoc
-from hexatherm.session import QUALITY_ALIASES, CmmNoise, QualityLimits, Session
+from hexatherm.session import QUALITY_ALIASES, CmmNoise, QualityLimits, Session, Tolerance
 
 SESSION_FORMAT = "hexatherm-session/1"
 
@@ -77,7 +77,7 @@ def read_session(path: str | os.PathLike[str]) -> Session:
     if doc.get("identification", default=None) is not None:
         doc.check_keys(list(IDENTIFICATION_KEYS), "identification")
         ident = read_identification(doc, "identification")
-    tolerances: dict[str, float] = {}
+    tolerances: dict[str, Tolerance] = {}
     if doc.get("tolerances", default=None) is not None:
         tolerances = read_tolerances(doc, "tolerances")
     return Session(

@@ -248,6 +248,8 @@ def output_files(
     lab_fields: dict[str, object] | None = None,
     coverage_factor: float = 2.0,
     template_dir: Path | None = None,
+    report_number: str | None = None,
+    title: str | None = None,
 ) -> dict[str, str]:
     """Every file of the output folder, name -> text; with ``inputs`` (the files the run
     read) the report too, and the predicted uncertainty over the stroke; the claim for
@@ -255,7 +257,7 @@ def output_files(
     output folder, for the report's relative paths; ``lab_fields``: a lab file's
     identification for the report's header; ``coverage_factor``: k of the expanded
     uncertainties of ``parameters.csv`` and the report; ``template_dir``: a lab's
-    templates for the report)."""
+    templates for the report; ``report_number``, ``title``: the report's own)."""
     stroke = None if inputs is None else stroke_map(run)
     if stroke is None:
         claim = pose_claim(run)
@@ -277,6 +279,8 @@ def output_files(
             coverage_factor,
             claim,
             template_dir,
+            report_number,
+            title,
         )
     return files
 

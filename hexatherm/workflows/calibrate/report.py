@@ -29,6 +29,7 @@ from hexatherm.io.provenance import current_run, now_iso
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.calibrate.claim import PoseClaim, span_poses
 from hexatherm.workflows.calibrate.run import Calibration
+from hexatherm.workflows.report.document import document, identification_block, template_variables
 from hexatherm.workflows.report.page import Cell, figure, provenance, signature_table, table
 from hexatherm.workflows.report.render import render_page
 from hexatherm.workflows.report.text import exact, fixed, unit_text
@@ -257,6 +258,16 @@ def sessions_text(run: Calibration) -> tuple[str, str]:
     return hexapod, sessions
 
 
+def sessions_folder(run: Calibration) -> Path:
+    """The folder that holds every session of the campaign (paths are printed relative
+    to it)."""
+    import os
+
+    folders = [str(r.session.path.parent.resolve()) for r in run.campaign.results]
+    common = Path(os.path.commonpath(folders))
+    return common.parent if str(common) in folders else common
+
+
 def report_html(
     run: Calibration,
     stroke: StrokeMap,
@@ -266,12 +277,16 @@ def report_html(
     coverage_factor: float = COVERAGE_FACTOR,
     claim: PoseClaim | None = None,
     template_dir: Path | None = None,
+    report_number: str | None = None,
+    title: str | None = None,
 ) -> str:
     """The calibration's report page (see the module text); ``lab_fields``: a lab file's
     identification (the sessions' own ``identification:`` over it, in the order given);
     ``coverage_factor``: k of every expanded uncertainty ``U = k u`` it prints; ``claim``:
     the claim for new poses (the parameters' part alone, over ``stroke``, without it);
-    ``template_dir``: a lab's templates, over the package's."""
+    ``template_dir``: a lab's templates, over the package's; ``report_number``, ``title``:
+    the document's own (``--report-number``, ``--title``; else the lab file's
+    ``numbering:``, ``titles:``; :mod:`~hexatherm.workflows.report.document`)."""
     from hexatherm.io.config.identity import identification
     from hexatherm.workflows.report.html import header_rows
 
@@ -354,13 +369,46 @@ def report_html(
     for result in run.campaign.results:
         merged.update(result.session.identification)
     ident = identification(merged, lab_fields)
-    title = "hexatherm calibration"
+    fields = dict(ident.fields)
+    issued = now_iso()
+    results = run.campaign.results
+    numbers = [r.session.identification.get("report_number") for r in results]
+    doc = document(
+        "calibrate",
+        issued,
+        fields,
+        [None if n is None else str(n) for n in numbers],
+        [r.session.name for r in results],
+        report_number,
+        title,
+    )
+    shown = [f"{r.session.name} (report {n})" for r, n in zip(results, numbers, strict=True) if n]
+    base = sessions_folder(run)
     return render_page(
         "calibration.html.j2",
         template_dir,
-        title=title,
-        header_rows=header_rows(title, ident, sessions, hexapod),
-        signatures=signature_table(ident.signatures),
+        title=doc.title,
+        subtitle=f"Geometry of the hexapod {hexapod} from the sessions {sessions}",
+        **template_variables(doc, fields),
+        ident_block=identification_block(
+            doc,
+            fields,
+            f"hexapod {hexapod}"
+            + "".join(
+                f", {name} {fields[key]}"
+                for key, name in (("hexapod.model", "model"), ("hexapod.serial", "serial"))
+                if key in fields
+            )
+            + (f"; the sessions' own reports: {', '.join(shown)}" if shown else ""),
+            sessions,
+            f"linear propagation (GUM) of the poses' covariance through the weighted least "
+            f"squares; U = k·u with k = {exact(k)}",
+            f"the calibrated parameters with U = k·u, the claimed uncertainty of a "
+            f"new calibrated pose ({len(run.campaign.labels)} poses)",
+            ident.signatures,
+        ),
+        header_rows=header_rows(doc, ident, sessions, hexapod),
+        signatures=signature_table(ident.signatures, doc.issue_date),
         verdict=verdict,
         levels=levels,
         parameters=table(
@@ -416,5 +464,12 @@ def report_html(
             "over the product of their standard uncertainties); near ±1: the campaign "
             "does not tell the two apart.",
         ),
-        provenance=provenance(current_run(), inputs, folder, now_iso()),
+        provenance=provenance(
+            current_run(),
+            inputs,
+            base,
+            issued,
+            folder_name="the folder of the sessions",
+            number=doc.number,
+        ),
     )
