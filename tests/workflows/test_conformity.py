@@ -54,6 +54,12 @@ def test_parse_tolerances():
     for bad in ("Tx=2", "Tx=2urad", "Qx=2um", "Tx=-1um", "Tx=2um,Tx=3um", "Rx=1mm", "Tx=1e999um"):
         with pytest.raises(ValueError):
             parse_tolerances(bad)
+    # an asymmetric zone: LOWER..UPPER (issue 33)
+    got = parse_tolerances("Tz=-1..3um,Rx=0..0.02mrad")
+    assert got == {"Tz_um": (-1.0, 3.0), "Rx_urad": (0.0, 20.0)}
+    for bad in ("Tz=3..-1um", "Tz=1..1um", "Tz=-1..um", "Tz=..3um"):
+        with pytest.raises(ValueError):
+            parse_tolerances(bad)
 
 
 def expected_decisions(poses: pd.DataFrame, name: str, unit: str, limit: float, k: float):

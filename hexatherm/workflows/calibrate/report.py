@@ -398,13 +398,13 @@ def report_html(
                 f", {name} {fields[key]}"
                 for key, name in (("hexapod.model", "model"), ("hexapod.serial", "serial"))
                 if key in fields
-            )
-            + (f"; the sessions' own reports: {', '.join(shown)}" if shown else ""),
+            ),
             sessions,
             f"linear propagation (GUM) of the poses' covariance through the weighted least "
             f"squares; U = k·u with k = {exact(k)}",
             f"the calibrated parameters with U = k·u, the claimed uncertainty of a "
-            f"new calibrated pose ({len(run.campaign.labels)} poses)",
+            f"new calibrated pose ({len(run.campaign.labels)} poses)"
+            + (f"; the sessions' own reports: {', '.join(shown)}" if shown else ""),
             ident.signatures,
         ),
         header_rows=header_rows(doc, ident, sessions, hexapod),
