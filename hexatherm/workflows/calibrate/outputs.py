@@ -38,6 +38,7 @@ from hexatherm.io.config import hexapod_to_yaml
 from hexatherm.io.csvout import csv_text
 from hexatherm.io.provenance import now_iso
 from hexatherm.workflows.calibrate.claim import PoseClaim, pose_claim
+from hexatherm.workflows.calibrate.recommend import Recommendation, controller_yaml, recommend
 from hexatherm.workflows.calibrate.report import (
     StrokeMap,
     not_explained,
@@ -170,10 +171,14 @@ def claim_record(claim: PoseClaim) -> dict[str, Any]:
 
 
 def calibration_json(
-    run: Calibration, stroke: StrokeMap | None = None, claim: PoseClaim | None = None
+    run: Calibration,
+    stroke: StrokeMap | None = None,
+    claim: PoseClaim | None = None,
+    advice: Recommendation | None = None,
 ) -> str:
     """``calibration.json`` (see the module text); with ``stroke``, the predicted
-    uncertainty over the campaign's span too; with ``claim``, the claim for new poses."""
+    uncertainty over the campaign's span too; with ``claim``, the claim for new poses;
+    with ``advice``, the recommendation and its tests."""
     fit = run.fit
     obs = fit.observability
     sigma = fit.predicted_sigma_um_urad(run.campaign.commanded)
@@ -238,6 +243,27 @@ def calibration_json(
         }
     if claim is not None:
         doc["new_pose_claim"] = claim_record(claim)
+    if advice is not None:
+        doc["recommendation"] = {
+            "apply": advice.apply,
+            "statement": advice.headline(),
+            "parameters_chi_square": advice.changes.chi_square,
+            "parameters_dof": advice.changes.dof,
+            "parameters_p": advice.changes.p,
+            "parameters_significant": advice.changes.significant,
+            "residuals_heldout": advice.heldout,
+            **{
+                f"{name}_mean_square_reduction": {
+                    "mean": imp.mean,
+                    "u": _finite(imp.u),
+                    "verdict": imp.verdict(advice.coverage_factor),
+                }
+                for name, imp in (
+                    ("translation_um2", advice.translation),
+                    ("rotation_urad2", advice.rotation),
+                )
+            },
+        }
     return json.dumps(doc, indent=1, allow_nan=False) + "\n"
 
 
@@ -263,12 +289,15 @@ def output_files(
         claim = pose_claim(run)
     else:
         claim = pose_claim(run, stroke.poses, stroke.sigma_um_urad)
+    advice = recommend(run, coverage_factor)
     files = {
         "hexapod.yaml": calibrated_hexapod_yaml(run),
         "parameters.csv": parameters_csv(run, coverage_factor),
         "residuals.csv": csv_text(residuals_frame(run)),
-        "calibration.json": calibration_json(run, stroke, claim),
+        "calibration.json": calibration_json(run, stroke, claim, advice),
     }
+    if advice.apply:  # the controller's form, only when it is to be applied
+        files["controller.yaml"] = controller_yaml(run, coverage_factor)
     if stroke is not None and inputs is not None:
         files["report.html"] = report_html(
             run,
@@ -363,4 +392,5 @@ def summary_lines(run: Calibration) -> list[str]:
         lines.append(f"warning: {not_explained(run)}")
     for a, b, rho in fit.high_correlations()[:5]:
         lines.append(f"warning: {a} and {b} are correlated (rho = {rho:+.3f})")
-    return lines
+    advice = recommend(run)
+    return [*lines, advice.headline(), *(f"  {line}" for line in advice.reasons())]

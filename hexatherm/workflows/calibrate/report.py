@@ -28,6 +28,7 @@ from hexatherm.io.csvout import ROW_RESOLUTION, fixed_text
 from hexatherm.io.provenance import current_run, now_iso
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.calibrate.claim import PoseClaim, span_poses
+from hexatherm.workflows.calibrate.recommend import recommend
 from hexatherm.workflows.calibrate.run import Calibration
 from hexatherm.workflows.report.document import document, identification_block, template_variables
 from hexatherm.workflows.report.page import Cell, figure, provenance, signature_table, table
@@ -410,6 +411,7 @@ def report_html(
         header_rows=header_rows(doc, ident, sessions, hexapod),
         signatures=signature_table(ident.signatures, doc.issue_date),
         verdict=verdict,
+        recommendation=recommend(run, coverage_factor),
         levels=levels,
         parameters=table(
             [
