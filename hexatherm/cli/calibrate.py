@@ -33,7 +33,8 @@ from hexatherm.io.files import ReadOptions
     default=None,
     type=click.Path(file_okay=False, path_type=Path),
     help="Output folder: hexapod.yaml, parameters.csv, residuals.csv, calibration.json, "
-    "report.html, provenance.json [default: the first session's folder/calibration].",
+    "report.html, provenance.json, and controller.yaml when the calibration is to be "
+    "applied [default: the first session's folder/calibration].",
 )
 @coverage_factor_option(
     "of parameters.csv (U, U_um, U_ppm), the report and the new-pose claim on screen"
