@@ -142,7 +142,11 @@ def command(
     """
     from hexatherm.io.config import read_session
     from hexatherm.io.outputs import check_output_settled
-    from hexatherm.workflows.process.outputs import deviation_table, write_results
+    from hexatherm.workflows.process.outputs import (
+        deviation_table,
+        significance_lines,
+        write_results,
+    )
     from hexatherm.workflows.process.pipeline import Checks, process_session
     from hexatherm.workflows.process.quality import (
         parse_threshold,
@@ -255,7 +259,9 @@ def command(
             f"interpolation smooth: {smooth.reason}"
             + (f" (smoothing {lams}, times scaled to [0, 1])" if lams else "")
         )
-    click.echo(deviation_table(result, twin))
+    click.echo(deviation_table(result, twin, uncertainty, coverage_factor))
+    for line in significance_lines(result, uncertainty, coverage_factor):
+        click.echo(line)
     for line in uncertainty_summary(uncertainty):
         echo_err(line)
     echo_err(f"quality checks of {len(quality.frame)} steps:")

@@ -140,6 +140,8 @@ def test_both_reports_carry_the_items_of_17025_7_8_2_1(tmp_path):
     first = pd.to_datetime(centres["time"][centres["label"] == "O"]).mean()
     assert f"Date(s) of measurement {first.isoformat(timespec='seconds')}+01:00 to" in text
     assert "µm" in text and "µrad" in text
+    # a correction smaller than its U is said to be so (item 10): Rz on this session
+    assert "Not significant: the thermal correction is smaller than its U on Rz" in text
     # the decision rule and the risk it carries (JCGM 106: 1 - Phi(2) at k = 2)
     assert "guarded acceptance, ILAC-G8:09/2019 4.2.2 (w = U)" in text
     assert "acceptance limit 2.28 %" in text and "Ty: T = [-3, 8] µm" in text

@@ -204,6 +204,24 @@ def verdict_items(summary: Verdict) -> list[tuple[str, str]]:
             + _extreme_text(summary.correction_urad, "urad", k)
             + ".",
         ),
+        *(
+            [
+                (
+                    "Not significant",
+                    "the thermal correction is smaller than its U on "
+                    + ", ".join(
+                        f"{name} (at most {fixed(effect, unit)} {unit_text(unit)} against "
+                        f"U = {fixed(big_u, unit)} {unit_text(unit)})"
+                        for name, effect, big_u in summary.insignificant
+                        for unit in ("um" if name[0] == "T" else "urad",)
+                    )
+                    + f" (k = {exact(k)}, U the median over the targets): there the corrected "
+                    "pose is not known better than the correction moved it.",
+                )
+            ]
+            if summary.insignificant
+            else []
+        ),
         (
             "Uncertainty",
             f"{summary.basis}; expanded uncertainty U = k\u00b7u with coverage factor "

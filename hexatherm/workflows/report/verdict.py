@@ -16,6 +16,7 @@ import numpy as np
 
 from hexatherm.core.geometry import to_um_urad
 from hexatherm.typing import FloatArray
+from hexatherm.workflows.process.outputs import insignificant_corrections
 from hexatherm.workflows.process.pipeline import ProcessResult
 from hexatherm.workflows.report.figures import POSE_NAMES, pose_deviations, target_labels
 
@@ -77,6 +78,9 @@ class Verdict:
     common_u : ndarray, shape (6,), optional
         The largest expanded common part ``k u_common`` of the corrected deviations over
         the targets (um, urad): from O and R0, shared by every target.
+    insignificant : tuple of (str, float, float)
+        The components whose thermal correction is smaller than its U: ``(name, largest
+        correction, median U)`` (``process.outputs.insignificant_corrections``).
     """
 
     targets: int
@@ -91,6 +95,7 @@ class Verdict:
     basis: str
     conformity: Conformity | None = None
     common_u: FloatArray | None = None
+    insignificant: tuple[tuple[str, float, float], ...] = ()
 
 
 def uncertainty_basis(uncertainty: PoseUncertainty | None) -> str:
@@ -182,6 +187,9 @@ def verdict(
         conformity=None
         if not tolerances
         else _conformity(result, uncertainty, tolerances, coverage_factor, rule),
+        insignificant=()
+        if uncertainty is None
+        else tuple(insignificant_corrections(result, uncertainty, coverage_factor)),
     )
 
 
