@@ -143,7 +143,7 @@ def command(
         )
     from hexatherm.io.config.identity import read_lab
 
-    lab_fields = read_lab(lab)[0] if lab is not None else {}
+    lab_fields, lab_tolerances = read_lab(lab) if lab is not None else ({}, {})
     templates = template_folder(template_dir, lab)
     if out is None:
         first = sessions[0] if sessions[0].is_dir() else sessions[0].parent
@@ -182,7 +182,15 @@ def command(
         run = calibrate(campaign, level, residuals)
     model = "" if twin_model is None else f" (twin model {twin_model})"
     files = output_files(
-        run, inputs, out, lab_fields, coverage_factor, templates, report_number, title
+        run,
+        inputs,
+        out,
+        lab_fields,
+        coverage_factor,
+        templates,
+        report_number,
+        title,
+        lab_tolerances,
     )
     with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
         for name, text in files.items():

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import shutil
 from pathlib import Path
 
@@ -97,3 +98,41 @@ def test_a_campaign_without_a_geometry_error_says_keep_the_controller(no_error_c
     assert not (tmp_path / "out" / "controller.yaml").exists()
     page = (tmp_path / "out" / "report.html").read_text()
     assert "keep the controller as it is" in page and "Parameters&#x27; change" in page
+
+
+def test_the_calibration_report_judges_the_calibrated_pose_error_against_the_labs_tolerances(
+    tmp_path,
+):
+    session = tmp_path / "calibration-geometry"
+    shutil.copytree(SHIPPED, session, ignore=shutil.ignore_patterns("expected"))
+    lab = tmp_path / "lab.yaml"
+    lab.write_text(
+        "format: hexatherm-lab/1\nlab: Laboratoire Precision Sud\n"
+        "tolerances: {Tx_um: 1.0, Tz_um: [-1.0, 2.0]}\n"
+        "decision_rule: {rule: guarded-acceptance}\n"
+    )
+    out = tmp_path / "out"
+    args = ["calibrate", str(session), "--level", "joints", "--lab", str(lab), "-o", str(out)]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    page = (out / "report.html").read_text()
+    block = page.split("Conformity of the calibrated pose error</h2>")[1].split("</table>")[0]
+    assert "guarded acceptance, ILAC-G8:09/2019 4.2.2 (w = U)" in block
+    cell = r'<td class="num">([-\d.]+)<span class="u">±\s([\d.]+)</span></td>'
+    cell += r'<td class="num">[^<]*</td><td>([a-z ]+)</td>'
+    rows = re.findall(r"<tr(?: class=\"fail\")?><td>([^<]+)</td>" + cell + cell, block)
+    residuals = pd.read_csv(out / "residuals.csv").set_index("target")
+    assert len(rows) == len(residuals) == 30
+    decided = set()
+    for label, dx, ux, cx, dz, uz, cz in rows:
+        # the deviation: residuals.csv's calibrated residual; the decision by hand
+        assert float(dx) == pytest.approx(residuals.loc[label, "dTx_um_calibrated"], abs=6e-4)
+        assert float(dz) == pytest.approx(residuals.loc[label, "dTz_um_calibrated"], abs=6e-4)
+        for got, d, u, lower, upper in ((cx, dx, ux, -1.0, 1.0), (cz, dz, uz, -1.0, 2.0)):
+            low, high = lower + float(u), upper - float(u)  # the acceptance limits, w = U
+            want = low <= float(d) <= high
+            near = min(abs(float(d) - low), abs(float(d) - high))
+            if near > 2e-3:  # clear of the page's rounding
+                assert got == ("conforms" if want else "does not conform"), (label, d, u)
+            decided.add(got)
+    assert decided == {"conforms", "does not conform"}  # the tolerances cut through the data

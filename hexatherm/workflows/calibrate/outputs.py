@@ -26,7 +26,7 @@ import json
 import math
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -46,6 +46,9 @@ from hexatherm.workflows.calibrate.report import (
     stroke_map,
 )
 from hexatherm.workflows.calibrate.run import Calibration
+
+if TYPE_CHECKING:
+    from hexatherm.session import Tolerance
 
 COMPONENTS = ("dTx_um", "dTy_um", "dTz_um", "dRx_urad", "dRy_urad", "dRz_urad")
 
@@ -276,6 +279,7 @@ def output_files(
     template_dir: Path | None = None,
     report_number: str | None = None,
     title: str | None = None,
+    tolerances: dict[str, Tolerance] | None = None,
 ) -> dict[str, str]:
     """Every file of the output folder, name -> text; with ``inputs`` (the files the run
     read) the report too, and the predicted uncertainty over the stroke; the claim for
@@ -283,7 +287,8 @@ def output_files(
     output folder, for the report's relative paths; ``lab_fields``: a lab file's
     identification for the report's header; ``coverage_factor``: k of the expanded
     uncertainties of ``parameters.csv`` and the report; ``template_dir``: a lab's
-    templates for the report; ``report_number``, ``title``: the report's own)."""
+    templates for the report; ``report_number``, ``title``: the report's own;
+    ``tolerances``: the lab's on the calibrated pose error, judged in the report)."""
     stroke = None if inputs is None else stroke_map(run)
     if stroke is None:
         claim = pose_claim(run)
@@ -310,6 +315,7 @@ def output_files(
             template_dir,
             report_number,
             title,
+            tolerances,
         )
     return files
 

@@ -30,6 +30,7 @@ from hexatherm.typing import FloatArray
 from hexatherm.workflows.calibrate.claim import PoseClaim, span_poses
 from hexatherm.workflows.calibrate.recommend import recommend
 from hexatherm.workflows.calibrate.run import Calibration
+from hexatherm.workflows.process.conformity import Conformity, decision_rule, judge
 from hexatherm.workflows.report.document import document, identification_block, template_variables
 from hexatherm.workflows.report.page import Cell, figure, provenance, signature_table, table
 from hexatherm.workflows.report.render import render_page
@@ -37,6 +38,9 @@ from hexatherm.workflows.report.text import exact, fixed, unit_text
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
+
+    from hexatherm.core.conformity import DecisionRule
+    from hexatherm.session import Tolerance
 
 #: the coverage factor of the expanded uncertainties the report prints
 COVERAGE_FACTOR = 2.0
@@ -259,6 +263,47 @@ def sessions_text(run: Calibration) -> tuple[str, str]:
     return hexapod, sessions
 
 
+def pose_error_conformity(
+    run: Calibration,
+    tolerances: dict[str, Tolerance],
+    coverage_factor: float = COVERAGE_FACTOR,
+    rule: DecisionRule | None = None,
+) -> Conformity:
+    """Every target's calibrated pose error (measured minus the calibrated model's
+    prediction, held out when the level was chosen) judged against ``tolerances``, with
+    ``U = k sqrt(u_measured^2 + u_predicted^2)`` per component (the measured pose's
+    linear uncertainty and the prediction's from the parameters' covariance)."""
+    from hexatherm.core.geometry import to_um_urad
+
+    campaign = run.campaign
+    n = len(campaign.labels)
+    u_measured = to_um_urad(np.sqrt(np.diag(campaign.covariance)).reshape(n, 6))
+    u_predicted = run.fit.predicted_sigma_um_urad(campaign.commanded)
+    expanded = coverage_factor * np.hypot(u_measured, u_predicted)
+    return judge(
+        list(campaign.labels),
+        run.residuals_after_um_urad,
+        expanded,
+        tolerances,
+        coverage_factor,
+        rule,
+    )
+
+
+def _conformity_part(
+    run: Calibration, tolerances: dict[str, Tolerance], k: float, rule: DecisionRule
+) -> dict[str, object]:
+    from hexatherm.workflows.report.conformity import conformity_item, conformity_table
+
+    judged = pose_error_conformity(run, tolerances, k, rule)
+    what = "the calibrated pose error d (measured \u2212 the calibrated model's prediction"
+    what += ", held out)" if run.heldout else ", in sample)"
+    return {
+        "item": conformity_item(judged, "the calibrated pose error")[1],
+        "table": conformity_table(judged, what),
+    }
+
+
 def sessions_folder(run: Calibration) -> Path:
     """The folder that holds every session of the campaign (paths are printed relative
     to it)."""
@@ -280,6 +325,7 @@ def report_html(
     template_dir: Path | None = None,
     report_number: str | None = None,
     title: str | None = None,
+    tolerances: dict[str, Tolerance] | None = None,
 ) -> str:
     """The calibration's report page (see the module text); ``lab_fields``: a lab file's
     identification (the sessions' own ``identification:`` over it, in the order given);
@@ -287,7 +333,8 @@ def report_html(
     the claim for new poses (the parameters' part alone, over ``stroke``, without it);
     ``template_dir``: a lab's templates, over the package's; ``report_number``, ``title``:
     the document's own (``--report-number``, ``--title``; else the lab file's
-    ``numbering:``, ``titles:``; :mod:`~hexatherm.workflows.report.document`)."""
+    ``numbering:``, ``titles:``; :mod:`~hexatherm.workflows.report.document`);
+    ``tolerances``: the lab's on the calibrated pose error (:func:`pose_error_conformity`)."""
     from hexatherm.io.config.identity import identification
     from hexatherm.workflows.report.html import header_rows
 
@@ -412,6 +459,9 @@ def report_html(
         signatures=signature_table(ident.signatures, doc.issue_date),
         verdict=verdict,
         recommendation=recommend(run, coverage_factor),
+        conformity=None
+        if not tolerances
+        else _conformity_part(run, tolerances, coverage_factor, decision_rule(fields)),
         levels=levels,
         parameters=table(
             [

@@ -203,22 +203,37 @@ def conformity(
 ) -> Conformity:
     """The decisions for ``tolerances`` (``Tx_um`` .. ``Rz_urad`` -> T or (lower, upper),
     not empty) under ``rule`` (default: ISO 14253-1, ``w = U``)."""
-    rule = DecisionRule() if rule is None else rule
-    keys = tuple(k for k in _KEYS if k in tolerances)
-    cols = [_KEYS.index(k) for k in keys]
     corr = result.correction
     idx = corr.target_index
-    deviation = to_um_urad(corr.corrected - result.session.plan.poses[idx])[:, cols]
+    deviation = to_um_urad(corr.corrected - result.session.plan.poses[idx])
     if uncertainty is None:
         expanded = np.full(deviation.shape, np.nan)
     else:
-        expanded = coverage_factor * to_um_urad(uncertainty.corrected_u)[:, cols]
+        expanded = coverage_factor * to_um_urad(uncertainty.corrected_u)
+    labels = [result.session.plan.labels[i] for i in idx]
+    return judge(labels, deviation, expanded, tolerances, coverage_factor, rule)
+
+
+def judge(
+    labels: list[str],
+    deviation: FloatArray,
+    expanded_u: FloatArray,
+    tolerances: dict[str, Tolerance],
+    coverage_factor: float = 2.0,
+    rule: DecisionRule | None = None,
+) -> Conformity:
+    """The decisions on deviations ``(M, 6)`` (um, urad, pose order) with their expanded
+    uncertainties ``U = k u`` for ``tolerances`` (not empty) under ``rule``."""
+    rule = DecisionRule() if rule is None else rule
+    keys = tuple(k for k in _KEYS if k in tolerances)
+    cols = [_KEYS.index(k) for k in keys]
+    deviation = np.asarray(deviation, dtype=float)[:, cols]
+    expanded = np.asarray(expanded_u, dtype=float)[:, cols]
     limits = np.array([interval(tolerances[k]) for k in keys], dtype=float).reshape(-1, 2)
     lower, upper = limits[:, 0], limits[:, 1]
     decisions = decide(deviation, expanded, upper, lower, rule)
     p_conform = conformance_probability(deviation, expanded / coverage_factor, upper, lower)
     per_target = combine(decisions, axis=1)
-    labels = [result.session.plan.labels[i] for i in idx]
     return Conformity(
         keys,
         lower,

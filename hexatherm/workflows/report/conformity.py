@@ -44,13 +44,16 @@ def rule_text(judged: Conformity) -> str:
     return text
 
 
-def conformity_item(judged: Conformity) -> tuple[str, str]:
-    """The verdict's item: the overall decision, the counts, the tolerances and the rule."""
+def conformity_item(
+    judged: Conformity, what: str = "corrected \u2212 commanded"
+) -> tuple[str, str]:
+    """The verdict's item: the overall decision, the counts, the tolerances and the rule
+    (``what``: the deviation judged)."""
     counts = {d: int(np.sum(judged.per_target == d)) for d in WORDS}
     words = ", ".join(f"{n} {WORDS[d]}" for d, n in counts.items() if n)
     return (
         "Conformity",
-        f"{WORDS[judged.overall].upper()}: corrected \u2212 commanded within "
+        f"{WORDS[judged.overall].upper()}: {what} within "
         f"{tolerance_text(judged.keys, judged.lower, judged.upper)} ({len(judged.labels)} "
         f"targets: {words}). {rule_text(judged)}",
     )
@@ -62,7 +65,9 @@ def _zone(lower: float, upper: float, unit: str) -> str:
     return f"T = [{exact(lower)}, {exact(upper)}] {unit_text(unit)}"
 
 
-def conformity_table(judged: Conformity) -> Table:
+def conformity_table(
+    judged: Conformity, what: str = "the corrected deviations d from the commanded pose"
+) -> Table:
     """One row per target: per toleranced component the deviation with its U, the
     probability of conformity and the decision; then the target's decision. The header
     gives each tolerance zone."""
@@ -95,7 +100,7 @@ def conformity_table(judged: Conformity) -> Table:
         rows,
         row_classes=classes,
         align=align,
-        caption=f"Conformity of the corrected deviations d from the commanded pose, U = "
+        caption=f"Conformity of {what}, U = "
         f"k\u00b7u under each (k = {exact(judged.coverage_factor)}); p: the probability that "
         "the true deviation lies in the tolerance zone (normal pdf, JCGM 106:2012). "
         f"Decision rule: {judged.rule.describe()}. Highlighted: targets that do not "
