@@ -234,9 +234,10 @@ class Session:
         The optional ``identification:`` mapping (an extension), flat: ``"lab"``,
         ``"cmm.serial"``, ... -> text (``ambient.*`` numbers), ``"signatures"`` -> list of
         ``(role, name)`` (:func:`hexatherm.io.config.identity.read_identification`).
-    tolerances : dict of str to float
+    tolerances : dict of str to Tolerance
         The optional ``tolerances:`` mapping: ``Tx_um`` .. ``Rz_urad`` -> half-width of
-        the tolerance zone of that deviation from the commanded pose.
+        the tolerance zone of that deviation from the commanded pose, or its
+        ``(lower, upper)`` limits.
     formats : dict of Path to MeasurementFormat
         The measurement entries given as a mapping (a column map, Calypso runs): how
         each is read; the others are hexatherm's CSV or DMIS.
@@ -259,7 +260,7 @@ class Session:
     config_files: tuple[Path, ...] = ()
     utc_offset_s: float | None = None
     identification: dict[str, object] = dataclasses.field(default_factory=dict)
-    tolerances: dict[str, float] = dataclasses.field(default_factory=dict)
+    tolerances: dict[str, Tolerance] = dataclasses.field(default_factory=dict)
     formats: dict[Path, MeasurementFormat] = dataclasses.field(default_factory=dict)
     measurement_files: tuple[Path, ...] = ()
     feature_names: dict[str, str | None] = dataclasses.field(default_factory=dict)
@@ -303,6 +304,8 @@ class Datums:
     tip_diameter_mm: float
 
 
+#: a tolerance: a half-width ``T`` (the interval ``[-T, T]``) or ``(lower, upper)`` limits
+Tolerance = float | tuple[float, float]
 #: tolerance keys -> unit of the deviation they bound (``tolerances:``, ``--tolerance``)
 TOLERANCE_UNITS: dict[str, str] = {
     **{f"T{a}_um": "um" for a in "xyz"},

@@ -10,6 +10,7 @@ from hexatherm.cli.options import (
     CHECK_FAILED_EXIT,
     clean_errors,
     coverage_factor_option,
+    document_options,
     echo_err,
     imports_done,
     interpolation_option,
@@ -32,7 +33,8 @@ from hexatherm.io.files import ReadOptions
     default=None,
     type=click.Path(file_okay=False, path_type=Path),
     help="Output folder: hexapod.yaml, parameters.csv, residuals.csv, calibration.json, "
-    "report.html, provenance.json [default: the first session's folder/calibration].",
+    "report.html, provenance.json, and controller.yaml when the calibration is to be "
+    "applied [default: the first session's folder/calibration].",
 )
 @coverage_factor_option(
     "of parameters.csv (U, U_um, U_ppm), the report and the new-pose claim on screen"
@@ -85,6 +87,7 @@ from hexatherm.io.files import ReadOptions
 @overwrite_option
 @lab_option
 @template_dir_option
+@document_options
 @reading_options
 @clean_errors
 def command(
@@ -101,6 +104,8 @@ def command(
     overwrite: bool,
     lab: Path | None,
     template_dir: Path | None,
+    report_number: str | None,
+    title: str | None,
     reading: ReadOptions,
 ) -> None:
     """Calibrate the geometry of the hexapod of SESSIONS from their measured poses.
@@ -138,7 +143,7 @@ def command(
         )
     from hexatherm.io.config.identity import read_lab
 
-    lab_fields = read_lab(lab)[0] if lab is not None else {}
+    lab_fields, lab_tolerances = read_lab(lab) if lab is not None else ({}, {})
     templates = template_folder(template_dir, lab)
     if out is None:
         first = sessions[0] if sessions[0].is_dir() else sessions[0].parent
@@ -176,7 +181,17 @@ def command(
         )
         run = calibrate(campaign, level, residuals)
     model = "" if twin_model is None else f" (twin model {twin_model})"
-    files = output_files(run, inputs, out, lab_fields, coverage_factor, templates)
+    files = output_files(
+        run,
+        inputs,
+        out,
+        lab_fields,
+        coverage_factor,
+        templates,
+        report_number,
+        title,
+        lab_tolerances,
+    )
     with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
         for name, text in files.items():
             (tmp / name).write_text(text, encoding="utf-8")

@@ -394,7 +394,7 @@ def template_files(folder: Path | None, lab: Path | None = None) -> list[Path]:
 def _tolerances(ctx: click.Context, param: click.Parameter, values: tuple[str, ...]) -> dict:
     from hexatherm.workflows.process.conformity import parse_tolerances
 
-    found: dict[str, float] = {}
+    found: dict[str, object] = {}
     for value in values:
         try:
             found.update(parse_tolerances(value))
@@ -414,6 +414,58 @@ tolerance_option = click.option(
     "does not conform / not decidable under ISO 14253-1 (U = k u as a guard band). Over "
     "the session's tolerances: mapping (and a --lab file's).",
 )
+
+
+def decision_rule_options(func: F) -> F:
+    """``--decision-rule`` and ``--guard-factor``: the conformity statement's rule
+    (ILAC-G8:09/2019), over a lab file's ``decision_rule:``."""
+
+    def rule(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+        from hexatherm.core.conformity import RULES  # numpy and scipy: not at start-up
+
+        if value is not None and value not in RULES:
+            raise click.BadParameter(f"{value!r}: one of {', '.join(RULES)}", ctx, param)
+        return value
+
+    func = click.option(
+        "--guard-factor",
+        "guard_factor",
+        type=CheckedFloat(min=0),
+        default=None,
+        help="r of the guard band w = r U of the decision rule (>= 0) [default: the lab "
+        "file's decision_rule: guard_factor, else 1].",
+    )(func)
+    return click.option(
+        "--decision-rule",
+        "decision_rule",
+        callback=rule,
+        metavar="RULE",
+        default=None,
+        help="How a deviation is judged against its tolerance, as agreed with the customer: "
+        "iso14253 (ISO 14253-1: conforms inside the zone shrunk by w, does not conform "
+        "outside it widened by w, else not decidable), simple (w = 0), guarded-acceptance, "
+        "guarded-rejection (ILAC-G8) [default: the lab file's decision_rule:, else iso14253]; "
+        "the report states the rule and its risk of false acceptance.",
+    )(func)
+
+
+def document_options(func: F) -> F:
+    """``--report-number`` and ``--title``: the document's own number and title."""
+    func = click.option(
+        "--title",
+        "title",
+        default=None,
+        help="The document's title (e.g. 'Calibration certificate') [default: the lab "
+        "file's titles:, else hexatherm's].",
+    )(func)
+    return click.option(
+        "--report-number",
+        "report_number",
+        default=None,
+        help="This document's own number, printed on every page and in its provenance "
+        "[default: the lab file's numbering: pattern, e.g. '{session}-{doc}-{date}'; else "
+        "the session's report_number for report, and that number with -C for calibrate].",
+    )(func)
 
 
 #: the largest --coverage-factor: beyond any coverage (Student's t of one degree of

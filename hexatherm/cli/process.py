@@ -15,6 +15,7 @@ from hexatherm.cli.options import (
     check_draws,
     clean_errors,
     coverage_factor_option,
+    decision_rule_options,
     echo_err,
     imports_done,
     interpolation_option,
@@ -30,6 +31,7 @@ from hexatherm.cli.options import (
 from hexatherm.io.files import ReadOptions
 
 if TYPE_CHECKING:
+    from hexatherm.session import Tolerance
     from hexatherm.workflows.process.uncertainty import PoseUncertainty
 
 
@@ -100,6 +102,7 @@ if TYPE_CHECKING:
     "[default: up to 200 targets; a 1000-target campaign makes it 120 MB].",
 )
 @tolerance_option
+@decision_rule_options
 @coverage_factor_option("that the conformity columns of poses.csv use (with tolerances)")
 @reading_options
 @clean_errors
@@ -120,7 +123,9 @@ def command(
     hexapod_path: Path | None,
     strict: bool,
     between: bool | None,
-    tolerances: dict[str, float],
+    tolerances: dict[str, Tolerance],
+    decision_rule: str | None,
+    guard_factor: float | None,
     coverage_factor: float,
     reading: ReadOptions,
 ) -> None:
@@ -138,7 +143,11 @@ def command(
     from hexatherm.io.config import read_session
     from hexatherm.io.outputs import check_output_settled
     from hexatherm.workflows.process.carryerror import carry_line
-    from hexatherm.workflows.process.outputs import deviation_table, write_results
+    from hexatherm.workflows.process.outputs import (
+        deviation_table,
+        significance_lines,
+        write_results,
+    )
     from hexatherm.workflows.process.pipeline import Checks, process_session
     from hexatherm.workflows.process.quality import (
         parse_threshold,
@@ -220,8 +229,10 @@ def command(
         )
     if tolerances:
         from hexatherm.workflows.process.conformity import conformity
+        from hexatherm.workflows.process.conformity import decision_rule as rule_of
 
-        judged = conformity(result, uncertainty, tolerances, coverage_factor)
+        rule = rule_of({}, decision_rule, guard_factor)
+        judged = conformity(result, uncertainty, tolerances, coverage_factor, rule)
     from hexatherm.workflows.process.conformity import conformity_line
 
     written = write_results(
@@ -252,7 +263,9 @@ def command(
             f"interpolation smooth: {smooth.reason}"
             + (f" (smoothing {lams}, times scaled to [0, 1])" if lams else "")
         )
-    click.echo(deviation_table(result, twin))
+    click.echo(deviation_table(result, twin, uncertainty, coverage_factor))
+    for line in significance_lines(result, uncertainty, coverage_factor):
+        click.echo(line)
     for line in uncertainty_summary(uncertainty):
         echo_err(line)
     echo_err(f"quality checks of {len(quality.frame)} steps:")

@@ -12,6 +12,8 @@ from hexatherm.cli.options import (
     check_draws,
     clean_errors,
     coverage_factor_option,
+    decision_rule_options,
+    document_options,
     echo_err,
     imports_done,
     interpolation_option,
@@ -28,6 +30,7 @@ from hexatherm.cli.options import (
     tolerance_option,
 )
 from hexatherm.io.files import ReadOptions
+from hexatherm.session import Tolerance
 
 
 def _file_name(ctx: click.Context, param: click.Parameter, value: str | None) -> Path | None:
@@ -75,6 +78,8 @@ def _file_name(ctx: click.Context, param: click.Parameter, value: str | None) ->
 @lab_option
 @template_dir_option
 @tolerance_option
+@decision_rule_options
+@document_options
 @reading_options
 @clean_errors
 def command(
@@ -90,7 +95,11 @@ def command(
     coverage_factor: float,
     lab: Path | None,
     template_dir: Path | None,
-    tolerances: dict[str, float],
+    tolerances: dict[str, Tolerance],
+    decision_rule: str | None,
+    guard_factor: float | None,
+    report_number: str | None,
+    title: str | None,
     reading: ReadOptions,
 ) -> None:
     """Process SESSION (a folder with session.yaml, or the file itself) and write its report.
@@ -108,6 +117,7 @@ def command(
     from hexatherm.io.config import read_session
     from hexatherm.io.config.identity import read_lab
     from hexatherm.io.outputs import check_output_settled, write_output_file
+    from hexatherm.workflows.process.conformity import decision_rule as rule_of
     from hexatherm.workflows.process.pipeline import Checks, process_session
     from hexatherm.workflows.process.quality import parse_threshold, session_thresholds
     from hexatherm.workflows.report import Verdict, build_report, verdict_items
@@ -147,6 +157,9 @@ def command(
             tolerances={**lab_tolerances, **result.session.tolerances, **tolerances},
             extra_inputs=extra_inputs,
             template_dir=templates,
+            rule=rule_of(lab_fields, decision_rule, guard_factor),
+            report_number=report_number,
+            title=title,
         )
     write_output_file(out_file, page, inputs=inputs, overwrite=overwrite)
     for summary in verdicts:  # the page's verdict, on the screen too

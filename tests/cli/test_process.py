@@ -14,6 +14,15 @@ from hexatherm.cli import main
 from hexatherm.workflows.process.outputs import CONTRACT_COLUMNS, pose_columns
 from tests.sessions import ROOT, make_session
 
+COMPONENTS = [
+    ("Tx", "um"),
+    ("Ty", "um"),
+    ("Tz", "um"),
+    ("Rx", "urad"),
+    ("Ry", "urad"),
+    ("Rz", "urad"),
+]
+
 UM, URAD = 1e3, np.pi / 180 * 1e6
 
 
@@ -311,3 +320,34 @@ def test_slow_dmis_read_shows_a_progress_bar_and_gives_the_same_poses(tmp_path):
     pd.testing.assert_frame_equal(
         pd.read_csv(tmp_path / "slow" / "poses.csv"), pd.read_csv(tmp_path / "fast" / "poses.csv")
     )
+
+
+def test_the_screen_shows_u_under_every_value_and_says_where_the_correction_is_not_significant(
+    tmp_path,
+):
+    # issue 33 item 10: on the paper's session the rotations' corrections are of the order
+    # of their U; the screen says which, recomputed here from poses.csv's own columns
+    session = ROOT / "sessions" / "paper-zero-pose"
+    result = run("process", session, "-o", tmp_path / "out")
+    assert result.exit_code == 0, result.output
+    poses = pd.read_csv(tmp_path / "out" / "poses.csv")
+    lines = result.stdout.splitlines()
+    rows = [line for line in lines if line.startswith("  U k=2")]
+    assert len(rows) == len(poses)  # one U row under every target's row
+    for row, (_, target) in zip(rows, poses.iterrows(), strict=True):
+        shown = [float(v.lstrip("±")) for v in row.split()[2:] if v.startswith("±")]
+        want = [
+            2 * target[f"u_d{c}_{kind}_{u}"] for kind in ("conv", "corr") for c, u in COMPONENTS
+        ]
+        np.testing.assert_allclose(shown, want, atol=2e-3)  # the file's 4 decimals, rounded
+    expected = []
+    for name, unit in COMPONENTS:
+        effect = (poses[f"d{name}_corr_{unit}"] - poses[f"d{name}_conv_{unit}"]).abs().max()
+        big_u = 2 * poses[f"u_d{name}_corr_{unit}"].median()
+        if effect < big_u - 2e-3:  # clear of the file's rounding
+            expected.append(name)
+        elif effect > big_u + 2e-3:
+            assert f"correction of {name} " not in result.stdout
+    assert expected  # the session has some: Rz
+    for name in expected:
+        assert f"not significant: the thermal correction of {name} (at most" in result.stdout

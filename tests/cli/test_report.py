@@ -40,8 +40,11 @@ def test_report_writes_the_page_into_the_session_folder(session):
     assert all(base64.b64decode(data).startswith(b"\x89PNG\r\n\x1a\n") for data in images)
     assert "paper-zero-pose" in page and "<td>S10</td>" in page
     # the provenance of a command-line run: its command line and options
-    assert f"<td>hexatherm report {session}</td>" in page
-    assert "coverage_factor = 2.0" in page and "(k = 2)" in page
+    # paths relative to the session folder, options as a person writes them (issue 33)
+    assert "<td>hexatherm report .</td>" in page
+    assert "--coverage-factor 2.0" in page and "(k = 2)" in page
+    assert "coverage_factor = " not in page and "None" not in page
+    assert str(session.parent) not in page  # no path of the lab's computer
     assert f"wrote {session / 'report.html'}" in result.output
     # the one hidden file is hexatherm's record of what it wrote there, for --overwrite
     assert sorted(p.name for p in session.iterdir() if p.name.startswith(".")) == [

@@ -23,6 +23,7 @@ from hexatherm.core.diagnosis.standin import RUNNER_UP_SHIFT_SE
 from hexatherm.core.effects import EFFECTS, Effect, ThermocoupleLog, make_effect
 from hexatherm.core.plan import StepKind
 from hexatherm.typing import FloatArray
+from hexatherm.workflows.diagnose.nextsteps import next_steps
 from hexatherm.workflows.diagnose.outputs import diagnosis_document, story
 from hexatherm.workflows.diagnose.report import report_markdown
 from hexatherm.workflows.diagnose.run import DiagnosisResult, read_for_diagnosis, run_diagnosis
@@ -102,6 +103,18 @@ def test_an_effect_outside_the_registry_is_reported_as_unexplained(
     assert headline.startswith("**NOT ADEQUATE")
     assert f"unexplained {verdict.unexplained_rms_um:.3f} um" in report
     assert "it shows in:" in first
+    # the next step (issue 33 item 8), from the twin's truth: the air tilt moves every
+    # step with time, the references too, which correct it: the corrected poses stay
+    # valid; the leg error over the stroke shows at the targets, not at the references
+    # (one commanded pose): it stays in the corrected poses
+    steps = next_steps(verdict)
+    if isinstance(effect, LegErrorQuadraticInCommand):
+        assert "shows at the targets" in steps[0] and "calibrate the geometry" in steps[0]
+    else:
+        assert steps[0].startswith("Still valid: process's reference-corrected poses and their U")
+    assert steps[-1].startswith("Add: ")
+    assert all(f"next: {step}" in story(result) for step in steps)
+    assert all(f"**next:** {step}" in report for step in steps)
     # whatever the registry named explains part of it at most; a named effect whose
     # parameters move by more than 2 SE when the runner-up joins it gets a caution
     text = story(result)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import base64
 import hashlib
+import os
 import re
 import shutil
 from pathlib import Path
@@ -383,7 +384,8 @@ def test_a_template_or_image_in_a_sub_folder_is_listed_in_the_provenance(tmp_pat
         for path, sha in re.findall(r"<tr><td[^>]*>([^<]*)</td>.*?<td[^>]*>([0-9a-f]{64})<", files)
     )
     for name in ("closing.html.j2", "letterhead.html.j2", "parts/words.html.j2", "img/logo.svg"):
-        assert rows[str(folder / name)] == hashlib.sha256((folder / name).read_bytes()).hexdigest()
+        shown = os.path.relpath(folder / name, SESSION)  # relative to the session (issue 33)
+        assert rows[shown] == hashlib.sha256((folder / name).read_bytes()).hexdigest()
     assert not any(".git" in path or "archive" in path for path in rows)
 
 
@@ -402,9 +404,13 @@ def test_the_command_line_in_the_provenance_runs_as_printed(tmp_path):
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
     page = out.read_text(encoding="utf-8")
-    row = re.search(r"<tr><td>command line</td><td>([^<]*)</td>", page)
+    row = re.search(r"<tr><td>command line[^<]*</td><td>([^<]*)</td>", page)
     assert row is not None
-    assert shlex.split(html.unescape(row.group(1))) == ["hexatherm", *args]
+    # paths relative to the session folder (no path of the lab's computer, issue 33): it
+    # runs as printed from there, each path still one argument
+    relative = ["report", ".", "-o", os.path.relpath(out, session), "--tolerance", "Tx=2um"]
+    assert shlex.split(html.unescape(row.group(1))) == ["hexatherm", *relative]
+    assert (session / relative[3]).resolve() == out.resolve()
 
 
 # ------------------------------------------------------------------ -o
@@ -568,5 +574,5 @@ def test_diagnoses_page_lists_the_labs_templates_and_the_hexapod_file_it_was_mad
     files = page.split("Input files, relative to", 1)[1].split("</tbody>", 1)[0]
     rows = dict(re.findall(r"<tr><td[^>]*>([^<]*)</td>.*?<td[^>]*>([0-9a-f]{64})<", files))
     for path in (folder / "closing.html.j2", model, session / "centres.csv"):
-        shown = str(path) if str(path) in rows else path.name
+        shown = os.path.relpath(path, session)  # relative to the session (issue 33)
         assert rows[shown] == hashlib.sha256(path.read_bytes()).hexdigest(), shown

@@ -54,6 +54,12 @@ def test_parse_tolerances():
     for bad in ("Tx=2", "Tx=2urad", "Qx=2um", "Tx=-1um", "Tx=2um,Tx=3um", "Rx=1mm", "Tx=1e999um"):
         with pytest.raises(ValueError):
             parse_tolerances(bad)
+    # an asymmetric zone: LOWER..UPPER (issue 33)
+    got = parse_tolerances("Tz=-1..3um,Rx=0..0.02mrad")
+    assert got == {"Tz_um": (-1.0, 3.0), "Rx_urad": (0.0, 20.0)}
+    for bad in ("Tz=3..-1um", "Tz=1..1um", "Tz=-1..um", "Tz=..3um"):
+        with pytest.raises(ValueError):
+            parse_tolerances(bad)
 
 
 def expected_decisions(poses: pd.DataFrame, name: str, unit: str, limit: float, k: float):
@@ -91,7 +97,9 @@ def test_process_writes_the_decisions_to_poses_csv(tmp_path):
     assert set(tx) == {CONFORMS, NOT_DECIDABLE, DOES_NOT_CONFORM}
     assert poses["conformity_dTx"].tolist() == tx.tolist()
     assert poses["conformity_dRx"].tolist() == rx.tolist()
-    assert (poses["tol_dTx_um"] == 1.0).all() and (poses["tol_dRx_urad"] == 30.0).all()
+    assert (poses["tol_upper_dTx_um"] == 1.0).all() and (poses["tol_upper_dRx_urad"] == 30.0).all()
+    assert (poses["tol_lower_dTx_um"] == -1.0).all()
+    assert (poses["decision_rule"] == "iso14253").all()
     np.testing.assert_allclose(poses["U_dTx_corr_um"], k * poses["u_dTx_corr_um"], atol=1e-4)
     assert (poses["coverage_factor"] == k).all()
     overall = [combine(row) for row in zip(tx, rx, strict=True)]
@@ -119,7 +127,9 @@ def test_session_tolerances_and_report_verdict(tmp_path):
     words = {CONFORMS: "CONFORMS", NOT_DECIDABLE: "NOT DECIDABLE", DOES_NOT_CONFORM: "DOES NOT"}
     assert f"Conformity: {words[overall]}" in result.output
     page = out.read_text()
-    assert "ISO 14253-1" in page and "U = guard band" in page
+    assert "ISO 14253-1 (guard band w = U)" in page and "Tx: T = ±5 µm" in page
+    # the risk the rule carries at its acceptance limit: 1 - Phi(2) for w = U, k = 2
+    assert "acceptance limit 2.28 %" in page
     assert page.count("<td>conforms</td>") >= int(np.sum(decisions == CONFORMS))
     # --tolerance wins over the session's, key by key
     again = CliRunner().invoke(
@@ -132,7 +142,7 @@ def test_session_tolerances_and_report_verdict(tmp_path):
     assert set(decisions[:, 0]) == {NOT_DECIDABLE, DOES_NOT_CONFORM}
     overall = str(combine(decisions))
     assert f"Conformity: {words[overall]}" in again.output
-    assert "Tx 0.01 um, Ty 5 um" in again.output
+    assert "Tx ±0.01 um, Ty ±5 um" in again.output
 
 
 @pytest.mark.parametrize("bad", ["Tx=2", "Tx=2urad", "Tq=1um"])

@@ -113,7 +113,7 @@ def test_process_report_prints_identification_on_every_page(tmp_path):
     assert digest in " ".join(pages)
     # the conformity statement, in the verdict on the first page, and its table
     assert "Conformity:" in pages[0]
-    assert "Rz: T = 50 µrad" in " ".join(pages)
+    assert "Rz: T = ±50 µrad" in " ".join(pages)
 
 
 def test_identification_fields_are_read_strictly(tmp_path):

@@ -26,12 +26,9 @@ from tests.workflows.test_report_identity import (
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "docs" / "examples" / "lab-templates"
-#: the example letterhead's wording, address and logo's text (in the SVG), on every page
-LETTERHEAD = [
-    "Example Metrology Laboratory · Calibration of hexapods and positioning systems",
-    "Musterstrasse 12, 38100 Braunschweig, Germany",
-    "EML",
-]
+#: the example letterhead prints the lab file's (LAB's) name and address, and the logo's
+#: text (in the SVG), on every page; it names no lab of its own (issue 33)
+LETTERHEAD = ["Hexapod Metrology Lab", "1 Example Road, Grenoble", "LOGO"]
 CLOSING = "shall not be reproduced except in full"
 
 
@@ -61,6 +58,8 @@ def test_the_example_letterhead_is_on_every_page_of_a_process_and_a_calibration_
     pages = pdf_pages(out, tmp_path / "process")
     check_every_page(pages, [*LETTERHEAD, *EXPECTED])
     assert CLOSING in " ".join(pages) and "Signatures" in " ".join(pages)
+    assert "written approval of Hexapod Metrology Lab" in " ".join(pages)
+    assert "Example Metrology" not in " ".join(pages)
     # the lab's templates are inputs of the page: in its provenance
     assert "letterhead.html.j2" in " ".join(pages)
 
@@ -110,7 +109,7 @@ def test_every_field_is_escaped_whatever_the_template(tmp_path):
     # in the lab's letterhead (the running header) and the signature-free identification
     letterhead = page.split('<table class="running"><thead>')[1].split("</thead>")[0]
     assert escaped in letterhead and "Lab &lt;b&gt;bold&lt;/b&gt; &amp; co" in letterhead
-    assert "Example Metrology Laboratory" in letterhead
+    assert "Example Metrology Laboratory" not in page
 
 
 def refused(tmp_path: Path, templates: dict[str, str], *extra: str) -> tuple[str, Path]:

@@ -133,7 +133,7 @@ def test_provenance_block_names_the_run_and_hashes_every_input(hidden, pages):
     block = page[page.index("<h2>Provenance</h2>") :]
     assert f"<td>{stamp}</td>" in block and f"<td>{__version__}</td>" in block
     assert "<td>hexatherm report sessions/with-hidden-effect --mc 0</td>" in block
-    assert "<td>mc = 0; seed = 0</td>" in block
+    assert "<td>--mc 0 --seed 0</td>" in block  # as a person writes them
     assert "form ≤ 10 µm" in block and "Jacobian rcond ≥ 0.01" in block
     files = sorted(
         p for p in (SESSIONS / "with-hidden-effect").iterdir() if p.suffix in (".yaml", ".csv")

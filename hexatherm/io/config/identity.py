@@ -18,16 +18,32 @@ from pathlib import Path
 from typing import Any
 
 from hexatherm.io.yamlfile import YamlDoc
-from hexatherm.session import TOLERANCE_UNITS, Identification
+from hexatherm.session import TOLERANCE_UNITS, Identification, Tolerance
 
 LAB_FORMAT = "hexatherm-lab/1"
 
-#: text fields at the top of the mapping
-_TEXTS = ("lab", "address", "customer", "operator", "report_number")
+#: text fields at the top of the mapping (a session's or a lab file's): who, where, what
+#: (ISO/IEC 17025:2017 7.8.2.1: the customer's contact, the place of the measurement, the
+#: item's receipt, the lab's procedure and deviations from it, external providers)
+_TEXTS = (
+    "lab",
+    "address",
+    "contact",
+    "accreditation",
+    "place",
+    "customer",
+    "customer_address",
+    "operator",
+    "report_number",
+    "received",
+    "procedure",
+    "deviations",
+    "external_providers",
+)
 #: sub-mappings and their text fields
 _GROUPS = {
     "cmm": ("make", "model", "serial", "certificate", "mpe"),
-    "hexapod": ("model", "serial"),
+    "hexapod": ("model", "serial", "condition"),
 }
 #: ambient conditions: key -> True for a number, False for a text
 _AMBIENT = {"temperature_C": True, "humidity_percent": True, "note": False}
@@ -90,26 +106,86 @@ def read_identification(doc: YamlDoc, *keys: Any) -> dict[str, Any]:
     return found
 
 
-def read_tolerances(doc: YamlDoc, *keys: Any) -> dict[str, float]:
-    """The ``tolerances:`` mapping at ``keys``: ``Tx_um`` .. ``Rz_urad`` -> the half-width of
-    the tolerance zone of that deviation from the commanded pose (> 0)."""
+def read_tolerances(doc: YamlDoc, *keys: Any) -> dict[str, Tolerance]:
+    """The ``tolerances:`` mapping at ``keys``: ``Tx_um`` .. ``Rz_urad`` -> the half-width
+    ``T`` of the tolerance zone ``[-T, T]`` of that deviation from the commanded pose
+    (> 0), or its limits ``[lower, upper]`` (``lower < upper``: an asymmetric zone)."""
     doc.check_keys(list(TOLERANCE_UNITS), *keys)
-    found = {}
+    found: dict[str, Tolerance] = {}
     for key in doc.get(*keys):
-        found[key] = doc.number(*keys, key, positive=True)
+        value = doc.get(*keys, key)
+        if not isinstance(value, list):
+            found[key] = doc.number(*keys, key, positive=True)
+            continue
+        if len(value) != 2:
+            raise doc.error(f"expected T or [lower, upper], got {value!r}", *keys, key)
+        lower, upper = doc.number(*keys, key, 0), doc.number(*keys, key, 1)
+        if not lower < upper:
+            raise doc.error(
+                f"the lower limit {lower:g} is not below the upper {upper:g}", *keys, key
+            )
+        found[key] = (lower, upper)
     return found
 
 
-def read_lab(path: str | os.PathLike[str]) -> tuple[dict[str, Any], dict[str, float]]:
+def read_lab(path: str | os.PathLike[str]) -> tuple[dict[str, Any], dict[str, Tolerance]]:
     """A lab file: its identification fields (as :func:`read_identification`) and its
     tolerances (as :func:`read_tolerances`, empty without them)."""
     doc = YamlDoc.load(Path(path))
     doc.check_format(LAB_FORMAT)
-    doc.check_keys(["format", *IDENTIFICATION_KEYS, "tolerances", "templates"])
+    doc.check_keys(["format", *IDENTIFICATION_KEYS, "tolerances", "templates", *LAB_SETTINGS])
     tolerances = {}
     if doc.get("tolerances", default=None) is not None:
         tolerances = read_tolerances(doc, "tolerances")
-    return read_identification(doc), tolerances
+    return {**read_identification(doc), **_lab_settings(doc)}, tolerances
+
+
+#: what only a lab file sets: how its documents are numbered and titled, its decision rule
+LAB_SETTINGS = ("numbering", "titles", "decision_rule")
+#: the documents a lab titles (``titles:``), by the command that writes them
+DOCUMENTS = ("report", "calibrate", "diagnose")
+#: the fields a ``numbering:`` pattern may use
+NUMBERING_FIELDS = ("session", "doc", "date", "time")
+
+
+def _lab_settings(doc: YamlDoc) -> dict[str, Any]:
+    """``numbering`` (a pattern of :data:`NUMBERING_FIELDS`), ``titles.<document>`` and
+    ``decision_rule`` / ``guard_factor``, flat, checked."""
+    import string
+
+    from hexatherm.core.conformity import RULES
+
+    found: dict[str, Any] = {}
+    if doc.get("numbering", default=None) is not None:
+        pattern = _text(doc, "numbering")
+        try:
+            names = [f for _, f, _, _ in string.Formatter().parse(pattern) if f is not None]
+        except ValueError as exc:
+            raise doc.error(f"not a pattern: {exc}", "numbering") from None
+        bad = [n for n in names if n not in NUMBERING_FIELDS]
+        if bad or not names:
+            raise doc.error(
+                f"a pattern of {{{'}, {'.join(NUMBERING_FIELDS)}}}"
+                + (f", got {{{bad[0]}}}" if bad else ", got no field"),
+                "numbering",
+            )
+        found["numbering"] = pattern
+    if doc.get("titles", default=None) is not None:
+        doc.check_keys(list(DOCUMENTS), "titles")
+        for name in DOCUMENTS:
+            if doc.get("titles", name, default=None) is not None:
+                found[f"titles.{name}"] = _text(doc, "titles", name)
+    if doc.get("decision_rule", default=None) is not None:
+        doc.check_keys(["rule", "guard_factor"], "decision_rule")
+        found["decision_rule"] = doc.string("decision_rule", "rule", choices=RULES)
+        if doc.get("decision_rule", "guard_factor", default=None) is not None:
+            r = doc.number("decision_rule", "guard_factor")
+            if r < 0:
+                raise doc.error(
+                    f"expected a number >= 0, got {r:g}", "decision_rule", "guard_factor"
+                )
+            found["guard_factor"] = r
+    return found
 
 
 def lab_template_dir(path: str | os.PathLike[str]) -> Path | None:

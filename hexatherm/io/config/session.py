@@ -26,6 +26,7 @@ from hexatherm.session import (
     MeasurementFormat,
     QualityLimits,
     Session,
+    Tolerance,
 )
 
 SESSION_FORMAT = "hexatherm-session/1"
@@ -84,7 +85,7 @@ def read_session(path: str | os.PathLike[str]) -> Session:
     if doc.get("identification", default=None) is not None:
         doc.check_keys(list(IDENTIFICATION_KEYS), "identification")
         ident = read_identification(doc, "identification")
-    tolerances: dict[str, float] = {}
+    tolerances: dict[str, Tolerance] = {}
     if doc.get("tolerances", default=None) is not None:
         tolerances = read_tolerances(doc, "tolerances")
     return Session(

@@ -27,7 +27,7 @@ import json
 import math
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -47,6 +47,7 @@ from hexatherm.workflows.calibrate.claim import (
     claim_regions,
     pose_claim,
 )
+from hexatherm.workflows.calibrate.recommend import Recommendation, controller_yaml, recommend
 from hexatherm.workflows.calibrate.report import (
     StrokeMap,
     not_explained,
@@ -54,6 +55,9 @@ from hexatherm.workflows.calibrate.report import (
     stroke_map,
 )
 from hexatherm.workflows.calibrate.run import Calibration
+
+if TYPE_CHECKING:
+    from hexatherm.session import Tolerance
 
 COMPONENTS = ("dTx_um", "dTy_um", "dTz_um", "dRx_urad", "dRy_urad", "dRz_urad")
 
@@ -224,10 +228,12 @@ def calibration_json(
     stroke: StrokeMap | None = None,
     claim: PoseClaim | None = None,
     claim_map: tuple[ClaimRegions, ClaimAxes] | None = None,
+    advice: Recommendation | None = None,
 ) -> str:
     """``calibration.json`` (see the module text); with ``stroke``, the predicted
     uncertainty over the campaign's span too; with ``claim``, the claim for new poses
-    (by region and along the axes: ``claim_map``, computed when not given)."""
+    (by region and along the axes: ``claim_map``, computed when not given); with
+    ``advice``, the recommendation and its tests."""
     fit = run.fit
     obs = fit.observability
     sigma = fit.predicted_sigma_um_urad(run.campaign.commanded)
@@ -295,6 +301,27 @@ def calibration_json(
         if claim_map is None:
             claim_map = (claim_regions(run, claim), claim_along_axes(run))
         doc["new_pose_claim"] = claim_record(claim, *claim_map)
+    if advice is not None:
+        doc["recommendation"] = {
+            "apply": advice.apply,
+            "statement": advice.headline(),
+            "parameters_chi_square": advice.changes.chi_square,
+            "parameters_dof": advice.changes.dof,
+            "parameters_p": advice.changes.p,
+            "parameters_significant": advice.changes.significant,
+            "residuals_heldout": advice.heldout,
+            **{
+                f"{name}_mean_square_reduction": {
+                    "mean": imp.mean,
+                    "u": _finite(imp.u),
+                    "verdict": imp.verdict(advice.coverage_factor),
+                }
+                for name, imp in (
+                    ("translation_um2", advice.translation),
+                    ("rotation_urad2", advice.rotation),
+                )
+            },
+        }
     return json.dumps(doc, indent=1, allow_nan=False) + "\n"
 
 
@@ -305,6 +332,9 @@ def output_files(
     lab_fields: dict[str, object] | None = None,
     coverage_factor: float = 2.0,
     template_dir: Path | None = None,
+    report_number: str | None = None,
+    title: str | None = None,
+    tolerances: dict[str, Tolerance] | None = None,
 ) -> dict[str, str]:
     """Every file of the output folder, name -> text; with ``inputs`` (the files the run
     read) the report too, and the predicted uncertainty over the stroke; the claim for
@@ -312,19 +342,23 @@ def output_files(
     output folder, for the report's relative paths; ``lab_fields``: a lab file's
     identification for the report's header; ``coverage_factor``: k of the expanded
     uncertainties of ``parameters.csv`` and the report; ``template_dir``: a lab's
-    templates for the report)."""
+    templates for the report; ``report_number``, ``title``: the report's own;
+    ``tolerances``: the lab's on the calibrated pose error, judged in the report)."""
     stroke = None if inputs is None else stroke_map(run)
     if stroke is None:
         claim = pose_claim(run)
     else:
         claim = pose_claim(run, stroke.poses, stroke.sigma_um_urad)
     claim_map = (claim_regions(run, claim), claim_along_axes(run))
+    advice = recommend(run, coverage_factor)
     files = {
         "hexapod.yaml": calibrated_hexapod_yaml(run),
         "parameters.csv": parameters_csv(run, coverage_factor),
         "residuals.csv": csv_text(residuals_frame(run)),
-        "calibration.json": calibration_json(run, stroke, claim, claim_map),
+        "calibration.json": calibration_json(run, stroke, claim, claim_map, advice),
     }
+    if advice.apply:  # the controller's form, only when it is to be applied
+        files["controller.yaml"] = controller_yaml(run, coverage_factor)
     if stroke is not None and inputs is not None:
         files["report.html"] = report_html(
             run,
@@ -336,6 +370,9 @@ def output_files(
             claim,
             template_dir,
             claim_map,
+            report_number,
+            title,
+            tolerances,
         )
     return files
 
@@ -423,4 +460,5 @@ def summary_lines(run: Calibration) -> list[str]:
         lines.append(f"warning: {not_explained(run)}")
     for a, b, rho in fit.high_correlations()[:5]:
         lines.append(f"warning: {a} and {b} are correlated (rho = {rho:+.3f})")
-    return lines
+    advice = recommend(run)
+    return [*lines, advice.headline(), *(f"  {line}" for line in advice.reasons())]

@@ -37,7 +37,11 @@ from hexatherm.workflows.calibrate.claim import (
     PoseClaim,
     span_poses,
 )
+from hexatherm.workflows.calibrate.conformity import COVERAGE_FACTOR, conformity_part
+from hexatherm.workflows.calibrate.recommend import recommend
 from hexatherm.workflows.calibrate.run import Calibration
+from hexatherm.workflows.process.conformity import decision_rule
+from hexatherm.workflows.report.document import document, identification_block, template_variables
 from hexatherm.workflows.report.page import (
     Cell,
     Table,
@@ -52,8 +56,8 @@ from hexatherm.workflows.report.text import exact, fixed, unit_text
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-#: the coverage factor of the expanded uncertainties the report prints
-COVERAGE_FACTOR = 2.0
+    from hexatherm.session import Tolerance
+
 #: poses drawn over the campaign's span for the worst predicted uncertainty
 N_STROKE_POSES = 2000
 #: grid of the map over Tx, Ty
@@ -330,6 +334,16 @@ def sessions_text(run: Calibration) -> tuple[str, str]:
     return hexapod, sessions
 
 
+def sessions_folder(run: Calibration) -> Path:
+    """The folder that holds every session of the campaign (paths are printed relative
+    to it)."""
+    import os
+
+    folders = [str(r.session.path.parent.resolve()) for r in run.campaign.results]
+    common = Path(os.path.commonpath(folders))
+    return common.parent if str(common) in folders else common
+
+
 def report_html(
     run: Calibration,
     stroke: StrokeMap,
@@ -340,13 +354,19 @@ def report_html(
     claim: PoseClaim | None = None,
     template_dir: Path | None = None,
     claim_map: tuple[ClaimRegions, ClaimAxes] | None = None,
+    report_number: str | None = None,
+    title: str | None = None,
+    tolerances: dict[str, Tolerance] | None = None,
 ) -> str:
     """The calibration's report page (see the module text); ``lab_fields``: a lab file's
     identification (the sessions' own ``identification:`` over it, in the order given);
     ``coverage_factor``: k of every expanded uncertainty ``U = k u`` it prints; ``claim``:
     the claim for new poses (the parameters' part alone, over ``stroke``, without it);
     ``template_dir``: a lab's templates, over the package's; ``claim_map``: the claim by
-    stroke region and along the axes (its tables)."""
+    stroke region and along the axes (its tables); ``report_number``, ``title``:
+    the document's own (``--report-number``, ``--title``; else the lab file's
+    ``numbering:``, ``titles:``; :mod:`~hexatherm.workflows.report.document`);
+    ``tolerances``: the lab's on the calibrated pose error (:mod:`.conformity`)."""
     from hexatherm.io.config.identity import identification
     from hexatherm.workflows.report.html import header_rows
 
@@ -429,15 +449,52 @@ def report_html(
     for result in run.campaign.results:
         merged.update(result.session.identification)
     ident = identification(merged, lab_fields)
-    title = "hexatherm calibration"
     claim_regions_table, claim_axes_table = claim_map_tables(claim_map, k)
+    fields = dict(ident.fields)
+    issued = now_iso()
+    results = run.campaign.results
+    numbers = [r.session.identification.get("report_number") for r in results]
+    doc = document(
+        "calibrate",
+        issued,
+        fields,
+        [None if n is None else str(n) for n in numbers],
+        [r.session.name for r in results],
+        report_number,
+        title,
+    )
+    shown = [f"{r.session.name} (report {n})" for r, n in zip(results, numbers, strict=True) if n]
+    base = sessions_folder(run)
     return render_page(
         "calibration.html.j2",
         template_dir,
-        title=title,
-        header_rows=header_rows(title, ident, sessions, hexapod),
-        signatures=signature_table(ident.signatures),
+        title=doc.title,
+        subtitle=f"Geometry of the hexapod {hexapod} from the sessions {sessions}",
+        **template_variables(doc, fields),
+        ident_block=identification_block(
+            doc,
+            fields,
+            f"hexapod {hexapod}"
+            + "".join(
+                f", {name} {fields[key]}"
+                for key, name in (("hexapod.model", "model"), ("hexapod.serial", "serial"))
+                if key in fields
+            ),
+            sessions,
+            f"linear propagation (GUM) of the poses' covariance through the weighted least "
+            f"squares; U = k·u with k = {exact(k)}",
+            f"the calibrated parameters with U = k·u, the claimed uncertainty of a "
+            f"new calibrated pose ({len(run.campaign.labels)} poses)"
+            + (f"; the sessions' own reports: {', '.join(shown)}" if shown else ""),
+            ident.signatures,
+        ),
+        header_rows=header_rows(doc, ident, sessions, hexapod),
+        signatures=signature_table(ident.signatures, doc.issue_date),
         verdict=verdict,
+        recommendation=recommend(run, coverage_factor),
+        conformity=None
+        if not tolerances
+        else conformity_part(run, tolerances, coverage_factor, decision_rule(fields)),
         levels=levels,
         parameters=table(
             [
@@ -494,5 +551,12 @@ def report_html(
         ),
         claim_regions=claim_regions_table,
         claim_axes=claim_axes_table,
-        provenance=provenance(current_run(), inputs, folder, now_iso()),
+        provenance=provenance(
+            current_run(),
+            inputs,
+            base,
+            issued,
+            folder_name="the folder of the sessions",
+            number=doc.number,
+        ),
     )

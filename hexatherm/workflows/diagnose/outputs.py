@@ -57,6 +57,7 @@ from hexatherm import __version__
 from hexatherm.core.diagnosis import Adequacy, Candidate, Folds, RunnerUp
 from hexatherm.core.diagnosis.guard import TwinCheck
 from hexatherm.io.config import hexapod_to_yaml
+from hexatherm.workflows.diagnose.nextsteps import next_steps
 from hexatherm.workflows.diagnose.run import DiagnosisResult
 
 RMS_DEFINITION = (
@@ -322,6 +323,7 @@ def story(result: DiagnosisResult) -> str:
             f"verdict: NOT ADEQUATE: {d.adequacy.unexplained_rms_um:.3f} um RMS unexplained; "
             "the effects named explain part of it at most"
         )
+        lines += [f"next: {step}" for step in next_steps(d.adequacy)]
     names = ", ".join(a.effect.name for a in d.added) or "nothing"
     lines.append(
         f"result: added {names}; gap {d.baseline_rms_um:.3f} -> {d.final_rms_um:.3f} um "

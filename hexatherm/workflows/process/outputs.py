@@ -301,11 +301,18 @@ def session_inputs(result: ProcessResult) -> list[Path]:
     return result.session.input_files()
 
 
-def deviation_table(result: ProcessResult, twin: np.ndarray | None = None) -> str:
+def deviation_table(
+    result: ProcessResult,
+    twin: np.ndarray | None = None,
+    uncertainty: PoseUncertainty | None = None,
+    coverage_factor: float = 2.0,
+) -> str:
     """Side-by-side table of conventional and corrected deviations from the commanded pose.
 
     Translations in micrometres, rotations in microradians; with ``twin`` (M, 6) a
-    third block: the poses corrected by the twin from the thermocouples.
+    third block: the poses corrected by the twin from the thermocouples. With
+    ``uncertainty`` every target's row is followed by its expanded uncertainties
+    ``U = k u`` (``coverage_factor``), each under its value (the twin's block has none).
     """
     corr = result.correction
     plan = result.session.plan
@@ -316,11 +323,19 @@ def deviation_table(result: ProcessResult, twin: np.ndarray | None = None) -> st
 
     tables = [deviations(corr.conventional), deviations(corr.corrected)]
     titles = ["conventional - commanded", "corrected - commanded"]
+    expanded: list[np.ndarray | None] = [None, None]
+    if uncertainty is not None:
+        expanded = [
+            coverage_factor * to_um_urad(uncertainty.conventional_u),
+            coverage_factor * to_um_urad(uncertainty.corrected_u),
+        ]
     if twin is not None:
         tables.append(deviations(np.asarray(twin)))
         titles.append("twin-corrected - commanded")
+        expanded.append(None)
     labels = [plan.labels[i] for i in corr.target_index]
-    width = max([5, *map(len, labels)])
+    u_label = f"U k={coverage_factor:g}"
+    width = max([5, len(u_label) + 2, *map(len, labels)])
     names = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
     block = " ".join(f"{n:>8}" for n in names)
     units = f"{'(um)':>26} {'(urad)':>26}"
@@ -334,9 +349,54 @@ def deviation_table(result: ProcessResult, twin: np.ndarray | None = None) -> st
             f"{label:{width}}  "
             + "  |  ".join(" ".join(f"{v:8.3f}" for v in table[i]) for table in tables)
         )
+        if uncertainty is not None:
+            lines.append(
+                f"{'  ' + u_label:{width}}  "
+                + "  |  ".join(
+                    " " * 53
+                    if u is None
+                    else " ".join(f"{'±' + format(v, '.3f'):>8}" for v in u[i])
+                    for u in expanded
+                )
+            )
     if len(labels) > 1:
         lines.append(
             f"{'spread':{width}}  "
             + "  |  ".join(" ".join(f"{v:8.3f}" for v in np.ptp(table, axis=0)) for table in tables)
         )
     return "\n".join(lines)
+
+
+def insignificant_corrections(
+    result: ProcessResult, uncertainty: PoseUncertainty, coverage_factor: float = 2.0
+) -> list[tuple[str, float, float]]:
+    """The components whose thermal correction (the largest |corrected - conventional|
+    over the targets) is smaller than the corrected poses' expanded uncertainty (their
+    median ``U = k u`` over the targets): ``(name, correction, U)``, um or urad. There
+    the correction is not significant: the pose is not known better than it moved."""
+    corr = result.correction
+    effect = np.abs(to_um_urad(corr.corrected - corr.conventional)).max(axis=0)
+    big_u = coverage_factor * np.median(to_um_urad(uncertainty.corrected_u), axis=0)
+    names = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
+    return [
+        (names[j], float(effect[j]), float(big_u[j]))
+        for j in range(6)
+        if effect.size and effect[j] < big_u[j]
+    ]
+
+
+def significance_lines(
+    result: ProcessResult, uncertainty: PoseUncertainty, coverage_factor: float = 2.0
+) -> list[str]:
+    """The screen's word on the correction's significance, one line per component where
+    it is smaller than its U (none: every correction exceeds its U)."""
+    lines = []
+    for name, effect, big_u in insignificant_corrections(result, uncertainty, coverage_factor):
+        unit = "um" if name[0] == "T" else "urad"
+        lines.append(
+            f"not significant: the thermal correction of {name} (at most {effect:.3f} {unit}) "
+            f"is smaller than its U ({big_u:.3f} {unit}, k = {coverage_factor:g}, median over "
+            f"the targets): on {name} the corrected pose is not known better than the "
+            "correction moved it"
+        )
+    return lines

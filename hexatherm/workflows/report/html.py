@@ -10,6 +10,14 @@ import numpy as np
 
 from hexatherm import __version__
 from hexatherm.workflows.process.pipeline import ProcessResult
+from hexatherm.workflows.report.document import (
+    Document,
+    document,
+    identification_block,
+    offset_time,
+    span_text,
+    template_variables,
+)
 from hexatherm.workflows.report.figures import (
     POSE_NAMES,
     _time_text,
@@ -43,8 +51,9 @@ from hexatherm.workflows.report.verdict import Extreme, Verdict, verdict
 __all__ = ["STYLE", "build_report", "metadata_rows", "provenance_block", "report_html"]
 
 if TYPE_CHECKING:
+    from hexatherm.core.conformity import DecisionRule
     from hexatherm.io.provenance import RunFacts
-    from hexatherm.session import Identification, QualityLimits
+    from hexatherm.session import Identification, QualityLimits, Tolerance
     from hexatherm.workflows.process.quality import QualityReport
     from hexatherm.workflows.process.uncertainty import PoseUncertainty
 
@@ -62,8 +71,9 @@ def metadata_rows(result: ProcessResult) -> list[tuple[str, str]]:
     session, plan = result.session, result.session.plan
     files = _session_files(result)
     times = result.centres.times_s
+    first, last = float(np.min(times)), float(np.max(times))
     start = start_time_s(result)
-    end = float(np.max(times))
+    end = last
     if result.temperatures is not None:
         end = max(end, float(result.temperatures.time_s[-1]))
     temps = result.temperatures
@@ -73,7 +83,7 @@ def metadata_rows(result: ProcessResult) -> list[tuple[str, str]]:
     n_refs = len(plan.reference_indices)
     return [
         ("session", session.name),
-        ("session file", str(session.path)),
+        ("session file", session.path.name),
         ("hexapod file", files["hexapod"]),
         ("balls file", files["balls"]),
         ("plan file", files["plan"]),
@@ -88,9 +98,12 @@ def metadata_rows(result: ProcessResult) -> list[tuple[str, str]]:
             f"{len(result.correction.target_index)} targets",
         ),
         ("reference pose (mm, \u00b0)", ", ".join(exact(v) for v in plan.reference_pose)),
+        ("measured", f"{session_dates(result)} ({(last - first) / 3600:.2f} h)"),
         (
-            "time span",
-            f"{_time_text(result, start)} to {_time_text(result, end)} "
+            "temperature log",
+            "none"
+            if temps is None
+            else f"{measured_time(result, start)} to {measured_time(result, end)} "
             f"({(end - start) / 3600:.2f} h)",
         ),
         ("interpolation", result.interpolation),
@@ -98,27 +111,45 @@ def metadata_rows(result: ProcessResult) -> list[tuple[str, str]]:
     ]
 
 
+def measured_time(result: ProcessResult, seconds: float) -> str:
+    """A time of the session as a report prints it: ISO 8601 with its UTC offset
+    (:func:`~hexatherm.workflows.report.document.offset_time`), or seconds."""
+    if result.centres.time_kind != "iso":
+        return _time_text(result, seconds)
+    return offset_time(seconds, result.session.utc_offset_s, result.centres.time_aware)
+
+
 def session_dates(result: ProcessResult) -> str:
-    """The dates of the session's measurements: first and last step."""
+    """The dates of the session's measurements: first and last step, with their UTC
+    offset (the one time span every part of a report prints)."""
     times = result.centres.times_s
-    first, last = _time_text(result, float(np.min(times))), _time_text(result, float(np.max(times)))
-    return first if first == last else f"{first} to {last}"
+    first = measured_time(result, float(np.min(times)))
+    return span_text(first, measured_time(result, float(np.max(times))))
 
 
 def header_rows(
-    title: str, ident: Identification | None, dates: str, hexapod: str
+    doc: Document, ident: Identification | None, dates: str, hexapod: str
 ) -> list[tuple[str, str]]:
-    """The running header's ``(name, text)`` rows: the report, every identification field
-    given, the hexapod file's name, the sessions' dates and the signatories."""
-    rows = [("Report", title)]
+    """The running header's ``(name, text)`` rows: the document's number, title and date
+    of issue, every identification field given (a session's report number but the
+    document's own), the hexapod, the dates measured and the signatories."""
+    rows = [
+        ("Report number", doc.number or "none assigned"),
+        ("Report", doc.title),
+        ("Date of issue", doc.issue_date),
+    ]
     if ident is None or not (ident.fields or ident.signatures):
         rows.append(("Identification", "none given (session.yaml identification:, --lab)"))
     else:
-        rows += ident.rows()
+        rows += [row for row in ident.rows() if row[0] != "Report number"]
     rows += [("Hexapod", hexapod), ("Measured", dates)]
     if ident is not None and ident.signatures:
         rows.append(("Signed by", ", ".join(f"{name} ({role})" for role, name in ident.signatures)))
     return rows
+
+
+def _text_or_none(value: object) -> str | None:
+    return None if value is None else str(value)
 
 
 def _extreme_text(extreme: Extreme, unit: str, k: float) -> str:
@@ -173,6 +204,24 @@ def verdict_items(summary: Verdict) -> list[tuple[str, str]]:
             + _extreme_text(summary.correction_urad, "urad", k)
             + ".",
         ),
+        *(
+            [
+                (
+                    "Not significant",
+                    "the thermal correction is smaller than its U on "
+                    + ", ".join(
+                        f"{name} (at most {fixed(effect, unit)} {unit_text(unit)} against "
+                        f"U = {fixed(big_u, unit)} {unit_text(unit)})"
+                        for name, effect, big_u in summary.insignificant
+                        for unit in ("um" if name[0] == "T" else "urad",)
+                    )
+                    + f" (k = {exact(k)}, U the median over the targets): there the corrected "
+                    "pose is not known better than the correction moved it.",
+                )
+            ]
+            if summary.insignificant
+            else []
+        ),
         (
             "Uncertainty",
             f"{summary.basis}; expanded uncertainty U = k\u00b7u with coverage factor "
@@ -220,19 +269,17 @@ def threshold_texts(thresholds: QualityLimits) -> list[str]:
     return texts
 
 
-def _options_text(options: dict[str, object]) -> str:
-    return "; ".join(f"{key} = {value}" for key, value in options.items())
-
-
 def provenance_block(
     result: ProcessResult,
     quality: QualityReport | None,
     facts: RunFacts | None,
     generated: str,
     extra_inputs: Sequence[Path] = (),
+    number: str | None = None,
 ) -> dict[str, Table]:
     """The provenance block of a session's report (:func:`page.provenance`), with the
-    quality limits; ``extra_inputs``: further files the page was made from (a lab file)."""
+    report's ``number`` and the quality limits; ``extra_inputs``: further files the page
+    was made from (a lab file)."""
     limits = "not available" if quality is None else "; ".join(threshold_texts(quality.thresholds))
     return provenance(
         facts,
@@ -240,6 +287,7 @@ def provenance_block(
         result.session.path.parent,
         generated,
         extra=[("quality limits", limits)],
+        number=number,
     )
 
 
@@ -252,9 +300,12 @@ def report_html(
     generated: str | None = None,
     on_verdict: Callable[[Verdict], None] | None = None,
     identification: Identification | None = None,
-    tolerances: dict[str, float] | None = None,
+    tolerances: dict[str, Tolerance] | None = None,
     extra_inputs: Sequence[Path] = (),
     template_dir: Path | None = None,
+    rule: DecisionRule | None = None,
+    report_number: str | None = None,
+    title: str | None = None,
 ) -> str:
     """The report page of a processed session (see the package's docstring).
 
@@ -284,6 +335,12 @@ def report_html(
         Further input files listed in the provenance (the lab file).
     template_dir : Path, optional
         A lab's templates, over the package's (:mod:`~hexatherm.workflows.report.render`).
+    rule : DecisionRule, optional
+        The conformity statement's decision rule (default: the lab file's
+        ``decision_rule:``, else ISO 14253-1 with w = U).
+    report_number, title : str, optional
+        The document's number and title (``--report-number``, ``--title``), over the lab
+        file's ``numbering:`` and ``titles:`` (:mod:`~hexatherm.workflows.report.document`).
 
     Returns
     -------
@@ -291,10 +348,24 @@ def report_html(
         One self-contained HTML document.
     """
     from hexatherm.io.provenance import current_run, now_iso
+    from hexatherm.workflows.process.conformity import decision_rule
 
     if facts is None:
         facts = current_run()
-    summary = verdict(result, uncertainty, quality, coverage_factor, tolerances)
+    fields = dict(identification.fields) if identification is not None else {}
+    issued = generated or now_iso()
+    session = result.session
+    doc = document(
+        "report",
+        issued,
+        fields,
+        [_text_or_none(session.identification.get("report_number"))],
+        [session.name],
+        report_number,
+        title,
+    )
+    rule = decision_rule(fields) if rule is None else rule
+    summary = verdict(result, uncertainty, quality, coverage_factor, tolerances, rule)
     if on_verdict is not None:
         on_verdict(summary)
     failing = dict(summary.failing_targets + summary.failing_other)
@@ -328,14 +399,33 @@ def report_html(
         from hexatherm.workflows.report.conformity import conformity_table
 
         conformity = conformity_table(summary.conformity)
-    title = f"hexatherm report: {result.session.name}"
-    hexapod = f"{result.session.hexapod.name} ({_session_files(result)['hexapod']})"
+    hexapod = f"{session.hexapod.name} ({_session_files(result)['hexapod']})"
+    signatories = () if identification is None else identification.signatures
+    item = f"hexapod {session.hexapod.name}" + "".join(
+        f", {name.lower()} {value}"
+        for key, name in (("hexapod.model", "model"), ("hexapod.serial", "serial"))
+        if (value := fields.get(key)) is not None
+    )
     return render_page(
         "process.html.j2",
         template_dir,
-        title=title,
-        header_rows=header_rows(title, identification, session_dates(result), hexapod),
-        signatures=None if identification is None else signature_table(identification.signatures),
+        title=doc.title,
+        subtitle=f"Thermally corrected 6-DOF poses of session {session.name}",
+        **template_variables(doc, fields),
+        ident_block=identification_block(
+            doc,
+            fields,
+            item,
+            session_dates(result),
+            summary.basis,
+            f"the corrected pose deviations of {summary.targets} targets from the commanded "
+            "pose (µm, µrad) with U = k·u below",
+            signatories,
+        ),
+        header_rows=header_rows(doc, identification, session_dates(result), hexapod),
+        signatures=None
+        if identification is None
+        else signature_table(identification.signatures, doc.issue_date),
         verdict=verdict_items(summary),
         verdict_failed=verdict_failed(summary),
         warnings=list(result.warnings),
@@ -378,7 +468,7 @@ def report_html(
             numeric_from=99,
             css="meta",
         ),
-        provenance=provenance_block(result, quality, facts, generated or now_iso(), extra_inputs),
+        provenance=provenance_block(result, quality, facts, issued, extra_inputs, doc.number),
     )
 
 
@@ -391,9 +481,12 @@ def build_report(
     coverage_factor: float = 2.0,
     on_verdict: Callable[[Verdict], None] | None = None,
     lab_fields: dict[str, object] | None = None,
-    tolerances: dict[str, float] | None = None,
+    tolerances: dict[str, Tolerance] | None = None,
     extra_inputs: Sequence[Path] = (),
     template_dir: Path | None = None,
+    rule: DecisionRule | None = None,
+    report_number: str | None = None,
+    title: str | None = None,
 ) -> str:
     """The report page of ``result`` with its pose uncertainty and quality checks.
 
@@ -422,6 +515,8 @@ def build_report(
         Further input files for the provenance (the lab file).
     template_dir : Path, optional
         A lab's templates, over the package's.
+    rule, report_number, title : optional
+        As :func:`report_html`.
     """
     from hexatherm.io.config.identity import identification
     from hexatherm.workflows.process.quality import quality_checks
@@ -437,4 +532,7 @@ def build_report(
         tolerances=result.session.tolerances if tolerances is None else tolerances,
         extra_inputs=extra_inputs,
         template_dir=template_dir,
+        rule=rule,
+        report_number=report_number,
+        title=title,
     )

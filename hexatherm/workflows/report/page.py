@@ -14,9 +14,10 @@ from __future__ import annotations
 
 import html
 import os
-from collections.abc import Iterable, Sequence
+import shlex
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from hexatherm import __version__
 from hexatherm.workflows.report.render import PACKAGE_TEMPLATES, Figure, Table
@@ -95,52 +96,113 @@ def provenance(
     folder: Path,
     generated: str,
     extra: Sequence[tuple[str, str]] = (),
+    folder_name: str = "the session's folder",
+    number: str | None = None,
 ) -> dict[str, Table]:
-    """The provenance block's two tables: when, by what, how (``extra`` rows: limits ...),
-    and from which files (size, SHA-256; paths relative to ``folder`` where they lie
-    inside it)."""
-    from hexatherm.io.provenance import command_line, input_entries
+    """The provenance block's two tables: the document's ``number``, when, by what, how
+    (``extra`` rows: limits ...), and from which files (size, SHA-256). Paths, in the files and
+    in the command line and options, are relative to ``folder`` (``folder_name`` says
+    which): a customer's document carries no path of the lab's computer."""
+    from hexatherm.io.provenance import input_entries
 
+    base = folder.resolve()
     if facts is None:
         command = options = "not run from the command line"
     else:
-        command = command_line(facts)  # quoted: it runs as printed
-        options = "; ".join(f"{key} = {value}" for key, value in facts.options.items())
+        command = command_text(facts.command, facts.argv, base)  # quoted: it runs as printed
+        options = options_text(facts.options, base) or "none"
     rows: list[Sequence[Cell]] = [
+        *([["report number", number or "none assigned"]] if number is not None else []),
         ["generated", generated],
         ["hexatherm", __version__],
-        ["command line", command],
-        ["options", options],
+        [f"command line (paths relative to {folder_name})", command],
+        ["options in effect", options],
         *[list(row) for row in extra],
     ]
     if facts is not None:
         rows.append(["started", facts.started])
     files: list[Sequence[Cell]] = []
-    base = folder.resolve()
     for entry in input_entries(inputs):
-        path = Path(entry["path"])
-        shown = os.path.relpath(path, base) if path.is_relative_to(base) else str(path)
         size = str(entry["bytes"]) if "bytes" in entry else "folder"
-        files.append([shown, size, entry.get("sha256", "")])
+        files.append([relative(entry["path"], base), size, entry.get("sha256", "")])
     return {
         "run": table([[("field", 1), ("value", 1)]], rows, numeric_from=99, css="meta"),
         "files": table(
             [[("input file", 1), ("bytes", 1), ("SHA-256", 1)]],
             files,
             numeric_from=1,
-            caption=f"Input files, relative to {base}",
+            caption=f"Input files, relative to {folder_name} ({base.name})",
         ),
     }
 
 
-def signature_table(signatures: Sequence[tuple[str, str]]) -> Table | None:
-    """The signature block: one row per ``(role, name)``, with room to sign and date."""
+def signature_table(signatures: Sequence[tuple[str, str]], date: str = "") -> Table | None:
+    """The signature block: one row per ``(role, name)``, with room to sign, dated
+    ``date`` (the date of issue: a document is signed when it is issued)."""
     if not signatures:
         return None
-    rows: list[Sequence[Cell]] = [[role, name, "", ""] for role, name in signatures]
+    rows: list[Sequence[Cell]] = [[role, name, "", date] for role, name in signatures]
     return table(
         [[("role", 1), ("name", 1), ("signature", 1), ("date", 1)]],
         rows,
         numeric_from=99,
         css="signatures",
     )
+
+
+def relative(path: str | os.PathLike[str], base: Path) -> str:
+    """``path`` relative to ``base`` (``..`` where it lies outside), never absolute."""
+    try:
+        return os.path.relpath(Path(path).resolve(), base.resolve())
+    except ValueError:  # another drive (Windows): its name only
+        return Path(path).name
+
+
+#: parameters that are arguments (in the command line), not options
+_ARGUMENTS = ("session", "sessions", "sessions_dir")
+#: options whose parameter is named otherwise than their flag
+_FLAGS = {"tolerances": "--tolerance", "quality_thresholds": "--quality-threshold", "out": "-o"}
+
+
+def options_text(options: Mapping[str, Any], base: Path) -> str:
+    """The options as a person writes them: ``--coverage-factor 2 --mc 0``; flags given
+    by their name, tolerances as ``Tx=2um``, paths relative to ``base``, options not given
+    left out."""
+    words: list[str] = []
+    for key, value in options.items():
+        flag = _FLAGS.get(key, "--" + key.replace("_", "-"))
+        empty = isinstance(value, list | tuple | Mapping | str) and not value
+        if key in _ARGUMENTS or value is None or value is False or empty:
+            continue
+        if value is True:
+            words.append(flag)
+        elif isinstance(value, Mapping) and all(isinstance(v, bool) for v in value.values()):
+            words += ["--" + k.replace("_", "-") for k, v in value.items() if v]
+        elif isinstance(value, Mapping):
+            words += [flag, ",".join(_item(k, v) for k, v in value.items())]
+        elif isinstance(value, list | tuple):
+            for item in value:
+                words += [flag, _word(item, base)]
+        else:
+            words += [flag, _word(value, base)]
+    return shlex.join(words)
+
+
+def _item(key: str, value: object) -> str:
+    """A mapping's item as the command line takes it: ``Tx_um: 2`` -> ``Tx=2um``,
+    ``(-1, 3)`` -> ``Tx=-1..3um``."""
+    name, _, unit = key.partition("_")
+    if unit in ("um", "urad"):
+        limits = value if isinstance(value, list | tuple) else [value]
+        return f"{name}=" + "..".join(f"{float(str(v)):g}" for v in limits) + unit
+    return f"{key}={value}"
+
+
+def _word(value: object, base: Path) -> str:
+    text = str(value)
+    return relative(text, base) if os.path.isabs(text) else text
+
+
+def command_text(command: str, argv: Sequence[str], base: Path) -> str:
+    """The command line with every absolute path relative to ``base``."""
+    return shlex.join(["hexatherm", command, *(_word(a, base) for a in argv)])

@@ -16,10 +16,13 @@ import numpy as np
 
 from hexatherm.core.geometry import to_um_urad
 from hexatherm.typing import FloatArray
+from hexatherm.workflows.process.outputs import insignificant_corrections
 from hexatherm.workflows.process.pipeline import ProcessResult
 from hexatherm.workflows.report.figures import POSE_NAMES, pose_deviations, target_labels
 
 if TYPE_CHECKING:
+    from hexatherm.core.conformity import DecisionRule
+    from hexatherm.session import Tolerance
     from hexatherm.workflows.process.conformity import Conformity
     from hexatherm.workflows.process.quality import QualityReport
     from hexatherm.workflows.process.uncertainty import PoseUncertainty
@@ -75,6 +78,9 @@ class Verdict:
     common_u : ndarray, shape (6,), optional
         The largest expanded common part ``k u_common`` of the corrected deviations over
         the targets (um, urad): from O and R0, shared by every target.
+    insignificant : tuple of (str, float, float)
+        The components whose thermal correction is smaller than its U: ``(name, largest
+        correction, median U)`` (``process.outputs.insignificant_corrections``).
     """
 
     targets: int
@@ -89,6 +95,7 @@ class Verdict:
     basis: str
     conformity: Conformity | None = None
     common_u: FloatArray | None = None
+    insignificant: tuple[tuple[str, float, float], ...] = ()
 
 
 def uncertainty_basis(uncertainty: PoseUncertainty | None) -> str:
@@ -134,7 +141,8 @@ def verdict(
     uncertainty: PoseUncertainty | None,
     quality: QualityReport | None,
     coverage_factor: float = 2.0,
-    tolerances: dict[str, float] | None = None,
+    tolerances: dict[str, Tolerance] | None = None,
+    rule: DecisionRule | None = None,
 ) -> Verdict:
     """The verdict of a processed session (see :class:`Verdict`).
 
@@ -147,7 +155,10 @@ def verdict(
     coverage_factor : float
         ``k`` of the expanded uncertainties, > 0.
     tolerances : dict, optional
-        ``Tx_um`` .. ``Rz_urad`` -> T: the conformity statement is made for them.
+        ``Tx_um`` .. ``Rz_urad`` -> T or (lower, upper): the conformity statement is made
+        for them.
+    rule : DecisionRule, optional
+        The decision rule of the conformity statement (default: ISO 14253-1, w = U).
     """
     if not coverage_factor > 0:
         raise ValueError(f"coverage factor {coverage_factor}: must be > 0")
@@ -175,16 +186,20 @@ def verdict(
         else coverage_factor * to_um_urad(uncertainty.common_u[:, 6:12]).max(axis=0),
         conformity=None
         if not tolerances
-        else _conformity(result, uncertainty, tolerances, coverage_factor),
+        else _conformity(result, uncertainty, tolerances, coverage_factor, rule),
+        insignificant=()
+        if uncertainty is None
+        else tuple(insignificant_corrections(result, uncertainty, coverage_factor)),
     )
 
 
 def _conformity(
     result: ProcessResult,
     uncertainty: PoseUncertainty | None,
-    tolerances: dict[str, float],
+    tolerances: dict[str, Tolerance],
     coverage_factor: float,
+    rule: DecisionRule | None,
 ) -> Conformity:
     from hexatherm.workflows.process.conformity import conformity
 
-    return conformity(result, uncertainty, tolerances, coverage_factor)
+    return conformity(result, uncertainty, tolerances, coverage_factor, rule)

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING
 from hexatherm.workflows.diagnose.report.figures import report_figures
 from hexatherm.workflows.diagnose.report.markdown import report_markdown
 from hexatherm.workflows.diagnose.report.tables import FIGURE_DPI, FIGURE_FILES, REPORT_FILE
+from hexatherm.workflows.report.document import document, template_variables
 from hexatherm.workflows.report.figures import figure_png
 from hexatherm.workflows.report.page import figure, provenance
 from hexatherm.workflows.report.render import Markup, render_macro, render_page
@@ -165,6 +166,15 @@ def report_html(
     names = {key: FIGURE_FILES[key] for key in figures}
     pngs = {FIGURE_FILES[key]: png for key, png in figures.items()}
     session = result.data.session
+    issued = generated or now_iso()
+    number = session.identification.get("report_number")
+    doc = document(
+        "diagnose",
+        issued,
+        {},
+        [None if number is None else str(number)],
+        [session.name],
+    )
     title = f"Diagnosis of {session.name}"
     keep = [  # a user's texts, printed as they are
         session.name,
@@ -178,8 +188,13 @@ def report_html(
         "diagnosis.html.j2",
         template_dir,
         title=title,
+        subtitle="",
+        **template_variables(doc, dict(session.identification)),
+        ident_block=None,
         header_rows=[
+            ("Report number", doc.number or "none assigned"),
             ("Report", title),
+            ("Date of issue", doc.issue_date),
             ("Hexapod", f"{result.data.hexapod.name} ({result.data.hexapod_source})"),
         ],
         signatures=None,
@@ -188,8 +203,9 @@ def report_html(
             current_run() if facts is None else facts,
             [*session.input_files(), *extra_inputs],
             session.path.parent,
-            generated or now_iso(),
+            issued,
             extra=[("hexapod", result.data.hexapod_source)],
+            number=doc.number,
         ),
     )
 

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from hexatherm.core.diagnosis import Diagnosis
+from hexatherm.workflows.diagnose.nextsteps import next_steps
 from hexatherm.workflows.diagnose.outputs import verdict_line
 from hexatherm.workflows.diagnose.report.tables import (
     _HOUR_S,
@@ -121,6 +122,7 @@ def adequacy_section(diagnosis: Diagnosis) -> list[str]:
     md += [f"- caution: {c}" for c in diagnosis.cautions()]
     if not v.adequate:
         md += [f"- it shows in: {'; '.join(v.where())}"]
+        md += [f"- **next:** {step}" for step in next_steps(v)]
     md += [f"  - {f.text()}" for f in v.findings[:12]]
     for a in diagnosis.added:
         r = a.runner_up
