@@ -284,3 +284,22 @@ def test_a_huge_asset_is_refused_before_it_is_hashed(tmp_path):
     with pytest.raises(InputError, match="asset 'a.png': 107374182400 bytes") as caught:
         template_files(folder.resolve())
     assert caught.value.path == str(folder.resolve() / "closing.html.j2") and caught.value.line == 1
+
+
+# ------------------------------------------------------------------- the low list
+
+
+@pytest.mark.parametrize(
+    ("air", "field"),
+    [("1e308", "heating.air_C"), ("[[0, 20.0], [14400, 1.0e+308]]", "heating.air_C[1][1]")],
+)
+def test_an_ambient_of_1e308_degC_is_refused(tmp_path, air, field):
+    text = (ROOT / "sessions" / "with-hidden-effect" / "truth" / "scenario.yaml").read_text()
+    text = text.replace("../symetrie-like.yaml", str(ROOT / "configs" / "symetrie-like.yaml"))
+    text = text.replace("../balls-3.yaml", str(BALLS))
+    text = text.replace("air_C: [[0, 20.0], [14400, 20.2]]", f"air_C: {air}")
+    assert f"air_C: {air}" in text
+    (tmp_path / "scenario.yaml").write_text(text)
+    line = refusal(invoke("simulate", tmp_path / "scenario.yaml", "-o", tmp_path / "out"))
+    assert f"field '{field}': a temperature must be within [-60, 150] degC" in line, line
+    assert not (tmp_path / "out").exists()
