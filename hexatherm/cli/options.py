@@ -397,9 +397,18 @@ def _tolerances(ctx: click.Context, param: click.Parameter, values: tuple[str, .
     found: dict[str, float] = {}
     for value in values:
         try:
-            found.update(parse_tolerances(value))
+            given = parse_tolerances(value)
         except ValueError as exc:
             raise click.BadParameter(str(exc), ctx=ctx, param=param) from None
+        twice = next((key for key in given if key in found), None)
+        if twice is not None:  # which one holds? neither: say so
+            name = twice.split("_")[0]
+            raise click.BadParameter(
+                f"{value!r}: {name} is given twice (in two --tolerance options)",
+                ctx=ctx,
+                param=param,
+            )
+        found.update(given)
     return found
 
 

@@ -303,3 +303,11 @@ def test_an_ambient_of_1e308_degC_is_refused(tmp_path, air, field):
     line = refusal(invoke("simulate", tmp_path / "scenario.yaml", "-o", tmp_path / "out"))
     assert f"field '{field}': a temperature must be within [-60, 150] degC" in line, line
     assert not (tmp_path / "out").exists()
+
+
+def test_a_tolerance_repeated_in_two_options_is_a_usage_error(tmp_path):
+    session = session_copy(tmp_path)
+    result = invoke("process", session, "--tolerance", "Tx=2um", "--tolerance", "Tx=5um,Ty=1um")
+    assert result.exit_code == 2, result.output
+    assert "'Tx=5um,Ty=1um': Tx is given twice (in two --tolerance options)" in result.output
+    assert not (session / "results").exists()
