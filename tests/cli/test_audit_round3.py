@@ -311,3 +311,14 @@ def test_a_tolerance_repeated_in_two_options_is_a_usage_error(tmp_path):
     assert result.exit_code == 2, result.output
     assert "'Tx=5um,Ty=1um': Tx is given twice (in two --tolerance options)" in result.output
     assert not (session / "results").exists()
+
+
+def test_a_name_in_diagnoses_markdown_has_no_raw_markup():
+    """The hexapod's name went into report.md as a code span: literal for CommonMark, but
+    a raw ``<script>`` in the file for anything else that reads it."""
+    from hexatherm.workflows.diagnose.report.tables import md_code
+
+    shown = md_code("<script>hx</script> & co")
+    assert "<" not in shown.replace("\\<", "") and "&" not in shown.replace("\\&", "")
+    assert shown == "\\<script\\>hx\\</script\\> \\& co"
+    assert md_code("s/session.yaml") == "`s/session.yaml`"
