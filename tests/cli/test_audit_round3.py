@@ -322,3 +322,13 @@ def test_a_name_in_diagnoses_markdown_has_no_raw_markup():
     assert "<" not in shown.replace("\\<", "") and "&" not in shown.replace("\\&", "")
     assert shown == "\\<script\\>hx\\</script\\> \\& co"
     assert md_code("s/session.yaml") == "`s/session.yaml`"
+
+
+def test_a_plan_message_shows_the_files_mapping_not_a_python_dict(tmp_path):
+    session = session_copy(tmp_path)
+    plan = session / "plan.yaml"
+    plan.write_text(
+        plan.read_text().replace("reference_pose: [0, 0, -40, 0, 0, 0]", "reference_pose: {x: 1}")
+    )
+    line = refusal(invoke("process", session, "--mc", 0))
+    assert line.endswith("field 'reference_pose': expected a list of 6 numbers, got {x: 1}"), line
