@@ -8,6 +8,7 @@ command replaces its own output.
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import pytest
@@ -332,3 +333,24 @@ def test_a_plan_message_shows_the_files_mapping_not_a_python_dict(tmp_path):
     )
     line = refusal(invoke("process", session, "--mc", 0))
     assert line.endswith("field 'reference_pose': expected a list of 6 numbers, got {x: 1}"), line
+
+
+def test_u_um_contradicting_the_covariance_columns_is_said(tmp_path):
+    from hexatherm.errors import InputWarning
+    from hexatherm.io.csvfile import read_measurement_csv
+
+    head = "label,ball,x,y,z,time,u_um,u_x_um,u_y_um,u_z_um\n"
+    rows = "O,B1,1,2,3,0,{u},0.3,0.4,0.5\nO,B2,4,5,6,1,0.41,0.3,0.4,0.5\n"
+    # sqrt((0.09 + 0.16 + 0.25) / 3) = 0.408 um: 0.41 agrees; 0.05 does not
+    (tmp_path / "agree.csv").write_text(head + rows.format(u="0.408"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        read_measurement_csv(tmp_path / "agree.csv")
+    (tmp_path / "c.csv").write_text(head + rows.format(u="0.05"))
+    with pytest.warns(InputWarning) as said:
+        read_measurement_csv(tmp_path / "c.csv")
+    assert len(said) == 1
+    assert str(said[0].message) == (
+        f"{tmp_path / 'c.csv'}:2: field 'u_um': 0.05 um contradicts the covariance columns "
+        "u_x_um, u_y_um, u_z_um (sqrt(tr C / 3) = 0.4082 um, more than 5% apart)"
+    )
