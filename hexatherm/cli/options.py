@@ -377,18 +377,18 @@ def template_folder(template_dir: Path | None, lab: Path | None) -> Path | None:
 
 
 def template_files(folder: Path | None, lab: Path | None = None) -> list[Path]:
-    """The files of the lab's template folder, and those of its sub-folders that its
-    templates name (an included template, an ``asset()``), but the lab file and what
-    hexatherm wrote there (a report, its manifest): inputs of the page (its provenance,
-    and never an output)."""
+    """The files of the lab's template folder its pages are made of (its templates, what
+    they include, their ``asset()``s: what is read, each of a bounded size), but the lab
+    file and what hexatherm wrote there (a report, its manifest): inputs of the page (its
+    provenance, and never an output). Other files of the folder are not read (a lab's
+    archive, a 100 GiB file nothing uses)."""
     from hexatherm.io.outputs import hexatherms_own
     from hexatherm.workflows.report.render import named_files
 
     if folder is None:
         return []
     skip = None if lab is None else lab.resolve()
-    found = {p for p in folder.iterdir() if p.is_file()} | set(named_files(folder))
-    return sorted(p for p in found if p.resolve() != skip and not hexatherms_own(p))
+    return sorted(p for p in named_files(folder) if p.resolve() != skip and not hexatherms_own(p))
 
 
 def _tolerances(ctx: click.Context, param: click.Parameter, values: tuple[str, ...]) -> dict:
@@ -397,9 +397,18 @@ def _tolerances(ctx: click.Context, param: click.Parameter, values: tuple[str, .
     found: dict[str, object] = {}
     for value in values:
         try:
-            found.update(parse_tolerances(value))
+            given = parse_tolerances(value)
         except ValueError as exc:
             raise click.BadParameter(str(exc), ctx=ctx, param=param) from None
+        twice = next((key for key in given if key in found), None)
+        if twice is not None:  # which one holds? neither: say so
+            name = twice.split("_")[0]
+            raise click.BadParameter(
+                f"{value!r}: {name} is given twice (in two --tolerance options)",
+                ctx=ctx,
+                param=param,
+            )
+        found.update(given)
     return found
 
 

@@ -42,6 +42,7 @@ import pandas as pd
 
 from hexatherm.core.plan import NAME_PATTERN
 from hexatherm.errors import InputError
+from hexatherm.io import records as records_module
 from hexatherm.io.csvcolumns import ASCII_BLANKS, column_numbers, column_times, drop_blank_rows
 from hexatherm.io.csvout import csv_text
 from hexatherm.io.csvtext import complete_lines, csv_frame, decode_text
@@ -285,8 +286,10 @@ def _centre_extra(
             field="r_xy",
         )
     u_mm = np.column_stack([values[c] for c in axes]) * 1e-3
-    extra["cov_centre_mm2"] = u_mm[:, :, None] * rho * u_mm[:, None, :]
+    extra["cov_centre_mm2"] = cov = u_mm[:, :, None] * rho * u_mm[:, None, :]
     extra["cov_from_file"] = rows
+    if "u_um" in values:
+        records_module.check_u_covariance(values["u_um"], cov, lines, path)
     return extra
 
 

@@ -382,3 +382,36 @@ def _select(records: Records, keep: npt.NDArray[np.bool_]) -> Records:
         ijk=None if records.ijk is None else records.ijk[keep],
         extra={key: pick(value) for key, value in records.extra.items()},
     )
+
+
+#: how far a centre's ``u_um`` may be from ``sqrt(tr C / 3)`` of its covariance columns
+#: (relative; plus 0.001 um, the last digit a CSV may round away) before a warning
+U_COVARIANCE_TOLERANCE = 0.05
+
+
+def check_u_covariance(
+    u_um: npt.NDArray[np.float64],
+    cov_mm2: npt.NDArray[np.float64],
+    lines: npt.NDArray[np.int64],
+    path: str,
+) -> None:
+    """Warn (:class:`InputWarning`, once for the file) when a centre's ``u_um`` contradicts
+    its covariance columns: ``fit-spheres`` writes ``u_um = sqrt(tr C / 3)``; a row further
+    than :data:`U_COVARIANCE_TOLERANCE` from it was edited by hand or joined from two
+    sources, and which of the two holds is for the user to say."""
+    with np.errstate(invalid="ignore"):
+        implied = np.sqrt(np.trace(cov_mm2, axis1=1, axis2=2) / 3) * 1e3
+        off = np.abs(u_um - implied) > U_COVARIANCE_TOLERANCE * implied + 1e-3
+    if not np.any(off):  # NaN rows compare False: a row without both is not checked
+        return
+    row = int(np.argmax(off))
+    more = int(off.sum()) - 1
+    warnings.warn(
+        InputWarning(
+            f"{path}:{int(lines[row])}: field 'u_um': {u_um[row]:g} um contradicts the "
+            f"covariance columns u_x_um, u_y_um, u_z_um (sqrt(tr C / 3) = {implied[row]:.4g} "
+            f"um, more than {U_COVARIANCE_TOLERANCE:.0%} apart)"
+            + (f"; {more} more row{'s' if more > 1 else ''} like it" if more else "")
+        ),
+        stacklevel=2,
+    )

@@ -83,6 +83,7 @@ from hexatherm.core.planning import (
 )
 from hexatherm.errors import InputError, PlanError
 from hexatherm.io.config import read_balls, read_hexapod_text, read_plan
+from hexatherm.io.config.hexapod import checked_temperature
 from hexatherm.io.measurements import COORDINATE_MAX_MM
 from hexatherm.io.records import iso_to_seconds
 from hexatherm.io.yamlfile import YamlDoc
@@ -457,12 +458,14 @@ def _check_stroke(doc: YamlDoc, hexapod: Hexapod, plan: Plan) -> None:
 def _air(doc: YamlDoc) -> tuple[tuple[float, ...], tuple[float, ...]]:
     value = doc.get("heating", "air_C", default=20.0)
     if not isinstance(value, list):
-        return (0.0,), (doc.number("heating", "air_C", default=20.0),)
+        air = doc.number("heating", "air_C", default=20.0)
+        return (0.0,), (checked_temperature(doc, air, "heating", "air_C"),)
     if not value:
         raise doc.error("expected a temperature or a list of [t_s, degC]", "heating", "air_C")
     pairs = [doc.vector("heating", "air_C", i, size=2) for i in range(len(value))]
-    for i in range(1, len(pairs)):
-        if pairs[i][0] <= pairs[i - 1][0]:
+    for i, pair in enumerate(pairs):  # an ambient of 1e308 degC is a typing error
+        checked_temperature(doc, pair[1], "heating", "air_C", i, 1)
+        if i and pair[0] <= pairs[i - 1][0]:
             raise doc.error("times must increase", "heating", "air_C", i)
     return tuple(p[0] for p in pairs), tuple(p[1] for p in pairs)
 
@@ -485,9 +488,7 @@ def _heating(doc: YamlDoc) -> MatHeating:
         tau = doc.number(*keys, "tau_s", default=2400.0, positive=True)
         periods = doc.get(*keys, "power", default=[])
         if not isinstance(periods, list):
-            raise doc.error(
-                "expected a list of [on_s, off_s] (off_s null: stays on)", *keys, "power"
-            )
+            raise doc.error("expected a list of [on_s, off_s] (off_s null: on)", *keys, "power")
         parsed: list[tuple[float, float]] = []
         for j, period in enumerate(periods):
             if not isinstance(period, list) or len(period) != 2:

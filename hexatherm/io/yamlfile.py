@@ -434,11 +434,25 @@ class YamlDoc:
             if key not in allowed:
                 raise self.error(f"unknown key; expected one of: {', '.join(allowed)}", *keys, key)
 
+    @staticmethod
+    def shown(value: Any) -> str:
+        """``value`` as a message shows what the file holds: a mapping or a list in YAML's
+        flow style (``{x: 1}``, not Python's ``{'x': 1}``), shortened past 60 characters.
+
+        >>> YamlDoc.shown({"x": 1, "y": [1, "a"]}), YamlDoc.shown("a")
+        ('{x: 1, y: [1, a]}', "'a'")
+        """
+        if not isinstance(value, dict | list):
+            return repr(value)
+        text = yaml.safe_dump(value, default_flow_style=True, width=10**6).strip()
+        text = text.removesuffix("\n...").strip()
+        return text if len(text) <= 60 else text[:57] + "..."
+
     def number(self, *keys: Key, default: Any = ..., positive: bool = False) -> float:
         """A finite number at ``keys``."""
         value = self.get(*keys, default=default)
         if isinstance(value, bool) or not isinstance(value, int | float):
-            raise self.error(f"expected a number, got {value!r}", *keys)
+            raise self.error(f"expected a number, got {self.shown(value)}", *keys)
         value = float(value)
         if not math.isfinite(value):
             raise self.error(f"expected a finite number, got {value!r}", *keys)
@@ -453,14 +467,14 @@ class YamlDoc:
         if value is missing:
             return [float(v) for v in default]
         if not isinstance(value, list) or len(value) != size:
-            raise self.error(f"expected a list of {size} numbers, got {value!r}", *keys)
+            raise self.error(f"expected a list of {size} numbers, got {self.shown(value)}", *keys)
         return [self.number(*keys, i) for i in range(size)]
 
     def string(self, *keys: Key, default: Any = ..., choices: Sequence[str] | None = None) -> str:
         """A string at ``keys``, optionally one of ``choices``."""
         value = self.get(*keys, default=default)
         if not isinstance(value, str):
-            raise self.error(f"expected a text value, got {value!r}", *keys)
+            raise self.error(f"expected a text value, got {self.shown(value)}", *keys)
         if choices is not None and value not in choices:
             raise self.error(f"expected one of {', '.join(choices)}, got {value!r}", *keys)
         return value

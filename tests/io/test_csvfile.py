@@ -67,7 +67,8 @@ def test_centre_covariance_round_trip(tmp_path):
     rec = read_measurement_csv(write(tmp_path, "c.csv", CENTRES))
     a = np.array([[0.3, 0.05, -0.1], [0.0, 0.4, 0.2], [0.0, 0.0, 0.9]]) * 1e-3
     cov = np.stack([a @ a.T, 4 * a.T @ a])
-    rec.extra.update({"cov_centre_mm2": cov, "u_um": np.array([0.5, 0.6])})
+    u_um = np.sqrt(np.trace(cov, axis1=1, axis2=2) / 3) * 1e3  # as fit-spheres writes it
+    rec.extra.update({"cov_centre_mm2": cov, "u_um": u_um})
     text = centres_to_csv(rec)
     assert text.splitlines()[0].endswith(",u_um,u_x_um,u_y_um,u_z_um,r_xy,r_xz,r_yz")
     for name, body in (("a.csv", text), ("b.csv", text.replace(",", ", "))):

@@ -45,7 +45,7 @@ def _checked_cte(doc: YamlDoc, value: float, *keys: Any) -> float:
     return value
 
 
-def _checked_temperature(doc: YamlDoc, value: float, *keys: Any) -> float:
+def checked_temperature(doc: YamlDoc, value: float, *keys: Any) -> float:
     """``value`` (degC) if within :data:`TEMPERATURE_RANGE_C`, else an InputError."""
     low, high = TEMPERATURE_RANGE_C
     if not low <= value <= high:
@@ -148,7 +148,7 @@ def _read_segments(doc: YamlDoc, *keys: Any) -> list[SegmentSpec]:
 
 def _read_legs(doc: YamlDoc) -> LegThermalModel:
     doc.check_keys(["reference_temperature", "segments", "per_leg"], "legs")
-    t_ref = _checked_temperature(
+    t_ref = checked_temperature(
         doc,
         doc.number("legs", "reference_temperature", default=20.0),
         "legs",

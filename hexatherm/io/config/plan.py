@@ -54,7 +54,7 @@ def _plan_from_doc(doc: YamlDoc) -> Plan:
         doc.check_keys(["label", "kind", "pose"], "steps", i)
         label = doc.get("steps", i, "label")
         if not isinstance(label, str | int) or isinstance(label, bool):
-            raise doc.error(f"expected a label, got {label!r}", "steps", i, "label")
+            raise doc.error(f"expected a label, got {doc.shown(label)}", "steps", i, "label")
         kind = doc.string("steps", i, "kind", choices=STEP_KINDS)
         pose = doc.vector("steps", i, "pose", size=6)
         if kind == "origin" and i == 0 and _off_zero(pose):

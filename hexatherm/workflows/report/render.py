@@ -14,7 +14,11 @@ a data URI: the page stays self-contained. Autoescape is on: every value the dat
 gives is escaped, whatever the template.
 
 A template that cannot be read, has a syntax error or fails while rendering raises
-:class:`~hexatherm.errors.InputError` naming its file and line; nothing is written.
+:class:`~hexatherm.errors.InputError` naming its file and line; nothing is written. So
+does one that runs too long or makes too much (:mod:`hexatherm.workflows.report.sandbox`).
+Templates and assets are read by one rule: files of the folder (no ``..``, no link out
+of it, of at most :data:`ASSET_MAX_BYTES`), each named by a constant so that the
+provenance lists every file a page is made of (:func:`named_files`).
 
 >>> environment().from_string("<p>{{ x }}</p>").render(x='<script a="1">')
 '<p>&lt;script a=&quot;1&quot;&gt;</p>'
@@ -36,11 +40,12 @@ from typing import Any
 import jinja2
 from jinja2 import nodes
 from jinja2.loaders import split_template_path
-from jinja2.sandbox import SandboxedEnvironment
 from markupsafe import Markup
 
 from hexatherm import __version__
 from hexatherm.errors import InputError
+from hexatherm.io.files import read_bytes
+from hexatherm.workflows.report.sandbox import BoundedEnvironment, render_bounds, spend
 
 #: the package's own templates
 PACKAGE_TEMPLATES = Path(__file__).resolve().parents[2] / "templates"
@@ -56,6 +61,8 @@ ASSET_TYPES = {
 #: the largest asset embedded (a logo, a stamp, a signature: a larger file is a mistake,
 #: and would make a page no browser prints)
 ASSET_MAX_BYTES = 10 * 2**20
+#: the largest template read (the same bound: a template may hold an inline image)
+TEMPLATE_MAX_BYTES = ASSET_MAX_BYTES
 
 
 #: a text cell with a run of more characters than this that a browser may not break (no
@@ -140,10 +147,17 @@ class Figure:
         return "data:image/png;base64," + base64.b64encode(self.png).decode("ascii")
 
 
-def _asset(folders: tuple[Path, ...], name: str) -> str:
+def _inside(folder: Path, name: str) -> bool:
+    """Whether ``folder / name`` is in ``folder``, links resolved: the one rule of the
+    templates and the assets (no ``..``, absolute path or link out of the folder)."""
+    path = folder / name
+    return folder.resolve() in path.resolve().parents
+
+
+def _asset(env: jinja2.Environment, folders: tuple[Path, ...], name: str) -> str:
     """A file of the lab's template folder (or the package's) as a data URI: an image,
     inside the folder (no ``..``, absolute path or link out of it), of at most
-    :data:`ASSET_MAX_BYTES`."""
+    :data:`ASSET_MAX_BYTES`; read once per page, and counted in the page's size."""
     kind = ASSET_TYPES.get(Path(name).suffix.lower())
     if kind is None:
         raise jinja2.TemplateRuntimeError(
@@ -153,7 +167,7 @@ def _asset(folders: tuple[Path, ...], name: str) -> str:
     for folder in folders:
         path = folder / name
         try:
-            inside = folder.resolve() in path.resolve().parents
+            inside = _inside(folder, name)
             found = inside and path.is_file()
         except (OSError, ValueError):
             raise jinja2.TemplateRuntimeError(f"asset {name!r}: not a file name") from None
@@ -167,12 +181,17 @@ def _asset(folders: tuple[Path, ...], name: str) -> str:
                     f"asset {name!r}: {size} bytes; an embedded image may have at most "
                     f"{ASSET_MAX_BYTES} ({ASSET_MAX_BYTES // 2**20} MiB)"
                 )
-            data = path.read_bytes()
+            data = read_bytes(path, limit=ASSET_MAX_BYTES)
         except OSError as exc:
             raise jinja2.TemplateRuntimeError(
                 f"asset {name!r}: cannot be read ({exc.strerror})"
             ) from None
-        return f"data:{kind};base64," + base64.b64encode(data).decode("ascii")
+        except InputError as exc:
+            raise jinja2.TemplateRuntimeError(f"asset {name!r}: {exc.message}") from None
+        _read_files(env).add(path.resolve())
+        uri = f"data:{kind};base64," + base64.b64encode(data).decode("ascii")
+        spend(len(uri))
+        return uri
     if outside:
         raise jinja2.TemplateRuntimeError(
             f"asset {name!r}: outside the template folder (an image in it: no '..', "
@@ -185,24 +204,47 @@ def _asset(folders: tuple[Path, ...], name: str) -> str:
 
 def _escaped(value: object) -> Markup:
     """Every value printed, escaped as :func:`html.escape` does (``&quot;``, ``&#x27;``):
-    autoescape leaves markup as it is."""
-    if isinstance(value, Markup):
-        return value
-    return Markup(html.escape(str(value), quote=True))
+    autoescape leaves markup as it is; counted in the page's size."""
+    if not isinstance(value, Markup):
+        value = Markup(html.escape(str(value), quote=True))
+    spend(len(value))
+    return value
+
+
+def _read_files(env: jinja2.Environment) -> set[Path]:
+    """Every file the environment ``env`` read (templates and assets, links resolved)."""
+    assert isinstance(env, BoundedEnvironment)
+    return env.hexatherm_read
 
 
 class _Loader(jinja2.FileSystemLoader):
-    """A folder of templates; a file that is not UTF-8 is a syntax error naming its line, one
-    that cannot be read an :class:`InputError` naming it."""
+    """A folder of templates, read by the rule of the assets (no link out of the folder, a
+    regular file of at most :data:`TEMPLATE_MAX_BYTES`); a file that is not UTF-8 is a
+    syntax error naming its line, one that cannot be read an :class:`InputError` naming it;
+    every file read is recorded (:func:`_read_files`)."""
 
     def get_source(self, environment: jinja2.Environment, template: str) -> tuple[str, str, Any]:
+        pieces = split_template_path(template)  # no '..'
+        folder = Path(self.searchpath[0])
+        path = os.path.join(folder, *pieces)
+        if not os.path.lexists(path):
+            raise jinja2.TemplateNotFound(template)
         try:
-            return super().get_source(environment, template)
-        except jinja2.TemplateNotFound:  # an OSError too: the next folder is searched
-            raise
+            inside = _inside(folder, "/".join(pieces))
+        except (OSError, ValueError):
+            raise jinja2.TemplateNotFound(template) from None
+        if not inside:
+            raise InputError(
+                "template: a link out of the template folder (templates and assets are "
+                "files of the folder)",
+                path=path,
+            )
+        if not os.path.isfile(path):
+            raise jinja2.TemplateNotFound(template)
+        data = read_bytes(path, limit=TEMPLATE_MAX_BYTES)
+        try:
+            source = data.decode("utf-8")
         except UnicodeDecodeError as exc:
-            path = self._file(template)
-            data = bytes(exc.object)
             line = data.count(b"\n", 0, exc.start) + 1
             column = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
             raise jinja2.TemplateSyntaxError(
@@ -211,15 +253,16 @@ class _Loader(jinja2.FileSystemLoader):
                 template,
                 path,
             ) from None
-        except OSError as exc:  # unreadable: its mode, a failing disk or share
-            raise InputError(
-                f"template: cannot be read ({exc.strerror or exc})", path=self._file(template)
-            ) from None
+        _read_files(environment).add(Path(path).resolve())
+        mtime = os.path.getmtime(path)
 
-    def _file(self, template: str) -> str:
-        pieces = split_template_path(template)
-        paths = [os.path.join(folder, *pieces) for folder in self.searchpath]
-        return next((p for p in paths if os.path.isfile(p)), paths[0])
+        def uptodate() -> bool:
+            try:
+                return os.path.getmtime(path) == mtime
+            except OSError:
+                return False
+
+        return source, path, uptodate
 
 
 @cache
@@ -229,7 +272,7 @@ def environment(template_dir: Path | None = None) -> jinja2.Environment:
     ``__globals__`` ... are refused, a lab's folder is data, not a program); without the
     ``safe`` filter (a value given by the data is never printed as markup)."""
     folders = (PACKAGE_TEMPLATES,) if template_dir is None else (template_dir, PACKAGE_TEMPLATES)
-    env = SandboxedEnvironment(
+    env = BoundedEnvironment(
         loader=jinja2.ChoiceLoader([_Loader(str(f)) for f in folders]),
         autoescape=True,
         undefined=jinja2.StrictUndefined,
@@ -240,7 +283,7 @@ def environment(template_dir: Path | None = None) -> jinja2.Environment:
     )
     # every value the data gives prints as text: no template marks it as markup
     del env.filters["safe"]
-    env.globals["asset"] = lambda name: _asset(folders, str(name))
+    env.globals["asset"] = lambda name: _asset(env, folders, str(name))
     env.globals["version"] = __version__
     return env
 
@@ -337,10 +380,19 @@ def named_files(template_dir: Path) -> list[Path]:
             ):
                 path = template_dir / first.value
                 try:
-                    if top in path.resolve().parents and path.is_file():
-                        found.add(path)
+                    if not (top in path.resolve().parents and path.is_file()):
+                        continue  # refused when the page is rendered
+                    size = path.stat().st_size
                 except (OSError, ValueError):
                     continue  # refused when the page is rendered
+                if size > ASSET_MAX_BYTES:  # before anything reads or hashes it
+                    raise InputError(
+                        f"template: asset {first.value!r}: {size} bytes; an embedded image "
+                        f"may have at most {ASSET_MAX_BYTES} ({ASSET_MAX_BYTES // 2**20} MiB)",
+                        path=filename or name,
+                        line=call.lineno,
+                    )
+                found.add(path)
     return sorted(found)
 
 
@@ -431,11 +483,15 @@ def _folders(env: jinja2.Environment) -> str:
 
 
 def render_page(name: str, template_dir: Path | None = None, **context: Any) -> str:
-    """The template ``name`` rendered with ``context``; a template's failure is an
-    :class:`InputError` naming its file and line."""
+    """The template ``name`` rendered with ``context``, within the bounds of
+    :mod:`~hexatherm.workflows.report.sandbox`; a template's failure, or a bound
+    exceeded, is an :class:`InputError` naming its file and line, and so is a file of the
+    lab's folder read by a name computed while rendering (the provenance lists the files
+    named by a constant, :func:`named_files`)."""
     env = environment(template_dir)
     try:
-        return env.get_template(name).render(**context)
+        with render_bounds():
+            page = env.get_template(name).render(**context)
     except jinja2.TemplateError as exc:
         raise template_error(exc, env) from None
     except RecursionError as exc:  # a loop of includes whose names are computed
@@ -444,6 +500,29 @@ def render_page(name: str, template_dir: Path | None = None, **context: Any) -> 
             exc,
             env,
         ) from None
+    except MemoryError as exc:
+        raise _in_template("template: the page needs too much memory", exc, env) from None
+    except Exception as exc:  # a lab's template fails (1/0, int('x'*5000)): its line
+        if template_dir is None:
+            raise  # hexatherm's own templates: a bug, with its traceback
+        raise _in_template(f"template: {type(exc).__name__}: {exc}", exc, env) from None
+    if template_dir is not None:
+        _check_read(env, template_dir)
+    return page
+
+
+def _check_read(env: jinja2.Environment, template_dir: Path) -> None:
+    """Refuse a file of the lab's folder the page read that :func:`named_files` does not
+    list (a name computed while rendering): the provenance would not list it."""
+    top = template_dir.resolve()
+    named = {p.resolve() for p in named_files(template_dir)}
+    unnamed = sorted(p for p in _read_files(env) if p.is_relative_to(top) and p not in named)
+    if unnamed:
+        raise InputError(
+            "template: read by a name computed while rendering; name it by a constant "
+            '(include "...", asset("...")) so that the provenance lists it',
+            path=os.fspath(unnamed[0]),
+        )
 
 
 def render_macro(name: str, *args: Any) -> str:

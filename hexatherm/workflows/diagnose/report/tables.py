@@ -159,13 +159,15 @@ def md_text(value: object) -> str:
 
 def md_code(value: object) -> str:
     r"""A user's text as a Markdown code span (literal), or as :func:`md_text` when it
-    holds a backtick (which would end the span).
+    holds a backtick (which would end the span) or what is markup outside a code span
+    (``<``, ``>``, ``&``: a viewer that does not know code spans, or a tool that reads
+    the file as HTML, never meets a raw ``<script>``).
 
-    >>> print(md_code("s/session.yaml"), md_code("a`b"))
-    `s/session.yaml` a\`b
+    >>> print(md_code("s/session.yaml"), md_code("a`b"), md_code("<script>"))
+    `s/session.yaml` a\`b \<script\>
     """
     text = " ".join(str(value).splitlines())
-    return md_text(text) if "`" in text else f"`{text}`"
+    return md_text(text) if any(c in text for c in "`<>&") else f"`{text}`"
 
 
 #: in a table cell (numbers, ranges ``[0, 3e-05]``, step labels): what would end the cell
