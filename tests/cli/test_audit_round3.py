@@ -354,3 +354,13 @@ def test_u_um_contradicting_the_covariance_columns_is_said(tmp_path):
         f"{tmp_path / 'c.csv'}:2: field 'u_um': 0.05 um contradicts the covariance columns "
         "u_x_um, u_y_um, u_z_um (sqrt(tr C / 3) = 0.4082 um, more than 5% apart)"
     )
+
+
+def test_1e400_is_not_the_word_inf(tmp_path):
+    """``--pose-tolerance inf`` turns the check off on purpose; ``1e400`` overflowed to the
+    same infinity and turned it off without a word."""
+    session = session_copy(tmp_path)
+    result = invoke("process", session, "--pose-tolerance", "1e400,1")
+    assert result.exit_code == 2, result.output
+    assert "'1e400': beyond a float's range (inf is written inf)" in result.output
+    assert not (session / "results").exists()
