@@ -8,6 +8,7 @@ command replaces its own output.
 
 from __future__ import annotations
 
+import re
 import warnings
 from pathlib import Path
 
@@ -364,3 +365,14 @@ def test_1e400_is_not_the_word_inf(tmp_path):
     assert result.exit_code == 2, result.output
     assert "'1e400': beyond a float's range (inf is written inf)" in result.output
     assert not (session / "results").exists()
+
+
+def test_a_hexapod_with_every_joint_in_one_plane_is_refused_naming_the_file(tmp_path):
+    """Every joint at y = 33 mm: the legs cannot hold the platform; the FGM's message
+    named no file, and a command that reaches the kinematics otherwise ends there."""
+    session = session_copy(tmp_path)
+    hexapod = session / "hexapod.yaml"
+    text = re.sub(r"- \[([-\d.]+), [-\d.]+, ([-\d.]+)\]", r"- [\1, 33.0, \2]", hexapod.read_text())
+    hexapod.write_text(text)
+    line = refusal(invoke("process", session, "--mc", 0))
+    assert f"{hexapod}:" in line and "field 'platform_joints': the joints make no hexapod" in line
