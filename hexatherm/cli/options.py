@@ -94,6 +94,10 @@ MAX_SEED = 2**64 - 1
 MAX_BAUD = 100_000_000
 
 
+#: how infinity is written on purpose
+_INF = ("inf", "infinity")
+
+
 class CheckedFloat(click.ParamType):
     """A float option that refuses NaN (and infinity unless ``allow_inf``), within bounds.
 
@@ -131,6 +135,9 @@ class CheckedFloat(click.ParamType):
             self.fail(f"{value!r} is not a number", param, ctx)
         if math.isinf(number) and not self.allow_inf:
             self.fail(f"{value!r}: must be finite", param, ctx)
+        if math.isinf(number) and str(value).strip().lower().lstrip("+-") not in _INF:
+            # 1e400: a number past a float's range, not the word that turns a check off
+            self.fail(f"{value!r}: beyond a float's range (inf is written inf)", param, ctx)
         if self.min is not None and (number < self.min or (self.min_open and number == self.min)):
             sign = ">" if self.min_open else ">="
             self.fail(f"{value!r}: must be {sign} {self.min:g}", param, ctx)

@@ -8,6 +8,7 @@ command replaces its own output.
 
 from __future__ import annotations
 
+import re
 import warnings
 from pathlib import Path
 
@@ -25,6 +26,7 @@ from hexatherm.workflows.report import sandbox
 from hexatherm.workflows.report.render import check_template_dir, render_page
 from hexatherm.workflows.report.sandbox import MAX_OPERATIONS
 from tests.audit import ROOT, hashes, refusal, session_copy
+from tests.workflows.test_audit_report import templates as lab_folder
 
 HEXAPOD = ROOT / "configs" / "symetrie-like.yaml"
 BALLS = ROOT / "configs" / "balls-3.yaml"
@@ -127,14 +129,6 @@ def test_a_manifest_nested_past_the_parser_vouches_for_nothing(tmp_path):
 # ------------------------------------------ item 5: a lab's template that does not end
 
 
-def lab_folder(folder: Path, files: dict[str, str | bytes]) -> Path:
-    folder.mkdir(parents=True, exist_ok=True)
-    for name, text in files.items():
-        data = text.encode("utf-8") if isinstance(text, str) else text
-        (folder / name).write_bytes(data)
-    return folder
-
-
 def page_refused(folder: Path) -> InputError:
     """The lab's ``closing.html.j2`` rendered alone: refused in one line, naming it."""
     with pytest.raises(InputError) as caught:
@@ -214,17 +208,6 @@ def test_a_bounded_template_still_renders(tmp_path):
 
 
 # ---------------------------------- item 6: links out of the folder, names computed
-
-
-def test_a_template_linked_out_of_the_folder_is_refused(tmp_path):
-    environ = Path("/proc/self/environ")
-    if not environ.exists():
-        pytest.skip("no /proc/self/environ")
-    folder = lab_folder(tmp_path / "t", {"closing.html.j2": '{% include "env.j2" %}\n'})
-    (folder / "env.j2").symlink_to(environ)
-    with pytest.raises(InputError, match="a link out of the template folder") as caught:
-        check_template_dir(folder)
-    assert caught.value.path == str(folder.resolve() / "env.j2")
 
 
 def test_a_linked_sub_folder_is_refused_by_templates_as_by_assets(tmp_path):
@@ -354,3 +337,24 @@ def test_u_um_contradicting_the_covariance_columns_is_said(tmp_path):
         f"{tmp_path / 'c.csv'}:2: field 'u_um': 0.05 um contradicts the covariance columns "
         "u_x_um, u_y_um, u_z_um (sqrt(tr C / 3) = 0.4082 um, more than 5% apart)"
     )
+
+
+def test_1e400_is_not_the_word_inf(tmp_path):
+    """``--pose-tolerance inf`` turns the check off on purpose; ``1e400`` overflowed to the
+    same infinity and turned it off without a word."""
+    session = session_copy(tmp_path)
+    result = invoke("process", session, "--pose-tolerance", "1e400,1")
+    assert result.exit_code == 2, result.output
+    assert "'1e400': beyond a float's range (inf is written inf)" in result.output
+    assert not (session / "results").exists()
+
+
+def test_a_hexapod_with_every_joint_in_one_plane_is_refused_naming_the_file(tmp_path):
+    """Every joint at y = 33 mm: the legs cannot hold the platform; the FGM's message
+    named no file, and a command that reaches the kinematics otherwise ends there."""
+    session = session_copy(tmp_path)
+    hexapod = session / "hexapod.yaml"
+    text = re.sub(r"- \[([-\d.]+), [-\d.]+, ([-\d.]+)\]", r"- [\1, 33.0, \2]", hexapod.read_text())
+    hexapod.write_text(text)
+    line = refusal(invoke("process", session, "--mc", 0))
+    assert f"{hexapod}:" in line and "field 'platform_joints': the joints make no hexapod" in line

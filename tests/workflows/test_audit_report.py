@@ -543,16 +543,17 @@ def test_report_onto_an_input_is_refused_whatever_the_overwrite(tmp_path, target
     assert hashes(session) == before and not (session / ".hexatherm-manifest.json").exists()
 
 
-def test_a_file_of_the_template_folder_that_cannot_be_read_is_one_line(tmp_path):
+@pytest.mark.parametrize("target", ["/proc/self/mem", "/proc/self/environ"])
+def test_a_file_of_the_template_folder_that_cannot_be_read_is_one_line(tmp_path, target):
     # /proc/self/mem reads as an I/O error (as an unreadable file or a failing share
-    # does; root reads any mode); a template linked to it is a link out of the folder,
-    # refused before it is read (issue 36 item 6); a file nothing reads is not read
-    # (item 7: tests/cli/test_audit_round3.py)
-    mem = Path("/proc/self/mem")
-    if not mem.is_file():
-        pytest.skip("no /proc/self/mem")
+    # does; root reads any mode), /proc/self/environ as the process's environment; a
+    # template linked to either is a link out of the folder, refused before it is read
+    # (issue 36 item 6); a file nothing reads is not read (item 7:
+    # tests/cli/test_audit_round3.py)
+    if not Path(target).is_file():
+        pytest.skip(f"no {target}")
     folder = templates(tmp_path / "t", {"letterhead.html.j2": "<div>{{ title }}</div>\n"})
-    (folder / "closing.html.j2").symlink_to(mem)
+    (folder / "closing.html.j2").symlink_to(target)
     line = report_refused(tmp_path, folder)
     assert line.startswith(f"Error: {folder / 'closing.html.j2'}: "), line
     assert "a link out of the template folder" in line, line

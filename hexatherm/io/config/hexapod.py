@@ -45,6 +45,11 @@ def _checked_cte(doc: YamlDoc, value: float, *keys: Any) -> float:
     return value
 
 
+#: the zero pose's Jacobian of a hexapod file is refused below this reciprocal condition
+#: number (the shipped hexapods' is 0.25; joints in one plane give 1e-17)
+DEGENERATE_RCOND = 1e-9
+
+
 def checked_temperature(doc: YamlDoc, value: float, *keys: Any) -> float:
     """``value`` (degC) if within :data:`TEMPERATURE_RANGE_C`, else an InputError."""
     low, high = TEMPERATURE_RANGE_C
@@ -121,6 +126,14 @@ def _hexapod_from_doc(doc: YamlDoc) -> Hexapod:
     if stroke is not None and np.any(hexapod.check_stroke(q0)):
         raise doc.error(
             f"the zero pose leg lengths {q0.round(3).tolist()} are outside the stroke", "stroke"
+        )
+    singular = np.linalg.svd(hexapod.jacobian(np.zeros(6))[0], compute_uv=False)
+    if not singular[-1] > DEGENERATE_RCOND * singular[0]:  # joints in one plane, a line
+        raise doc.error(
+            "the joints make no hexapod: the legs do not hold the platform in the zero pose "
+            f"(reciprocal condition number of the Jacobian {singular[-1] / singular[0]:.1e}; "
+            "joints in one plane or on one line?)",
+            "platform_joints",
         )
     return hexapod
 
