@@ -22,9 +22,16 @@ import numpy.typing as npt
 
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
-from hexatherm.core.planning import DEFAULT_MIN_RCOND
+from hexatherm.limits import (
+    DISTANCE_REFUSAL_UM,
+    QUALITY_ALIASES,
+    QualityLimits,
+    limits_text,
+)
 
 __all__ = [
+    "DISTANCE_REFUSAL_UM",
+    "QUALITY_ALIASES",
     "Balls",
     "CmmNoise",
     "Datums",
@@ -32,6 +39,7 @@ __all__ = [
     "MeasurementFormat",
     "QualityLimits",
     "Session",
+    "limits_text",
 ]
 
 
@@ -79,68 +87,6 @@ class CmmNoise:
     point_noise_um: float
     points_per_ball: int | None = None
     cap_angle_deg: float = 70.0
-
-
-#: quality limit names of earlier versions -> (the name now, the factor to it): a radius
-#: deviation limit is half the diameter deviation limit
-QUALITY_ALIASES: dict[str, tuple[str, float]] = {"radius_dev_um": ("diameter_dev_um", 2.0)}
-
-
-@dataclass(frozen=True)
-class QualityLimits:
-    """Limits of the quality checks (``--quality-threshold NAME=VALUE`` overrides one).
-
-    Attributes
-    ----------
-    form_um : float
-        Largest sphere form error (max - min residual) of a ball: about 4 sigma of
-        the probing noise for 25 points, so 10 um holds CMMs of up to 2.5 um noise.
-    diameter_dev_um : float
-        Largest deviation of a fitted diameter from the nominal one (a wrong ball,
-        a missed probe compensation, a bad fit), as ``fits.csv``'s ``diameter_dev_um``.
-        The name ``radius_dev_um`` of earlier versions is read as half of it
-        (:data:`QUALITY_ALIASES`).
-    distance_dev_um : float
-        Largest deviation of an inter-ball distance from the balls file (``process``
-        refuses a step beyond ``--distance-tolerance-um``, 50 um; this flags less).
-    registration_rms_um : float
-        Largest registration RMS residual of a step.
-    time_gap_s : float
-        Largest time between a target and a reference it uses (the plan's ``--max-gap``).
-    temperature_change_C : float
-        Largest leg temperature change between a target and a reference it uses
-        (1 K is about 4.5 um of growth per leg for the Symetrie-like legs, left to
-        the correction's model and interpolation to carry over).
-    min_rcond : float
-        Smallest reciprocal condition number of the Jacobian at a target (as ``plan``).
-    growth_margin_C : float
-        With a thermocouple log: how much more a leg's growth since R0 at a reference may
-        need (as the smallest temperature change that explains it) than the span of the
-        leg's logged temperatures up to that reference. It covers the thermocouple's
-        error, gradients along the leg and the leg length's noise (about 1 um, 0.2 K on
-        the Symetrie-like legs); the shipped sessions need at most 0.7 K.
-    max_warming_C : float
-        Without a log: the largest temperature change since R0 that a leg's growth at a
-        reference may need. Twice the largest leg warming of the shipped and simulated
-        campaigns (10.7 K, heating mats on the legs): motors and a CMM room at 20 +- 1 K
-        do not warm a hexapod's legs by more; 20 K is 91 um on the Symetrie-like legs.
-    """
-
-    form_um: float = 10.0
-    diameter_dev_um: float = 20.0
-    distance_dev_um: float = 10.0
-    registration_rms_um: float = 5.0
-    time_gap_s: float = 600.0
-    temperature_change_C: float = 1.0
-    min_rcond: float = DEFAULT_MIN_RCOND
-    growth_margin_C: float = 2.0
-    max_warming_C: float = 20.0
-
-    def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if not (isinstance(value, int | float) and value >= 0 and not np.isnan(value)):
-                raise ValueError(f"quality threshold {f.name} must be a number >= 0, got {value!r}")
 
 
 #: length units a mapped table or a Calypso run may be written in -> mm per unit

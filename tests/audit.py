@@ -8,6 +8,8 @@ from pathlib import Path
 
 from click.testing import Result
 
+from tests.shipped import SHIPPED
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -24,7 +26,7 @@ def hashes(*folders: Path) -> dict[str, str]:
 def session_copy(tmp_path: Path, name: str = "paper-zero-pose") -> Path:
     """A copy of the shipped session ``name`` in ``tmp_path`` (without its expected/)."""
     folder = tmp_path / name
-    shutil.copytree(ROOT / "sessions" / name, folder, ignore=shutil.ignore_patterns("expected"))
+    shutil.copytree(SHIPPED / name, folder, ignore=shutil.ignore_patterns("expected"))
     return folder
 
 

@@ -28,6 +28,7 @@ FLOORS = {
     "data": 0,  # package data (YAML), no code
     "core": 1,
     "session": 1,
+    "limits": 1,  # the one table of limits (pure Python, below session)
     "io": 2,
     "devices": 2,
     "workflows": 3,

@@ -21,6 +21,8 @@ from pathlib import Path
 import pytest
 import yaml
 
+from tests.shipped import SHIPPED
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -94,7 +96,7 @@ def test_the_shipped_hexapod_data_is_the_configs_file() -> None:
 
 def test_diagnose_runs_from_the_wheel_on_a_shipped_session(installed: Path, tmp_path: Path) -> None:
     session = tmp_path / "session"
-    shutil.copytree(ROOT / "sessions" / "with-hidden-effect", session)
+    shutil.copytree(SHIPPED / "with-hidden-effect", session)
     out = tmp_path / "diagnosis"
     done = _run(installed, tmp_path, "-m", "hexatherm", "diagnose", str(session), "-o", str(out))
     assert done.returncode == 0, done.stderr

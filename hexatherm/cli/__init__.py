@@ -25,6 +25,7 @@ from __future__ import annotations
 import importlib
 import os
 import sys
+import textwrap
 from typing import Any
 
 from hexatherm.cli.signals import exit_on_signals
@@ -59,11 +60,14 @@ for _name in BLAS_THREAD_VARIABLES:
 #: exit status -> meaning, for every command
 EXIT_CODES = {
     0: "done",
-    1: "refused: bad input or a failed computation (one line naming file, line and field)",
+    1: "refused: bad input, an output that would touch an input, a failed computation (one "
+    "line on stderr naming file, line and field, or the step)",
     2: "usage error: a bad option or argument",
-    3: "--strict: results written, but a check failed (process: quality; calibrate: chi-square;"
-    " run, always: balls that fail their checks after the re-probe)",
-    130: "interrupted (Ctrl-C)",
+    3: "results written, but a check failed: process --strict (a quality check), calibrate "
+    "--strict (the model does not explain the poses, chi-square), run (always: balls that "
+    "fail their checks after the re-probe)",
+    130: "interrupted (Ctrl-C; for run also SIGTERM, SIGHUP, SIGQUIT): outputs are whole or "
+    "absent, a hexapod driven by run is stopped",
 }
 #: the exit status of an interrupted command (128 + SIGINT, as shells report it)
 INTERRUPTED = 130
@@ -71,29 +75,41 @@ INTERRUPTED = 130
 #: where the group keeps its arguments as given, in ``click.Context.meta``
 ARGV_KEY = "hexatherm.argv"
 
-#: command name -> (module, one-line help shown by ``hexatherm --help``)
+#: command name -> (module, one-line help shown by ``hexatherm --help``), in a lab's order:
+#: plan, measure (acquire, run, simulate), process, report, calibrate, diagnose, then the
+#: tools (``hexatherm --help`` lists them in this order)
 COMMANDS: dict[str, tuple[str, str]] = {
-    "process": ("hexatherm.cli.process", "Process a session: conventional and corrected poses."),
     "plan": ("hexatherm.cli.plan", "Write a measuring plan (and its DMIS program, checklist)."),
     "acquire": ("hexatherm.cli.acquire", "Record a session from a serial probe stream."),
+    "run": ("hexatherm.cli.run", "Measure a plan unattended: CMM (I++ DME) and controller."),
+    "simulate": ("hexatherm.cli.simulate", "Simulate a session (and its truth) from a scenario."),
+    "process": ("hexatherm.cli.process", "Process a session: conventional and corrected poses."),
+    "report": ("hexatherm.cli.report", "Write the HTML report of a processed session's results."),
+    "calibrate": ("hexatherm.cli.calibrate", "Calibrate the hexapod's geometry from sessions."),
+    "diagnose": ("hexatherm.cli.diagnose", "Find where the twin and a session disagree, and why."),
     "fit-spheres": ("hexatherm.cli.fit_spheres", "Fit ball centres to probed points (CSV, DMIS)."),
     "inspect": ("hexatherm.cli.inspect", "List the features of a measurement file."),
     "register": ("hexatherm.cli.register", "Balls file from a measurement of the platform datums."),
     "replay": ("hexatherm.cli.replay", "Re-process recorded sessions against their expected/."),
-    "diagnose": ("hexatherm.cli.diagnose", "Find where the twin and a session disagree, and why."),
-    "simulate": ("hexatherm.cli.simulate", "Simulate a session (and its truth) from a scenario."),
-    "report": ("hexatherm.cli.report", "Write an HTML report of a session with figures."),
-    "calibrate": ("hexatherm.cli.calibrate", "Calibrate the hexapod's geometry from sessions."),
-    "run": ("hexatherm.cli.run", "Measure a plan unattended: CMM (I++ DME) and controller."),
     "serve-twin": ("hexatherm.cli.serve_twin", "Serve a simulated CMM and controller (the twin)."),
 }
+
+
+def exit_status_help() -> str:
+    """The exit-status table of :data:`EXIT_CODES`, as ``hexatherm --help`` prints it (kept
+    as written: click does not rewrap a paragraph that starts with ``\\b``)."""
+    rows = [
+        textwrap.fill(text, 72, initial_indent=f"{code:>3}  ", subsequent_indent=" " * 5)
+        for code, text in EXIT_CODES.items()
+    ]
+    return "\b\nExit status, the same for every command:\n" + "\n".join(rows)
 
 
 class LazyGroup(click.Group):
     """A click group whose subcommands are imported on first use."""
 
     def list_commands(self, ctx: click.Context) -> list[str]:
-        return sorted(COMMANDS)
+        return list(COMMANDS)  # a lab's order, not the alphabet's
 
     def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
         if cmd_name not in COMMANDS:
@@ -129,12 +145,17 @@ class LazyGroup(click.Group):
             formatter.write_dl(rows)
 
 
-@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(
+    cls=LazyGroup,
+    context_settings={"help_option_names": ["-h", "--help"]},
+    epilog=exit_status_help(),
+)
 @click.version_option(__version__, prog_name="hexatherm")
 def main() -> None:
     """Thermal deflection decoupled 6-DOF pose measurement of hexapods.
 
-    Data goes to standard output, messages and logs to standard error. Exit
-    status: 0 done, 1 refused (bad input), 2 usage error, 3 process --strict with
-    a failed quality check, 130 interrupted.
+    A lab's day, in the order the commands are listed: plan the steps, measure them
+    (acquire, run or simulate), process the session, report its results, calibrate the
+    hexapod, diagnose a disagreement. Data goes to standard output, messages and logs to
+    standard error; `hexatherm COMMAND --help` lists a command's options.
     """

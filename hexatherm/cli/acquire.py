@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 import click
 
 from hexatherm.cli.options import MAX_BAUD, CheckedFloat, clean_errors, echo_err, max_gap_option
+from hexatherm.workflows.limits import DEFAULTS, radius_limit_um
 
 if TYPE_CHECKING:
     from hexatherm.workflows.acquire.recorder import BallFit
@@ -56,15 +57,34 @@ def _fits_table(fits: Sequence[BallFit]) -> str:
     type=click.Path(file_okay=False, path_type=Path),
     help="Session folder to record into (or, with --replay, to create).",
 )
-@click.option("--baud", type=click.IntRange(min=1, max=MAX_BAUD), default=9600, show_default=True)
-@click.option("--bytesize", type=click.Choice(["5", "6", "7", "8"]), default="8", show_default=True)
+@click.option(
+    "--baud",
+    type=click.IntRange(min=1, max=MAX_BAUD),
+    default=9600,
+    show_default=True,
+    help="The probe's serial line speed (baud, bits per second), as its interface sends.",
+)
+@click.option(
+    "--bytesize",
+    type=click.Choice(["5", "6", "7", "8"]),
+    default="8",
+    show_default=True,
+    help="Data bits per character of the probe's serial line.",
+)
 @click.option(
     "--parity",
     type=click.Choice(["N", "E", "O", "M", "S"], case_sensitive=False),
     default="N",
     show_default=True,
+    help="Parity of the probe's serial line: N none, E even, O odd, M mark, S space.",
 )
-@click.option("--stopbits", type=click.Choice(["1", "1.5", "2"]), default="1", show_default=True)
+@click.option(
+    "--stopbits",
+    type=click.Choice(["1", "1.5", "2"]),
+    default="1",
+    show_default=True,
+    help="Stop bits per character of the probe's serial line.",
+)
 @click.option("--xonxoff", is_flag=True, help="Software flow control.")
 @click.option("--rtscts", is_flag=True, help="Hardware (RTS/CTS) flow control.")
 @click.option("--dsrdtr", is_flag=True, help="Hardware (DSR/DTR) flow control.")
@@ -114,16 +134,17 @@ def _fits_table(fits: Sequence[BallFit]) -> str:
 @click.option(
     "--radius-tol-um",
     type=CheckedFloat(min=0),
-    default=20.0,
+    default=radius_limit_um(),
     show_default=True,
-    help="Warn when a ball's fitted radius is further off.",
+    help="Warn when a ball's fitted radius is further off its nominal (um; half the "
+    "quality limit diameter_dev_um, so that a ball accepted here is not flagged by process).",
 )
 @click.option(
     "--form-tol-um",
     type=CheckedFloat(min=0),
-    default=15.0,
+    default=DEFAULTS.form_um,
     show_default=True,
-    help="Warn when a ball's form error is larger.",
+    help="Warn when a ball's form error is larger (um; the quality limit form_um).",
 )
 @click.option(
     "--min-points",
@@ -152,7 +173,11 @@ def _fits_table(fits: Sequence[BallFit]) -> str:
     "six or more numbers: leg1..leg6, then others).",
 )
 @click.option(
-    "--temperature-baud", type=click.IntRange(min=1, max=MAX_BAUD), default=9600, show_default=True
+    "--temperature-baud",
+    type=click.IntRange(min=1, max=MAX_BAUD),
+    default=9600,
+    show_default=True,
+    help="The thermocouple logger's serial line speed (baud; 8 data bits, no parity, 1 stop bit).",
 )
 @clean_errors
 def command(

@@ -6,6 +6,7 @@ import functools
 import gc
 import math
 import os
+import re
 import sys
 import warnings
 from collections.abc import Callable
@@ -17,6 +18,7 @@ import click
 from hexatherm.errors import HexathermError, InputWarning
 from hexatherm.io.files import ReadOptions
 from hexatherm.io.provenance import run_context
+from hexatherm.workflows.limits import limits_text
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -80,9 +82,8 @@ quality_threshold_option = click.option(
     callback=_thresholds,
     metavar="NAME=VALUE",
     help="Change a quality check's limit (repeatable; over the session file's quality: "
-    "mapping): form_um, diameter_dev_um, distance_dev_um, registration_rms_um, time_gap_s, "
-    "temperature_change_C, min_rcond, growth_margin_C, max_warming_C; inf (0 for min_rcond) "
-    "disables a check.",
+    f"mapping). The table of limits, units in the names: {limits_text()}; inf (0 for "
+    "min_rcond) disables a check (docs/uncertainty.md, 'One table of limits').",
 )
 #: exit status of ``--strict`` when a check fails (the outputs are still written)
 CHECK_FAILED_EXIT = 3
@@ -361,9 +362,23 @@ lab_option = click.option(
 )
 
 
+class _LabAwareOption(click.Option):
+    """An option shared by commands with and without ``--lab``, whose help names the lab
+    file only where the command has one: the help's sentences that name ``--lab`` (or its
+    parenthesis) are left out elsewhere."""
+
+    def get_help_record(self, ctx: click.Context) -> tuple[str, str] | None:
+        record = super().get_help_record(ctx)
+        if record is None or any(p.name == "lab" for p in ctx.command.params):
+            return record
+        text = re.sub(r" ?(\([^()]*--lab[^()]*\)|[^.()]*--lab[^.()]*\.)", "", record[1])
+        return record[0], text
+
+
 template_dir_option = click.option(
     "--template-dir",
     "template_dir",
+    cls=_LabAwareOption,
     type=click.Path(exists=True, file_okay=False, path_type=Path),
     default=None,
     help="A folder of the lab's report templates (Jinja2: letterhead.html.j2, closing.html.j2 "
@@ -422,6 +437,7 @@ def _tolerances(ctx: click.Context, param: click.Parameter, values: tuple[str, .
 tolerance_option = click.option(
     "--tolerance",
     "tolerances",
+    cls=_LabAwareOption,
     multiple=True,
     metavar="Tx=2um,Rx=10urad,...",
     callback=_tolerances,

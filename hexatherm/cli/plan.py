@@ -128,15 +128,16 @@ def parse_levels(text: str) -> list[int]:
     "box",
     multiple=True,
     metavar="AXIS=MIN:MAX",
-    help="Workspace box of --grid/--random, one axis per option (e.g. "
-    "--box Tx=-10:10 --box Rz=-2:2); axes not given stay at 0.",
+    help="Workspace box of --grid/--random, one axis per option, relative to O (Tx, Ty, "
+    "Tz in mm; Rx, Ry, Rz in deg; e.g. --box Tx=-10:10 --box Rz=-2:2); axes not given "
+    "stay at 0.",
 )
 @click.option(
     "--reference",
     default="0,0,-40,0,0,0",
     show_default=True,
     metavar="Tx,Ty,Tz,Rx,Ry,Rz",
-    help="The reference pose R.",
+    help="The reference pose R, relative to O (mm and deg, the hexapod file's convention).",
 )
 @click.option(
     "--cycles",
@@ -176,20 +177,22 @@ def parse_levels(text: str) -> list[int]:
     type=click.IntRange(min=1, max=MAX_POINTS_PER_BALL),
     default=25,
     show_default=True,
+    help="Points probed on each ball (the DMIS program's and the checklist's count, and the "
+    "time estimate's; 4 fit a sphere, 25 check its form: docs/planning.md).",
 )
 @click.option(
     "--seconds-per-point",
     type=CheckedFloat(min=0),
     default=2.4,  # core.planning.DEFAULT_SECONDS_PER_POINT (imports numpy)
     show_default=True,
-    help="Estimated probing time per point.",
+    help="Estimated probing time per point (s).",
 )
 @click.option(
     "--seconds-per-move",
     type=CheckedFloat(min=0),
     default=20.0,  # core.planning.DEFAULT_SECONDS_PER_MOVE, as simulate's
     show_default=True,
-    help="Estimated time to command a pose and settle.",
+    help="Estimated time to command a pose and settle (s).",
 )
 @max_gap_option
 @click.option(
@@ -214,7 +217,8 @@ def parse_levels(text: str) -> list[int]:
 @click.option(
     "--origin-on-cmm",
     metavar="Tx,Ty,Tz,Rx,Ry,Rz",
-    help="Nominal placement of frame O on the CMM (needed by --dmis and --qif).",
+    help="Nominal placement of frame O on the CMM: X,Y,Z in mm, A,B,C in deg, the hexapod "
+    "file's convention (needed by --dmis and --qif).",
 )
 @click.option(
     "--cap-angle",

@@ -29,6 +29,7 @@ from hexatherm.cli.options import (
     tolerance_option,
 )
 from hexatherm.io.files import ReadOptions
+from hexatherm.workflows.limits import DEFAULTS, DISTANCE_REFUSAL_UM
 
 if TYPE_CHECKING:
     from hexatherm.session import Tolerance
@@ -50,16 +51,19 @@ if TYPE_CHECKING:
 @click.option(
     "--distance-tolerance-um",
     type=CheckedFloat(min=0, allow_inf=True),
-    default=50.0,
+    default=DISTANCE_REFUSAL_UM,
     show_default=True,
-    help="Refuse a step whose inter-ball distances deviate more (inf: no check).",
+    help="Refuse a step whose inter-ball distances deviate more from the balls file (um; a "
+    "gross error: swapped balls, inch read as mm; inf: no check). Smaller deviations beyond "
+    "the quality limit distance_dev_um are processed and flagged.",
 )
 @click.option(
     "--registration-tolerance-um",
     type=CheckedFloat(min=0, allow_inf=True),
-    default=10.0,
+    default=DEFAULTS.registration_rms_um,
     show_default=True,
-    help="Warn about a step whose registration RMS is larger.",
+    help="Warn about a step whose registration RMS residual is larger (um; the quality "
+    "limit registration_rms_um).",
 )
 @click.option(
     "--strict-registration",

@@ -13,6 +13,7 @@ import click
 from hexatherm.cli.options import CHECK_FAILED_EXIT, CheckedFloat, clean_errors, echo_err
 from hexatherm.cli.signals import signals_interrupt
 from hexatherm.errors import Terminated
+from hexatherm.workflows.limits import DEFAULTS, radius_limit_um
 
 #: the largest coordinate (mm) or angle (deg) an option of run or serve-twin takes
 LARGEST_MM = 1e5
@@ -168,16 +169,18 @@ def _numbers(text: str | None, n: int, what: str) -> tuple[float, ...] | None:
 @click.option(
     "--radius-tol-um",
     type=CheckedFloat(min=0, max=10000),
-    default=20.0,
+    default=radius_limit_um(),
     show_default=True,
-    help="Probe a ball again when its fitted radius is further off (um).",
+    help="Probe a ball again when its fitted radius is further off its nominal (um; half "
+    "the quality limit diameter_dev_um, so that a ball accepted here is not flagged by "
+    "process).",
 )
 @click.option(
     "--form-tol-um",
     type=CheckedFloat(min=0, max=10000),
-    default=10.0,
+    default=DEFAULTS.form_um,
     show_default=True,
-    help="Probe a ball again when its form error is larger (um).",
+    help="Probe a ball again when its form error is larger (um; the quality limit form_um).",
 )
 @click.option(
     "--rms-tol-um",
@@ -202,6 +205,8 @@ def _numbers(text: str | None, n: int, what: str) -> tuple[float, ...] | None:
     type=click.IntRange(min=1, max=10_000_000),
     default=9600,
     show_default=True,
+    help="The thermocouple logger's serial line speed on --temperature-port (baud; 8 data "
+    "bits, no parity, 1 stop bit).",
 )
 @click.option(
     "--reconnects",

@@ -32,6 +32,10 @@ import numpy.typing as npt
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan, repeat_label
 from hexatherm.errors import InputError, PlanError, PoseError
+
+#: reciprocal condition number of the Jacobian dq/dX (mm per mm, mm per degree) below
+#: which a commanded pose is called near-singular: the table of limits'
+from hexatherm.limits import DEFAULT_MIN_RCOND
 from hexatherm.text import format_number
 from hexatherm.typing import FloatArray
 
@@ -42,9 +46,6 @@ REFERENCE_EVERY: tuple[ReferenceEvery, ...] = ("both", "before", "after", "alter
 AXES: tuple[str, ...] = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
 #: the paper's reference pose (mm, deg)
 DEFAULT_REFERENCE = (0.0, 0.0, -40.0, 0.0, 0.0, 0.0)
-#: reciprocal condition number of the Jacobian dq/dX (mm per mm, mm per degree)
-#: below which a commanded pose is called near-singular
-DEFAULT_MIN_RCOND = 1e-2
 #: one set of defaults for every command that plans or simulates a campaign (issue 25):
 #: probing time per point and time to command a pose and settle (s), as ``simulate``'s
 #: scenario has them, and the half-angle of the probed cap (deg), as the session's ``cmm:``

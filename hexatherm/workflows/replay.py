@@ -5,8 +5,9 @@ the default options; each CSV of ``expected/`` is compared with the new one:
 same columns, same rows, text cells equal, numbers within a tolerance chosen by
 the column's unit (:func:`~hexatherm.io.csvout.column_unit`: ``_mm``, ``_deg``,
 ``_um``, ``_urad``, ``_um2``, ``_urad2``, ``_ppm``, ``_C``, ``_s``; others relative
-1e-9; ``parameters.csv``'s values by the unit of their row), at least 1.5 steps of the
-resolution the files are written at.
+1e-9), at least 1.5 steps of the resolution the files are written at; a column
+written at a resolution of its own (``jacobian_rcond``, a correlation) and
+``parameters.csv``'s values in their row's unit likewise.
 """
 
 from __future__ import annotations
@@ -16,7 +17,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import numpy.typing as npt
 import pandas as pd
 
 from hexatherm.io.csvout import ROW_RESOLUTION, column_unit
@@ -26,7 +26,7 @@ from hexatherm.workflows.calibrate.outputs import (
     output_files,
 )
 from hexatherm.workflows.calibrate.run import calibrate, read_campaign
-from hexatherm.workflows.process.outputs import write_results
+from hexatherm.workflows.process.outputs import RCOND_RESOLUTION, write_results
 from hexatherm.workflows.process.pipeline import process_session
 from hexatherm.workflows.process.quality import quality_checks
 
@@ -66,31 +66,31 @@ class Comparison:
         return not self.mismatches
 
 
+#: columns without a unit written at a resolution of their own (csv_text's
+#: ``resolutions``): a tolerance of 1.5 steps, as the units'
+WRITTEN_AT = {
+    "max_abs_correlation": CORRELATION_RESOLUTION,
+    "jacobian_rcond": RCOND_RESOLUTION,
+}
+
+
+def row_tolerance(unit: str, tolerances: dict[str, float]) -> float:
+    """The tolerance of a value in ``unit`` named by its row (``parameters.csv``): the
+    unit's, 1.5 steps of :data:`~hexatherm.io.csvout.ROW_RESOLUTION` for a gain (mm/mm),
+    else relative 1e-9."""
+    if unit in tolerances:
+        return tolerances[unit]
+    if unit in ROW_RESOLUTION:
+        return 1.5 * ROW_RESOLUTION[unit]
+    return 1e-9
+
+
 def tolerance_for(column: str, tolerances: dict[str, float]) -> tuple[str, float]:
     """Unit and absolute tolerance of a column (unit ``rel`` means relative 1e-9)."""
     unit = column_unit(column)
     if unit in tolerances:
         return unit, tolerances[unit]
     return "rel", 1e-9
-
-
-def written_limits(column: str, expected: pd.DataFrame) -> npt.NDArray[np.float64] | None:
-    """Absolute tolerances, row by row, of a column written at a resolution its name does
-    not carry: ``parameters.csv``'s values in each row's unit (1.5 steps of that unit's
-    resolution, :data:`~hexatherm.io.csvout.ROW_RESOLUTION`) and its correlations; None
-    for any other column.
-
-    >>> table = pd.DataFrame({"unit": ["mm", "mm/mm"], "calibrated": [31.2721083, 1.0]})
-    >>> written_limits("calibrated", table).tolist()
-    [1.5e-07, 1.5e-10]
-    """
-    if column in ROW_UNIT_COLUMNS and "unit" in expected:
-        units = expected["unit"].astype(str)
-        if units.isin(list(ROW_RESOLUTION)).all():
-            return np.asarray(1.5 * units.map(ROW_RESOLUTION).to_numpy(dtype=float), np.float64)
-    if column == "max_abs_correlation":
-        return np.full(len(expected), 1.5 * CORRELATION_RESOLUTION, dtype=np.float64)
-    return None
 
 
 def compare_tables(
@@ -114,6 +114,7 @@ def compare_tables(
         )
         return
     key = expected["label"].astype(str).tolist() if "label" in expected else None
+    row_units = expected["unit"].astype(str).to_numpy() if "unit" in expected else None
     for column in expected.columns:
         a, b = expected[column], got[column]
         row_name = (lambda i: f"row {i + 2} ({key[i]})") if key else (lambda i: f"row {i + 2}")
@@ -123,9 +124,13 @@ def compare_tables(
             both_nan = np.isnan(x) & np.isnan(y)
             diff = np.where(both_nan, 0.0, np.abs(x - y))
             limit = tol if unit != "rel" else tol * np.maximum(np.abs(x), 1.0)
-            written = written_limits(column, expected) if unit == "rel" else None
-            if written is not None:  # written at a resolution per row: a flip of its last digit
-                limit = np.maximum(limit, written)
+            if row_units is not None and column in ROW_UNIT_COLUMNS:
+                # parameters.csv: each row's value in its own unit, at its resolution
+                limit = np.array([row_tolerance(u, tolerances) for u in row_units])
+                limit = np.where(np.isnan(limit), 1e-9 * np.maximum(np.abs(x), 1.0), limit)
+                tol = float(np.max(limit))
+            elif column in WRITTEN_AT:
+                limit = tol = 1.5 * WRITTEN_AT[column]
             bad = ~(diff <= limit) & ~both_nan
             finite = diff[np.isfinite(diff)]
             if finite.size and unit != "rel":
@@ -135,7 +140,7 @@ def compare_tables(
                 result.mismatches.append(
                     f"{result.session}/{name}: {row_name(i)}, column {column}: "
                     f"expected {float(x[i])!r}, got {float(y[i])!r} "
-                    f"(|diff| {diff[i]:.3g} > {float(np.broadcast_to(limit, x.shape)[i]):g})"
+                    f"(|diff| {diff[i]:.3g} > {tol:g})"
                 )
         else:
             sa, sb = a.fillna("").astype(str), b.fillna("").astype(str)

@@ -26,6 +26,7 @@ from hexatherm.workflows.report import sandbox
 from hexatherm.workflows.report.render import check_template_dir, render_page
 from hexatherm.workflows.report.sandbox import MAX_OPERATIONS
 from tests.audit import ROOT, hashes, refusal, session_copy
+from tests.shipped import SHIPPED as SHIPPED_SESSIONS
 from tests.workflows.test_audit_report import templates as lab_folder
 
 HEXAPOD = ROOT / "configs" / "symetrie-like.yaml"
@@ -278,7 +279,7 @@ def test_a_huge_asset_is_refused_before_it_is_hashed(tmp_path):
     [("1e308", "heating.air_C"), ("[[0, 20.0], [14400, 1.0e+308]]", "heating.air_C[1][1]")],
 )
 def test_an_ambient_of_1e308_degC_is_refused(tmp_path, air, field):
-    text = (ROOT / "sessions" / "with-hidden-effect" / "truth" / "scenario.yaml").read_text()
+    text = (SHIPPED_SESSIONS / "with-hidden-effect" / "truth" / "scenario.yaml").read_text()
     text = text.replace("../symetrie-like.yaml", str(ROOT / "configs" / "symetrie-like.yaml"))
     text = text.replace("../balls-3.yaml", str(BALLS))
     text = text.replace("air_C: [[0, 20.0], [14400, 20.2]]", f"air_C: {air}")

@@ -14,9 +14,10 @@ import pytest
 from click.testing import CliRunner
 
 from hexatherm.cli import main
+from tests.shipped import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[2]
-SESSION = ROOT / "sessions" / "calibration-geometry"
+SESSION = SHIPPED / "calibration-geometry"
 
 
 @pytest.fixture(scope="module")

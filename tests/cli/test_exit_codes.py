@@ -21,12 +21,13 @@ import hexatherm.workflows.register
 import hexatherm.workflows.replay
 import hexatherm.workflows.simulate.run
 from hexatherm.cli import COMMANDS, EXIT_CODES, INTERRUPTED, main
+from tests.shipped import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[2]
-S = ROOT / "sessions" / "paper-zero-pose"
-DMIS = ROOT / "sessions" / "paper-zero-pose-dmis" / "points.dmo"
-SCENARIO = ROOT / "sessions" / "calibration-campaign" / "truth" / "scenario.yaml"
-R = ROOT / "sessions" / "register-datums"
+S = SHIPPED / "paper-zero-pose"
+DMIS = SHIPPED / "paper-zero-pose-dmis" / "points.dmo"
+SCENARIO = SHIPPED / "calibration-campaign" / "truth" / "scenario.yaml"
+R = SHIPPED / "register-datums"
 CONFIGS = ROOT / "configs"
 PLAN = ["--hexapod", CONFIGS / "symetrie-like.yaml", "--balls", CONFIGS / "balls-3.yaml"]
 
@@ -101,7 +102,7 @@ def test_refused_input_is_1_in_one_line(name: str, tmp_path: Path) -> None:
 
 def test_done_is_0_and_a_failed_check_with_strict_is_3(tmp_path: Path) -> None:
     session = tmp_path / "s"
-    shutil.copytree(ROOT / "sessions" / "with-hidden-effect", session)
+    shutil.copytree(SHIPPED / "with-hidden-effect", session)
     assert run("process", session, "-o", tmp_path / "a").exit_code == 0  # warnings only
     strict = run("process", session, "-o", tmp_path / "b", "--strict")
     assert strict.exit_code == 3, strict.output
@@ -111,7 +112,7 @@ def test_done_is_0_and_a_failed_check_with_strict_is_3(tmp_path: Path) -> None:
 def test_calibrate_strict_is_3_when_the_model_does_not_explain_the_poses(tmp_path: Path) -> None:
     # the shipped heated campaign: corrected poses are explained by the calibrated model,
     # conventional ones (tens of um of drift in them) are not
-    session = ROOT / "sessions" / "calibration-geometry"
+    session = SHIPPED / "calibration-geometry"
     good = run("calibrate", session, "-o", tmp_path / "a", "--strict")
     assert good.exit_code == 0, good.output
     assert json.loads((tmp_path / "a" / "calibration.json").read_text())["explains_poses"]
@@ -149,7 +150,7 @@ INTERRUPTIBLE = {
     ),
     "plan": (hexatherm.workflows.plan, "make_plan", [*PLAN, "--grid", "2", "--box", "Tx=-1:1"]),
     "simulate": (hexatherm.workflows.simulate.run, "simulate_file", [SCENARIO, "-o", "{tmp}/s"]),
-    "replay": (hexatherm.workflows.replay, "replay_session", [ROOT / "sessions"]),
+    "replay": (hexatherm.workflows.replay, "replay_session", [SHIPPED]),
     "calibrate": (hexatherm.workflows.calibrate.run, "read_campaign", [S, "-o", "{tmp}/c"]),
 }
 

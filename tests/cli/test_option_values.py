@@ -15,9 +15,10 @@ from click.testing import CliRunner
 
 from hexatherm.cli import main
 from hexatherm.cli.options import CheckedFloat
+from tests.shipped import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[2]
-SESSION = ROOT / "sessions" / "paper-zero-pose"
+SESSION = SHIPPED / "paper-zero-pose"
 #: commands left out of the structural check (none)
 ELSEWHERE: set[str] = set()
 
@@ -76,7 +77,7 @@ PLAN = [
         [*PLAN, "--grid", "2", "--box", "Tx=-1:1", "--clearance", "nan"],
         [
             "fit-spheres",
-            ROOT / "sessions" / "paper-zero-pose-dmis" / "points.dmo",
+            SHIPPED / "paper-zero-pose-dmis" / "points.dmo",
             "--diameter-mm",
             "nan",
         ],
@@ -86,7 +87,7 @@ PLAN = [
         ["process", SESSION, "--distance-tolerance-um", "nan"],
         [
             "simulate",
-            ROOT / "sessions" / "calibration-campaign" / "truth" / "scenario.yaml",
+            SHIPPED / "calibration-campaign" / "truth" / "scenario.yaml",
             "-o",
             "x",
             "--seed",

@@ -19,6 +19,7 @@ from hexatherm.cli import main
 from hexatherm.io.manifest import read_manifest
 from hexatherm.workflows.serve import TwinMachines
 from tests.cli.test_run import machines
+from tests.shipped import SHIPPED
 
 __all__ = ["machines"]  # the twin's machines, a fixture
 
@@ -44,7 +45,7 @@ def lab(tmp_path: Path) -> Path:
         ("paper-zero-pose-dmis", "d"),
         ("register-datums", "r"),
     ]:
-        shutil.copytree(ROOT / "sessions" / name, tmp_path / to)
+        shutil.copytree(SHIPPED / name, tmp_path / to)
     (tmp_path / "scenario.yaml").write_text(
         SCENARIO.format(
             hexapod=tmp_path / "s" / "hexapod.yaml", balls=tmp_path / "s" / "balls.yaml"

@@ -22,6 +22,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from hexatherm.cli import main
+from tests.shipped import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -83,9 +84,7 @@ def template(tmp_path_factory: pytest.TempPathFactory) -> Path:
         ("paper-zero-pose-dmis", "d"),
         ("register-datums", "r"),
     ]:
-        shutil.copytree(
-            ROOT / "sessions" / name, lab / to, ignore=shutil.ignore_patterns("results")
-        )
+        shutil.copytree(SHIPPED / name, lab / to, ignore=shutil.ignore_patterns("results"))
     (lab / "scenario.yaml").write_text(SCENARIO)
     return lab
 

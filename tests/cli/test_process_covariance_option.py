@@ -10,9 +10,10 @@ from click.testing import CliRunner
 
 import hexatherm.workflows.process.uncertainty as uncertainty
 from hexatherm.cli import main
+from tests.shipped import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[2]
-SESSION = ROOT / "sessions" / "paper-zero-pose"
+SESSION = SHIPPED / "paper-zero-pose"
 
 
 def test_covariance_is_written_by_default_and_left_out_when_asked(tmp_path: Path) -> None:

@@ -9,6 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 from hexatherm.cli import main
+from tests.shipped import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -20,12 +21,12 @@ def snapshot(folder: Path) -> dict[str, bytes]:
 @pytest.fixture
 def sessions(tmp_path: Path) -> Path:
     shutil.copytree(
-        ROOT / "sessions" / "paper-zero-pose",
+        SHIPPED / "paper-zero-pose",
         tmp_path / "s",
         ignore=shutil.ignore_patterns("results"),
     )
     shutil.copytree(
-        ROOT / "sessions" / "with-hidden-effect",
+        SHIPPED / "with-hidden-effect",
         tmp_path / "s2",
         ignore=shutil.ignore_patterns("results"),
     )

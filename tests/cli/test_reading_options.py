@@ -12,12 +12,13 @@ import pytest
 from click.testing import CliRunner
 
 from hexatherm.cli import main
+from tests.shipped import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def copy(name: str, to: Path) -> Path:
-    shutil.copytree(ROOT / "sessions" / name, to, ignore=shutil.ignore_patterns("results"))
+    shutil.copytree(SHIPPED / name, to, ignore=shutil.ignore_patterns("results"))
     return to
 
 
@@ -89,7 +90,7 @@ def test_a_temperature_log_cut_short(tmp_path: Path, command: str) -> None:
 
 
 def test_inspect_lists_a_cut_file_only_when_asked(tmp_path: Path) -> None:
-    lines = (ROOT / "sessions" / "paper-zero-pose-dmis" / "points.dmo").read_text()
+    lines = (SHIPPED / "paper-zero-pose-dmis" / "points.dmo").read_text()
     cut = tmp_path / "points.dmo"
     cut.write_text("".join(lines.splitlines(keepends=True)[:-2]))  # no ENDFIL
     refused = run("inspect", cut)
@@ -98,11 +99,11 @@ def test_inspect_lists_a_cut_file_only_when_asked(tmp_path: Path) -> None:
     assert listed.exit_code == 0, listed.output
     assert "warning: " in listed.output
     # the truth: the whole file's features but the last (the cut one)
-    whole = run("inspect", ROOT / "sessions" / "paper-zero-pose-dmis" / "points.dmo", "--csv")
+    whole = run("inspect", SHIPPED / "paper-zero-pose-dmis" / "points.dmo", "--csv")
     assert whole.exit_code == 0, whole.output
     assert listed.stdout.splitlines() == whole.stdout.splitlines()[:-1]
     # a centres file with a ball measured twice: the later row when asked
-    text = (ROOT / "sessions" / "paper-zero-pose" / "centres.csv").read_text()
+    text = (SHIPPED / "paper-zero-pose" / "centres.csv").read_text()
     twice = tmp_path / "centres.csv"
     first = text.splitlines()[1]
     twice.write_text(text + first + "\n")
@@ -119,7 +120,7 @@ def test_fit_spheres_refuses_a_ball_in_two_files(tmp_path: Path) -> None:
     # ("measured again (already in an earlier file)"): fit-spheres refuses them too, with
     # or without --keep-later (which keeps the later of two within one file), as process
     # does across the files of a session
-    points = ROOT / "sessions" / "serial-capture" / "points.csv"
+    points = SHIPPED / "serial-capture" / "points.csv"
     header, *rows = points.read_text().splitlines(keepends=True)
     again = tmp_path / "again.csv"
     again.write_text(header + "".join(r for r in rows if r.startswith("R0,")))

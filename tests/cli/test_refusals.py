@@ -16,8 +16,9 @@ from click.testing import CliRunner
 
 from hexatherm.cli import main
 from tests.sessions import ROOT, make_session
+from tests.shipped import SHIPPED
 
-DATUMS = ROOT / "sessions" / "register-datums"
+DATUMS = SHIPPED / "register-datums"
 
 
 @pytest.fixture(scope="module")
@@ -296,8 +297,9 @@ def test_process_says_when_there_is_no_thermocouple_log(session):
     ), result.output
     quality = (session / "out" / "quality.csv").read_text().splitlines()
     header = quality[0].split(",")
-    column = header.index("ok_temperature")
-    assert {row.split(",")[column] for row in quality[1:]} == {""}  # empty: could not run
+    value, ok = header.index("temperature_change_C"), header.index("ok_temperature")
+    # could not run: no value, and nothing failed
+    assert {(row.split(",")[value], row.split(",")[ok]) for row in quality[1:]} == {("", "True")}
 
 
 def test_pose_tolerance_option_lets_a_known_deviation_through(session):
@@ -320,7 +322,7 @@ def test_pose_tolerance_option_lets_a_known_deviation_through(session):
 
 def test_replay_with_an_expected_file_is_a_mismatch(tmp_path):
     root = tmp_path / "sessions"
-    shutil.copytree(ROOT / "sessions" / "serial-capture", root / "serial-capture")
+    shutil.copytree(SHIPPED / "serial-capture", root / "serial-capture")
     shutil.rmtree(root / "serial-capture" / "expected")
     (root / "serial-capture" / "expected").write_text("x\n")
     before = snapshot(root)
@@ -334,7 +336,7 @@ def test_replay_with_an_expected_file_is_a_mismatch(tmp_path):
 
 def test_replay_update_lists_what_it_rewrote(tmp_path):
     root = tmp_path / "sessions"
-    shutil.copytree(ROOT / "sessions" / "serial-capture", root / "serial-capture")
+    shutil.copytree(SHIPPED / "serial-capture", root / "serial-capture")
     expected = root / "serial-capture" / "expected"
     (expected / "README.md").write_text("kept\n")
     legs = expected / "legs.csv"

@@ -8,7 +8,7 @@ import pandas as pd
 from click.testing import CliRunner
 
 from hexatherm.cli import main
-from tests.sessions import ROOT
+from tests.shipped import SHIPPED
 
 
 def run(*args):
@@ -17,14 +17,12 @@ def run(*args):
 
 def copy_paper_session(tmp_path):
     target = tmp_path / "sessions" / "paper-zero-pose"
-    shutil.copytree(
-        ROOT / "sessions" / "paper-zero-pose", target, ignore=shutil.ignore_patterns("results")
-    )
+    shutil.copytree(SHIPPED / "paper-zero-pose", target, ignore=shutil.ignore_patterns("results"))
     return target
 
 
 def test_shipped_sessions_replay():
-    result = run("replay", ROOT / "sessions")
+    result = run("replay", SHIPPED)
     assert result.exit_code == 0, result.output
     assert "paper-zero-pose" in result.output and "ok" in result.output
 
@@ -69,7 +67,7 @@ def test_no_sessions_is_an_error(tmp_path):
 
 
 def test_serial_capture_replays_to_the_same_points_byte_for_byte(tmp_path):
-    folder = ROOT / "sessions" / "serial-capture"
+    folder = SHIPPED / "serial-capture"
     result = run(
         "acquire",
         folder / "plan.yaml",

@@ -6,7 +6,6 @@ import base64
 import html
 import re
 import shutil
-from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
@@ -14,8 +13,9 @@ from click.testing import CliRunner
 import hexatherm.workflows.report
 from hexatherm.cli import main
 from hexatherm.io.manifest import read_manifest
+from tests.shipped import SHIPPED
 
-SESSION = Path(__file__).resolve().parents[2] / "sessions" / "paper-zero-pose"
+SESSION = SHIPPED / "paper-zero-pose"
 IMG = re.compile(r'<img src="data:image/png;base64,([A-Za-z0-9+/=]+)"')
 
 

@@ -17,6 +17,7 @@ from hexatherm.io.config import plan_to_yaml, read_session
 from hexatherm.io.manifest import MANIFEST_NAME
 from hexatherm.io.provenance import PROVENANCE_NAME
 from tests.sessions import ROOT
+from tests.shipped import SHIPPED
 
 UM, URAD = 1e3, np.pi / 180 * 1e6
 TARGETS = [
@@ -285,7 +286,7 @@ def test_the_twin_still_makes_the_recorded_calibration_geometry(tmp_path):
     # do not fail it, while a change of the twin's draws, 0.1-1 um, does). Then the
     # recorded sessions stop being what their scenarios make: say so in docs/simulate.md
     # (four older sessions already are not, since 081bd0e)
-    recorded = ROOT / "sessions" / "calibration-geometry"
+    recorded = SHIPPED / "calibration-geometry"
     scenario = ROOT / "configs" / "scenarios" / "calibration-geometry.yaml"
     result = run("simulate", scenario, "-o", tmp_path / "again")
     assert result.exit_code == 0, result.output

@@ -14,6 +14,7 @@ import yaml
 from click.testing import CliRunner
 
 from hexatherm.cli import main
+from tests.shipped import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[2]
 STAMP = re.compile(r"(\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d(?:\.\d+)?)")
@@ -21,9 +22,7 @@ STAMP = re.compile(r"(\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d(?:\.\d+)?)")
 
 def naive_copy(folder: Path) -> Path:
     """paper-zero-pose without its ``utc_offset:``: its times as a CMM's clock gives them."""
-    shutil.copytree(
-        ROOT / "sessions" / "paper-zero-pose", folder, ignore=shutil.ignore_patterns("results")
-    )
+    shutil.copytree(SHIPPED / "paper-zero-pose", folder, ignore=shutil.ignore_patterns("results"))
     text = (folder / "session.yaml").read_text()
     assert 'utc_offset: "+00:00"\n' in text
     (folder / "session.yaml").write_text(text.replace('utc_offset: "+00:00"\n', ""))
@@ -95,13 +94,13 @@ def test_a_simulated_session_declares_its_clock_and_its_times_open_tz_aware(
 
 
 @pytest.mark.parametrize(
-    "session", sorted(p.parent.parent.name for p in ROOT.glob("sessions/*/expected/poses.csv"))
+    "session", sorted(p.parent.parent.name for p in SHIPPED.glob("*/expected/poses.csv"))
 )
 def test_every_shipped_poses_file_opens_with_floats_and_tz_aware_times(session: str) -> None:
     """What ``process`` writes for the shipped sessions (``expected/``, which replay holds
     equal to it) opens in pandas as it should: every number with a unit as float64, the
     deviation columns equal (pose - commanded) to the file's resolution, times tz-aware."""
-    poses = pd.read_csv(ROOT / "sessions" / session / "expected" / "poses.csv")
+    poses = pd.read_csv(SHIPPED / session / "expected" / "poses.csv")
     with_unit = [c for c in poses.columns if c.rsplit("_", 1)[-1] in ("mm", "deg", "um", "urad")]
     assert len(with_unit) > 30
     assert all(poses[c].dtype == "float64" for c in with_unit), poses.dtypes[with_unit]

@@ -26,6 +26,7 @@ from hexatherm.io.measurements import read_measurements
 from hexatherm.io.records import Records
 from hexatherm.workflows.process.pipeline import ProcessResult, process_session
 from tests.io.cmmexports import INCH_MM, step_times, write_calypso, write_foreign_table
+from tests.shipped import SHIPPED as SHIPPED_SESSIONS
 
 ROOT = Path(__file__).resolve().parents[2]
 FEATURES = {"B1": "Kugel_1", "B2": "Kugel_2", "B3": "Kugel_3"}
@@ -50,7 +51,7 @@ TABLE = (
 def make(tmp_path: Path, measurements: str, name: str = "s") -> Path:
     """The twin session copied, its measurements replaced by ``measurements``."""
     folder = tmp_path / name
-    source = ROOT / "sessions" / "paper-zero-pose"
+    source = SHIPPED_SESSIONS / "paper-zero-pose"
     folder.mkdir()
     for file in ("hexapod.yaml", "balls.yaml", "plan.yaml", "centres.csv", "temperatures.csv"):
         shutil.copy(source / file, folder / file)

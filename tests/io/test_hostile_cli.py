@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.shipped import SHIPPED
 from tests.waiting import SAFETY_S
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -67,11 +68,11 @@ def test_commands_refuse_fifos_and_devices(tmp_path: Path, command: str) -> None
         args = ["fit-spheres", bad, "-o", tmp_path / "out.csv"]
     elif command == "register":
         bad = fifo(tmp_path / "datums.csv")
-        datums = ROOT / "sessions" / "register-datums" / "datums.yaml"
+        datums = SHIPPED / "register-datums" / "datums.yaml"
         args = ["register", bad, "--datums", datums, "-o", tmp_path / "balls.yaml"]
     elif command == "register-datums":
         bad = fifo(tmp_path / "datums.yaml")
-        points = ROOT / "sessions" / "register-datums" / "points.csv"
+        points = SHIPPED / "register-datums" / "points.csv"
         args = ["register", points, "--datums", bad, "-o", tmp_path / "balls.yaml"]
     elif command == "plan":
         bad = fifo(tmp_path / "targets.csv")
@@ -89,7 +90,7 @@ def test_commands_refuse_fifos_and_devices(tmp_path: Path, command: str) -> None
     else:
         session = tmp_path / "s"
         shutil.copytree(
-            ROOT / "sessions" / "paper-zero-pose",
+            SHIPPED / "paper-zero-pose",
             session,
             ignore=shutil.ignore_patterns("expected", "results"),
         )

@@ -18,6 +18,7 @@ from hexatherm.cli import main
 from hexatherm.io.manifest import read_manifest
 from hexatherm.io.outputs import output_dir
 from hexatherm.io.provenance import PROVENANCE_NAME, json_ready
+from tests.shipped import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -28,7 +29,7 @@ def sha256(path: Path) -> str:
 
 @pytest.fixture
 def session(tmp_path: Path) -> Path:
-    return Path(shutil.copytree(ROOT / "sessions" / "paper-zero-pose", tmp_path / "s"))
+    return Path(shutil.copytree(SHIPPED / "paper-zero-pose", tmp_path / "s"))
 
 
 def test_process_records_its_command_options_and_inputs(session: Path, tmp_path: Path) -> None:
@@ -85,7 +86,7 @@ def test_the_command_line_of_a_path_with_a_space_runs_as_written(tmp_path: Path)
     # space came back as two arguments)
     import shlex
 
-    session = Path(shutil.copytree(ROOT / "sessions" / "paper-zero-pose", tmp_path / "my s"))
+    session = Path(shutil.copytree(SHIPPED / "paper-zero-pose", tmp_path / "my s"))
     out = tmp_path / "out 'a'"
     args = ["process", str(session), "-o", str(out)]
     result = CliRunner().invoke(main, args)

@@ -13,6 +13,7 @@ from click.testing import CliRunner
 
 from hexatherm.cli import main
 from hexatherm.io.csvfile import read_measurement_csv
+from tests.shipped import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -23,7 +24,7 @@ def european(text: str) -> str:
 
 
 def test_points_and_centres_read_alike(tmp_path: Path) -> None:
-    comma = ROOT / "sessions" / "paper-zero-pose" / "centres.csv"
+    comma = SHIPPED / "paper-zero-pose" / "centres.csv"
     semi = tmp_path / "centres.csv"
     semi.write_text(european(comma.read_text()))
     a, b = read_measurement_csv(comma), read_measurement_csv(semi)
@@ -34,12 +35,12 @@ def test_points_and_centres_read_alike(tmp_path: Path) -> None:
 
 def test_a_semicolon_session_gives_the_same_poses(tmp_path: Path) -> None:
     session = tmp_path / "s"
-    shutil.copytree(ROOT / "sessions" / "paper-zero-pose", session)
+    shutil.copytree(SHIPPED / "paper-zero-pose", session)
     for name in ("centres.csv", "temperatures.csv"):
         (session / name).write_text(european((session / name).read_text()))
     result = CliRunner().invoke(main, ["process", str(session), "-o", str(tmp_path / "out")])
     assert result.exit_code == 0, result.output
-    expected = pd.read_csv(ROOT / "sessions" / "paper-zero-pose" / "expected" / "poses.csv")
+    expected = pd.read_csv(SHIPPED / "paper-zero-pose" / "expected" / "poses.csv")
     got = pd.read_csv(tmp_path / "out" / "poses.csv")
     for column in ("Tx_corr_mm", "Ty_corr_mm", "Rz_corr_deg", "Tz_conv_mm"):
         np.testing.assert_allclose(got[column], expected[column], rtol=0, atol=1e-9)

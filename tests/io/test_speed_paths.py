@@ -26,6 +26,7 @@ from hexatherm.errors import InputError
 from hexatherm.io import csvfile, dmis, measurements
 from hexatherm.io.records import Records
 from tests.conftest import make_hexapod, random_poses
+from tests.shipped import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -121,7 +122,7 @@ def test_dmis_canonical_points_take_the_fast_lane(tmp_path, ijk):
 
 
 def test_dmis_twin_session_file_takes_the_fast_lane():
-    check_dmis(ROOT / "sessions" / "paper-zero-pose-dmis" / "points.dmo", fast=True)
+    check_dmis(SHIPPED / "paper-zero-pose-dmis" / "points.dmo", fast=True)
 
 
 CANONICAL = points_dmo(n_steps=2, balls=2, points=4)

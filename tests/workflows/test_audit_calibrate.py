@@ -14,10 +14,11 @@ import pytest
 from click.testing import CliRunner
 
 from hexatherm.cli import main
+from tests.shipped import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[2]
-GEOMETRY = ROOT / "sessions" / "calibration-geometry"
-CAMPAIGN = ROOT / "sessions" / "calibration-campaign"
+GEOMETRY = SHIPPED / "calibration-geometry"
+CAMPAIGN = SHIPPED / "calibration-campaign"
 
 
 def run(*args: object):

@@ -17,9 +17,10 @@ from click.testing import CliRunner
 from hexatherm.cli import main
 from hexatherm.core.spherefit import fit_spheres
 from hexatherm.io.config import read_balls
+from tests.shipped import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[2]
-DATUMS = ROOT / "sessions" / "register-datums"
+DATUMS = SHIPPED / "register-datums"
 HEXAPOD = ROOT / "configs" / "symetrie-like.yaml"
 BALLS = ROOT / "configs" / "balls-3.yaml"
 

@@ -17,6 +17,7 @@ from click.testing import CliRunner
 
 from hexatherm.cli import main
 from tests.audit import hashes, refusal, session_copy
+from tests.shipped import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -93,7 +94,7 @@ def simulated_session(tmp_path: Path, n_targets: int, seed: int = 0) -> Path:
     """A session with no hidden effect (truth/effects.yaml: none) of 2 + 2 n_targets
     steps: ``plan --random`` then ``simulate --plan`` (legs warmed by mats, 0.5 um CMM
     noise)."""
-    config = ROOT / "sessions" / "paper-zero-pose"
+    config = SHIPPED / "paper-zero-pose"
     hexapod, balls = str(config / "hexapod.yaml"), str(config / "balls.yaml")
     plan = tmp_path / f"plan{n_targets}.yaml"
     common = ["--hexapod", hexapod, "--balls", balls]
@@ -316,14 +317,14 @@ def test_a_target_with_a_reference_on_one_side_only_is_said(tmp_path: Path) -> N
     result = CliRunner().invoke(main, ["process", str(session), "-o", str(out)])
     assert result.exit_code == 0, result.output
     poses = {r["label"]: r for r in csv.DictReader((out / "poses.csv").open())}
-    assert poses["S10"]["ref_after"] == "" and float(poses["S10"]["weight_after"]) == 0
+    assert poses["S10"]["ref_after"] == "none" and float(poses["S10"]["weight_after"]) == 0
     lines = [line for line in result.output.splitlines() if "one side" in line]
     assert len(lines) == 1 and lines[0].startswith("warning: "), result.output
     gap = float(poses["S10"]["dt_before_s"])
     assert "S10" in lines[0] and "R9" in lines[0] and f"{gap:.0f} s" in lines[0]
     # the whole session: no such line
     full = CliRunner().invoke(
-        main, ["process", str(ROOT / "sessions" / "paper-zero-pose"), "-o", str(tmp_path / "f")]
+        main, ["process", str(SHIPPED / "paper-zero-pose"), "-o", str(tmp_path / "f")]
     )
     assert full.exit_code == 0 and "one side" not in full.output
 

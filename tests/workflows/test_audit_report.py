@@ -23,9 +23,10 @@ from hexatherm.cli import main
 from hexatherm.errors import InputError
 from hexatherm.workflows.report.render import render_page
 from tests.audit import hashes, refusal, session_copy
+from tests.shipped import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[2]
-SESSION = ROOT / "sessions" / "paper-zero-pose"
+SESSION = SHIPPED / "paper-zero-pose"
 
 
 def templates(folder: Path, files: dict[str, str | bytes]) -> Path:

@@ -31,6 +31,7 @@ from hexatherm.workflows.simulate.twinsession import (
     write_files,
 )
 from tests.sessions import BALLS, ROOT
+from tests.shipped import SHIPPED
 
 HEXAPOD_TEXT = (ROOT / "configs" / "symetrie-like.yaml").read_text()
 ZERO = [0.0] * 6
@@ -65,7 +66,7 @@ def test_identical_centres_in_every_step_keep_the_assumed_cap(tmp_path: Path) ->
     component (measured 0.97-1.03 before and after)."""
     folder = tmp_path / "one-pose"
     shutil.copytree(
-        ROOT / "sessions" / "paper-zero-pose",
+        SHIPPED / "paper-zero-pose",
         folder,
         ignore=shutil.ignore_patterns("expected", "truth"),
     )

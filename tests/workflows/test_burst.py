@@ -15,13 +15,14 @@ import numpy as np
 import pandas as pd
 
 from hexatherm.workflows.process.pipeline import process_session
+from tests.shipped import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_a_burst_session_processes_with_equal_weights_and_says_so(tmp_path: Path) -> None:
     session = tmp_path / "burst"
-    shutil.copytree(ROOT / "sessions" / "serial-capture", session)
+    shutil.copytree(SHIPPED / "serial-capture", session)
     points = pd.read_csv(session / "points.csv")
     points["time"] = points["time"].iloc[0]
     points.to_csv(session / "points.csv", index=False)
@@ -32,5 +33,5 @@ def test_a_burst_session_processes_with_equal_weights_and_says_so(tmp_path: Path
     np.testing.assert_array_equal(corr.weight_after[both], 0.5)
     assert any("same time" in w and "1/2" in w for w in result.warnings)
     # the same session with its real times: the weights follow the times
-    timed = process_session(ROOT / "sessions" / "serial-capture")
+    timed = process_session(SHIPPED / "serial-capture")
     assert not any("same time" in w for w in timed.warnings)

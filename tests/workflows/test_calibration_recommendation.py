@@ -21,9 +21,10 @@ from click.testing import CliRunner
 
 from hexatherm.cli import main
 from hexatherm.core.calibration.significance import improvement, parameter_change_test
+from tests.shipped import SHIPPED as SHIPPED_SESSIONS
 
 ROOT = Path(__file__).resolve().parents[2]
-SHIPPED = ROOT / "sessions" / "calibration-geometry"
+SHIPPED = SHIPPED_SESSIONS / "calibration-geometry"
 
 
 def test_the_parameters_change_test_and_the_paired_improvement_by_hand():

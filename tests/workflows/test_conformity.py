@@ -16,9 +16,10 @@ from click.testing import CliRunner
 from hexatherm.cli import main
 from hexatherm.core.conformity import CONFORMS, DOES_NOT_CONFORM, NOT_DECIDABLE, combine, decide
 from hexatherm.workflows.process.conformity import parse_tolerances
+from tests.shipped import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[2]
-SESSION = ROOT / "sessions" / "paper-zero-pose"
+SESSION = SHIPPED / "paper-zero-pose"
 
 
 def test_decision_rule_on_known_cases():

@@ -16,13 +16,14 @@ from hexatherm.workflows.process.uncertainty import (
     joint_pose_covariance,
     pose_chain,
 )
+from tests.shipped import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.parametrize("corrected", [True, False])
 def test_joint_covariance_matches_the_blocks_and_the_between_target_terms(corrected) -> None:
-    result = process_session(ROOT / "sessions" / "paper-zero-pose")
+    result = process_session(SHIPPED / "paper-zero-pose")
     joint = joint_pose_covariance(result, corrected=corrected)
     centres = centre_covariance(result)
     jacobian = target_jacobian(pose_chain(result), result.centres.centres_mm)

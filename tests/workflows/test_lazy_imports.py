@@ -8,7 +8,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-SESSIONS = Path(__file__).resolve().parents[2] / "sessions"
+from tests.shipped import SHIPPED
+
+SESSIONS = SHIPPED
 
 
 def _loaded(code: str, modules: tuple[str, ...]) -> dict[str, bool]:

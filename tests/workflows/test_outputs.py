@@ -14,6 +14,7 @@ from hexatherm.io.csvout import RESOLUTION
 from hexatherm.workflows.process.outputs import poses_frame
 from hexatherm.workflows.process.pipeline import process_session
 from hexatherm.workflows.process.uncertainty import pose_uncertainty
+from tests.shipped import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[2]
 AXES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
@@ -22,7 +23,7 @@ URAD_PER_DEG = np.pi / 180 * 1e6
 
 def test_deviation_columns_are_pose_minus_commanded_in_um_and_urad() -> None:
     # in memory, where the point is the arithmetic: to 1e-6 um and urad (issue 16)
-    result = process_session(ROOT / "sessions" / "paper-zero-pose")
+    result = process_session(SHIPPED / "paper-zero-pose")
     poses = poses_frame(result, pose_uncertainty(result))
     for tag in ("conv", "corr"):
         for axis in AXES:
@@ -40,9 +41,7 @@ def test_written_deviations_agree_with_written_poses_within_the_resolution(
     # from the file, every number rounded to its resolution: a deviation and the two
     # poses it comes from are each within half a step of their exact values
     session = tmp_path / "s"
-    shutil.copytree(
-        ROOT / "sessions" / "paper-zero-pose", session, ignore=shutil.ignore_patterns("results")
-    )
+    shutil.copytree(SHIPPED / "paper-zero-pose", session, ignore=shutil.ignore_patterns("results"))
     result = CliRunner().invoke(main, ["process", str(session), "-o", str(tmp_path / "out")])
     assert result.exit_code == 0, result.output
     poses = pd.read_csv(tmp_path / "out" / "poses.csv")

@@ -38,6 +38,7 @@ from hexatherm.workflows.process.pipeline import Checks, process_session
 from hexatherm.workflows.process.quality import quality_checks
 from hexatherm.workflows.simulate.twinsession import Heating, TwinSessionSpec, write_twin_session
 from tests.sessions import BALLS, REFERENCE, ROOT, make_session
+from tests.shipped import SHIPPED
 from tests.workflows.test_run import make_bench
 
 #: the displacement of the reference's balls on the CMM, mm
@@ -180,7 +181,7 @@ def test_process_strict_exits_3_naming_the_reference_and_the_leg(session):
 
 
 #: the largest growth excess (K, None: no log) and warming (K) of the shipped sessions
-SHIPPED = {
+SHIPPED_EXCESS = {
     "paper-zero-pose": (0.27, 7.4),
     "paper-zero-pose-dmis": (0.70, 7.2),
     "with-hidden-effect": (0.04, 8.3),
@@ -190,13 +191,13 @@ SHIPPED = {
 }
 
 
-@pytest.mark.parametrize("name", list(SHIPPED))
+@pytest.mark.parametrize("name", list(SHIPPED_EXCESS))
 def test_the_shipped_sessions_pass_the_growth_checks(name):
     """Real heating (up to 10.7 K on the legs, legs that lag their thermocouples by 30 min
     in with-hidden-effect) stays within the bounds: the growth needs at most 0.7 K beyond
     the logged span (limit 2 K) and at most 10.7 K in all (limit 20 K)."""
-    quality = quality_checks(process_session(ROOT / "sessions" / name))
-    excess, warming = SHIPPED[name]
+    quality = quality_checks(process_session(SHIPPED / name))
+    excess, warming = SHIPPED_EXCESS[name]
     frame = quality.frame
     refs = (frame["kind"] == "reference").to_numpy()
     assert np.nanmax(frame["growth_warming_C"].to_numpy(dtype=float)) <= warming
@@ -453,7 +454,7 @@ def test_the_shipped_campaign_read_in_the_other_convention_is_refused(tmp_path):
     by 7.5 mrad (0.427 deg) with no check failing."""
     session = tmp_path / "s"
     shutil.copytree(
-        ROOT / "sessions" / "calibration-campaign",
+        SHIPPED / "calibration-campaign",
         session,
         ignore=shutil.ignore_patterns("expected", "truth", "results"),
     )

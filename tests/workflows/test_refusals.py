@@ -31,8 +31,9 @@ from hexatherm.workflows.register import register_balls
 from hexatherm.workflows.replay import find_sessions, replay_session
 from hexatherm.workflows.simulate.twinsession import Heating, TwinSessionSpec, write_twin_session
 from tests.sessions import BALLS, REFERENCE, ROOT
+from tests.shipped import SHIPPED
 
-DATUMS = ROOT / "sessions" / "register-datums"
+DATUMS = SHIPPED / "register-datums"
 TARGETS = (
     [5.0, -3.0, 2.0, 2.0, -3.0, 5.0],
     [-4.0, 6.0, -3.0, -2.5, 1.5, -4.0],
@@ -353,7 +354,7 @@ def test_the_shipped_sessions_pass_the_pose_check():
     default tolerance (2 mm, 0.05 deg + 1 % of the commanded angle) by a factor of 10 or
     more."""
     for name in ("paper-zero-pose", "calibration-campaign", "serial-capture"):
-        result = process_session(ROOT / "sessions" / name)
+        result = process_session(SHIPPED / name)
         deviation = np.abs(result.steps.pose - result.session.plan.poses)
         assert deviation[:, :3].max() < 0.05 and deviation[:, 3:].max() < 0.01, name
 
@@ -504,7 +505,7 @@ def test_register_accepts_the_sample_within_its_noise():
 @pytest.fixture
 def recorded(tmp_path):
     root = tmp_path / "sessions"
-    shutil.copytree(ROOT / "sessions" / "serial-capture", root / "serial-capture")
+    shutil.copytree(SHIPPED / "serial-capture", root / "serial-capture")
     return root / "serial-capture"
 
 

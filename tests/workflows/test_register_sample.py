@@ -12,9 +12,10 @@ from click.testing import CliRunner
 
 from hexatherm.cli import main
 from hexatherm.io.config import read_balls
+from tests.shipped import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[2]
-SAMPLE = ROOT / "sessions" / "register-datums"
+SAMPLE = SHIPPED / "register-datums"
 
 
 def register_sample(out: Path) -> None:
@@ -47,7 +48,7 @@ def test_register_recovers_the_true_balls_from_the_sample(tmp_path: Path) -> Non
 
 def test_the_sample_is_what_its_script_makes() -> None:
     spec = importlib.util.spec_from_file_location(
-        "make_register_datums", ROOT / "sessions" / "make_register_datums.py"
+        "make_register_datums", SHIPPED / "make_register_datums.py"
     )
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)

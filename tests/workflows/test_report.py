@@ -32,9 +32,10 @@ from hexatherm.workflows.report import (
     report_html,
     temperature_figure,
 )
+from tests.shipped import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[2]
-SESSIONS = ROOT / "sessions"
+SESSIONS = SHIPPED
 IMG = re.compile(r'<img src="data:image/png;base64,([A-Za-z0-9+/=]+)"')
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 URAD_PER_DEG = np.pi / 180 * 1e6

@@ -30,10 +30,11 @@ import pytest
 from hexatherm.io.csvout import RESOLUTION
 from hexatherm.workflows.process.pipeline import process_session
 from hexatherm.workflows.report import build_report
+from tests.shipped import SHIPPED
 from tests.waiting import SAFETY_S
 
 ROOT = Path(__file__).resolve().parents[2]
-SESSION = ROOT / "sessions" / "with-hidden-effect"
+SESSION = SHIPPED / "with-hidden-effect"
 BROWSERS = ("chromium", "chromium-browser", "google-chrome")
 A4_PT = (595.28, 841.89)
 IMG = re.compile(r'<img src="data:image/png;base64,([A-Za-z0-9+/=]+)"')
@@ -196,7 +197,7 @@ def shown(value: float, decimals: int, unit: str) -> set[str]:
 
 
 OTHER_SESSIONS = sorted(
-    p.parent.name for p in (ROOT / "sessions").glob("*/expected") if p.parent.name != SESSION.name
+    p.parent.name for p in (SHIPPED).glob("*/expected") if p.parent.name != SESSION.name
 )
 
 
@@ -204,7 +205,7 @@ OTHER_SESSIONS = sorted(
 def test_every_shipped_sessions_report_prints_its_pose_columns_on_a4(name, tmp_path):
     """The other shipped sessions, lighter: A4, nothing off the paper, every pose column
     head of both tables and every corrected Tx of poses.csv in the PDF's text."""
-    _, pages, _ = print_report(ROOT / "sessions" / name, tmp_path)
+    _, pages, _ = print_report(SHIPPED / name, tmp_path)
     words = [w[4] for _, _, page in pages for w in page]
     for width, height, page_words in pages:
         assert (width, height) == pytest.approx(A4_PT, abs=1.0)
@@ -215,5 +216,5 @@ def test_every_shipped_sessions_report_prints_its_pose_columns_on_a4(name, tmp_p
         assert f"{which} − commanded" in text
     for axis in ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz"):
         assert words.count(axis) >= 2, axis  # a deviation column in each table
-    poses = pd.read_csv(ROOT / "sessions" / name / "expected" / "poses.csv")
+    poses = pd.read_csv(SHIPPED / name / "expected" / "poses.csv")
     assert not [v for v in poses["dTx_corr_um"] if not shown(v, 3, "um") & set(words)]

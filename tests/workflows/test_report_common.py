@@ -14,9 +14,10 @@ import pytest
 from hexatherm.workflows.process.pipeline import process_session
 from hexatherm.workflows.process.uncertainty import pose_uncertainty
 from hexatherm.workflows.report import pose_figure, verdict, verdict_items
+from tests.shipped import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[2]
-SESSION = ROOT / "sessions" / "paper-zero-pose"
+SESSION = SHIPPED / "paper-zero-pose"
 UNITS = ("um",) * 3 + ("urad",) * 3
 NAMES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
 

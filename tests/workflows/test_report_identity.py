@@ -18,6 +18,7 @@ from hexatherm.cli import main
 from hexatherm.errors import InputError
 from hexatherm.io.config import read_session
 from hexatherm.io.config.identity import read_lab
+from tests.shipped import SHIPPED
 from tests.workflows.test_report_browser import PAGE, WORD, print_pdf
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -63,7 +64,7 @@ EXPECTED = [
 
 def session_copy(name: str, tmp_path: Path, extra: str = IDENT) -> Path:
     folder = tmp_path / name
-    shutil.copytree(ROOT / "sessions" / name, folder, ignore=shutil.ignore_patterns("expected"))
+    shutil.copytree(SHIPPED / name, folder, ignore=shutil.ignore_patterns("expected"))
     with (folder / "session.yaml").open("a", encoding="utf-8") as f:
         f.write("\n" + extra)
     return folder
@@ -152,7 +153,7 @@ def test_cli_refuses_a_bad_lab_file_in_one_line(tmp_path):
         main,
         [
             "report",
-            str(ROOT / "sessions" / "paper-zero-pose"),
+            str(SHIPPED / "paper-zero-pose"),
             "--lab",
             str(tmp_path / "lab.yaml"),
             "-o",

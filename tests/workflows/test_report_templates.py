@@ -15,6 +15,7 @@ from pathlib import Path
 from click.testing import CliRunner
 
 from hexatherm.cli import main
+from tests.shipped import SHIPPED
 from tests.workflows.test_report_identity import (
     EXPECTED,
     IDENT,
@@ -120,7 +121,7 @@ def refused(tmp_path: Path, templates: dict[str, str], *extra: str) -> tuple[str
     for name, text in templates.items():
         (folder / name).write_text(text, encoding="utf-8")
     out = tmp_path / "report.html"
-    session = ROOT / "sessions" / "paper-zero-pose"
+    session = SHIPPED / "paper-zero-pose"
     result = CliRunner().invoke(
         main, ["report", str(session), "--template-dir", str(folder), *extra, "-o", str(out)]
     )
@@ -148,7 +149,7 @@ def test_a_bad_template_is_refused_naming_file_and_line(tmp_path):
     lab = tmp_path / "lab.yaml"
     lab.write_text(LAB + "templates: nowhere\n", encoding="utf-8")
     out = tmp_path / "r.html"
-    session = ROOT / "sessions" / "paper-zero-pose"
+    session = SHIPPED / "paper-zero-pose"
     result = CliRunner().invoke(main, ["report", str(session), "--lab", str(lab), "-o", str(out)])
     assert result.exit_code != 0 and not out.exists()
     assert f"lab.yaml:{LAB.count(chr(10)) + 1}: field 'templates'" in result.output

@@ -16,6 +16,7 @@ from hexatherm.workflows.process.outputs import fits_frame, legs_frame, poses_fr
 from hexatherm.workflows.process.pipeline import ProcessResult, process_session
 from hexatherm.workflows.process.quality import quality_checks
 from hexatherm.workflows.process.uncertainty import PoseUncertainty, pose_uncertainty
+from tests.shipped import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -24,7 +25,7 @@ ROOT = Path(__file__).resolve().parents[2]
 def processed(
     tmp_path_factory: pytest.TempPathFactory,
 ) -> tuple[ProcessResult, PoseUncertainty, Path]:
-    result = process_session(ROOT / "sessions" / "paper-zero-pose-dmis")
+    result = process_session(SHIPPED / "paper-zero-pose-dmis")
     uncertainty = pose_uncertainty(result)
     out = tmp_path_factory.mktemp("res") / "out"
     write_results(result, out, uncertainty=uncertainty, quality=quality_checks(result))

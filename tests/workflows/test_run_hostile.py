@@ -25,7 +25,7 @@ from hexatherm.devices.ippserver.server import IppSimServer
 from hexatherm.workflows.replay import replay_session
 from hexatherm.workflows.serve import TwinMachines
 from tests.cli.test_run import base, machines, write_plan  # noqa: F401  (the fixture)
-from tests.sessions import ROOT
+from tests.shipped import SHIPPED
 
 TARGET = [[5.0, -3.0, 4.0, 1.0, -2.0, 3.0]]
 
@@ -89,7 +89,7 @@ def test_an_absurd_position_is_one_line_naming_the_get(
 
 def test_replay_mismatches_print_plain_numbers(tmp_path: Path) -> None:
     recorded = tmp_path / "serial-capture"
-    shutil.copytree(ROOT / "sessions" / "serial-capture", recorded)
+    shutil.copytree(SHIPPED / "serial-capture", recorded)
     poses = pd.read_csv(recorded / "expected" / "poses.csv")
     poses.loc[0, "Tz_corr_mm"] = 842.001
     poses.to_csv(recorded / "expected" / "poses.csv", index=False)

@@ -99,7 +99,7 @@ from hexatherm.io.seriallog import (
     MemorySink,
     Sink,
 )
-from hexatherm.session import Balls
+from hexatherm.session import DISTANCE_REFUSAL_UM, Balls, QualityLimits
 from hexatherm.text import format_pose
 
 OPERATOR_EVENTS = ("next", "redo", "quit")
@@ -133,23 +133,27 @@ class FitChecks:
     Attributes
     ----------
     radius_tol_mm : float
-        Warn when the fitted radius is further than this from the nominal one.
+        Warn when the fitted radius is further than this from the nominal one (half
+        the quality limit ``diameter_dev_um``: the one table of limits,
+        :class:`~hexatherm.session.QualityLimits`).
     form_tol_um : float
-        Warn when the form error (max - min residual) is larger.
+        Warn when the form error (max - min residual) is larger (``form_um``).
     min_points : int
         Warn when a ball has fewer points (4 fit a sphere, more check it).
     centre_distance_tol_mm : float
         Warn when the distance between two balls' fitted centres in one step is
-        further than this from the balls file's (the wrong ball was probed).
+        further than this from the balls file's (``distance_dev_um``: what ``process``
+        would flag; beyond :data:`~hexatherm.session.DISTANCE_REFUSAL_UM` it refuses
+        the step, and the wrong ball was probed).
     surface_tol_mm : float
         A point lies on a ball when its distance to the ball's expected centre is
         the expected radius within this (see the module docstring).
     """
 
-    radius_tol_mm: float = 0.02
-    form_tol_um: float = 15.0
+    radius_tol_mm: float = QualityLimits.diameter_dev_um / 2 * 1e-3
+    form_tol_um: float = QualityLimits.form_um
     min_points: int = 5
-    centre_distance_tol_mm: float = 0.5
+    centre_distance_tol_mm: float = QualityLimits.distance_dev_um * 1e-3
     surface_tol_mm: float = 0.5
 
 
@@ -836,10 +840,18 @@ class Recorder:
                 continue
             measured = float(np.linalg.norm(centre - np.array(fit.centre_mm)))
             nominal = float(np.linalg.norm(self.balls.centres_mm[j] - self.balls.centres_mm[oj]))
-            if abs(measured - nominal) > self.checks.centre_distance_tol_mm:
+            off_um = abs(measured - nominal) * 1e3
+            if off_um > self.checks.centre_distance_tol_mm * 1e3:
                 out.append(
-                    f"{measured:.3f} mm from {self.balls.names[oj]}, the balls file says "
-                    f"{nominal:.3f} mm: was the right ball probed?"
+                    f"{measured:.4f} mm from {self.balls.names[oj]}, the balls file says "
+                    f"{nominal:.4f} mm ({off_um:.1f} um off, limit "
+                    f"{self.checks.centre_distance_tol_mm * 1e3:g} um"
+                    + (
+                        f"; process refuses the step beyond {DISTANCE_REFUSAL_UM:g} um): "
+                        "was the right ball probed?"
+                        if off_um > DISTANCE_REFUSAL_UM
+                        else ": process flags it)"
+                    )
                 )
         return out
 

@@ -6,7 +6,7 @@ process"), then these extensions, documented in docs/files.md:
 * ``Tx_cmd_mm`` .. ``Rz_cmd_deg``: the commanded pose of the target;
 * ``dq_leg1_um`` .. ``dq_leg6_um``: thermal growth of each leg at S_i (relative
   to the first reference), subtracted from its leg lengths;
-* ``ref_before``, ``ref_after``: labels of the references used (empty: none);
+* ``ref_before``, ``ref_after``: labels of the references used (``none``: none);
 * ``dt_before_s``, ``dt_after_s``: ``t_S - t_before`` and ``t_after - t_S``;
 * ``weight_after``: weight of the later reference in the time interpolation;
 * ``interpolation`` (with ``--interpolation smooth`` only): ``smooth`` when the smooth
@@ -25,8 +25,8 @@ Numbers are written at the resolution of their unit (:mod:`hexatherm.io.csvout`)
 targets (:func:`covariance_frame`).
 
 ``quality.csv`` has one row per step with the quality checks of
-:mod:`hexatherm.workflows.process.quality` (``ok_*``: ``True``, ``False``, or empty where
-a check could not run).
+:mod:`hexatherm.workflows.process.quality` (:func:`quality_file_frame`: ``ok_*``
+``True``/``False``, ``failed`` never empty, legs as whole numbers).
 
 ``legs.csv`` has one row per step: ``label,kind,time``, the step's measured pose
 relative to O (``Tx_mm`` ...), its IGM leg lengths ``q_leg1_mm`` .. and, for
@@ -56,6 +56,17 @@ if TYPE_CHECKING:
 POSE_NAMES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
 POSE_UNITS = ("mm", "mm", "mm", "deg", "deg", "deg")
 LEGS = range(1, 7)
+#: the text of ``quality.csv``'s ``failed`` and ``poses.csv``'s ``ref_before`` /
+#: ``ref_after`` where there is nothing to name: never empty, which pandas would read as
+#: NaN (a column of floats in a session where nothing failed)
+NONE_TEXT = "none"
+#: ``quality.csv``'s ``growth_leg`` / ``warming_leg`` where the check names no leg (legs
+#: are 1 to 6): a whole number, so the column reads as integers in every session
+NO_LEG = 0
+#: the resolution ``jacobian_rcond`` is written at: 1e-6 of a ratio at most 1, three
+#: significant digits at the default limit of 0.01 (a condition number is known to a few
+#: per cent, not to 17 digits)
+RCOND_RESOLUTION = 1e-6
 
 
 def pose_columns(tag: str) -> list[str]:
@@ -108,8 +119,8 @@ def poses_frame(
             data[col] = values[:, j]
     for leg in LEGS:
         data[f"dq_leg{leg}_um"] = corr.growth_mm[:, leg - 1] * 1e3
-    data["ref_before"] = np.where(corr.before_index >= 0, labels[corr.before_index], "")
-    data["ref_after"] = np.where(corr.after_index >= 0, labels[corr.after_index], "")
+    data["ref_before"] = np.where(corr.before_index >= 0, labels[corr.before_index], NONE_TEXT)
+    data["ref_after"] = np.where(corr.after_index >= 0, labels[corr.after_index], NONE_TEXT)
     data["dt_before_s"] = corr.dt_before_s
     data["dt_after_s"] = corr.dt_after_s
     data["weight_after"] = corr.weight_after
@@ -275,7 +286,10 @@ def write_results(
         tables["covariance.csv"] = covariance_frame(result, uncertainty)
     if quality is not None:
         tables["quality.csv"] = quality_file_frame(quality)
-    texts = {name: csv_text(frame) for name, frame in tables.items()}
+    texts = {
+        name: csv_text(frame, resolutions={"jacobian_rcond": RCOND_RESOLUTION})
+        for name, frame in tables.items()
+    }
     inputs = [*session_inputs(result), *extra_inputs]
     with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
         for name, text in texts.items():
@@ -284,15 +298,21 @@ def write_results(
 
 
 def quality_file_frame(quality: QualityReport) -> pd.DataFrame:
-    """``quality.csv``'s table: the checks' frame with every ``ok_<check>`` a boolean,
-    empty where the check could not run (the frame's ``"na"``), so that pandas reads
-    ``True``/``False`` (and NaN), never text."""
+    """``quality.csv``'s table, one dtype per column whatever the session (pandas reads
+    it without cleaning): every ``ok_<check>`` a boolean, False exactly where the check
+    ran and failed (where it could not run its value is empty and it passes, as the
+    checks count it: the screen and the report say n/a); ``growth_leg`` and
+    ``warming_leg`` whole numbers (:data:`NO_LEG` where no leg is named); ``failed`` the
+    failed checks, ``;``-separated, :data:`NONE_TEXT` when none."""
     from hexatherm.workflows.process.quality import NA
 
     frame = quality.frame.copy()
     for column in frame.columns:
         if str(column).startswith("ok_"):
-            frame[column] = ["" if v is NA or v == NA else bool(v) for v in frame[column]]
+            frame[column] = np.array([v is NA or v == NA or bool(v) for v in frame[column]])
+    for column in ("growth_leg", "warming_leg"):
+        frame[column] = np.array([int(v) if v != "" else NO_LEG for v in frame[column]])
+    frame["failed"] = [text or NONE_TEXT for text in frame["failed"]]
     return frame
 
 

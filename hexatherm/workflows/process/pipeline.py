@@ -40,7 +40,7 @@ from hexatherm.io.config import read_pose_check, read_session
 from hexatherm.io.files import STRICT, ReadOptions
 from hexatherm.io.records import Records
 from hexatherm.io.temperatures import Temperatures
-from hexatherm.session import Session
+from hexatherm.session import DISTANCE_REFUSAL_UM, QualityLimits, Session
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.carrying import OriginCarry, RepeatGroup, carry_and_average
 from hexatherm.workflows.process.measured import (
@@ -90,9 +90,11 @@ class Checks:
     ----------
     distance_tolerance_um : float
         Largest deviation of a measured inter-ball distance from the balls file;
-        beyond it the step is refused with a diagnosis (swapped balls, inch/mm).
+        beyond it the step is refused with a diagnosis (swapped balls, inch/mm). Default
+        :data:`~hexatherm.session.DISTANCE_REFUSAL_UM`.
     registration_tolerance_um : float
-        Largest registration RMS residual of a step.
+        Largest registration RMS residual of a step; default the quality limit
+        ``registration_rms_um`` (:class:`~hexatherm.session.QualityLimits`).
     registration_fails : bool
         Whether exceeding ``registration_tolerance_um`` is an error (else a warning).
     pose_tolerance : (float, float) or None
@@ -108,8 +110,8 @@ class Checks:
         A tolerance that is not a number >= 0 (NaN would turn a check off unseen).
     """
 
-    distance_tolerance_um: float = 50.0
-    registration_tolerance_um: float = 10.0
+    distance_tolerance_um: float = DISTANCE_REFUSAL_UM
+    registration_tolerance_um: float = QualityLimits.registration_rms_um
     registration_fails: bool = False
     pose_tolerance: tuple[float, float] | None = None
 

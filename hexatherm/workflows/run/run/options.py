@@ -9,6 +9,7 @@ from pathlib import Path
 from hexatherm.devices.controller import InPositionCriteria
 from hexatherm.devices.serialport import PortSettings
 from hexatherm.typing import FloatArray
+from hexatherm.workflows.limits import DEFAULTS, radius_limit_um
 from hexatherm.workflows.run.resume import (
     ProbeSettings,
 )
@@ -24,9 +25,11 @@ class BallChecks:
     ----------
     radius_tol_um : float
         Largest deviation of the fitted radius from the nominal (ball radius, plus the tip
-        radius when the probe is not compensated), um.
+        radius when the probe is not compensated), um: half the diameter limit of the
+        table of limits (:mod:`hexatherm.limits`), so that a ball ``run`` accepts is not
+        flagged by ``process``.
     form_um : float
-        Largest form error (max - min residual), um.
+        Largest form error (max - min residual), um (the table's ``form_um``).
     rms_um : float
         Largest RMS of the residuals, um.
     centre_tol_mm : float
@@ -34,8 +37,8 @@ class BallChecks:
         the prediction, hence the touch points, were off: probed again around the fit).
     """
 
-    radius_tol_um: float = 20.0
-    form_um: float = 10.0
+    radius_tol_um: float = radius_limit_um()
+    form_um: float = DEFAULTS.form_um
     rms_um: float = 3.0
     centre_tol_mm: float = 0.5
 
