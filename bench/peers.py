@@ -10,7 +10,7 @@ run this in an environment of its own::
     /tmp/venv-cgse/bin/pip install symetrie-hexapod -e .
     /tmp/venv-cgse/bin/python bench/peers.py
 
-It serves the twin's gpascii controller (:mod:`hexatherm.devices.pmacsim`) on
+It serves the twin's gpascii controller (:mod:`hexatherm.devices.sim.symetriepmac`) on
 127.0.0.1 around the hexapod of ``configs/symetrie-like.yaml`` (wall clock, 20 mm/s), then
 with each CGSE driver (``PunaPlusController``: the ``AlphaPlusTelnetInterface`` of
 PUNA+ and JORAN; ``ZondaController``: ``ZondaTelnetInterface``) reads the version and the
@@ -36,8 +36,8 @@ from typing import Any
 
 import numpy as np
 
-from hexatherm.devices.controllersim import SimulatedHexapod
-from hexatherm.devices.pmacsim import SymetriePmacSimulator
+from hexatherm.devices.sim.symetrie import SimulatedHexapod
+from hexatherm.devices.sim.symetriepmac import SymetriePmacSimulator
 from hexatherm.io.config import read_hexapod
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -245,7 +245,7 @@ def test_the_checker_finds_a_deliberate_cycle(tmp_path: Path, files: dict[str, s
 LONG_MODULES = {
     "io.dmis",
     "workflows.acquire.recorder",
-    "workflows.run.run.campaign",
+    "workflows.run.campaign",
     "core.spherefit",
     "core.hexapod",
     "core.effects",
@@ -301,3 +301,43 @@ def test_the_checkers_find_a_long_module_and_a_stray_exception(tmp_path: Path) -
     )
     assert long_modules(root) == {"io.big"}
     assert exceptions_outside_errors(root) == ["io.stray.StrayError"]
+
+
+#: the only modules of the package that may import the simulated instruments (issue 34,
+#: item 4): the simulators themselves and ``serve-twin``'s workflow
+SIMULATOR_USERS = ("devices.sim", "workflows.serve")
+
+
+def simulator_imports(root: Path) -> list[str]:
+    """Imports of ``devices.sim`` by a module that is not one of :data:`SIMULATOR_USERS`."""
+    return [
+        f"hexatherm.{importer} (line {line}) imports hexatherm.{target}"
+        for importer, target, line in import_edges(root)
+        if (target == "devices.sim" or target.startswith("devices.sim."))
+        and not any(importer == u or importer.startswith(u + ".") for u in SIMULATOR_USERS)
+    ]
+
+
+def test_the_simulated_instruments_live_in_a_room_of_their_own() -> None:
+    """The drivers a lab runs (``devices``), and every command but ``serve-twin``, import
+    no simulator: the twin they are tested against reads apart from them."""
+    assert simulator_imports(PACKAGE) == []
+    assert (PACKAGE / "devices" / "sim" / "__init__.py").is_file()
+    assert not list((PACKAGE / "devices").glob("*sim.py"))
+
+
+def test_the_checker_finds_a_driver_that_imports_a_simulator(tmp_path: Path) -> None:
+    root = _package(
+        tmp_path,
+        {
+            "devices/__init__.py": "",
+            "devices/pi.py": "from hexatherm.devices.sim.pi import PISimulator\n",
+            "devices/sim/__init__.py": "",
+            "devices/sim/pi.py": "PISimulator = 1\n",
+            "workflows/__init__.py": "",
+            "workflows/serve.py": "from hexatherm.devices.sim import pi\n",
+        },
+    )
+    assert simulator_imports(root) == [
+        "hexatherm.devices.pi (line 1) imports hexatherm.devices.sim.pi"
+    ]

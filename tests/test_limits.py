@@ -13,7 +13,7 @@ from hexatherm.cli import main
 from hexatherm.limits import DISTANCE_REFUSAL_UM, QualityLimits, limits_text
 from hexatherm.workflows.acquire.recorder import FitChecks
 from hexatherm.workflows.process.pipeline import Checks
-from hexatherm.workflows.run.run.options import BallChecks
+from hexatherm.workflows.run.options import BallChecks
 
 TABLE = QualityLimits()
 

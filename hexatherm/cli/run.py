@@ -280,9 +280,9 @@ def command(
     from hexatherm.devices.serialport import PortSettings
     from hexatherm.io.config import read_hexapod
     from hexatherm.workflows.acquire.files import load_files
+    from hexatherm.workflows.run.campaign import STOPPED_NOTE, run_campaign
+    from hexatherm.workflows.run.options import BallChecks, RunOptions
     from hexatherm.workflows.run.resume import ProbeSettings
-    from hexatherm.workflows.run.run import BallChecks, RunOptions, run_campaign
-    from hexatherm.workflows.run.run.campaign import STOPPED_NOTE
 
     if dry_run and resume:
         raise click.UsageError("--dry-run checks a plan: not with --resume")
@@ -392,7 +392,7 @@ def _dry_run(
     an output first (not an input, not inside the session folder), written at the end
     whatever the check found."""
     from hexatherm.io.outputs import check_output_settled, write_output_file
-    from hexatherm.workflows.run.run import dry_run as check_plan
+    from hexatherm.workflows.run.support import dry_run as check_plan
 
     if transcript is None:
         check_plan(files, hexapod, options, notify)

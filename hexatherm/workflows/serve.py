@@ -1,14 +1,14 @@
 """``hexatherm serve-twin``: a simulated CMM and hexapod controller backed by the twin.
 
 The rehearsal of an unattended campaign (``hexatherm run``): an I++ DME server
-(:class:`~hexatherm.devices.ippserver.IppSimServer`), a controller server
-(:class:`~hexatherm.devices.controllersim.SymetrieSimulator` or
-:class:`~hexatherm.devices.pisim.PISimulator`) and a thermocouple logger
-(:class:`~hexatherm.devices.thermosim.ThermocoupleSimulator`, for ``run
+(:class:`~hexatherm.devices.sim.ipp.IppSimServer`), a controller server
+(:class:`~hexatherm.devices.sim.symetrie.SymetrieSimulator` or
+:class:`~hexatherm.devices.sim.pi.PISimulator`) and a thermocouple logger
+(:class:`~hexatherm.devices.sim.thermocouples.ThermocoupleSimulator`, for ``run
 --temperature-port socket://127.0.0.1:PORT``) on 127.0.0.1, all backed by one
 :class:`TwinWorld`:
 
-- the hexapod (:class:`~hexatherm.devices.controllersim.SimulatedHexapod`): moves in a
+- the hexapod (:class:`~hexatherm.devices.sim.symetrie.SimulatedHexapod`): moves in a
   straight line in pose space at finite speeds, raises its in-position flag a settle time
   after the motion, reads back with noise, reports the IGM's actuator lengths and the
   heating model's leg temperatures (6 channels, deg C);
@@ -20,14 +20,14 @@ The rehearsal of an unattended campaign (``hexatherm run``): an I++ DME server
   channel), one line per sampling period, as a logger sends them;
 - time: one clock for everything, in seconds; :class:`AcceleratedClock` runs the thermal
   history ``time_scale`` times faster than the wall clock (a night in minutes), a
-  :class:`~hexatherm.devices.controllersim.ManualClock` moves only when the run's waits
+  :class:`~hexatherm.devices.sim.symetrie.ManualClock` moves only when the run's waits
   sleep (tests). Every CMM motion (each ``GoTo``, and the approach and touch of a
   ``PtMeas``) takes ``cmm_move_s`` of it.
 
 Faults (:func:`parse_fault`): I++ errors of any severity, ``E0000`` events, a dropped
-connection mid-transaction, lines split across reads (:class:`~hexatherm.devices.ippserver.
+connection mid-transaction, lines split across reads (:class:`~hexatherm.devices.sim.ipp.
 Fault`); a late in-position flag, a connection dropped mid-move, split replies, an error
-code, a refused pose (:class:`~hexatherm.devices.controllersim.Faults`).
+code, a refused pose (:class:`~hexatherm.devices.sim.symetrie.Faults`).
 """
 
 from __future__ import annotations
@@ -46,16 +46,16 @@ from hexatherm.core.heating import HeatingModel, Mat, MatHeating
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
 from hexatherm.core.twin import TwinSteps, predict
-from hexatherm.devices.controllersim import (
+from hexatherm.devices.sim.ipp import Fault, IppSimServer
+from hexatherm.devices.sim.pi import PISimulator, PIStart
+from hexatherm.devices.sim.symetrie import (
     Faults,
     SimulatedController,
     SimulatedHexapod,
     SymetrieSimulator,
 )
-from hexatherm.devices.ippserver import Fault, IppSimServer
-from hexatherm.devices.pisim import PISimulator, PIStart
-from hexatherm.devices.pmacsim import SymetriePmacSimulator
-from hexatherm.devices.thermosim import ThermocoupleSimulator
+from hexatherm.devices.sim.symetriepmac import SymetriePmacSimulator
+from hexatherm.devices.sim.thermocouples import ThermocoupleSimulator
 from hexatherm.errors import HexathermError, InputError
 from hexatherm.session import Balls
 from hexatherm.typing import FloatArray
@@ -152,7 +152,7 @@ def default_heating() -> MatHeating:
 
 
 class TwinWorld:
-    """The twin behind the simulated machines: a :class:`~hexatherm.devices.ippserver.CmmBackend`.
+    """The twin behind the simulated machines: a :class:`~hexatherm.devices.sim.ipp.CmmBackend`.
 
     Parameters
     ----------
@@ -176,7 +176,7 @@ class TwinWorld:
     sample_period_s : float
         Period of the thermocouple history the effects see (a lag needs it), s.
     speed_mm_s, speed_deg_s, settle_s, noise_um, noise_urad, seed, faults
-        Of the :class:`~hexatherm.devices.controllersim.SimulatedHexapod`.
+        Of the :class:`~hexatherm.devices.sim.symetrie.SimulatedHexapod`.
     """
 
     def __init__(
@@ -493,7 +493,7 @@ class TwinMachines:
         The state the PI controller starts in (``dialect="pi"``).
     cmm_dialect : {"dme-1.4.3", "dme-1.4"}
         How the simulated CMM speaks (``dme-1.4``: a plain DME 1.4 server, see
-        :data:`~hexatherm.devices.ippserver.CMM_DIALECTS`).
+        :data:`~hexatherm.devices.sim.ipp.CMM_DIALECTS`).
 
     Attributes
     ----------

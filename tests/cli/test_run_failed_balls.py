@@ -17,7 +17,7 @@ from click.testing import CliRunner
 
 from hexatherm.cli import main
 from hexatherm.core.spherefit import fit_spheres
-from hexatherm.devices.ippserver import Fault
+from hexatherm.devices.sim.ipp import Fault
 from hexatherm.workflows.serve import TwinMachines
 from tests.cli.test_run import BALLS, base, machines, write_plan  # noqa: F401  (the fixture)
 

@@ -27,14 +27,14 @@ from hexatherm.devices.controller import (
     SocketController,
     pose_deviation_um_urad,
 )
-from hexatherm.devices.controllersim import (
+from hexatherm.devices.pi import PIController, format_axes, parse_answer, parse_error
+from hexatherm.devices.sim.pi import PISimulator
+from hexatherm.devices.sim.symetrie import (
     ManualClock,
     SimulatedController,
     SimulatedHexapod,
     SymetrieSimulator,
 )
-from hexatherm.devices.pi import PIController, format_axes, parse_answer, parse_error
-from hexatherm.devices.pisim import PISimulator
 from hexatherm.devices.symetrie import (
     SymetrieController,
     describe_status,

@@ -37,7 +37,7 @@ from hexatherm.devices.ipp import (
     probe_cap,
     replay_transcript,
 )
-from hexatherm.devices.ippserver import Fault, IppSimServer, StaticBalls, segment_hits
+from hexatherm.devices.sim.ipp import Fault, IppSimServer, StaticBalls, segment_hits
 from hexatherm.errors import (
     IppCommandError,
     IppConnectionLost,

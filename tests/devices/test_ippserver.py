@@ -16,7 +16,7 @@ from hexatherm.devices.ipp import (
     fields,
     parse_response,
 )
-from hexatherm.devices.ippserver import (
+from hexatherm.devices.sim.ipp import (
     Fault,
     IppSimServer,
     StaticBalls,

@@ -1,5 +1,5 @@
 """hexatherm's PI driver checks the controller before moving and stops it as PI's own
-software does: against the twin's PI controller (:mod:`hexatherm.devices.pisim`) in the
+software does: against the twin's PI controller (:mod:`hexatherm.devices.sim.pi`) in the
 states a lab may find it in (servo off, not referenced, busy, a user coordinate system)."""
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from hexatherm.core.geometry import transform_from_pose
-from hexatherm.devices.controllersim import ManualClock, SimulatedHexapod
 from hexatherm.devices.pi import PIController
-from hexatherm.devices.pisim import PISimulator, PIStart
+from hexatherm.devices.sim.pi import PISimulator, PIStart
+from hexatherm.devices.sim.symetrie import ManualClock, SimulatedHexapod
 from hexatherm.errors import ControllerError
 from tests.devices.test_controllers import make_hexapod
 

@@ -3,7 +3,7 @@
 ``pipython`` (PyPI, "Other/Proprietary License": a test dependency only, see
 docs/design.md) is what a PI user scripts a C-887 with: its pure-Python ``PISocket``,
 ``GCSMessages`` and ``GCSCommands``, and the ``pitools`` helpers. These tests send a PI
-user's first commands to :class:`~hexatherm.devices.pisim.PISimulator` (in process, on a
+user's first commands to :class:`~hexatherm.devices.sim.pi.PISimulator` (in process, on a
 ManualClock, and once through ``hexatherm serve-twin --dialect pi``) and check every
 answer against the twin's truth: the simulated hexapod's pose, stroke and speeds.
 """
@@ -26,9 +26,9 @@ from pipython.pidevice.gcscommands import GCSCommands
 from pipython.pidevice.gcsmessages import GCSMessages
 from pipython.pidevice.interfaces.pisocket import PISocket
 
-from hexatherm.devices.controllersim import ManualClock, SimulatedHexapod
 from hexatherm.devices.pi import AXES
-from hexatherm.devices.pisim import PISimulator, PIStart
+from hexatherm.devices.sim.pi import PISimulator, PIStart
+from hexatherm.devices.sim.symetrie import ManualClock, SimulatedHexapod
 from tests.devices.test_controllers import make_hexapod
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -30,7 +30,7 @@ import yaml
 
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.devices.controller import LineBuffer
-from hexatherm.devices.controllersim import ManualClock, SimulatedHexapod, SymetrieSimulator
+from hexatherm.devices.sim.symetrie import ManualClock, SimulatedHexapod, SymetrieSimulator
 
 CONFIG = Path(__file__).resolve().parents[2] / "configs" / "symetrie-like.yaml"
 REPLY = re.compile(r"(?P<cmd>[^:]+):(?P<code>[+\-0-9]+)(?P<data>.*)$")

@@ -19,8 +19,8 @@ import yaml
 
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.devices.controller import InPositionCriteria
-from hexatherm.devices.controllersim import Faults, ManualClock, SimulatedHexapod
-from hexatherm.devices.pmacsim import SymetriePmacSimulator, strip_telnet
+from hexatherm.devices.sim.symetrie import Faults, ManualClock, SimulatedHexapod
+from hexatherm.devices.sim.symetriepmac import SymetriePmacSimulator, strip_telnet
 from hexatherm.devices.symetriepmac import SymetriePmacController
 from hexatherm.devices.urls import controller_from_url
 from hexatherm.errors import (

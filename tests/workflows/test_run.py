@@ -2,7 +2,7 @@
 
 The CMM (I++ DME) and the controller are the simulators of ``workflows/serve.py`` on
 127.0.0.1; the run, both simulators and the twin share one
-:class:`~hexatherm.devices.controllersim.ManualClock`, so nothing waits for the wall clock.
+:class:`~hexatherm.devices.sim.symetrie.ManualClock`, so nothing waits for the wall clock.
 The truth is the twin's prediction at the times the run measured (``TwinWorld.truth``).
 """
 
@@ -22,15 +22,17 @@ from hexatherm.core.registration import register
 from hexatherm.core.spherefit import fit_spheres
 from hexatherm.core.twin import TwinSteps
 from hexatherm.devices.controller import InPositionCriteria
-from hexatherm.devices.controllersim import Faults, ManualClock
-from hexatherm.devices.ippserver import Fault
+from hexatherm.devices.sim.ipp import Fault
+from hexatherm.devices.sim.symetrie import Faults, ManualClock
 from hexatherm.errors import PoseError
 from hexatherm.io.config import plan_to_yaml, read_hexapod
 from hexatherm.io.records import iso_to_seconds
 from hexatherm.workflows.acquire.files import SessionFiles, load_files
 from hexatherm.workflows.process.pipeline import process_session
+from hexatherm.workflows.run.campaign import run_campaign
 from hexatherm.workflows.run.files import points_csv_from_transcript
-from hexatherm.workflows.run.run import RunOptions, RunResult, dry_run, run_campaign
+from hexatherm.workflows.run.options import RunOptions, RunResult
+from hexatherm.workflows.run.support import dry_run
 from hexatherm.workflows.serve import TwinMachines, TwinWorld
 from tests.sessions import ROOT
 

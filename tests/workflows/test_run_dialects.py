@@ -14,7 +14,7 @@ import pandas as pd
 import pytest
 import yaml
 
-from hexatherm.devices.ippserver import CMM_DIALECTS, Fault
+from hexatherm.devices.sim.ipp import CMM_DIALECTS, Fault
 from hexatherm.errors import AcquisitionError, IncompleteSession
 from hexatherm.workflows.run.resume import ProbeSettings, read_run_settings
 from tests.workflows.test_run import check_complete, make_bench, run_to_the_truth

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hexatherm.devices.ippserver import Fault, IppSimServer
+from hexatherm.devices.sim.ipp import Fault, IppSimServer
 from hexatherm.errors import AcquisitionError, IncompleteSession
 from hexatherm.workflows.run.files import accepted_balls
 from tests.workflows.test_run import Bench, check_complete, make_bench

@@ -11,8 +11,8 @@ from click.testing import CliRunner
 
 from hexatherm.cli import main
 from hexatherm.devices.controller import InPositionCriteria
-from hexatherm.devices.controllersim import Faults
-from hexatherm.devices.ippserver import Fault
+from hexatherm.devices.sim.ipp import Fault
+from hexatherm.devices.sim.symetrie import Faults
 from hexatherm.errors import ControllerError, IncompleteSession, PoseError
 from hexatherm.io.records import iso_to_seconds
 from hexatherm.workflows.serve import parse_fault

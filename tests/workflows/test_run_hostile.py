@@ -20,8 +20,8 @@ import pytest
 from click.testing import CliRunner
 
 from hexatherm.cli import main
-from hexatherm.devices.ippserver import Fault
-from hexatherm.devices.ippserver.server import IppSimServer
+from hexatherm.devices.sim.ipp import Fault
+from hexatherm.devices.sim.ipp.server import IppSimServer
 from hexatherm.workflows.replay import replay_session
 from hexatherm.workflows.serve import TwinMachines
 from tests.cli.test_run import base, machines, write_plan  # noqa: F401  (the fixture)

@@ -14,9 +14,8 @@ import pytest
 from hexatherm.core.planning import DEFAULT_SECONDS_PER_MOVE, DEFAULT_SECONDS_PER_POINT
 from hexatherm.errors import IncompleteSession
 from hexatherm.io.records import iso_to_seconds
-from hexatherm.workflows.run.run import run_campaign
-from hexatherm.workflows.run.run.campaign import STOPPED_NOTE
-from hexatherm.workflows.run.run.pace import Pace, clock_text, duration_text
+from hexatherm.workflows.run.campaign import STOPPED_NOTE, run_campaign
+from hexatherm.workflows.run.pace import Pace, clock_text, duration_text
 from hexatherm.workflows.serve import default_heating, time_scale_warning
 from tests.workflows.test_run import make_bench
 

@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 
 from hexatherm.devices.serialport import PortSettings
-from hexatherm.devices.thermosim import ThermocoupleSimulator, format_sample
+from hexatherm.devices.sim.thermocouples import ThermocoupleSimulator, format_sample
 from hexatherm.errors import AcquisitionError, InputError
 from hexatherm.workflows.acquire.run import session_from_log
 from hexatherm.workflows.process.pipeline import process_session

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from hexatherm.devices.controllersim import Faults, SymetrieSimulator
-from hexatherm.devices.ippserver import Fault, IppSimServer
+from hexatherm.devices.sim.ipp import Fault, IppSimServer
+from hexatherm.devices.sim.symetrie import Faults, SymetrieSimulator
 from hexatherm.errors import IncompleteSession
 from tests.workflows.test_run import Bench, check_complete, make_bench
 
@@ -60,7 +60,7 @@ class Restart:
             self.up()
 
     def run(self, **options: object):
-        from hexatherm.workflows.run.run import run_campaign
+        from hexatherm.workflows.run.campaign import run_campaign
 
         return run_campaign(
             self.b.files,

@@ -20,7 +20,7 @@ import pytest
 from hexatherm.core.heating import Mat, MatHeating
 from hexatherm.devices.controller import InPositionCriteria
 from hexatherm.errors import IncompleteSession
-from hexatherm.workflows.run.run import run_campaign
+from hexatherm.workflows.run.campaign import run_campaign
 from hexatherm.workflows.serve import AcceleratedClock, TwinMachines, TwinWorld
 from tests.sessions import ROOT
 from tests.waiting import SAFETY_S, wait_for

@@ -23,11 +23,11 @@ from click.testing import CliRunner
 from hexatherm.cli import main
 from hexatherm.devices.controller import InPositionCriteria
 from hexatherm.devices.serialport import PortSettings
-from hexatherm.devices.thermosim import SentSample
+from hexatherm.devices.sim.thermocouples import SentSample
 from hexatherm.errors import AcquisitionError
 from hexatherm.io.records import iso_to_seconds
 from hexatherm.workflows.acquire.run import session_from_log
-from hexatherm.workflows.run.run import run_campaign
+from hexatherm.workflows.run.campaign import run_campaign
 from hexatherm.workflows.serve import AcceleratedClock, TwinMachines, TwinWorld
 from tests.sessions import ROOT
 from tests.waiting import SAFETY_S, wait_for
@@ -284,7 +284,7 @@ def test_a_silent_logger_is_waited_for_then_said_and_the_run_goes_on(
     first line on connection, the first row precedes every point (test above)."""
     import socket
 
-    from hexatherm.workflows.run.run import campaign
+    from hexatherm.workflows.run import campaign
 
     monkeypatch.setattr(campaign, "FIRST_TEMPERATURE_WAIT_S", 0.0)
     b = make_bench(tmp_path, **SHORT)  # type: ignore[arg-type]

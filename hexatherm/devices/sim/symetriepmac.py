@@ -56,7 +56,7 @@ import numpy as np
 
 from hexatherm.core.geometry import Convention, pose_from_transform, transform_from_pose
 from hexatherm.devices.controller import LineBuffer, convert_pose
-from hexatherm.devices.controllersim import (
+from hexatherm.devices.sim.symetrie import (
     SimulatedController,
     SimulatedHexapod,
     _Drop,

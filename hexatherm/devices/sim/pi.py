@@ -64,13 +64,13 @@ import numpy as np
 from hexatherm import __version__
 from hexatherm.core.geometry import pose_from_transform, transform_from_pose
 from hexatherm.devices.controller import LineBuffer, convert_pose
-from hexatherm.devices.controllersim import (
+from hexatherm.devices.pi import AXES, PIVOT_AXES
+from hexatherm.devices.sim.symetrie import (
     SimulatedController,
     SimulatedHexapod,
     _Drop,
     single_axis_travel,
 )
-from hexatherm.devices.pi import AXES, PIVOT_AXES
 from hexatherm.typing import FloatArray
 
 #: the identification, ``manufacturer, model, serial, firmware``

@@ -10,7 +10,7 @@ from typing import Any
 
 from hexatherm.devices.ipp import Call, IppClient, IppEvent
 from hexatherm.errors import AcquisitionError
-from hexatherm.workflows.run.run.options import Notify
+from hexatherm.workflows.run.options import Notify
 
 #: ``Tool.AvrRadius`` came with I++ DME 1.4.2
 AVR_RADIUS_SINCE = (1, 4, 2)

@@ -22,8 +22,8 @@ from hexatherm.devices.ipp import (
     format_number,
     parse_command,
 )
-from hexatherm.devices.ippserver.contact import _calls, first_contact, segment_hits
-from hexatherm.devices.ippserver.model import (
+from hexatherm.devices.sim.ipp.contact import _calls, first_contact, segment_hits
+from hexatherm.devices.sim.ipp.model import (
     _IN_ERROR_OK,
     _TAG,
     CMM_DIALECTS,

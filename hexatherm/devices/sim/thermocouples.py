@@ -24,7 +24,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 
-from hexatherm.devices.tcpservice import TcpService
+from hexatherm.devices.sim.tcpservice import TcpService
 
 __all__ = ["SentSample", "ThermocoupleSimulator", "format_sample"]
 

@@ -51,11 +51,11 @@ from hexatherm.workflows.acquire.files import (
     SessionFiles,
 )
 from hexatherm.workflows.acquire.recorder import Recorder as StreamRecorder
+from hexatherm.workflows.run.cmmfacts import check_tool
+from hexatherm.workflows.run.options import Notify, RunOptions
 from hexatherm.workflows.run.resume import (
     ProbeSettings,
 )
-from hexatherm.workflows.run.run.cmmfacts import check_tool
-from hexatherm.workflows.run.run.options import Notify, RunOptions
 
 # ----------------------------------------------------------------------- helpers
 #: the largest coordinate a CMM can answer, mm (100 m: no CMM's travel comes near it)

@@ -63,6 +63,7 @@ from hexatherm.workflows.acquire.files import (
     finish_session,
     write_copies,
 )
+from hexatherm.workflows.run.cmmfacts import changed_tool, dme_version, tip_radius
 from hexatherm.workflows.run.files import (
     CONTROLLER_LOG_MAGIC,
     CONTROLLER_LOG_NAME,
@@ -80,6 +81,9 @@ from hexatherm.workflows.run.files import (
     transcript_is_new,
     write_lines,
 )
+from hexatherm.workflows.run.options import BallResult, Notify, RunOptions, RunResult
+from hexatherm.workflows.run.pace import Pace, clock_text, duration_text
+from hexatherm.workflows.run.reconnect import reopen
 from hexatherm.workflows.run.resume import (
     RunSettings,
     RunState,
@@ -89,11 +93,7 @@ from hexatherm.workflows.run.resume import (
     record_controller,
     write_run_settings,
 )
-from hexatherm.workflows.run.run.cmmfacts import changed_tool, dme_version, tip_radius
-from hexatherm.workflows.run.run.options import BallResult, Notify, RunOptions, RunResult
-from hexatherm.workflows.run.run.pace import Pace, clock_text, duration_text
-from hexatherm.workflows.run.run.reconnect import reopen
-from hexatherm.workflows.run.run.support import (
+from hexatherm.workflows.run.support import (
     _Geometry,
     _Thermocouples,
     _travel_z,

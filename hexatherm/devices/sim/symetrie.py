@@ -1,5 +1,5 @@
 """Simulated hexapod controllers: TCP servers speaking the Symétrie and PI dialects
-(the PI one: :mod:`hexatherm.devices.pisim`).
+(the PI one: :mod:`hexatherm.devices.sim.pi`).
 
 Both servers run on 127.0.0.1 (port 0: a free port, see ``.port`` and ``.url``), one
 thread per connection, and speak exactly what :mod:`hexatherm.devices.symetrie` and
@@ -42,8 +42,8 @@ import numpy.typing as npt
 from hexatherm.core.geometry import Convention
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.devices.controller import LineBuffer, convert_pose, stroke_violations
+from hexatherm.devices.sim.tcpservice import TcpService
 from hexatherm.devices.symetrie import pose_from_wire, pose_to_wire
-from hexatherm.devices.tcpservice import TcpService
 from hexatherm.typing import FloatArray
 
 #: points along a move's path where the stroke is checked

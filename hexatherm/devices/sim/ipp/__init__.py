@@ -52,11 +52,11 @@ Examples
 
 from __future__ import annotations
 
-from hexatherm.devices.ippserver.contact import (
+from hexatherm.devices.sim.ipp.contact import (
     first_contact,
     segment_hits,
 )
-from hexatherm.devices.ippserver.model import (
+from hexatherm.devices.sim.ipp.model import (
     CMM_DIALECTS,
     DEFAULT_EVENTS,
     DEFAULT_FAULT_NUMBER,
@@ -67,7 +67,7 @@ from hexatherm.devices.ippserver.model import (
     FaultKind,
     StaticBalls,
 )
-from hexatherm.devices.ippserver.server import (
+from hexatherm.devices.sim.ipp.server import (
     IppSimServer,
 )
 
