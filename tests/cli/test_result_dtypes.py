@@ -38,9 +38,10 @@ TEXTS = {
     "ref_after",
     "interpolation",
     "failed",
+    "decision_rule",
 }
 #: float columns without a unit (ratios)
-RATIOS = {"weight_after", "jacobian_rcond", "coverage_factor"}
+RATIOS = {"weight_after", "jacobian_rcond", "coverage_factor", "guard_factor"}
 
 
 def expected_kind(column: str) -> str:
@@ -52,7 +53,7 @@ def expected_kind(column: str) -> str:
         return "b"
     if column in TEXTS or column.startswith("conformity"):
         return "O"
-    if column in RATIOS or column_unit(column):
+    if column in RATIOS or column.startswith("p_conform_") or column_unit(column):
         return "f"
     raise AssertionError(f"a result column no rule names: {column} (decide, then add it here)")
 

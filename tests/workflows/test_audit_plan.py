@@ -222,23 +222,24 @@ def test_simulate_refuses_an_inline_plan_beyond_a_campaign(tmp_path: Path) -> No
 
 def test_plan_refuses_a_dmis_program_beyond_a_campaign(tmp_path: Path) -> None:
     # 300 targets at 10,000 points per ball (602 steps, 18 million touch points, 500
-    # days of probing) filled the memory writing the program; 40 targets (2.5 million
-    # points, 68 days, a 180 MB program) were written. The touch points are capped now
+    # days of probing) filled the memory writing the program. The touch points are capped
+    # now, at 5 million (issue 37: a scanning campaign of 2000 targets x 400 points);
+    # 100 targets at 10,000 points a ball are 6 million
     targets = tmp_path / "targets.csv"
-    targets.write_text("".join(f"{k / 100:.2f},0,0,0,0,0\n" for k in range(40)))
+    targets.write_text("".join(f"{k / 100:.2f},0,0,0,0,0\n" for k in range(100)))
     out, dmis = tmp_path / "plan.yaml", tmp_path / "prog.dmi"
     args = ["plan", "--hexapod", str(HEXAPOD), "--balls", str(BALLS), "--targets", str(targets)]
     args += ["--origin-on-cmm", "450,320,210,0,0,15", "--dmis", str(dmis), "-o", str(out)]
     result = CliRunner().invoke(main, [*args, "--points-per-ball", "10000"])
     assert result.exit_code == 1, result.output
     line = one_line_error(result.output)
-    assert "82 steps x 3 balls x 10,000 points" in line, line
+    assert "202 steps x 3 balls x 10,000 points" in line, line
     assert not out.exists() and not dmis.exists()
     # the control: the same plan with 25 points per ball has its program, a MEAS block
     # of 25 touch points per step and ball
     result = CliRunner().invoke(main, [*args, "--points-per-ball", "25"])
     assert result.exit_code == 0, result.output
-    assert dmis.read_text().count("PTMEAS/") == (2 + 2 * 40) * 3 * 25
+    assert dmis.read_text().count("PTMEAS/") == (2 + 2 * 100) * 3 * 25
 
 
 def test_simulate_refuses_more_touch_points_than_a_campaign_holds(tmp_path: Path) -> None:
@@ -246,13 +247,13 @@ def test_simulate_refuses_more_touch_points_than_a_campaign_holds(tmp_path: Path
     # _ArrayMemoryError traceback: the same cap as plan --dmis's, named at the field
     scenario = tmp_path / "scenario.yaml"
     text = scenario_text("[450, 320, 210, 0, 0, 15]")
-    scenario.write_text(text.replace("point_noise_um: 0.5", "points_per_ball: 200000"))
+    scenario.write_text(text.replace("point_noise_um: 0.5", "points_per_ball: 500000"))
     out = tmp_path / "session"
     result = CliRunner().invoke(main, ["simulate", str(scenario), "-o", str(out)])
     assert result.exit_code == 1, result.output
     line = one_line_error(result.output)
     assert f"{scenario}:6: field 'cmm.points_per_ball'" in line, line
-    assert "4 steps x 3 balls x 200,000 points" in line, line
+    assert "4 steps x 3 balls x 500,000 points" in line, line
     assert not out.exists()
 
 
