@@ -320,6 +320,15 @@ def test_fuzzed_plans_read_as_yaml_says(edits):
     assert outcome(read_plan_text, text) == outcome(general, text)
 
 
+def test_an_origin_off_zero_is_refused_by_the_fast_reader_too() -> None:
+    """The fuzzed test above found it (one '1' typed into O's pose): the fast reader took
+    an origin step off the zero pose that the general reader refuses."""
+    text = SPEC_PLAN.replace("kind: origin,    pose: [0,", "kind: origin,    pose: [10,", 1)
+    assert text != SPEC_PLAN
+    assert outcome(read_plan_text, text) == outcome(general, text)
+    assert outcome(general, text)[0] == "error"
+
+
 def test_a_missing_vector_takes_its_default_and_a_given_one_is_checked() -> None:
     """A vector with a default was refused as 'missing (required)' when left out of a
     scenario (origin_on_cmm) or a datums file (origin_offset)."""

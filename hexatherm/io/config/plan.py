@@ -166,6 +166,8 @@ def _read_plan_fast(text: str) -> Plan | None:
     is_reference = np.array(kinds) == "reference"
     if np.any(np.abs(poses[is_reference] - reference).max(axis=1) > 1e-9):
         return None
+    if kinds[0] == "origin" and _off_zero(poses[0]):
+        return None  # the general reader refuses it, naming steps[0].pose
     ppb = (
         int(found["points_per_ball"][1]) if "points_per_ball" in found else DEFAULT_POINTS_PER_BALL
     )
