@@ -545,9 +545,10 @@ def _fit_in_blocks(
 
     if ends.size == 0 or ends[-1] <= block_points:
         return at_once()
-    cuts = np.unique(np.searchsorted(ends, np.arange(block_points, ends[-1], block_points)))
-    bounds = np.concatenate(([0], cuts[cuts < counts.size], [counts.size]))
-    bounds = np.unique(bounds)
+    # spheres where the running point count crosses each multiple of block_points (sorted,
+    # so one unique makes the block bounds)
+    cuts = np.searchsorted(ends, np.arange(block_points, ends[-1], block_points))
+    bounds = np.unique(np.concatenate(([0], cuts, [counts.size])))
     parts = []
     try:
         for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True):
