@@ -30,8 +30,20 @@ RNG = np.random.default_rng(7)
 POSES = np.concatenate([np.zeros((1, 6)), RNG.uniform(-1, 1, (24, 6)) * [8, 8, 5, 2, 2, 3]])
 
 
-def hexapods() -> tuple[Hexapod, Hexapod, np.ndarray]:
-    """The nominal hexapod, the true one (base joints in frame O), and ``Y0``."""
+def rigidly_wrong(nominal: Hexapod) -> Hexapod:
+    """The true hexapod: the nominal joints moved by ``A`` (base) and ``C`` (platform),
+    the base put in frame O, the true platform at the zero command ``Y0 = A C^-1``."""
+    y0 = A @ invert_transform(C)
+    base_o = apply_transform(invert_transform(y0), apply_transform(A, nominal.base_joints_mm))
+    return replace(
+        nominal,
+        base_joints_mm=base_o,
+        platform_joints_mm=apply_transform(C, nominal.platform_joints_mm),
+    )
+
+
+def hexapods() -> tuple[Hexapod, Hexapod]:
+    """The nominal hexapod and the true one."""
     nominal = Hexapod.symmetric(
         base_radius_mm=150,
         platform_radius_mm=100,
@@ -39,18 +51,11 @@ def hexapods() -> tuple[Hexapod, Hexapod, np.ndarray]:
         platform_half_angle_deg=10,
         height_mm=200,
     )
-    y0 = A @ invert_transform(C)
-    base_o = apply_transform(invert_transform(y0), apply_transform(A, nominal.base_joints_mm))
-    true = replace(
-        nominal,
-        base_joints_mm=base_o,
-        platform_joints_mm=apply_transform(C, nominal.platform_joints_mm),
-    )
-    return nominal, true, y0
+    return nominal, rigidly_wrong(nominal)
 
 
 def test_a_rigid_joint_error_is_taken_exactly_by_the_frames_known_by_hand():
-    nominal, true, _ = hexapods()
+    nominal, true = hexapods()
 
     def predict(given: np.ndarray) -> np.ndarray:  # the controller's IGM, the truth's FGM
         return true.fgm(nominal.igm(given), initial_poses=given)
@@ -75,7 +80,7 @@ def test_a_rigid_joint_error_is_taken_exactly_by_the_frames_known_by_hand():
 
 
 def test_a_non_rigid_error_the_frames_never_make_worse_and_their_u_by_hand():
-    nominal, true, _ = hexapods()
+    nominal, true = hexapods()
     bent = true.base_joints_mm.copy()
     bent[2] += [0.05, -0.03, 0.02]  # one joint off the rigid motion: no frame takes it
     true = replace(true, base_joints_mm=bent)

@@ -9,14 +9,12 @@ reports)."""
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from hexatherm.core.calibration.frames import frame_correction
 from hexatherm.core.geometry import (
-    apply_transform,
     invert_transform,
     pose_from_transform,
     to_um_urad,
@@ -24,10 +22,9 @@ from hexatherm.core.geometry import (
 )
 from hexatherm.devices.controller import InPositionCriteria
 from hexatherm.devices.symetriepmac import format_command
+from tests.core.test_calibration_frames import rigidly_wrong
 from tests.devices.test_symetrie_pmac import Rig
 
-A = transform_from_pose([0.21, -0.13, 0.08, 0.03, -0.02, 0.05])
-C = transform_from_pose([-0.05, 0.11, -0.04, -0.04, 0.025, -0.03])
 POSES = np.array(
     [
         [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
@@ -71,14 +68,7 @@ def test_the_twin_takes_cfg_cs_and_composes_the_frames_as_cgse_links_them(rig: R
 
 def test_the_calibrations_frames_make_the_twin_drive_the_true_poses(rig: Rig) -> None:
     nominal = rig.model.hexapod
-    y0 = A @ invert_transform(C)  # the true platform at the zero command: frame O
-    true = replace(
-        nominal,
-        base_joints_mm=apply_transform(
-            invert_transform(y0), apply_transform(A, nominal.base_joints_mm)
-        ),
-        platform_joints_mm=apply_transform(C, nominal.platform_joints_mm),
-    )
+    true = rigidly_wrong(nominal)
     values = frame_correction(
         nominal.base_joints_mm,
         nominal.platform_joints_mm,

@@ -22,7 +22,7 @@ from click.testing import CliRunner
 from hexatherm.cli import main
 from hexatherm.core.calibration.model import true_leg_lengths
 from hexatherm.core.calibration.significance import improvement, parameter_change_test
-from hexatherm.core.geometry import to_um_urad
+from hexatherm.core.geometry import to_um_urad, transform_from_pose
 from hexatherm.devices.controller import InPositionCriteria
 from hexatherm.devices.sim.symetrie import ManualClock, SimulatedHexapod
 from hexatherm.devices.sim.symetriepmac import SymetriePmacSimulator
@@ -109,6 +109,16 @@ def frames_drive_the_twin_as_controller_yaml_says(session: Path, out: Path, cont
     smaller than without the frames."""
     frames = controller["controller_frames"]
     predicted = frames["pose_error_at_targets_predicted"]
+    # PI's values are the same transforms in PI's convention (R = Rx Ry Rz)
+    for sym, pi in (
+        ("user_frame_in_machine", "work_frame_in_zero"),
+        ("object_frame_in_platform", "tool_frame_in_platform"),
+    ):
+        a = transform_from_pose(list(frames["symetrie"][sym]["pose"].values()), "symetrie")
+        b = transform_from_pose(list(frames["pi"][pi]["pose"].values()), "pi")
+        np.testing.assert_allclose(a, b, atol=1e-8)
+    work = [float(v) for v in frames["pi"]["gcs_values"]["work"].split()[1::2]]
+    np.testing.assert_allclose(work, list(frames["pi"]["work_frame_in_zero"]["pose"].values()))
     campaign = read_campaign([session])
     calibrated = read_hexapod(out / "hexapod.yaml")
     legs = controller["legs"]
