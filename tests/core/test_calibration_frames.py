@@ -8,6 +8,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from hexatherm.core.calibration.frames import (
     command,
@@ -23,6 +24,7 @@ from hexatherm.core.geometry import (
     transform_from_pose,
 )
 from hexatherm.core.hexapod import Hexapod
+from hexatherm.errors import CalibrationError
 
 A = transform_from_pose([0.21, -0.13, 0.08, 0.03, -0.02, 0.05])
 C = transform_from_pose([-0.05, 0.11, -0.04, -0.04, 0.025, -0.03])
@@ -113,3 +115,8 @@ def test_the_frames_compose_with_the_frames_set_during_the_calibration():
         transform_from_pose(out[6:], "symetrie"), transform_from_pose(o0) @ h, atol=1e-12
     )
     np.testing.assert_allclose(corrected_frames(values, "pi"), values, atol=1e-12)
+
+
+def test_the_frames_need_two_poses():
+    with pytest.raises(CalibrationError, match="at least 2 commanded poses"):
+        fit_frames(lambda given: given, POSES[:1], "symetrie")

@@ -52,6 +52,7 @@ from hexatherm.core.geometry import (
     transform_from_pose,
 )
 from hexatherm.core.registration import rigid_rows
+from hexatherm.errors import CalibrationError
 from hexatherm.typing import FloatArray
 
 #: finite-difference step of :func:`fit_frames`' Jacobian, mm or deg
@@ -158,7 +159,9 @@ def fit_frames(
     """The 12 frame values minimising ``sum |predict(G X H^-1) - X|^2`` (um and urad)
     over the commanded poses ``X`` (N, 6); ``predict`` maps the poses given to the
     controller's geometry (N, 6) to the poses reached (N, 6), both mm and deg."""
-    x = check_poses(commanded)
+    x = np.atleast_2d(check_poses(commanded))
+    if x.shape[0] < 2:
+        raise CalibrationError("the frames need at least 2 commanded poses (12 values)")
 
     def residuals(v: FloatArray) -> FloatArray:
         return np.asarray(to_um_urad(predict(command(v, x, convention)) - x), float).ravel()
