@@ -20,7 +20,15 @@ import yaml
 from click.testing import CliRunner
 
 from hexatherm.cli import main
+from hexatherm.core.calibration.model import true_leg_lengths
 from hexatherm.core.calibration.significance import improvement, parameter_change_test
+from hexatherm.core.geometry import to_um_urad, transform_from_pose
+from hexatherm.devices.controller import InPositionCriteria
+from hexatherm.devices.sim.symetrie import ManualClock, SimulatedHexapod
+from hexatherm.devices.sim.symetriepmac import SymetriePmacSimulator
+from hexatherm.devices.urls import controller_from_url
+from hexatherm.io.config.hexapod import read_hexapod
+from hexatherm.workflows.calibrate.run import read_campaign
 from tests.shipped import SHIPPED as SHIPPED_SESSIONS
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -90,6 +98,62 @@ def test_a_campaign_with_a_geometry_error_says_apply_and_writes_the_controllers_
     assert "report.html" in [p.name for p in (tmp_path / "out").iterdir()]
     page = (tmp_path / "out" / "report.html").read_text()
     assert "Recommendation: APPLY" in page
+    frames_drive_the_twin_as_controller_yaml_says(session, tmp_path / "out", controller)
+
+
+def frames_drive_the_twin_as_controller_yaml_says(session: Path, out: Path, controller: dict):
+    """``controller_frames``: the gpascii line, sent as it is to the gpascii twin (the
+    sessions' nominal geometry: the controller's), makes the twin drive legs that the
+    calibrated geometry (``hexapod.yaml``'s joints, ``legs:``' offsets and gains) turns
+    into poses whose error at the campaign's targets is what the file predicts, and
+    smaller than without the frames."""
+    frames = controller["controller_frames"]
+    predicted = frames["pose_error_at_targets_predicted"]
+    # PI's values are the same transforms in PI's convention (R = Rx Ry Rz)
+    for sym, pi in (
+        ("user_frame_in_machine", "work_frame_in_zero"),
+        ("object_frame_in_platform", "tool_frame_in_platform"),
+    ):
+        a = transform_from_pose(list(frames["symetrie"][sym]["pose"].values()), "symetrie")
+        b = transform_from_pose(list(frames["pi"][pi]["pose"].values()), "pi")
+        np.testing.assert_allclose(a, b, atol=1e-8)
+    work = [float(v) for v in frames["pi"]["gcs_values"]["work"].split()[1::2]]
+    np.testing.assert_allclose(work, list(frames["pi"]["work_frame_in_zero"]["pose"].values()))
+    campaign = read_campaign([session])
+    calibrated = read_hexapod(out / "hexapod.yaml")
+    legs = controller["legs"]
+    home = np.array([leg["home_length_mm"] for leg in legs])
+    offsets = np.array([leg["length_offset_mm"] for leg in legs])
+    gains = np.array([leg["gain"] for leg in legs])
+    clock = ManualClock(0.0)
+    model = SimulatedHexapod(campaign.nominal, clock=clock)
+    with SymetriePmacSimulator(model) as sim:
+        driver = controller_from_url(sim.url, clock=clock, sleep=clock.sleep)
+        driver.connect()
+        worst = {}
+        for name, line in (("nominal_controller", None), ("with_these_frames", "set")):
+            if line is not None:
+                driver._query(frames["symetrie"]["gpascii_line"])
+                while driver._values("c_cmd", 1)[0] > 0:
+                    pass
+                assert driver._values("c_cmd", 1)[0] == 0
+            errors = []
+            for pose in campaign.commanded:
+                driver.move_absolute(pose)
+                record = driver.wait_in_position(InPositionCriteria(settle_s=1.0, poll_s=0.5))
+                q = true_leg_lengths(record.actuators_mm[None], home, offsets, gains)
+                errors.append(to_um_urad(calibrated.fgm(q, initial_poses=pose[None])[0] - pose))
+            err = np.array(errors)
+            worst[name] = (
+                np.linalg.norm(err[:, :3], axis=1).max(),
+                np.linalg.norm(err[:, 3:], axis=1).max(),
+            )
+        driver.close()
+    for name, (t_um, r_urad) in worst.items():
+        assert t_um == pytest.approx(predicted[name]["max_translation_um"], abs=2e-3), name
+        assert r_urad == pytest.approx(predicted[name]["max_rotation_urad"], abs=2e-2), name
+    assert worst["with_these_frames"][0] < worst["nominal_controller"][0]
+    assert worst["with_these_frames"][1] < worst["nominal_controller"][1]
 
 
 def test_a_campaign_without_a_geometry_error_says_keep_the_controller(no_error_campaign, tmp_path):

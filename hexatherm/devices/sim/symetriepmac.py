@@ -35,9 +35,14 @@ the pose or the step, mm and deg, Symétrie convention), ``C_VALID_PTP`` (``vm=1
 ``C_CFG_LIMITENABLE`` (``c_par(1)``; machine and user limits start disabled: the twin's
 struts are its limits), ``C_STOP``,
 ``C_CLEARERROR``, ``C_CONTROLON``, ``C_CONTROLOFF``, ``C_HOME``, ``C_VERSION``,
-``C_CFG_CS`` (get: 12 zeros, the twin's frames), ``C_CFG_SPEED`` (get). Status:
-``s_hexa`` (general state bits), ``s_ax_1..6``, ``s_uto_tx..rz`` and ``s_mtp_tx..rz``
-(mm, deg), ``s_pos_ax_1..6`` (the twin serves the IGM's leg lengths, mm; a real
+``C_CFG_CS`` (get: ``c_par(0..11)``, the user frame in the machine frame then the object
+frame in the platform frame, mm and deg, Symétrie convention, zero at the start; set: the
+same 12 from ``c_par``, as CGSE's ``configure_coordinates_systems`` sends them: every pose
+on the wire is then the object's in the user frame, the platform standing at
+``U X O^-1`` in the machine frame, as CGSE's simulator links the frames),
+``C_CFG_SPEED`` (get). Status: ``s_hexa`` (general state bits), ``s_ax_1..6``,
+``s_uto_tx..rz`` (the object in the user frame) and ``s_mtp_tx..rz`` (the platform in the
+machine frame; mm, deg), ``s_pos_ax_1..6`` (the twin serves the IGM's leg lengths, mm; a real
 controller's actuator positions may be counted from another zero), ``s_ai_1..6``,
 ``s_err_nr``. ``vers`` answers the firmware's version. ``C_JOG``, ``C_MAINTENANCE`` and
 ``C_CFG_DEFAULT`` are known and refused (-46, not served); an undefined constant
@@ -184,6 +189,9 @@ class SymetriePmacSimulator(SimulatedController):
         travel = np.concatenate(single_axis_travel(model))
         self.limits = {k: travel.copy() for k in (0, 1, 2)}
         self.limits_enabled = {1: False, 2: False}
+        #: ``C_CFG_CS``: the user frame in the machine frame, the object frame in the
+        #: platform frame (mm, deg, Symétrie convention)
+        self.frames = np.zeros(12)
         self._state_lock = threading.RLock()
         super().__init__(model, host, port)
 
@@ -283,7 +291,7 @@ class SymetriePmacSimulator(SimulatedController):
         ai = np.zeros(6) if temps is None else np.resize(temps, 6)
         groups = {
             "s_uto": ([f"s_uto_{a}" for a in _AXES], list(pose)),
-            "s_mtp": ([f"s_mtp_{a}" for a in _AXES], list(pose)),
+            "s_mtp": ([f"s_mtp_{a}" for a in _AXES], list(self._platform_pose())),
             "s_ax": ([f"s_ax_{i}" for i in range(1, 7)], [float(axis)] * 6),
             "s_pos_ax": ([f"s_pos_ax_{i}" for i in range(1, 7)], list(m.actuators_mm())),
             "s_ai": ([f"s_ai_{i}" for i in range(1, 7)], list(ai)),
@@ -405,9 +413,12 @@ class SymetriePmacSimulator(SimulatedController):
             p[:12] = [0, 5, 3, 0, 0, 2, 7, 1, 0, 0, 0, 1]  # software 5.3.0.0, API 2.7.1.0
             return 0
         if name == "CFG_CS":
-            if self.c_cfg != 0:
-                return -46  # changing the frames: not served by the twin
-            p[:12] = 0.0
+            if self.c_cfg == 0:
+                p[:12] = self.frames
+                return 0
+            if not np.all(np.isfinite(p[:12])):
+                return -11
+            self.frames = p[:12].copy()
             return 0
         if name == "CFG_SPEED":
             if self.c_cfg == 0:
@@ -427,7 +438,11 @@ class SymetriePmacSimulator(SimulatedController):
                 return -10
             retracted = np.zeros(6)
             retracted[2] = self.limits[0][2]  # the lowest Tz the struts allow
-            p[1:7] = retracted if p[0] == 2 else np.zeros(6)
+            machine = convert_pose(
+                retracted if p[0] == 2 else np.zeros(6), "symetrie", m.convention
+            )
+            # user zero: the object at the user frame's origin; the others: platform poses
+            p[1:7] = np.zeros(6) if p[0] == 1 else self._object_pose(machine)
             p[0] = 0
         if name in ("MOVE_PTP", "MOVE_SPECIFICPOS"):
             if p[0] not in (0, 1, 2):
@@ -456,13 +471,40 @@ class SymetriePmacSimulator(SimulatedController):
         step = np.array(pose, dtype=float)
         if mode == 0:
             return step
-        now = transform_from_pose(self._wire(self.model.target), "symetrie")
+        now = transform_from_pose(self._object_pose(self.model.target), "symetrie")
         move = transform_from_pose(step, "symetrie")
         frame = now @ move if mode == 1 else move @ now
         return np.asarray(pose_from_transform(frame, "symetrie"), dtype=float)
 
-    def _wire(self, model_pose: FloatArray) -> FloatArray:
-        return convert_pose(model_pose, self.model.convention, self.native_convention)
+    def _frames(self) -> tuple[FloatArray, FloatArray]:
+        user = transform_from_pose(self.frames[:6], "symetrie")
+        return user, transform_from_pose(self.frames[6:], "symetrie")
+
+    def _object_pose(self, model_pose: FloatArray) -> FloatArray:
+        """The object's pose in the user frame (wire) of the platform's ``model_pose``:
+        ``U^-1 M O``."""
+        native = convert_pose(model_pose, self.model.convention, self.native_convention)
+        if not self.frames.any():
+            return native
+        user, obj = self._frames()
+        frame = np.linalg.inv(user) @ transform_from_pose(native, "symetrie") @ obj
+        return np.asarray(pose_from_transform(frame, "symetrie"), dtype=float)
+
+    def _wire_pose(self) -> FloatArray:
+        return self._object_pose(self.model.read_pose())
+
+    def _platform_pose(self) -> FloatArray:
+        """The platform's read-back pose in the machine frame (``s_mtp``)."""
+        return convert_pose(self.model.read_pose(), self.model.convention, "symetrie")
+
+    def _model_pose(self, native: FloatArray) -> FloatArray:
+        """The platform's pose (model) of the object's pose ``native`` in the user frame:
+        ``M = U X O^-1``."""
+        if self.frames.any():
+            user, obj = self._frames()
+            frame = user @ transform_from_pose(native, "symetrie") @ np.linalg.inv(obj)
+            native = np.asarray(pose_from_transform(frame, "symetrie"), dtype=float)
+        return convert_pose(native, "symetrie", self.model.convention)
 
     def _broken(self, wire: FloatArray) -> int:
         """The validation bits a pose breaks (0: it can be reached): machine and user

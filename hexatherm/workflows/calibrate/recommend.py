@@ -18,15 +18,15 @@ offset ``dq_i`` and a gain ``g_i`` with ``q_true_i = q_cmd_i + dq_i + g_i (q_cmd
 q_home_i)`` (:mod:`hexatherm.core.calibration`): ``dq_i > 0`` means the real leg is
 *longer* than the controller believes at its home length. A controller that adds a
 per-leg correction ``c_i`` to the length it drives must be given ``c_i = -dq_i`` (and
-a travel scale ``1 / (1 + g_i)``) to reach the geometric length. Neither Symétrie's nor
-PI's controller geometry parameters are publicly documented in what hexatherm's drivers
-were learnt from (Symétrie's API as CGSE's and BLISS's clients use it: user and object
-frames, ``CFG_CS``, speeds and moves; PI's GCS as pipython speaks it: parameters read and
-written by number, ``SPA``/``SEP``, the hexapod's geometry parameter numbers not
-public), so ``controller.yaml`` is a documented neutral form: joint centres (base in
-frame O, platform in the platform frame, mm), the offsets and the corrections with their
-signs, the gains, each with its expanded uncertainty; the maker's service, or the lab
-with the maker's documentation, enters them (docs/calibrate.md).
+a travel scale ``1 / (1 + g_i)``) to reach the geometric length. The joints' rigid part
+goes into the frames both makers' controllers take (Symétrie's user and object frames,
+``C_CFG_CS``/``CFG#CS``; PI's work and tool frames), with its uncertainty and what it
+leaves (:mod:`hexatherm.workflows.calibrate.frames`). The rest (the joints' non-rigid
+part, the offsets and gains) has no publicly documented controller parameter in the
+sources searched (docs/calibrate.md), so ``controller.yaml`` keeps it in a documented
+neutral form: joint centres (base in frame O, platform in the platform frame, mm), the
+offsets and the corrections with their signs, the gains, each with its expanded
+uncertainty; the maker's service, or the lab with the maker's documentation, enters them.
 """
 
 from __future__ import annotations
@@ -43,10 +43,11 @@ from hexatherm.core.calibration.significance import (
     improvement,
     parameter_change_test,
 )
+from hexatherm.workflows.calibrate.frames import frames_record
 from hexatherm.workflows.calibrate.run import Calibration
 
 #: the format tag of ``controller.yaml``
-CONTROLLER_FORMAT = "hexatherm-controller-geometry/1"
+CONTROLLER_FORMAT = "hexatherm-controller-geometry/2"
 
 
 @dataclass(frozen=True)
@@ -178,10 +179,10 @@ def controller_record(run: Calibration, coverage_factor: float = 2.0) -> dict[st
         "home length; a controller that adds a correction to the length it drives takes "
         "actuator_correction = -length_offset, and scales the travel from home by "
         "travel_scale = 1 / (1 + gain)",
-        "symetrie": "the controller's geometry parameters are not publicly documented: "
-        "give this file to Symetrie's service (the joints, the offsets with their signs)",
-        "pi": "the controller's geometry parameters (GCS parameter numbers) are not publicly "
-        "documented: give this file to PI's service",
+        "controller_frames": frames_record(run, coverage_factor),
+        "legs_parameters": "the joints' non-rigid part, the leg offsets and gains: no public "
+        "source searched documents the Symetrie or PI controller parameters that hold them "
+        "(docs/calibrate.md); give legs: to the maker's service",
         "legs": legs,
     }
 
