@@ -57,3 +57,23 @@ def test_the_check_finds_a_command_that_imports_io_core_devices_or_session(
         "hexatherm.cli.plan",
         "hexatherm.cli.run",
     ]
+
+
+def test_a_decision_rule_is_checked_against_the_conformity_s_own_rules(tmp_path: Path) -> None:
+    """``--decision-rule`` (cli/options.py) reads the rules through the workflows; the
+    usage error names core.conformity's rules, and a rule of them is taken."""
+    from click.testing import CliRunner
+
+    from hexatherm.cli import main
+    from hexatherm.core.conformity import RULES
+    from tests.shipped import SHIPPED
+
+    session = SHIPPED / "paper-zero-pose"
+    bad = CliRunner().invoke(main, ["process", str(session), "--decision-rule", "bogus"])
+    assert bad.exit_code == 2
+    assert f"'bogus': one of {', '.join(RULES)}" in bad.output
+    out = tmp_path / "out"
+    good = CliRunner().invoke(
+        main, ["process", str(session), "--decision-rule", RULES[1], "-o", str(out)]
+    )
+    assert good.exit_code == 0, good.output

@@ -453,10 +453,11 @@ def decision_rule_options(func: F) -> F:
     (ILAC-G8:09/2019), over a lab file's ``decision_rule:``."""
 
     def rule(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
-        from hexatherm.core.conformity import RULES  # numpy and scipy: not at start-up
+        from hexatherm.workflows.options import decision_rules  # numpy: not at start-up
 
-        if value is not None and value not in RULES:
-            raise click.BadParameter(f"{value!r}: one of {', '.join(RULES)}", ctx, param)
+        rules = decision_rules()
+        if value is not None and value not in rules:
+            raise click.BadParameter(f"{value!r}: one of {', '.join(rules)}", ctx, param)
         return value
 
     func = click.option(
