@@ -226,7 +226,7 @@ def command(
     set aside there, and you are told what to probe.
     """
     from hexatherm.workflows.acquire.recorder import FitChecks
-    from hexatherm.workflows.acquire.run import AcquireRequest, record
+    from hexatherm.workflows.acquire.run import AcquireRequest, PortSettings, record
 
     if replay_log is not None:
         if port is not None or resume or temperature_port is not None:
@@ -249,20 +249,25 @@ def command(
             return
         echo_err(("warning: " if level == "warn" else "") + message)
 
+    probe = None
+    if port is not None:
+        probe = PortSettings(
+            port,
+            baudrate=baud,
+            bytesize=int(bytesize),
+            parity=parity.upper(),
+            stopbits=float(stopbits),
+            xonxoff=xonxoff,
+            rtscts=rtscts,
+            dsrdtr=dsrdtr,
+            timeout_s=read_timeout,
+        )
     request = AcquireRequest(
         plan=plan,
         session=session,
         hexapod=hexapod_path,
         balls=balls_path,
-        port=port,
-        baudrate=baud,
-        bytesize=int(bytesize),
-        parity=parity.upper(),
-        stopbits=float(stopbits),
-        xonxoff=xonxoff,
-        rtscts=rtscts,
-        dsrdtr=dsrdtr,
-        read_timeout_s=read_timeout,
+        probe=probe,
         reopen_interval_s=reopen_interval,
         unit=unit,
         auto=auto,
@@ -277,8 +282,9 @@ def command(
             surface_tol_mm=surface_tol_um / 1e3,
         ),
         temperatures_file=temperatures_file,
-        temperature_port=temperature_port,
-        temperature_baud=temperature_baud,
+        temperature_port=None
+        if temperature_port is None
+        else PortSettings(temperature_port, baudrate=temperature_baud, timeout_s=read_timeout),
     )
     try:
         result = record(request, notify, None if auto else sys.stdin)

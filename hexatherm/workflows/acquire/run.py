@@ -474,22 +474,14 @@ class AcquireRequest:
     """What ``hexatherm acquire`` was asked (its options, in the workflow's types).
 
     ``hexapod`` and ``balls`` default to the session's copies (with ``replay_log``: the
-    copies beside the log); a live run reads ``port``, a replay ``replay_log``.
+    copies beside the log); a live run reads the ``probe`` port, a replay ``replay_log``.
     """
 
     plan: Path
     session: Path
     hexapod: Path | None = None
     balls: Path | None = None
-    port: str | None = None
-    baudrate: int = 9600
-    bytesize: int = 8
-    parity: str = "N"
-    stopbits: float = 1
-    xonxoff: bool = False
-    rtscts: bool = False
-    dsrdtr: bool = False
-    read_timeout_s: float = 0.1
+    probe: PortSettings | None = None
     reopen_interval_s: float = 1.0
     unit: str = "mm"
     auto: bool = False
@@ -499,8 +491,7 @@ class AcquireRequest:
     max_gap_s: float = 600.0
     checks: FitChecks = field(default_factory=FitChecks)
     temperatures_file: Path | None = None
-    temperature_port: str | None = None
-    temperature_baud: int = 9600
+    temperature_port: PortSettings | None = None
 
 
 def record(
@@ -519,30 +510,12 @@ def record(
         return session_from_log(
             files, request.replay_log, request.session, notify, request.temperatures_file
         )
-    if request.port is None:
+    if request.probe is None:
         raise ValueError("a live acquisition needs the probe's port")
-    probe = PortSettings(
-        request.port,
-        baudrate=request.baudrate,
-        bytesize=request.bytesize,
-        parity=request.parity,
-        stopbits=request.stopbits,
-        xonxoff=request.xonxoff,
-        rtscts=request.rtscts,
-        dsrdtr=request.dsrdtr,
-        timeout_s=request.read_timeout_s,
-    )
-    temperature_port = None
-    if request.temperature_port is not None:
-        temperature_port = PortSettings(
-            request.temperature_port,
-            baudrate=request.temperature_baud,
-            timeout_s=request.read_timeout_s,
-        )
     options = AcquireOptions(
         session=request.session,
-        probe=probe,
-        temperature_port=temperature_port,
+        probe=request.probe,
+        temperature_port=request.temperature_port,
         temperatures_file=request.temperatures_file,
         auto=request.auto,
         resume=request.resume,
