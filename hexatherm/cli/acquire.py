@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import sys
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -225,42 +225,32 @@ def command(
     to SESSION/rejected.csv. On --resume the interrupted ball's points are
     set aside there, and you are told what to probe.
     """
-    from hexatherm.devices.serialport import PortSettings
-    from hexatherm.workflows.acquire.files import load_files
     from hexatherm.workflows.acquire.recorder import FitChecks
-    from hexatherm.workflows.acquire.run import AcquireOptions, session_from_log
-    from hexatherm.workflows.acquire.run import acquire as run_acquisition
+    from hexatherm.workflows.acquire.run import AcquireRequest, PortSettings, record
 
     if replay_log is not None:
         if port is not None or resume or temperature_port is not None:
             raise click.UsageError(
                 "--replay reads a recording: no --port, --resume or --temperature-port"
             )
-        config_dir = replay_log.parent
     else:
         if port is None:
             raise click.UsageError("give the probe's --port (or --replay a recording)")
         if temperatures_file is not None and temperature_port is not None:
             raise click.UsageError("give --temperatures or --temperature-port, not both")
-        config_dir = session
     if (hexapod_path is None or balls_path is None) and replay_log is None and not resume:
         raise click.UsageError(
             "--hexapod and --balls are needed (except with --resume or "
             "--replay, which use the session's copies)"
         )
-    hexapod_path = hexapod_path or config_dir / "hexapod.yaml"
-    balls_path = balls_path or config_dir / "balls.yaml"
-    files = load_files(plan, hexapod_path, balls_path)
 
     def notify(level: str, message: str) -> None:
         if level == "progress" and auto:
             return
         echo_err(("warning: " if level == "warn" else "") + message)
 
-    if replay_log is not None:
-        result = session_from_log(files, replay_log, session, notify, temperatures_file)
-    else:
-        assert port is not None
+    probe = None
+    if port is not None:
         probe = PortSettings(
             port,
             baudrate=baud,
@@ -272,34 +262,37 @@ def command(
             dsrdtr=dsrdtr,
             timeout_s=read_timeout,
         )
-        options = AcquireOptions(
-            session=session,
-            probe=probe,
-            temperature_port=None
-            if temperature_port is None
-            else PortSettings(temperature_port, baudrate=temperature_baud, timeout_s=read_timeout),
-            temperatures_file=temperatures_file,
-            auto=auto,
-            resume=resume,
-            unit=unit,
-            idle_timeout_s=idle_timeout,
-            reopen_interval_s=reopen_interval,
-            checks=FitChecks(
-                radius_tol_mm=radius_tol_um / 1e3,
-                form_tol_um=form_tol_um,
-                min_points=min_points,
-                surface_tol_mm=surface_tol_um / 1e3,
-            ),
-            max_gap_s=max_gap,
-        )
-        operator_lines: Iterable[str] | None = None
-        if not auto:
-            operator_lines = sys.stdin
-        try:
-            result = run_acquisition(files, options, notify, operator_lines)
-        except KeyboardInterrupt:
-            echo_err(f"interrupted: everything received is in {session}; continue with --resume")
-            sys.exit(130)
+    request = AcquireRequest(
+        plan=plan,
+        session=session,
+        hexapod=hexapod_path,
+        balls=balls_path,
+        probe=probe,
+        reopen_interval_s=reopen_interval,
+        unit=unit,
+        auto=auto,
+        resume=resume,
+        replay_log=replay_log,
+        idle_timeout_s=idle_timeout,
+        max_gap_s=max_gap,
+        checks=FitChecks(
+            radius_tol_mm=radius_tol_um / 1e3,
+            form_tol_um=form_tol_um,
+            min_points=min_points,
+            surface_tol_mm=surface_tol_um / 1e3,
+        ),
+        temperatures_file=temperatures_file,
+        temperature_port=None
+        if temperature_port is None
+        else PortSettings(temperature_port, baudrate=temperature_baud, timeout_s=read_timeout),
+    )
+    try:
+        result = record(request, notify, None if auto else sys.stdin)
+    except KeyboardInterrupt:
+        if replay_log is not None:
+            raise
+        echo_err(f"interrupted: everything received is in {session}; continue with --resume")
+        sys.exit(130)
     click.echo(_fits_table(result.fits))
     n_warn = sum(bool(f.warnings) for f in result.fits)
     echo_err(

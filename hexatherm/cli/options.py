@@ -16,9 +16,12 @@ from typing import Any, TypeVar
 import click
 
 from hexatherm.errors import HexathermError, InputWarning
-from hexatherm.io.files import ReadOptions
-from hexatherm.io.provenance import run_context
 from hexatherm.workflows.limits import limits_text
+from hexatherm.workflows.options import ReadOptions, run_context
+
+# the lab's report templates, for the commands that write pages (report, calibrate, diagnose)
+from hexatherm.workflows.options import template_files as template_files
+from hexatherm.workflows.options import template_folder as template_folder
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -387,32 +390,6 @@ template_dir_option = click.option(
 )
 
 
-def template_folder(template_dir: Path | None, lab: Path | None) -> Path | None:
-    """The lab's templates (``--template-dir``, else the lab file's ``templates:``),
-    every one of them compiled: a syntax error is refused naming file and line."""
-    from hexatherm.io.config.identity import lab_template_dir
-    from hexatherm.workflows.report.render import check_template_dir
-
-    if template_dir is None and lab is not None:
-        template_dir = lab_template_dir(lab)
-    return check_template_dir(template_dir)
-
-
-def template_files(folder: Path | None, lab: Path | None = None) -> list[Path]:
-    """The files of the lab's template folder its pages are made of (its templates, what
-    they include, their ``asset()``s: what is read, each of a bounded size), but the lab
-    file and what hexatherm wrote there (a report, its manifest): inputs of the page (its
-    provenance, and never an output). Other files of the folder are not read (a lab's
-    archive, a 100 GiB file nothing uses)."""
-    from hexatherm.io.outputs import hexatherms_own
-    from hexatherm.workflows.report.render import named_files
-
-    if folder is None:
-        return []
-    skip = None if lab is None else lab.resolve()
-    return sorted(p for p in named_files(folder) if p.resolve() != skip and not hexatherms_own(p))
-
-
 def _tolerances(ctx: click.Context, param: click.Parameter, values: tuple[str, ...]) -> dict:
     from hexatherm.workflows.process.conformity import parse_tolerances
 
@@ -453,10 +430,11 @@ def decision_rule_options(func: F) -> F:
     (ILAC-G8:09/2019), over a lab file's ``decision_rule:``."""
 
     def rule(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
-        from hexatherm.core.conformity import RULES  # numpy and scipy: not at start-up
+        from hexatherm.workflows.options import decision_rules  # numpy: not at start-up
 
-        if value is not None and value not in RULES:
-            raise click.BadParameter(f"{value!r}: one of {', '.join(RULES)}", ctx, param)
+        rules = decision_rules()
+        if value is not None and value not in rules:
+            raise click.BadParameter(f"{value!r}: one of {', '.join(rules)}", ctx, param)
         return value
 
     func = click.option(

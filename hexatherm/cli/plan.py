@@ -313,9 +313,7 @@ def command(
     OUT (or standard output); --dmis, --checklist and --qif add the CMM program, the
     operator's sheet and the plan as QIF 3 sphere features.
     """
-    from hexatherm.core.plan import find_repeats
-    from hexatherm.io.outputs import check_output_settled, write_output_file
-    from hexatherm.workflows.plan import PlanRequest, make_plan
+    from hexatherm.workflows.plan import PlanFiles, PlanRequest, write_plan
 
     sources_given = sum(x is not None for x in (targets_path, grid, n_random))
     if sources_given != 1:
@@ -352,7 +350,7 @@ def command(
             )
     origin = None if origin_on_cmm is None else parse_pose(origin_on_cmm, "--origin-on-cmm")
     if origin is not None:
-        from hexatherm.io.measurements import COORDINATE_MAX_MM
+        from hexatherm.workflows.plan import COORDINATE_MAX_MM
 
         if max(abs(v) for v in origin[:3]) > COORDINATE_MAX_MM:
             raise click.BadParameter(
@@ -389,13 +387,8 @@ def command(
         calibration_level=calibration_level,
         calibration_criterion=calibration_criterion,
     )
-    inputs = [p for p in (hexapod_path, balls_path, targets_path) if p is not None]
-    for path, option in named:
-        if path is not None:
-            check_output_settled(
-                path, kind="file", inputs=inputs, overwrite=overwrite, option=option
-            )
-    made = make_plan(request)
+    done = write_plan(request, PlanFiles(out, dmis_path, checklist_path, qif_path, overwrite))
+    made = done.made
     if made.redrawn:
         echo_err(f"drew {made.redrawn} random pose(s) again: out of the stroke or near-singular")
     if made.selection is not None:
@@ -430,26 +423,17 @@ def command(
             f"{gap.gap_s / 60:.1f} min apart (--max-gap {max_gap / 60:.1f} min): fewer "
             "points per ball or a faster CMM program keep the thermal state comparable"
         )
-    texts = [made.plan_yaml, made.dmis, made.checklist, made.qif]
-    for (target, option), text in zip(named, texts, strict=True):
-        if text is None:
-            continue
-        if target is None:
-            click.echo(text, nl=False)
-        else:
-            write_output_file(target, text, inputs=inputs, overwrite=overwrite, option=option)
-            echo_err(f"wrote {target}")
-    plan = made.plan
-    repeats = find_repeats(plan)
-    n_targets = len(plan.target_indices) - (len(repeats.origin) - 1)
+    if done.stdout is not None:
+        click.echo(done.stdout, nl=False)
+    for target in done.written:
+        echo_err(f"wrote {target}")
     echo_err(
-        f"plan: {len(plan.labels)} steps ({n_targets} targets x "
+        f"plan: {len(made.plan.labels)} steps ({done.n_targets} targets x "
         f"{len(made.ball_names)} balls x {points_per_ball} points), estimated "
         f"{made.timing.total_s / 3600:.2f} h"
     )
-    if repeats.any:
+    if done.repeat_labels:
         echo_err(
-            f"O measured {len(repeats.origin)} time(s), R0 {len(repeats.reference0)} time(s) "
-            f"({', '.join(plan.labels[i] for i in sorted(repeats.origin + repeats.reference0))}): "
-            "process averages each"
+            f"O measured {done.n_origin} time(s), R0 {done.n_reference0} time(s) "
+            f"({', '.join(done.repeat_labels)}): process averages each"
         )

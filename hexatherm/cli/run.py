@@ -4,9 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import sys
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import click
 
@@ -276,13 +274,9 @@ def command(
     terminating signal (SIGTERM, SIGHUP, SIGQUIT, ...: exit status 130) or an error stops the
     hexapod; --resume continues. The balls' fits go to standard output.
     """
-    from hexatherm.devices.controller import InPositionCriteria
-    from hexatherm.devices.serialport import PortSettings
-    from hexatherm.io.config import read_hexapod
-    from hexatherm.workflows.acquire.files import load_files
-    from hexatherm.workflows.run.campaign import STOPPED_NOTE, run_campaign
-    from hexatherm.workflows.run.options import BallChecks, RunOptions
-    from hexatherm.workflows.run.resume import ProbeSettings
+    from hexatherm.workflows.run.campaign import STOPPED_NOTE
+    from hexatherm.workflows.run.options import BallChecks
+    from hexatherm.workflows.run.run import RunRequest, run
 
     if dry_run and resume:
         raise click.UsageError("--dry-run checks a plan: not with --resume")
@@ -292,10 +286,6 @@ def command(
         raise click.UsageError("--hexapod and --balls are needed (except with --resume)")
     if origin_on_cmm is None and not resume:
         raise click.UsageError("--origin-on-cmm is needed (except with --resume)")
-    hexapod_path = hexapod_path or session / "hexapod.yaml"
-    balls_path = balls_path or session / "balls.yaml"
-    files = load_files(plan, hexapod_path, balls_path)
-    hexapod = read_hexapod(hexapod_path)
     origin = _numbers(origin_on_cmm, 6, "--origin-on-cmm")
     limits = _numbers(cmm_limits, 6, "--cmm-limits")
     if limits is not None and not all(a < b for a, b in zip(limits[:3], limits[3:], strict=True)):
@@ -303,30 +293,42 @@ def command(
             f"{cmm_limits!r}: the lower corner X0,Y0,Z0 must be below the upper X1,Y1,Z1",
             param_hint="--cmm-limits",
         )
-    options = RunOptions(
+    if dry_run_transcript is not None and session.resolve() in dry_run_transcript.resolve().parents:
+        raise click.BadParameter(
+            f"{dry_run_transcript} is inside the session folder {session}, which a dry run "
+            "leaves untouched",
+            param_hint="--dry-run-transcript",
+        )
+    request = RunRequest(
+        plan=plan,
         session=session,
         cmm_url=cmm_url,
         controller_url=controller_url,
+        hexapod=hexapod_path,
+        balls=balls_path,
         origin_on_cmm=origin,
+        dry_run=dry_run,
+        dry_run_transcript=dry_run_transcript,
+        overwrite=overwrite,
         resume=resume,
-        probe=ProbeSettings(tool, cap_angle, approach, max(clearance, approach), travel),
-        checks=BallChecks(radius_tol_um, form_tol_um, rms_tol_um, centre_tol_mm),
-        criteria=InPositionCriteria(
-            settle_s=settle,
-            tolerance_um=readback_tol_um,
-            tolerance_urad=5 * readback_tol_um,
-            n_readings=readings,
-            poll_s=poll,
-            timeout_s=in_position_timeout,
-        ),
+        tool=tool,
+        cap_angle_deg=cap_angle,
+        approach_mm=approach,
+        clearance_mm=clearance,
+        travel_mm=travel,
+        cmm_limits_mm=limits,
         max_gap_s=max_gap,
-        cmm_limits_mm=None if limits is None else (limits[:3], limits[3:]),  # type: ignore[arg-type]
-        temperature_port=None
-        if temperature_port is None
-        else PortSettings(temperature_port, baudrate=temperature_baud),
-        durable=fsync,
+        settle_s=settle,
+        poll_s=poll,
+        in_position_timeout_s=in_position_timeout,
+        readback_tol_um=readback_tol_um,
+        readings=readings,
+        checks=BallChecks(radius_tol_um, form_tol_um, rms_tol_um, centre_tol_mm),
+        temperature_port=temperature_port,
+        temperature_baud=temperature_baud,
         reconnects=reconnects,
         ipp_timeout_s=ipp_timeout,
+        durable=fsync,
     )
 
     def notify(level: str, message: str) -> None:
@@ -335,10 +337,7 @@ def command(
     try:
         # SIGTERM, SIGHUP, SIGQUIT, ... take Ctrl-C's path: the hexapod is sent STOP
         with signals_interrupt():
-            if dry_run:
-                _dry_run(files, hexapod, options, notify, dry_run_transcript, overwrite)
-                return
-            result = run_campaign(files, hexapod, options, notify)
+            done = run(request, notify)
     except KeyboardInterrupt as exc:
         how = exc.name if isinstance(exc, Terminated) else "Ctrl-C"
         # what became of the hexapod and the session, said once (the campaign's note)
@@ -352,6 +351,9 @@ def command(
         with contextlib.suppress(OSError):  # SIGHUP: the terminal may be gone
             echo_err(f"interrupted ({how}): {said}")
         sys.exit(130)
+    result = done.result
+    if result is None:  # a dry run
+        return
     lines = ["label,ball,n,x,y,z,radius_mm,form_um,rms_um,attempts,problems"]
     for b in result.balls:
         lines.append(
@@ -369,51 +371,11 @@ def command(
     echo_err(f"wrote {result.session_file}")
     if result.failed:
         first = result.failed[0]
-        n_balls = len(files.plan.labels) * len(files.balls.names)
         echo_err(
-            f"error: {len(result.failed)} of {n_balls} balls still fail their checks after "
+            f"error: {len(result.failed)} of {done.n_balls} balls still fail their checks after "
             f"probing them again: {', '.join(f'{b.label} {b.ball}' for b in result.failed)} "
             f"(first: {first.label} {first.ball}: {'; '.join(first.problems)}); the session is "
             "recorded, but check the balls file, the CMM's tool and the plan before processing "
             f"it (exit status {CHECK_FAILED_EXIT})"
         )
         sys.exit(CHECK_FAILED_EXIT)
-
-
-def _dry_run(
-    files: Any,
-    hexapod: Any,
-    options: Any,
-    notify: Callable[[str, str], None],
-    transcript: Path | None,
-    overwrite: bool,
-) -> None:
-    """``run --dry-run``, its I++ transcript kept in ``transcript`` when given: checked as
-    an output first (not an input, not inside the session folder), written at the end
-    whatever the check found."""
-    from hexatherm.io.outputs import check_output_settled, write_output_file
-    from hexatherm.workflows.run.support import dry_run as check_plan
-
-    if transcript is None:
-        check_plan(files, hexapod, options, notify)
-        return
-    inputs = list(files.paths)
-    if options.session.resolve() in transcript.resolve().parents:
-        raise click.BadParameter(
-            f"{transcript} is inside the session folder {options.session}, which a dry run "
-            "leaves untouched",
-            param_hint="--dry-run-transcript",
-        )
-    check_output_settled(
-        transcript, kind="file", inputs=inputs, overwrite=overwrite, option="--dry-run-transcript"
-    )
-    lines: list[str] = []
-    try:
-        check_plan(files, hexapod, options, notify, transcript=lines.append)
-    finally:
-        if lines:
-            text = "".join(line if line.endswith("\n") else line + "\n" for line in lines)
-            write_output_file(
-                transcript, text, inputs=inputs, overwrite=True, option="--dry-run-transcript"
-            )
-            echo_err(f"wrote {transcript} ({len(lines)} lines)")

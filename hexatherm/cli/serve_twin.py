@@ -166,100 +166,66 @@ def command(
     campaign.
     """
     from hexatherm.cli.run import _numbers
-    from hexatherm.core.effects import Effect
-    from hexatherm.core.heating import HeatingModel
     from hexatherm.errors import HexathermError
-    from hexatherm.io.config import read_balls, read_hexapod
-    from hexatherm.io.scenario import read_scenario
-    from hexatherm.workflows.serve import (
-        AcceleratedClock,
-        ServeFaults,
-        TwinMachines,
-        TwinWorld,
-        default_heating,
-        parse_fault,
-        time_scale_warning,
-    )
+    from hexatherm.workflows.serve import ServeFaults, parse_fault
+    from hexatherm.workflows.serve_twin import ServeRequest, Serving, serve_twin
 
-    heating: HeatingModel = default_heating()
-    origin: tuple[float, ...] = (450.0, 320.0, 210.0, 0.0, 0.0, 15.0)
-    noise, the_seed = 0.5, 0
-    the_effects: tuple[Effect, ...] = ()
-    hexapod = balls = None
-    if scenario is not None:
-        read = read_scenario(scenario)
-        heating, origin, hexapod, balls = read.heating, read.origin_on_cmm, read.hexapod, read.balls
-        noise, the_seed = 1e3 * read.point_noise_mm, read.seed
-        # the truth: the scenario's hexapod model and its hidden effects (another --hexapod
-        # brings its own model: the hidden effects only)
-        the_effects = read.effects if hexapod_path is None else read.hidden_effects
-    if hexapod_path is not None:
-        hexapod = read_hexapod(hexapod_path)
-    if balls_path is not None:
-        balls = read_balls(balls_path)
-    if hexapod is None or balls is None:
+    if scenario is None and (hexapod_path is None or balls_path is None):
         raise click.UsageError("give --hexapod and --balls (or a --scenario)")
-    origin = _numbers(origin_on_cmm, 6, "--origin-on-cmm") or origin
-    noise = noise if point_noise_um is None else point_noise_um
-    the_seed = the_seed if seed is None else seed
+    origin = _numbers(origin_on_cmm, 6, "--origin-on-cmm")
     injected = ServeFaults()
     for text in faults:
         try:
             parse_fault(text, injected)
         except HexathermError as exc:  # an option's value: a usage error
             raise click.BadParameter(f"{text!r}: {exc}", param_hint="--fault") from None
-    clock = AcceleratedClock(time_scale)
-    world = TwinWorld(
-        hexapod,
-        balls,
-        heating=heating,
-        origin_on_cmm=origin,
-        effects=the_effects,
-        clock=clock,
-        sleep=clock.sleep,
-        cmm_move_s=cmm_move_s,
-        speed_mm_s=speed_mm_s,
-        speed_deg_s=speed_mm_s / 2,
-        settle_s=settle,
-        seed=the_seed,
-        faults=injected.controller,
-    )
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    with TwinMachines(
-        world,
+    request = ServeRequest(
+        hexapod=hexapod_path,
+        balls=balls_path,
+        scenario=scenario,
         dialect=dialect,
+        cmm_dialect=cmm_dialect,
+        time_scale=time_scale,
+        faults=injected,
+        origin_on_cmm=origin,
+        point_noise_um=point_noise_um,
+        seed=seed,
         tool=tool,
-        point_noise_um=noise,
-        seed=the_seed,
-        ipp_faults=injected.ipp,
         cmm_port=cmm_port,
         controller_port=controller_port,
+        speed_mm_s=speed_mm_s,
+        settle_s=settle,
+        cmm_move_s=cmm_move_s,
         thermocouple_port=thermocouple_port,
         thermocouple_period_s=thermocouple_period,
-        pi_start=injected.pi,
-        cmm_dialect=cmm_dialect,
-    ) as machines:
-        click.echo(f"cmm: {machines.cmm_url}")
-        click.echo(f"controller: {machines.controller_url}")
-        click.echo(f"thermocouples: {machines.thermocouples_url}")
+    )
+    stop = threading.Event()
+
+    def ready(serving: Serving) -> None:
+        signal.signal(signal.SIGTERM, lambda *_: stop.set())
+        click.echo(f"cmm: {serving.cmm_url}")
+        click.echo(f"controller: {serving.controller_url}")
+        click.echo(f"thermocouples: {serving.thermocouples_url}")
         sys_stdout_flush()
-        distorted = time_scale_warning(time_scale, heating)
-        if distorted is not None:
-            echo_err(f"warning: {distorted}")
+        if serving.time_scale_warning is not None:
+            echo_err(f"warning: {serving.time_scale_warning}")
         echo_err(
-            f"serving the twin ({dialect}, x{time_scale:g} time, {noise:g} um probing noise, "
-            f"{len(injected.ipp)} I++ fault(s)); Ctrl-C to stop. Rehearse with:\n"
-            f"  hexatherm run PLAN --cmm {machines.cmm_url} --controller "
-            f"{machines.controller_url} --temperature-port {machines.thermocouples_url} "
-            f"--hexapod H --balls B --origin-on-cmm {','.join(f'{v:g}' for v in origin)} "
-            "--session DIR"
+            f"serving the twin ({dialect}, x{time_scale:g} time, {serving.point_noise_um:g} um "
+            f"probing noise, {serving.n_ipp_faults} I++ fault(s)); Ctrl-C to stop. Rehearse "
+            f"with:\n  hexatherm run PLAN --cmm {serving.cmm_url} --controller "
+            f"{serving.controller_url} --temperature-port {serving.thermocouples_url} "
+            f"--hexapod H --balls B --origin-on-cmm "
+            f"{','.join(f'{v:g}' for v in serving.origin_on_cmm)} --session DIR"
         )
+
+    def wait() -> None:
         try:
             while not stop.wait(0.5):
                 pass
         except KeyboardInterrupt:
             pass
+
+    serve_twin(request, ready, wait)
     echo_err("stopped")
 
 

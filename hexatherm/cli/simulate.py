@@ -72,41 +72,27 @@ def command(
     give the same files, byte for byte. Prints, per target, the true thermal
     error of its conventional pose (um, urad).
     """
-    import numpy as np
-
-    from hexatherm.io.outputs import check_output_settled
-    from hexatherm.io.scenario import Scenario, plan_scenario
-    from hexatherm.workflows.simulate.run import simulate_file
+    from hexatherm.workflows.simulate.run import SimulateRequest, simulate_folder
 
     imports_done()
-    source: Path | Scenario
     if (scenario is None) == (plan_path is None):
         raise click.UsageError("give a SCENARIO file or --plan PLAN, one of them")
     if plan_path is None:
         if hexapod_path is not None or balls_path is not None:
             raise click.UsageError("--hexapod and --balls go with --plan (a scenario names them)")
-        assert scenario is not None
-        inputs, source = [scenario], scenario
-    else:
-        if hexapod_path is None or balls_path is None:
-            raise click.UsageError("--plan needs --hexapod and --balls")
-        inputs = [plan_path, hexapod_path, balls_path]
-        source = plan_scenario(plan_path, hexapod_path, balls_path, out.name, seed or 0)
-    check_output_settled(out, kind="folder", inputs=inputs, overwrite=overwrite, sessions=True)
-    read, simulated, written = simulate_file(source, out, seed, overwrite)
-    plan, truth = read.plan, simulated.truth
-    duration_h = float(simulated.step_times_s[-1]) / 3600.0
+    elif hexapod_path is None or balls_path is None:
+        raise click.UsageError("--plan needs --hexapod and --balls")
+    done = simulate_folder(
+        SimulateRequest(out, scenario, plan_path, hexapod_path, balls_path, seed, overwrite)
+    )
+    read = done.scenario
     effects = ", ".join(e.name for e in read.effects) or "none"
     echo_err(
-        f"scenario {read.name}: {len(plan.labels)} steps ({plan.target_indices.size} "
-        f"targets) over {duration_h:.2f} h, output {read.output}, effects: {effects}"
+        f"scenario {read.name}: {done.n_steps} steps ({done.n_targets} "
+        f"targets) over {done.duration_h:.2f} h, output {read.output}, effects: {effects}"
     )
     echo_err("true thermal error of each target's conventional pose (vs. R0's thermal state):")
     click.echo(f"{'label':8} {'|dT| um':>10} {'|dR| urad':>10}")
-    targets = plan.target_indices
-    error = truth.pose[targets] - truth.corrected_pose[targets]
-    d_t = np.linalg.norm(error[:, :3], axis=1) * 1e3
-    d_r = np.linalg.norm(error[:, 3:], axis=1) * np.pi / 180 * 1e6
-    for i, step in enumerate(targets):
-        click.echo(f"{plan.labels[step]:8} {d_t[i]:10.3f} {d_r[i]:10.3f}")
-    echo_err(f"wrote {len(written)} files to {out}")
+    for target in done.targets:
+        click.echo(f"{target.label:8} {target.translation_um:10.3f} {target.rotation_urad:10.3f}")
+    echo_err(f"wrote {len(done.written)} files to {out}")

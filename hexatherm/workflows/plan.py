@@ -42,6 +42,8 @@ from hexatherm.io.checklist import checklist_markdown
 from hexatherm.io.config import plan_to_yaml, read_balls, read_hexapod
 from hexatherm.io.csvtext import read_text
 from hexatherm.io.dmisprog import dmis_program
+from hexatherm.io.measurements import COORDINATE_MAX_MM as COORDINATE_MAX_MM
+from hexatherm.io.outputs import check_output_settled, write_output_file
 from hexatherm.io.qifout import NominalSphere, qif_plan
 
 #: random choices of as many candidates that ``plan --calibration`` compares its design with
@@ -259,4 +261,89 @@ def make_plan(request: PlanRequest) -> PlanTexts:
         checklist,
         selection,
         qif,
+    )
+
+
+# ------------------------------------------------------------------- the command
+@dataclass(frozen=True)
+class PlanFiles:
+    """Where ``hexatherm plan`` writes: the plan (``out``; None: standard output), the
+    DMIS program, the checklist and the QIF plan (None: not asked for)."""
+
+    out: Path | None = None
+    dmis: Path | None = None
+    checklist: Path | None = None
+    qif: Path | None = None
+    overwrite: bool = False
+
+
+@dataclass(frozen=True)
+class PlanOutcome:
+    """What ``hexatherm plan`` made and wrote.
+
+    Attributes
+    ----------
+    made : PlanTexts
+    stdout : str or None
+        The plan's text for standard output (no ``out`` given).
+    written : tuple of Path
+        The files written, in the order -o, --dmis, --checklist, --qif.
+    n_targets : int
+        Targets of the plan (a repeat of O is not one).
+    n_origin, n_reference0 : int
+        How often O and R0 are measured.
+    repeat_labels : tuple of str
+        The labels of O, R0 and their repeats, in plan order, when there are repeats.
+    """
+
+    made: PlanTexts
+    stdout: str | None
+    written: tuple[Path, ...]
+    n_targets: int
+    n_origin: int
+    n_reference0: int
+    repeat_labels: tuple[str, ...]
+
+
+def write_plan(request: PlanRequest, files: PlanFiles) -> PlanOutcome:
+    """``hexatherm plan`` from its request to its outcome: check the outputs (never an
+    input, never a foreign file), make the plan (:func:`make_plan`) and write its texts."""
+    named = [
+        (files.out, "-o"),
+        (files.dmis, "--dmis"),
+        (files.checklist, "--checklist"),
+        (files.qif, "--qif"),
+    ]
+    inputs = [
+        p for p in (request.hexapod_path, request.balls_path, request.targets_path) if p is not None
+    ]
+    for path, option in named:
+        if path is not None:
+            check_output_settled(
+                path, kind="file", inputs=inputs, overwrite=files.overwrite, option=option
+            )
+    made = make_plan(request)
+    texts = [made.plan_yaml, made.dmis, made.checklist, made.qif]
+    stdout, written = None, []
+    for (target, option), text in zip(named, texts, strict=True):
+        if text is None:
+            continue
+        if target is None:
+            assert isinstance(text, str)
+            stdout = text
+        else:
+            write_output_file(target, text, inputs=inputs, overwrite=files.overwrite, option=option)
+            written.append(target)
+    plan = made.plan
+    repeats = find_repeats(plan)
+    return PlanOutcome(
+        made,
+        stdout,
+        tuple(written),
+        n_targets=len(plan.target_indices) - (len(repeats.origin) - 1),
+        n_origin=len(repeats.origin),
+        n_reference0=len(repeats.reference0),
+        repeat_labels=tuple(plan.labels[i] for i in sorted(repeats.origin + repeats.reference0))
+        if repeats.any
+        else (),
     )

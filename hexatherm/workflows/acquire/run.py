@@ -75,6 +75,7 @@ from hexatherm.workflows.acquire.files import (
     SessionFiles,
     check_same_files,
     finish_session,
+    load_files,
     session_lock,
     write_copies,
 )
@@ -465,3 +466,63 @@ def session_from_log(
             "(no session.yaml)",
         )
     return AcquireResult(session, recorder.done, recorder.n_points, fits, session_file)
+
+
+# ------------------------------------------------------------------- the command
+@dataclass(frozen=True)
+class AcquireRequest:
+    """What ``hexatherm acquire`` was asked (its options, in the workflow's types).
+
+    ``hexapod`` and ``balls`` default to the session's copies (with ``replay_log``: the
+    copies beside the log); a live run reads the ``probe`` port, a replay ``replay_log``.
+    """
+
+    plan: Path
+    session: Path
+    hexapod: Path | None = None
+    balls: Path | None = None
+    probe: PortSettings | None = None
+    reopen_interval_s: float = 1.0
+    unit: str = "mm"
+    auto: bool = False
+    resume: bool = False
+    replay_log: Path | None = None
+    idle_timeout_s: float | None = None
+    max_gap_s: float = 600.0
+    checks: FitChecks = field(default_factory=FitChecks)
+    temperatures_file: Path | None = None
+    temperature_port: PortSettings | None = None
+
+
+def record(
+    request: AcquireRequest, notify: Notify, operator_lines: Iterable[str] | None = None
+) -> AcquireResult:
+    """``hexatherm acquire`` from its request to its outcome: read the plan, hexapod and
+    balls files, then replay ``request.replay_log`` into a new session
+    (:func:`session_from_log`) or record from the probe's port (:func:`acquire`)."""
+    config_dir = request.session if request.replay_log is None else request.replay_log.parent
+    files = load_files(
+        request.plan,
+        request.hexapod or config_dir / "hexapod.yaml",
+        request.balls or config_dir / "balls.yaml",
+    )
+    if request.replay_log is not None:
+        return session_from_log(
+            files, request.replay_log, request.session, notify, request.temperatures_file
+        )
+    if request.probe is None:
+        raise ValueError("a live acquisition needs the probe's port")
+    options = AcquireOptions(
+        session=request.session,
+        probe=request.probe,
+        temperature_port=request.temperature_port,
+        temperatures_file=request.temperatures_file,
+        auto=request.auto,
+        resume=request.resume,
+        unit=request.unit,
+        idle_timeout_s=request.idle_timeout_s,
+        reopen_interval_s=request.reopen_interval_s,
+        checks=request.checks,
+        max_gap_s=request.max_gap_s,
+    )
+    return acquire(files, options, notify, operator_lines)

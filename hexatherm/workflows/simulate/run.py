@@ -24,9 +24,13 @@ Choices the scenario does not spell out:
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
-from hexatherm.io.scenario import Scenario, read_scenario
+import numpy as np
+
+from hexatherm.io.outputs import check_output_settled
+from hexatherm.io.scenario import Scenario, plan_scenario, read_scenario
 from hexatherm.workflows.simulate.twinsession import (
     SimulatedSession,
     TwinSessionSpec,
@@ -85,3 +89,75 @@ def simulate_file(
     simulated = simulate(scenario, seed)
     written = write_files(simulated.files, out, overwrite, scenario.input_files)
     return scenario, simulated, written
+
+
+@dataclass(frozen=True)
+class SimulateRequest:
+    """What ``hexatherm simulate`` was asked: a scenario file, or a plan with its hexapod
+    and balls files (measured as a typical session, :func:`~hexatherm.io.scenario.
+    plan_scenario`), and the session folder to write."""
+
+    out: Path
+    scenario: Path | None = None
+    plan: Path | None = None
+    hexapod: Path | None = None
+    balls: Path | None = None
+    seed: int | None = None
+    overwrite: bool = False
+
+
+@dataclass(frozen=True)
+class TargetError:
+    """The true thermal error of a target's conventional pose (vs. R0's thermal state)."""
+
+    label: str
+    translation_um: float
+    rotation_urad: float
+
+
+@dataclass(frozen=True)
+class SimulateOutcome:
+    """What ``hexatherm simulate`` wrote, and the truth it prints."""
+
+    scenario: Scenario
+    n_steps: int
+    n_targets: int
+    duration_h: float
+    targets: tuple[TargetError, ...]
+    written: tuple[Path, ...]
+
+
+def simulate_folder(request: SimulateRequest) -> SimulateOutcome:
+    """Check the output folder, simulate the scenario (or the plan) and write the session
+    folder ``request.out``; the outcome holds each target's true thermal error."""
+    source: Path | Scenario
+    if request.plan is None:
+        assert request.scenario is not None
+        inputs, source = [request.scenario], request.scenario
+    else:
+        assert request.hexapod is not None and request.balls is not None
+        inputs = [request.plan, request.hexapod, request.balls]
+        source = plan_scenario(
+            request.plan, request.hexapod, request.balls, request.out.name, request.seed or 0
+        )
+    out = request.out
+    check_output_settled(
+        out, kind="folder", inputs=inputs, overwrite=request.overwrite, sessions=True
+    )
+    read, simulated, written = simulate_file(source, out, request.seed, request.overwrite)
+    plan, truth = read.plan, simulated.truth
+    targets = plan.target_indices
+    error = truth.pose[targets] - truth.corrected_pose[targets]
+    d_t = np.linalg.norm(error[:, :3], axis=1) * 1e3
+    d_r = np.linalg.norm(error[:, 3:], axis=1) * np.pi / 180 * 1e6
+    return SimulateOutcome(
+        scenario=read,
+        n_steps=len(plan.labels),
+        n_targets=int(targets.size),
+        duration_h=float(simulated.step_times_s[-1]) / 3600.0,
+        targets=tuple(
+            TargetError(plan.labels[step], float(d_t[i]), float(d_r[i]))
+            for i, step in enumerate(targets)
+        ),
+        written=tuple(written),
+    )
