@@ -225,9 +225,9 @@ def test_an_acknowledged_query_completes_a_controller_cycle_after_it_is_sent(
 ) -> None:
     """The ``:2`` of ``CFG#CS?3`` leaves the twin 20 ms (its cycle) after the command
     came, so no client reads it before then: long enough for BLISS's own client on a
-    loaded machine (bench/peers_bliss.py: 5 of 5 runs at 20 ms and load 14 on 2 cores;
-    3 of 5 failed with "Error 2" at the 5 ms of before). A lower bound: load only
-    lengthens it."""
+    loaded machine (bench/peers_bliss.py on 2 cores: 13 of 15 runs passed at 20 ms and
+    load 14 to 16; 6 of 10 at the 5 ms of before, the others failing with "Error 2"). A
+    lower bound: load only lengthens it."""
     _, _, client = twin
     for _ in range(3):
         sent = time.monotonic()

@@ -412,8 +412,9 @@ class SymetrieSimulator(SimulatedController):
     #: (``:2``), and the poll of a move's end: a controller's cycle, so that the two
     #: replies never travel in one packet. ESRF's BLISS 2.4 fails a command whose two
     #: replies it finds waiting together, as a client process not scheduled within the
-    #: cycle does: at 5 ms 3 of 5 runs of ``bench/peers_bliss.py`` failed (load 13 on 2
-    #: cores), at 20 ms none of 5 (load 14). ``cycle_s`` sets it per server.
+    #: cycle does: of the runs of ``bench/peers_bliss.py`` on 2 cores, 4 of 10 failed at
+    #: 5 ms (load 11 to 14), 2 of 15 at 20 ms (at load 16), none of 10 at 50 ms (load
+    #: 12 to 17). ``cycle_s`` sets it per server.
     CYCLE_S = 0.02
     #: accelerations reported by ``CFG#ACC?`` (m/s2, rad/s2): *choice*, the twin's
     #: motion has no acceleration phase (it moves at its speed from the start)
