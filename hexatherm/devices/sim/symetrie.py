@@ -410,13 +410,27 @@ class SymetrieSimulator(SimulatedController):
     _COMMAND = re.compile(r"^(?P<name>[A-Z#]+\??)(?P<args>.*)$")
     #: wall-clock pause between a command's acceptance (``:1``) and its completion
     #: (``:2``), and the poll of a move's end: a controller's cycle, so that the two
-    #: replies never travel in one packet (ESRF's BLISS reads them one at a time)
-    CYCLE_S = 0.005
+    #: replies never travel in one packet. ESRF's BLISS 2.4 fails a command whose two
+    #: replies it finds waiting together, as a client process not scheduled within the
+    #: cycle does: of the runs of ``bench/peers_bliss.py`` on 2 cores, 4 of 10 failed at
+    #: 5 ms (load 11 to 14), 2 of 15 at 20 ms (at load 16), none of 10 at 50 ms (load
+    #: 12 to 17). ``cycle_s`` sets it per server.
+    CYCLE_S = 0.02
     #: accelerations reported by ``CFG#ACC?`` (m/s2, rad/s2): *choice*, the twin's
     #: motion has no acceleration phase (it moves at its speed from the start)
     ACCELERATIONS = (0.01, 0.005)
 
-    def __init__(self, model: SimulatedHexapod, host: str = "127.0.0.1", port: int = 0) -> None:
+    def __init__(
+        self,
+        model: SimulatedHexapod,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        *,
+        cycle_s: float = CYCLE_S,
+    ) -> None:
+        if not cycle_s > 0:
+            raise ValueError(f"the controller's cycle must be > 0 s, not {cycle_s!r}")
+        self.cycle_s = float(cycle_s)
         self._wire_lock = threading.Lock()
         #: per connection: a ``MOVE#ABS`` accepted whose ``:2`` waits for the motion's end
         self._moves: dict[socket.socket, bool] = {}
@@ -438,7 +452,7 @@ class SymetrieSimulator(SimulatedController):
 
     def _move_ends(self, sock: socket.socket, closed: threading.Event) -> None:
         """Send ``MOVE#ABS:2`` when an accepted move has ended (polled each cycle)."""
-        while not closed.wait(self.CYCLE_S):
+        while not closed.wait(self.cycle_s):
             if self._moves.get(sock) and not self.model.moving():
                 self._moves[sock] = False
                 try:
@@ -459,9 +473,29 @@ class SymetrieSimulator(SimulatedController):
             if replies[0] == "MOVE#ABS:1":
                 self._moves[sock] = True
                 return
-            time.sleep(self.CYCLE_S)
+            time.sleep(self.cycle_s)
             replies = replies[1:]
         self._send_replies(sock, replies)
+
+    def _specific_position(self, short: str, args: str) -> list[str]:
+        """``CFG#SPECIFICPOS?0``: ``0,BITS,LARGEST`` (the positions defined, the largest
+        number); ``?i``: ``i,ENABLED,CS,`` + the pose (m, rad) + ``,"NAME"``. The twin's
+        three are those of its gpascii server: 1 user zero (CS 3, object in user), 2
+        retracted (the lowest Tz the struts allow) and 3 machine zero (CS 0, platform in
+        machine); names *choice*. Another number: -48 (ParamsIn_WrongValue)."""
+        if not re.fullmatch(r"\d+", args):
+            return [f"{short}:-9"]
+        index = int(args)
+        if index == 0:
+            return [f"{short}:1", f"{short}:2,0,{0b111},3"]
+        if index > 3:
+            return [f"{short}:-48"]
+        pose = np.zeros(6)
+        if index == 2:
+            pose[2] = self.travel[0][2]
+        name, cs = {1: ("USER ZERO", 3), 2: ("RETRACTED", 0), 3: ("MACHINE ZERO", 0)}[index]
+        values = ",".join(repr(float(v)) for v in pose_to_wire(pose))
+        return [f"{short}:1", f'{short}:2,{index},1,{cs},{values},"{name}"']
 
     def greeting(self) -> list[str]:
         return [
@@ -478,6 +512,16 @@ class SymetrieSimulator(SimulatedController):
             bits.add(4)
         if m.moving():
             bits.add(5)
+        return sum(1 << b for b in bits)
+
+    def _axis_word(self) -> int:
+        """An actuator's status word, as the hexapod's: bits 3 control, 5 phasing and 6
+        homing done; 1 in position, 2 moving (BLISS's ``AXIS_STATUS_FIELDS``)."""
+        bits = {3, 5, 6}
+        if self.model.in_position():
+            bits.add(1)
+        if self.model.moving():
+            bits.add(2)
         return sum(1 << b for b in bits)
 
     def respond(self, line: str) -> list[str]:
@@ -499,7 +543,7 @@ class SymetrieSimulator(SimulatedController):
             if not m.report_actuators:
                 return [f"{short}:-6"]
             lengths = m.actuators_mm() * 1e-3
-            data = ["6"] + ["0"] * 6 + [repr(float(v)) for v in lengths]
+            data = ["6"] + [str(self._axis_word())] * 6 + [repr(float(v)) for v in lengths]
             return [f"{short}:2," + ",".join(data)]
         if name == "STA#TEMP?":
             temps = m.temperatures()
@@ -518,6 +562,8 @@ class SymetrieSimulator(SimulatedController):
                 return [f"{short}:1", f"{short}:2,{args},{int(enabled)}"]
             limits = pose_to_wire(np.array(self.travel)).ravel()
             return [f"{short}:1", f"{short}:2,{args}," + ",".join(repr(float(v)) for v in limits)]
+        if name == "CFG#SPECIFICPOS?":
+            return self._specific_position(short, args)
         if name == "CFG#CS?":  # CFG#CS?CS: that CS first, then user and object frames
             if not re.fullmatch(r"\d+", args):
                 return [f"{short}:-9"]
