@@ -16,8 +16,7 @@ from typing import Any, TypeVar
 import click
 
 from hexatherm.errors import HexathermError, InputWarning
-from hexatherm.io.files import ReadOptions
-from hexatherm.io.provenance import run_context
+from hexatherm.workflows.common import ReadOptions, run_context
 from hexatherm.workflows.limits import limits_text
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -381,29 +380,17 @@ template_dir_option = click.option(
 
 
 def template_folder(template_dir: Path | None, lab: Path | None) -> Path | None:
-    """The lab's templates (``--template-dir``, else the lab file's ``templates:``),
-    every one of them compiled: a syntax error is refused naming file and line."""
-    from hexatherm.io.config.identity import lab_template_dir
-    from hexatherm.workflows.report.render import check_template_dir
+    """The lab's templates (:func:`hexatherm.workflows.common.template_folder`)."""
+    from hexatherm.workflows.common import template_folder as folder_of
 
-    if template_dir is None and lab is not None:
-        template_dir = lab_template_dir(lab)
-    return check_template_dir(template_dir)
+    return folder_of(template_dir, lab)
 
 
 def template_files(folder: Path | None, lab: Path | None = None) -> list[Path]:
-    """The files of the lab's template folder, and those of its sub-folders that its
-    templates name (an included template, an ``asset()``), but the lab file and what
-    hexatherm wrote there (a report, its manifest): inputs of the page (its provenance,
-    and never an output)."""
-    from hexatherm.io.outputs import hexatherms_own
-    from hexatherm.workflows.report.render import named_files
+    """The lab's template files (:func:`hexatherm.workflows.common.template_files`)."""
+    from hexatherm.workflows.common import template_files as files_of
 
-    if folder is None:
-        return []
-    skip = None if lab is None else lab.resolve()
-    found = {p for p in folder.iterdir() if p.is_file()} | set(named_files(folder))
-    return sorted(p for p in found if p.resolve() != skip and not hexatherms_own(p))
+    return files_of(folder, lab)
 
 
 def _tolerances(ctx: click.Context, param: click.Parameter, values: tuple[str, ...]) -> dict:

@@ -399,7 +399,9 @@ def test_the_command_line_in_the_provenance_runs_as_printed(tmp_path):
 
     session = session_copy(tmp_path / "Sessions 2026 'Zürich'")
     out = tmp_path / "the report.html"
-    args = ["report", str(session), "-o", str(out), "--tolerance", "Tx=2um"]
+    processed = CliRunner().invoke(main, ["process", str(session), "--tolerance", "Tx=2um"])
+    assert processed.exit_code == 0, processed.output
+    args = ["report", str(session), "-o", str(out)]
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
     page = out.read_text(encoding="utf-8")

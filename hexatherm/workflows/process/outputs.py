@@ -277,6 +277,23 @@ def write_results(
         from hexatherm.workflows.process.uncertainty import pose_uncertainty
 
         uncertainty = pose_uncertainty(result)
+    texts = result_tables(result, uncertainty, quality, twin, conformity)
+    inputs = [*session_inputs(result), *extra_inputs]
+    with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
+        for name, text in texts.items():
+            (tmp / name).write_text(text, encoding="utf-8", newline="")
+    return [Path(out) / name for name in texts]
+
+
+def result_tables(
+    result: ProcessResult,
+    uncertainty: PoseUncertainty,
+    quality: QualityReport | None = None,
+    twin: np.ndarray | None = None,
+    conformity: Conformity | None = None,
+) -> dict[str, str]:
+    """The result files' texts, name -> CSV text, as :func:`write_results` writes them
+    (``report`` compares a results folder with them)."""
     tables = {
         "poses.csv": poses_frame(result, uncertainty, twin, conformity),
         "legs.csv": legs_frame(result),
@@ -286,15 +303,10 @@ def write_results(
         tables["covariance.csv"] = covariance_frame(result, uncertainty)
     if quality is not None:
         tables["quality.csv"] = quality_file_frame(quality)
-    texts = {
+    return {
         name: csv_text(frame, resolutions={"jacobian_rcond": RCOND_RESOLUTION})
         for name, frame in tables.items()
     }
-    inputs = [*session_inputs(result), *extra_inputs]
-    with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
-        for name, text in texts.items():
-            (tmp / name).write_text(text, encoding="utf-8", newline="")
-    return [Path(out) / name for name in texts]
 
 
 def quality_file_frame(quality: QualityReport) -> pd.DataFrame:
