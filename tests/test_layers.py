@@ -1,4 +1,5 @@
-"""The package's floors: imports point down only, and no module imports itself back.
+"""The package's floors: imports point down only, and no module imports itself back; a
+command (``cli``) imports only the workflows, the errors and the texts.
 
 ``cli -> workflows -> {io, devices} -> {core, session} -> {errors, typing}``
 
@@ -179,6 +180,64 @@ def import_cycles(root: Path) -> list[list[str]]:
         if node not in index:
             visit(node)
     return cycles
+
+
+#: what a ``cli`` module may import of the package: the workflows (a command's steps),
+#: the errors (its exit codes), the texts (its messages) and the other ``cli`` modules;
+#: never ``io``, ``core``, ``devices``, ``session`` or ``limits`` (issue 34: options,
+#: messages and exit codes only; rasterio's ``rio`` commands are the model)
+CLI_MAY_IMPORT = ("workflows", "errors", "text", "cli", "")
+#: the commands whose steps are not yet in their workflow (issue 34, item 2: each leaves
+#: this list when it moves; a module not in it is held to the rule)
+NOT_YET_THIN = {
+    "cli.acquire",
+    "cli.calibrate",
+    "cli.diagnose",
+    "cli.fit_spheres",
+    "cli.plan",
+    "cli.register",
+    "cli.run",
+    "cli.serve_twin",
+    "cli.simulate",
+}
+
+
+def thick_cli(root: Path, exempt: set[str] = NOT_YET_THIN) -> list[str]:
+    """``cli`` imports of anything but :data:`CLI_MAY_IMPORT`, one readable line each."""
+    problems = []
+    for importer, target, line in import_edges(root):
+        if not importer.startswith("cli") or importer in exempt:
+            continue
+        if not any(target == t or target.startswith(t + ".") for t in CLI_MAY_IMPORT):
+            problems.append(
+                f"hexatherm.{importer} (line {line}) imports hexatherm.{target}: a command "
+                "holds options, messages and exit codes; its steps go in its workflow"
+            )
+    return problems
+
+
+def test_the_commands_import_only_workflows_errors_and_texts() -> None:
+    assert thick_cli(PACKAGE) == []
+
+
+def test_the_checker_refuses_a_command_that_imports_core_or_io(tmp_path: Path) -> None:
+    root = _package(
+        tmp_path,
+        {
+            "cli/process.py": "from hexatherm.workflows.process import run\n"
+            "from hexatherm.errors import E\n",
+            "cli/report.py": "def f():\n    from hexatherm.io.outputs import write\n",
+            "cli/plan.py": "import hexatherm.core.planning\n",
+            "workflows/process.py": "run = 1\n",
+            "io/outputs.py": "write = 1\n",
+            "core/planning.py": "",
+            "errors.py": "E = 1\n",
+        },
+    )
+    assert [p.split(" (")[0] for p in thick_cli(root, set())] == [
+        "hexatherm.cli.plan",
+        "hexatherm.cli.report",
+    ]
 
 
 def test_the_package_has_no_upward_import() -> None:
