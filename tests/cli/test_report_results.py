@@ -127,3 +127,49 @@ def test_process_options_given_to_report_are_refused_naming_process(
     assert result.exit_code == 2
     assert f"{option[0]} is an option of process" in result.output
     assert not (session / "report.html").exists() and not (session / "results").exists()
+
+
+def test_the_conformity_is_process_s_and_a_lab_s_own_tolerances_are_said(tmp_path: Path) -> None:
+    # process judged Tx with a guarded rule: the page's decisions are poses.csv's, and its
+    # rule; the lab file's Ty (not judged by process) is judged on the same numbers and
+    # said; the lab's other decision rule is not used, with a warning
+    session = session_copy(tmp_path, "paper-zero-pose")
+    judged = run(
+        "process", session, "--tolerance", "Tx=0.5um", "--decision-rule", "guarded-acceptance"
+    )
+    assert judged.exit_code == 0, judged.output
+    lab = tmp_path / "lab.yaml"
+    lab.write_text(
+        "format: hexatherm-lab/1\nlab: L\n"
+        "decision_rule:\n  rule: simple\ntolerances:\n  Ty_um: 50\n",
+        encoding="utf-8",
+    )
+    out = tmp_path / "page.html"
+    result = run("report", session, "--lab", lab, "-o", out)
+    assert result.exit_code == 0, result.output
+    assert "Ty_um judged against the lab file's tolerances" in result.output
+    assert "decision_rule simple is not used" in result.output
+    poses = pd.read_csv(session / "results" / "poses.csv")
+    page = html.unescape(out.read_text(encoding="utf-8"))
+    rows = {  # the conformity table's rows: with the probability of conforming (%)
+        label: cells
+        for label, cells in re.findall(r"<tr[^>]*><td>(S\d+)</td>(.*?)</tr>", page)
+        if " %</td>" in cells
+    }
+    for label, decision in zip(poses["label"], poses["conformity_dTx"], strict=True):
+        first = re.findall(r"<td>([a-z ]+)</td>", rows[label])[0]  # Tx's, then Ty's, overall
+        assert first == decision.replace("_", " "), (label, decision, rows[label])
+    assert "guarded acceptance" in page.lower()
+
+
+def test_process_s_warnings_and_centres_basis_reach_the_page(tmp_path: Path) -> None:
+    import json
+
+    session = session_copy(tmp_path, "paper-zero-pose")
+    assert run("process", session).exit_code == 0
+    notes = json.loads((session / "results" / "provenance.json").read_text())["process"]
+    assert notes["centres_uncertainty"].startswith("registration residuals pooled")
+    out = tmp_path / "page.html"
+    assert run("report", session, "-o", out).exit_code == 0
+    page = html.unescape(out.read_text(encoding="utf-8"))
+    assert f"ball centres: {notes['centres_uncertainty']}" in page
