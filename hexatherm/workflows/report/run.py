@@ -212,7 +212,7 @@ def report(
     inputs = [*known, *request.extra_inputs]
     check_output_settled(out_file, kind="file", inputs=inputs, overwrite=request.overwrite)
     if results is None:
-        processed = process_first(request.source, reading_progress, draws_progress)
+        processed = process_first(request.source, reading_progress, draws_progress, lab_fields)
         results = read_results(processed.request.out_dir)
         inputs = [*results.inputs, *results.files(), *request.extra_inputs]
     try:
@@ -307,16 +307,25 @@ def process_first(
     session: Path,
     reading_progress: FileProgress | None = None,
     draws_progress: DrawProgress | None = None,
+    lab_fields: dict[str, object] | None = None,
 ) -> ProcessOutcome:
-    """A session without results: ``hexatherm process SESSION`` with process's defaults,
-    recorded as that command (its ``provenance.json`` says ``process``), before the page.
-    A session that is no session is refused by process, naming the file."""
+    """A session without results: ``hexatherm process SESSION`` with process's defaults
+    and the lab file's decision rule (its ``--decision-rule``/``--guard-factor``, so that
+    process judges the session's tolerances as the lab agreed), recorded as that command
+    (its ``provenance.json`` says ``process``), before the page. A session that is no
+    session is refused by process, naming the file."""
     import dataclasses
 
     from hexatherm.io.provenance import json_ready, run_context
     from hexatherm.workflows.process.run import ProcessRequest, process
 
-    request = ProcessRequest(session=session)
+    fields = lab_fields or {}
+    rule, r = fields.get("decision_rule"), fields.get("guard_factor")
+    request = ProcessRequest(
+        session=session,
+        decision_rule=rule if isinstance(rule, str) else None,
+        guard_factor=float(r) if isinstance(r, int | float) else None,
+    )
     options = {k: v for k, v in json_ready(dataclasses.asdict(request)).items() if k != "reading"}
     options.update(json_ready(dataclasses.asdict(request.reading)))
     with run_context("process", [str(session)], options):
