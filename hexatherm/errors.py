@@ -87,6 +87,11 @@ class PoseError(PlanError):
         super().__init__(f"step {step}{where}: pose {format_pose(self.pose)}: {message}")
 
 
+class ResultsError(HexathermError):
+    """A results folder ``report`` cannot render: not written by ``process``, missing,
+    stale (an input changed since), or no longer what its inputs and options give."""
+
+
 class OutputExistsError(HexathermError):
     """The output exists and overwriting was not asked for."""
 

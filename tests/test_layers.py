@@ -1,4 +1,5 @@
-"""The package's floors: imports point down only, and no module imports itself back.
+"""The package's floors: imports point down only, and no module imports itself back; a
+command (``cli``) imports only the workflows, the errors and the texts.
 
 ``cli -> workflows -> {io, devices} -> {core, session} -> {errors, typing}``
 
@@ -179,6 +180,51 @@ def import_cycles(root: Path) -> list[list[str]]:
         if node not in index:
             visit(node)
     return cycles
+
+
+#: what a ``cli`` module may import of the package: the workflows (a command's steps),
+#: the errors (its exit codes), the other ``cli`` modules and the package's version;
+#: never ``io``, ``core``, ``devices``, ``session`` or ``limits`` (issue 34: options,
+#: messages and exit codes only; rasterio's ``rio`` commands are the model)
+CLI_MAY_IMPORT = ("workflows", "errors", "cli", "")
+
+
+def thick_cli(root: Path) -> list[str]:
+    """``cli`` imports of anything but :data:`CLI_MAY_IMPORT`, one readable line each."""
+    problems = []
+    for importer, target, line in import_edges(root):
+        if not importer.startswith("cli"):
+            continue
+        if not any(target == t or target.startswith(t + ".") for t in CLI_MAY_IMPORT):
+            problems.append(
+                f"hexatherm.{importer} (line {line}) imports hexatherm.{target}: a command "
+                "holds options, messages and exit codes; its steps go in its workflow"
+            )
+    return problems
+
+
+def test_the_commands_import_only_workflows_errors_and_texts() -> None:
+    assert thick_cli(PACKAGE) == []
+
+
+def test_the_checker_refuses_a_command_that_imports_core_or_io(tmp_path: Path) -> None:
+    root = _package(
+        tmp_path,
+        {
+            "cli/process.py": "from hexatherm.workflows.process import run\n"
+            "from hexatherm.errors import E\n",
+            "cli/report.py": "def f():\n    from hexatherm.io.outputs import write\n",
+            "cli/plan.py": "import hexatherm.core.planning\n",
+            "workflows/process.py": "run = 1\n",
+            "io/outputs.py": "write = 1\n",
+            "core/planning.py": "",
+            "errors.py": "E = 1\n",
+        },
+    )
+    assert [p.split(" (")[0] for p in thick_cli(root)] == [
+        "hexatherm.cli.plan",
+        "hexatherm.cli.report",
+    ]
 
 
 def test_the_package_has_no_upward_import() -> None:

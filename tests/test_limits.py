@@ -46,12 +46,12 @@ def test_process_warns_at_the_quality_limit_and_refuses_beyond_the_gross_one() -
     assert given["distance_tolerance_um"] == DISTANCE_REFUSAL_UM
 
 
-@pytest.mark.parametrize("command", ["process", "report", "acquire", "run"])
+@pytest.mark.parametrize("command", ["process", "acquire", "run"])
 def test_every_checking_command_shows_its_limits_in_its_help(command: str) -> None:
     result = CliRunner().invoke(main, [command, "--help"], terminal_width=2000)
     assert result.exit_code == 0, result.output
     text = " ".join(result.output.split())
-    if command in ("process", "report"):
+    if command == "process":
         assert limits_text() in text
     if command in ("acquire", "run"):
         assert "half the quality limit diameter_dev_um" in text

@@ -84,7 +84,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "run": ("hexatherm.cli.run", "Measure a plan unattended: CMM (I++ DME) and controller."),
     "simulate": ("hexatherm.cli.simulate", "Simulate a session (and its truth) from a scenario."),
     "process": ("hexatherm.cli.process", "Process a session: conventional and corrected poses."),
-    "report": ("hexatherm.cli.report", "Write an HTML report of a session with figures."),
+    "report": ("hexatherm.cli.report", "Write the HTML report of a processed session's results."),
     "calibrate": ("hexatherm.cli.calibrate", "Calibrate the hexapod's geometry from sessions."),
     "diagnose": ("hexatherm.cli.diagnose", "Find where the twin and a session disagree, and why."),
     "fit-spheres": ("hexatherm.cli.fit_spheres", "Fit ball centres to probed points (CSV, DMIS)."),

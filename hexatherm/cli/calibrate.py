@@ -21,7 +21,7 @@ from hexatherm.cli.options import (
     template_files,
     template_folder,
 )
-from hexatherm.io.files import ReadOptions
+from hexatherm.workflows.common import ReadOptions
 
 
 @click.command("calibrate")
@@ -117,21 +117,13 @@ def command(
     (calibrated, held out when the level is chosen); writes OUT/hexapod.yaml (usable by
     process, plan and simulate) and the parameters with their uncertainties.
     """
-    from hexatherm.io.config import read_session
-    from hexatherm.io.outputs import check_output_settled, output_dir
     from hexatherm.workflows.calibrate.checks import session_warnings
+    from hexatherm.workflows.calibrate.command import run_calibrate
     from hexatherm.workflows.calibrate.outputs import (
         claim_lines,
-        output_files,
         span_lines,
         summary_lines,
         unexplained_claim_lines,
-    )
-    from hexatherm.workflows.calibrate.run import (
-        TwinModel,
-        calibrate,
-        calibrate_iterated,
-        read_campaign,
     )
 
     imports_done()
@@ -141,60 +133,32 @@ def command(
         raise click.UsageError(
             f"--twin-model is the twin's model for --poses twin, not for --poses {poses}"
         )
-    from hexatherm.io.config.identity import read_lab
-
-    lab_fields, lab_tolerances = read_lab(lab) if lab is not None else ({}, {})
     templates = template_folder(template_dir, lab)
-    if out is None:
-        first = sessions[0] if sessions[0].is_dir() else sessions[0].parent
-        out = first / "calibration"
-    inputs = [f for s in sessions for f in read_session(s).input_files()]
-    if lab is not None:
-        inputs.append(lab)
-    inputs += template_files(templates, lab)
-    if twin_model is not None:
-        inputs.append(twin_model)
-    twin = None if twin_model is None else TwinModel.read(twin_model)
-    check_output_settled(out, kind="folder", inputs=inputs, overwrite=overwrite)
-    if iterate:
-        run, moves = calibrate_iterated(
-            sessions,
-            poses,  # type: ignore[arg-type]
-            reading,
-            interpolation,  # type: ignore[arg-type]
-            level,
-            residuals,
-            twin,
-        )
-        for k, move in enumerate(moves, 2):
-            echo_err(
-                f"round {k}: reprocessed with the calibrated geometry; the parameters "
-                f"moved at most {move * 1e3:.3g} um"
-            )
-    else:
-        campaign = read_campaign(
-            sessions,
-            poses,  # type: ignore[arg-type]
-            reading,
-            interpolation,  # type: ignore[arg-type]
-            twin=twin,
-        )
-        run = calibrate(campaign, level, residuals)
-    model = "" if twin_model is None else f" (twin model {twin_model})"
-    files = output_files(
-        run,
-        inputs,
+    done = run_calibrate(
+        sessions,
         out,
-        lab_fields,
-        coverage_factor,
+        poses,
+        twin_model,
+        level,
+        residuals,
+        iterate,
+        interpolation,
+        overwrite,
+        lab,
         templates,
+        template_files(templates, lab),
+        coverage_factor,
         report_number,
         title,
-        lab_tolerances,
+        reading,
     )
-    with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
-        for name, text in files.items():
-            (tmp / name).write_text(text, encoding="utf-8")
+    run, files, out = done.run, done.files, done.out
+    for k, move in enumerate(done.moves, 2):
+        echo_err(
+            f"round {k}: reprocessed with the calibrated geometry; the parameters "
+            f"moved at most {move * 1e3:.3g} um"
+        )
+    model = "" if twin_model is None else f" (twin model {twin_model})"
     # after the outputs: a run refused while computing or writing them says one line
     echo_err(
         f"calibrated from {len(run.campaign.labels)} {poses} poses{model} of "

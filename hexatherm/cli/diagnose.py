@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
@@ -18,7 +19,10 @@ from hexatherm.cli.options import (
     template_files,
     template_folder,
 )
-from hexatherm.io.files import ReadOptions
+from hexatherm.workflows.common import ReadOptions
+
+if TYPE_CHECKING:
+    from hexatherm.workflows.diagnose.run import SessionData
 
 
 @click.command("diagnose")
@@ -65,45 +69,34 @@ def command(
     OUT/report.md with its figures and OUT/report.html (the same, one page); prints the
     story to standard output.
     """
-    from hexatherm.io.config import read_session
-    from hexatherm.io.outputs import check_output_settled, output_dir
-    from hexatherm.workflows.diagnose.outputs import diagnosed_hexapod_yaml, diagnosis_json, story
-    from hexatherm.workflows.diagnose.report import terminal_tables, write_report_files
-    from hexatherm.workflows.diagnose.run import read_for_diagnosis, run_diagnosis
+    from hexatherm.workflows.diagnose.command import diagnose
+    from hexatherm.workflows.diagnose.outputs import story
+    from hexatherm.workflows.diagnose.report import terminal_tables
 
     imports_done()
-    folder = session if session.is_dir() else session.parent
-    out_dir = Path(out) if out is not None else folder / "diagnosis"
-    inputs = read_session(session).input_files()
-    extra_inputs = [hexapod_path] if hexapod_path is not None else []
     templates = template_folder(template_dir, None)
-    extra_inputs += template_files(templates)
-    inputs += extra_inputs
-    # before any work: never into, around or onto the session's files (checked again
-    # under the output's lock when the results are written)
-    check_output_settled(out_dir, kind="folder", inputs=inputs, overwrite=overwrite)
-    data = read_for_diagnosis(session, hexapod_path, reading)
-    echo_err(f"diagnosing {data.session.name}: {data.observations.n_steps} steps")
-    for warning in data.warnings:
-        echo_err(f"warning: {warning}")
+
+    def said(data: SessionData) -> None:
+        echo_err(f"diagnosing {data.session.name}: {data.observations.n_steps} steps")
+        for warning in data.warnings:
+            echo_err(f"warning: {warning}")
+
     with ProgressBars() as bars:
-        result = run_diagnosis(
-            data,
-            lambda round_, done, total: bars.update(f"round {round_}: candidates", done, total),
+        outcome = diagnose(
+            session,
+            Path(out) if out is not None else None,
+            overwrite,
+            hexapod_path,
+            templates,
+            template_files(templates),
+            reading,
+            on_read=said,
+            progress=lambda round_, done, total: bars.update(
+                f"round {round_}: candidates", done, total
+            ),
         )
-    files = {
-        "diagnosis.json": diagnosis_json(result),
-        "hexapod.yaml": diagnosed_hexapod_yaml(result),
-    }
-    written: list[Path] = []
-    with output_dir(out_dir, inputs=inputs, overwrite=overwrite) as tmp:
-        for name, text in files.items():
-            (tmp / name).write_text(text, encoding="utf-8")
-            written.append(out_dir / name)
-        pages = write_report_files(result, tmp, template_dir=templates, extra_inputs=extra_inputs)
-        written += [out_dir / p.relative_to(tmp) for p in pages]
-    click.echo(terminal_tables(result, tests=False))
+    click.echo(terminal_tables(outcome.result, tests=False))
     click.echo()
-    click.echo(story(result))
-    for path in written:
+    click.echo(story(outcome.result))
+    for path in outcome.written:
         echo_err(f"wrote {path}")

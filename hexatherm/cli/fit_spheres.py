@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import functools
 import sys
 from pathlib import Path
 
@@ -17,7 +16,7 @@ from hexatherm.cli.options import (
     overwrite_option,
     reading_options,
 )
-from hexatherm.io.files import ReadOptions
+from hexatherm.workflows.common import ReadOptions
 
 
 @click.command("fit-spheres")
@@ -70,44 +69,22 @@ def command(
             raise click.UsageError("give --diameter-mm (the name of --fixed-diameter now) once")
         echo_err("warning: fit-spheres --fixed-diameter MM is now --diameter-mm MM")
         fixed_diameter = old_fixed_diameter
-    import numpy as np
-
-    from hexatherm.io.csvfile import centres_to_csv
-    from hexatherm.io.measurements import read_measurements
-    from hexatherm.io.outputs import check_output_settled, write_output_file
-    from hexatherm.io.records import Records, concat_records, refuse_groups_in_two_files
-    from hexatherm.workflows.process.measured import fit_points
+    from hexatherm.workflows.fit_spheres import fit_spheres
 
     imports_done()
-    if out is not None:
-        check_output_settled(out, kind="file", inputs=points, overwrite=overwrite)
-    probed: list[Records] = []
-    for path in points:
-        with ProgressBars() as bars:
-            records = read_measurements(
-                path,
-                progress=functools.partial(bars.reading, str(path)),
-                allow_truncated=reading.allow_truncated,
-                keep_later=reading.keep_later,
-            )
-        found = [r for r in records if r.kind == "points"]
-        if not found:
-            echo_err(f"{path}: no probed points, skipped")
-        probed.extend(found)
-    # a step's ball in two files would be two centres that process refuses: say so here
-    refuse_groups_in_two_files(probed)
-    fitted = [fit_points(r, fixed_diameter_mm=fixed_diameter) for r in probed]
-    if not fitted:
-        raise click.ClickException("no probed points in the given files")
-    kinds = {r.time_kind for r in fitted}
-    if len(kinds) > 1:
-        raise click.ClickException("the files mix ISO 8601 times and seconds")
-    text = centres_to_csv(concat_records(fitted))
+    with ProgressBars() as bars:
+        fitted = fit_spheres(
+            points,
+            out,
+            fixed_diameter,
+            overwrite,
+            reading,
+            progress=bars.reading,
+            on_skipped=lambda path: echo_err(f"{path}: no probed points, skipped"),
+        )
     if out is None:
-        sys.stdout.write(text)
+        sys.stdout.write(fitted.text)
     else:
-        write_output_file(out, text, inputs=points, overwrite=overwrite)
         echo_err(f"wrote {out}")
-    for rec in fitted:
-        form_um = float(np.max(np.asarray(rec.extra["form_um"], dtype=float)))
-        echo_err(f"{rec.path}: {len(rec)} spheres, form error up to {form_um:.2f} um")
+    for path, n, form_um in fitted.files:
+        echo_err(f"{path}: {n} spheres, form error up to {form_um:.2f} um")

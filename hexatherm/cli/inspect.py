@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from hexatherm.cli.options import clean_errors, echo_err, reading_options
-from hexatherm.io.files import ReadOptions
+from hexatherm.workflows.common import ReadOptions
 
 
 @click.command("inspect")

@@ -16,12 +16,12 @@ from typing import Any, TypeVar
 import click
 
 from hexatherm.errors import HexathermError, InputWarning
-from hexatherm.workflows.limits import limits_text
-from hexatherm.workflows.options import ReadOptions, run_context
+from hexatherm.workflows.common import ReadOptions, run_context
 
 # the lab's report templates, for the commands that write pages (report, calibrate, diagnose)
-from hexatherm.workflows.options import template_files as template_files
-from hexatherm.workflows.options import template_folder as template_folder
+from hexatherm.workflows.common import template_files as template_files
+from hexatherm.workflows.common import template_folder as template_folder
+from hexatherm.workflows.limits import limits_text
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -430,7 +430,7 @@ def decision_rule_options(func: F) -> F:
     (ILAC-G8:09/2019), over a lab file's ``decision_rule:``."""
 
     def rule(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
-        from hexatherm.workflows.options import decision_rules  # numpy: not at start-up
+        from hexatherm.workflows.common import decision_rules  # numpy: not at start-up
 
         rules = decision_rules()
         if value is not None and value not in rules:

@@ -13,7 +13,7 @@ from hexatherm.cli.options import (
     overwrite_option,
     reading_options,
 )
-from hexatherm.io.files import ReadOptions
+from hexatherm.workflows.common import ReadOptions
 
 
 @click.command("register")
@@ -66,19 +66,10 @@ def command(
     face's normal (towards the balls), X runs from the first bore's centre to the
     second's, the origin is the first bore's centre on the face plus the offset.
     """
-    from hexatherm.io.config import balls_to_yaml, read_datums
-    from hexatherm.io.outputs import check_output_settled, write_output_file
-    from hexatherm.workflows.register import BALLS_RESOLUTION_MM, register_balls
+    from hexatherm.workflows.register import register
 
-    inputs = [measurement, datums_path]
-    check_output_settled(out, kind="file", inputs=inputs, overwrite=overwrite)
-    datums = read_datums(datums_path)
-    result = register_balls(measurement, datums, fixed_diameter, diameter_tolerance_um, reading)
-    write_output_file(
-        out,
-        balls_to_yaml(result.balls, result.u_centre_um, BALLS_RESOLUTION_MM),
-        inputs=inputs,
-        overwrite=overwrite,
+    result = register(
+        measurement, datums_path, out, fixed_diameter, diameter_tolerance_um, overwrite, reading
     )
     plane, (b1, b2) = result.frame.plane, result.frame.bores
     echo_err(f"top face: {plane.n} points, flatness {plane.form_um:.2f} um")

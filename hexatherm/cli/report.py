@@ -4,33 +4,23 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Any
 
 import click
 
 from hexatherm.cli.options import (
+    F,
     ProgressBars,
-    check_draws,
     clean_errors,
-    coverage_factor_option,
-    decision_rule_options,
     document_options,
     echo_err,
     imports_done,
-    interpolation_option,
     lab_option,
-    mc_option,
     overwrite_option,
-    pose_tolerance_option,
-    quality_threshold_option,
-    reading_options,
-    seed_option,
     template_dir_option,
     template_files,
     template_folder,
-    tolerance_option,
 )
-from hexatherm.io.files import ReadOptions
-from hexatherm.session import Tolerance
 
 
 def _file_name(ctx: click.Context, param: click.Parameter, value: str | None) -> Path | None:
@@ -48,8 +38,51 @@ def _file_name(ctx: click.Context, param: click.Parameter, value: str | None) ->
     return Path(value)
 
 
+#: process's options that report took before issue 34: refused, naming process
+PROCESS_OPTIONS = {
+    "--interpolation": True,
+    "--fixed-diameter": False,
+    "--pose-tolerance": True,
+    "--mc": True,
+    "--seed": True,
+    "--quality-threshold": True,
+    "--coverage-factor": True,
+    "--tolerance": True,
+    "--decision-rule": True,
+    "--guard-factor": True,
+    "--allow-truncated": False,
+    "--keep-later": False,
+}
+
+
+def _process_option(ctx: click.Context, param: click.Parameter, value: object) -> None:
+    """A process option given to report: a usage error saying where it goes."""
+    if value not in (None, False, ()):
+        name = param.opts[0]
+        raise click.UsageError(
+            f"{name} is an option of process: report renders what process wrote, with "
+            f"process's options (recorded in the results' provenance.json); run "
+            f"'hexatherm process SESSION {name} ...', then 'hexatherm report SESSION'",
+            ctx,
+        )
+
+
+def refused_process_options(func: F) -> F:
+    """Every option of :data:`PROCESS_OPTIONS`, hidden, refused when given."""
+    for name, takes_value in PROCESS_OPTIONS.items():
+        kind: dict[str, Any] = (
+            {"type": click.STRING, "multiple": name in ("--quality-threshold", "--tolerance")}
+            if takes_value
+            else {"is_flag": True}
+        )
+        func = click.option(
+            name, hidden=True, expose_value=False, callback=_process_option, **kind
+        )(func)
+    return func
+
+
 @click.command("report")
-@click.argument("session", type=click.Path(exists=True, path_type=Path))
+@click.argument("source", metavar="RESULTS", type=click.Path(exists=True, path_type=Path))
 @click.option(
     "-o",
     "--out",
@@ -57,52 +90,25 @@ def _file_name(ctx: click.Context, param: click.Parameter, value: str | None) ->
     type=click.Path(dir_okay=False),
     callback=_file_name,
     default=None,
-    help="Output HTML file [default: SESSION/report.html].",
+    help="Output HTML file [default: report.html beside the results folder, in the session].",
 )
 @overwrite_option
-@interpolation_option
-@click.option(
-    "--fixed-diameter",
-    "fixed_diameter",
-    is_flag=True,
-    help="Fit spheres to probed points with the radius fixed to the balls file's "
-    "(as in process); default: free radius.",
-)
-@pose_tolerance_option
-@mc_option
-@seed_option
-@quality_threshold_option
-@coverage_factor_option(
-    "in the figure, the tables and the verdict (2, as calibration certificates use)"
-)
 @lab_option
 @template_dir_option
-@tolerance_option
-@decision_rule_options
 @document_options
-@reading_options
+@refused_process_options
 @clean_errors
 def command(
-    session: Path,
+    source: Path,
     out: Path | None,
     overwrite: bool,
-    interpolation: str,
-    fixed_diameter: bool,
-    pose_tolerance: tuple[float, float] | None,
-    mc: int,
-    seed: int,
-    quality_thresholds: tuple[str, ...],
-    coverage_factor: float,
     lab: Path | None,
     template_dir: Path | None,
-    tolerances: dict[str, Tolerance],
-    decision_rule: str | None,
-    guard_factor: float | None,
     report_number: str | None,
     title: str | None,
-    reading: ReadOptions,
 ) -> None:
-    """Process SESSION (a folder with session.yaml, or the file itself) and write its report.
+    """Write the report of RESULTS, a results folder that process wrote (or a session,
+    whose results/ it reports).
 
     One HTML file, figures embedded, that prints on A4: a verdict first (targets,
     failed checks, the largest corrected deviation with its expanded uncertainty
@@ -110,59 +116,53 @@ def command(
     conventional and corrected, as deviations from the commanded pose with U (the
     paper's Figure 6); the temperatures (Figure 7); the legs' growth at the
     references; the registration residuals; quality flags; the session's metadata
-    and the provenance (command line, options, limits, inputs' SHA-256). Nothing is
-    written when processing fails. A lab's own templates (--template-dir, or the lab
-    file's templates:) give the page its letterhead and wording.
+    and the provenance (command line, options, limits, inputs' and results' SHA-256).
+
+    The page shows process's results and nothing else: process's options (interpolation,
+    Monte Carlo draws, limits, tolerances and decision rule, coverage factor k) are the
+    ones process recorded in provenance.json, and report asks none again; a lab file's
+    tolerances for components process did not judge are judged on the numbers process
+    wrote, and the screen says so. Results whose inputs
+    changed since process wrote them are refused (stale: run process again); a session
+    without results is processed first with process's defaults, as 'hexatherm process
+    SESSION' does (SESSION/results), and the screen says so. A lab's own templates (--template-dir,
+    or the lab file's templates:) give the page its letterhead and wording.
     """
-    from hexatherm.io.config import read_session
-    from hexatherm.io.config.identity import read_lab
-    from hexatherm.io.outputs import check_output_settled, write_output_file
-    from hexatherm.workflows.process.conformity import decision_rule as rule_of
-    from hexatherm.workflows.process.pipeline import Checks, process_session
-    from hexatherm.workflows.process.quality import parse_threshold, session_thresholds
-    from hexatherm.workflows.report import Verdict, build_report, verdict_items
+    from hexatherm.workflows.report import verdict_items
+    from hexatherm.workflows.report.run import ReportRequest, report
 
     imports_done()
-    check_draws(mc)
-    lab_fields, lab_tolerances = read_lab(lab) if lab is not None else ({}, {})
     templates = template_folder(template_dir, lab)
     extra_inputs = ([] if lab is None else [lab]) + template_files(templates, lab)
-    overrides = dict(parse_threshold(t) for t in quality_thresholds)
-    folder = session if session.is_dir() else session.parent
-    out_file = out if out is not None else folder / "report.html"
-    inputs = read_session(session).input_files() + extra_inputs
-    check_output_settled(out_file, kind="file", inputs=inputs, overwrite=overwrite)
+    request = ReportRequest(
+        source, out, overwrite, lab, templates, extra_inputs, report_number, title
+    )
     with ProgressBars() as bars:
-        result = process_session(
-            session,
-            interpolation,  # type: ignore[arg-type]
-            0.0 if fixed_diameter else None,
-            Checks(pose_tolerance=pose_tolerance),
-            progress=bars.reading,
-            reading=reading,
-        )
-    for warning in result.warnings:
+        outcome = report(request, bars.reading, bars.draws)
+    for warning in outcome.result.warnings:
         echo_err(f"warning: {warning}")
-    verdicts: list[Verdict] = []
-    with ProgressBars() as bars:
-        page = build_report(
-            result,
-            mc,
-            seed,
-            session_thresholds(result.session, overrides),
-            progress=bars.draws,
-            coverage_factor=coverage_factor,
-            on_verdict=verdicts.append,
-            lab_fields=lab_fields,
-            tolerances={**lab_tolerances, **result.session.tolerances, **tolerances},
-            extra_inputs=extra_inputs,
-            template_dir=templates,
-            rule=rule_of(lab_fields, decision_rule, guard_factor),
-            report_number=report_number,
-            title=title,
+    if outcome.processed_first:
+        for path in outcome.processed_first:
+            echo_err(f"wrote {path}")
+        echo_err(
+            f"no results in {source}: processed it first as 'hexatherm process {source}' "
+            "does, with process's defaults (run process with options of your own, then "
+            "report)"
         )
-    write_output_file(out_file, page, inputs=inputs, overwrite=overwrite)
-    for summary in verdicts:  # the page's verdict, on the screen too
+    echo_err(f"rendered {outcome.results.folder} ({outcome.results.command_line})")
+    if outcome.lab_judged:
+        echo_err(
+            f"conformity: {', '.join(outcome.lab_judged)} judged against the lab file's "
+            "tolerances on the numbers process wrote (process did not judge them: "
+            "give process --tolerance to have them in poses.csv)"
+        )
+    if outcome.rule_ignored:
+        echo_err(
+            f"warning: the lab file's decision_rule {outcome.rule_ignored} is not used: "
+            "process judged the tolerances with its own rule (recorded); give process "
+            "--decision-rule"
+        )
+    for summary in outcome.verdicts:  # the page's verdict, on the screen too
         for head, text in verdict_items(summary):
             click.echo(f"{head}{'' if text.startswith('(') else ':'} {text}")
-    echo_err(f"wrote {out_file}")
+    echo_err(f"wrote {outcome.out_file}")

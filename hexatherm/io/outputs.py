@@ -76,9 +76,9 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 from hexatherm.errors import (
     ForeignFilesError,
@@ -463,15 +463,15 @@ def output_dir(
     lock_timeout_s: float = DEFAULT_LOCK_TIMEOUT_S,
     on_wait: Callable[[Path], None] | None = None,
     sessions: bool = False,
+    notes: Mapping[str, Any] | None = None,
 ) -> Iterator[Path]:
     """Yield a temporary folder that becomes the output folder ``output`` if the block succeeds.
 
     Checks as :func:`check_output` before the block and again under the lock before
     the swap (another run may have written meanwhile); writes the manifest of what
     the block wrote into the folder, and (in a command line's run) ``provenance.json``
-    (:mod:`hexatherm.io.provenance`); swaps it in
-    (:func:`hexatherm.io.atomic.atomic_output_dir`).
-    On any error nothing is left behind and ``output`` is as it was.
+    (:mod:`hexatherm.io.provenance`, with ``notes``); swaps it in
+    (:func:`hexatherm.io.atomic.atomic_output_dir`). On any error nothing is left behind.
 
     Parameters
     ----------
@@ -503,7 +503,7 @@ def output_dir(
                 raise ForeignFilesError(_foreign_message(option, given, entries), entries=entries)
         facts = current_run()
         if facts is not None:  # a command line's run: where the folder came from
-            (tmp / PROVENANCE_NAME).write_text(provenance_json(facts, inputs), encoding="utf-8")
+            (tmp / PROVENANCE_NAME).write_text(provenance_json(facts, inputs, notes), "utf-8")
         (tmp / MANIFEST_NAME).write_bytes(manifest_for_tree(tmp, _writer()).to_json())
 
     with atomic_output_dir(

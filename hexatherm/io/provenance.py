@@ -174,8 +174,14 @@ def command_line(facts: RunFacts) -> str:
     return shlex.join(["hexatherm", facts.command, *facts.argv])
 
 
-def provenance_json(facts: RunFacts, inputs: Iterable[str | os.PathLike[str]]) -> str:
-    """The content of ``provenance.json`` for a run that read ``inputs``."""
+def provenance_json(
+    facts: RunFacts,
+    inputs: Iterable[str | os.PathLike[str]],
+    notes: Mapping[str, Any] | None = None,
+) -> str:
+    """The content of ``provenance.json`` for a run that read ``inputs``; ``notes``, what
+    the command found that a later reader of its outputs needs (``process``: its warnings),
+    under the command's name."""
     files = input_entries(inputs)
     doc = {
         "format": PROVENANCE_FORMAT,
@@ -190,4 +196,6 @@ def provenance_json(facts: RunFacts, inputs: Iterable[str | os.PathLike[str]]) -
         "python": platform.python_version(),
         "libraries": {name: _version(name) for name in LIBRARIES},
     }
+    if notes is not None:
+        doc[facts.command] = json_ready(dict(notes))
     return json.dumps(doc, indent=1, allow_nan=False) + "\n"

@@ -249,3 +249,26 @@ def register_balls(
     return BallRegistration(
         balls, frame, platform2cmm, 2 * fits.radius_mm, fits.form_um, fits.n, distance, cov
     )
+
+
+def register(
+    measurement: os.PathLike[str],
+    datums_path: os.PathLike[str],
+    out: os.PathLike[str],
+    fixed_diameter: bool,
+    diameter_tolerance_um: float,
+    overwrite: bool,
+    reading: ReadOptions,
+) -> BallRegistration:
+    """``hexatherm register``: the output checked before any work, the datums read, the
+    frame built and the balls registered, the balls file written to ``out``."""
+    from hexatherm.io.config import balls_to_yaml, read_datums
+    from hexatherm.io.outputs import check_output_settled, write_output_file
+
+    inputs = [measurement, datums_path]
+    check_output_settled(out, kind="file", inputs=inputs, overwrite=overwrite)
+    datums = read_datums(datums_path)
+    result = register_balls(measurement, datums, fixed_diameter, diameter_tolerance_um, reading)
+    text = balls_to_yaml(result.balls, result.u_centre_um, BALLS_RESOLUTION_MM)
+    write_output_file(out, text, inputs=inputs, overwrite=overwrite)
+    return result

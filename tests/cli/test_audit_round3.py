@@ -255,7 +255,7 @@ def test_a_huge_file_nothing_reads_is_neither_read_nor_hashed(tmp_path, monkeypa
 
     monkeypatch.setattr(provenance, "_sha256", spy)
     out = tmp_path / "report.html"
-    done = invoke("report", session, "--mc", 0, "--template-dir", folder, "-o", out)
+    done = invoke("report", session, "--template-dir", folder, "-o", out)
     assert done.exit_code == 0, done.output
     assert folder / "closing.html.j2" in hashed
     page = out.read_text(encoding="utf-8")

@@ -60,7 +60,8 @@ def test_diagnose_plus_minus_is_labelled_k_1():
     )
 
 
-@pytest.mark.parametrize("command", ["process", "report"])
+# report takes no process option (tests/cli/test_report_results.py)
+@pytest.mark.parametrize("command", ["process"])
 def test_a_bad_quality_threshold_is_a_usage_error(tmp_path, command):
     out = tmp_path / ("o" if command == "process" else "r.html")
     result = CliRunner().invoke(

@@ -81,7 +81,7 @@ PLAN = [
             "--diameter-mm",
             "nan",
         ],
-        ["report", SESSION, "--mc", "1"],
+        ["process", SESSION, "--mc", "1"],
         ["process", SESSION, "--mc", "-5"],
         ["process", SESSION, "--seed", "-1"],
         ["process", SESSION, "--distance-tolerance-um", "nan"],

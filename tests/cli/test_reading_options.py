@@ -76,7 +76,8 @@ def test_a_ball_measured_twice_keeps_the_later_only_when_asked(tmp_path: Path) -
     pd.testing.assert_frame_equal(got, poses(truth))
 
 
-@pytest.mark.parametrize("command", ["process", "report"])
+# report takes no process option (tests/cli/test_report_results.py)
+@pytest.mark.parametrize("command", ["process"])
 def test_a_temperature_log_cut_short(tmp_path: Path, command: str) -> None:
     cut = copy("paper-zero-pose", tmp_path / "cut")
     text = (cut / "temperatures.csv").read_text()

@@ -126,11 +126,8 @@ USAGE = {
         ["--hexapod", ROOT / "configs" / "symetrie-like.yaml"],
         r"'--hexapod': --hexapod is the twin's model: use it with --method twin",
     ),
-    "report --mc 1": ("report", ["--mc", "1"], r"'--mc': Monte Carlo needs at least 2 draws"),
-    "report --mc -5": ("report", ["--mc", "-5"], r"'--mc': -5 is not in the range"),
-    "report --seed -1": ("report", ["--seed", "-1"], r"'--seed': -1 is not in the range"),
-    "report --pose-tolerance empty": (
-        "report",
+    "process --pose-tolerance empty": (
+        "process",
         ["--pose-tolerance", ""],
         r"'--pose-tolerance': '': expected MM,DEG",
     ),

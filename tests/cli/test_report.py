@@ -42,15 +42,19 @@ def test_report_writes_the_page_into_the_session_folder(session):
     # the provenance of a command-line run: its command line and options
     # paths relative to the session folder, options as a person writes them (issue 33)
     assert "<td>hexatherm report .</td>" in page
-    assert "--coverage-factor 2.0" in page and "(k = 2)" in page
+    assert "(k = 2)" in page
     assert "coverage_factor = " not in page and "None" not in page
     assert str(session.parent) not in page  # no path of the lab's computer
+    # and the results it rendered: process's provenance, with its SHA-256
+    assert "results/provenance.json" in page and "results/poses.csv" in page
     assert f"wrote {session / 'report.html'}" in result.output
     # the one hidden file is hexatherm's record of what it wrote there, for --overwrite
     assert sorted(p.name for p in session.iterdir() if p.name.startswith(".")) == [
         ".hexatherm-manifest.json"
     ]
+    # no results there: processed first, as process does (its results/), and said
     assert sorted(read_manifest(session).files) == ["report.html"]
+    assert (session / "results" / "provenance.json").is_file()
     again = run("report", session, "--overwrite")
     assert again.exit_code == 0, again.output
 
@@ -66,24 +70,11 @@ def test_report_refuses_to_overwrite_unless_asked(session, tmp_path, monkeypatch
     assert foreign.exit_code == 1 and "r.html (not written by hexatherm" in foreign.output
     assert out.read_text() == "keep me\n"
     out.unlink()
-    # the page itself is tested above; here that --overwrite replaces the file and
-    # that the options reach the report
-    calls = []
-
-    def fake_report(result, mc, seed, thresholds, progress=None, coverage_factor=2.0, **_):
-        calls.append(
-            (result.interpolation, mc, seed, thresholds.registration_rms_um, coverage_factor)
-        )
-        if progress is not None:
-            progress(10, mc)
-        return "<html>new</html>\n"
-
-    monkeypatch.setattr(hexatherm.workflows.report, "build_report", fake_report)
-    replaced = run(
-        "report",
+    # the page itself is tested above; here that --overwrite replaces the file and that
+    # process's options (recorded in its provenance.json) reach the report
+    processed = run(
+        "process",
         session,
-        "-o",
-        out,
         "--overwrite",
         "--interpolation",
         "before",
@@ -93,13 +84,32 @@ def test_report_refuses_to_overwrite_unless_asked(session, tmp_path, monkeypatch
         3,
         "--quality-threshold",
         "registration_rms_um=1.5",
+        "--tolerance",
+        "Tx=20um",
         "--coverage-factor",
         "3",
     )
+    assert processed.exit_code == 0, processed.output
+    calls = []
+    real = hexatherm.workflows.report.html.report_html
+
+    def spy(result, uncertainty=None, quality=None, coverage_factor=2.0, **kwargs):
+        calls.append(
+            (
+                result.interpolation,
+                uncertainty.draws,
+                uncertainty.seed,
+                quality.thresholds.registration_rms_um,
+                coverage_factor,
+            )
+        )
+        return real(result, uncertainty, quality, coverage_factor, **kwargs)
+
+    monkeypatch.setattr(hexatherm.workflows.report.html, "report_html", spy)
+    replaced = run("report", session, "-o", out, "--overwrite")
     assert replaced.exit_code == 0, replaced.output
     assert calls[-1] == ("before", 50, 3, 1.5, 3.0)
-    assert "Monte Carlo draws" in replaced.output  # the draws' progress bar
-    assert out.read_text() == "<html>new</html>\n"
+    assert "<td>interpolation</td><td>before</td>" in out.read_text().replace("\n", "")
     assert sorted(p.name for p in out.parent.iterdir()) == [".hexatherm-manifest.json", "r.html"]
 
 
@@ -117,7 +127,8 @@ def test_report_of_a_bad_session_fails_cleanly_and_writes_nothing(session):
 
 def test_report_refuses_a_bad_quality_threshold(session):
     result = run("report", session, "--quality-threshold", "form=5")
-    assert result.exit_code == 2 and "unknown name 'form'" in result.output  # a usage error
+    assert result.exit_code == 2  # a usage error: process's option, not report's
+    assert "--quality-threshold is an option of process" in result.output
     assert not (session / "report.html").exists()
 
 
@@ -131,7 +142,7 @@ def test_report_refuses_a_bad_coverage_factor(session, k):
 def test_report_is_listed_by_help():
     result = run("--help")
     assert result.exit_code == 0 and "report" in result.output
-    assert "Write an HTML report of a session with figures." in result.output
+    assert "Write the HTML report of a processed session's results." in result.output
 
 
 def test_report_prints_the_pages_verdict(session, tmp_path):

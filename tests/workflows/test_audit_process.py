@@ -168,7 +168,8 @@ def test_smooth_interpolation_on_a_points_session(tmp_path: Path, fixed: bool) -
             assert abs(error) <= 3 * float(row[f"u_{axis}_corr_mm"]), (row["label"], axis)
 
 
-@pytest.mark.parametrize("command", ["process", "report"])
+# report takes no process option (tests/cli/test_report_results.py)
+@pytest.mark.parametrize("command", ["process"])
 def test_seed_without_monte_carlo_is_a_usage_error(tmp_path: Path, command: str) -> None:
     # --seed 5 without --mc: the linear propagation draws nothing, and the seed was
     # ignored without a word (results identical to --seed 0), as --hexapod without

@@ -146,8 +146,9 @@ def test_an_asset_too_large_to_embed_is_refused(tmp_path):
     # one byte less is embedded, whole
     (folder / "big.png").write_bytes(b"\x89PNG" + bytes(ASSET_MAX_BYTES - 4))
     out = tmp_path / "ok.html"
+    session = session_copy(tmp_path / "s")  # report processes it first: its results/
     result = CliRunner().invoke(
-        main, ["report", str(SESSION), "--template-dir", str(folder), "-o", str(out)]
+        main, ["report", str(session), "--template-dir", str(folder), "-o", str(out)]
     )
     assert result.exit_code == 0, result.output
     page = out.read_text(encoding="utf-8")
@@ -193,6 +194,7 @@ def test_a_template_folder_that_holds_the_report_is_replaced_with_overwrite(tmp_
     session = session_copy(tmp_path)
     folder = session if where == "session" else templates(tmp_path / "t", {"closing.html.j2": "x"})
     out = folder / "report.html"
+    assert CliRunner().invoke(main, ["process", str(session)]).exit_code == 0
     inputs = hashes(session, folder)
     args = ["report", str(session), "--template-dir", str(folder), "-o", str(out)]
     first = CliRunner().invoke(main, args)
@@ -373,8 +375,9 @@ def test_a_template_or_image_in_a_sub_folder_is_listed_in_the_provenance(tmp_pat
     templates(folder / ".git", {"HEAD": "ref: refs/heads/main\n"})  # a lab's own history
     templates(folder / "archive", {"old.html.j2": "<p>2019</p>\n"})  # not named: not read
     out = tmp_path / "report.html"
+    session = session_copy(tmp_path / "s")  # report processes it first: its results/
     result = CliRunner().invoke(
-        main, ["report", str(SESSION), "--template-dir", str(folder), "-o", str(out)]
+        main, ["report", str(session), "--template-dir", str(folder), "-o", str(out)]
     )
     assert result.exit_code == 0, result.output
     page = out.read_text(encoding="utf-8")
@@ -385,7 +388,7 @@ def test_a_template_or_image_in_a_sub_folder_is_listed_in_the_provenance(tmp_pat
         for path, sha in re.findall(r"<tr><td[^>]*>([^<]*)</td>.*?<td[^>]*>([0-9a-f]{64})<", files)
     )
     for name in ("closing.html.j2", "letterhead.html.j2", "parts/words.html.j2", "img/logo.svg"):
-        shown = os.path.relpath(folder / name, SESSION)  # relative to the session (issue 33)
+        shown = os.path.relpath(folder / name, session)  # relative to the session (issue 33)
         assert rows[shown] == hashlib.sha256((folder / name).read_bytes()).hexdigest()
     assert not any(".git" in path or "archive" in path for path in rows)
 
@@ -401,7 +404,9 @@ def test_the_command_line_in_the_provenance_runs_as_printed(tmp_path):
 
     session = session_copy(tmp_path / "Sessions 2026 'Zürich'")
     out = tmp_path / "the report.html"
-    args = ["report", str(session), "-o", str(out), "--tolerance", "Tx=2um"]
+    processed = CliRunner().invoke(main, ["process", str(session), "--tolerance", "Tx=2um"])
+    assert processed.exit_code == 0, processed.output
+    args = ["report", str(session), "-o", str(out)]
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
     page = out.read_text(encoding="utf-8")
@@ -409,7 +414,7 @@ def test_the_command_line_in_the_provenance_runs_as_printed(tmp_path):
     assert row is not None
     # paths relative to the session folder (no path of the lab's computer, issue 33): it
     # runs as printed from there, each path still one argument
-    relative = ["report", ".", "-o", os.path.relpath(out, session), "--tolerance", "Tx=2um"]
+    relative = ["report", ".", "-o", os.path.relpath(out, session)]
     assert shlex.split(html.unescape(row.group(1))) == ["hexatherm", *relative]
     assert (session / relative[3]).resolve() == out.resolve()
 
@@ -511,7 +516,8 @@ def test_a_long_path_in_the_provenance_does_not_shrink_the_printed_page(tmp_path
         "format: hexatherm-lab/1\nlab: Example Lab\n", encoding="utf-8"
     )
     out = tmp_path / "report.html"
-    args = ["report", str(SESSION), "--lab", str(deep / "laboratoryfile.yaml"), "-o", str(out)]
+    session = session_copy(tmp_path / "s")  # report processes it first: its results/
+    args = ["report", str(session), "--lab", str(deep / "laboratoryfile.yaml"), "-o", str(out)]
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
     pages = PAGE.findall(print_pdf(out, tmp_path / "report.pdf"))

@@ -118,6 +118,9 @@ def test_session_tolerances_and_report_verdict(tmp_path):
     with (session / "session.yaml").open("a") as f:
         f.write("\ntolerances: {Tx_um: 5.0, Ty_um: 5.0, Tz_um: 5.0}\n")
     out = tmp_path / "report.html"
+    # the session's tolerances are judged where the numbers are made, and the report
+    # renders that judgement (issue 34)
+    assert CliRunner().invoke(main, ["process", str(session)]).exit_code == 0
     result = CliRunner().invoke(main, ["report", str(session), "-o", str(out)])
     assert result.exit_code == 0, result.output
     poses = pd.read_csv(SESSION / "expected" / "poses.csv")
@@ -132,10 +135,12 @@ def test_session_tolerances_and_report_verdict(tmp_path):
     # the risk the rule carries at its acceptance limit: 1 - Phi(2) for w = U, k = 2
     assert "acceptance limit 2.28 %" in page
     assert page.count("<td>conforms</td>") >= int(np.sum(decisions == CONFORMS))
-    # --tolerance wins over the session's, key by key
-    again = CliRunner().invoke(
-        main, ["report", str(session), "-o", str(out), "--overwrite", "--tolerance", "Tx=0.01um"]
+    # process's --tolerance wins over the session's, key by key
+    processed = CliRunner().invoke(
+        main, ["process", str(session), "--overwrite", "--tolerance", "Tx=0.01um"]
     )
+    assert processed.exit_code == 0, processed.output
+    again = CliRunner().invoke(main, ["report", str(session), "-o", str(out), "--overwrite"])
     assert again.exit_code == 0, again.output
     decisions[:, 0] = expected_decisions(poses, "Tx", "um", 0.01, 2.0)
     # with U ~1.3 um nothing can conform to 0.01 um: where |d| - U > T it does not, else

@@ -25,10 +25,10 @@ from hexatherm.core.conformity import (
 from hexatherm.core.geometry import to_um_urad
 from hexatherm.session import TOLERANCE_UNITS, Tolerance
 from hexatherm.typing import FloatArray
-from hexatherm.workflows.process.pipeline import ProcessResult
 
 if TYPE_CHECKING:
-    from hexatherm.workflows.process.uncertainty import PoseUncertainty
+    from hexatherm.workflows.process.views import Processed, Uncertain
+
 
 __all__ = [
     "Conformity",
@@ -91,6 +91,24 @@ def parse_tolerances(text: str) -> dict[str, Tolerance]:
         if key in found:
             raise ValueError(f"{item.strip()!r}: {name} is given twice")
         found[key] = value if lower is None else (lower, value)
+    return found
+
+
+def parse_recorded(recorded: Mapping[str, object]) -> dict[str, Tolerance]:
+    """The tolerances as ``provenance.json`` records them (``{"Tx_um": 2.0, "Tz_um": [-1.0,
+    3.0]}``) as :func:`parse_tolerances` gives them; ResultsError on anything else."""
+    from hexatherm.errors import ResultsError
+
+    found: dict[str, Tolerance] = {}
+    for key, value in recorded.items():
+        if key not in _KEYS:
+            raise ResultsError(f"provenance.json: tolerance {key!r} is not one of {_KEYS}")
+        if isinstance(value, int | float):
+            found[key] = float(value)
+        elif isinstance(value, list | tuple) and len(value) == 2:
+            found[key] = (float(value[0]), float(value[1]))
+        else:
+            raise ResultsError(f"provenance.json: tolerance {key}: {value!r} is no tolerance")
     return found
 
 
@@ -195,8 +213,8 @@ class Conformity:
 
 
 def conformity(
-    result: ProcessResult,
-    uncertainty: PoseUncertainty | None,
+    result: Processed,
+    uncertainty: Uncertain | None,
     tolerances: dict[str, Tolerance],
     coverage_factor: float = 2.0,
     rule: DecisionRule | None = None,

@@ -316,6 +316,17 @@ def _in_utc(source: _Timed, offset_s: float) -> _Timed:
     return dataclasses.replace(source, time_s=source.time_s - offset_s, time_aware=True)
 
 
+def session_temperatures(session: Session, reading: ReadOptions) -> Temperatures | None:
+    """The session's thermocouple log (None without one), its naive times made UTC by
+    the session's ``utc_offset``, as processing reads it."""
+    if session.temperatures is None:
+        return None
+    temperatures = read_temperatures(session.temperatures, allow_truncated=reading.allow_truncated)
+    if session.utc_offset_s is not None:
+        temperatures = _in_utc(temperatures, session.utc_offset_s)
+    return temperatures
+
+
 def read_measured(
     session: Session,
     fixed_diameter_mm: float | None = None,
@@ -359,13 +370,8 @@ def read_measured(
         records = [_in_utc(r, session.utc_offset_s) for r in records]
         points = [None if p is None else _in_utc(p, session.utc_offset_s) for p in points]
     centres = assemble_centres(records, session)
-    temperatures = None
-    if session.temperatures is not None:
-        temperatures = read_temperatures(
-            session.temperatures, allow_truncated=reading.allow_truncated
-        )
-        if session.utc_offset_s is not None:
-            temperatures = _in_utc(temperatures, session.utc_offset_s)
+    temperatures = session_temperatures(session, reading)
+    if temperatures is not None:
         if temperatures.time_kind != centres.time_kind:
             raise InputError(
                 f"times are {temperatures.time_kind} here but "

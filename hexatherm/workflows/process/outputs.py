@@ -35,9 +35,9 @@ reference steps, the growth since R0 ``dq_leg1_um`` ..
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -52,6 +52,7 @@ if TYPE_CHECKING:
     from hexatherm.workflows.process.conformity import Conformity
     from hexatherm.workflows.process.quality import QualityReport
     from hexatherm.workflows.process.uncertainty import PoseUncertainty
+    from hexatherm.workflows.process.views import Processed, Uncertain
 
 POSE_NAMES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
 POSE_UNITS = ("mm", "mm", "mm", "deg", "deg", "deg")
@@ -262,6 +263,7 @@ def write_results(
     twin: np.ndarray | None = None,
     conformity: Conformity | None = None,
     extra_inputs: Sequence[Path] = (),
+    notes: Mapping[str, Any] | None = None,
 ) -> list[Path]:
     """Write ``poses.csv``, ``legs.csv``, ``fits.csv``, ``covariance.csv`` (and
     ``quality.csv``) into ``out``; ``extra_inputs`` are files read besides the session's
@@ -271,7 +273,8 @@ def write_results(
     propagation (:func:`hexatherm.workflows.process.uncertainty.pose_uncertainty`); ``quality.csv``
     is written when ``quality`` is given (``hexatherm process`` always gives it);
     ``twin`` (M, 6) adds the twin-corrected poses (``process --method twin``);
-    ``conformity`` the conformity columns (``process --tolerance``).
+    ``conformity`` the conformity columns (``process --tolerance``); ``notes`` go into
+    ``provenance.json`` (what ``report`` says beyond the CSV files).
     """
     if uncertainty is None:
         from hexatherm.workflows.process.uncertainty import pose_uncertainty
@@ -291,7 +294,7 @@ def write_results(
         for name, frame in tables.items()
     }
     inputs = [*session_inputs(result), *extra_inputs]
-    with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
+    with output_dir(out, inputs=inputs, overwrite=overwrite, notes=notes) as tmp:
         for name, text in texts.items():
             (tmp / name).write_text(text, encoding="utf-8", newline="")
     return [Path(out) / name for name in texts]
@@ -388,7 +391,7 @@ def deviation_table(
 
 
 def insignificant_corrections(
-    result: ProcessResult, uncertainty: PoseUncertainty, coverage_factor: float = 2.0
+    result: Processed, uncertainty: Uncertain, coverage_factor: float = 2.0
 ) -> list[tuple[str, float, float]]:
     """The components whose thermal correction (the largest |corrected - conventional|
     over the targets) is smaller than the corrected poses' expanded uncertainty (their

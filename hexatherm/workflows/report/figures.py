@@ -15,14 +15,12 @@ import numpy.typing as npt
 from hexatherm.core.geometry import to_um_urad
 from hexatherm.io.records import seconds_to_iso
 from hexatherm.typing import FloatArray
-from hexatherm.workflows.process.pipeline import ProcessResult
+from hexatherm.workflows.process.views import Processed, Uncertain
 from hexatherm.workflows.report.text import exact, unit_text
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
-
-    from hexatherm.workflows.process.uncertainty import PoseUncertainty
 
 
 POSE_NAMES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
@@ -80,19 +78,19 @@ MARKS_PER_LINE = 12
 
 
 # --------------------------------------------------------------------- numbers
-def target_labels(result: ProcessResult) -> list[str]:
+def target_labels(result: Processed) -> list[str]:
     """Labels of the targets, in plan order."""
     return [result.session.plan.labels[i] for i in result.correction.target_index]
 
 
-def pose_deviations(result: ProcessResult) -> tuple[FloatArray, FloatArray]:
+def pose_deviations(result: Processed) -> tuple[FloatArray, FloatArray]:
     """Conventional and corrected poses minus the commanded pose, um and urad, shape (M, 6)."""
     corr = result.correction
     commanded = result.session.plan.poses[corr.target_index]
     return to_um_urad(corr.conventional - commanded), to_um_urad(corr.corrected - commanded)
 
 
-def start_time_s(result: ProcessResult) -> float:
+def start_time_s(result: Processed) -> float:
     """Start of the session: its first temperature sample or its first step, the earlier."""
     start = float(np.min(result.centres.times_s))
     if result.temperatures is not None and result.temperatures.time_s.size:
@@ -100,12 +98,12 @@ def start_time_s(result: ProcessResult) -> float:
     return start
 
 
-def hours_since_start(result: ProcessResult, times_s: npt.ArrayLike) -> FloatArray:
+def hours_since_start(result: Processed, times_s: npt.ArrayLike) -> FloatArray:
     """Times in hours since :func:`start_time_s`."""
     return (np.asarray(times_s, dtype=float) - start_time_s(result)) / 3600.0
 
 
-def reference_growth_um(result: ProcessResult) -> tuple[npt.NDArray[np.intp], FloatArray]:
+def reference_growth_um(result: Processed) -> tuple[npt.NDArray[np.intp], FloatArray]:
     """Thermal growth of every leg at every reference step since R0, um.
 
     Returns
@@ -122,7 +120,7 @@ def reference_growth_um(result: ProcessResult) -> tuple[npt.NDArray[np.intp], Fl
     return refs, (q[refs] - q[refs[0]]) * 1e3
 
 
-def _time_text(result: ProcessResult, seconds: float) -> str:
+def _time_text(result: Processed, seconds: float) -> str:
     if result.centres.time_kind == "iso":
         return seconds_to_iso(seconds)[:19]
     return f"{seconds:g} s"
@@ -198,8 +196,8 @@ def _room_below(fig: Figure, ax: Axes) -> None:
 
 
 def pose_figure(
-    result: ProcessResult,
-    uncertainty: PoseUncertainty | None = None,
+    result: Processed,
+    uncertainty: Uncertain | None = None,
     coverage_factor: float = 2.0,
     failing: Collection[str] = (),
 ) -> Figure:
@@ -331,7 +329,7 @@ def plain_text(text: str) -> str:
     return text.replace("$", "\\$")
 
 
-def temperature_figure(result: ProcessResult) -> Figure | None:
+def temperature_figure(result: Processed) -> Figure | None:
     """The paper's Figure 7: leg temperatures (and air, ...) over time; None without a log.
 
     Lines are labelled ``"leg 1"`` .. ``"leg 6"`` and by the further columns' names
@@ -377,7 +375,7 @@ def temperature_figure(result: ProcessResult) -> Figure | None:
     return fig
 
 
-def _mark_targets(ax: Axes, result: ProcessResult) -> None:
+def _mark_targets(ax: Axes, result: Processed) -> None:
     """Ticks at the bottom of ``ax`` at the targets' times (no legend entry)."""
     hours = hours_since_start(result, result.centres.times_s[result.correction.target_index])
     ax.plot(
@@ -393,7 +391,7 @@ def _mark_targets(ax: Axes, result: ProcessResult) -> None:
     )
 
 
-def growth_figure(result: ProcessResult) -> Figure:
+def growth_figure(result: Processed) -> Figure:
     """Thermal growth of every leg measured at the references since R0 (um) over time.
 
     One line per leg (labelled ``"leg 1"`` ..), one marker per reference step; the
@@ -426,7 +424,7 @@ def growth_figure(result: ProcessResult) -> Figure:
     return fig
 
 
-def registration_figure(result: ProcessResult) -> Figure:
+def registration_figure(result: Processed) -> Figure:
     """Registration residual (RMS, um) of every step over time, one marker style per kind.
 
     Lines are labelled by step kind (``"origin"``, ``"reference"``, ``"target"``).

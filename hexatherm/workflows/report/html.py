@@ -10,6 +10,7 @@ import numpy as np
 
 from hexatherm import __version__
 from hexatherm.workflows.process.pipeline import ProcessResult
+from hexatherm.workflows.process.views import Processed, Uncertain
 from hexatherm.workflows.report.document import (
     Document,
     document,
@@ -55,10 +56,9 @@ if TYPE_CHECKING:
     from hexatherm.io.provenance import RunFacts
     from hexatherm.session import Identification, QualityLimits, Tolerance
     from hexatherm.workflows.process.quality import QualityReport
-    from hexatherm.workflows.process.uncertainty import PoseUncertainty
 
 
-def _session_files(result: ProcessResult) -> dict[str, str]:
+def _session_files(result: Processed) -> dict[str, str]:
     """The hexapod, balls and plan file names as the session file gives them."""
     from hexatherm.io.yamlfile import YamlDoc
 
@@ -66,7 +66,7 @@ def _session_files(result: ProcessResult) -> dict[str, str]:
     return {key: str(data.get(key, "")) for key in ("hexapod", "balls", "plan")}
 
 
-def metadata_rows(result: ProcessResult) -> list[tuple[str, str]]:
+def metadata_rows(result: Processed) -> list[tuple[str, str]]:
     """``(field, value)`` rows describing the session and how it was processed."""
     session, plan = result.session, result.session.plan
     files = _session_files(result)
@@ -111,7 +111,7 @@ def metadata_rows(result: ProcessResult) -> list[tuple[str, str]]:
     ]
 
 
-def measured_time(result: ProcessResult, seconds: float) -> str:
+def measured_time(result: Processed, seconds: float) -> str:
     """A time of the session as a report prints it: ISO 8601 with its UTC offset
     (:func:`~hexatherm.workflows.report.document.offset_time`), or seconds."""
     if result.centres.time_kind != "iso":
@@ -119,7 +119,7 @@ def measured_time(result: ProcessResult, seconds: float) -> str:
     return offset_time(seconds, result.session.utc_offset_s, result.centres.time_aware)
 
 
-def session_dates(result: ProcessResult) -> str:
+def session_dates(result: Processed) -> str:
     """The dates of the session's measurements: first and last step, with their UTC
     offset (the one time span every part of a report prints)."""
     times = result.centres.times_s
@@ -270,7 +270,7 @@ def threshold_texts(thresholds: QualityLimits) -> list[str]:
 
 
 def provenance_block(
-    result: ProcessResult,
+    result: Processed,
     quality: QualityReport | None,
     facts: RunFacts | None,
     generated: str,
@@ -292,8 +292,8 @@ def provenance_block(
 
 
 def report_html(
-    result: ProcessResult,
-    uncertainty: PoseUncertainty | None = None,
+    result: Processed,
+    uncertainty: Uncertain | None = None,
     quality: QualityReport | None = None,
     coverage_factor: float = 2.0,
     facts: RunFacts | None = None,

@@ -159,7 +159,7 @@ def relative(path: str | os.PathLike[str], base: Path) -> str:
 
 
 #: parameters that are arguments (in the command line), not options
-_ARGUMENTS = ("session", "sessions", "sessions_dir")
+_ARGUMENTS = ("session", "sessions", "sessions_dir", "source")
 #: options whose parameter is named otherwise than their flag
 _FLAGS = {"tolerances": "--tolerance", "quality_thresholds": "--quality-threshold", "out": "-o"}
 

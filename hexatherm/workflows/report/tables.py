@@ -16,7 +16,7 @@ import numpy as np
 from hexatherm.core.geometry import to_um_urad
 from hexatherm.core.residuals import rms
 from hexatherm.typing import FloatArray
-from hexatherm.workflows.process.pipeline import ProcessResult
+from hexatherm.workflows.process.views import Processed, Uncertain
 from hexatherm.workflows.report.figures import (
     DEVIATION_UNITS,
     POSE_NAMES,
@@ -34,7 +34,6 @@ if TYPE_CHECKING:
     import pandas as pd
 
     from hexatherm.workflows.process.quality import QualityReport
-    from hexatherm.workflows.process.uncertainty import PoseUncertainty
 
 #: what follows the label of a step that failed a quality check, in every table
 FAIL_MARK = " \u2717"
@@ -63,15 +62,15 @@ def marked(label: str, failing: Mapping[str, str]) -> str:
     return label + FAIL_MARK if label in failing else label
 
 
-def commanded_columns(result: ProcessResult) -> list[int]:
+def commanded_columns(result: Processed) -> list[int]:
     """The pose parameters whose commanded value is not zero at every target."""
     commanded = result.session.plan.poses[result.correction.target_index]
     return [j for j in range(6) if np.any(commanded[:, j] != 0.0)]
 
 
 def poses_table_html(
-    result: ProcessResult,
-    uncertainty: PoseUncertainty | None,
+    result: Processed,
+    uncertainty: Uncertain | None,
     which: Literal["conventional", "corrected"],
     coverage_factor: float = 2.0,
     failing: Mapping[str, str] | None = None,
@@ -81,8 +80,8 @@ def poses_table_html(
 
 
 def poses_table(
-    result: ProcessResult,
-    uncertainty: PoseUncertainty | None,
+    result: Processed,
+    uncertainty: Uncertain | None,
     which: Literal["conventional", "corrected"],
     coverage_factor: float = 2.0,
     failing: Mapping[str, str] | None = None,
@@ -164,7 +163,7 @@ def poses_table(
     return table(header, rows, numeric_from=1, row_classes=classes, caption=caption)
 
 
-def growth_table(result: ProcessResult, failing: Mapping[str, str] | None = None) -> Table:
+def growth_table(result: Processed, failing: Mapping[str, str] | None = None) -> Table:
     """Every reference step: its time and the growth of each leg since R0 (µm)."""
     failing = failing or {}
     refs, growth = reference_growth_um(result)
@@ -259,7 +258,7 @@ def quality_summary(quality: QualityReport) -> Table:
     return out
 
 
-def shared_parts_table(uncertainty: PoseUncertainty, coverage_factor: float = 2.0) -> Table | None:
+def shared_parts_table(uncertainty: Uncertain, coverage_factor: float = 2.0) -> Table | None:
     """The expanded uncertainty of the corrected poses split into the part common to every
     target and the part of its own (RMS over the targets, µm and µrad), with what each
     means: the table every reader of the pose tables needs once."""

@@ -17,7 +17,7 @@ import numpy as np
 from hexatherm.core.geometry import to_um_urad
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.outputs import insignificant_corrections
-from hexatherm.workflows.process.pipeline import ProcessResult
+from hexatherm.workflows.process.views import Processed, Uncertain
 from hexatherm.workflows.report.figures import POSE_NAMES, pose_deviations, target_labels
 
 if TYPE_CHECKING:
@@ -25,7 +25,6 @@ if TYPE_CHECKING:
     from hexatherm.session import Tolerance
     from hexatherm.workflows.process.conformity import Conformity
     from hexatherm.workflows.process.quality import QualityReport
-    from hexatherm.workflows.process.uncertainty import PoseUncertainty
 
 
 @dataclass(frozen=True)
@@ -98,7 +97,7 @@ class Verdict:
     insignificant: tuple[tuple[str, float, float], ...] = ()
 
 
-def uncertainty_basis(uncertainty: PoseUncertainty | None) -> str:
+def uncertainty_basis(uncertainty: Uncertain | None) -> str:
     """One line: linear propagation or Monte Carlo (draws, seed), or "not available"."""
     if uncertainty is None:
         return "not available"
@@ -137,8 +136,8 @@ def failing_steps(quality: QualityReport | None) -> dict[str, str]:
 
 
 def verdict(
-    result: ProcessResult,
-    uncertainty: PoseUncertainty | None,
+    result: Processed,
+    uncertainty: Uncertain | None,
     quality: QualityReport | None,
     coverage_factor: float = 2.0,
     tolerances: dict[str, Tolerance] | None = None,
@@ -194,8 +193,8 @@ def verdict(
 
 
 def _conformity(
-    result: ProcessResult,
-    uncertainty: PoseUncertainty | None,
+    result: Processed,
+    uncertainty: Uncertain | None,
     tolerances: dict[str, Tolerance],
     coverage_factor: float,
     rule: DecisionRule | None,

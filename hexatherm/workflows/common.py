@@ -1,20 +1,41 @@
-"""What the options every command shares need of the floors below the workflows, so that
-the command line (``hexatherm.cli.options``) imports only the workflows (issue 34): how
-input files may be read, the run's facts for ``provenance.json``, a lab's report
-templates and the conformity's decision rules.
+"""What every command's options need of the floors below the workflows, so that the
+command line imports only the workflows (issue 34): how input files may be read, the
+run's facts for ``provenance.json``, a tolerance's type, the conformity's decision
+rules, and a lab's report templates.
 
 Light at import (the command line imports it at start-up): what needs numpy, scipy or
-Jinja2 is imported when called.
-"""
+Jinja2 is imported when called."""
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
-from hexatherm.io.files import ReadOptions
+from hexatherm.io.files import STRICT, ReadOptions
 from hexatherm.io.provenance import run_context
 
-__all__ = ["ReadOptions", "decision_rules", "run_context", "template_files", "template_folder"]
+if TYPE_CHECKING:
+    from hexatherm.session import Tolerance
+
+__all__ = [
+    "STRICT",
+    "ReadOptions",
+    "Tolerance",
+    "decision_rules",
+    "run_context",
+    "template_files",
+    "template_folder",
+]
+
+
+def __getattr__(name: str) -> Any:
+    """``Tolerance`` when asked for: :mod:`hexatherm.session` imports numpy, which the
+    command line does not load at start-up."""
+    if name == "Tolerance":
+        from hexatherm.session import Tolerance
+
+        return Tolerance
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def decision_rules() -> tuple[str, ...]:

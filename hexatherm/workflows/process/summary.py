@@ -1,0 +1,153 @@
+"""What ``process`` says on the screen of its uncertainty (lines the command line prints)."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from hexatherm.workflows.process.run import ProcessOutcome
+    from hexatherm.workflows.process.uncertainty import PoseUncertainty
+
+#: the largest relative standard uncertainty of a Monte Carlo u said without a warning
+#: (1/sqrt(2 (M - 1)): 10 % at 51 draws)
+MC_RELATIVE_LIMIT = 0.1
+
+
+def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
+    """Screen lines: where the centre uncertainties came from, and the largest pose ones."""
+    lines = [f"uncertainty: centres from {uncertainty.centres.description}"]
+    for name, u in (
+        ("conventional", uncertainty.conventional_u),
+        ("corrected", uncertainty.corrected_u),
+    ):
+        if u.size == 0:
+            continue
+        t_um, r_urad = u[:, :3].max() * 1e3, np.deg2rad(u[:, 3:]).max() * 1e6
+        lines.append(
+            f"  u ({uncertainty.method}, k=1) of the {name} poses: up to "
+            f"{t_um:.3f} um, {r_urad:.2f} urad"
+        )
+    lines.extend(shared_summary(uncertainty))
+    excess = uncertainty.smooth_excess
+    if excess is not None:
+        residuals = (
+            f"the references' standardized residuals from the smooth fit {excess.observed_um:.3g}"
+            f" um RMS, {excess.noise_um:.3g} um from their noise alone"
+        )
+        lines.append(
+            f"  smooth fit's own error (bias, smoothing chosen from the data): growth at R "
+            f"{excess.excess_um:.3g} um RMS over the legs added to each corrected pose's own u "
+            f"({residuals})"
+            if excess.excess_um > 0
+            else f"  smooth fit's own error: nothing added ({residuals})"
+        )
+    for check in uncertainty.repeats:
+        line = (
+            f"  {check.label} measured {check.n} times, averaged: their scatter is "
+            f"{check.ratio:.2f}x the claimed u (chi2 {check.chi2:.1f} over {check.dof} dof"
+            + (", after a straight-line drift" if check.n >= 3 else "")
+            + ")"
+        )
+        lines.append(line)
+        if not check.ok:
+            lines.append(
+                f"warning: the {check.n} measurements of {check.label} scatter more than "
+                f"their u allows (p = {check.p_value:.1g}): the platform moved or drifted "
+                "between them, or a ball was probed badly; the average is used, and u "
+                "does not include that scatter"
+            )
+    if uncertainty.method == "monte-carlo":
+        ratio = uncertainty.ratio_to_linear()
+        if np.isfinite(ratio).any():
+            drawn = (
+                "probed points drawn, spheres refitted"
+                if uncertainty.drawn == "points"
+                else "centres drawn from their covariance"
+            )
+            lines.append(
+                f"  Monte Carlo ({uncertainty.draws} draws, seed {uncertainty.seed}) "
+                f"over linear propagation: {np.nanmin(ratio):.3f} to "
+                f"{np.nanmax(ratio):.3f} ({drawn})"
+            )
+        # a standard deviation of M draws is itself uncertain by 1/sqrt(2 (M - 1)) (k=1)
+        relative = 1 / np.sqrt(2 * (uncertainty.draws - 1))
+        if relative > MC_RELATIVE_LIMIT:
+            lines.append(
+                f"warning: {uncertainty.draws} Monte Carlo draws: every u written is the "
+                f"standard deviation of {uncertainty.draws} values, itself uncertain by "
+                f"about {relative * 100:.0f} % (k=1); --mc 1000 or more for a u to rely on"
+            )
+    return lines
+
+
+def shared_summary(uncertainty: PoseUncertainty) -> list[str]:
+    """Screen lines: the parts of u common to all targets (O and R0) and of their own."""
+    common, own = uncertainty.common_u, uncertainty.own_u
+    if common is None or own is None or common.size == 0:
+        return []
+    from hexatherm.core.geometry import to_um_urad
+
+    def rms(values: np.ndarray) -> str:
+        v = np.sqrt(np.mean(to_um_urad(values) ** 2, axis=0))
+        return (
+            " ".join(f"{n} {x:.3g}" for n, x in zip(("Tx", "Ty", "Tz"), v[:3], strict=True))
+            + " um, "
+            + " ".join(f"{n} {x:.3g}" for n, x in zip(("Rx", "Ry", "Rz"), v[3:], strict=True))
+            + " urad"
+        )
+
+    scaled = " (linear shares of the Monte Carlo u)" if uncertainty.method == "monte-carlo" else ""
+    lines = [
+        "  parts of u, RMS over the targets" + scaled + ": common to all targets (the one "
+        "measurement of O and R0 every pose carries; it shifts all targets together and "
+        "cancels in their differences) and own (the target's step and its references):"
+    ]
+    for name, cols in (("conventional", slice(0, 6)), ("corrected", slice(6, 12))):
+        lines.append(f"    {name:12} common {rms(common[:, cols])}")
+        lines.append(f"    {'':12} own    {rms(own[:, cols])}")
+    if uncertainty.between_covariance is not None:
+        lines.append("  covariance between targets: covariance.csv")
+    else:
+        m = len(common)
+        lines.append(
+            f"  covariance between targets: not written for {m} targets "
+            f"({m * (m + 1) // 2:,} pairs); --covariance writes covariance.csv"
+        )
+    return lines
+
+
+def session_lines(outcome: ProcessOutcome) -> list[str]:
+    """The lines that say what was processed: steps, targets, the interpolation (and the
+    smooth fit's choice), the repeats averaged."""
+    result = outcome.result
+    n = len(result.correction.target_index)
+    averaged = "".join(
+        f", {g.label} averaged over {len(g.labels)} measurements" for g in result.repeats
+    )
+    lines = [
+        f"session {result.session.name}: {len(result.session.plan.labels)} steps, "
+        f"{n} targets, interpolation {outcome.request.interpolation}{averaged}"
+    ]
+    smooth = result.correction.smooth
+    if smooth is not None:
+        lams = ", ".join(sorted({f"{v:.2g}" for v in smooth.lam})) if smooth.used else ""
+        lines.append(
+            f"interpolation smooth: {smooth.reason}"
+            + (f" (smoothing {lams}, times scaled to [0, 1])" if lams else "")
+        )
+    return lines
+
+
+def failure_text(outcome: ProcessOutcome) -> str | None:
+    """What failed the quality checks, naming up to five steps; None when nothing did."""
+    quality = outcome.quality
+    if not quality.any_failed:
+        return None
+    steps = quality.failed_steps
+    return (
+        f"quality checks failed at {len(steps)} step(s) ({', '.join(steps[:5])}"
+        + (" ..." if len(steps) > 5 else "")
+        + ")"
+    )
