@@ -67,3 +67,19 @@ def test_process_keeps_the_collector_off_its_imports(tmp_path: Path) -> None:
     assert _loaded(code, ("numpy",)) == {"numpy": True}
     expected = SESSIONS / "paper-zero-pose" / "expected" / "poses.csv"
     assert (out / "poses.csv").read_bytes() == expected.read_bytes()
+
+
+def test_process_without_repeats_or_tolerances_loads_no_scipy(tmp_path: Path) -> None:
+    """paper-zero-pose-dmis (O and R0 measured once, no --tolerance): nothing of scipy is
+    needed, and its import is a fifth of a small process's CPU (issue 37); the conformity
+    rules that `--tolerance`'s help names come without ``scipy.special``."""
+    out = tmp_path / "out"
+    code = (
+        "from hexatherm.cli import main\n"
+        "try:\n"
+        f"    main(['process', {str(SESSIONS / 'paper-zero-pose-dmis')!r}, '-o', {str(out)!r}])\n"
+        "except SystemExit as stop:\n"
+        "    assert not stop.code, stop.code\n"
+    )
+    assert _loaded(code, ("scipy", "pandas")) == {"scipy": False, "pandas": True}
+    assert (out / "poses.csv").is_file()
