@@ -102,6 +102,28 @@ def register(
     Registration
         Always with a leading N axis.
     """
+    centres, balls, rot, transforms = _fit(centres_mm, balls_mm, weights)
+    residuals = centres - (balls @ np.swapaxes(rot, 1, 2) + transforms[:, None, :3, 3])
+    rms = np.sqrt((residuals**2).sum(axis=-1).mean(axis=-1)) * 1e3
+    return Registration(platform2cmm=transforms, residuals_mm=residuals, rms_um=rms)
+
+
+def platform_frames(
+    centres_mm: npt.ArrayLike,
+    balls_mm: npt.ArrayLike,
+    weights: npt.ArrayLike | None = None,
+) -> FloatArray:
+    """:func:`register`'s ``platform2cmm`` (N, 4, 4) alone, without the residuals (the
+    uncertainty's central differences register each step 6k times and use only these)."""
+    return _fit(centres_mm, balls_mm, weights)[3]
+
+
+def _fit(
+    centres_mm: npt.ArrayLike,
+    balls_mm: npt.ArrayLike,
+    weights: npt.ArrayLike | None,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """:func:`register`'s checks and fit: centres (N, k, 3), balls, rotations, transforms."""
     balls = check_ball_layout(balls_mm)
     centres = np.asarray(centres_mm, dtype=float)
     if centres.ndim == 2:
@@ -131,10 +153,7 @@ def register(
         np.einsum("nk,nki,nki->n", w_norm, b, b) + np.einsum("nk,nki,nki->n", w_norm, c, c)
     )
     rot = _rotations(cov, scale)
-    transforms = _transforms(rot, centres_mean, balls_mean)
-    residuals = centres - (balls @ np.swapaxes(rot, 1, 2) + transforms[:, None, :3, 3])
-    rms = np.sqrt((residuals**2).sum(axis=-1).mean(axis=-1)) * 1e3
-    return Registration(platform2cmm=transforms, residuals_mm=residuals, rms_um=rms)
+    return centres, balls, rot, _transforms(rot, centres_mean, balls_mean)
 
 
 def rigid_rows(centres_mm: FloatArray, balls_mm: FloatArray, weights: FloatArray) -> FloatArray:

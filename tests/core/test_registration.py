@@ -108,3 +108,18 @@ def test_many_rows_register_as_each_row_alone(rng):
     c = centres - centres.mean(axis=1, keepdims=True)
     kabsch = registration._kabsch(np.swapaxes(c, 1, 2) @ b / 3)
     np.testing.assert_allclose(together[:, :3, :3], kabsch, atol=1e-12)
+
+
+def test_platform_frames_are_the_registrations_transforms(rng):
+    """The uncertainty's central differences take the transforms alone: the same fit
+    (same checks, same arithmetic), against register's own, with weights, and the same
+    refusal of a non-finite centre."""
+    truth = random_transforms(rng, 300)
+    centres = apply_transform(truth, BALLS) + rng.normal(0, 1e-3, (300, len(BALLS), 3))
+    weights = rng.uniform(0.5, 2.0, (300, len(BALLS)))
+    for w in (None, weights):
+        frames = registration.platform_frames(centres, BALLS, w)
+        np.testing.assert_array_equal(frames, register(centres, BALLS, w).platform2cmm)
+    centres[7, 1, 2] = np.nan
+    with pytest.raises(RegistrationError, match="step index 7"):
+        registration.platform_frames(centres, BALLS)
