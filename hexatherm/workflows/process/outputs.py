@@ -86,7 +86,7 @@ CONTRACT_COLUMNS = ["label", "time", *pose_columns("conv"), *pose_columns("corr"
 
 def _times(result: ProcessResult, seconds: np.ndarray) -> list[str] | np.ndarray:
     if result.centres.time_kind == "iso":
-        return [result.centres.time_text(s) for s in seconds]
+        return result.centres.time_texts(seconds)
     return seconds
 
 
