@@ -23,7 +23,10 @@ With ``--baseline DIR`` (a checkout of the code before, e.g. ``git worktree add
 /tmp/before main``) every pair becomes a triple, the floor, that code and this code,
 both run as ``python -m hexatherm`` with ``PYTHONPATH`` set to their checkout, and both
 ratios to the floor are printed, with the median of this code's CPU time over that
-code's.
+code's. ``--code DIR`` measures the checkout at ``DIR`` as "now" instead of this one
+(a snapshot, e.g. ``git worktree add --detach /tmp/now HEAD``, so that editing this
+checkout does not change what a long run measures). Each run writes its own output
+folder (``floor-out-<pid>``), so two runs may share ``bench/.cache/``.
 
 The second figure, paired the same way (``--plain-pairs``, default 3; 0 leaves it out):
 ``bench/straightforward.py`` (the same job done the straightforward way: the file read
@@ -37,6 +40,7 @@ from __future__ import annotations
 import argparse
 import os
 import resource
+import shutil
 import statistics
 import subprocess
 import sys
@@ -59,6 +63,8 @@ _PEAK = (
     "import resource, subprocess, sys; subprocess.run(sys.argv[1:], check=True); "
     "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)"
 )
+#: this run's output folder of ``process`` (its own: runs may share the cache)
+OUT = str(CACHE / f"floor-out-{os.getpid()}")
 #: the peak memory (MB) of the last run of :func:`timed`
 LAST_PEAK_MB = [0.0]
 
@@ -99,6 +105,7 @@ def main() -> None:
     parser.add_argument("--pairs", type=int, default=7)
     parser.add_argument("--plain-pairs", type=int, default=3)
     parser.add_argument("--baseline", type=Path, help="a checkout of the code before")
+    parser.add_argument("--code", type=Path, help="the checkout measured as now (default: this)")
     parser.add_argument("--bytecode", action="store_true", help="compiled modules, as installed")
     parser.add_argument(
         "--points-per-ball",
@@ -117,7 +124,7 @@ def main() -> None:
     assert measurement, f"no measurement CSV in {folder}"
     points = measurement[0]
     floor = [sys.executable, "-c", f"import numpy, pandas; pandas.read_csv({str(points)!r})"]
-    ours = [*hexatherm_script(), "process", str(folder), "-o", str(CACHE / "floor-out")]
+    ours = [*hexatherm_script(), "process", str(folder), "-o", OUT]
     ours.append("--overwrite")
     timed(ours)  # warm the file cache, write the output (and compile the modules) once
     print(
@@ -155,9 +162,9 @@ def main() -> None:
 
 def baseline(args: argparse.Namespace, floor: list[str], folder: Path, name: str) -> None:
     """Alternating triples: the floor, the code at ``args.baseline``, this code."""
-    out = str(CACHE / "floor-out")
+    out = OUT
     command = [sys.executable, "-m", "hexatherm", "process", str(folder), "-o", out, "--overwrite"]
-    here = Path(__file__).resolve().parents[1]
+    here = args.code or Path(__file__).resolve().parents[1]
     timed(command, args.baseline)  # warm (and compile) both once
     timed(command, here)
     triples = []
@@ -215,4 +222,7 @@ def straightforward(folder: Path, ours: list[str], n_pairs: int) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    finally:
+        shutil.rmtree(OUT, ignore_errors=True)
