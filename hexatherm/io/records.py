@@ -278,8 +278,10 @@ def check_groups(records: Records, *, keep_later: bool = False) -> Records:
         starts = np.concatenate(([0], np.flatnonzero(change) + 1))
     stops = np.append(starts[1:], n)
     groups: dict[tuple[str, str], list[int]] = {}
-    for g, row in enumerate(starts.tolist()):
-        groups.setdefault((str(label[row]), str(ball[row])), []).append(g)
+    # each group's step and ball as Python strings at once (not two numpy scalars a group)
+    keys = zip(label[starts].astype(str).tolist(), ball[starts].astype(str).tolist(), strict=True)
+    for g, key in enumerate(keys):
+        groups.setdefault(key, []).append(g)
     repeated = {key: gs for key, gs in groups.items() if len(gs) > 1}
     keep = None
     if repeated and not keep_later:
