@@ -23,7 +23,13 @@ With ``--baseline DIR`` (a checkout of the code before, e.g. ``git worktree add
 /tmp/before main``) every pair becomes a triple, the floor, that code and this code,
 both run as ``python -m hexatherm`` with ``PYTHONPATH`` set to their checkout, and both
 ratios to the floor are printed, with the median of this code's CPU time over that
-code's.
+code's. ``--code DIR`` measures the checkout at ``DIR`` as "now" instead of this one
+(a snapshot, e.g. ``git worktree add --detach /tmp/now HEAD``, so that editing this
+checkout does not change what a long run measures). Each run writes its own output
+folder (``floor-out-<pid>``), so two runs may share ``bench/.cache/``. ``--issue37``
+(with ``--baseline``) runs issue 37's three rows one after the other, 1000 targets x 25
+points a ball, 10,000 x 25 and the scanning session 1000 x 400, and prints their table:
+the CPU ratios to the floor before and now, now over before, and the peak memories.
 
 The second figure, paired the same way (``--plain-pairs``, default 3; 0 leaves it out):
 ``bench/straightforward.py`` (the same job done the straightforward way: the file read
@@ -37,6 +43,7 @@ from __future__ import annotations
 import argparse
 import os
 import resource
+import shutil
 import statistics
 import subprocess
 import sys
@@ -59,6 +66,8 @@ _PEAK = (
     "import resource, subprocess, sys; subprocess.run(sys.argv[1:], check=True); "
     "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)"
 )
+#: this run's output folder of ``process`` (its own: runs may share the cache)
+OUT = str(CACHE / f"floor-out-{os.getpid()}")
 #: the peak memory (MB) of the last run of :func:`timed`
 LAST_PEAK_MB = [0.0]
 
@@ -99,6 +108,7 @@ def main() -> None:
     parser.add_argument("--pairs", type=int, default=7)
     parser.add_argument("--plain-pairs", type=int, default=3)
     parser.add_argument("--baseline", type=Path, help="a checkout of the code before")
+    parser.add_argument("--code", type=Path, help="the checkout measured as now (default: this)")
     parser.add_argument("--bytecode", action="store_true", help="compiled modules, as installed")
     parser.add_argument(
         "--points-per-ball",
@@ -106,18 +116,27 @@ def main() -> None:
         default=25,
         help="a scanning probe's session when above 25 (issue 37: 400, 4 decimals)",
     )
+    parser.add_argument(
+        "--issue37",
+        action="store_true",
+        help="with --baseline: the issue's three rows (1000 x 25, 10,000 x 25, 1000 x 400 "
+        "points a ball) one after the other, then their table",
+    )
     args = parser.parse_args()
     global BYTECODE
     BYTECODE = args.bytecode
-    if args.points_per_ball == 25:
-        folder = session(args.targets, "points")
-    else:
-        folder = scanning_session(args.targets, args.points_per_ball)
-    measurement = [p for p in folder.glob("*.csv") if p.name != "temperatures.csv"]
-    assert measurement, f"no measurement CSV in {folder}"
-    points = measurement[0]
-    floor = [sys.executable, "-c", f"import numpy, pandas; pandas.read_csv({str(points)!r})"]
-    ours = [*hexatherm_script(), "process", str(folder), "-o", str(CACHE / "floor-out")]
+    if args.issue37:
+        if args.baseline is None:
+            parser.error("--issue37 compares with --baseline DIR")
+        summaries = []
+        for targets, per_ball in ISSUE37_ROWS:
+            args.targets, args.points_per_ball = targets, per_ball
+            folder, points, floor = _row(targets, per_ball)
+            summaries.append(baseline(args, floor, folder, points.name))
+        _issue37_table(summaries, args.pairs)
+        return
+    folder, points, floor = _row(args.targets, args.points_per_ball)
+    ours = [*hexatherm_script(), "process", str(folder), "-o", OUT]
     ours.append("--overwrite")
     timed(ours)  # warm the file cache, write the output (and compile the modules) once
     print(
@@ -153,11 +172,44 @@ def main() -> None:
         straightforward(folder, ours, args.plain_pairs)
 
 
-def baseline(args: argparse.Namespace, floor: list[str], folder: Path, name: str) -> None:
+#: issue 37's rows: (targets, points per ball)
+ISSUE37_ROWS = ((1000, 25), (10000, 25), (1000, 400))
+
+
+def _row(targets: int, per_ball: int) -> tuple[Path, Path, list[str]]:
+    """The session folder of a row (simulated once, then cached), its points file and
+    the floor's command."""
+    folder = session(targets, "points") if per_ball == 25 else scanning_session(targets, per_ball)
+    measurement = [p for p in folder.glob("*.csv") if p.name != "temperatures.csv"]
+    assert measurement, f"no measurement CSV in {folder}"
+    points = measurement[0]
+    floor = [sys.executable, "-c", f"import numpy, pandas; pandas.read_csv({str(points)!r})"]
+    return folder, points, floor
+
+
+def _issue37_table(summaries: list[dict[str, float]], pairs: int) -> None:
+    """The rows side by side: medians of the CPU ratios and peak memories."""
+    print(f"\nissue 37, CPU (user + system), medians of {pairs} alternating triples")
+    print(
+        f"{'row':>16} {'floor s':>8} {'before/floor':>13} {'now/floor':>10} {'now/before':>11}"
+        f" {'floor MB':>9} {'before MB':>10} {'now MB':>7} {'now/floor MB':>13} {'load':>5}"
+    )
+    for row in summaries:
+        print(
+            f"{row['name']:>16} {row['floor_s']:8.3f} {row['before_ratio']:13.2f} "
+            f"{row['now_ratio']:10.2f} {row['paired']:11.2f} {row['floor_mb']:9.0f} "
+            f"{row['before_mb']:10.0f} {row['now_mb']:7.0f} "
+            f"{row['now_mb'] / row['floor_mb']:13.2f} {row['load']:5.1f}"
+        )
+
+
+def baseline(
+    args: argparse.Namespace, floor: list[str], folder: Path, name: str
+) -> dict[str, float]:
     """Alternating triples: the floor, the code at ``args.baseline``, this code."""
-    out = str(CACHE / "floor-out")
+    out = OUT
     command = [sys.executable, "-m", "hexatherm", "process", str(folder), "-o", out, "--overwrite"]
-    here = Path(__file__).resolve().parents[1]
+    here = args.code or Path(__file__).resolve().parents[1]
     timed(command, args.baseline)  # warm (and compile) both once
     timed(command, here)
     triples = []
@@ -191,6 +243,17 @@ def baseline(args: argparse.Namespace, floor: list[str], folder: Path, name: str
         f"peak memory: floor {floor_mb:.0f} MB, before {before_mb:.0f} MB "
         f"({before_mb / floor_mb:.2f}x), now {now_mb:.0f} MB ({now_mb / floor_mb:.2f}x)"
     )
+    return {
+        "name": f"{args.targets} x {args.points_per_ball}",
+        "floor_s": statistics.median(t[0][1] for t in triples),
+        "before_ratio": statistics.median(t[1][1] / t[0][1] for t in triples),
+        "now_ratio": statistics.median(t[2][1] / t[0][1] for t in triples),
+        "paired": statistics.median(t[2][1] / t[1][1] for t in triples),
+        "floor_mb": floor_mb,
+        "before_mb": before_mb,
+        "now_mb": now_mb,
+        "load": os.getloadavg()[0],
+    }
 
 
 def straightforward(folder: Path, ours: list[str], n_pairs: int) -> None:
@@ -215,4 +278,7 @@ def straightforward(folder: Path, ours: list[str], n_pairs: int) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    finally:
+        shutil.rmtree(OUT, ignore_errors=True)

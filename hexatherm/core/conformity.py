@@ -53,7 +53,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from scipy.special import ndtr
 
 from hexatherm.typing import FloatArray
 
@@ -143,6 +142,8 @@ class DecisionRule:
     def risk_text(self, coverage_factor: float) -> str:
         """The risk the rule carries at its acceptance limit (JCGM 106:2012 9.3, a normal
         pdf, the far limit neglected), in one sentence."""
+        from scipy.special import ndtr  # here: a process without tolerances loads no scipy
+
         pfa = float(1.0 - ndtr(self.guard_sign * self.guard_factor * coverage_factor))
         text = (
             f"probability of false acceptance of a deviation exactly at an acceptance "
@@ -227,6 +228,8 @@ def conformance_probability(
     u = np.asarray(standard_u, dtype=float)
     hi = np.asarray(upper, dtype=float)
     lo = -hi if lower is None else np.asarray(lower, dtype=float)
+    from scipy.special import ndtr  # here: a process without tolerances loads no scipy
+
     with np.errstate(divide="ignore", invalid="ignore"):
         p = ndtr((hi - y) / u) - ndtr((lo - y) / u)
     exact = (u == 0) & np.isfinite(y)

@@ -82,6 +82,7 @@ class Plan:
         if not self.labels:
             raise StepError("the plan has no steps")
         seen: dict[str, int] = {}
+        finite = np.all(np.isfinite(self.poses), axis=1).tolist()  # one pass, not one a step
         for i, (label, kind) in enumerate(zip(self.labels, self.kinds, strict=True)):
             if not NAME_PATTERN.fullmatch(label):
                 raise StepError("label must match [A-Za-z0-9-]+", step=label, index=i)
@@ -96,7 +97,7 @@ class Plan:
                     step=label,
                     index=i,
                 )
-            if not np.all(np.isfinite(self.poses[i])):
+            if not finite[i]:
                 raise StepError("pose has a non-finite value", step=label, index=i)
         if self.kinds[0] != "origin":
             raise StepError(
@@ -110,21 +111,27 @@ class Plan:
         refs = self.reference_indices
         if self.target_indices.size and not refs.size:
             raise StepError("the plan has targets but no reference step")
-        for i in refs:
-            if np.abs(self.poses[i] - self.poses[refs[0]]).max() > SAME_POSE_TOL:
+        if refs.size:
+            # each row at once (one array pass, not one per step); the first one named
+            spread = np.abs(self.poses[refs] - self.poses[refs[0]]).max(axis=1)
+            differ = refs[spread > SAME_POSE_TOL]
+            if differ.size:
+                i = int(differ[0])
                 raise StepError(
                     f"reference pose differs from the first reference {self.labels[refs[0]]}; "
                     "all reference steps must command the same pose",
                     step=self.labels[i],
-                    index=int(i),
+                    index=i,
                 )
-        for i in self.target_indices:
-            if refs.size and i < refs[0]:
+            targets = self.target_indices
+            early = targets[targets < refs[0]]
+            if early.size:
+                i = int(early[0])
                 raise StepError(
                     f"target comes before the first reference {self.labels[refs[0]]}, which "
                     "fixes the thermal state of the corrected poses",
                     step=self.labels[i],
-                    index=int(i),
+                    index=i,
                 )
         for i, (before, after) in zip(self.target_indices, self.adjacent_references(), strict=True):
             if before < 0 and after < 0:

@@ -42,7 +42,7 @@ from hexatherm.core.correction import interpolated_growth, target_growth
 from hexatherm.core.geometry import invert_transform, pose_from_transform
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
-from hexatherm.core.registration import register
+from hexatherm.core.registration import platform_frames
 from hexatherm.core.touch import cap_directions
 from hexatherm.typing import FloatArray
 
@@ -129,7 +129,7 @@ class PoseChain:
             if self.weights is None
             else np.broadcast_to(self.weights, centres_mm.shape[:-1]).reshape(-1, k)
         )
-        return register(flat, self.balls_mm, w).platform2cmm.reshape(centres_mm.shape[:-2] + (4, 4))
+        return platform_frames(flat, self.balls_mm, w).reshape(centres_mm.shape[:-2] + (4, 4))
 
     def outputs_from_poses(self, pose: FloatArray) -> FloatArray:
         """Outputs (b, M, 12) from the poses (b, N, 6) of every step relative to O."""

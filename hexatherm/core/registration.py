@@ -102,6 +102,52 @@ def register(
     Registration
         Always with a leading N axis.
     """
+    centres, balls, rot, transforms = _fit(centres_mm, balls_mm, weights)
+    residuals = centres - (balls @ np.swapaxes(rot, 1, 2) + transforms[:, None, :3, 3])
+    rms = np.sqrt((residuals**2).sum(axis=-1).mean(axis=-1)) * 1e3
+    return Registration(platform2cmm=transforms, residuals_mm=residuals, rms_um=rms)
+
+
+def platform_frames(
+    centres_mm: npt.ArrayLike,
+    balls_mm: npt.ArrayLike,
+    weights: npt.ArrayLike | None = None,
+) -> FloatArray:
+    """:func:`register`'s ``platform2cmm`` (N, 4, 4) alone, without the residuals (the
+    uncertainty's central differences register each step 6k times and use only these).
+
+    Checked as a whole (an error names the step as :func:`register` does), then fitted
+    :data:`FRAME_BLOCK` rows at a time: each row's fit is its own arithmetic, so the
+    transforms are the same, and the temporaries of a block stay in the cache (the
+    central differences of 10,000 targets, 360,036 registrations: 2.2 -> 1.3 s)."""
+    centres, balls, w = _checked(centres_mm, balls_mm, weights)
+    out = np.empty((centres.shape[0], 4, 4))
+    for start in range(0, centres.shape[0], FRAME_BLOCK):
+        rows = slice(start, start + FRAME_BLOCK)
+        out[rows] = _solve(centres[rows], balls, w[rows])[1]
+    return out
+
+
+#: rows that :func:`platform_frames` fits at once
+FRAME_BLOCK = 8192
+
+
+def _fit(
+    centres_mm: npt.ArrayLike,
+    balls_mm: npt.ArrayLike,
+    weights: npt.ArrayLike | None,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """:func:`register`'s checks and fit: centres (N, k, 3), balls, rotations, transforms."""
+    centres, balls, w = _checked(centres_mm, balls_mm, weights)
+    return (centres, balls, *_solve(centres, balls, w))
+
+
+def _checked(
+    centres_mm: npt.ArrayLike,
+    balls_mm: npt.ArrayLike,
+    weights: npt.ArrayLike | None,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """:func:`register`'s checks: centres (N, k, 3), balls (k, 3), weights (N, k)."""
     balls = check_ball_layout(balls_mm)
     centres = np.asarray(centres_mm, dtype=float)
     if centres.ndim == 2:
@@ -121,6 +167,11 @@ def register(
     )
     if np.any(w < 0) or not np.all(np.isfinite(w)) or np.any(w.sum(axis=1) <= 0):
         raise RegistrationError("registration weights must be finite, non-negative, not all 0")
+    return centres, balls, w
+
+
+def _solve(centres: FloatArray, balls: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The rotations (N, 3, 3) and transforms (N, 4, 4) of checked rows."""
     w_norm = w / w.sum(axis=1, keepdims=True)
     balls_mean = w_norm @ balls
     centres_mean = (w_norm[:, None, :] @ centres)[:, 0]
@@ -131,10 +182,7 @@ def register(
         np.einsum("nk,nki,nki->n", w_norm, b, b) + np.einsum("nk,nki,nki->n", w_norm, c, c)
     )
     rot = _rotations(cov, scale)
-    transforms = _transforms(rot, centres_mean, balls_mean)
-    residuals = centres - (balls @ np.swapaxes(rot, 1, 2) + transforms[:, None, :3, 3])
-    rms = np.sqrt((residuals**2).sum(axis=-1).mean(axis=-1)) * 1e3
-    return Registration(platform2cmm=transforms, residuals_mm=residuals, rms_um=rms)
+    return rot, _transforms(rot, centres_mean, balls_mean)
 
 
 def rigid_rows(centres_mm: FloatArray, balls_mm: FloatArray, weights: FloatArray) -> FloatArray:

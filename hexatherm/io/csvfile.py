@@ -379,7 +379,12 @@ def _fast_measurement_csv(raw: bytes, path: str, kind: RecordKind | None) -> Rec
     if not parts or len({(p["time_kind"], p["aware"]) for p in parts}) != 1:
         return None  # no rows, or times of different kinds: the general reader says
     joined = {key: np.concatenate([p[key] for p in parts]) for key in ("label", "ball", "time")}
-    values = {c: np.concatenate([p["values"][c] for p in parts]) for c in numeric}
+    # the coordinates (and normals) were stacked chunk by chunk: one copy of them, here
+    values = {c: np.concatenate([p["values"][c] for p in parts]) for c in parts[0]["values"]}
+    xyz = np.concatenate([p["xyz"] for p in parts])
+    normals = None if parts[0]["ijk"] is None else np.concatenate([p["ijk"] for p in parts])
+    time_kind, aware = parts[0]["time_kind"], parts[0]["aware"]
+    del parts
     lines = np.arange(joined["time"].size, dtype=np.int64) + 2
     label, ball = joined["label"], joined["ball"]
     kind = kind or _kind(columns, path, label, ball)
@@ -395,11 +400,10 @@ def _fast_measurement_csv(raw: bytes, path: str, kind: RecordKind | None) -> Rec
             extra = _centre_extra(values, lines, path)
     except InputError:
         return None
-    if kind == "points" and all(c in values for c in POINT_EXTRA):
-        ijk = np.column_stack([values[c] for c in POINT_EXTRA])
-    elif kind == "points" and any(c in values for c in POINT_EXTRA):
+    if kind == "points" and normals is not None:
+        ijk = normals
+    elif kind == "points" and any(c in columns for c in POINT_EXTRA):
         return None
-    xyz = np.column_stack([values[c] for c in ("x", "y", "z")])
     return Records(
         path=path,
         kind=kind,
@@ -407,12 +411,12 @@ def _fast_measurement_csv(raw: bytes, path: str, kind: RecordKind | None) -> Rec
         ball=ball,
         xyz_mm=xyz,
         time_s=joined["time"],
-        time_kind=parts[0]["time_kind"],
+        time_kind=time_kind,
         line=lines,
         diameter_mm=diameter,
         ijk=ijk,
         extra=extra,
-        time_aware=parts[0]["aware"],
+        time_aware=aware,
     )
 
 
@@ -440,7 +444,18 @@ def _clean_chunk(
     if not all(np.isfinite(v).all() for v in values.values()):
         raise _Unclean  # empty or non-finite numbers: the general reader tells them apart
     time, time_kind, aware = column_times(frame, path)  # (its lines are not used: clean)
-    return {**named, "values": values, "time": time, "time_kind": time_kind, "aware": aware}
+    xyz = np.column_stack([values.pop(c) for c in ("x", "y", "z")])
+    with_normals = all(c in values for c in POINT_EXTRA)
+    ijk = np.column_stack([values.pop(c) for c in POINT_EXTRA]) if with_normals else None
+    return {
+        **named,
+        "values": values,  # the other numbers, by column
+        "xyz": xyz,
+        "ijk": ijk,
+        "time": time,
+        "time_kind": time_kind,
+        "aware": aware,
+    }
 
 
 def centres_to_csv(records: Records) -> str:

@@ -96,6 +96,29 @@ def seconds_to_iso(seconds: float) -> str:
     return stamp.isoformat(timespec="microseconds")
 
 
+#: POSIX seconds of 1970-01-01 and of 9999-12-31T23:59:59: where numpy's dates and
+#: Python's write a timestamp alike (four-digit years, no sign)
+_ISO_SPAN_S = (0.0, 253402300799.0)
+
+
+def seconds_to_iso_texts(seconds: npt.ArrayLike) -> list[str]:
+    """:func:`seconds_to_iso` of many times at once, the same texts: the microseconds
+    rounded as ``datetime.fromtimestamp`` rounds them (the fraction of the second times
+    1e6, half to even), formatted by numpy; a time outside 1970-9999 value by value.
+
+    >>> seconds_to_iso_texts([1577836810.25, 0.0000005, 1.9999996])
+    ['2020-01-01T00:00:10.250000', '1970-01-01T00:00:00.000000', '1970-01-01T00:00:02.000000']
+    """
+    values = np.asarray(seconds, dtype=float).ravel()
+    low, high = _ISO_SPAN_S
+    if not (np.all(values >= low) and np.all(values <= high)):
+        return [seconds_to_iso(v) for v in values.tolist()]
+    fraction, whole = np.modf(values)
+    micro = whole.astype(np.int64) * 1_000_000 + np.rint(fraction * 1e6).astype(np.int64)
+    texts = np.datetime_as_string(micro.astype("datetime64[us]"), unit="us")
+    return [str(t) for t in texts.tolist()]
+
+
 def concat_records(records: list[Records]) -> Records:
     """Join records of one kind and time kind (the first one's path names the result)."""
     first = records[0]
@@ -255,8 +278,10 @@ def check_groups(records: Records, *, keep_later: bool = False) -> Records:
         starts = np.concatenate(([0], np.flatnonzero(change) + 1))
     stops = np.append(starts[1:], n)
     groups: dict[tuple[str, str], list[int]] = {}
-    for g, row in enumerate(starts.tolist()):
-        groups.setdefault((str(label[row]), str(ball[row])), []).append(g)
+    # each group's step and ball as Python strings at once (not two numpy scalars a group)
+    keys = zip(label[starts].astype(str).tolist(), ball[starts].astype(str).tolist(), strict=True)
+    for g, key in enumerate(keys):
+        groups.setdefault(key, []).append(g)
     repeated = {key: gs for key, gs in groups.items() if len(gs) > 1}
     keep = None
     if repeated and not keep_later:

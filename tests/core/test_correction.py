@@ -129,6 +129,29 @@ def test_target_without_adjacent_reference_names_the_step():
             ],
             "step S1: target comes before the first",
         ),
+        (  # several at fault: the first is named (the checks run over all steps at once)
+            [
+                ("O", "origin", [0] * 6),
+                ("R0", "reference", REFERENCE_POSE),
+                ("S1", "target", [0] * 6),
+                ("R1", "reference", [0, 0, -30, 0, 0, 0]),
+                ("R2", "reference", [0, 0, -20, 0, 0, 0]),
+            ],
+            "step R1: reference pose differs",
+        ),
+        (
+            [
+                ("O", "origin", [0] * 6),
+                ("S1", "target", [0] * 6),
+                ("S2", "target", [0] * 6),
+                ("R0", "reference", REFERENCE_POSE),
+            ],
+            "step S1: target comes before the first",
+        ),
+        (
+            [("O", "origin", [0] * 6), ("S1", "target", [0, np.nan, 0, 0, 0, 0])],
+            "step S1: pose has a non-finite value",
+        ),
         ([("O", "origin", [0] * 6), ("O2", "origin", [0] * 6)], "only one origin"),
         ([("O", "origin", [0] * 6), ("X", "tagret", [0] * 6)], "unknown kind 'tagret'"),
     ],

@@ -108,3 +108,22 @@ def test_many_rows_register_as_each_row_alone(rng):
     c = centres - centres.mean(axis=1, keepdims=True)
     kabsch = registration._kabsch(np.swapaxes(c, 1, 2) @ b / 3)
     np.testing.assert_allclose(together[:, :3, :3], kabsch, atol=1e-12)
+
+
+def test_platform_frames_are_the_registrations_transforms(rng, monkeypatch):
+    """The uncertainty's central differences take the transforms alone: the same fit
+    (same checks, same arithmetic row by row, in blocks of rows), against register's own
+    of all rows at once, with weights, and the same refusal of a non-finite centre."""
+    truth = random_transforms(rng, 300)
+    centres = apply_transform(truth, BALLS) + rng.normal(0, 1e-3, (300, len(BALLS), 3))
+    weights = rng.uniform(0.5, 2.0, (300, len(BALLS)))
+    for block in (registration.FRAME_BLOCK, 7, 64):  # in blocks, as whole
+        monkeypatch.setattr(registration, "FRAME_BLOCK", block)
+        for w in (None, weights):
+            frames = registration.platform_frames(centres, BALLS, w)
+            # each row its own arithmetic: equal but for what a kernel may order otherwise
+            expected = register(centres, BALLS, w).platform2cmm
+            np.testing.assert_allclose(frames, expected, rtol=1e-15, atol=1e-12)
+    centres[207, 1, 2] = np.nan
+    with pytest.raises(RegistrationError, match="step index 207"):
+        registration.platform_frames(centres, BALLS)

@@ -86,13 +86,21 @@ def test_replay_tolerates_a_value_flipping_one_step() -> None:
         assert DEFAULT_TOLERANCES[unit] >= 1.5 * step * (1 - 1e-12), unit
 
 
+def _python_fixed(values: np.ndarray, step: float) -> list[str]:
+    """The second method of fixed decimals: Python's ``format``, value by value."""
+    decimals = round(-np.log10(step))
+    texts = [format(v, f".{decimals}f") for v in values.tolist()]
+    zero = format(0.0, f".{decimals}f")
+    return ["" if t == "nan" else zero if float(t) == 0 else t for t in texts]
+
+
 def _pandas_text(frame: pd.DataFrame, rounded: bool) -> str:
     """The second method: pandas' to_csv on the frame with its rounded columns as text."""
     frame = frame.copy()
     for column in frame.columns:
         step = resolution_of(column) if rounded else None
         if step is not None and frame[column].dtype == np.float64:
-            frame[column] = fixed_text(frame[column].to_numpy(), step)
+            frame[column] = _python_fixed(frame[column].to_numpy(), step)
     return frame.to_csv(index=False, lineterminator="\n")
 
 
@@ -117,6 +125,9 @@ def test_the_joined_text_is_what_pandas_writes() -> None:
         pd.DataFrame({**base, "failed": [None, "form"] * (n // 2)}),  # a missing text
         pd.DataFrame({"Tx_mm": floats}),  # one column
         pd.DataFrame({"label": [], "Tx_mm": []}),  # no rows
+        pd.DataFrame({**base, "label": [f"S{i}\u00b5" for i in range(n)]}),  # not ASCII
+        pd.DataFrame({**base, "failed": ["a\x00", "b"] * (n // 2)}),  # a NUL: pandas
+        pd.DataFrame({**base, "Tx_um": floats * 1e3, "Rx_urad": floats, "x": -floats}),
     ]
     for frame in frames:
         for rounded in (True, False):

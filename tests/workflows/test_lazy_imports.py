@@ -24,6 +24,18 @@ def _loaded(code: str, modules: tuple[str, ...]) -> dict[str, bool]:
     return dict(zip(modules, (word == "True" for word in out[-len(modules) :]), strict=True))
 
 
+def _process_code(session: str, out: Path) -> str:
+    """A script that runs ``process`` on a shipped session into ``out`` (and fails on a
+    non-zero exit)."""
+    return (
+        "from hexatherm.cli import main\n"
+        "try:\n"
+        f"    main(['process', {str(SESSIONS / session)!r}, '-o', {str(out)!r}])\n"
+        "except SystemExit as stop:\n"
+        "    assert not stop.code, stop.code\n"
+    )
+
+
 def test_diagnose_does_not_import_scipy_stats() -> None:
     code = (
         "import hexatherm.cli, hexatherm.cli.diagnose\n"
@@ -39,13 +51,7 @@ def test_diagnose_does_not_import_scipy_stats() -> None:
 def test_process_of_a_small_session_does_not_import_scipy_sparse(tmp_path: Path) -> None:
     """paper-zero-pose: its covariance between targets takes the dense path."""
     out = tmp_path / "out"
-    code = (
-        "from hexatherm.cli import main\n"
-        "try:\n"
-        f"    main(['process', {str(SESSIONS / 'paper-zero-pose')!r}, '-o', {str(out)!r}])\n"
-        "except SystemExit as stop:\n"
-        "    assert not stop.code, stop.code\n"
-    )
+    code = _process_code("paper-zero-pose", out)
     assert _loaded(code, ("scipy.sparse", "pandas")) == {"scipy.sparse": False, "pandas": True}
     assert (out / "covariance.csv").is_file()
 
@@ -67,3 +73,13 @@ def test_process_keeps_the_collector_off_its_imports(tmp_path: Path) -> None:
     assert _loaded(code, ("numpy",)) == {"numpy": True}
     expected = SESSIONS / "paper-zero-pose" / "expected" / "poses.csv"
     assert (out / "poses.csv").read_bytes() == expected.read_bytes()
+
+
+def test_process_without_repeats_or_tolerances_loads_no_scipy(tmp_path: Path) -> None:
+    """paper-zero-pose-dmis (O and R0 measured once, no --tolerance): nothing of scipy is
+    needed, and its import is a fifth of a small process's CPU (issue 37); the conformity
+    rules that `--tolerance`'s help names come without ``scipy.special``."""
+    out = tmp_path / "out"
+    code = _process_code("paper-zero-pose-dmis", out)
+    assert _loaded(code, ("scipy", "pandas")) == {"scipy": False, "pandas": True}
+    assert (out / "poses.csv").is_file()

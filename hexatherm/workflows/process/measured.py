@@ -17,7 +17,13 @@ from hexatherm.core.spherefit import fit_spheres, probe_radius_mm
 from hexatherm.errors import FitError, InputError, PlanError
 from hexatherm.io.files import STRICT, ReadOptions
 from hexatherm.io.measurements import read_measurements
-from hexatherm.io.records import Records, TimeKind, refuse_groups_in_two_files, seconds_to_iso
+from hexatherm.io.records import (
+    Records,
+    TimeKind,
+    refuse_groups_in_two_files,
+    seconds_to_iso,
+    seconds_to_iso_texts,
+)
 from hexatherm.io.temperatures import Temperatures, read_temperatures
 from hexatherm.session import Balls, Session
 from hexatherm.typing import FloatArray
@@ -68,6 +74,13 @@ class StepCentres:
             return repr(float(seconds))
         text = seconds_to_iso(seconds)
         return text + "+00:00" if self.time_aware else text
+
+    def time_texts(self, seconds: npt.ArrayLike) -> list[str]:
+        """:meth:`time_text` of many times (the ISO texts formatted at once)."""
+        if self.time_kind != "iso":
+            return [repr(v) for v in np.asarray(seconds, dtype=float).ravel().tolist()]
+        texts = seconds_to_iso_texts(seconds)
+        return [t + "+00:00" for t in texts] if self.time_aware else texts
 
     @property
     def measurements(self) -> npt.NDArray[np.intp]:

@@ -87,7 +87,7 @@ CONTRACT_COLUMNS = ["label", "time", *pose_columns("conv"), *pose_columns("corr"
 
 def _times(result: ProcessResult, seconds: np.ndarray) -> list[str] | np.ndarray:
     if result.centres.time_kind == "iso":
-        return [result.centres.time_text(s) for s in seconds]
+        return result.centres.time_texts(seconds)
     return seconds
 
 
@@ -367,19 +367,21 @@ def deviation_table(
         f"{'step':{width}}  " + "  |  ".join(block for _ in titles),
         f"{'':{width}}  " + "  |  ".join(units for _ in titles),
     ]
+    # Python floats, one format per row: numpy scalars format the same, several times slower
+    row_text = " ".join(["{:8.3f}"] * 6).format
+    values = [table.tolist() for table in tables]
+    u_values = [None if u is None else u.tolist() for u in expanded]
+    u_head = f"{'  ' + u_label:{width}}  "
     for i, label in enumerate(labels):
-        lines.append(
-            f"{label:{width}}  "
-            + "  |  ".join(" ".join(f"{v:8.3f}" for v in table[i]) for table in tables)
-        )
+        lines.append(f"{label:{width}}  " + "  |  ".join(row_text(*v[i]) for v in values))
         if uncertainty is not None:
             lines.append(
-                f"{'  ' + u_label:{width}}  "
+                u_head
                 + "  |  ".join(
                     " " * 53
                     if u is None
                     else " ".join(f"{'±' + format(v, '.3f'):>8}" for v in u[i])
-                    for u in expanded
+                    for u in u_values
                 )
             )
     if len(labels) > 1:
