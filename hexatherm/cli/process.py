@@ -146,6 +146,7 @@ def command(
     """
     from hexatherm.io.config import read_session
     from hexatherm.io.outputs import check_output_settled
+    from hexatherm.workflows.process.carryerror import carry_line
     from hexatherm.workflows.process.outputs import (
         deviation_table,
         significance_lines,
@@ -256,6 +257,9 @@ def command(
         f"session {result.session.name}: {len(result.session.plan.labels)} steps, "
         f"{n} targets, interpolation {interpolation}{averaged}"
     )
+    carried = carry_line(result, uncertainty.carry)
+    if carried:
+        echo_err(carried)
     smooth = result.correction.smooth
     if smooth is not None:
         lams = ", ".join(sorted({f"{v:.2g}" for v in smooth.lam})) if smooth.used else ""
