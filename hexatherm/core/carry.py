@@ -55,7 +55,7 @@ def leg_growth(
     ``s(q) (T - T_state)`` leg by leg (``leg_C`` (..., 6), ``state_leg_C`` (6,)).
 
     >>> from hexatherm.core.thermal import LegThermalModel
-    >>> legs = LegThermalModel.uniform(11.5e-6)
+    >>> legs = LegThermalModel.uniform([("rod", "steel", 11.5e-6, None)])  # one steel rod
     >>> g = leg_growth(legs, np.full(6, 400.0), np.full(6, 21.0), np.full(6, 20.0))
     >>> round(float(g[0]) * 1e3, 3)  # um: 400 mm of steel warmed 1 K
     4.6
@@ -69,7 +69,8 @@ def carry_motion(hexapod: Hexapod, pose_cmd: npt.ArrayLike, growth_mm: npt.Array
     by ``growth_mm`` (n, 6) to the wanted state, at commanded poses ``pose_cmd`` (n, 6).
 
     >>> from hexatherm.core.hexapod import Hexapod
-    >>> hx = Hexapod.example()
+    >>> hx = Hexapod.symmetric(base_radius_mm=150, platform_radius_mm=100,
+    ...     base_half_angle_deg=10, platform_half_angle_deg=10, height_mm=200)
     >>> m = carry_motion(hx, np.zeros((1, 6)), np.full((1, 6), 1e-3))  # every leg 1 um longer
     >>> bool(m[0, 2, 3] < 0) and bool(np.allclose(m[0, :3, :3], np.eye(3)))  # carried down
     True
