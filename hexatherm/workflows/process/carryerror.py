@@ -38,6 +38,7 @@ from hexatherm.core.propagation import PoseChain, TargetJacobian, reference_scat
 from hexatherm.core.registration import register
 from hexatherm.core.smoothbias import own_leg_covariance
 from hexatherm.typing import FloatArray
+from hexatherm.workflows.process.carrying import extrapolation_weights
 from hexatherm.workflows.process.pipeline import ProcessResult
 
 __all__ = ["CarryError", "carry_error"]
@@ -56,14 +57,20 @@ class CarryError:
         ``F`` with the outputs' added covariance ``F_a F_b^T`` between targets a and b
         (common to all targets): mm and deg.
     sigma_C : float
-        The thermocouples' noise from the log (Type A), K.
+        The thermocouples' noise from the log (Type A), K (NaN: no log).
     misfit : float
-        The leg model's relative misfit of the references' growth.
+        The leg model's relative misfit of the references' growth (NaN: no log).
+    source : str
+        How O was carried (:class:`~hexatherm.workflows.process.carrying.OriginCarry`).
+    basis : str
+        Without a log: what the extrapolation's error rests on (one line).
     """
 
     factor: FloatArray
     sigma_C: float
     misfit: float
+    source: str = "log"
+    basis: str = ""
 
     def covariance(self) -> FloatArray:
         """Added covariance (M, 12, 12) of every target's outputs."""
@@ -91,32 +98,41 @@ def carry_error(
     carry = result.carry
     session = result.session
     legs, hexapod = session.hexapod.legs, session.hexapod
-    if carry is None or legs is None or result.temperatures is None:
+    if carry is None or legs is None:
         return None
     plan = session.plan
-    log = result.temperatures
-    sigma2, _ = reference_scatter(log.time_s, log.legs_C)
-    sigma_c = float(np.sqrt(sigma2)) if np.isfinite(sigma2) else 0.0
     refs = plan.reference_indices
     q = result.steps.q_mm
-    predicted = leg_growth(
-        legs, hexapod.igm(plan.poses[refs]), carry.leg_C[refs], carry.state_leg_C
-    )
-    misfit = 1.0
-    if refs.size > 1:
-        # the references' growth is measured with their noise and R0's: not the model's
-        legs_cov = own_leg_covariance(chain, result.centres.centres_mm, centre_cov_mm2, refs)
-        noise = np.trace(legs_cov[1:], axis1=1, axis2=2).sum() + (refs.size - 1) * np.trace(
-            legs_cov[0]
+    origin = plan.origin_index
+    g_o = carry.origin_growth_mm
+    sigma_c, misfit, basis = np.nan, np.nan, ""
+    model_o = np.zeros(6)
+    if carry.source == "references":
+        sd_o, model_o, basis = _extrapolation_error(result, chain, centre_cov_mm2)
+    else:
+        if result.temperatures is None:
+            return None
+        log = result.temperatures
+        sigma2, _ = reference_scatter(log.time_s, log.legs_C)
+        sigma_c = float(np.sqrt(sigma2)) if np.isfinite(sigma2) else 0.0
+        predicted = leg_growth(
+            legs, hexapod.igm(plan.poses[refs]), carry.leg_C[refs], carry.state_leg_C
         )
-        misfit = model_misfit(q[refs[1:]] - q[refs[0]], predicted[1:], float(noise))
-    misfit = min(misfit, 1.0) if np.isfinite(misfit) else 1.0
+        misfit = 1.0
+        if refs.size > 1:
+            # the references' growth is measured with their noise and R0's: not the model's
+            legs_cov = own_leg_covariance(chain, result.centres.centres_mm, centre_cov_mm2, refs)
+            noise = np.trace(legs_cov[1:], axis1=1, axis2=2).sum() + (refs.size - 1) * np.trace(
+                legs_cov[0]
+            )
+            misfit = model_misfit(q[refs[1:]] - q[refs[0]], predicted[1:], float(noise))
+        misfit = min(misfit, 1.0) if np.isfinite(misfit) else 1.0
+        sd_o = _leg_sd(
+            legs.sensitivity_mm_per_K(hexapod.igm(plan.poses[origin])), g_o, sigma_c, misfit
+        )
     m = len(result.correction.target_index)
     factor = np.zeros((m, 12, 12))
     # O: its carried frame, the corrected poses' frame
-    origin = plan.origin_index
-    g_o = carry.origin_growth_mm
-    sd_o = _leg_sd(legs.sensitivity_mm_per_K(hexapod.igm(plan.poses[origin])), g_o, sigma_c, misfit)
     zero = np.zeros((1, 6))
     g_mean = g_o.mean(axis=0)
     by_growth = np.stack(
@@ -133,9 +149,12 @@ def carry_error(
     unshifted = result.correction.corrected  # the shift's derivative at ~ the same poses
     _, by_shift = shift_jacobian(carry.shift, unshifted, hexapod.convention)
     factor[:, 6:, :6] = by_shift @ (by_growth * sd_o)
+    if carry.source == "references":
+        # the extrapolation's model error: every leg's together (R0's columns are free)
+        factor[:, 6:, 6] = by_shift @ (by_growth @ model_o)
     # R0: its carried centres (all but the last measurement moved)
     g_r = carry.reference_growth_mm
-    if np.any(g_r != 0):
+    if carry.source == "log" and np.any(g_r != 0):
         r0 = int(refs[0])
         sd_r = _leg_sd(
             legs.sensitivity_mm_per_K(hexapod.igm(plan.poses[r0])),
@@ -162,7 +181,67 @@ def carry_error(
             axis=1
         )  # (M, 12, k, 3)
         factor[:, :, 6:] = on_r0.reshape(m, 12, 3 * k) @ (by_c * sd_r)
-    return CarryError(factor, sigma_c, misfit)
+    return CarryError(factor, sigma_c, misfit, carry.source, basis)
+
+
+def _extrapolation_error(
+    result: ProcessResult, chain: PoseChain, centre_cov_mm2: FloatArray
+) -> tuple[FloatArray, FloatArray, str]:
+    """O's mean growth taken from the references (no log): its noise's standard deviation
+    per leg (6,), its model error (6,, one error of every leg together: the heating's
+    history is the legs' one), and one line on what the model error rests on.
+
+    O's growth is ``sum_j L_j (q_Rj - q_R0)`` over the first ``d + 1`` references
+    (:func:`extrapolation_weights` at O's times, averaged; ``d`` the polynomial's degree),
+    scaled to O's legs: its noise ``sum_j>0 L_j^2 var q_Rj + (1 - L_0)^2 var q_R0`` (their
+    own centres, O held fixed). Its model error is the term the polynomial misses: the
+    RMS divided difference of order ``d + 1`` of the references' growth over consecutive
+    references (their noise included: on the safe side) times ``prod_j<=d (t_O - t_Rj)``;
+    with too few references to read it, the whole last term (the parabola's departure
+    from the line; the whole carry with two references).
+    """
+    session, carry = result.session, result.carry
+    assert carry is not None and session.hexapod.legs is not None
+    hexapod, legs, plan = session.hexapod, session.hexapod.legs, session.plan
+    refs = plan.reference_indices
+    degree = max(carry.degree, 1)
+    used = refs[: degree + 1]
+    t = np.asarray(result.centres.times_s, dtype=float)
+    tr = t[refs]
+    t_o = np.asarray(carry.origin_times_s, dtype=float)
+    weights = extrapolation_weights(tr[: used.size], t_o).mean(axis=0)
+    legs_cov = own_leg_covariance(chain, result.centres.centres_mm, centre_cov_mm2, used)
+    var = np.diagonal(legs_cov, axis1=1, axis2=2)  # (used, 6)
+    noise = (1.0 - weights[0]) ** 2 * var[0] + (weights[1:, None] ** 2 * var[1:]).sum(axis=0)
+    g = result.steps.q_mm[refs] - result.steps.q_mm[refs[0]]
+    q_r0 = result.steps.q_mm[refs[0]]
+    ratio = legs.sensitivity_mm_per_K(hexapod.igm(plan.poses[plan.origin_index][None])[0]) / (
+        legs.sensitivity_mm_per_K(q_r0)
+    )
+    order = degree + 1
+    if refs.size > order:
+        dd = g
+        for k in range(1, order + 1):  # divided differences of consecutive references
+            dd = np.diff(dd, axis=0) / (tr[k:] - tr[:-k])[:, None]
+        rms = np.sqrt(np.mean(dd**2, axis=0)) * np.sign(np.mean(dd, axis=0))
+        product = np.mean(np.prod(t_o[:, None] - tr[None, :order], axis=1))
+        model = rms * float(product)
+        basis = (
+            f"the references' noise and the {'line' if degree == 1 else 'parabola'}'s miss "
+            f"(their divided differences of order {order} over {refs.size - order} sets)"
+        )
+    elif degree == 2:
+        line = extrapolation_weights(tr[:2], t_o).mean(axis=0)
+        model = weights[1:] @ g[1:3] - line[1] * g[1]
+        basis = "the references' noise and the parabola's whole departure from the line"
+    else:
+        model = weights[1] * g[1]
+        basis = "the references' noise and the whole carry (two references: no curvature to read)"
+    return (
+        np.asarray(ratio * np.sqrt(noise), dtype=float),
+        np.asarray(ratio * model, dtype=float),
+        basis,
+    )
 
 
 def add_common(
@@ -203,30 +282,47 @@ def carry_line(result: ProcessResult, error: CarryError | None) -> str:
     """One screen line: how O (and R0's repeats) were carried to R0's state, and the
     carry's error in u; or why nothing was carried."""
     carry = result.carry
+    plan = result.session.plan
     if carry is None:
-        if result.temperatures is None:
+        if plan.reference_indices.size and result.session.hexapod.legs is not None:
             return (
-                "warning: O not carried to R0's thermal state (no thermocouple log): the "
-                "corrected poses refer to O in its own state"
-                + (", and the repeats are averaged at their mean time" if result.repeats else "")
+                "warning: O not carried to R0's thermal state (no thermocouple log and no "
+                "reference after R0): the corrected poses refer to O in its own state"
             )
         return ""
     g = carry.origin_growth_mm * 1e3
     repeats = {group.label: len(group.labels) for group in result.repeats}
-    r0 = repeats.get(result.session.plan.labels[result.session.plan.reference_indices[0]], 1)
-    text = (
-        f"O carried to R0's thermal state by the leg model and the thermocouple log (R0's "
-        f"legs {carry.warming_K:+.3f} K warmer than O's on average; O's growth "
-        f"{g.min():+.3g} to {g.max():+.3g} um)"
-    )
-    if r0 > 1:
-        text += f"; R0's {r0} measurements carried to the last one's state and averaged"
+    r0 = repeats.get(plan.labels[plan.reference_indices[0]], 1)
+    if carry.source == "references":
+        text = (
+            "O carried to R0's thermal state by the references' growth (no thermocouple "
+            "log: the growth since R0 of the first references extrapolated back to O's "
+            f"time, scaled to O's legs; O's growth {g.min():+.3g} to {g.max():+.3g} um)"
+        )
+        if r0 > 1:
+            text += (
+                f"; R0's {r0} measurements fitted by a straight line in time, taken at the "
+                "last one's"
+            )
+    else:
+        text = (
+            f"O carried to R0's thermal state by the leg model and the thermocouple log (R0's "
+            f"legs {carry.warming_K:+.3f} K warmer than O's on average; O's growth "
+            f"{g.min():+.3g} to {g.max():+.3g} um)"
+        )
+        if r0 > 1:
+            text += f"; R0's {r0} measurements carried to the last one's state and averaged"
     if error is not None:
         u = np.sqrt(np.diagonal(error.covariance(), axis1=1, axis2=2)).max(axis=0)
+        if error.source == "references":
+            basis = error.basis
+        else:
+            basis = (
+                f"thermocouple noise {error.sigma_C * 1e3:.3g} mK (Type A from the log), "
+                f"leg model gain error {error.misfit:.0%} beyond the references' noise"
+            )
         text += (
-            f"; its error in u (common): thermocouple noise {error.sigma_C * 1e3:.3g} mK "
-            f"(Type A from the log), leg model gain error {error.misfit:.0%} beyond the "
-            f"references' noise: up to {u[6:9].max() * 1e3:.3g} um, "
+            f"; its error in u (common): {basis}: up to {u[6:9].max() * 1e3:.3g} um, "
             f"{np.deg2rad(u[9:]).max() * 1e6:.3g} urad"
         )
     return text

@@ -8,8 +8,14 @@ state of R0's last measurement (the one nearest the first target, which interpol
 it) by the leg model (:mod:`hexatherm.core.carry`); R0's measurements are then averaged
 (its time that of the last), and O's carried average gives the frame the corrected poses
 are expressed in (``OriginCarry.shift``), while the conventional poses keep O as measured.
-Without a log nothing is carried: each step's measurements are averaged at their mean time,
-and the screen says so.
+Without a log, the references' growth stands in for the leg model's (the same correction
+the targets get): O is carried by the growth R1 (and R2) measured since R0, on the
+straight line (the parabola) through them back to O's time, scaled to O's legs, and R0's
+repeats give their straight line in time at the last one's time (their drift is the legs'
+growth); with no reference after R0
+nothing is carried, and the screen says so. Either way the corrected poses mean one
+thing, the pose in R0's (last) thermal state relative to O in that state, as the twin's
+truth defines it (:class:`hexatherm.core.twin.TwinSteps`).
 """
 
 from __future__ import annotations
@@ -18,9 +24,10 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from hexatherm.core.carry import carry_centres, carry_motion, leg_growth
-from hexatherm.core.geometry import invert_transform
+from hexatherm.core.geometry import invert_transform, pose_from_transform
 from hexatherm.core.plan import find_repeats, without_repeats
 from hexatherm.core.registration import register
 from hexatherm.io.temperatures import Temperatures
@@ -80,9 +87,18 @@ class OriginCarry:
     state_time_s : float
         Time of R0's thermal state (its last measurement).
     leg_C : ndarray, shape (N, 6)
-        The logged leg temperatures at every step of the (reduced) plan.
+        The logged leg temperatures at every step of the (reduced) plan (NaN: no log).
     state_leg_C : ndarray, shape (6,)
-        The leg temperatures of R0's state.
+        The leg temperatures of R0's state (NaN: no log).
+    source : str
+        ``log``: the growth from the leg model and the thermocouple log; ``references``:
+        from the growth the references measured since R0, extrapolated in time
+        (:func:`growth_from_references`).
+    origin_times_s : ndarray, shape (n_O,)
+        Each measurement of O's time.
+    degree : int
+        Without a log: the degree of the polynomial through the references that took
+        their growth back to O's time (1 a line, 2 a parabola; 0 with a log).
     """
 
     shift: FloatArray
@@ -91,10 +107,14 @@ class OriginCarry:
     state_time_s: float
     leg_C: FloatArray
     state_leg_C: FloatArray
+    source: str = "log"
+    origin_times_s: FloatArray = dataclasses.field(default_factory=lambda: np.zeros(0))
+    degree: int = 0
 
     @property
     def warming_K(self) -> float:
-        """The legs' mean warming from O's (first) measurement to R0's state, K."""
+        """The legs' mean warming from O's (first) measurement to R0's state, K (NaN
+        without a log)."""
         return float(np.mean(self.state_leg_C - self.leg_C[0]))
 
 
@@ -118,24 +138,124 @@ def _deviations(times: FloatArray, values: FloatArray) -> tuple[FloatArray, int]
     return values - values.mean(axis=0), values[0].size * (n - 1)
 
 
+def line_at_end(times_s: FloatArray) -> FloatArray:
+    """Weights (n,) giving the straight line fitted in time through n values at the last
+    time: ``1/n + (t_n - mean) (t_i - mean) / Sxx`` (the mean's when the times coincide).
+
+    >>> line_at_end(np.array([0.0, 1.0])).tolist()
+    [0.0, 1.0]
+    >>> line_at_end(np.array([0.0, 1.0, 2.0])).round(3).tolist()
+    [-0.167, 0.333, 0.833]
+    """
+    t = np.asarray(times_s, dtype=float)
+    d = t - t.mean()
+    sxx = float(np.sum(d**2))
+    if not sxx > 0:
+        return np.full(t.size, 1.0 / t.size)
+    return np.asarray(1.0 / t.size + d[-1] * d / sxx, dtype=float)
+
+
+def extrapolation_weights(ref_times_s: FloatArray, at_s: FloatArray) -> FloatArray:
+    """Weights (n_at, n) of the polynomial through n references' values (Lagrange: a
+    straight line through two, a parabola through three) at times ``at_s``.
+
+    >>> extrapolation_weights(np.array([1.0, 2.0]), np.array([0.0])).tolist()
+    [[2.0, -1.0]]
+    >>> extrapolation_weights(np.array([1.0, 2.0, 3.0]), np.array([0.0])).tolist()
+    [[3.0, -3.0, 1.0]]
+    """
+    tr = np.asarray(ref_times_s, dtype=float)
+    at = np.asarray(at_s, dtype=float)[:, None]
+    out = np.ones((at.shape[0], tr.size))
+    for j in range(tr.size):
+        for m in range(tr.size):
+            if m != j:
+                out[:, j] *= (at[:, 0] - tr[m]) / (tr[j] - tr[m])
+    return out
+
+
+def extrapolation_degree(ref_times_s: FloatArray, growth_mm: FloatArray) -> int:
+    """The polynomial's degree to take the references' growth back to O's time: 1 (the
+    line through R0 and R1) with two references, 2 (the parabola through R0, R1, R2) with
+    three; with four or more, the one that predicts each reference from the next two
+    (three), backwards as O is reached, with the smaller RMS error over the references.
+
+    >>> t = np.arange(6.0)
+    >>> int(extrapolation_degree(t, np.outer(1 - np.exp(-t / 3), np.ones(6))))  # a curve
+    2
+    >>> int(extrapolation_degree(t, np.outer(t + [0, 1, -1, 1, -1, 1], np.ones(6))))  # noise
+    1
+    """
+    t = np.asarray(ref_times_s, dtype=float)
+    g = np.asarray(growth_mm, dtype=float)
+    if t.size < 4:
+        return min(t.size - 1, 2)
+    miss: dict[int, list[FloatArray]] = {1: [], 2: []}
+    for j in range(t.size - 3):
+        for degree in (1, 2):
+            nxt = slice(j + 1, j + 2 + degree)
+            predicted = extrapolation_weights(t[nxt], t[j : j + 1]) @ g[nxt]
+            miss[degree].append(predicted[0] - g[j])
+    rms = {d: float(np.sqrt(np.mean(np.square(m)))) for d, m in miss.items()}
+    return 2 if rms[2] < rms[1] else 1
+
+
+def growth_from_references(
+    session: Session,
+    centres_mm: FloatArray,
+    times_s: FloatArray,
+    weights: FloatArray | None,
+    steps: tuple[int, ...],
+    at_s: FloatArray,
+) -> tuple[FloatArray, int]:
+    """Growth (n, 6) of O's legs at times ``at_s`` since R0's state, from the references
+    alone (no thermocouple log), and the polynomial's degree: the growth the references
+    measured since R0 (``q_R - q_R0``, poses relative to O), extrapolated to each time by
+    the polynomial through the first two or three (:func:`extrapolation_degree`,
+    :func:`extrapolation_weights`), scaled to O's commanded legs by the leg model
+    (:meth:`~hexatherm.core.thermal.LegThermalModel.scale_growth`). ``steps`` are O, then
+    R0 (its time its state's) and the references after it."""
+    hexapod, legs = session.hexapod, session.hexapod.legs
+    assert legs is not None
+    idx = np.array(steps, dtype=np.intp)
+    frames = register(
+        centres_mm[idx], session.balls.centres_mm, None if weights is None else weights[idx]
+    ).platform2cmm
+    poses = pose_from_transform(invert_transform(frames[0]) @ frames[1:], hexapod.convention)
+    q = hexapod.igm(poses)  # the references
+    tr = times_s[idx[1:]]
+    degree = extrapolation_degree(tr, q - q[0])
+    g_r = extrapolation_weights(tr[: degree + 1], at_s) @ (q[: degree + 1] - q[0])
+    q_o = hexapod.igm(session.plan.poses[idx[0]][None])[0]
+    return np.asarray(legs.scale_growth(g_r, q[0], q_o), dtype=float), degree
+
+
 def carry_and_average(
     session: Session, centres: StepCentres, temperatures: Temperatures | None
 ) -> tuple[Session, StepCentres, tuple[RepeatGroup, ...], OriginCarry | None]:
     """Carry O and R0 to R0's (last) thermal state and average the repeats.
 
-    Each ball's centre of an averaged step is the mean of its (carried) centres, its
-    covariance the sum of theirs over ``n^2`` (fits), its ``u_um`` ``sqrt(sum u^2) / n``
+    With a thermocouple log, each measurement of O and R0 is carried by the leg model's
+    growth; R0's centres are the mean of its carried ones. Without a log, R0's repeats are
+    a straight line in time per centre coordinate taken at the last one's time
+    (:func:`line_at_end`: its drift is the legs' growth), and O is carried by the
+    references' growth (:func:`growth_from_references`) when there is a reference after
+    R0. Each ball's centre of an averaged step is a weighted sum of its centres, its
+    covariance the sum of theirs times the squared weights (fits), its ``u_um`` likewise
     (files); R0's time is its last measurement's when carried (the mean of the times
     otherwise), O's the mean of its times. O's centres stay the mean of the measured ones
     (the conventional poses' frame); its carry is ``OriginCarry.shift``. The session's
     plan loses the repeats (:func:`hexatherm.core.plan.without_repeats`). Returns the
     session and centres unchanged, no group and no carry when nothing is repeated and
-    there is no log (or no reference).
+    nothing can be carried.
     """
     plan = session.plan
     repeats = find_repeats(plan)
     legs = session.hexapod.legs
-    carry = temperatures is not None and legs is not None and bool(repeats.reference0)
+    logged = temperatures is not None and legs is not None and bool(repeats.reference0)
+    later = [int(i) for i in plan.reference_indices if int(i) not in repeats.reference0]
+    by_references = not logged and legs is not None and bool(repeats.reference0) and bool(later)
+    carry = logged or by_references
     if not repeats.any and not carry:
         return session, centres, (), None
     c, t, u = centres.centres_mm.copy(), centres.times_s.copy(), centres.u_um.copy()
@@ -145,33 +265,30 @@ def carry_and_average(
     growth: dict[int, FloatArray] = {}
     motions: dict[int, FloatArray] = {}
     state_time = float(centres.times_s[repeats.reference0[-1]]) if repeats.reference0 else np.nan
-    if carry:
+    if logged:
         assert temperatures is not None and legs is not None
         idx = np.array(repeats.origin + repeats.reference0, dtype=np.intp)
         temps = logged_legs(temperatures, centres.times_s[idx])
         state = logged_legs(temperatures, np.array([state_time]))[0]
-        g = leg_growth(legs, session.hexapod.igm(plan.poses[idx]), temps, state)
-        frames = register(
-            centres.centres_mm[idx],
-            session.balls.centres_mm,
-            None if weights is None else weights[idx],
-        ).platform2cmm
-        motion = carry_motion(session.hexapod, plan.poses[idx], g)
-        world = frames @ motion @ invert_transform(frames)
-        world[~np.any(g != 0, axis=1)] = np.eye(4)  # R0's last: exactly where it is
-        for j, i in enumerate(idx):
-            growth[int(i)], motions[int(i)] = g[j], world[j]
+        growth.update(
+            zip(
+                idx.tolist(),
+                leg_growth(legs, session.hexapod.igm(plan.poses[idx]), temps, state),
+                strict=True,
+            )
+        )
+        motions.update(_world_motions(session, centres, weights, idx, growth))
     groups = []
-    shift = np.eye(4)
     for steps in (repeats.origin, repeats.reference0):
         idx = np.asarray(steps, dtype=np.intp)
         if not idx.size:
             continue
         n, first = len(idx), int(idx[0])
+        is_origin = first == plan.origin_index
         times = centres.times_s[idx]
         measured = centres.centres_mm[idx]  # (n, k, 3)
         world = np.stack([motions.get(int(i), np.eye(4)) for i in idx])
-        carried = carry_centres(np.eye(4), world, measured) if carry else measured
+        carried = carry_centres(np.eye(4), world, measured) if logged else measured
         if n > 1:
             deviations, dof = _deviations(times, carried)
             one_cov = (
@@ -187,24 +304,53 @@ def carry_and_average(
                     deviations,
                     int(dof),
                     one_cov,
-                    world if carry and first != plan.origin_index else None,
+                    world if logged and not is_origin else None,
                 )
             )
-        is_origin = first == plan.origin_index
-        c[first] = (measured if is_origin or not carry else carried).mean(axis=0)
-        t[first] = times.mean() if is_origin or not carry else state_time
-        u[first] = np.sqrt((centres.u_um[idx] ** 2).sum(axis=0)) / n
+        # R0 without a log: its line in time at its last measurement (its state)
+        w = line_at_end(times) if by_references and not is_origin else np.full(n, 1.0 / n)
+        c[first] = np.einsum("i,ikj->kj", w, measured if is_origin else carried)
+        t[first] = state_time if carry and not is_origin else times.mean()
+        u[first] = np.sqrt(np.einsum("i,ik->k", w**2, centres.u_um[idx] ** 2))
         if cov is not None and centres.cov_mm2 is not None:
-            cov[first] = centres.cov_mm2[idx].sum(axis=0) / n**2
+            cov[first] = np.einsum("i,ikab->kab", w**2, centres.cov_mm2[idx])
         count[first] = n
-        if is_origin and carry:
-            w = None if weights is None else weights[first][None]
-            pair = register(
-                np.stack([measured.mean(axis=0), carried.mean(axis=0)]),
-                session.balls.centres_mm,
-                w,
-            ).platform2cmm
-            shift = invert_transform(pair[0]) @ pair[1]
+    origin_carry = None
+    if carry:
+        o_idx = np.asarray(repeats.origin, dtype=np.intp)
+        if by_references:
+            used = (plan.origin_index, repeats.reference0[0], *later)
+            g_o, degree = growth_from_references(
+                session, c, t, registration_weights(u), used, centres.times_s[o_idx]
+            )
+            growth.update(zip(o_idx.tolist(), g_o, strict=True))
+            growth.update((int(i), np.zeros(6)) for i in repeats.reference0)
+            motions.update(_world_motions(session, centres, weights, o_idx, growth))
+        measured = centres.centres_mm[o_idx]
+        world = np.stack([motions[int(i)] for i in o_idx])
+        pair = register(
+            np.stack([measured.mean(axis=0), carry_centres(np.eye(4), world, measured).mean(0)]),
+            session.balls.centres_mm,
+            None if weights is None else weights[plan.origin_index][None],
+        ).platform2cmm
+        shift = invert_transform(pair[0]) @ pair[1]
+        if logged:
+            assert temperatures is not None
+            leg_c = logged_legs(temperatures, t)
+            state_c = logged_legs(temperatures, np.array([state_time]))[0]
+        else:
+            leg_c, state_c = np.full((len(t), 6), np.nan), np.full(6, np.nan)
+        origin_carry = OriginCarry(
+            shift,
+            np.array([growth[i] for i in repeats.origin]),
+            np.array([growth[i] for i in repeats.reference0]),
+            state_time,
+            leg_c,
+            state_c,
+            "log" if logged else "references",
+            centres.times_s[o_idx],
+            degree if by_references else 0,
+        )
     reduced, keep = without_repeats(plan, repeats) if repeats.any else (plan, np.arange(len(t)))
     averaged = StepCentres(
         c[keep],
@@ -216,15 +362,28 @@ def carry_and_average(
         centres.time_aware,
         None if centres.cov_from_file is None else centres.cov_from_file[keep],
     )
-    origin_carry = None
-    if carry:
-        assert temperatures is not None
-        origin_carry = OriginCarry(
-            shift,
-            np.array([growth[i] for i in repeats.origin]),
-            np.array([growth[i] for i in repeats.reference0]),
-            state_time,
-            logged_legs(temperatures, averaged.times_s),
-            logged_legs(temperatures, np.array([state_time]))[0],
-        )
+    if origin_carry is not None:
+        origin_carry = dataclasses.replace(origin_carry, leg_C=origin_carry.leg_C[keep])
     return dataclasses.replace(session, plan=reduced), averaged, tuple(groups), origin_carry
+
+
+def _world_motions(
+    session: Session,
+    centres: StepCentres,
+    weights: FloatArray | None,
+    idx: npt.NDArray[np.intp],
+    growth: dict[int, FloatArray],
+) -> dict[int, FloatArray]:
+    """The rigid motions (CMM frame) carrying the measurements ``idx`` by their growth:
+    ``F M F^-1`` (:func:`~hexatherm.core.carry.carry_motion`), identity where none."""
+    plan = session.plan
+    g = np.array([growth[int(i)] for i in idx])
+    frames = register(
+        centres.centres_mm[idx],
+        session.balls.centres_mm,
+        None if weights is None else weights[idx],
+    ).platform2cmm
+    motion = carry_motion(session.hexapod, plan.poses[idx], g)
+    world = frames @ motion @ invert_transform(frames)
+    world[~np.any(g != 0, axis=1)] = np.eye(4)  # R0's last: exactly where it is
+    return dict(zip(idx.tolist(), world, strict=True))
