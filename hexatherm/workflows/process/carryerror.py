@@ -38,7 +38,7 @@ from hexatherm.core.propagation import PoseChain, TargetJacobian, reference_scat
 from hexatherm.core.registration import register
 from hexatherm.core.smoothbias import own_leg_covariance
 from hexatherm.typing import FloatArray
-from hexatherm.workflows.process.carrying import extrapolation_weights
+from hexatherm.workflows.process.carrying import extrapolation_weights, line_at_end
 from hexatherm.workflows.process.pipeline import ProcessResult
 
 __all__ = ["CarryError", "carry_error"]
@@ -184,59 +184,92 @@ def carry_error(
     return CarryError(factor, sigma_c, misfit, carry.source, basis)
 
 
+def _divided(times: FloatArray, values: FloatArray, order: int) -> FloatArray:
+    """Divided differences (n - order, 6) of ``order`` over consecutive times."""
+    dd = values
+    for k in range(1, order + 1):
+        dd = np.diff(dd, axis=0) / (times[k:] - times[:-k])[:, None]
+    return dd
+
+
+def _beyond_noise(times: FloatArray, values: FloatArray, var: FloatArray, order: int) -> FloatArray:
+    """The divided differences' RMS of ``order`` (6,) beyond what the values' noise (their
+    variances ``var`` (n, 6), independent) gives them: ``sqrt(max(0, mean dd^2 - mean
+    var dd))``, signed as their mean."""
+    dd = _divided(times, values, order)
+    operator = _divided(times, np.eye(times.size), order)  # (n - order, n)
+    noise = np.mean(operator**2 @ var, axis=0)
+    rms2 = np.maximum(np.mean(dd**2, axis=0) - noise, 0.0)
+    return np.asarray(np.sqrt(rms2) * np.sign(np.mean(dd, axis=0)), dtype=float)
+
+
 def _extrapolation_error(
     result: ProcessResult, chain: PoseChain, centre_cov_mm2: FloatArray
 ) -> tuple[FloatArray, FloatArray, str]:
-    """O's mean growth taken from the references (no log): its noise's standard deviation
-    per leg (6,), its model error (6,, one error of every leg together: the heating's
-    history is the legs' one), and one line on what the model error rests on.
+    """O's mean growth read from the references' series (no log, :class:`ReferenceSeries`):
+    its noise's standard deviation per leg (6,), its model error (6,: one error of every
+    leg together, the heating's history being the legs' one), and one line on what the
+    model error rests on.
 
-    O's growth is ``sum_j L_j (q_Rj - q_R0)`` over the first ``d + 1`` references
-    (:func:`extrapolation_weights` at O's times, averaged; ``d`` the polynomial's degree),
-    scaled to O's legs: its noise ``sum_j>0 L_j^2 var q_Rj + (1 - L_0)^2 var q_R0`` (their
-    own centres, O held fixed). Its model error is the term the polynomial misses: the
-    RMS divided difference of order ``d + 1`` of the references' growth over consecutive
-    references (their noise included: on the safe side) times ``prod_j<=d (t_O - t_Rj)``;
-    with too few references to read it, the whole last term (the parabola's departure
-    from the line; the whole carry with two references).
+    O's growth is ``sum_j W_j (q_j - q_R0)`` over the series (O's measurements' weights
+    averaged), scaled to O's legs, R0's state being the line ``sum_i l_i q_i`` of R0's
+    measurements: its noise ``sum_i (W_i - l_i sum W)^2 var q_i`` over R0's measurements
+    plus ``sum_j W_j^2 var q_j`` over the later references (their own centres, O held
+    fixed; one measurement of R0 has R0's state's variance over ``sum l^2``). Its model
+    error is the term the line or polynomial misses: the RMS divided difference of the
+    next order over consecutive members of the series, beyond what their noise gives it
+    (in squares), times ``prod_j (t_O - t_j)`` over the members used; with too few
+    members to read it, the whole last term (the parabola's departure from the line; with
+    two, the whole carry). Added to the outputs as independent of the correction's own
+    noise (R0's state is in both: left out, on the safe side).
     """
     session, carry = result.session, result.carry
-    assert carry is not None and session.hexapod.legs is not None
+    assert carry is not None and carry.series is not None
+    assert session.hexapod.legs is not None
+    series = carry.series
     hexapod, legs, plan = session.hexapod, session.hexapod.legs, session.plan
     refs = plan.reference_indices
-    degree = max(carry.degree, 1)
-    used = refs[: degree + 1]
-    t = np.asarray(result.centres.times_s, dtype=float)
-    tr = t[refs]
-    t_o = np.asarray(carry.origin_times_s, dtype=float)
-    weights = extrapolation_weights(tr[: used.size], t_o).mean(axis=0)
-    legs_cov = own_leg_covariance(chain, result.centres.centres_mm, centre_cov_mm2, used)
-    var = np.diagonal(legs_cov, axis1=1, axis2=2)  # (used, 6)
-    noise = (1.0 - weights[0]) ** 2 * var[0] + (weights[1:, None] ** 2 * var[1:]).sum(axis=0)
-    g = result.steps.q_mm[refs] - result.steps.q_mm[refs[0]]
+    ts, g, n0 = series.times_s, series.growth_mm, series.r0_count
+    n = ts.size
+    legs_cov = own_leg_covariance(chain, result.centres.centres_mm, centre_cov_mm2, refs)
+    var = np.diagonal(legs_cov, axis1=1, axis2=2)  # (R, 6): R0's state, then the later
+    line = line_at_end(ts[:n0])  # R0's state from its measurements
+    var_single = var[0] / float(np.sum(line**2))
+    var_series = np.concatenate([np.repeat(var_single[None], n0, axis=0), var[1:]])
+    w = series.weights.mean(axis=0)
+    # on R0's measurements: their own weight less their share of R0's state
+    on = np.concatenate([w[:n0] - w.sum() * line, w[n0:]])
+    noise = (on[:, None] ** 2 * var_series).sum(axis=0)
+    models = []
+    for t, row in zip(carry.origin_times_s, series.weights, strict=True):
+        used = np.flatnonzero(row)
+        if t < ts[0]:
+            order = used.size  # degree + 1
+            if n > order:
+                rms = _beyond_noise(ts, g, var_series, order)
+                models.append(rms * float(np.prod(t - ts[:order])))
+            elif order == 3:
+                line2 = extrapolation_weights(ts[:2], np.array([t]))[0]
+                models.append(row[:3] @ g[:3] - line2 @ g[:2])
+            else:
+                models.append(row @ g)
+        elif n >= 3:
+            rms = _beyond_noise(ts, g, var_series, 2)
+            models.append(rms * float(np.prod(t - ts[used])))
+        else:
+            models.append(np.zeros(6))
+    model = np.mean(models, axis=0)
     q_r0 = result.steps.q_mm[refs[0]]
     ratio = legs.sensitivity_mm_per_K(hexapod.igm(plan.poses[plan.origin_index][None])[0]) / (
         legs.sensitivity_mm_per_K(q_r0)
     )
-    order = degree + 1
-    if refs.size > order:
-        dd = g
-        for k in range(1, order + 1):  # divided differences of consecutive references
-            dd = np.diff(dd, axis=0) / (tr[k:] - tr[:-k])[:, None]
-        rms = np.sqrt(np.mean(dd**2, axis=0)) * np.sign(np.mean(dd, axis=0))
-        product = np.mean(np.prod(t_o[:, None] - tr[None, :order], axis=1))
-        model = rms * float(product)
-        basis = (
-            f"the references' noise and the {'line' if degree == 1 else 'parabola'}'s miss "
-            f"(their divided differences of order {order} over {refs.size - order} sets)"
-        )
-    elif degree == 2:
-        line = extrapolation_weights(tr[:2], t_o).mean(axis=0)
-        model = weights[1:] @ g[1:3] - line[1] * g[1]
-        basis = "the references' noise and the parabola's whole departure from the line"
-    else:
-        model = weights[1] * g[1]
-        basis = "the references' noise and the whole carry (two references: no curvature to read)"
+    shape = {1: "line", 2: "parabola"}[series.degree]
+    basis = f"the references' noise and what the {shape} through them misses ({n} in the " + (
+        f"series, the next divided differences' RMS beyond their noise over "
+        f"{n - series.degree - 1} sets)"
+        if n > series.degree + 1
+        else "series: the whole last term)"
+    )
     return (
         np.asarray(ratio * np.sqrt(noise), dtype=float),
         np.asarray(ratio * model, dtype=float),
@@ -296,8 +329,10 @@ def carry_line(result: ProcessResult, error: CarryError | None) -> str:
     if carry.source == "references":
         text = (
             "O carried to R0's thermal state by the references' growth (no thermocouple "
-            "log: the growth since R0 of the first references extrapolated back to O's "
-            f"time, scaled to O's legs; O's growth {g.min():+.3g} to {g.max():+.3g} um)"
+            "log: the growth since R0 of R0's measurements and the references after it, "
+            "read at O's time, between two of them on the line through them, before the "
+            f"first on a line or parabola; scaled to O's legs; O's growth {g.min():+.3g} to "
+            f"{g.max():+.3g} um)"
         )
         if r0 > 1:
             text += (

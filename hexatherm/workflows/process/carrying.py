@@ -96,9 +96,8 @@ class OriginCarry:
         (:func:`growth_from_references`).
     origin_times_s : ndarray, shape (n_O,)
         Each measurement of O's time.
-    degree : int
-        Without a log: the degree of the polynomial through the references that took
-        their growth back to O's time (1 a line, 2 a parabola; 0 with a log).
+    series : ReferenceSeries, optional
+        Without a log: the references' growth O's growth was read from.
     """
 
     shift: FloatArray
@@ -109,7 +108,7 @@ class OriginCarry:
     state_leg_C: FloatArray
     source: str = "log"
     origin_times_s: FloatArray = dataclasses.field(default_factory=lambda: np.zeros(0))
-    degree: int = 0
+    series: ReferenceSeries | None = None
 
     @property
     def warming_K(self) -> float:
@@ -200,34 +199,97 @@ def extrapolation_degree(ref_times_s: FloatArray, growth_mm: FloatArray) -> int:
     return 2 if rms[2] < rms[1] else 1
 
 
+def series_weights(series_s: FloatArray, at_s: FloatArray, degree: int) -> FloatArray:
+    """Weights (n_at, n) of the references' growth series (times ``series_s``) at times
+    ``at_s``: between two references the straight line through them (as a target's
+    growth), before the first the polynomial of ``degree`` through the first ``degree +
+    1`` (after the last, the line through the last two).
+
+    >>> series_weights(np.array([1.0, 2.0, 3.0]), np.array([0.0, 1.5]), 1).tolist()
+    [[2.0, -1.0, 0.0], [0.5, 0.5, 0.0]]
+    """
+    ts = np.asarray(series_s, dtype=float)
+    at = np.asarray(at_s, dtype=float)
+    out = np.zeros((at.size, ts.size))
+    for e, t in enumerate(at):
+        if t < ts[0]:
+            out[e, : degree + 1] = extrapolation_weights(ts[: degree + 1], np.array([t]))[0]
+        elif t >= ts[-1]:
+            out[e, -2:] = extrapolation_weights(ts[-2:], np.array([t]))[0]
+        else:
+            i = int(np.searchsorted(ts, t, side="right") - 1)
+            out[e, i : i + 2] = extrapolation_weights(ts[i : i + 2], np.array([t]))[0]
+    return out
+
+
+@dataclass(frozen=True)
+class ReferenceSeries:
+    """The references' growth series O's growth is read from without a log.
+
+    Attributes
+    ----------
+    times_s : ndarray, shape (n,)
+        Every measurement of R0, then the references after it.
+    growth_mm : ndarray, shape (n, 6)
+        Their legs' growth since R0's state (``q - q_R0``, R0 its line at its last time).
+    weights : ndarray, shape (n_O, n)
+        O's measurements' growth (at R's legs) is ``weights @ growth_mm``.
+    r0_count : int
+        How many of the series are measurements of R0.
+    degree : int
+        The polynomial's degree before the first (:func:`extrapolation_degree`).
+    """
+
+    times_s: FloatArray
+    growth_mm: FloatArray
+    weights: FloatArray
+    r0_count: int
+    degree: int
+
+
 def growth_from_references(
     session: Session,
-    centres_mm: FloatArray,
-    times_s: FloatArray,
+    centres: StepCentres,
     weights: FloatArray | None,
-    steps: tuple[int, ...],
-    at_s: FloatArray,
-) -> tuple[FloatArray, int]:
-    """Growth (n, 6) of O's legs at times ``at_s`` since R0's state, from the references
-    alone (no thermocouple log), and the polynomial's degree: the growth the references
-    measured since R0 (``q_R - q_R0``, poses relative to O), extrapolated to each time by
-    the polynomial through the first two or three (:func:`extrapolation_degree`,
-    :func:`extrapolation_weights`), scaled to O's commanded legs by the leg model
-    (:meth:`~hexatherm.core.thermal.LegThermalModel.scale_growth`). ``steps`` are O, then
-    R0 (its time its state's) and the references after it."""
-    hexapod, legs = session.hexapod, session.hexapod.legs
+    origin: tuple[int, ...],
+    r0: tuple[int, ...],
+    r0_state_mm: FloatArray,
+    later: tuple[int, ...],
+) -> tuple[FloatArray, ReferenceSeries]:
+    """Growth (n_O, 6) of O's legs at O's measurements since R0's state, from the
+    references alone (no thermocouple log), and the series it rests on: the growth since
+    R0's state (``r0_state_mm``, R0's centres in it) of every measurement of R0 and of
+    the references after it (poses relative to O, its measurements' mean), read at each
+    O's time (:func:`series_weights`: between neighbours a straight line, before the
+    first the line or parabola of :func:`extrapolation_degree`), scaled to O's commanded
+    legs by the leg model (:meth:`~hexatherm.core.thermal.LegThermalModel.scale_growth`).
+    """
+    hexapod, legs, plan = session.hexapod, session.hexapod.legs, session.plan
     assert legs is not None
-    idx = np.array(steps, dtype=np.intp)
-    frames = register(
-        centres_mm[idx], session.balls.centres_mm, None if weights is None else weights[idx]
-    ).platform2cmm
+    steps = np.array(r0 + later, dtype=np.intp)
+    c = np.concatenate(
+        [
+            centres.centres_mm[list(origin)].mean(axis=0)[None],
+            r0_state_mm[None],
+            centres.centres_mm[steps],
+        ]
+    )
+    w = None
+    if weights is not None:
+        w = np.concatenate([weights[[origin[0], r0[0]]], weights[steps]])
+    frames = register(c, session.balls.centres_mm, w).platform2cmm
     poses = pose_from_transform(invert_transform(frames[0]) @ frames[1:], hexapod.convention)
-    q = hexapod.igm(poses)  # the references
-    tr = times_s[idx[1:]]
-    degree = extrapolation_degree(tr, q - q[0])
-    g_r = extrapolation_weights(tr[: degree + 1], at_s) @ (q[: degree + 1] - q[0])
-    q_o = hexapod.igm(session.plan.poses[idx[0]][None])[0]
-    return np.asarray(legs.scale_growth(g_r, q[0], q_o), dtype=float), degree
+    q = hexapod.igm(poses)  # R0's state, then the series
+    ts = centres.times_s[steps]
+    growth = q[1:] - q[0]
+    if len(r0) == 1:
+        growth[0] = 0.0  # R0 is its state
+    degree = extrapolation_degree(ts, growth)
+    at = centres.times_s[list(origin)]
+    wts = series_weights(ts, at, degree)
+    q_o = hexapod.igm(plan.poses[origin[0]][None])[0]
+    g_o = legs.scale_growth(wts @ growth, q[0], q_o)
+    return np.asarray(g_o, dtype=float), ReferenceSeries(ts, growth, wts, len(r0), degree)
 
 
 def carry_and_average(
@@ -319,9 +381,14 @@ def carry_and_average(
     if carry:
         o_idx = np.asarray(repeats.origin, dtype=np.intp)
         if by_references:
-            used = (plan.origin_index, repeats.reference0[0], *later)
-            g_o, degree = growth_from_references(
-                session, c, t, registration_weights(u), used, centres.times_s[o_idx]
+            g_o, series = growth_from_references(
+                session,
+                centres,
+                weights,
+                repeats.origin,
+                repeats.reference0,
+                c[repeats.reference0[0]],
+                tuple(later),
             )
             growth.update(zip(o_idx.tolist(), g_o, strict=True))
             growth.update((int(i), np.zeros(6)) for i in repeats.reference0)
@@ -349,7 +416,7 @@ def carry_and_average(
             state_c,
             "log" if logged else "references",
             centres.times_s[o_idx],
-            degree if by_references else 0,
+            series if by_references else None,
         )
     reduced, keep = without_repeats(plan, repeats) if repeats.any else (plan, np.arange(len(t)))
     averaged = StepCentres(
