@@ -114,3 +114,17 @@ def test_without_a_log_o_and_r0_are_carried_by_the_references(
     ratio = np.sqrt((claimed**2).mean(axis=(0, 1)) / (errors**2).mean(axis=(0, 1)))
     assert np.all((ratio > 0.8) & (ratio < 2.2)), ratio.round(2)
     assert float((np.abs(errors) <= 2 * claimed).mean()) >= 0.92
+
+
+def test_the_screen_says_o_was_carried_by_the_references(tmp_path: Path) -> None:
+    """Without a log, ``process --strict`` passes the x4 session (R0 at its last time) and
+    one line says how O was carried and what its error in u rests on."""
+    folder, _ = write(tmp_path / "s", 0, log=False)
+    result = CliRunner().invoke(
+        main, ["process", str(folder), "--strict", "-o", str(tmp_path / "o")]
+    )
+    assert result.exit_code == 0, result.output
+    line = next(x for x in result.output.splitlines() if x.startswith("O carried"))
+    assert "by the references' growth (no thermocouple log" in line
+    assert "R0's 4 measurements fitted by a straight line in time" in line
+    assert "its error in u (common): the references' noise" in line
