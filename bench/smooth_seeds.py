@@ -1,6 +1,7 @@
 """Issue 35 item 6: the smooth fit's claimed/observed Ty over many noise seeds.
 
-Run with ``python bench/smooth_seeds.py [SEEDS] [BLOCK]``. For each configuration of the
+Run with ``python bench/smooth_seeds.py [SEEDS] [BLOCK] [CONFIG]`` (CONFIG: a part of a
+configuration's name, to run only those). For each configuration of the
 twin (heating, touch pattern), it simulates SEEDS sessions (6 targets, 7 references, 3
 balls, fitted centres, 1 um point noise unless said), processes each with
 ``--interpolation linear`` and ``smooth``, and prints per block of BLOCK seeds the claimed
@@ -64,7 +65,7 @@ def one(folder: Path, seed: int, config: tuple) -> tuple[np.ndarray, ...] | None
         cap_half_angle_deg=cap,
     )
     write_files(simulate_session(spec).files, folder)
-    cmm = f"cmm: {{point_noise_um: {noise_um}, points_per_ball: {points}}}\n"
+    cmm = f"cmm: {{point_noise_um: {noise_um}, points_per_ball: {points}, cap_angle_deg: {cap}}}\n"
     (folder / "session.yaml").write_text((folder / "session.yaml").read_text() + cmm)
     truth = pd.read_csv(folder / "truth" / "steps.csv").set_index("label")
     out = []
@@ -86,8 +87,10 @@ def ratio(claimed: list[np.ndarray], errors: list[np.ndarray]) -> np.ndarray:
     )
 
 
-def main(seeds: int, block: int) -> None:
+def main(seeds: int, block: int, only: str = "") -> None:
     for name, config in CONFIGS.items():
+        if only not in name:
+            continue
         rows = []
         with tempfile.TemporaryDirectory() as tmp:
             for seed in range(seeds):
@@ -112,4 +115,5 @@ if __name__ == "__main__":
     main(
         int(sys.argv[1]) if len(sys.argv) > 1 else 100,
         int(sys.argv[2]) if len(sys.argv) > 2 else 25,
+        sys.argv[3] if len(sys.argv) > 3 else "",
     )
