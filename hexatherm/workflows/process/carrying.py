@@ -316,7 +316,15 @@ def carry_and_average(
     legs = session.hexapod.legs
     logged = temperatures is not None and legs is not None and bool(repeats.reference0)
     later = [int(i) for i in plan.reference_indices if int(i) not in repeats.reference0]
-    by_references = not logged and legs is not None and bool(repeats.reference0) and bool(later)
+    series_t = centres.times_s[list(repeats.reference0) + later]
+    by_references = (
+        not logged
+        and legs is not None
+        and bool(repeats.reference0)
+        and bool(later)
+        and bool(np.all(np.isfinite(series_t)))
+        and bool(np.all(np.diff(series_t) > 0))  # a burst (one time): nothing to read
+    )
     carry = logged or by_references
     if not repeats.any and not carry:
         return session, centres, (), None
