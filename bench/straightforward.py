@@ -3,7 +3,7 @@
 Run with ``.venv/bin/python bench/straightforward.py SESSION -o OUT``. It does the job of
 ``hexatherm process`` (free-radius sphere fits of the probed points, weighted rigid
 registration, conventional and corrected poses, linear interpolation of the
-references) one item at a time, the way one would write it first:
+references, O carried to R0's thermal state) one item at a time, the way one would write it first:
 
 - the measurements are read line by line with the standard library (``csv`` for a
   points CSV, a plain line loop for a DMIS file of ``FA(<step>_<ball>_<n>)=FEAT/POINT``
@@ -13,7 +13,11 @@ references) one item at a time, the way one would write it first:
 - one registration per step (:meth:`scipy.spatial.transform.Rotation.align_vectors`,
   weights ``1/u^2`` from each fit's centre uncertainty);
 - one pose and leg-length computation per step, and per target the references,
-  the scaling of the growth and one :func:`scipy.optimize.root` for the FGM.
+  the scaling of the growth and one :func:`scipy.optimize.root` for the FGM;
+- O's legs' growth since R0 (the thermocouple log read row by row and the leg model's
+  sensitivity, or without a log the references' growth on the Lagrange polynomial
+  through the first two or three of them), O's frame moved by it with one more FGM, and
+  every corrected pose expressed in that frame.
 
 It writes ``OUT/poses.csv`` (label, conventional and corrected pose). Only the
 formats and options ``bench/speed.py`` simulates are supported. The functions
@@ -160,6 +164,93 @@ def fgm_pose(hexapod: Hexapod, q: np.ndarray, start: np.ndarray) -> np.ndarray:
     return sol.x
 
 
+def transform_of(pose: np.ndarray, hexapod: Hexapod) -> np.ndarray:
+    """The 4x4 transform of one pose ``[Tx, Ty, Tz, Rx, Ry, Rz]`` (mm, deg)."""
+    out = np.eye(4)
+    out[:3, :3] = Rotation.from_euler(_seq(hexapod), pose[3:], degrees=True).as_matrix()
+    out[:3, 3] = pose[:3]
+    return out
+
+
+# ----------------------------------------------------------------------------- O's carry
+def read_leg_log(path: str | Path) -> tuple[list[float], list[list[float]]]:
+    """Times and leg temperatures of a thermocouple log, row by row."""
+    times, temps = [], []
+    with open(path, newline="", encoding="utf-8-sig") as handle:
+        for row in csv.DictReader(handle):
+            stamp = row["time"].strip()
+            try:
+                times.append(float(stamp))
+            except ValueError:
+                times.append(_seconds(stamp))
+            temps.append([float(row[f"leg{i}"]) for i in range(1, 7)])
+    return times, temps
+
+
+def leg_temperatures_at(times: list[float], temps: list[list[float]], t: float) -> np.ndarray:
+    """Each leg's temperature at ``t``, the samples joined by straight lines."""
+    return np.array([np.interp(t, times, [row[i] for row in temps]) for i in range(6)])
+
+
+def lagrange_at(ref_times: list[float], t: float) -> list[float]:
+    """Weights of the polynomial through the references' values at time ``t``."""
+    weights = []
+    for j, tj in enumerate(ref_times):
+        w = 1.0
+        for m, tm in enumerate(ref_times):
+            if m != j:
+                w *= (t - tm) / (tj - tm)
+        weights.append(w)
+    return weights
+
+
+def polynomial_degree(ref_times: list[float], growth: list[np.ndarray]) -> int:
+    """1 (a line) or 2 (a parabola): with two references a line, three a parabola; with
+    more, the one whose backward predictions of each reference from the next two (three)
+    miss less (root of the mean square over references and legs)."""
+    n = len(ref_times)
+    if n < 4:
+        return n - 1
+    squares = {1: 0.0, 2: 0.0}
+    for j in range(n - 3):
+        for degree in (1, 2):
+            later = list(range(j + 1, j + 2 + degree))
+            weights = lagrange_at([ref_times[i] for i in later], ref_times[j])
+            predicted = sum(w * growth[i] for w, i in zip(weights, later, strict=True))
+            squares[degree] += float(np.sum((predicted - growth[j]) ** 2))
+    return 2 if squares[2] < squares[1] else 1
+
+
+def origin_growth(
+    session: Session, times: np.ndarray, q: np.ndarray, q_origin_cmd: np.ndarray
+) -> np.ndarray | None:
+    """Growth of O's legs since R0's thermal state (negative: O's legs were shorter): the
+    leg model and the thermocouple log when the session has one, otherwise the
+    references' growth since R0 on the line or parabola through the first two or three
+    of them (:func:`polynomial_degree`) back to O's time, scaled to O's legs; None when
+    neither is there."""
+    plan, legs = session.plan, session.hexapod.legs
+    assert legs is not None
+    o, refs = plan.origin_index, list(plan.reference_indices)
+    if not refs:
+        return None
+    r0 = refs[0]
+    if session.temperatures is not None:
+        log_t, log_c = read_leg_log(session.temperatures)
+        warming = leg_temperatures_at(log_t, log_c, times[o]) - leg_temperatures_at(
+            log_t, log_c, times[r0]
+        )
+        return np.asarray(legs.sensitivity_mm_per_K(q_origin_cmd) * warming, dtype=float)
+    if len(refs) < 2:
+        return None
+    used = refs[
+        : 1 + polynomial_degree([float(times[r]) for r in refs], [q[r] - q[r0] for r in refs])
+    ]
+    weights = lagrange_at([float(times[r]) for r in used], float(times[o]))
+    growth_r = sum(w * (q[r] - q[r0]) for w, r in zip(weights, used, strict=True))
+    return np.asarray(legs.scale_growth(growth_r, q[r0], q_origin_cmd), dtype=float)
+
+
 # ----------------------------------------------------------------------------- the job
 def read(session_path: str | Path) -> tuple[Session, Groups]:
     """The session and its probed points, grouped by (step, ball)."""
@@ -214,6 +305,19 @@ def compute(session: Session, groups: Groups) -> dict[str, np.ndarray]:
         growth_s = legs.scale_growth(growth_r, q_r0, q[s])
         growth_s = legs.scale_growth(growth_r, q_r0, q[s] - growth_s)
         corrected[m] = fgm_pose(hexapod, q[s] - growth_s, poses[s])
+    # the corrected poses relative to O in R0's thermal state: O's frame moved by its
+    # legs' growth taken off, at its commanded pose
+    pose_o = plan.poses[plan.origin_index]
+    q_o = leg_lengths(pose_o, hexapod)
+    g_o = origin_growth(session, times, q, q_o)
+    if g_o is not None:
+        shift = np.linalg.inv(transform_of(pose_o, hexapod)) @ transform_of(
+            fgm_pose(hexapod, q_o - g_o, pose_o), hexapod
+        )
+        for m in range(len(targets)):
+            corrected[m] = pose_of(
+                np.linalg.inv(shift) @ transform_of(corrected[m], hexapod), hexapod
+            )
     return {
         "centres_mm": centres,
         "u_um": u_um,

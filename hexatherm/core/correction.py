@@ -33,6 +33,7 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
+from hexatherm.core.carry import shifted_poses
 from hexatherm.core.geometry import invert_transform, pose_from_transform
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
@@ -74,7 +75,8 @@ class Correction:
     conventional : ndarray, shape (M, 6)
         ``T(O, S_i)`` as measured, mm and deg.
     corrected : ndarray, shape (M, 6)
-        The pose at the thermal state of R0, mm and deg.
+        The pose at the thermal state of R0, mm and deg, relative to O carried to that
+        state when ``correct`` was given its shift.
     growth_mm : ndarray, shape (M, 6)
         Thermal growth of each leg at S_i, subtracted from its leg lengths.
     reference_growth_mm : ndarray, shape (M, 6)
@@ -184,6 +186,7 @@ def correct(
     platform2cmm: npt.ArrayLike,
     interpolation: Interpolation = "linear",
     measurements: npt.ArrayLike | None = None,
+    origin_shift: npt.ArrayLike | None = None,
 ) -> tuple[StepPoses, Correction]:
     """Run the thermal deflection decoupled method on one session.
 
@@ -203,6 +206,10 @@ def correct(
         (:func:`smooth_growth`), unless its cross-validation prefers the neighbours.
     measurements : array_like of int, shape (N,), optional
         How many measurements each step averages (weights of the smooth fit).
+    origin_shift : array_like, shape (4, 4), optional
+        The frame O in R0's thermal state relative to O as measured
+        (:mod:`hexatherm.core.carry`): the corrected poses are expressed in it; the
+        conventional ones stay relative to O as measured. None: O as measured.
 
     Returns
     -------
@@ -234,6 +241,8 @@ def correct(
     growth_s = target_growth(hexapod.legs, reference_growth, q_r0, q_s)
     q_corr = q_s - growth_s
     corrected = hexapod.fgm(q_corr, initial_poses=steps.pose[targets])
+    if origin_shift is not None:
+        corrected = shifted_poses(origin_shift, corrected, hexapod.convention)
 
     dt_before = np.where(before >= 0, t[targets] - t[np.maximum(before, 0)], np.nan)
     dt_after = np.where(after >= 0, t[np.maximum(after, 0)] - t[targets], np.nan)

@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
+from hexatherm.core.carry import shift_jacobian, shifted_poses
 from hexatherm.core.correction import interpolated_growth, target_growth
 from hexatherm.core.geometry import invert_transform, pose_from_transform
 from hexatherm.core.hexapod import Hexapod
@@ -95,6 +96,9 @@ class PoseChain:
     growth_weights : ndarray, shape (M, 6, N), optional
         The smooth fit's weights of every step's leg lengths in the growth at each target
         (:class:`~hexatherm.core.correction.Correction`); None: the two neighbours.
+    origin_shift : ndarray, shape (4, 4), optional
+        O in R0's thermal state relative to O as measured: the corrected poses are
+        expressed in it (:func:`hexatherm.core.correction.correct`); taken as exact here.
     """
 
     hexapod: Hexapod
@@ -106,6 +110,7 @@ class PoseChain:
     weights: FloatArray | None = None
     initial_poses: FloatArray | None = None
     growth_weights: FloatArray | None = None
+    origin_shift: FloatArray | None = None
 
     def __call__(self, centres_mm: npt.ArrayLike) -> FloatArray:
         """Outputs (..., M, 12) for centres (..., N, k, 3)."""
@@ -131,8 +136,9 @@ class PoseChain:
         )
         return platform_frames(flat, self.balls_mm, w).reshape(centres_mm.shape[:-2] + (4, 4))
 
-    def outputs_from_poses(self, pose: FloatArray) -> FloatArray:
-        """Outputs (b, M, 12) from the poses (b, N, 6) of every step relative to O."""
+    def outputs_from_poses(self, pose: FloatArray, shifted: bool = True) -> FloatArray:
+        """Outputs (b, M, 12) from the poses (b, N, 6) of every step relative to O (the
+        corrected ones relative to O as measured unless ``shifted``)."""
         b, n = pose.shape[:2]
         targets = self.plan.target_indices
         m = targets.size
@@ -159,6 +165,8 @@ class PoseChain:
         corrected = self.hexapod.fgm(
             corrected_q.reshape(-1, 6), initial_poses=start.reshape(-1, 6)
         ).reshape(b, m, 6)
+        if shifted and self.origin_shift is not None:
+            corrected = shifted_poses(self.origin_shift, corrected, self.hexapod.convention)
         return np.concatenate([pose[:, targets], corrected], axis=-1)
 
 
@@ -432,9 +440,12 @@ def target_jacobian(
     d_growth = (q_corr(growth + h, q_r0, q_s) - q_corr(growth - h, q_r0, q_s)) / (2 * h)
     d_r0 = (q_corr(growth, q_r0 + h, q_s) - q_corr(growth, q_r0 - h, q_s)) / (2 * h)
     d_s = (q_corr(growth, q_r0, q_s + h) - q_corr(growth, q_r0, q_s - h)) / (2 * h)
-    jac_fgm_inv = np.asarray(
-        np.linalg.inv(hexapod.jacobian(chain.outputs_from_poses(pose[None])[0, :, 6:])), float
-    )
+    unshifted = chain.outputs_from_poses(pose[None], shifted=False)[0, :, 6:]
+    jac_fgm_inv = np.asarray(np.linalg.inv(hexapod.jacobian(unshifted)), float)
+    if chain.origin_shift is not None:
+        # the corrected poses expressed in O carried to R0's state: a fixed rigid shift
+        by_pose, _ = shift_jacobian(chain.origin_shift, unshifted, hexapod.convention)
+        jac_fgm_inv = by_pose @ jac_fgm_inv
     if chain.growth_weights is not None:
         return _smooth_jacobian(
             chain,

@@ -43,7 +43,7 @@ from hexatherm.core.geometry import (
     transform_from_pose,
 )
 from hexatherm.core.hexapod import Hexapod
-from hexatherm.core.plan import Plan
+from hexatherm.core.plan import Plan, find_repeats
 from hexatherm.core.registration import register
 from hexatherm.core.thermal import LegThermalModel
 from hexatherm.core.touch import cap_directions, polar_uniform_directions
@@ -65,8 +65,9 @@ class TwinSteps:
     pose : ndarray, shape (N, 6)
         True pose at measurement time relative to the measured origin step.
     corrected_pose : ndarray, shape (N, 6)
-        True pose with the legs at the thermal state of the first reference step,
-        relative to the measured origin step (equals ``pose`` for that step).
+        True pose with the legs at the thermal state of the reference step, relative
+        to the origin step in that state too (zero for that step; issue 35: relative to
+        O as measured, in its own state, before).
     centres_cmm_mm : ndarray, shape (N, k, 3)
         True ball centres in the CMM frame (where the balls are when measured:
         ball effects included, CMM effects not).
@@ -84,7 +85,8 @@ class TwinSteps:
         Leg lengths of each step in the reference thermal state.
     reference_index : int
         The step whose thermal state the corrected poses refer to (the first
-        reference step, or the origin when the plan has none).
+        reference step R0, its last measurement when R0 is repeated, or the origin
+        when the plan has none).
     measured_centres_cmm_mm : ndarray, shape (N, k, 3)
         Ball centres as the CMM reports them (CMM effects applied at each ball's
         time); equal to ``centres_cmm_mm`` without such effects.
@@ -323,8 +325,10 @@ def _solve(
     origin2measured = invert_transform(platform2origin[origin])
     measured = origin2measured @ platform2origin
 
-    refs = plan.reference_indices
-    r = int(refs[0]) if refs.size else origin
+    # the reference state: R0's last measurement (R0's only one unless it is repeated),
+    # the state process carries every measurement of O and R0 to
+    repeats = find_repeats(plan)
+    r = int(repeats.reference0[-1]) if repeats.reference0 else origin
     if reference_state:
         growth0, q0 = lengths(
             np.broadcast_to(segment_C[r], segment_C.shape),
@@ -332,9 +336,10 @@ def _solve(
         )
         base0 = None if base is None else np.broadcast_to(base[r], base.shape)
         absolute0 = true.solver.fgm(q0, initial_poses=plan.poses, base_joints_mm=base0)
+        # relative to O in that state too (O's own state differs while the legs warm)
+        frames0 = transform_from_pose(absolute0, hexapod.convention)
         corrected = pose_from_transform(
-            origin2measured @ transform_from_pose(absolute0, hexapod.convention),
-            hexapod.convention,
+            invert_transform(frames0[origin]) @ frames0, hexapod.convention
         )
     else:
         growth0 = q0 = np.full_like(q, np.nan)

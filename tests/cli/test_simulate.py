@@ -207,7 +207,10 @@ def test_a_hidden_effect_is_in_the_truth_only(tmp_path):
     # correction, which scales the references' growth (2 % too large as well) by s(q_S)/s(q_R)
     poses, truth = process(hidden)
     assert max(worst(poses, truth, "conv", "true")) < 0.05
-    assert max(worst(poses, truth, "corr", "truecorr")) < 0.05
+    # ... but not out of O's carry to R0's state (issue 35), which takes the leg model's
+    # growth from the log: 2 % of leg 5's growth between O and R0 (0.03 um, 0.14 urad)
+    d_t, d_r = worst(poses, truth, "corr", "truecorr")
+    assert d_t < 0.05 and d_r < 0.3, (d_t, d_r)
 
 
 def test_a_hidden_overheat_biases_the_correction(tmp_path):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hexatherm.core.carry import carry_motion, leg_growth
 from hexatherm.core.correction import choose_references, correct
 from hexatherm.core.geometry import transform_from_pose
 from hexatherm.core.plan import Plan
@@ -18,9 +19,14 @@ UM, URAD = 1e3, np.pi / 180 * 1e6
 
 
 def run(hexapod, plan, times, temps, interpolation="linear"):
+    """The twin's steps and the correction, O carried to R0's state by the leg model
+    (:mod:`hexatherm.core.carry`) as ``process`` carries it from a thermocouple log."""
     twin = predict_steps(hexapod, plan, temps, BALLS, ORIGIN2CMM)
     frames = register(twin.centres_cmm_mm, BALLS).platform2cmm
-    steps, corr = correct(hexapod, plan, times, frames, interpolation)
+    origin, r0 = plan.origin_index, plan.reference_indices[0]
+    grown = leg_growth(hexapod.legs, hexapod.igm(plan.poses[origin]), temps[origin], temps[r0])
+    shift = carry_motion(hexapod, plan.poses[origin][None], grown[None])[0]
+    steps, corr = correct(hexapod, plan, times, frames, interpolation, origin_shift=shift)
     return twin, steps, corr
 
 

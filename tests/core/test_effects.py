@@ -256,8 +256,7 @@ def test_the_reference_state_is_the_first_reference_steps(case):
         steps.q_cmd_mm, steps.segment_temperature_C[r0], per_segment=True
     )
     np.testing.assert_allclose(steps.reference_q_mm, steps.q_cmd_mm + growth0, atol=1e-13)
-    origin = transform_from_pose(absolute(hexapod, steps)[0], hexapod.convention)
-    corrected = np.linalg.inv(origin) @ transform_from_pose(
+    frames0 = transform_from_pose(
         hexapod.fgm(
             steps.reference_q_mm,
             plan.poses,
@@ -265,10 +264,14 @@ def test_the_reference_state_is_the_first_reference_steps(case):
         ),
         hexapod.convention,
     )
+    # relative to O in that state too (issue 35): O's own state is another one
+    corrected = np.linalg.inv(frames0[0]) @ frames0
     np.testing.assert_allclose(
         steps.corrected_pose, pose_from_transform(corrected, hexapod.convention), atol=1e-10
     )
-    np.testing.assert_allclose(steps.corrected_pose[r0], steps.pose[r0], atol=1e-10)
+    np.testing.assert_allclose(steps.corrected_pose[0], 0.0, atol=1e-10)
+    moved = np.abs(steps.pose[0] - pose_from_transform(frames0[0], hexapod.convention))
+    assert moved.max() > 1e-4  # O warmed before R0: not where it stood when measured
 
 
 def test_no_effect_is_the_plain_twin_at_the_logged_temperatures(case):

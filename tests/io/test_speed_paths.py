@@ -394,14 +394,24 @@ def test_fgm_conditioning_bound_matches_the_svd():
 
 
 # ----------------------------------------------------------------------------- whole process
-@pytest.mark.parametrize("output", ["points", "dmis"])
-def test_process_agrees_with_the_straightforward_way(tmp_path, output):
+@pytest.mark.parametrize(("output", "log"), [("points", True), ("dmis", True), ("points", False)])
+def test_process_agrees_with_the_straightforward_way(tmp_path, output, log):
+    """Every step of process against the plain one, O carried to R0's thermal state
+    (issue 35) by the log and the leg model, or without a log by the references."""
     from hexatherm.workflows.process.pipeline import process_session
     from tests.sessions import make_session
 
     sf = _straightforward()
     make_session(tmp_path / "s", n_targets=4, output=output, point_noise_mm=1e-3)
+    if not log:
+        yaml = tmp_path / "s" / "session.yaml"
+        text = yaml.read_text()
+        assert "temperatures:" in text
+        yaml.write_text(
+            "".join(line for line in text.splitlines(True) if "temperatures" not in line)
+        )
     ours = process_session(tmp_path / "s")
+    assert ours.carry is not None and ours.carry.source == ("log" if log else "references")
     plain = sf.process(tmp_path / "s")
     np.testing.assert_allclose(plain["centres_mm"], ours.centres.centres_mm, atol=1e-9, rtol=0)
     np.testing.assert_allclose(plain["times_s"], ours.centres.times_s, atol=1e-6, rtol=0)

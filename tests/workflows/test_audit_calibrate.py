@@ -262,7 +262,7 @@ def test_a_clean_session_calibrates_without_a_warning(tmp_path: Path) -> None:
 
 # ------------------------------------------------------------------ poses that span nothing
 # Twelve targets within +-1 um and +-0.1 mdeg of O identify the six leg offsets only in
-# name: forced, calibrate wrote leg offsets of +45 and -58 mm with u = 46-172 mm
+# name: forced, calibrate wrote leg offsets of +45 and -58 mm with u = 46-175 mm
 # (chi2/dof 1.15, exit 0) as a calibrated hexapod.yaml; with --level auto a fold's fit
 # stepped so far that the model's FGM failed, and the run ended on "FGM did not converge
 # ... raise max_iter or start closer", which says nothing of the poses.
@@ -296,7 +296,7 @@ def test_offsets_the_poses_identify_only_in_name_are_refused(tiny: Path, tmp_pat
     before = digests(tiny)
     line = refused_in_one_line(run("calibrate", tiny, "-o", tmp_path / "out", "--level", "offsets"))
     assert line.startswith("Error: level offsets: the poses identify level 'offsets' only to ")
-    assert "u = 172 mm (leg4_offset_mm)" in line
+    assert "u = 175 mm (leg4_offset_mm)" in line
     assert "more than 1% of the legs' home length (2.68 mm)" in line
     assert "the poses span Tx 0.00" in line and "spread them over the stroke" in line
     assert not (tmp_path / "out").exists()
@@ -306,7 +306,7 @@ def test_offsets_the_poses_identify_only_in_name_are_refused(tiny: Path, tmp_pat
 def test_auto_says_why_no_level_fits_poses_that_span_nothing(tiny: Path, tmp_path: Path) -> None:
     line = refused_in_one_line(run("calibrate", tiny, "-o", tmp_path / "out"))
     assert line.startswith("Error: no calibration level can be fitted: offsets: the poses ")
-    assert "identify level 'offsets' only to u = 172 mm" in line and "FGM" not in line
+    assert "identify level 'offsets' only to u = 175 mm" in line and "FGM" not in line
     assert not (tmp_path / "out").exists()
 
 

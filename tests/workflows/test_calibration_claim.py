@@ -184,13 +184,13 @@ def test_floor_is_the_error_of_a_noise_free_calibration(tmp_path: Path, seed: in
     assert np.all(np.abs(np.abs(error) / at - 1.0)[worst, range(6)] < 0.2), (error, at)
     parameters = np.sqrt(np.mean(claim.parameters_um_urad**2, axis=0))
     assert np.all(parameters < 0.2 * floor), (parameters, floor)  # the floor alone
-    # the gains absorb R0's growth; the legs' warming between O and R0 stays (Tz)
+    # the gains absorb R0's growth; the legs' warming between O and R0 stayed in Tz until
+    # process carried O to R0's state (issue 35): now nothing stays, and none is claimed
     gains = calibrate(run.campaign, level="joints+gains")
     claim = pose_claim(gains, held)
     error = to_um_urad(gains.fit.predict(held) - heldout_truth(spec, held))
     tz = np.sqrt(np.mean(error[:, 2] ** 2))
-    assert abs(claim.floor.sigma_um_urad[2] / tz - 1.0) < 0.1, (claim.floor.sigma_um_urad, tz)
-    assert claim.floor.sigma_um_urad[2] < 0.6 * floor[2]
+    assert tz < 0.01 and claim.floor.sigma_um_urad[2] < 0.01, (claim.floor.sigma_um_urad, tz)
 
 
 def test_calibration_json_and_report_say_the_claim_and_its_floor(tmp_path: Path) -> None:

@@ -43,15 +43,10 @@ def repeated_plan(n_targets: int, repeats: int) -> Plan:
     return Plan.from_steps(steps, reference_pose=REFERENCE)
 
 
-def session(
-    folder: Path,
-    seed: int,
-    repeats: int,
-    n_targets: int = 3,
-    gain: tuple[float, ...] = GAIN,
-    edit: Callable[[Path], None] | None = None,
-) -> Path:
-    spec = TwinSessionSpec(
+def spec(
+    folder: Path, seed: int, repeats: int, n_targets: int = 3, gain: tuple[float, ...] = GAIN
+) -> TwinSessionSpec:
+    return TwinSessionSpec(
         name=folder.name,
         hexapod_text=HEXAPOD_TEXT,
         balls=BALLS,
@@ -64,7 +59,17 @@ def session(
         points_per_ball=25,
         cap_half_angle_deg=70.0,
     )
-    write_files(simulate_session(spec).files, folder)
+
+
+def session(
+    folder: Path,
+    seed: int,
+    repeats: int,
+    n_targets: int = 3,
+    gain: tuple[float, ...] = GAIN,
+    edit: Callable[[Path], None] | None = None,
+) -> Path:
+    write_files(simulate_session(spec(folder, seed, repeats, n_targets, gain)).files, folder)
     (folder / "session.yaml").write_text((folder / "session.yaml").read_text() + CMM)
     if edit is not None:
         edit(folder)
@@ -125,19 +130,31 @@ def test_plan_command_writes_the_repeats(tmp_path: Path) -> None:
 
 
 def test_process_averages_the_centres_of_the_repeats(tmp_path: Path) -> None:
+    """O's centres are the mean of its measurements (the conventional poses' frame); R0's
+    are each carried to the last one's thermal state by the leg model and the log, then
+    averaged, at the last one's time (issue 35): the twin's true centres of R0's last
+    measurement, within the noise, where the plain mean is the heating's average."""
     folder = session(tmp_path / "s", seed=3, repeats=3)
     result = process_session(folder)
     centres = pd.read_csv(folder / "centres.csv")
     assert result.session.plan.labels == ("O", "R0", "S1", "R1", "S2", "R2", "S3", "R3")
     assert [g.labels for g in result.repeats] == [("O", "O-2", "O-3"), ("R0", "R0-2", "R0-3")]
+    epoch = pd.Timestamp(0, tz="UTC")
+    means = {}
     for step, group in ((0, ("O", "O-2", "O-3")), (1, ("R0", "R0-2", "R0-3"))):
         rows = centres[centres["label"].isin(group)]
-        mean = rows.groupby("ball")[["x", "y", "z"]].mean().loc[list(BALLS.names)].to_numpy()
-        np.testing.assert_allclose(result.centres.centres_mm[step], mean, rtol=0, atol=1e-12)
-        epoch = pd.Timestamp(0, tz="UTC")
+        means[step] = rows.groupby("ball")[["x", "y", "z"]].mean().loc[list(BALLS.names)].to_numpy()
         seconds = (pd.to_datetime(rows["time"], utc=True) - epoch).dt.total_seconds().to_numpy()
-        assert result.centres.times_s[step] == pytest.approx(seconds.mean(), abs=1e-3)
+        last = seconds[rows["label"].to_numpy() == group[-1]].mean()
+        expected_time = seconds.mean() if step == 0 else last
+        assert result.centres.times_s[step] == pytest.approx(expected_time, abs=1e-3)
         assert result.centres.measurements[step] == 3
+    np.testing.assert_allclose(result.centres.centres_mm[0], means[0], rtol=0, atol=1e-12)
+    truth = simulate_session(spec(tmp_path / "s", seed=3, repeats=3)).truth
+    true_last = truth.centres_cmm_mm[repeated_plan(3, 3).labels.index("R0-3")]
+    carried_off = np.abs(result.centres.centres_mm[1] - true_last).max()
+    mean_off = np.abs(means[1] - true_last).max()
+    assert carried_off < 2e-3 < mean_off, (carried_off, mean_off)
     assert result.centres.measurements[2:].tolist() == [1] * 6
     # the files: legs.csv has the averaged steps, fits.csv every measurement
     write_results(result, tmp_path / "out")
@@ -155,8 +172,13 @@ def common_and_own(folder: Path) -> tuple[np.ndarray, np.ndarray, PoseUncertaint
 def test_the_common_part_falls_as_one_over_sqrt_n(tmp_path: Path, repeats: int) -> None:
     common_1, own_1, _ = common_and_own(session(tmp_path / "one", seed=5, repeats=1))
     common_n, own_n, u = common_and_own(session(tmp_path / "n", seed=5, repeats=repeats))
+    # the error of carrying the repeats to R0's last state (issue 35) is common too
+    assert u.carry is not None
+    carried = np.diagonal(u.carry.covariance(), axis1=1, axis2=2)
+    assert np.all(carried <= 0.25 * common_n**2)
+    noise_n = np.sqrt(common_n**2 - carried)
     # targets whose references are not R0: O's and R0's noise enter whole, 1/N of it
-    np.testing.assert_allclose(common_n[1:] / common_1[1:], 1 / np.sqrt(repeats), rtol=0.01)
+    np.testing.assert_allclose(noise_n[1:] / common_1[1:], 1 / np.sqrt(repeats), rtol=0.01)
     np.testing.assert_allclose(own_n[1:], own_1[1:], rtol=0.01)
     # S1 uses R0 as its reference before, now at the repeats' mean time (another weight)
     assert np.all(common_n[0] < 0.85 * common_1[0])

@@ -120,7 +120,9 @@ def r0_leg_temperatures(run: Calibration) -> tuple[FloatArray | None, str]:
         refs = plan.reference_indices
         r0 = int(refs[0]) if refs.size else plan.origin_index
         temps = result.temperatures
-        at = np.asarray(result.centres.times_s, float)[[r0, plan.origin_index]]
+        # O carried to R0's thermal state by process (issue 35): O's legs are R0's
+        origin = r0 if result.carry is not None else plan.origin_index
+        at = np.asarray(result.centres.times_s, float)[[r0, origin]]
         rows.append(leg_trend_C(np.asarray(temps.time_s, float), temps.legs_C, at))
     return np.asarray(rows, float), ""
 

@@ -16,8 +16,12 @@ from hexatherm.core.propagation import reference_scatter
 from hexatherm.workflows.process.pipeline import ProcessResult
 
 #: fewest degrees of freedom of the references' heights for a Type A evaluation of the
-#: centres' error along the cap's axis (3 balls: 4 references)
-MIN_HEIGHT_DOF = 6
+#: centres' error along the cap's axis (3 balls: 3 references, the shortest session with
+#: two targets; issue 35: with 6, such a session kept the assumed cap, which claimed
+#: 1.23-1.42x the observed Tz, Rx, Ry of another touch pattern)
+MIN_HEIGHT_DOF = 3
+#: below this many degrees of freedom the screen gives Student's k for 95 %
+FEW_HEIGHT_DOF = 6
 
 
 @dataclass(frozen=True)

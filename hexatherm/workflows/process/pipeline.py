@@ -24,7 +24,6 @@ from hexatherm.core.correction import (
     step_poses,
 )
 from hexatherm.core.hexapod import Hexapod
-from hexatherm.core.plan import find_repeats, without_repeats
 from hexatherm.core.plausibility import (
     ROTATION_FLOOR_DEG,
     ROTATION_FRACTION,
@@ -43,6 +42,7 @@ from hexatherm.io.records import Records
 from hexatherm.io.temperatures import Temperatures
 from hexatherm.session import DISTANCE_REFUSAL_UM, QualityLimits, Session
 from hexatherm.typing import FloatArray
+from hexatherm.workflows.process.carrying import OriginCarry, RepeatGroup, carry_and_average
 from hexatherm.workflows.process.measured import (
     FileProgress,
     StepCentres,
@@ -50,34 +50,6 @@ from hexatherm.workflows.process.measured import (
     read_measured,
     registration_weights,
 )
-
-
-@dataclass(frozen=True)
-class RepeatGroup:
-    """The measurements of one step repeated (O or R0), before they were averaged.
-
-    Attributes
-    ----------
-    label : str
-        The step kept (``O``, ``R0``).
-    labels : tuple of str
-        Every measurement's step, in plan order (``O``, ``O-2``, ...).
-    times_s : ndarray, shape (n,)
-    deviations_mm : ndarray, shape (n, k, 3)
-        Each measurement's centres less their mean (n = 2) or less a straight line in
-        time fitted per coordinate (n >= 3: a slow drift of the platform is not noise).
-    dof : int
-        Degrees of freedom of the deviations, ``3 k (n - 1)`` or ``3 k (n - 2)``.
-    cov_mm2 : ndarray, shape (n, k, 3, 3)
-        Each measurement's centre covariance from its sphere fit (NaN: none).
-    """
-
-    label: str
-    labels: tuple[str, ...]
-    times_s: FloatArray
-    deviations_mm: FloatArray
-    dof: int
-    cov_mm2: FloatArray
 
 
 @dataclass(frozen=True)
@@ -102,6 +74,7 @@ class ProcessResult:
     points: tuple[Records | None, ...] = ()
     fixed_diameter_mm: float | None = None
     repeats: tuple[RepeatGroup, ...] = ()
+    carry: OriginCarry | None = None
 
     @property
     def repeat_of(self) -> dict[str, str]:
@@ -332,74 +305,6 @@ def one_sided(
     ]
 
 
-def average_repeats(
-    session: Session, centres: StepCentres
-) -> tuple[Session, StepCentres, tuple[RepeatGroup, ...]]:
-    """Average the repeated measurements of O and R0 (``plan --origin-repeats`` ...).
-
-    Each ball's centre is the mean of its repeated centres (before registration: one
-    frame from the mean centres), its covariance the sum of theirs over ``n^2`` (fits),
-    its ``u_um`` ``sqrt(sum u^2) / n`` (files), the step's time the mean of the times.
-    The session's plan loses the repeats (:func:`hexatherm.core.plan.without_repeats`).
-    Returns the session and centres unchanged when nothing is repeated.
-    """
-    plan = session.plan
-    repeats = find_repeats(plan)
-    if not repeats.any:
-        return session, centres, ()
-    c, t, u = centres.centres_mm.copy(), centres.times_s.copy(), centres.u_um.copy()
-    cov = None if centres.cov_mm2 is None else centres.cov_mm2.copy()
-    count = np.ones(len(plan.labels), dtype=np.intp)
-    groups = []
-    for steps in repeats.groups():
-        idx = np.asarray(steps, dtype=np.intp)
-        n, first = len(idx), int(idx[0])
-        times = centres.times_s[idx]
-        values = centres.centres_mm[idx]  # (n, k, 3)
-        if n >= 3 and np.ptp(times) > 0:
-            # per coordinate a straight line in time: drift is not noise
-            design = np.column_stack([np.ones(n), times - times.mean()])
-            coef, *_ = np.linalg.lstsq(design, values.reshape(n, -1), rcond=None)
-            deviations = (values.reshape(n, -1) - design @ coef).reshape(values.shape)
-            dof = values[0].size * (n - 2)
-        else:
-            deviations = values - values.mean(axis=0)
-            dof = values[0].size * (n - 1)
-        one_cov = (
-            np.full(values.shape + (3,), np.nan)
-            if centres.cov_mm2 is None
-            else centres.cov_mm2[idx]
-        )
-        groups.append(
-            RepeatGroup(
-                plan.labels[first],
-                tuple(plan.labels[i] for i in idx),
-                times,
-                deviations,
-                int(dof),
-                one_cov,
-            )
-        )
-        c[first] = values.mean(axis=0)
-        t[first] = times.mean()
-        u[first] = np.sqrt((centres.u_um[idx] ** 2).sum(axis=0)) / n
-        if cov is not None and centres.cov_mm2 is not None:
-            cov[first] = centres.cov_mm2[idx].sum(axis=0) / n**2
-        count[first] = n
-    reduced, keep = without_repeats(plan, repeats)
-    averaged = StepCentres(
-        c[keep],
-        t[keep],
-        centres.time_kind,
-        u[keep],
-        None if cov is None else cov[keep],
-        count[keep],
-        centres.time_aware,
-        None if centres.cov_from_file is None else centres.cov_from_file[keep],
-    )
-    return dataclasses.replace(session, plan=reduced), averaged, tuple(groups)
-
-
 def process_session(
     path: str | Path,
     interpolation: Interpolation = "linear",
@@ -434,7 +339,7 @@ def process_session(
     if bad:
         more = f" ({len(bad) - 1} more step(s) too)" if len(bad) > 1 else ""
         raise PlanError(f"step {plan.labels[bad[0]]}: {distances.diagnosis[bad[0]]}{more}")
-    session, centres, repeats = average_repeats(session, centres)
+    session, centres, repeats, carry = carry_and_average(session, centres, temperatures)
     plan = session.plan
     registration = register(
         centres.centres_mm, balls.centres_mm, registration_weights(centres.u_um)
@@ -485,6 +390,7 @@ def process_session(
         registration.platform2cmm,
         interpolation,
         centres.measurements,
+        None if carry is None else carry.shift,
     )
     check_target_times(session, centres, correction, records)
     warnings.extend(one_sided(session, centres, correction, interpolation))
@@ -512,4 +418,5 @@ def process_session(
         tuple(points),
         fixed_diameter_mm,
         repeats,
+        carry,
     )

@@ -6,6 +6,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from hexatherm.workflows.process.carryerror import carry_line
+
 if TYPE_CHECKING:
     from hexatherm.workflows.process.run import ProcessOutcome
     from hexatherm.workflows.process.uncertainty import PoseUncertainty
@@ -120,7 +122,7 @@ def shared_summary(uncertainty: PoseUncertainty) -> list[str]:
 
 def session_lines(outcome: ProcessOutcome) -> list[str]:
     """The lines that say what was processed: steps, targets, the interpolation (and the
-    smooth fit's choice), the repeats averaged."""
+    smooth fit's choice), the repeats averaged, O carried to R0's thermal state."""
     result = outcome.result
     n = len(result.correction.target_index)
     averaged = "".join(
@@ -130,6 +132,9 @@ def session_lines(outcome: ProcessOutcome) -> list[str]:
         f"session {result.session.name}: {len(result.session.plan.labels)} steps, "
         f"{n} targets, interpolation {outcome.request.interpolation}{averaged}"
     ]
+    carried = carry_line(result, outcome.uncertainty.carry)
+    if carried:
+        lines.append(carried)
     smooth = result.correction.smooth
     if smooth is not None:
         lams = ", ".join(sorted({f"{v:.2g}" for v in smooth.lam})) if smooth.used else ""

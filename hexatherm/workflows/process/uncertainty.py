@@ -8,7 +8,8 @@ from, in this order of preference:
    covariance from the fit residuals);
 2. the ``u_x_um``, ``u_y_um``, ``u_z_um``, ``r_xy``, ``r_xz``, ``r_yz`` columns of a
    centres file (its covariance, as ``fit-spheres`` writes it), else its ``u_um`` column
-   (isotropic: ``u^2 I``, as other software's scalar means);
+   shaped as a cap fit to the plan's touch pattern, its RMS over the axes the file's u
+   (:mod:`~hexatherm.workflows.process.centrecov`);
 3. the session's ``cmm:`` mapping (point noise, or MPE / 2): the covariance of
    a free-radius fit to ``points_per_ball`` points over a cap of
    ``cap_angle_deg`` around the CMM's +Z;
@@ -32,7 +33,6 @@ rest of the chain.
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal
@@ -44,18 +44,16 @@ from hexatherm.core.propagation import (
     CentreSampler,
     PoseChain,
     TargetJacobian,
-    cap_centre_covariance,
-    cap_height_floor,
     covariance_root,
     draw_centres,
     monte_carlo_covariance,
-    residual_scale,
     target_jacobian,
 )
 from hexatherm.core.smoothbias import GrowthExcess
 from hexatherm.core.spherefit import fit_spheres, refine_spheres
 from hexatherm.typing import FloatArray
-from hexatherm.workflows.process.heights import reference_height_scale
+from hexatherm.workflows.process.carryerror import CarryError, add_common, carry_error
+from hexatherm.workflows.process.centrecov import CentreCovariance, centre_covariance
 from hexatherm.workflows.process.measured import fit_radii, point_groups, registration_weights
 from hexatherm.workflows.process.pipeline import ProcessResult
 from hexatherm.workflows.process.repeats import RepeatCheck, repeat_checks
@@ -67,9 +65,6 @@ if TYPE_CHECKING:  # the calibration's weights (and scipy.sparse): imported when
 Method = Literal["linear", "monte-carlo"]
 IntArray = npt.NDArray[np.intp]
 
-#: cap half-angle assumed for centres given without an uncertainty (as ``cmm:``'s default)
-DEFAULT_CAP_ANGLE_DEG = 70.0
-
 __all__ = [
     "CentreCovariance",
     "RepeatCheck",
@@ -78,29 +73,6 @@ __all__ = [
     "pose_chain",
     "pose_uncertainty",
 ]
-
-
-@dataclass(frozen=True)
-class CentreCovariance:
-    """Covariance of every ball centre and where it came from.
-
-    Attributes
-    ----------
-    cov_mm2 : ndarray, shape (N, k, 3, 3)
-    source : ndarray of str, shape (N, k)
-        ``fit``, ``file``, ``cmm`` or ``registration`` (see the module docstring).
-    description : str
-        One line saying which sources were used, with their figures.
-    """
-
-    cov_mm2: FloatArray
-    source: npt.NDArray[np.str_]
-    description: str
-
-    @property
-    def u_um(self) -> FloatArray:
-        """RMS standard uncertainty per coordinate of each centre, ``sqrt(trace / 3)``, um."""
-        return np.sqrt(np.trace(self.cov_mm2, axis1=-2, axis2=-1) / 3) * 1e3
 
 
 @dataclass(frozen=True)
@@ -142,6 +114,9 @@ class PoseUncertainty:
         With ``--interpolation smooth`` when the smooth fit is used: the fit's own error
         of the growth at R beyond the references' noise (:func:`smooth_excess`), in
         ``covariance``, ``linear_covariance`` and the corrected poses' own part.
+    carry : CarryError, optional
+        The error of carrying O and R0 to R0's thermal state (common to all targets), in
+        ``covariance``, ``linear_covariance``, the common part and ``between_covariance``.
     """
 
     conventional_u: FloatArray
@@ -158,6 +133,7 @@ class PoseUncertainty:
     between_covariance: FloatArray | None = None
     repeats: tuple[RepeatCheck, ...] = ()
     smooth_excess: GrowthExcess | None = None
+    carry: CarryError | None = None
 
     def ratio_to_linear(self) -> FloatArray:
         """Reported over linear standard uncertainty, (M, 12) (1 for the linear method)."""
@@ -165,104 +141,6 @@ class PoseUncertainty:
         rep = np.sqrt(np.diagonal(self.covariance, axis1=1, axis2=2))
         with np.errstate(invalid="ignore", divide="ignore"):
             return np.where(lin > 0, rep / np.where(lin > 0, lin, 1.0), np.nan)
-
-
-def centre_covariance(result: ProcessResult) -> CentreCovariance:
-    """Covariance (N, k, 3, 3) of every ball centre of ``result``, with its source."""
-    centres = result.centres
-    n, k = centres.centres_mm.shape[:2]
-    cov = np.full((n, k, 3, 3), np.nan)
-    source = np.full((n, k), "", dtype=object)
-    parts = []
-    if centres.cov_mm2 is not None:
-        given = np.isfinite(centres.cov_mm2).all(axis=(-2, -1))
-        cov[given] = centres.cov_mm2[given]
-        in_file = np.zeros((n, k), dtype=bool)
-        if centres.cov_from_file is not None:
-            in_file = given & centres.cov_from_file
-        for mask, name, what in (
-            (given & ~in_file, "fit", "sphere fits of the probed points"),
-            (in_file, "file covariance", "u_x_um .. r_yz of the centres file"),
-        ):
-            source[mask] = name
-            if mask.any():
-                u_xyz = np.sqrt(np.median(np.diagonal(cov[mask], axis1=-2, axis2=-1), 0)) * 1e3
-                parts.append(
-                    f"{what} ({int(mask.sum())} centres, u {u_xyz[0]:.3g}, {u_xyz[1]:.3g}, "
-                    f"{u_xyz[2]:.3g} um median in x, y, z)"
-                )
-    file = (source == "") & np.isfinite(centres.u_um)
-    if file.any():
-        cov[file] = (centres.u_um[file] * 1e-3)[:, None, None] ** 2 * np.eye(3)
-        source[file] = "file"
-        parts.append(
-            f"u_um of the centres file ({int(file.sum())} centres), read as isotropic "
-            "(u^2 in x, y and z: a cap fit's centre is less certain along the cap's axis; "
-            "u_x_um .. r_yz columns state it)"
-        )
-    rest = source == ""
-    cmm = result.session.cmm
-    # steps averaging repeated measurements (O, R0): 1/n of one measurement's covariance
-    per_step = 1.0 / np.broadcast_to(centres.measurements[:, None], (n, k))
-    if rest.any() and cmm is not None:
-        points = cmm.points_per_ball or result.session.plan.points_per_ball
-        single = cap_centre_covariance(points, cmm.cap_angle_deg, cmm.point_noise_um * 1e-3)
-        cov[rest] = per_step[rest][:, None, None] * single
-        source[rest] = "cmm"
-        parts.append(
-            f"session cmm: point noise {cmm.point_noise_um:g} um, {points} points "
-            f"over a {cmm.cap_angle_deg:g} deg cap ({int(rest.sum())} centres)"
-        )
-    elif rest.any():
-        # the residuals see only part of a centre's error (three coplanar balls: nothing
-        # along the plane's normal), and a cap fit's error is largest along the cap's
-        # axis: keep the shape of a cap fit's covariance and scale it to the residuals
-        points = result.session.plan.points_per_ball
-        shape = cap_centre_covariance(points, DEFAULT_CAP_ANGLE_DEG, 1.0)
-        step_shape = per_step[:, :, None, None] * shape  # (N, k, 3, 3)
-        scale, seen = residual_scale(
-            result.registration.residuals_mm, centres.centres_mm, step_shape
-        )
-        # along the cap's axis (z) the residuals see nothing: the references' heights,
-        # measured again and again over the session, do (a Type A evaluation)
-        height = reference_height_scale(result, scale * shape[2, 2])
-        floor = cap_height_floor(height.dof, shape) if height.used else 0.0
-        too_flat = height.ratio < floor
-        if too_flat:
-            height = dataclasses.replace(
-                height,
-                used=False,
-                ratio=1.0,
-                text="",
-                why=(
-                    f"the references' ball heights ({height.dof} degrees of freedom) "
-                    "scatter less than a free-radius fit over an upper cap allows (z part "
-                    f"{height.ratio:.3g} of the assumed cap's in variance, below "
-                    f"{floor:.3g}: references repeating the "
-                    "same centres?): not the CMM's noise"
-                ),
-            )
-        if height.used:
-            axis_scale = np.array([1.0, 1.0, np.sqrt(height.ratio)])
-            shape = shape * np.outer(axis_scale, axis_scale)
-            step_shape = per_step[:, :, None, None] * shape
-        cov[rest] = scale * step_shape[rest]
-        source[rest] = "registration"
-        u_xyz = np.sqrt(np.diag(scale * shape)) * 1e3
-        parts.append(
-            "registration residuals pooled over "
-            f"{n} steps ({int(rest.sum())} centres), with the covariance shape of a "
-            f"free-radius fit to {points} points over a {DEFAULT_CAP_ANGLE_DEG:g} deg cap"
-            f"{height.text}: u {u_xyz[0]:.3g}, {u_xyz[1]:.3g}, {u_xyz[2]:.3g} um in x, y, z"
-        )
-        if (seen < 0.9 or too_flat) and not height.used:
-            parts.append(
-                f"warning: {height.why}; the residuals see {seen:.0%} of that shape (none "
-                "of a centre's error normal to the balls' plane): the uncertainty of Tz, Rx, "
-                "Ry rests on the assumed cap; give cmm: in session.yaml or u_um in the "
-                "centres file to state the CMM's noise"
-            )
-    return CentreCovariance(cov, source.astype(str), "; ".join(parts))
 
 
 #: probed points refitted at once in a Monte Carlo batch: small enough that the refit's
@@ -414,6 +292,7 @@ def pose_chain(result: ProcessResult) -> PoseChain:
         weights=registration_weights(result.centres.u_um),
         initial_poses=corr.corrected,
         growth_weights=corr.growth_weights,
+        origin_shift=None if result.carry is None else result.carry.shift,
     )
 
 
@@ -472,6 +351,11 @@ def pose_uncertainty(
     if between is None:
         between = len(result.correction.target_index) <= BETWEEN_MAX_TARGETS
     common_u, own_u, pairs = shared_parts(jacobian, centres.cov_mm2, u, linear, between)
+    carried = carry_error(result, chain, jacobian, centres.cov_mm2)  # common
+    covariance, linear, common_u, own_u, pairs = add_common(
+        carried, covariance, linear, common_u, own_u, pairs
+    )
+    u = np.sqrt(np.clip(np.diagonal(covariance, axis1=1, axis2=2), 0.0, None))
     excess = smooth_excess(result, chain, centres.cov_mm2)
     if excess is not None:
         # the smooth fit's own error: a target's own part, independent between targets
@@ -499,6 +383,7 @@ def pose_uncertainty(
         between_covariance=pairs,
         repeats=repeat_checks(result, centres.cov_mm2),
         smooth_excess=None if excess is None else excess[1],
+        carry=carried,
     )
 
 
