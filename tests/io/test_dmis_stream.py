@@ -10,7 +10,6 @@ memory the fast lane takes is the records' and a chunk's, not the file's text.
 from __future__ import annotations
 
 import tracemalloc
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -18,9 +17,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hexatherm.errors import InputError
 from hexatherm.io import dmis
 from hexatherm.io.records import Records
+from tests.io.test_hostile_truncation import outcome
 from tests.io.test_speed_paths import assert_same_records, mutated_dmis, points_dmo
 
 CHUNKS = [1, 2, 7, 64, 301, 1 << 22]
@@ -30,17 +29,6 @@ def general(path: Path, allow_truncated: bool = False) -> list[Records]:
     text = dmis._read_text(path)
     features = dmis.features_from_text(text, path, allow_truncated=allow_truncated)
     return dmis.records_from_features(features, path)
-
-
-def outcome(read, path: Path, **options: bool):
-    """(records or error text, warning texts) of one read."""
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        try:
-            result = read(path, **options)
-        except InputError as error:
-            result = f"InputError: {error}"
-    return result, [str(w.message) for w in caught]
 
 
 def assert_reads_as_general(path: Path, chunk: int, allow_truncated: bool = False) -> None:
