@@ -36,20 +36,21 @@ naming the file, the line where the statement starts and the field.
 
 from __future__ import annotations
 
+import io
 import math
 import os
 import re
 import warnings
 from collections import deque
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from datetime import UTC, date, datetime, time, timedelta
-from typing import NoReturn
+from typing import BinaryIO, NoReturn
 
 import numpy as np
 
 from hexatherm.errors import InputError, InputWarning
-from hexatherm.io.files import read_bytes, refuse_utf16
+from hexatherm.io.files import open_bounded, read_bytes, refuse_utf16
 from hexatherm.io.records import RecordKind, Records, check_groups
 
 __all__ = [
@@ -323,22 +324,17 @@ def read_dmis(
         ``TIME=`` before it, a ball is measured twice in a step (unless
         ``keep_later``) or a point label is seen twice.
     """
-    data = _read_bytes(path)
-    text = _decode(data, path)
-    fast_data: bytes | None = data
-    dropped: tuple[int, str] | None = None
-    if not _ends_with_endfil(data):
-        cut = _cut_last_record(data) if allow_truncated else None
-        fast_data, dropped = (None, None) if cut is None else cut
-    fast = None if fast_data is None else _fast_records(fast_data, path)
+    fast = _fast_file(os.fspath(path), allow_truncated)
     if fast is not None:
+        records, dropped, lines = fast
         if dropped is not None:
             _warn_truncated(path, *dropped)
         if progress is not None:
-            lines = text.count("\n") + 1
             progress(lines, lines)
-        return [check_groups(records, keep_later=keep_later) for records in fast]
-    features = features_from_text(text, path, progress=progress, allow_truncated=allow_truncated)
+        return [check_groups(each, keep_later=keep_later) for each in records]
+    features = features_from_text(
+        _read_text(path), path, progress=progress, allow_truncated=allow_truncated
+    )
     return records_from_features(features, path, keep_later=keep_later)
 
 
@@ -514,44 +510,53 @@ def _warn_truncated(path: str | os.PathLike[str], line: int, label: str) -> None
 _FA_LINE = re.compile(rb"^[ \t]*FA[ \t]*\(", re.IGNORECASE | re.MULTILINE)
 
 
-def _ends_with_endfil(data: bytes) -> bool:
-    """Whether the last line with text is ``ENDFIL``, on bytes (the fast lane's test: when
-    it says so, so do the statements, for a file the fast lane reads; otherwise the
-    general reader decides)."""
-    tail = data.rstrip(b" \t\r\n")
+def _ends_with_endfil(tail: bytes) -> bool:
+    """Whether the last line with text is ``ENDFIL``, on bytes that hold that line whole
+    (the fast lane's test: when it says so, so do the statements, for a file the fast
+    lane reads; otherwise the general reader decides)."""
+    tail = tail.rstrip(b" \t\r\n")
     return tail[tail.rfind(b"\n") + 1 :].strip(b" \t").upper() == b"ENDFIL"
 
 
-def _cut_last_record(data: bytes) -> tuple[bytes, tuple[int, str] | None] | None:
-    """``data`` without its last ``FA(`` line (or, with none, its last line with text) and
-    what follows, and that line's number and label (None when there is no statement),
-    for a file whose lines are its statements (no ``$``); None when the general reader
-    must decide (a ``$``, a line after it that starts with ``,`` or that the general
-    reader would take for an actual feature)."""
+def _cut_last_record(data: bytes) -> tuple[int, tuple[int, str] | None] | None:
+    """Where to cut ``data`` before its last ``FA(`` line (or, with none, its last line with
+    text) and what follows, and that line's number and label (None when there is no
+    statement), for a file whose lines are its statements (no ``$``); None when the
+    general reader must decide (a ``$``, a line after it that starts with ``,`` or that
+    the general reader would take for an actual feature)."""
     if b"$" in data:
         return None
     last = deque(_FA_LINE.finditer(data), maxlen=1)
     if last:
         start = last[0].start()
-    else:
-        end = len(data.rstrip())
-        if end == 0:
-            return data, None
-        start = data.rfind(b"\n", 0, end) + 1
-    text = data[start if last else 0 :].decode("utf-8", "replace")
-    if start == 0 or not last:
-        text = text.removeprefix("\ufeff")
+        return _cut_before(data[start:], start, data.count(b"\n", 0, start) + 1)
+    end = len(data.rstrip())
+    if end == 0:
+        return len(data), None
+    start = data.rfind(b"\n", 0, end) + 1
+    # every line: none may be an actual feature to the general reader
+    text = data.decode("utf-8", "replace").removeprefix("\ufeff")
     lines = [line.strip() for line in text.split("\n")]
-    if last:
-        first, others = lines[0], lines[1:]
-    else:  # every line: none may be an actual feature to the general reader
-        first, others = lines[data.count(b"\n", 0, start)], lines
+    first = lines[data.count(b"\n", 0, start)]
     if not first or first.startswith(","):
         return None
-    if any(line.startswith(",") or _FA_START.match(line) for line in others):
+    if any(line.startswith(",") or _FA_START.match(line) for line in lines):
         return None
-    line = data.count(b"\n", 0, start) + 1
-    return data[:start], (line, _shown_label(first))
+    return start, (data.count(b"\n", 0, start) + 1, _shown_label(first))
+
+
+def _cut_before(tail: bytes, start: int, line: int) -> tuple[int, tuple[int, str]] | None:
+    """:func:`_cut_last_record` where ``tail``, the bytes from offset ``start`` (line
+    ``line``) on, starts with the file's last ``FA(`` line."""
+    text = tail.decode("utf-8", "replace")
+    if start == 0:
+        text = text.removeprefix("\ufeff")
+    first, *others = (part.strip() for part in text.split("\n"))
+    if not first or first.startswith(","):
+        return None
+    if any(part.startswith(",") or _FA_START.match(part) for part in others):
+        return None
+    return start, (line, _shown_label(first))
 
 
 def records_from_features(
@@ -1026,6 +1031,14 @@ def _records(path: str, kind: RecordKind, rows: list[_Row], **optional: object) 
 # would refuse, a feature without a time, ...) the fast lane gives up and the
 # general reader reads the whole file, so that results and errors are exactly
 # those of :func:`records_from_features` of :func:`features_from_text`.
+#
+# The fast lane reads the file a chunk of whole lines at a time (about
+# :data:`_CHUNK_BYTES`), carrying the UNITS, DATE and TIME in effect from one chunk to
+# the next, and puts each chunk's points into columns grown in place
+# (:class:`_Column`): its memory is the records' and one chunk's work, not the file's
+# text (a scanning session's 268 MB file: 3.0 GB -> 0.44 GB peak). Whether the file
+# ends with ENDFIL is told from the last chunk with text; a file cut short is read
+# again up to its cut (:func:`_find_cut`).
 
 # First and last bytes of lines that are statements as they are, with no blanks to strip:
 # printable ASCII (bytes >= 0x80 may be blanks too), and not ',' first (a continuation)
@@ -1045,12 +1058,200 @@ class _GiveUp(Exception):
     """The fast lane cannot read this file the way the general reader would."""
 
 
+#: bytes the fast lane reads at a time (then up to the next line end: lines stay whole)
+_CHUNK_BYTES = 1 << 22
+_BOM = b"\xef\xbb\xbf"
+_POINT_COLUMNS = ("line", "step", "ball", "n", "xyz", "ijk", "seconds")
+#: the room first reserved for a column of points, bytes (see :class:`_Column`)
+_COLUMN_BYTES = 1 << 26
+#: what :func:`_fast_read` returns: the records, the record dropped from a file cut short
+#: (its line and label) and the number of lines of the file
+_FastRead = tuple[list[Records], tuple[int, str] | None, int]
+
+
+@dataclass(frozen=True)
+class _InEffect:
+    """The last ``UNITS`` (scale to mm, angle unit), ``DATE`` and ``TIME`` read so far."""
+
+    unit: tuple[float, str] | None = None
+    day: date | None = None
+    clock: time | None = None
+
+
+class _Column:
+    """A column of the points read, grown in place as chunks add to it.
+
+    Joining the chunks' pieces at the end would hold every column twice (the pieces
+    and the whole), and the allocator keeps the pages of the freed pieces: the peak
+    memory would be about twice the records'. Instead the column is one array, made
+    large (:data:`_COLUMN_BYTES`, reserved, not touched: the system allocates such a
+    block apart, as a mapping) and resized in place when full and at the end (numpy's
+    ``resize``: ``realloc``, which moves a mapping's pages rather than copying them)."""
+
+    def __init__(self) -> None:
+        self.array: np.ndarray | None = None
+        self.size = 0
+
+    def append(self, piece: np.ndarray) -> None:
+        array, size, end = self.array, self.size, self.size + len(piece)
+        if array is None or array.dtype.itemsize < piece.dtype.itemsize:  # longer labels
+            row = piece.dtype.itemsize * math.prod(piece.shape[1:])
+            rows = max(2 * end, _COLUMN_BYTES // max(row, 1))
+            wider = np.empty((rows, *piece.shape[1:]), dtype=piece.dtype)
+            if array is not None:
+                wider[:size] = array[:size]
+            array = wider
+        if end > len(array):
+            array.resize((end + 4 * len(piece), *array.shape[1:]), refcheck=False)
+        array[size:end] = piece
+        self.array, self.size = array, end
+
+    def finish(self) -> np.ndarray:
+        """The column, its spare rows given back."""
+        array = self.array
+        assert array is not None
+        array.resize((self.size, *array.shape[1:]), refcheck=False)
+        self.array = None
+        return array
+
+
+class _Lane:
+    """What the fast lane has read of a file so far, a chunk of lines at a time: the
+    sphere rows, the point columns, what is in effect where the next chunk starts, the
+    line ends seen and the last chunk with text (its last line is the file's last line
+    with text, whole)."""
+
+    def __init__(self) -> None:
+        self.centres: list[_Row] = []
+        self.points = {name: _Column() for name in _POINT_COLUMNS}
+        self.in_effect = _InEffect()
+        self.line_ends = 0
+        self.last_text = b""
+
+    def records(self, where: str) -> list[Records]:
+        """The records read."""
+        records: list[Records] = []
+        if self.centres:
+            records.extend(_rows_to_records(where, self.centres, []))
+        if self.points["line"].size:
+            columns = {name: column.finish() for name, column in self.points.items()}
+            records.append(
+                Records(
+                    path=where,
+                    kind="points",
+                    label=columns["step"],
+                    ball=columns["ball"],
+                    xyz_mm=columns["xyz"],
+                    time_s=columns["seconds"],
+                    time_kind="iso",
+                    line=columns["line"],
+                    ijk=columns["ijk"],
+                    extra={"n": columns["n"]},
+                    time_aware=False,
+                )
+            )
+        return records
+
+
+def _fast_file(where: str, allow_truncated: bool) -> _FastRead | None:
+    """:func:`read_dmis` of a file by the fast lane, which reads it a chunk of lines at a
+    time (memory: the records and a chunk, not the file's text); None when the general
+    reader must read it."""
+    return _fast_read(lambda: open_bounded(where), where, allow_truncated)
+
+
 def _fast_records(data: bytes, path: str | os.PathLike[str]) -> list[Records] | None:
-    """:func:`read_dmis` of a file without continuations; None when the general reader must."""
+    """The fast lane's records of a whole file's bytes; None when the general reader must."""
+    read = _fast_read(lambda: io.BytesIO(data), os.fspath(path), allow_truncated=False)
+    return None if read is None else read[0]
+
+
+def _fast_read(
+    open_stream: Callable[[], BinaryIO], where: str, allow_truncated: bool
+) -> _FastRead | None:
+    """:func:`read_dmis` by the fast lane, the file opened by ``open_stream``; None when
+    the general reader must (which then says what is wrong, if anything)."""
     try:
-        return _fast_lane(data, os.fspath(path))
+        with open_stream() as stream:
+            lane = _fast_stream(stream, where)
+        if _ends_with_endfil(lane.last_text):
+            return lane.records(where), None, lane.line_ends + 1
+        if not allow_truncated:
+            return None
+        line_ends = lane.line_ends
+        del lane
+        cut = _find_cut(open_stream)
+        if cut is None:
+            return None
+        with open_stream() as stream:
+            lane = _fast_stream(stream, where, stop=cut[0])
+        return lane.records(where), cut[1], line_ends + 1
     except Exception:  # _GiveUp, the general parser's InputError, anything unforeseen
         return None
+
+
+def _line_chunks(stream: BinaryIO, stop: int | None = None) -> Iterator[tuple[bytes, int]]:
+    """The bytes of ``stream`` (its first ``stop``) in chunks of whole lines of about
+    :data:`_CHUNK_BYTES` (the last one may lack its line end), each with the number of
+    its first line."""
+    parts: list[bytes] = []
+    line = 1
+    left = math.inf if stop is None else stop
+    while True:
+        block = stream.read(int(min(_CHUNK_BYTES, left))) if left > 0 else b""
+        left -= len(block)
+        cut = block.rfind(b"\n") + 1
+        if not block or cut == 0:
+            if block:
+                parts.append(block)
+                continue
+            if parts:
+                yield b"".join(parts), line
+            return
+        chunk = b"".join((*parts, block[:cut])) if parts else block[:cut]
+        parts = [block[cut:]] if cut < len(block) else []
+        yield chunk, line
+        line += chunk.count(b"\n")
+
+
+def _fast_stream(stream: BinaryIO, where: str, stop: int | None = None) -> _Lane:
+    """The fast lane over the first ``stop`` bytes of ``stream`` (all by default)."""
+    lane = _Lane()
+    for chunk, first in _line_chunks(stream, stop):
+        lane.line_ends += chunk.count(b"\n")
+        if chunk.rstrip(b" \t\r\n"):
+            lane.last_text = chunk
+        data = chunk
+        if first == 1:
+            refuse_utf16(data, where)  # the general reader says so
+            data = data.removeprefix(_BOM)
+        if not data.isascii():
+            data.decode("utf-8")  # not UTF-8: the general reader says where
+        _fast_chunk(data, where, first, lane)
+    return lane
+
+
+def _find_cut(open_stream: Callable[[], BinaryIO]) -> tuple[int, tuple[int, str] | None] | None:
+    """:func:`_cut_last_record` of the file, read a chunk at a time when it has an
+    ``FA(`` line (the last one and what follows are kept), whole otherwise."""
+    found: tuple[int, int] | None = None
+    tail: list[bytes] = []
+    offset = 0
+    with open_stream() as stream:
+        for chunk, first in _line_chunks(stream):
+            if b"$" in chunk:
+                return None
+            last = deque(_FA_LINE.finditer(chunk), maxlen=1)
+            if last:
+                at = last[0].start()
+                found, tail = (offset + at, first + chunk.count(b"\n", 0, at)), [chunk[at:]]
+            elif found is not None:
+                tail.append(chunk)
+            offset += len(chunk)
+    if found is not None:
+        return _cut_before(b"".join(tail), *found)
+    with open_stream() as stream:
+        return _cut_last_record(stream.read())
 
 
 def _prefixed(padded: np.ndarray, starts: np.ndarray, prefix: bytes) -> np.ndarray:
@@ -1060,13 +1261,12 @@ def _prefixed(padded: np.ndarray, starts: np.ndarray, prefix: bytes) -> np.ndarr
     return mask
 
 
-def _fast_lane(data: bytes, where: str) -> list[Records]:
-    if data.startswith(b"\xef\xbb\xbf"):
-        data = data[3:]
+def _fast_chunk(data: bytes, where: str, first: int, lane: _Lane) -> None:
+    """Read a chunk of whole lines (``first``: the number of its first) into ``lane``."""
     if b"$" in data:
         raise _GiveUp
     if not data:
-        return []
+        return
     arr = np.frombuffer(data, dtype=np.uint8)
     size = arr.size
     carriage = np.flatnonzero(arr == 13)
@@ -1083,7 +1283,7 @@ def _fast_lane(data: bytes, where: str) -> list[Records]:
     regular = (
         nonempty & _REGULAR_FIRST[padded[starts]] & _REGULAR_LAST[padded[np.maximum(ends - 1, 0)]]
     )
-    line_no = np.arange(1, starts.size + 1)
+    line_no = np.arange(first, first + starts.size)
 
     is_point = regular & _prefixed(padded, starts, b"FA(")
     is_date = regular & _prefixed(padded, starts, b"DATE=") & (lengths == 15)
@@ -1101,9 +1301,11 @@ def _fast_lane(data: bytes, where: str) -> list[Records]:
     # Lines read one by one: irregular ones, and regular ones that may be relevant.
     special = nonempty & ~regular
     special |= regular & ~(is_point | is_date | is_time) & _MAYBE_RELEVANT[padded[starts]]
-    units: list[tuple[int, float, str]] = []
-    dates: list[tuple[int, date]] = []
-    times: list[tuple[int, time]] = []
+    # What the lines before the chunk left in effect, as if stated on the line before it.
+    before, carried = first - 1, lane.in_effect
+    units: list[tuple[int, float, str]] = [] if carried.unit is None else [(before, *carried.unit)]
+    dates: list[tuple[int, date]] = [] if carried.day is None else [(before, carried.day)]
+    times: list[tuple[int, time]] = [] if carried.clock is None else [(before, carried.clock)]
     actuals: list[tuple[int, str]] = []
     for index in np.flatnonzero(special).tolist():
         statement = data[starts[index] : ends[index]].decode("utf-8").strip()
@@ -1111,7 +1313,7 @@ def _fast_lane(data: bytes, where: str) -> list[Records]:
             continue
         if statement.startswith(","):
             raise _GiveUp  # a continuation
-        line = index + 1
+        line = index + first
         if _FA_START.match(statement):
             actuals.append((line, statement))
         elif (match := _UNITS.match(statement)) is not None:
@@ -1142,6 +1344,11 @@ def _fast_lane(data: bytes, where: str) -> list[Records]:
     order = np.argsort(time_lines, kind="stable")
     time_lines, time_us = time_lines[order], time_us[order]
     unit_lines = np.array([u[0] for u in units], dtype=np.int64)
+    lane.in_effect = _InEffect(
+        unit=units[-1][1:] if units else None,
+        day=date.fromordinal(int(date_days[-1]) + _EPOCH_ORDINAL) if date_days.size else None,
+        clock=_clock(int(time_us[-1])) if time_us.size else None,
+    )
 
     def context(lines: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """At each line: index of the UNITS in effect (-1: none), POSIX microseconds of
@@ -1166,8 +1373,8 @@ def _fast_lane(data: bytes, where: str) -> list[Records]:
             blob = blob[:-1]
         canonical, steps, balls, numbers, values = _canonical_points(blob)
         if not canonical.all():  # FA( lines that are not canonical points: one by one
-            for line in point_lines[~canonical].tolist():
-                actuals.append((line, data[starts[line - 1] : ends[line - 1]].decode("utf-8")))
+            for index in (point_lines[~canonical] - first).tolist():
+                actuals.append((index + first, data[starts[index] : ends[index]].decode("utf-8")))
             point_lines = point_lines[canonical]
     u, stamp, known = context(point_lines)
     if not known.all():
@@ -1205,9 +1412,7 @@ def _fast_lane(data: bytes, where: str) -> list[Records]:
             if row is not None:
                 (centre_rows if row[0] == "centres" else point_rows).append(row[1])
 
-    records: list[Records] = []
-    if centre_rows:
-        records.extend(_rows_to_records(where, centre_rows, []))
+    lane.centres.extend(centre_rows)
     if point_lines.size or point_rows:
         lines = point_lines
         if point_rows:
@@ -1224,22 +1429,15 @@ def _fast_lane(data: bytes, where: str) -> list[Records]:
             ijk = np.concatenate((ijk, [r.ijk for r in point_rows]))
             seconds = np.concatenate((seconds, [r.seconds for r in point_rows]))
         order = np.argsort(lines, kind="stable")
-        records.append(
-            Records(
-                path=where,
-                kind="points",
-                label=steps[order],
-                ball=balls[order],
-                xyz_mm=xyz[order],
-                time_s=seconds[order],
-                time_kind="iso",
-                line=lines[order].astype(np.int64),
-                ijk=ijk[order],
-                extra={"n": numbers[order]},
-                time_aware=False,
-            )
-        )
-    return records
+        columns = (lines.astype(np.int64), steps, balls, numbers, xyz, ijk, seconds)
+        for name, column in zip(_POINT_COLUMNS, columns, strict=True):
+            lane.points[name].append(column[order])
+
+
+def _clock(microseconds: int) -> time:
+    """The time of day ``microseconds`` after midnight."""
+    seconds, micro = divmod(microseconds, 1_000_000)
+    return time(seconds // 3600, seconds // 60 % 60, seconds % 60, micro)
 
 
 def _fast_dates(
@@ -1299,8 +1497,6 @@ def _canonical_points(
     blanks come after that; pandas' C parser reads the numbers (correctly rounded,
     as ``float``), and a malformed number makes the whole lane give up.
     """
-    import io
-
     import pandas as pd
 
     size = blob.size

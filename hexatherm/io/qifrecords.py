@@ -110,14 +110,15 @@ def _point_records(
     point_sets: Mapping[str, tuple[FloatArray, IntArray]],
     aware: bool | None,
 ) -> Records:
-    label: list[str] = []
-    ball: list[str] = []
-    time: list[float] = []
-    number: list[str] = []
+    """The points of the spheres, as arrays made per sphere and per range of a point set
+    (no Python object per point: a scanning session has millions)."""
     xyz: list[np.ndarray] = []
     line: list[np.ndarray] = []
+    ranges: list[tuple[str, int, int]] = []  # (set id, first, last) of each PointList entry
+    counts: list[int] = []
+    seconds: list[float] = []
     for sphere in spheres:
-        seconds = _seconds(path, sphere)
+        seconds.append(_seconds(path, sphere))
         count = 0
         for set_id, first, last, ref_line in sphere.point_sets:
             if set_id not in point_sets:
@@ -140,25 +141,43 @@ def _point_records(
                 )
             xyz.append(values[first - 1 : stop])
             line.append(lines[first - 1 : stop])
-            number.extend(f"{set_id}-{i}" for i in range(first, stop + 1))
+            ranges.append((set_id, first, stop))
             count += stop - first + 1
         sphere.points = count
-        label.extend([sphere.step] * count)
-        ball.extend([sphere.ball] * count)
-        time.extend([seconds] * count)
+        counts.append(count)
+    per_sphere = np.array(counts, dtype=np.int64)
+    n = int(per_sphere.sum())
     return Records(
         path=path,
         kind="points",
-        label=np.array(label, dtype=np.str_),
-        ball=np.array(ball, dtype=np.str_),
+        label=np.repeat(np.array([s.step for s in spheres], dtype=np.str_), per_sphere),
+        ball=np.repeat(np.array([s.ball for s in spheres], dtype=np.str_), per_sphere),
         xyz_mm=np.concatenate(xyz).reshape(-1, 3),
-        time_s=np.array(time, dtype=np.float64),
+        time_s=np.repeat(np.array(seconds, dtype=np.float64), per_sphere),
         time_kind="iso",
         line=np.concatenate(line).astype(np.int64),
-        ijk=np.full((len(label), 3), math.nan),
-        extra={"n": np.array(number, dtype=np.str_)},
+        ijk=np.full((n, 3), math.nan),
+        extra={"n": _point_numbers(ranges)},
         time_aware=aware,
     )
+
+
+def _point_numbers(ranges: list[tuple[str, int, int]]) -> np.ndarray:
+    """``<set id>-<index>`` of every point of the ranges ``(set id, first, last)``, as
+    ``np.array`` of those strings gives them (the same width).
+
+    >>> _point_numbers([("7", 1, 3), ("12", 9, 10)]).tolist()
+    ['7-1', '7-2', '7-3', '12-9', '12-10']
+    """
+    sizes = np.array([last - first + 1 for _, first, last in ranges], dtype=np.int64)
+    starts = np.array([first for _, first, _ in ranges], dtype=np.int64)
+    ends = np.cumsum(sizes)
+    index = np.arange(int(ends[-1]), dtype=np.int64) - np.repeat(ends - sizes - starts, sizes)
+    prefix = np.repeat(np.array([f"{set_id}-" for set_id, _, _ in ranges], dtype=np.str_), sizes)
+    digits = len(str(max(last for _, _, last in ranges)))
+    width = max(len(set_id) + 1 + len(str(last)) for set_id, _, last in ranges)
+    numbers = np.char.add(prefix, index.astype(f"<U{digits}"))
+    return numbers.astype(f"<U{width}", copy=False)
 
 
 def _aware(text: str) -> bool:
