@@ -115,11 +115,15 @@ def test_the_fit_is_the_dense_fit(campaign: Campaign, dense: np.ndarray, residua
     full = fit_calibration(*args, dense, level="joints", residuals=residuals)
     assert structured.chi_square == pytest.approx(full.chi_square, rel=1e-10)
     assert rel(structured.covariance, full.covariance) < 1e-9
-    # the optimum to the optimizer's tolerance: a millionth of each standard uncertainty
+    # the same optimum: each parameter within 1e-5 of its standard uncertainty. The two
+    # weightings agree to ~1e-13 relative and the fit stops at xtol = ftol = 1e-10;
+    # measured 1.04e-6 at worst on this campaign since O is carried to R0's thermal state
+    # (issue 35; 5e-9..9e-7 for the other parameters). A wrong structured fit moves
+    # parameters by about their u (1e5 times this bound)
     u = np.sqrt(np.diag(full.covariance))
     free = u > 0
     moved = np.abs(structured.parameters - full.parameters)[free] / u[free]
-    assert moved.max() < 1e-6
+    assert moved.max() < 1e-5
 
 
 def test_the_level_choice_is_the_dense_one(campaign: Campaign, dense: np.ndarray) -> None:
