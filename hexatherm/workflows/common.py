@@ -9,33 +9,24 @@ Jinja2 is imported when called."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from hexatherm.io.files import STRICT, ReadOptions
 from hexatherm.io.provenance import run_context
 
 if TYPE_CHECKING:
-    from hexatherm.session import Tolerance
+    # a tolerance's type, for annotations only: hexatherm.session imports numpy, which the
+    # command line does not load at start-up
+    from hexatherm.session import Tolerance as Tolerance
 
 __all__ = [
     "STRICT",
     "ReadOptions",
-    "Tolerance",
     "decision_rules",
     "run_context",
     "template_files",
     "template_folder",
 ]
-
-
-def __getattr__(name: str) -> Any:
-    """``Tolerance`` when asked for: :mod:`hexatherm.session` imports numpy, which the
-    command line does not load at start-up."""
-    if name == "Tolerance":
-        from hexatherm.session import Tolerance
-
-        return Tolerance
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def decision_rules() -> tuple[str, ...]:
