@@ -160,6 +160,24 @@ def rotation_derivatives(angles_deg: npt.ArrayLike, convention: str = "symetrie"
     return np.stack(parts, axis=-3) * (np.pi / 180.0)
 
 
+def angle_rates(angles_deg: npt.ArrayLike, convention: str = "symetrie") -> FloatArray:
+    """The change of ``[Rx, Ry, Rz]`` (deg) per small rotation ``omega`` (rad) applied on
+    the left, ``R -> (I + [omega]x) R``: matrices (..., 3, 3), the inverse of the one
+    whose column k is ``vee(dR/dangle_k R^T)`` (:func:`rotation_derivatives`).
+
+    >>> import numpy as np
+    >>> np.round(angle_rates([0, 0, 0]), 6) + 0.0  # at zero: 180/pi deg per rad, axis by axis
+    array([[57.29578,  0.     ,  0.     ],
+           [ 0.     , 57.29578,  0.     ],
+           [ 0.     ,  0.     , 57.29578]])
+    """
+    a = np.asarray(angles_deg, dtype=float)
+    rot = rotation_from_angles(a, convention)
+    skew = rotation_derivatives(a, convention) @ np.swapaxes(rot, -1, -2)[..., None, :, :]
+    columns = np.stack([skew[..., 2, 1], skew[..., 0, 2], skew[..., 1, 0]], axis=-1)
+    return np.asarray(np.linalg.inv(np.swapaxes(columns, -1, -2)), dtype=float)
+
+
 def angles_from_rotation(rotation: npt.ArrayLike, convention: str = "symetrie") -> FloatArray:
     """``[Rx, Ry, Rz]`` in degrees from rotation matrices (..., 3, 3).
 

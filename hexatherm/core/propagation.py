@@ -13,8 +13,8 @@ own 3x3 covariance.
 * **Linear propagation** (GUM): ``U_y = J U_c J^T`` (:func:`linear_covariance`).
   Target S_i depends on at most five steps: O, R0, S_i and its references
   before and after. ``J`` is put together by the chain rule, vectorized over
-  the steps: the registration's derivatives by central differences (every
-  step's coordinate moved at once), the IGM's analytic Jacobian, the leg-by-leg
+  the steps: the registration's analytic derivatives (the rotation's by the
+  implicit function theorem on its optimality), the IGM's analytic Jacobian, the leg-by-leg
   derivatives of the correction, and the FGM as the inverse of the IGM's
   Jacobian at the corrected pose.
 * **Monte Carlo** (GUM Supplement 1): the centres are drawn from
@@ -40,10 +40,10 @@ import numpy.typing as npt
 
 from hexatherm.core.carry import shift_jacobian, shifted_poses
 from hexatherm.core.correction import interpolated_growth, target_growth
-from hexatherm.core.geometry import invert_transform, pose_from_transform
+from hexatherm.core.geometry import angle_rates, invert_transform, pose_from_transform
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
-from hexatherm.core.registration import platform_frames
+from hexatherm.core.registration import frame_derivatives, platform_frames
 from hexatherm.core.touch import cap_directions
 from hexatherm.typing import FloatArray
 
@@ -135,6 +135,33 @@ class PoseChain:
             else np.broadcast_to(self.weights, centres_mm.shape[:-1]).reshape(-1, k)
         )
         return platform_frames(flat, self.balls_mm, w).reshape(centres_mm.shape[:-2] + (4, 4))
+
+    def pose_derivatives(self, centres_mm: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Every step's pose relative to O (N, 6) and its derivatives (N, 6, 3k) by the
+        step's own centres and by O's (zero for O itself), analytic.
+
+        The registration's derivatives (:func:`~hexatherm.core.registration.frame_derivatives`:
+        a small rotation ``omega`` and a translation ``dt`` of each frame per centre
+        coordinate) carried to the pose ``X_j = pose(O^-1 T_j)``: by the step's own
+        centres ``omega_X = R_O^T omega_j``, ``dt_X = R_O^T dt_j``; by O's
+        ``omega_X = -R_O^T omega_O``, ``dt_X = R_O^T ((t_j - t_O) x omega_O - dt_O)``;
+        the angles by :func:`~hexatherm.core.geometry.angle_rates`.
+        """
+        n, k = centres_mm.shape[:2]
+        frames, d_rot, d_trans = frame_derivatives(centres_mm, self.balls_mm, self.weights)
+        origin = self.plan.origin_index
+        convention = self.hexapod.convention
+        pose = pose_from_transform(invert_transform(frames[origin]) @ frames, convention)
+        back = frames[origin, :3, :3].T  # R_O^T
+        rates = angle_rates(pose[:, 3:], convention)  # (N, 3, 3)
+        d_rot, d_trans = d_rot.reshape(n, 3, 3 * k), d_trans.reshape(n, 3, 3 * k)
+        own = np.concatenate([back @ d_trans, rates @ (back @ d_rot)], axis=1)
+        lever = frames[:, :3, 3] - frames[origin, :3, 3]  # t_j - t_O, (N, 3)
+        moved = np.cross(lever[:, :, None], d_rot[origin][None], axis=1) - d_trans[origin]
+        by_origin = np.concatenate([back @ moved, -(rates @ (back @ d_rot[origin]))], axis=1)
+        own[origin] = 0.0  # O's pose relative to itself is zero whatever its centres
+        by_origin[origin] = 0.0
+        return pose, own, by_origin
 
     def outputs_from_poses(self, pose: FloatArray, shifted: bool = True) -> FloatArray:
         """Outputs (b, M, 12) from the poses (b, N, 6) of every step relative to O (the
@@ -358,9 +385,9 @@ def target_jacobian(
     together by the chain rule, vectorized over the steps:
 
     1. ``dX_j/dc_j`` and ``dX_j/dc_O``: the pose of every step j relative to O by
-       its own centres and by O's, by central differences of the registration
-       (every step's coordinate moved at once: ``2 x 3k`` registrations of all
-       steps, and as many of O);
+       its own centres and by O's, from the registration's analytic derivative
+       (:meth:`PoseChain.pose_derivatives`; were central differences, ``2 x 3k``
+       registrations of every step: the same to about 1e-9 relative);
     2. ``dq_j = J(X_j) dX_j`` with the IGM's analytic Jacobian ``J``;
     3. the growth at the references and its scaling to the target, leg by leg:
        ``q_corr = q_S - g(G, q_R0, q_S)`` with
@@ -378,7 +405,7 @@ def target_jacobian(
     centres_mm : array_like, shape (N, k, 3)
         The measured centres.
     step_mm : float
-        Central-difference step on each coordinate.
+        Central-difference step of the correction's leg-by-leg derivatives (mm).
 
     Returns
     -------
@@ -396,30 +423,8 @@ def target_jacobian(
     legs = hexapod.legs
     if legs is None:
         raise ValueError("the hexapod has no leg model")
-    # 1. poses relative to O, nominal and with one coordinate of every step's centres
-    # (own) or of O's centres moved: (3k, 2, N, 6)
-    frames = chain.frames(c)
-    o2cmm_inv = invert_transform(frames[origin])
-    pose = pose_from_transform(o2cmm_inv @ frames, hexapod.convention)  # (N, 6)
-    moved = np.broadcast_to(c, (k, 3, 2, n, k, 3)).copy()
-    for ball in range(k):
-        for axis in range(3):
-            moved[ball, axis, 0, :, ball, axis] += step_mm
-            moved[ball, axis, 1, :, ball, axis] -= step_mm
-    moved_frames = chain.frames(moved).reshape(3 * k, 2, n, 4, 4)
-    own = pose_from_transform(o2cmm_inv @ moved_frames, hexapod.convention)
-    by_origin = pose_from_transform(
-        invert_transform(moved_frames[:, :, origin])[:, :, None] @ frames, hexapod.convention
-    )
-
-    def derivative(plus_minus: FloatArray) -> FloatArray:  # (3k, 2, N, 6) -> (N, 6, 3k)
-        d = plus_minus[:, 0] - plus_minus[:, 1]
-        d[..., 3:] = (d[..., 3:] + 180.0) % 360.0 - 180.0
-        return np.moveaxis(d / (2 * step_mm), 0, -1)
-
-    dpose_own, dpose_origin = derivative(own), derivative(by_origin)
-    dpose_own[origin] = 0.0  # O's pose relative to itself is zero whatever its centres
-    dpose_origin[origin] = 0.0
+    # 1. poses relative to O and their derivatives by each step's own centres and by O's
+    pose, dpose_own, dpose_origin = chain.pose_derivatives(c)
     jac_igm = hexapod.jacobian(pose)
     dq_own, dq_origin = jac_igm @ dpose_own, jac_igm @ dpose_origin  # (N, 6, 3k)
     # 3. the correction's leg-by-leg partial derivatives, (M, 6) each

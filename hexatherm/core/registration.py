@@ -132,6 +132,57 @@ def platform_frames(
 FRAME_BLOCK = 8192
 
 
+def frame_derivatives(
+    centres_mm: npt.ArrayLike,
+    balls_mm: npt.ArrayLike,
+    weights: npt.ArrayLike | None = None,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """:func:`platform_frames` and their derivatives by the centres, analytic.
+
+    The fitted rotation ``R`` maximises ``sum w_k c_k . R b_k`` (centred, weights
+    normalized): its gradient by a small rotation ``R -> (I + [omega]x) R`` vanishes,
+    ``g = sum w_k a_k x c_k = 0`` with ``a_k = R b_k``. Moving the centres by ``dc``
+    moves the optimum by ``omega = (tr(M) I - M)^-1 sum w_k [a_k]x dc_k``, where
+    ``M = sum w_k a_k c_k^T`` (the implicit function theorem on ``g``; the weighted
+    mean of the ``a_k`` is zero, so the centres' own mean drops out), and the translation
+    ``t = c_mean - R b_mean`` by ``dt = dc_mean + (R b_mean) x omega``. The same
+    minimiser whichever way :func:`register` computed it (Horn or SVD).
+
+    Returns
+    -------
+    transforms : ndarray, shape (N, 4, 4)
+        As :func:`platform_frames`.
+    d_rotation : ndarray, shape (N, 3, k, 3)
+        ``omega`` (rad) per mm of each centre coordinate: ``dR = [omega]x R``.
+    d_translation : ndarray, shape (N, 3, k, 3)
+        ``dt`` (mm/mm) per mm of each centre coordinate.
+    """
+    centres, balls, w = _checked(centres_mm, balls_mm, weights)
+    out = np.empty((centres.shape[0], 4, 4))
+    for start in range(0, centres.shape[0], FRAME_BLOCK):
+        rows = slice(start, start + FRAME_BLOCK)
+        out[rows] = _solve(centres[rows], balls, w[rows])[1]
+    rot = out[:, :3, :3]
+    w_norm = w / w.sum(axis=1, keepdims=True)  # (N, k)
+    balls_mean = w_norm @ balls  # (N, 3)
+    a = (balls[None] - balls_mean[:, None]) @ np.swapaxes(rot, 1, 2)  # a_k = R b_k
+    c = centres - (w_norm[:, None, :] @ centres)
+    m = np.einsum("nk,nki,nkj->nij", w_norm, a, c)
+    hessian = np.trace(m, axis1=1, axis2=2)[:, None, None] * np.eye(3) - m
+    # [a_k]x, (N, k, 3, 3), weighted: column i is w_k a_k x e_i
+    cross = np.zeros(a.shape + (3,))
+    cross[..., 0, 1], cross[..., 0, 2] = -a[..., 2], a[..., 1]
+    cross[..., 1, 0], cross[..., 1, 2] = a[..., 2], -a[..., 0]
+    cross[..., 2, 0], cross[..., 2, 1] = -a[..., 1], a[..., 0]
+    cross *= w_norm[..., None, None]
+    n, k = w.shape
+    d_rot = np.linalg.solve(hessian, np.moveaxis(cross, 1, 2).reshape(n, 3, 3 * k))  # (N, 3, k*3)
+    lever = (rot @ balls_mean[..., None])[..., 0]  # R b_mean, (N, 3)
+    d_trans = np.cross(lever[:, :, None], d_rot, axis=1)
+    d_trans += (w_norm[:, None, :, None] * np.eye(3)[None, :, None, :]).reshape(n, 3, 3 * k)
+    return out, d_rot.reshape(n, 3, k, 3), d_trans.reshape(n, 3, k, 3)
+
+
 def _fit(
     centres_mm: npt.ArrayLike,
     balls_mm: npt.ArrayLike,

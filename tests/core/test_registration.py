@@ -127,3 +127,46 @@ def test_platform_frames_are_the_registrations_transforms(rng, monkeypatch):
     centres[207, 1, 2] = np.nan
     with pytest.raises(RegistrationError, match="step index 207"):
         registration.platform_frames(centres, BALLS)
+
+
+def central_frame_derivatives(centres, balls, weights, h=1e-4):
+    """The derivatives of :func:`platform_frames` by central differences: ``omega`` (the
+    rotation's change ``dR R^T``, a skew matrix) and ``dt`` per centre coordinate."""
+    frames = registration.platform_frames(centres, balls, weights)
+    d_rot = np.zeros(centres.shape[:1] + (3,) + centres.shape[1:])
+    d_trans = np.zeros_like(d_rot)
+    for ball in range(centres.shape[1]):
+        for axis in range(3):
+            plus, minus = centres.copy(), centres.copy()
+            plus[:, ball, axis] += h
+            minus[:, ball, axis] -= h
+            up = registration.platform_frames(plus, balls, weights)
+            down = registration.platform_frames(minus, balls, weights)
+            skew = (
+                (up[:, :3, :3] - down[:, :3, :3]) / (2 * h) @ np.swapaxes(frames[:, :3, :3], 1, 2)
+            )
+            d_rot[:, :, ball, axis] = np.stack([skew[:, 2, 1], skew[:, 0, 2], skew[:, 1, 0]], -1)
+            d_trans[:, :, ball, axis] = (up[:, :3, 3] - down[:, :3, 3]) / (2 * h)
+    return d_rot, d_trans
+
+
+@pytest.mark.parametrize("n_balls", [3, 5])
+def test_frame_derivatives_equal_central_differences(rng, n_balls):
+    """The analytic derivative of the registration (implicit function theorem on Horn's
+    optimum) against central differences of the fit itself, with and without weights,
+    three and five balls (the fifth nearly on a plane with two others), noisy centres."""
+    balls = np.vstack([BALLS, [[30.0, -40.0, 55.0], [-20.0, 10.0, -35.0]]])[:n_balls]
+    truth = random_transforms(rng, 40)
+    centres = apply_transform(truth, balls) + rng.normal(0, 5e-3, (40, n_balls, 3))
+    for weights in (None, rng.uniform(0.2, 3.0, (40, n_balls))):
+        frames, d_rot, d_trans = registration.frame_derivatives(centres, balls, weights)
+        assert np.array_equal(frames, registration.platform_frames(centres, balls, weights))
+        num_rot, num_trans = central_frame_derivatives(centres, balls, weights)
+        # the differences' truncation (h^2 over the balls' spread squared) and rounding
+        # are about 1e-10 of the derivatives; a wrong sign or factor is of their size
+        np.testing.assert_allclose(d_rot, num_rot, rtol=0, atol=1e-6 * np.abs(num_rot).max())
+        np.testing.assert_allclose(d_trans, num_trans, rtol=0, atol=1e-6 * np.abs(num_trans).max())
+    # a translation of every centre moves the frame's translation alone, one for one
+    moved = d_trans.sum(axis=2)
+    np.testing.assert_allclose(moved, np.broadcast_to(np.eye(3), moved.shape), atol=1e-9)
+    np.testing.assert_allclose(d_rot.sum(axis=2), 0.0, atol=1e-12)

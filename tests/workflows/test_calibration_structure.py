@@ -132,7 +132,11 @@ def test_the_level_choice_is_the_dense_one(campaign: Campaign, dense: np.ndarray
     assert structured.choice is not None and full.choice is not None
     assert structured.choice.level == full.choice.level
     for a, b in zip(structured.choice.scores, full.choice.scores, strict=True):
-        assert a.bic == pytest.approx(b.bic, rel=1e-10)
+        # the fits stop at ftol = 1e-10 (relative change of the cost): their chi-squares,
+        # hence the BICs, agree to a few times that (joints: 3e-11 before the analytic
+        # registration derivative, 1.02e-10 after, from derivatives that moved by 2e-10);
+        # a wrong structured covariance moves the chi-square by percents
+        assert a.bic == pytest.approx(b.bic, rel=1e-9)
         # each fold's fit agrees to the optimizer's tolerance, its held-out RMS with it
         assert a.heldout_rms_w == pytest.approx(b.heldout_rms_w, rel=1e-7)
 
