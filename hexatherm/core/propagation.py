@@ -136,31 +136,38 @@ class PoseChain:
         )
         return platform_frames(flat, self.balls_mm, w).reshape(centres_mm.shape[:-2] + (4, 4))
 
-    def pose_derivatives(self, centres_mm: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Every step's pose relative to O (N, 6) and its derivatives (N, 6, 3k) by the
-        step's own centres and by O's (zero for O itself), analytic.
+    def pose_derivatives(
+        self, centres_mm: FloatArray, steps: npt.ArrayLike | None = None
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The poses relative to O (S, 6) of ``steps`` (default: every step) and their
+        derivatives (S, 6, 3k) by each step's own centres (O's frame held) and by O's
+        (the step's frame held), analytic.
 
         The registration's derivatives (:func:`~hexatherm.core.registration.frame_derivatives`:
         a small rotation ``omega`` and a translation ``dt`` of each frame per centre
         coordinate) carried to the pose ``X_j = pose(O^-1 T_j)``: by the step's own
         centres ``omega_X = R_O^T omega_j``, ``dt_X = R_O^T dt_j``; by O's
         ``omega_X = -R_O^T omega_O``, ``dt_X = R_O^T ((t_j - t_O) x omega_O - dt_O)``;
-        the angles by :func:`~hexatherm.core.geometry.angle_rates`.
+        the angles by :func:`~hexatherm.core.geometry.angle_rates`. Only O and ``steps``
+        are registered.
         """
-        n, k = centres_mm.shape[:2]
-        frames, d_rot, d_trans = frame_derivatives(centres_mm, self.balls_mm, self.weights)
+        k = centres_mm.shape[1]
         origin = self.plan.origin_index
+        rows = np.arange(centres_mm.shape[0]) if steps is None else np.asarray(steps, np.intp)
+        rows = np.concatenate([[origin], rows])
+        weights = self.weights
+        if weights is not None and np.ndim(weights) == 2:
+            weights = np.asarray(weights)[rows]
+        frames, d_rot, d_trans = frame_derivatives(centres_mm[rows], self.balls_mm, weights)
         convention = self.hexapod.convention
-        pose = pose_from_transform(invert_transform(frames[origin]) @ frames, convention)
-        back = frames[origin, :3, :3].T  # R_O^T
-        rates = angle_rates(pose[:, 3:], convention)  # (N, 3, 3)
-        d_rot, d_trans = d_rot.reshape(n, 3, 3 * k), d_trans.reshape(n, 3, 3 * k)
-        own = np.concatenate([back @ d_trans, rates @ (back @ d_rot)], axis=1)
-        lever = frames[:, :3, 3] - frames[origin, :3, 3]  # t_j - t_O, (N, 3)
-        moved = np.cross(lever[:, :, None], d_rot[origin][None], axis=1) - d_trans[origin]
-        by_origin = np.concatenate([back @ moved, -(rates @ (back @ d_rot[origin]))], axis=1)
-        own[origin] = 0.0  # O's pose relative to itself is zero whatever its centres
-        by_origin[origin] = 0.0
+        pose = pose_from_transform(invert_transform(frames[0]) @ frames[1:], convention)
+        back = frames[0, :3, :3].T  # R_O^T
+        rates = angle_rates(pose[:, 3:], convention)  # (S, 3, 3)
+        d_rot, d_trans = d_rot.reshape(-1, 3, 3 * k), d_trans.reshape(-1, 3, 3 * k)
+        own = np.concatenate([back @ d_trans[1:], rates @ (back @ d_rot[1:])], axis=1)
+        lever = frames[1:, :3, 3] - frames[0, :3, 3]  # t_j - t_O, (S, 3)
+        moved = np.cross(lever[:, :, None], d_rot[0][None], axis=1) - d_trans[0]
+        by_origin = np.concatenate([back @ moved, -(rates @ (back @ d_rot[0]))], axis=1)
         return pose, own, by_origin
 
     def outputs_from_poses(self, pose: FloatArray, shifted: bool = True) -> FloatArray:
@@ -425,6 +432,8 @@ def target_jacobian(
         raise ValueError("the hexapod has no leg model")
     # 1. poses relative to O and their derivatives by each step's own centres and by O's
     pose, dpose_own, dpose_origin = chain.pose_derivatives(c)
+    dpose_own[origin] = 0.0  # O's pose relative to itself is zero whatever its centres
+    dpose_origin[origin] = 0.0
     jac_igm = hexapod.jacobian(pose)
     dq_own, dq_origin = jac_igm @ dpose_own, jac_igm @ dpose_origin  # (N, 6, 3k)
     # 3. the correction's leg-by-leg partial derivatives, (M, 6) each

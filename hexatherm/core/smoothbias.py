@@ -20,19 +20,18 @@ standardized ones 0.95x.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
 from hexatherm.core.correction import smoothing_hat, target_growth
-from hexatherm.core.geometry import invert_transform, pose_from_transform
 from hexatherm.core.propagation import PoseChain
 from hexatherm.typing import FloatArray
 
 __all__ = ["GrowthExcess", "corrected_excess", "growth_excess", "own_leg_covariance"]
 
-#: central-difference step on a centre coordinate / a leg's growth, mm
+#: central-difference step on a leg's growth, mm
 STEP_MM = 1e-4
 
 
@@ -129,26 +128,16 @@ def own_leg_covariance(
     steps: npt.ArrayLike,
 ) -> FloatArray:
     """Covariance (len(steps), 6, 6) of the leg lengths of ``steps`` from their own centres
-    (O held fixed), by central differences of the registration and the IGM."""
+    (O held fixed): the poses' analytic derivatives
+    (:meth:`~hexatherm.core.propagation.PoseChain.pose_derivatives`) and the IGM's Jacobian."""
     c = np.asarray(centres_mm, dtype=float)
     cov = np.asarray(centre_cov_mm2, dtype=float)
     idx = np.asarray(steps, dtype=np.intp)
-    n, k = c.shape[:2]
-    hexapod = chain.hexapod
-    o2cmm_inv = invert_transform(chain.frames(c)[chain.plan.origin_index])
-    # the registration weights of ``steps`` only (per step and ball for probed points)
-    weights = chain.weights
-    if weights is not None and np.ndim(weights) == 2:
-        chain = replace(chain, weights=np.asarray(weights)[idx])
-    moved = np.broadcast_to(c[idx], (k, 3, 2, idx.size, k, 3)).copy()
-    for ball in range(k):
-        for axis in range(3):
-            moved[ball, axis, 0, :, ball, axis] += STEP_MM
-            moved[ball, axis, 1, :, ball, axis] -= STEP_MM
-    q = hexapod.igm(
-        pose_from_transform(o2cmm_inv @ chain.frames(moved), hexapod.convention).reshape(-1, 6)
-    ).reshape(k, 3, 2, idx.size, 6)
-    dq = np.moveaxis((q[:, :, 0] - q[:, :, 1]) / (2 * STEP_MM), 2, 0)  # (R, k, 3, 6)
+    k = c.shape[1]
+    # the poses' analytic derivatives by the steps' own centres (O's frame held)
+    pose, own, _ = chain.pose_derivatives(c, idx)
+    dq = (chain.hexapod.jacobian(pose) @ own).reshape(idx.size, 6, k, 3)
+    dq = np.moveaxis(dq, 1, -1)  # (R, k, 3, 6)
     return np.asarray(np.einsum("rbil,rbij,rbjm->rlm", dq, cov[idx], dq, optimize=True))
 
 

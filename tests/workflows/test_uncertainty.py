@@ -14,6 +14,7 @@ from hexatherm.core.propagation import (
     monte_carlo_covariance,
     output_difference,
 )
+from hexatherm.core.smoothbias import own_leg_covariance
 from hexatherm.core.spherefit import fit_spheres
 from hexatherm.core.twin import probe_points
 from hexatherm.errors import InputError
@@ -68,7 +69,8 @@ def test_pose_derivatives_equal_central_differences(noisy):
     """The poses' analytic derivatives by each step's own centres and by O's (what the
     chain rule starts from) against central differences of the registrations, as they
     were computed before (every step's coordinate moved at once, O's alone): within 1e-6
-    of the largest derivative (the differences' own error is about 1e-9 of it)."""
+    of the largest derivative (the differences' own error is about 1e-9 of it); and of
+    some steps alone (O's frame registered with them) the same rows."""
     chain = pose_chain(noisy)
     c = noisy.centres.centres_mm
     n, k = c.shape[:2]
@@ -92,10 +94,39 @@ def test_pose_derivatives_equal_central_differences(noisy):
             ]
             num_own[:, :, col] = output_difference(*own_pm)[:, :6] / (2 * h)
             num_origin[:, :, col] = output_difference(*origin_pm)[:, :6] / (2 * h)
-    num_own[origin] = num_origin[origin] = 0.0
     for analytic, numeric in ((own, num_own), (by_origin, num_origin)):
         assert np.abs(numeric).max() > 0.1
         np.testing.assert_allclose(analytic, numeric, rtol=0, atol=1e-6 * np.abs(numeric).max())
+    some = np.array([n - 1, 2, origin])
+    for whole, part in zip((pose, own, by_origin), chain.pose_derivatives(c, some), strict=True):
+        np.testing.assert_allclose(part, whole[some], rtol=1e-12, atol=1e-12)
+
+
+def test_own_leg_covariance_equals_central_differences(noisy):
+    """The references' leg covariance from their own centres (the smooth fit's and the
+    carry's error) by the analytic pose derivatives, against central differences of the
+    leg lengths of registrations with O held (as it was computed before)."""
+    chain = pose_chain(noisy)
+    c = noisy.centres.centres_mm
+    cov = centre_covariance(noisy).cov_mm2
+    refs = chain.plan.reference_indices
+    k, h = c.shape[1], 1e-4
+    convention = chain.hexapod.convention
+    o_inv = invert_transform(chain.frames(c)[chain.plan.origin_index])
+    dq = np.zeros((refs.size, k, 3, 6))
+    for ball in range(k):
+        for axis in range(3):
+            moved = [c.copy(), c.copy()]
+            moved[0][:, ball, axis] += h
+            moved[1][:, ball, axis] -= h
+            q = [
+                chain.hexapod.igm(pose_from_transform(o_inv @ chain.frames(m), convention))
+                for m in moved
+            ]
+            dq[:, ball, axis] = ((q[0] - q[1]) / (2 * h))[refs]
+    numeric = np.einsum("rbil,rbij,rbjm->rlm", dq, cov[refs], dq)
+    analytic = own_leg_covariance(chain, c, cov, refs)
+    np.testing.assert_allclose(analytic, numeric, rtol=0, atol=1e-6 * np.abs(numeric).max())
 
 
 def brute_force_covariance(chain, centres, cov, step_mm=1e-3):
