@@ -38,7 +38,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from hexatherm.core.carry import shift_jacobian, shifted_poses
+from hexatherm.core.carry import shifted_poses
 from hexatherm.core.correction import interpolated_growth, target_growth
 from hexatherm.core.geometry import angle_rates, invert_transform, pose_from_transform
 from hexatherm.core.hexapod import Hexapod
@@ -204,6 +204,22 @@ class PoseChain:
         return np.concatenate([pose[:, targets], corrected], axis=-1)
 
 
+def shifted_pose_derivative(shift: FloatArray, poses: FloatArray, convention: str) -> FloatArray:
+    """Derivatives (M, 6, 6) of :func:`~hexatherm.core.carry.shifted_poses` (the poses
+    relative to a fixed frame ``shift``) by the poses, analytic: the translations turn by
+    ``D_R^T``; an angle step turns the rotation by ``E(X)`` (the inverse of
+    :func:`~hexatherm.core.geometry.angle_rates`), seen as ``D_R^T E`` in the shifted frame,
+    whose angles move by ``angle_rates(X') D_R^T E(X)``."""
+    x = np.asarray(poses, dtype=float)
+    back = np.asarray(shift, dtype=float)[:3, :3].T
+    moved = shifted_poses(shift, x, convention)
+    out = np.zeros(x.shape[:-1] + (6, 6))
+    out[..., :3, :3] = back
+    turn = back @ np.linalg.inv(angle_rates(x[..., 3:], convention))
+    out[..., 3:, 3:] = angle_rates(moved[..., 3:], convention) @ turn
+    return out
+
+
 def output_difference(a: npt.ArrayLike, b: npt.ArrayLike) -> FloatArray:
     """``a - b`` for outputs (..., 12), angles wrapped into [-180, 180) deg."""
     d = np.asarray(a, dtype=float) - np.asarray(b, dtype=float)
@@ -251,9 +267,11 @@ class TargetJacobian:
         use[list(parts) if parts else slice(None)] = True
         live = (self.steps >= 0) & use
         part_cov = np.where(live[..., None, None, None], cov[np.maximum(self.steps, 0)], 0.0)
-        return np.asarray(
-            np.einsum("mpybi,mpbij,mpzbj->myz", self.jac, part_cov, self.jac, optimize=True)
-        )
+        # J U J^T as two batched products (einsum's own path copied the operands about)
+        by_ball = np.swapaxes(self.jac, 2, 3)  # (M, P, k, 12, 3)
+        weighted = (by_ball @ part_cov).transpose(0, 3, 1, 2, 4).reshape(m, n_out, -1)
+        plain = by_ball.transpose(0, 3, 1, 2, 4).reshape(m, n_out, -1)
+        return np.asarray(weighted @ np.swapaxes(plain, 1, 2))
 
     def between_targets(self, centre_cov_mm2: npt.ArrayLike) -> FloatArray:
         """Covariance (12, M, M) of each output between every pair of targets.
@@ -458,7 +476,7 @@ def target_jacobian(
     jac_fgm_inv = np.asarray(np.linalg.inv(hexapod.jacobian(unshifted)), float)
     if chain.origin_shift is not None:
         # the corrected poses expressed in O carried to R0's state: a fixed rigid shift
-        by_pose, _ = shift_jacobian(chain.origin_shift, unshifted, hexapod.convention)
+        by_pose = shifted_pose_derivative(chain.origin_shift, unshifted, hexapod.convention)
         jac_fgm_inv = by_pose @ jac_fgm_inv
     if chain.growth_weights is not None:
         return _smooth_jacobian(

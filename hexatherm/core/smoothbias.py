@@ -138,7 +138,8 @@ def own_leg_covariance(
     pose, own, _ = chain.pose_derivatives(c, idx)
     dq = (chain.hexapod.jacobian(pose) @ own).reshape(idx.size, 6, k, 3)
     dq = np.moveaxis(dq, 1, -1)  # (R, k, 3, 6)
-    return np.asarray(np.einsum("rbil,rbij,rbjm->rlm", dq, cov[idx], dq, optimize=True))
+    weighted = (cov[idx] @ dq).reshape(idx.size, 3 * k, 6)  # U dq, ball by ball
+    return np.asarray(np.swapaxes(dq.reshape(idx.size, 3 * k, 6), 1, 2) @ weighted)
 
 
 def corrected_excess(
