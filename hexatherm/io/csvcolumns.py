@@ -53,17 +53,106 @@ ISO_TIME = re.compile(
 _ISO_HELP = "YYYY-MM-DDTHH:MM[:SS[.ffffff]][Z|+HH:MM]"
 
 
+def ns_seconds(ns: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
+    """Seconds (float) of integer nanoseconds as pandas' ``total_seconds`` makes them
+    (pandas 3): whole seconds plus the remainder's fraction, a value that rounds onto a
+    whole second while it is not one moved off it by one step.
+
+    >>> ns_seconds(np.array([1_500_000_000, -2_250_000_000]))
+    array([ 1.5 , -2.25])
+    """
+    whole, rest = np.divmod(ns, 1_000_000_000)
+    seconds = whole + rest / 1e9
+    big = np.abs(ns) > 2**53
+    if big.any():
+        fixable = big & (rest != 0) & (np.abs(whole) < 2**52)
+        floor = whole.astype(np.float64)
+        seconds = np.where(fixable & (seconds == floor), np.nextafter(seconds, np.inf), seconds)
+        seconds = np.where(
+            fixable & (seconds == floor + 1.0), np.nextafter(seconds, -np.inf), seconds
+        )
+    return np.asarray(seconds, dtype=np.float64)
+
+
+#: the fields of an ISO time's layout (its digits written as 0): where each is
+_ISO_FIELDS = re.compile(
+    r"(?P<Y>0{4})-(?P<M>00)-(?P<D>00)[T ](?P<h>00):(?P<m>00)(?::(?P<s>00)(?:\.(?P<f>0{1,9}))?)?"
+    r"(?:Z|(?P<sign>[+-])(?P<oh>00)(?::?(?P<om>00))?)?"
+)
+
+
+def _block_seconds(codes: npt.NDArray[np.uint8], template: str) -> npt.NDArray[np.float64] | None:
+    """POSIX seconds of ISO times of one layout from their bytes (rows of ``codes``;
+    ``template`` the layout with its digits as 0), field by field in integers, as
+    :func:`_iso_seconds` gives them; None when a field is out of its range or the
+    year beyond 1678-2261 (then pandas and ``datetime`` decide, and say what is wrong)."""
+    match = _ISO_FIELDS.fullmatch(template)
+    if match is None:
+        return None
+
+    def field(name: str) -> npt.NDArray[np.int64]:
+        start, end = match.span(name)
+        value = np.zeros(codes.shape[0], dtype=np.int64)
+        for at in range(start, end):  # nothing when the field is absent (-1, -1)
+            value = value * 10 + (codes[:, at] - np.uint8(48))
+        return value
+
+    year, month, day = field("Y"), field("M"), field("D")
+    hour, minute, second = field("h"), field("m"), field("s")
+    leap = (year % 4 == 0) & ((year % 100 != 0) | (year % 400 == 0))
+    month_days = np.array([0, 31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31])
+    ok = (
+        (year >= 1678)
+        & (year <= 2261)
+        & (month >= 1)
+        & (month <= 12)
+        & (day >= 1)
+        & (day <= month_days[np.clip(month, 0, 12)] + (leap & (month == 2)))
+        & (hour <= 23)
+        & (minute <= 59)
+        & (second <= 59)
+    )
+    offset = np.zeros(1, dtype=np.int64)
+    if match.group("sign") is not None:
+        oh, om = field("oh"), field("om")
+        ok &= (oh <= 23) & (om <= 59)
+        sign = 1 if codes[0, match.start("sign")] == ord("+") else -1
+        offset = sign * (oh * 3600 + om * 60)
+    if not ok.all():
+        return None
+    # days from 1970-01-01 of the proleptic Gregorian calendar (H. Hinnant's days_from_civil)
+    y = year - (month <= 2)
+    era = y // 400
+    yoe = y - era * 400
+    doy = (153 * (month + np.where(month > 2, -3, 9)) + 2) // 5 + day - 1
+    days = era * 146097 + yoe * 365 + yoe // 4 - yoe // 100 + doy - 719468
+    whole = days * 86400 + hour * 3600 + minute * 60 + second - offset
+    digits = match.end("f") - match.start("f") if match.group("f") is not None else 0
+    fraction = field("f") * 10 ** (9 - digits) if digits else 0
+    return ns_seconds(whole * 1_000_000_000 + fraction)
+
+
 def _iso_layout(values: npt.NDArray[np.object_]) -> bool | None:
     """Whether every time has an offset (True) or none has (False), when all follow one
     layout that :data:`ISO_TIME` accepts (of one length, digits where the first has
     digits, the same other characters); None when they do not: then each is checked.
 
-    The times are compared as one block of ASCII bytes, a row each (a scanning probe's
-    file has millions of them), one byte wider than the first so that a longer one shows.
-
     >>> _iso_layout(np.array(["2024-03-05T07:30:00", "2024-03-05T07:31:02"], dtype=object))
     False
     >>> _iso_layout(np.array(["2024-03-05T07:30:00", "2024-03-05T07:31:02Z"], dtype=object))
+    """
+    block = _iso_block(values)
+    return None if block is None else block[2]
+
+
+def _iso_block(
+    values: npt.NDArray[np.object_],
+) -> tuple[npt.NDArray[np.uint8], str, bool] | None:
+    """:func:`_iso_layout` with the times' bytes (a row each) and the layout (its digits
+    as 0), or None.
+
+    The times are compared as one block of ASCII bytes, a row each (a scanning probe's
+    file has millions of them), one byte wider than the first so that a longer one shows.
     """
     first = values[0]
     if not isinstance(first, str) or not first.isascii():
@@ -82,10 +171,11 @@ def _iso_layout(values: npt.NDArray[np.object_]) -> bool | None:
     other = np.flatnonzero(~digit[0])
     if not (codes[:, other] == codes[0, other]).all():
         return None
-    match = ISO_TIME.fullmatch(
-        np.where(digit[0], np.uint8(48), codes[0, :width]).tobytes().decode()
-    )
-    return None if match is None else match.group("offset") is not None
+    template = np.where(digit[0], np.uint8(48), codes[0, :width]).tobytes().decode()
+    match = ISO_TIME.fullmatch(template)
+    if match is None:
+        return None
+    return codes[:, :width], template, match.group("offset") is not None
 
 
 def _iso_seconds(
@@ -127,8 +217,9 @@ def _iso_seconds(
         aware = bool(first_aware)
     try:
         stamps = pd.to_datetime(text, errors="coerce", utc=True, format="ISO8601")
-        since = (stamps - pd.Timestamp(0, tz="UTC")).dt.total_seconds()
-        seconds = since.to_numpy(dtype=np.float64)
+        since = (stamps - pd.Timestamp(0, tz="UTC")).to_numpy(dtype="timedelta64[ns]")
+        seconds = ns_seconds(since.view(np.int64))
+        seconds[np.isnat(since)] = np.nan
     except (OverflowError, pd.errors.OutOfBoundsDatetime, pd.errors.OutOfBoundsTimedelta):
         seconds = np.full(values.size, np.nan)  # years beyond pandas' nanoseconds: below
     missing = np.flatnonzero(np.isnan(seconds))
@@ -156,10 +247,15 @@ def column_times(
     text = frame["time"]
     lines = frame.index.to_numpy(dtype=np.int64)
     values = text.to_numpy(dtype=object)
-    layout = _iso_layout(values) if values.size else None
-    if layout is not None:
-        # every time of one ISO layout (the common case): none is empty or a number
-        seconds, aware = _iso_seconds(text, lines, path, layout)
+    block = _iso_block(values) if values.size else None
+    if block is not None:
+        # every time of one ISO layout (the common case): none is empty or a number; the
+        # seconds from the bytes, field by field, unless a field is out of range
+        codes, template, aware = block
+        from_bytes = _block_seconds(codes, template)
+        if from_bytes is not None:
+            return from_bytes, "iso", aware
+        seconds, aware = _iso_seconds(text, lines, path, aware)
         return seconds, "iso", aware
     empty = (text == "").to_numpy()
     if np.any(empty):

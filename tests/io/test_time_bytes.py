@@ -1,0 +1,104 @@
+"""The points reader's shortcuts of issue 37 against the ways they replaced: ISO times
+converted from their bytes field by field against pandas' parser (and ``datetime``), the
+one-pass blank check against a search for each blank."""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime, timedelta
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from hexatherm.errors import InputError
+from hexatherm.io import csvcolumns, csvfile
+from hexatherm.io.csvcolumns import ASCII_BLANKS, column_times
+
+LAYOUTS = [
+    "%Y-%m-%dT%H:%M:%S.%f",
+    "%Y-%m-%d %H:%M:%S",
+    "%Y-%m-%dT%H:%M",
+    "%Y-%m-%dT%H:%M:%S.%fZ",
+    "%Y-%m-%dT%H:%M:%S.%f+02:00",
+    "%Y-%m-%dT%H:%M:%S-0530",
+    "%Y-%m-%dT%H:%M:%S.%f-11",
+]
+
+
+def times(rng, layout, n=400, digits=6):
+    """``n`` random times of ``layout`` (leap days, year ends, 1678-2261), the fraction cut
+    to ``digits`` digits (or padded to 9 with random digits)."""
+    start = datetime(1678, 1, 1, tzinfo=UTC).timestamp()
+    stop = datetime(2261, 12, 31, tzinfo=UTC).timestamp()
+    stamps = rng.uniform(start, stop, n)
+    fixed = [datetime(2024, 2, 29, 23, 59, 59, 999999, UTC), datetime(2000, 12, 31, tzinfo=UTC)]
+    out = []
+    for t in [*fixed, *(datetime(1970, 1, 1, tzinfo=UTC) + timedelta(seconds=s) for s in stamps)]:
+        text = t.strftime(layout)
+        if ".%f" in layout:
+            head, tail = text.split(".", 1)
+            frac, rest = tail[:6], tail[6:]
+            frac = (frac + "".join(rng.choice(list("0123456789"), 3)))[:digits]
+            text = f"{head}.{frac}{rest}"
+        out.append(text)
+    return out
+
+
+@pytest.mark.parametrize("layout", LAYOUTS)
+@pytest.mark.parametrize("digits", [1, 3, 6, 9])
+def test_times_from_bytes_are_pandas_seconds(rng, layout, digits):
+    values = times(rng, layout, digits=digits)
+    frame = pd.DataFrame({"time": np.array(values, dtype=object)}, index=np.arange(len(values)) + 2)
+    fast, kind, aware = column_times(frame, "t.csv")
+    assert kind == "iso" and aware == (layout.endswith(("Z", "00", "30", "11")))
+    text = frame["time"]
+    slow, slow_aware = csvcolumns._iso_seconds(text, frame.index.to_numpy(), "t.csv")
+    assert slow_aware == aware
+    np.testing.assert_array_equal(fast, slow)  # the same seconds, to the bit
+    # and pandas' own seconds (its total_seconds, not our rule for them)
+    stamps = pd.to_datetime(text, utc=True, format="ISO8601")
+    np.testing.assert_array_equal(fast, (stamps - pd.Timestamp(0, tz="UTC")).dt.total_seconds())
+    # the shortcut did run: the fields come from the bytes
+    block = csvcolumns._iso_block(text.to_numpy(dtype=object))
+    assert block is not None and csvcolumns._block_seconds(block[0], block[1]) is not None
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        "2023-02-29T10:00:00",
+        "2024-13-01T10:00:00",
+        "2024-04-31T10:00:00",
+        "2024-01-01T24:00:00",
+        "2024-01-01T10:60:00",
+        "2024-01-01T10:00:60",
+        "2300-01-01T10:00:00",
+    ],
+)
+def test_a_time_out_of_range_is_left_to_pandas_and_datetime(bad):
+    """A field out of its range (or a year beyond pandas' nanoseconds) is not converted
+    from the bytes: the general conversion decides (an error naming the line, or the
+    year 2300's seconds)."""
+    values = ["2024-01-01T10:00:00"] * 3 + [bad]
+    block = csvcolumns._iso_block(np.array(values, dtype=object))
+    assert block is not None and csvcolumns._block_seconds(block[0], block[1]) is None
+    frame = pd.DataFrame({"time": np.array(values, dtype=object)}, index=[2, 3, 4, 5])
+    if bad.startswith("2300"):
+        seconds = column_times(frame, "t.csv")[0]
+        assert seconds[-1] == datetime(2300, 1, 1, 10, tzinfo=UTC).timestamp()
+    else:
+        with pytest.raises(InputError, match="t.csv:5: field 'time': not a valid date"):
+            column_times(frame, "t.csv")
+
+
+def test_blank_check_in_one_pass_finds_every_blank():
+    clean = b"label,ball,x\nO,B1,1.5\nS1,B2,2.5\n"
+    assert csvfile._blank_free(clean)
+    for blank in ASCII_BLANKS:
+        for at in (0, 14, len(clean) - 2):
+            dirty = clean[:at] + blank.encode() + clean[at:]
+            assert not csvfile._blank_free(dirty), (blank, at)
+    # control bytes that are not blanks: still blank-free (the search decides)
+    assert csvfile._blank_free(clean.replace(b"S1", b"S\x01"))
+    monkey = clean * 50
+    assert csvfile._blank_free(monkey)
