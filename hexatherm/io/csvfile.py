@@ -377,15 +377,15 @@ def _fast_measurement_csv(raw: bytes, path: str, kind: RecordKind | None) -> Rec
         return None
     if not parts or len({(p["time_kind"], p["aware"]) for p in parts}) != 1:
         return None  # no rows, or times of different kinds: the general reader says
-    joined = {key: np.concatenate([p[key] for p in parts]) for key in ("label", "ball", "time")}
+    label, ball = (_spread_names([p[key] for p in parts]) for key in ("label", "ball"))
+    time_s = np.concatenate([p["time"] for p in parts])
     # the coordinates (and normals) were stacked chunk by chunk: one copy of them, here
     values = {c: np.concatenate([p["values"][c] for p in parts]) for c in parts[0]["values"]}
     xyz = np.concatenate([p["xyz"] for p in parts])
     normals = None if parts[0]["ijk"] is None else np.concatenate([p["ijk"] for p in parts])
     time_kind, aware = parts[0]["time_kind"], parts[0]["aware"]
     del parts
-    lines = np.arange(joined["time"].size, dtype=np.int64) + 2
-    label, ball = joined["label"], joined["ball"]
+    lines = np.arange(time_s.size, dtype=np.int64) + 2
     kind = kind or _kind(columns, path, label, ball)
     extras = CENTRE_EXTRA if kind == "centres" else POINT_EXTRA
     if any(c not in extras for c in columns[6:]):
@@ -409,7 +409,7 @@ def _fast_measurement_csv(raw: bytes, path: str, kind: RecordKind | None) -> Rec
         label=label,
         ball=ball,
         xyz_mm=xyz,
-        time_s=joined["time"],
+        time_s=time_s,
         time_kind=time_kind,
         line=lines,
         diameter_mm=diameter,
@@ -428,12 +428,25 @@ def _blank_free(raw: bytes) -> bool:
     blank is below ``!``, and of those a clean file holds only line feeds), instead of a
     search for each blank."""
     data = np.frombuffer(raw, dtype=np.uint8)
-    low = 0
     for start in range(0, data.size, _BLANK_SCAN):
-        low += int(np.count_nonzero(data[start : start + _BLANK_SCAN] < 33))
-    if low == raw.count(b"\n"):
-        return True
-    return not any(c.encode() in raw for c in ASCII_BLANKS)  # or another control byte
+        part = data[start : start + _BLANK_SCAN]
+        if np.count_nonzero(part < 33) != np.count_nonzero(part == 10):
+            # a blank, or another control byte: the search for each blank decides
+            return not any(c.encode() in raw for c in ASCII_BLANKS)
+    return True
+
+
+def _spread_names(
+    chunks: list[tuple[npt.NDArray[np.object_], npt.NDArray[np.integer]]],
+) -> npt.NDArray[np.str_]:
+    """Every row's name (a str array) from each chunk's distinct names and codes: the
+    names of all chunks made one list, each converted once, then spread."""
+    index: dict[str, int] = {}
+    codes = []
+    for names, chunk_codes in chunks:
+        where = np.array([index.setdefault(name, len(index)) for name in names], dtype=np.intp)
+        codes.append(where[chunk_codes])
+    return np.asarray(list(index), dtype=str)[np.concatenate(codes)]
 
 
 def _clean_chunk(
@@ -443,7 +456,7 @@ def _clean_chunk(
     InputError) when the general reader must read the file."""
     if frame.empty or list(frame.columns) != columns or frame["time"].isna().any():
         raise _Unclean  # a short row
-    named: dict[str, npt.NDArray[np.str_]] = {}
+    named: dict[str, tuple[npt.NDArray[np.object_], npt.NDArray[np.integer]]] = {}
     for column in ("label", "ball"):
         names = frame[column].cat.categories.to_numpy(dtype=object)
         codes = frame[column].cat.codes.to_numpy()
@@ -452,7 +465,7 @@ def _clean_chunk(
         if codes.size and codes.min() < 0:
             raise _Unclean  # a missing name (a short row)
         # each name converted once, then spread (not a million conversions)
-        named[column] = np.asarray(names, dtype=str)[codes]
+        named[column] = (names, codes)  # spread once, for the whole file
     if not blank_free:
         # a blank somewhere in the file: is it in a time?
         times = frame["time"].to_numpy()

@@ -204,9 +204,11 @@ def read_bytes(path: str | os.PathLike[str], *, limit: int = MAX_MEASUREMENT_BYT
     try:
         parts: list[bytes] = []
         total = 0
-        want = info.st_size + 1  # one read for a file that does not change
+        # one read of the whole file for a file that does not change (its one part is
+        # returned as it is: no copy by the join), then parts of _CHUNK
+        want = max(info.st_size + 1, 65536)
         while True:
-            chunk = os.read(fd, max(1, min(max(want, 65536), _CHUNK, limit + 1 - total)))
+            chunk = os.read(fd, max(1, min(want, limit + 1 - total)))
             if not chunk:
                 break
             parts.append(chunk)
