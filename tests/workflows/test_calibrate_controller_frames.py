@@ -90,11 +90,16 @@ def set_frames(driver, values: np.ndarray) -> None:
 
 
 def measure(
-    tmp: Path, dialect: str, frames: np.ndarray | None, noise_um: float = 0.0, seed: int = 3
+    tmp: Path,
+    dialect: str,
+    frames: np.ndarray | None,
+    noise_um: float = 0.0,
+    seed: int = 3,
+    targets: np.ndarray = TARGETS,
 ) -> Path:
     """``hexatherm run`` of the plan against the twins, with the controller's frames set
     (``--origin-on-cmm``: the nominal placement of the platform at the origin step)."""
-    plan = build_plan(TARGETS, np.zeros(6), points_per_ball=5, reference_every="alternate")
+    plan = build_plan(targets, np.zeros(6), points_per_ball=5, reference_every="alternate")
     tmp.mkdir(parents=True, exist_ok=True)
     (tmp / "plan.yaml").write_text(plan_to_yaml(plan))
     files = load_files(tmp / "plan.yaml", HEXAPOD, ROOT / "configs" / "balls-3.yaml")
@@ -314,3 +319,13 @@ def test_the_records_run_yaml_keeps_as_calibrate_reads_them(tmp_path: Path) -> N
     path = record_file(tmp_path, [{"frames_mm_deg": full}, {"frames_mm_deg": other}])
     with pytest.raises(InputError, match=r"run.yaml.*controller\[1\].*changed between"):
         read_recorded_frames(path)
+
+
+def test_a_pi_campaign_is_at_zero_frames_by_its_record(tmp_path: Path) -> None:
+    """``run`` moves a PI hexapod only with ``ZERO`` enabled (its driver refuses another
+    system, a pivot off zero): its record says so, and calibrate takes the frames as
+    known zero, not assumed."""
+    session = measure(tmp_path, "pi", None, targets=TARGETS[:1])
+    recorded = read_recorded_frames(session)
+    assert recorded.values_mm_deg is not None and not recorded.values.any()
+    assert "PI" in recorded.source and "ZERO=ZERO" in recorded.source
