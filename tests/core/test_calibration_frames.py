@@ -16,6 +16,7 @@ from hexatherm.core.calibration.frames import (
     corrected_frames,
     fit_frames,
     frame_correction,
+    frames_covariance,
     machine_in_origin,
     poses_from_origin,
 )
@@ -152,13 +153,34 @@ def test_frames_set_during_the_campaign_map_the_poses_and_compose_with_the_fitte
     np.testing.assert_allclose(predict(y), measured(during, POSES), atol=1e-9)
     # without composing (the fitted frames alone), or with none, the poses are missed
     frames = fit_frames(predict, y, "symetrie")
-    written = corrected_frames(frames.values, "symetrie", during[:6], during[6:])
+    written = corrected_frames(frames.values, "symetrie", during)
     for wrong in (frames.values, during):
         assert np.abs(to_um_urad(measured(wrong, POSES) - y)).max() > 20.0
     error = to_um_urad(measured(written, POSES) - y)
     assert np.abs(error).max() < 1e-3, error
     # with no frames during the campaign, the fitted frames as they are
     np.testing.assert_allclose(corrected_frames(frames.values, "pi"), frames.values, atol=1e-12)
+
+
+def test_the_composed_frames_covariance_is_the_spread_of_composed_samples():
+    """frames_covariance against a second method: the covariance of the composed frames
+    of 4000 samples of the fitted ones (small: the composition is smooth there)."""
+    rng = np.random.default_rng(3)
+    values = np.array([0.1, -0.2, 0.3, 0.01, -0.02, 0.03, -0.05, 0.04, 0.02, 0.0, 0.01, -0.01])
+    during = np.array([0.8, -1.5, 2.0, 0.4, -0.3, 1.2, 2.0, 1.0, 30.0, -0.5, 0.7, 20.0])
+    root = rng.normal(size=(12, 12)) * 1e-3
+    cov = root @ root.T
+    got = frames_covariance(values, cov, "symetrie", during)
+    samples = rng.multivariate_normal(values, cov, 4000)
+    composed = np.array([corrected_frames(v, "symetrie", during) for v in samples])
+    spread = np.cov(composed.T)
+    scale = np.sqrt(np.outer(np.diag(spread), np.diag(spread)))
+    assert np.abs(got - spread).max() / scale.max() < 0.1
+    assert np.abs(np.diag(got) / np.diag(spread) - 1).max() < 0.1
+    # the composition moves it: not the fitted values' covariance
+    assert np.abs(got - cov).max() > 0.2 * np.abs(cov).max()
+    # with no frames during the campaign, the same covariance
+    np.testing.assert_allclose(frames_covariance(values, cov, "symetrie"), cov, atol=1e-12)
 
 
 def test_the_frames_need_two_poses():

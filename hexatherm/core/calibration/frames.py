@@ -228,27 +228,22 @@ def in_frame(points_mm: npt.ArrayLike, pose: npt.ArrayLike, convention: Conventi
 
 
 def corrected_frames(
-    values: npt.ArrayLike,
-    convention: Convention,
-    user_pose: npt.ArrayLike | None = None,
-    object_pose: npt.ArrayLike | None = None,
-    frames_convention: Convention = "symetrie",
+    values: npt.ArrayLike, convention: Convention, during: npt.ArrayLike | None = None
 ) -> FloatArray:
     """The 12 values (mm, deg, ``convention``) a controller is given: its user (work)
     frame's pose in the machine frame (ZERO), then its object (tool) frame's in the
     platform frame, from the fitted ``values`` (``G`` then ``H``, relative to the
     campaign's frame O: :func:`fit_frames` on poses from :func:`poses_from_origin`) and
-    the frames ``U0``, ``O0`` set during the campaign (``user_pose``, ``object_pose`` in
-    ``frames_convention``; zero when not given): ``U0 O0^-1 G O0`` and ``H O0``.
+    the frames ``U0``, ``O0`` set during the campaign (``during``: 12 values, mm and deg,
+    Symétrie convention, as ``run.yaml`` records them; zero when not given):
+    ``U0 O0^-1 G O0`` and ``H O0``.
 
     Commanding ``X`` then puts the platform at ``M0 G (O0 X O0^-1) H^-1`` in the
     machine frame, ``G (O0 X O0^-1) H^-1`` relative to frame O: what the fit made reach
     ``O0 X O0^-1``, the object frame at ``X`` from where it stood at the campaign's
     origin step. With zero frames, ``G`` and ``H``."""
     v = np.asarray(values, float)
-    zero = np.zeros(6)
-    u0 = transform_from_pose(zero if user_pose is None else user_pose, frames_convention)
-    o0 = transform_from_pose(zero if object_pose is None else object_pose, frames_convention)
+    u0, o0 = campaign_transforms(np.zeros(12) if during is None else during)
     g, h = transform_from_pose(np.stack([v[:6], v[6:]]), convention)
     frames = np.stack([u0 @ invert_transform(o0) @ g @ o0, h @ o0])
     return np.asarray(pose_from_transform(frames, convention), float).ravel()
@@ -258,14 +253,12 @@ def frames_covariance(
     values: npt.ArrayLike,
     covariance: npt.ArrayLike,
     convention: Convention,
-    user_pose: npt.ArrayLike | None = None,
-    object_pose: npt.ArrayLike | None = None,
-    frames_convention: Convention = "symetrie",
+    during: npt.ArrayLike | None = None,
 ) -> FloatArray:
     """The covariance (12, 12) of :func:`corrected_frames` from the fitted values'
     (first order: central differences of 1e-6 mm, deg); the same with zero frames."""
     v = np.asarray(values, float)
-    args = (convention, user_pose, object_pose, frames_convention)
+    args = (convention, during)
     steps = np.eye(12) * _STEP
     jac = (
         np.stack([corrected_frames(v + d, *args) - corrected_frames(v - d, *args) for d in steps])

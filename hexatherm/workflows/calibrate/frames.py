@@ -79,8 +79,8 @@ def frames_record(run: Calibration, coverage_factor: float = 2.0) -> dict[str, A
     # those set during the campaign (zero when none: then the same)
     campaign = run.campaign.frames
     during = np.zeros(12) if campaign is None else campaign.values
-    written = corrected_frames(frames.values, conv, during[:6], during[6:])
-    cov = frames_covariance(frames.values, cov, conv, during[:6], during[6:])
+    written = corrected_frames(frames.values, conv, during)
+    cov = frames_covariance(frames.values, cov, conv, during)
     u = np.sqrt(np.maximum(np.diag(cov), 0.0))
     before = to_um_urad(fit.predict(commanded) - commanded)
     out: dict[str, Any] = {
