@@ -199,6 +199,18 @@ def pose_from_wire(pose_m_rad: npt.ArrayLike) -> FloatArray:
     return p
 
 
+def format_frames(values_mm_deg: npt.ArrayLike) -> str:
+    """The user frame in the machine frame then the object frame in the platform frame,
+    12 numbers (mm, deg, Symétrie convention) to 15 significant digits: ``run.yaml``'s
+    record of them, which ``calibrate`` reads (``user_frame_in_machine`` and
+    ``object_frame_in_platform`` are rounded, for the eye).
+
+    >>> format_frames([0.5, 0, 0, 0, 0, 1 / 3] + [0] * 6)
+    '0.5 0 0 0 0 0.333333333333333 0 0 0 0 0 0'
+    """
+    return " ".join(f"{v:.15g}" for v in np.asarray(values_mm_deg, dtype=float).ravel())
+
+
 def format_wire(values: npt.ArrayLike) -> str:
     """Comma-separated numbers in fixed notation (12 decimals: 1 pm, 1 prad).
 
@@ -254,6 +266,7 @@ class SymetrieController(SocketController):
         mm_deg = pose_from_wire(data[1:].reshape(2, 6))
         self.info["user_frame_in_machine"] = format_pose(mm_deg[0])
         self.info["object_frame_in_platform"] = format_pose(mm_deg[1])
+        self.info["frames_mm_deg"] = format_frames(mm_deg)
 
     # ---------------------------------------------------------------- replies
     def _transact(self, command: str, args: str = "", *, accepted: bool = False) -> str:

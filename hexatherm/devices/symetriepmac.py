@@ -46,6 +46,7 @@ import numpy as np
 
 from hexatherm.core.geometry import Convention
 from hexatherm.devices.controller import ControllerState, SocketController, format_pose
+from hexatherm.devices.symetrie import format_frames
 from hexatherm.errors import (
     ControllerConnectionError,
     ControllerError,
@@ -247,6 +248,7 @@ class SymetriePmacController(SocketController):
         frames = self._get("CFG_CS", 12, cfg=0)
         self.info["user_frame_in_machine"] = format_pose(frames[:6])
         self.info["object_frame_in_platform"] = format_pose(frames[6:])
+        self.info["frames_mm_deg"] = format_frames(frames)
 
     # ---------------------------------------------------------------- gpascii
     def _query(self, line: str) -> list[str]:

@@ -177,6 +177,8 @@ class TwinWorld:
         Period of the thermocouple history the effects see (a lag needs it), s.
     speed_mm_s, speed_deg_s, settle_s, noise_um, noise_urad, seed, faults
         Of the :class:`~hexatherm.devices.sim.symetrie.SimulatedHexapod`.
+    true_parameters : array_like, shape (48,), optional
+        The true geometry, if not ``hexapod``'s (:func:`hexatherm.core.twin.predict`).
     """
 
     def __init__(
@@ -199,6 +201,7 @@ class TwinWorld:
         noise_urad: float = 0.2,
         seed: int = 0,
         faults: Faults | None = None,
+        true_parameters: npt.ArrayLike | None = None,
     ) -> None:
         if hexapod.legs is None:
             raise InputError("the twin needs the hexapod's leg model (legs:)")
@@ -206,6 +209,7 @@ class TwinWorld:
             raise ValueError("cmm_move_s must be >= 0 and sample_period_s > 0")
         self.hexapod, self.balls, self.heating = hexapod, balls, heating
         self.effects = tuple(effects)
+        self.true_parameters = true_parameters
         self.origin2cmm = transform_from_pose(origin_on_cmm, hexapod.convention)
         self.clock, self.sleep = clock, sleep
         self.start_s = clock() if start_s is None else float(start_s)
@@ -249,16 +253,7 @@ class TwinWorld:
         pose = [float(v) for v in np.asarray(pose_mm_deg, dtype=float).reshape(6)]
         plan = Plan.from_steps([("O", "origin", pose)])
         log = self.log(t_s)
-        steps = predict(
-            self.hexapod,
-            plan,
-            [log.times_s[-1]],
-            log,
-            self.balls.centres_mm,
-            self.origin2cmm,
-            self.effects,
-            reference_state=False,
-        )
+        steps = self._predict(plan, [log.times_s[-1]], log, reference_state=False)
         return np.asarray(steps.measured_centres_cmm_mm[0], dtype=float)
 
     def truth(self, plan: Plan, times_s: npt.ArrayLike) -> TwinSteps:
@@ -267,15 +262,16 @@ class TwinWorld:
         thermal state (``corrected_pose``), what ``process`` should find."""
         t = np.asarray(times_s, dtype=float).reshape(-1)
         log = self.log(float(t.max()))
-        return predict(
-            self.hexapod,
-            plan,
-            t - self.start_s,
-            log,
-            self.balls.centres_mm,
-            self.origin2cmm,
-            self.effects,
-        )
+        return self._predict(plan, t - self.start_s, log)
+
+    def _predict(
+        self, plan: Plan, times_s: npt.ArrayLike, log: ThermocoupleLog, reference_state: bool = True
+    ) -> TwinSteps:
+        """:func:`~hexatherm.core.twin.predict` with the twin's model, balls, placement,
+        effects and true geometry."""
+        args = (self.balls.centres_mm, self.origin2cmm, self.effects, self.true_parameters)
+        at = {"reference_state": reference_state, "true_parameters": args[3]}
+        return predict(self.hexapod, plan, times_s, log, *args[:3], **at)  # type: ignore[arg-type]
 
     # CmmBackend
     def ball_centres_mm(self, t_s: float) -> FloatArray:

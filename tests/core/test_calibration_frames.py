@@ -11,10 +11,14 @@ import numpy as np
 import pytest
 
 from hexatherm.core.calibration.frames import (
+    campaign_transforms,
     command,
     corrected_frames,
     fit_frames,
     frame_correction,
+    frames_covariance,
+    machine_in_origin,
+    poses_from_origin,
 )
 from hexatherm.core.geometry import (
     apply_transform,
@@ -103,18 +107,80 @@ def test_a_non_rigid_error_the_frames_never_make_worse_and_their_u_by_hand():
     assert np.abs(np.diag(cov)[1:]).max() < 1e-3
 
 
-def test_the_frames_compose_with_the_frames_set_during_the_calibration():
+def test_frames_set_during_the_campaign_map_the_poses_and_compose_with_the_fitted_ones():
+    """A campaign measured with frames ``U0``, ``O0`` set on a controller (its IGM the
+    nominal one of ``M = U0 X O0^-1``) whose hexapod is rigidly wrong: relative to frame
+    O (where the origin step put the platform) it is a campaign without frames of the
+    nominal hexapod with its base moved by ``O0 U0^-1``, commanded ``O0 X O0^-1`` (the
+    same legs); the frames fitted there, composed with ``U0``, ``O0``, make the true
+    platform reach ``O0 X O0^-1`` relative to frame O (the object frame at ``X`` from
+    where it stood at the origin step) within 1 nm and 1 nrad."""
+    nominal, true = hexapods()
+    during = np.array([0.8, -1.5, 2.0, 0.4, -0.3, 1.2, 2.0, 1.0, 30.0, -0.5, 0.7, 20.0])
+    user, obj = campaign_transforms(during)
+
+    def controller(frames: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        """Where the true platform stands (machine frame) for poses commanded with frames:
+        the controller's nominal IGM of ``U X O^-1``, the truth's FGM."""
+        u, o = campaign_transforms(frames)
+        m = pose_from_transform(u @ transform_from_pose(poses) @ invert_transform(o))
+        return true.fgm(nominal.igm(m), initial_poses=m)
+
+    origin = transform_from_pose(controller(during, np.zeros((1, 6)))[0])  # frame O
+
+    def measured(frames: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        placed = transform_from_pose(controller(frames, poses), "symetrie")
+        return pose_from_transform(invert_transform(origin) @ placed, "symetrie")
+
+    # the same legs through the campaign's frames and through frame O's nominal
+    shifted = replace(
+        nominal,
+        base_joints_mm=apply_transform(machine_in_origin(user, obj), nominal.base_joints_mm),
+    )
+    y = poses_from_origin(POSES, obj, "symetrie")
+    machine = pose_from_transform(
+        user @ transform_from_pose(POSES) @ invert_transform(obj), "symetrie"
+    )
+    np.testing.assert_allclose(shifted.igm(y), nominal.igm(machine), atol=1e-10)
+    t_o = transform_from_pose(
+        true.fgm(shifted.igm(np.zeros((1, 6))), initial_poses=np.zeros((1, 6)))[0]
+    )
+
+    def predict(given: np.ndarray) -> np.ndarray:  # frame O's world: no frames
+        placed = transform_from_pose(true.fgm(shifted.igm(given), initial_poses=given))
+        return pose_from_transform(invert_transform(t_o) @ placed, "symetrie")
+
+    np.testing.assert_allclose(predict(y), measured(during, POSES), atol=1e-9)
+    # without composing (the fitted frames alone), or with none, the poses are missed
+    frames = fit_frames(predict, y, "symetrie")
+    written = corrected_frames(frames.values, "symetrie", during)
+    for wrong in (frames.values, during):
+        assert np.abs(to_um_urad(measured(wrong, POSES) - y)).max() > 20.0
+    error = to_um_urad(measured(written, POSES) - y)
+    assert np.abs(error).max() < 1e-3, error
+    # with no frames during the campaign, the fitted frames as they are
+    np.testing.assert_allclose(corrected_frames(frames.values, "pi"), frames.values, atol=1e-12)
+
+
+def test_the_composed_frames_covariance_is_the_spread_of_composed_samples():
+    """frames_covariance against a second method: the covariance of the composed frames
+    of 4000 samples of the fitted ones (small: the composition is smooth there)."""
+    rng = np.random.default_rng(3)
     values = np.array([0.1, -0.2, 0.3, 0.01, -0.02, 0.03, -0.05, 0.04, 0.02, 0.0, 0.01, -0.01])
-    u0, o0 = np.array([0, 0, 328.83, 0, 0, 0]), np.array([1.0, 2.0, 3.0, 0.5, 0.0, 0.0])
-    out = corrected_frames(values, "symetrie", u0, o0)
-    g, h = transform_from_pose(np.stack([values[:6], values[6:]]), "symetrie")
-    np.testing.assert_allclose(
-        transform_from_pose(out[:6], "symetrie"), transform_from_pose(u0) @ g, atol=1e-12
-    )
-    np.testing.assert_allclose(
-        transform_from_pose(out[6:], "symetrie"), transform_from_pose(o0) @ h, atol=1e-12
-    )
-    np.testing.assert_allclose(corrected_frames(values, "pi"), values, atol=1e-12)
+    during = np.array([0.8, -1.5, 2.0, 0.4, -0.3, 1.2, 2.0, 1.0, 30.0, -0.5, 0.7, 20.0])
+    root = rng.normal(size=(12, 12)) * 1e-3
+    cov = root @ root.T
+    got = frames_covariance(values, cov, "symetrie", during)
+    samples = rng.multivariate_normal(values, cov, 4000)
+    composed = np.array([corrected_frames(v, "symetrie", during) for v in samples])
+    spread = np.cov(composed.T)
+    scale = np.sqrt(np.outer(np.diag(spread), np.diag(spread)))
+    assert np.abs(got - spread).max() / scale.max() < 0.1
+    assert np.abs(np.diag(got) / np.diag(spread) - 1).max() < 0.1
+    # the composition moves it: not the fitted values' covariance
+    assert np.abs(got - cov).max() > 0.2 * np.abs(cov).max()
+    # with no frames during the campaign, the same covariance
+    np.testing.assert_allclose(frames_covariance(values, cov, "symetrie"), cov, atol=1e-12)
 
 
 def test_the_frames_need_two_poses():

@@ -43,6 +43,7 @@ from hexatherm.core.geometry import Convention
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.devices.controller import LineBuffer, convert_pose, stroke_violations
 from hexatherm.devices.sim.tcpservice import TcpService
+from hexatherm.devices.sim.userframes import UserObjectFrames
 from hexatherm.devices.symetrie import pose_from_wire, pose_to_wire
 from hexatherm.typing import FloatArray
 
@@ -391,7 +392,7 @@ def _floats(text: str, n: int) -> FloatArray | None:
     return values
 
 
-class SymetrieSimulator(SimulatedController):
+class SymetrieSimulator(UserObjectFrames, SimulatedController):
     """A simulated Symétrie controller (API v2 as in :mod:`hexatherm.devices.symetrie`).
 
     Examples
@@ -404,6 +405,7 @@ class SymetrieSimulator(SimulatedController):
     True
     """
 
+    model: SimulatedHexapod
     scheme = "symetrie"
     native_convention: Convention = "symetrie"
     line_end = "\r\n"
@@ -431,6 +433,7 @@ class SymetrieSimulator(SimulatedController):
         if not cycle_s > 0:
             raise ValueError(f"the controller's cycle must be > 0 s, not {cycle_s!r}")
         self.cycle_s = float(cycle_s)
+        self.frames = np.zeros(12)
         self._wire_lock = threading.Lock()
         #: per connection: a ``MOVE#ABS`` accepted whose ``:2`` waits for the motion's end
         self._moves: dict[socket.socket, bool] = {}
@@ -536,8 +539,8 @@ class SymetrieSimulator(SimulatedController):
         m = self.model
         if name == "STA#HEXAPOD?":
             self._drop_if_moving()
-            pose = pose_to_wire(self._wire_pose())
-            values = ",".join(repr(float(v)) for v in [*pose, *pose])
+            pose = pose_to_wire(np.stack([self._wire_pose(), self._platform_pose()]))
+            values = ",".join(repr(float(v)) for v in pose.ravel())
             return [f"{short}:2,{self._status_word()},{values}"]  # an integer word
         if name == "STA#AXES?":
             if not m.report_actuators:
@@ -567,7 +570,14 @@ class SymetrieSimulator(SimulatedController):
         if name == "CFG#CS?":  # CFG#CS?CS: that CS first, then user and object frames
             if not re.fullmatch(r"\d+", args):
                 return [f"{short}:-9"]
-            return [f"{short}:1", f"{short}:2,{int(args)}," + ",".join(["0"] * 12)]
+            now = ",".join(repr(float(v)) for v in pose_to_wire(self.frames.reshape(2, 6)).ravel())
+            return [f"{short}:1", f"{short}:2,{int(args)},{now}"]
+        if name == "CFG#CS":  # *choice*: the 12 values of CFG#CS?'s answer (m, rad)
+            given = _floats(args, 12)
+            if given is None:
+                return [f"{short}:-9"]
+            self.frames = pose_from_wire(given.reshape(2, 6)).ravel()
+            return [f"{short}:1", f"{short}:2"]
         if name in ("VALID#PTP?", "MOVE#ABS"):
             wire = _floats(args, 6)
             if wire is None:

@@ -67,6 +67,7 @@ from hexatherm.devices.sim.symetrie import (
     _Drop,
     single_axis_travel,
 )
+from hexatherm.devices.sim.userframes import UserObjectFrames
 from hexatherm.typing import FloatArray
 
 IAC, WILL, WONT, DO, DONT, SB, SE = 255, 251, 252, 253, 254, 250, 240
@@ -147,7 +148,7 @@ class _Session:
         self.lines = 0
 
 
-class SymetriePmacSimulator(SimulatedController):
+class SymetriePmacSimulator(UserObjectFrames, SimulatedController):
     """The twin's gpascii server (see the module docstring).
 
     Examples
@@ -161,6 +162,7 @@ class SymetriePmacSimulator(SimulatedController):
     True
     """
 
+    model: SimulatedHexapod
     scheme = "symetrie-pmac"
     native_convention: Convention = "symetrie"
     line_end = "\r\n"
@@ -189,8 +191,6 @@ class SymetriePmacSimulator(SimulatedController):
         travel = np.concatenate(single_axis_travel(model))
         self.limits = {k: travel.copy() for k in (0, 1, 2)}
         self.limits_enabled = {1: False, 2: False}
-        #: ``C_CFG_CS``: the user frame in the machine frame, the object frame in the
-        #: platform frame (mm, deg, Symétrie convention)
         self.frames = np.zeros(12)
         self._state_lock = threading.RLock()
         super().__init__(model, host, port)
@@ -475,36 +475,6 @@ class SymetriePmacSimulator(SimulatedController):
         move = transform_from_pose(step, "symetrie")
         frame = now @ move if mode == 1 else move @ now
         return np.asarray(pose_from_transform(frame, "symetrie"), dtype=float)
-
-    def _frames(self) -> tuple[FloatArray, FloatArray]:
-        user = transform_from_pose(self.frames[:6], "symetrie")
-        return user, transform_from_pose(self.frames[6:], "symetrie")
-
-    def _object_pose(self, model_pose: FloatArray) -> FloatArray:
-        """The object's pose in the user frame (wire) of the platform's ``model_pose``:
-        ``U^-1 M O``."""
-        native = convert_pose(model_pose, self.model.convention, self.native_convention)
-        if not self.frames.any():
-            return native
-        user, obj = self._frames()
-        frame = np.linalg.inv(user) @ transform_from_pose(native, "symetrie") @ obj
-        return np.asarray(pose_from_transform(frame, "symetrie"), dtype=float)
-
-    def _wire_pose(self) -> FloatArray:
-        return self._object_pose(self.model.read_pose())
-
-    def _platform_pose(self) -> FloatArray:
-        """The platform's read-back pose in the machine frame (``s_mtp``)."""
-        return convert_pose(self.model.read_pose(), self.model.convention, "symetrie")
-
-    def _model_pose(self, native: FloatArray) -> FloatArray:
-        """The platform's pose (model) of the object's pose ``native`` in the user frame:
-        ``M = U X O^-1``."""
-        if self.frames.any():
-            user, obj = self._frames()
-            frame = user @ transform_from_pose(native, "symetrie") @ np.linalg.inv(obj)
-            native = np.asarray(pose_from_transform(frame, "symetrie"), dtype=float)
-        return convert_pose(native, "symetrie", self.model.convention)
 
     def _broken(self, wire: FloatArray) -> int:
         """The validation bits a pose breaks (0: it can be reached): machine and user

@@ -43,6 +43,7 @@ import numpy as np
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.errors import InputError, InputWarning
 from hexatherm.io.manifest import sha256_file
+from hexatherm.io.runrecord import RecordedFrames
 from hexatherm.session import Session
 from hexatherm.workflows.process.pipeline import ProcessResult
 from hexatherm.workflows.process.quality import quality_checks
@@ -221,6 +222,23 @@ def check_one_hexapod(specs: Sequence[Session]) -> None:
                 path=str(spec.path),
                 field=f"hexapod: {field}",
             )
+
+
+def check_one_frames(recorded: Sequence[RecordedFrames]) -> RecordedFrames:
+    """The controller frames the sessions were measured with (``run.yaml``'s record; not
+    recorded: zero, assumed); sessions measured with other frames refused in one line
+    naming both records (frame O moves with the frames: one calibration, one setting)."""
+    first = recorded[0]
+    for other in recorded[1:]:
+        if np.abs(other.values - first.values).max() > 1e-9:
+            raise InputError(
+                f"the controller's frames were {_numbers(other.values)} (mm, deg; "
+                f"{other.source}), {first.path}'s {_numbers(first.values)} ({first.source}): "
+                "calibrate sessions measured with one frame setting together",
+                path=other.path,
+                field="controller: frames_mm_deg",
+            )
+    return first
 
 
 def _numbers(values: np.ndarray) -> str:

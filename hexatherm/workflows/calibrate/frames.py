@@ -18,7 +18,13 @@ from typing import Any
 
 import numpy as np
 
-from hexatherm.core.calibration.frames import command, fit_frames, frame_correction
+from hexatherm.core.calibration.frames import (
+    command,
+    corrected_frames,
+    fit_frames,
+    frame_correction,
+    frames_covariance,
+)
 from hexatherm.core.calibration.model import BASE, PLATFORM
 from hexatherm.core.geometry import (
     Convention,
@@ -68,14 +74,21 @@ def frames_record(run: Calibration, coverage_factor: float = 2.0) -> dict[str, A
     _, by_theta = fit.model.predict(fit.parameters, command(frames.values, commanded, conv))
     scale = np.array([1e3] * 3 + [np.pi / 180 * 1e6] * 3)
     by_theta = (by_theta * scale[None, :, None]).reshape(-1, by_theta.shape[-1])
-    u = np.sqrt(np.maximum(np.diag(frames.covariance(by_theta, fit.covariance)), 0.0))
+    cov = frames.covariance(by_theta, fit.covariance)
+    # the frames to set: the fitted ones (relative to the campaign's frame O) composed with
+    # those set during the campaign (zero when none: then the same)
+    campaign = run.campaign.frames
+    during = np.zeros(12) if campaign is None else campaign.values
+    written = corrected_frames(frames.values, conv, during)
+    cov = frames_covariance(frames.values, cov, conv, during)
+    u = np.sqrt(np.maximum(np.diag(cov), 0.0))
     before = to_um_urad(fit.predict(commanded) - commanded)
     out: dict[str, Any] = {
         "what": "the frames that bring the calibrated model's predicted poses closest to the "
         "commanded ones over the campaign's targets (least squares, um and urad, from no "
-        "frames: never worse than none); for a controller whose frames were zero during the "
-        "calibration (else compose: U0 * user, O0 * object, 4x4 transforms in the maker's "
-        "convention); U from the fitted parameters' covariance",
+        "frames: never worse than none), composed with the frames the controller had "
+        "during the campaign (calibration.json: controller_frames_during_campaign): the "
+        "values to set on it now; U from the fitted parameters' covariance",
         "non_rigid_joints_max_um": {
             "base": round(float(np.linalg.norm(rigid.base_rest_mm, axis=1).max() * 1e3), 4),
             "platform": round(float(np.linalg.norm(rigid.platform_rest_mm, axis=1).max() * 1e3), 4),
@@ -92,7 +105,7 @@ def frames_record(run: Calibration, coverage_factor: float = 2.0) -> dict[str, A
         conv_m: Convention = convention  # type: ignore[assignment]
         # the other maker's convention: the same transforms, its angles (their U the
         # same to first order: the frames' angles are small)
-        values = frames.values if conv_m == conv else _converted(frames.values, conv, conv_m)
+        values = written if conv_m == conv else _converted(written, conv, conv_m)
         names = (
             ("user_frame_in_machine", "object_frame_in_platform")
             if maker == "symetrie"
@@ -120,6 +133,35 @@ def frames_record(run: Calibration, coverage_factor: float = 2.0) -> dict[str, A
                 for key, part in (("work", values[:6]), ("tool", values[6:]))
             }
     return out
+
+
+def campaign_frames_record(run: Calibration) -> dict[str, Any]:
+    """``calibration.json``'s ``controller_frames_during_campaign``: the frames the
+    controller had while the sessions were measured, and where that comes from."""
+    frames = run.campaign.frames
+    values = np.zeros(12) if frames is None else frames.values
+    return {
+        "user_frame_in_machine": dict(zip(_AXES, _rounded(values[:6], 12), strict=True)),
+        "object_frame_in_platform": dict(zip(_AXES, _rounded(values[6:], 12), strict=True)),
+        "convention": "symetrie (R = Rz Ry Rx, fixed axes); PI's work and tool frames the same",
+        "assumed_zero": frames is None or frames.values_mm_deg is None,
+        "source": "no session" if frames is None else frames.source,
+        "record": None if frames is None else frames.path,
+    }
+
+
+def campaign_frames_line(run: Calibration) -> str:
+    """The screen's line of the frames the campaign was measured with."""
+    record = campaign_frames_record(run)
+    if record["assumed_zero"]:
+        return f"controller frames during the campaign: assumed zero ({record['source']})"
+    frames = run.campaign.frames
+    assert frames is not None
+    shown = ", ".join(f"{v:.6g}" for v in frames.values)
+    return (
+        f"controller frames during the campaign: user, object [{shown}] (mm, deg; "
+        f"{frames.source}); the commanded poses go through them"
+    )
 
 
 def _converted(values: np.ndarray, source: Convention, target: Convention) -> np.ndarray:

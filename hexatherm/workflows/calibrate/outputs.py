@@ -47,6 +47,7 @@ from hexatherm.workflows.calibrate.claim import (
     claim_regions,
     pose_claim,
 )
+from hexatherm.workflows.calibrate.frames import campaign_frames_line, campaign_frames_record
 from hexatherm.workflows.calibrate.recommend import Recommendation, controller_yaml, recommend
 from hexatherm.workflows.calibrate.report import (
     StrokeMap,
@@ -54,7 +55,7 @@ from hexatherm.workflows.calibrate.report import (
     report_html,
     stroke_map,
 )
-from hexatherm.workflows.calibrate.run import Calibration
+from hexatherm.workflows.calibrate.run import Calibration, machine_hexapod
 
 if TYPE_CHECKING:
     from hexatherm.session import Tolerance
@@ -77,7 +78,7 @@ def calibrated_hexapod_yaml(run: Calibration) -> str:
         "hexatherm": __version__,
         "written": now_iso(),
     }
-    return hexapod_to_yaml(fit.hexapod(), record)
+    return hexapod_to_yaml(machine_hexapod(run), record)
 
 
 def twin_record(run: Calibration) -> dict[str, str]:
@@ -268,6 +269,7 @@ def calibration_json(
         "chi_square_per_dof": float(fit.chi_square_per_dof),
         "chi_square_p": float(fit.chi_square_p),
         "explains_poses": bool(fit.explains_poses),
+        "controller_frames_during_campaign": campaign_frames_record(run),
         "rank": int(obs.rank),
         "n_parameters": int(obs.n_parameters),
         "gauge_freedoms": int(obs.n_gauge),
@@ -432,6 +434,7 @@ def summary_lines(run: Calibration) -> list[str]:
     obs = fit.observability
     how = "chosen by BIC and held-out folds" if run.choice is not None else "forced"
     lines = [
+        campaign_frames_line(run),
         f"level {fit.level} ({how}): {obs.n_parameters} parameters ({obs.n_gauge} fixed by the "
         f"gauge) from {len(run.campaign.labels)} {run.campaign.poses} poses; chi2/dof "
         f"{fit.chi_square_per_dof:.2f}, condition number {obs.condition_number:.3g}",

@@ -44,7 +44,7 @@ from hexatherm.core.calibration.significance import (
     parameter_change_test,
 )
 from hexatherm.workflows.calibrate.frames import frames_record
-from hexatherm.workflows.calibrate.run import Calibration
+from hexatherm.workflows.calibrate.run import Calibration, machine_hexapod
 
 #: the format tag of ``controller.yaml``
 CONTROLLER_FORMAT = "hexatherm-controller-geometry/2"
@@ -144,7 +144,7 @@ def recommend(run: Calibration, coverage_factor: float = 2.0) -> Recommendation:
 def controller_record(run: Calibration, coverage_factor: float = 2.0) -> dict[str, Any]:
     """``controller.yaml``'s content: the calibrated geometry in a controller's terms."""
     fit = run.fit
-    hexapod = fit.hexapod()
+    hexapod = machine_hexapod(run)
     nominal = run.campaign.nominal
     k = coverage_factor
     u = fit.std_errors
@@ -172,8 +172,10 @@ def controller_record(run: Calibration, coverage_factor: float = 2.0) -> dict[st
         "hexapod": nominal.name,
         "level": fit.level,
         "coverage_factor": k,
-        "frames": "base_joint_mm in frame O (the platform frame at the zero command); "
-        "platform_joint_mm in the platform frame (the frame the balls define); mm",
+        "frames": "base_joint_mm in frame O (the platform frame at the zero command, with "
+        "no controller frames); platform_joint_mm in the platform frame (the frame the "
+        "balls define); mm; home_length_mm: the nominal legs at the campaign's origin step "
+        "(the zero command with the frames set during the campaign)",
         "sign_conventions": "q_true = q_cmd + length_offset + gain (q_cmd - home_length): "
         "length_offset > 0: the real leg is longer than the controller believes at its "
         "home length; a controller that adds a correction to the length it drives takes "

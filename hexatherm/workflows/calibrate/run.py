@@ -42,19 +42,27 @@ from hexatherm.core.calibration import (
     fit_calibration,
     select_level,
 )
+from hexatherm.core.calibration.frames import (
+    campaign_transforms,
+    in_frame,
+    machine_in_origin,
+    poses_from_origin,
+)
 from hexatherm.core.correction import Interpolation
-from hexatherm.core.geometry import to_um_urad
+from hexatherm.core.geometry import apply_transform, pose_from_transform, to_um_urad
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.errors import CalibrationError, InputError
 from hexatherm.io.config import hexapod_to_yaml, read_hexapod, read_hexapod_text, read_session
 from hexatherm.io.files import STRICT, ReadOptions
 from hexatherm.io.manifest import sha256_file
+from hexatherm.io.runrecord import RecordedFrames, read_recorded_frames
 from hexatherm.io.yamlfile import YamlDoc
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.calibrate.checks import (
     check_distinct_measurements,
     check_distinct_sessions,
     check_one_balls,
+    check_one_frames,
     check_one_hexapod,
     check_reference_states,
 )
@@ -162,6 +170,13 @@ class Campaign:
     poses : {"corrected", "conventional", "twin"}
     twin : TwinModel or None
         The twin's model (``twin`` poses only).
+    frames : RecordedFrames or None
+        The controller's frames during the sessions (``run.yaml``'s record; its
+        ``values_mm_deg`` None: not recorded, assumed zero). When they are not zero,
+        :attr:`nominal` is the hexapod file's geometry with its base joints moved into
+        frame O (the platform at the origin step, :func:`~hexatherm.core.calibration.
+        frames.machine_in_origin`) and :attr:`commanded` the nominal poses relative to
+        it (``O0 X O0^-1``): the same leg lengths as the controller drove.
     structure : BandedCovariance or None
         :attr:`covariance` with its structure (O and R0 low-rank, the rest banded), what
         the fit whitens with (None: not banded, the dense one is used).
@@ -179,6 +194,18 @@ class Campaign:
     twin: TwinModel | None = None
     structure: BandedCovariance | None = None
     dense_covariance: FloatArray | None = None
+    frames: RecordedFrames | None = None
+
+    @property
+    def machine_zero(self) -> FloatArray | None:
+        """The pose (6,) of the controller's machine frame (its zero pose with no frames)
+        relative to frame O; None when the frames were zero."""
+        if self.frames is None or not self.frames.values.any():
+            return None
+        user, obj = campaign_transforms(self.frames.values)
+        return np.asarray(
+            pose_from_transform(machine_in_origin(user, obj), self.nominal.convention), float
+        )
 
     def __post_init__(self) -> None:
         if (self.structure is None) == (self.dense_covariance is None):
@@ -226,11 +253,16 @@ def read_campaign(
     check_distinct_sessions(specs)
     check_one_hexapod(specs)
     check_one_balls(specs)
+    frames = check_one_frames([read_recorded_frames(spec.path.parent) for spec in specs])
     results = [
         process_session(path, interpolation, reading=reading, hexapod=geometry) for path in paths
     ]
     check_distinct_measurements(results)
     nominal = specs[0].hexapod
+    user, obj = campaign_transforms(frames.values)
+    if frames.values.any():  # the campaign relative to frame O, as with no frames
+        base = apply_transform(machine_in_origin(user, obj), nominal.base_joints_mm)
+        nominal = dataclasses.replace(nominal, base_joints_mm=base)
     check_reference_states(results, warn=geometry is None)  # --iterate's rounds: said once
     labels: list[str] = []
     commanded, measured = [], []
@@ -242,7 +274,10 @@ def read_campaign(
         name = names[k - 1]
         tag = f"{name}#{k}" if names.count(name) > 1 else name  # sessions of one name apart
         labels += [f"{tag}:{result.session.plan.labels[i]}" for i in targets]
-        commanded.append(result.session.plan.poses[targets])
+        plan_poses = result.session.plan.poses[targets]
+        if frames.values.any():
+            plan_poses = poses_from_origin(plan_poses, obj, nominal.convention)
+        commanded.append(plan_poses)
         if twin is not None:
             measured.append(twin_poses(result, twin.with_geometry(geometry), twin.path))
         else:
@@ -277,6 +312,7 @@ def read_campaign(
         twin,
         structure,
         dense,
+        frames,
     )
 
 
@@ -306,6 +342,21 @@ class Calibration:
     residuals_before_um_urad: FloatArray
     residuals_after_um_urad: FloatArray
     heldout: bool
+
+
+def machine_hexapod(run: Calibration) -> Hexapod:
+    """The calibrated geometry as ``hexapod.yaml`` gives it: base joints in frame O of
+    the controller's zero pose with no frames (the platform where the calibrated
+    geometry stands for the legs of the nominal zero pose). With zero frames during the
+    campaign that is its origin step's frame O, :meth:`CalibrationFit.hexapod`; else
+    the calibrated platform at the machine's zero, predicted relative to frame O."""
+    hexapod = run.fit.hexapod()
+    zero = run.campaign.machine_zero
+    if zero is None:
+        return hexapod
+    at = run.fit.predict(zero[None])[0]
+    base = in_frame(hexapod.base_joints_mm, at, hexapod.convention)
+    return dataclasses.replace(hexapod, base_joints_mm=base)
 
 
 def calibrate(campaign: Campaign, level: str = "auto", residuals: str = "pose") -> Calibration:
