@@ -15,7 +15,8 @@ import pytest
 from hexatherm.core.effects import Effect
 from hexatherm.workflows.diagnose.run import DiagnosisResult, read_for_diagnosis, run_diagnosis
 from hexatherm.workflows.simulate.campaigns import diagnosis_campaign
-from hexatherm.workflows.simulate.twinsession import write_twin_session
+from hexatherm.workflows.simulate.twinsession import simulate_session
+from tests.replicas import write_session
 
 Diagnosed = Callable[..., DiagnosisResult]
 
@@ -27,7 +28,8 @@ NULL_SEEDS = tuple(range(100, 120))
 def diagnosed_campaign(tmp_path_factory: pytest.TempPathFactory) -> Diagnosed:
     """``diagnosed_campaign(hidden, seed, **options)``: the campaign written by the twin
     with ``hidden`` applied to the truth (the session's hexapod file does not name
-    them), read back as ``hexatherm diagnose`` reads it and diagnosed."""
+    them), read back as ``hexatherm diagnose`` reads it and diagnosed (the truth is
+    ``hidden``: its ``truth/`` is not written)."""
     done: dict[object, DiagnosisResult] = {}
     root = tmp_path_factory.mktemp("campaigns")
 
@@ -39,7 +41,8 @@ def diagnosed_campaign(tmp_path_factory: pytest.TempPathFactory) -> Diagnosed:
         )
         if key not in done:
             folder = root / f"c{len(done)}"
-            write_twin_session(diagnosis_campaign(hidden, seed, **options), folder)  # type: ignore[arg-type]
+            spec = diagnosis_campaign(hidden, seed, **options)  # type: ignore[arg-type]
+            write_session(simulate_session(spec).files, folder)  # plain files, no truth/
             done[key] = run_diagnosis(read_for_diagnosis(folder))
         return done[key]
 

@@ -9,11 +9,12 @@ before.
 from __future__ import annotations
 
 import csv
+import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
+from click.testing import CliRunner, Result
 
 from hexatherm.cli import main
 from tests.audit import hashes, refusal, session_copy
@@ -128,11 +129,29 @@ def test_diagnose_refuses_a_session_too_short_for_its_heldout_check(tmp_path: Pa
     assert hashes(session) == before
 
 
-def test_diagnose_takes_a_session_of_twelve_steps(tmp_path: Path) -> None:
+@pytest.fixture(scope="module")
+def twelve_steps(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, Result]:
+    """The session of 12 steps (:func:`simulated_session` of 5 targets) and ``diagnose S
+    -o D`` of it, made once: the tests read them, and copy what they change
+    (:func:`twelve_steps_copy`)."""
+    root = tmp_path_factory.mktemp("twelve")
+    session = simulated_session(root, 5)
+    out = root / "diagnosis"
+    return session, out, CliRunner().invoke(main, ["diagnose", str(session), "-o", str(out)])
+
+
+def twelve_steps_copy(tmp_path: Path, twelve_steps: tuple[Path, Path, Result]) -> Path:
+    """A copy of the 12-step session in ``tmp_path`` (its own folder name, ``s5``)."""
+    session = tmp_path / twelve_steps[0].name
+    shutil.copytree(twelve_steps[0], session)
+    return session
+
+
+def test_diagnose_takes_a_session_of_twelve_steps(
+    twelve_steps: tuple[Path, Path, Result],
+) -> None:
     # the control at the limit: 12 steps, no hidden effect; nothing added (the truth)
-    session = simulated_session(tmp_path, 5)
-    out = tmp_path / "diagnosis"
-    result = CliRunner().invoke(main, ["diagnose", str(session), "-o", str(out)])
+    _, out, result = twelve_steps
     assert result.exit_code == 0, result.output
     assert "diagnosing s5: 12 steps" in result.output
     assert "result: added nothing" in result.output
@@ -283,12 +302,14 @@ def flatten_legs(temperatures: Path, legs: tuple[int, ...] = (1, 2, 3, 4, 5, 6))
         csv.writer(f, lineterminator="\n").writerows(rows)
 
 
-def test_diagnose_and_process_say_when_thermocouples_never_change(tmp_path: Path) -> None:
+def test_diagnose_and_process_say_when_thermocouples_never_change(
+    tmp_path: Path, twelve_steps: tuple[Path, Path, Result]
+) -> None:
     # a log whose leg columns are constant all session (a stuck logger): the twin then
     # predicts no thermal change at all, and diagnose named the heating's signature as
     # cmm_drift and leg_offset (with-hidden-effect, NOT ADEQUATE) with no word on the log
-    session = simulated_session(tmp_path, 5)
-    control = CliRunner().invoke(main, ["diagnose", str(session), "-o", str(tmp_path / "d0")])
+    session = twelve_steps_copy(tmp_path, twelve_steps)
+    control = twelve_steps[2]  # diagnose of the session as simulated
     assert control.exit_code == 0, control.output
     assert "never changes" not in control.output
     flatten_legs(session / "temperatures.csv", (2, 5))
@@ -351,12 +372,12 @@ def test_few_monte_carlo_draws_are_said(tmp_path: Path) -> None:
 
 
 def test_diagnose_model_needing_air_without_an_air_column_names_the_file(
-    tmp_path: Path,
+    tmp_path: Path, twelve_steps: tuple[Path, Path, Result]
 ) -> None:
     # --hexapod whose thermal_model has base_expansion, on a log without 'air': the
     # refusal was "Error: field 'air': the temperatures have no 'air' column", naming no
     # file (process --method twin names temperatures.csv:1)
-    session = simulated_session(tmp_path, 5)
+    session = twelve_steps_copy(tmp_path, twelve_steps)
     rows = list(csv.reader((session / "temperatures.csv").open(newline="")))
     assert rows[0][-1] == "air"
     with (session / "temperatures.csv").open("w", newline="") as f:
@@ -380,14 +401,17 @@ def test_diagnose_model_needing_air_without_an_air_column_names_the_file(
     assert hashes(session) == before
 
 
-def test_process_overwrite_never_removes_its_twin_model(tmp_path: Path) -> None:
+def test_process_overwrite_never_removes_its_twin_model(
+    tmp_path: Path, twelve_steps: tuple[Path, Path, Result]
+) -> None:
     # diagnose S -o D, then process S --method twin --hexapod D/hexapod.yaml -o D
     # --overwrite: D is hexatherm's (its manifest lists every file), so --overwrite
     # replaced it, and the --hexapod file the run had just read was deleted (the
     # model's file was not among the inputs the output was checked against)
-    session = simulated_session(tmp_path, 5)
+    session = twelve_steps_copy(tmp_path, twelve_steps)
     folder = tmp_path / "D"
-    assert CliRunner().invoke(main, ["diagnose", str(session), "-o", str(folder)]).exit_code == 0
+    assert twelve_steps[2].exit_code == 0, twelve_steps[2].output
+    shutil.copytree(twelve_steps[1], folder)  # diagnose S -o D, as written
     model = folder / "hexapod.yaml"
     before = hashes(session, folder)
     args = ["process", str(session), "--method", "twin", "--hexapod", str(model)]

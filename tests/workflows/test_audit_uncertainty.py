@@ -20,16 +20,13 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from hexatherm.core.plan import Plan
 from hexatherm.workflows.process.pipeline import process_session
 from hexatherm.workflows.process.uncertainty import pose_uncertainty
-from hexatherm.workflows.simulate.twinsession import (
-    Heating,
-    TwinSessionSpec,
-    simulate_session,
-    write_files,
-)
+from hexatherm.workflows.simulate.twinsession import Heating, TwinSessionSpec, simulate_session
+from tests.replicas import SessionReader, write_session
 from tests.sessions import BALLS, ROOT
 from tests.shipped import SHIPPED
 
@@ -98,9 +95,11 @@ def test_identical_centres_in_every_step_keep_the_assumed_cap(tmp_path: Path) ->
     assert np.all((ratio > 0.9) & (ratio < 1.1)), ratio.round(3)
 
 
-def one_pose_session(folder: Path, seed: int, output: str, **spec: object) -> Path:
+def one_pose_files(seed: int, output: str, **spec: object) -> dict[str, str]:
+    """The files of a one-pose twin session (4 targets, 0.5 um point noise), ``truth/``
+    left out."""
     session = TwinSessionSpec(
-        name=folder.name,
+        name="one-pose",
         hexapod_text=HEXAPOD_TEXT,
         balls=BALLS,
         plan=one_pose_plan(4),
@@ -112,8 +111,12 @@ def one_pose_session(folder: Path, seed: int, output: str, **spec: object) -> Pa
         cap_half_angle_deg=70.0,
         **spec,  # type: ignore[arg-type]
     )
-    write_files(simulate_session(session).files, folder)
-    return folder
+    files = simulate_session(session).files
+    return {k: v for k, v in files.items() if not k.startswith("truth/")}
+
+
+def one_pose_session(folder: Path, seed: int, output: str, **spec: object) -> Path:
+    return write_session(one_pose_files(seed, output, **spec), folder)
 
 
 def test_one_pose_session_linear_u_matches_monte_carlo_over_the_points(tmp_path: Path) -> None:
@@ -129,8 +132,15 @@ def test_one_pose_session_linear_u_matches_monte_carlo_over_the_points(tmp_path:
 REPLICAS = 160
 
 
+@pytest.fixture(scope="module")
+def replica_files() -> list[dict[str, str]]:
+    """The :data:`REPLICAS` noise replicas' files, simulated once for both replica tests
+    (the second edits its copies)."""
+    return [one_pose_files(seed, "centres", fit_centres=True) for seed in range(REPLICAS)]
+
+
 def replica_ratio(
-    tmp_path: Path, edit: Callable[[Path], None] | None = None
+    tmp_path: Path, files: list[dict[str, str]], edit: Callable[[Path], None] | None = None
 ) -> tuple[np.ndarray, str]:
     """Claimed over observed (12: conventional, corrected) over :data:`REPLICAS` noise
     replicas of a one-pose session (centres without u, fitted to 25 points on a 70 deg cap,
@@ -139,11 +149,12 @@ def replica_ratio(
     ``edit(folder)`` changes each session before it is processed."""
     poses, claimed = [], []
     description = ""
+    reader = SessionReader()  # every replica's YAML files are the same: read once
     for seed in range(REPLICAS):
-        folder = one_pose_session(tmp_path / f"r{seed}", seed, "centres", fit_centres=True)
+        folder = write_session(files[seed], tmp_path / f"r{seed}")
         if edit is not None:
             edit(folder)
-        result = process_session(folder)
+        result = reader.process(folder)
         u = pose_uncertainty(result)
         description = u.centres.description
         correction = result.correction
@@ -154,13 +165,15 @@ def replica_ratio(
     return np.sqrt((np.array(claimed) ** 2).mean(axis=(0, 1))) / observed, description
 
 
-def test_one_pose_session_u_holds_against_noise_replicas(tmp_path: Path) -> None:
+def test_one_pose_session_u_holds_against_noise_replicas(
+    tmp_path: Path, replica_files: list[dict[str, str]]
+) -> None:
     """Centres without u (free-radius fits of 25 points on a 70 deg cap, 0.5 um point
     noise), every step at the zero pose, four targets: over 160 noise replicas, the RMS
     claimed u over the scatter of the poses (per target, pooled) is 0.85-1.15 in every
     component, conventional and corrected (measured 0.95-1.12); none is tiny: the small u
     of the auditor's session is not the geometry's."""
-    ratio, description = replica_ratio(tmp_path)
+    ratio, description = replica_ratio(tmp_path, replica_files)
     assert np.all((ratio > 0.85) & (ratio < 1.15)), ratio.round(3)
     assert "(Type A: second differences in time, 9 degrees of freedom)" in description
 
@@ -175,7 +188,9 @@ def references_repeat_r0(folder: Path) -> None:
     centres.to_csv(path, index=False)
 
 
-def test_references_without_height_scatter_do_not_make_tz_rx_ry_certain(tmp_path: Path) -> None:
+def test_references_without_height_scatter_do_not_make_tz_rx_ry_certain(
+    tmp_path: Path, replica_files: list[dict[str, str]]
+) -> None:
     """The references repeat R0's centres, the targets are measured with their noise: the
     references' heights do not scatter, and the Type A evaluation took the centres' error
     along z as 0 for every step; u of the conventional Tz, Rx, Ry came out 1e-5 of the
@@ -186,7 +201,7 @@ def test_references_without_height_scatter_do_not_make_tz_rx_ry_certain(tmp_path
     in every component; corrected at least 0.85 (the propagation counts the references'
     noise, which these copies do not have: it claims more). Measured: conventional
     0.95-1.08, corrected 1.21-1.38 (before: Tz, Rx, Ry 3e-6, Tx 0.61, Ty 0.66)."""
-    ratio, description = replica_ratio(tmp_path, references_repeat_r0)
+    ratio, description = replica_ratio(tmp_path, replica_files, references_repeat_r0)
     assert np.all((ratio[:6] > 0.85) & (ratio[:6] < 1.15)), ratio.round(3)
     assert np.all(ratio[6:] > 0.85), ratio.round(3)
     assert "scatter less than a free-radius fit over an upper cap allows" in description

@@ -34,7 +34,8 @@ from hexatherm.workflows.calibrate.outputs import calibration_json, output_files
 from hexatherm.workflows.calibrate.run import Calibration, calibrate, read_campaign
 from hexatherm.workflows.simulate.heldout import heldout_truth
 from hexatherm.workflows.simulate.run import scenario_spec, simulate
-from hexatherm.workflows.simulate.twinsession import TwinSessionSpec, write_files
+from hexatherm.workflows.simulate.twinsession import TwinSessionSpec
+from tests.replicas import write_session
 from tests.sessions import CALIBRATION_SPAN, calibration_scenario, calibration_targets
 
 #: campaigns pooled (each about 0.2 s of CPU)
@@ -67,7 +68,7 @@ def campaign(
     path.write_text(text)
     scenario = read_scenario(path)
     folder = root / f"s{seed}"
-    write_files(simulate(scenario).files, folder)
+    write_session(simulate(scenario).files, folder)  # the truth is heldout_truth's
     return calibrate(read_campaign([folder]), level="joints"), scenario_spec(scenario)
 
 

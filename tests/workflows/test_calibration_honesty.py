@@ -15,7 +15,7 @@ from hexatherm.core.calibration import CalibrationModel
 from hexatherm.io.scenario import read_scenario
 from hexatherm.workflows.calibrate.run import calibrate, read_campaign
 from hexatherm.workflows.simulate.run import simulate
-from hexatherm.workflows.simulate.twinsession import write_files
+from tests.replicas import write_session
 from tests.sessions import calibration_scenario, calibration_targets
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -45,7 +45,7 @@ def test_parameter_errors_follow_their_covariance_over_20_campaigns() -> None:
             path.write_text(scenario(seed))
             read = read_scenario(path)
             folder = Path(tmp) / f"s{seed}"
-            write_files(simulate(read).files, folder)
+            write_session(simulate(read).files, folder)
             run = calibrate(read_campaign([folder]), level="joints")
             fit, model = run.fit, run.fit.model
             p_values.append(fit.chi_square_p)

@@ -27,7 +27,8 @@ from hexatherm.workflows.diagnose.outputs import diagnosis_json, story
 from hexatherm.workflows.diagnose.report import report_html, report_markdown
 from hexatherm.workflows.diagnose.run import DiagnosisResult, read_for_diagnosis, run_diagnosis
 from hexatherm.workflows.simulate.campaigns import NOMINAL_HIDDEN, diagnosis_campaign
-from hexatherm.workflows.simulate.twinsession import write_twin_session
+from hexatherm.workflows.simulate.twinsession import simulate_session
+from tests.replicas import write_session
 from tests.workflows.conftest import Diagnosed
 
 
@@ -76,7 +77,7 @@ SHAPE = "read it as the shape of the disagreement, not its physical cause"
 
 
 def diagnosed(folder: Path, hidden: tuple[Effect, ...], seed: int) -> DiagnosisResult:
-    write_twin_session(diagnosis_campaign(hidden, seed), folder)
+    write_session(simulate_session(diagnosis_campaign(hidden, seed)).files, folder)
     return run_diagnosis(read_for_diagnosis(folder))
 
 

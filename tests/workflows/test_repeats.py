@@ -27,8 +27,8 @@ from hexatherm.workflows.simulate.twinsession import (
     Heating,
     TwinSessionSpec,
     simulate_session,
-    write_files,
 )
+from tests.replicas import SessionReader, write_session
 from tests.sessions import BALLS, REFERENCE, ROOT
 
 HEXAPOD_TEXT = (ROOT / "configs" / "symetrie-like.yaml").read_text()
@@ -47,7 +47,7 @@ def spec(
     folder: Path, seed: int, repeats: int, n_targets: int = 3, gain: tuple[float, ...] = GAIN
 ) -> TwinSessionSpec:
     return TwinSessionSpec(
-        name=folder.name,
+        name="repeats",  # one session file for every replica: read once (SessionReader)
         hexapod_text=HEXAPOD_TEXT,
         balls=BALLS,
         plan=repeated_plan(n_targets, repeats),
@@ -69,7 +69,7 @@ def session(
     gain: tuple[float, ...] = GAIN,
     edit: Callable[[Path], None] | None = None,
 ) -> Path:
-    write_files(simulate_session(spec(folder, seed, repeats, n_targets, gain)).files, folder)
+    write_session(simulate_session(spec(folder, seed, repeats, n_targets, gain)).files, folder)
     (folder / "session.yaml").write_text((folder / "session.yaml").read_text() + CMM)
     if edit is not None:
         edit(folder)
@@ -212,8 +212,9 @@ def replicas(
 ) -> list[tuple[ProcessResult, PoseUncertainty]]:
     root = tmp_path_factory.mktemp("repeats")
     out = []
+    reader = SessionReader()
     for seed in range(REPLICAS):
-        result = process_session(session(root / f"r{seed}", seed=seed, repeats=3))
+        result = reader.process(session(root / f"r{seed}", seed=seed, repeats=3))
         out.append((result, pose_uncertainty(result)))
     return out
 
@@ -244,9 +245,10 @@ def test_replicas_scatter_as_the_shrunk_u_claims(
 def test_the_repeats_scatter_as_their_u_without_heating(tmp_path: Path) -> None:
     """Noise alone (mats off): chi2 / dof of the repeats, pooled over 30 replicas, is 1
     within 4 standard errors, for O and for R0 (measured 0.88 and 1.08 over 40)."""
+    reader = SessionReader()
     checks = [
         pose_uncertainty(
-            process_session(session(tmp_path / f"r{seed}", seed, 3, n_targets=1, gain=(0.0,) * 6))
+            reader.process(session(tmp_path / f"r{seed}", seed, 3, n_targets=1, gain=(0.0,) * 6))
         ).repeats
         for seed in range(30)
     ]
@@ -283,7 +285,7 @@ def test_monte_carlo_refits_the_repeats_and_agrees_with_linear(tmp_path: Path) -
         points_per_ball=25,
         cap_half_angle_deg=70.0,
     )
-    write_files(simulate_session(spec).files, tmp_path / "s")
+    write_session(simulate_session(spec).files, tmp_path / "s")
     result = process_session(tmp_path / "s")
     assert [len(g.labels) for g in result.repeats] == [3, 3]
     mc = pose_uncertainty(result, mc=1500, seed=2)

@@ -28,12 +28,8 @@ from hexatherm.io.measurements import read_measurements
 from hexatherm.workflows.process.measured import fit_points
 from hexatherm.workflows.process.pipeline import process_session
 from hexatherm.workflows.process.uncertainty import centre_covariance, pose_chain, pose_uncertainty
-from hexatherm.workflows.simulate.twinsession import (
-    Heating,
-    TwinSessionSpec,
-    simulate_session,
-    write_files,
-)
+from hexatherm.workflows.simulate.twinsession import Heating, TwinSessionSpec, simulate_session
+from tests.replicas import SessionReader, write_session
 from tests.sessions import BALLS, ROOT, small_plan
 
 HEXAPOD_TEXT = (ROOT / "configs" / "symetrie-like.yaml").read_text()
@@ -54,19 +50,21 @@ class Parts:
 #: simulated files per (seed, spec): a campaign's noise replicas are simulated once and
 #: processed by every test that reads them (each writes its own copy to edit)
 _SIMULATED: dict[tuple[int, tuple[tuple[str, object], ...]], dict[str, str]] = {}
+#: every replica's session, hexapod, balls and plan files are read once per text
+READER = SessionReader()
 
 
 @pytest.fixture(scope="module", autouse=True)
 def _forget_the_simulations() -> Iterator[None]:
     yield
-    _SIMULATED.clear()  # some 40 MB of points files: not kept past this module
+    _SIMULATED.clear()  # some 30 MB of points files: not kept past this module
 
 
 def simulated_files(seed: int, spec: dict[str, object]) -> dict[str, str]:
     key = (seed, tuple(sorted(spec.items())))
     if key not in _SIMULATED:
         session = TwinSessionSpec(
-            name=f"r{seed}",
+            name="r",  # one session file for every replica: read once (READER)
             hexapod_text=HEXAPOD_TEXT,
             balls=BALLS,
             plan=small_plan(4, 1),
@@ -74,7 +72,8 @@ def simulated_files(seed: int, spec: dict[str, object]) -> dict[str, str]:
             seed=seed,
             **spec,  # type: ignore[arg-type]
         )
-        _SIMULATED[key] = simulate_session(session).files
+        files = simulate_session(session).files
+        _SIMULATED[key] = {k: v for k, v in files.items() if not k.startswith("truth/")}
     return _SIMULATED[key]
 
 
@@ -94,10 +93,10 @@ def replicas(
     spec = {"point_noise_mm": 1e-3, "points_per_ball": 25, "cap_half_angle_deg": 70.0, **spec}
     for seed in range(count):
         folder = tmp_path / f"r{seed}"
-        write_files(simulated_files(seed, spec), folder)
+        write_session(simulated_files(seed, spec), folder)
         if edit is not None:
             edit(folder)
-        result = process_session(folder)
+        result = READER.process(folder)
         u = pose_uncertainty(result)
         description = u.centres.description
         poses.append(
@@ -173,8 +172,7 @@ def short_session(folder: Path, seed: int, polar: bool) -> Path:
         fit_centres=True,
         touch_polar_deg=(5.0, 80.0) if polar else None,
     )
-    write_files(simulate_session(session).files, folder)
-    return folder
+    return write_session(simulate_session(session).files, folder)
 
 
 SHORT_REPLICAS = 60
@@ -191,7 +189,7 @@ def test_a_short_session_evaluates_its_heights_and_says_its_degrees_of_freedom(
     95 %)."""
     poses, claimed = [], []
     for seed in range(SHORT_REPLICAS):
-        result = process_session(short_session(tmp_path / f"r{seed}", seed, polar=True))
+        result = READER.process(short_session(tmp_path / f"r{seed}", seed, polar=True))
         u = pose_uncertainty(result)
         poses.append(
             np.concatenate([result.correction.conventional, result.correction.corrected], 1)

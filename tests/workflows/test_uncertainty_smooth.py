@@ -23,11 +23,11 @@ from hexatherm.workflows.process.uncertainty import (
 )
 from hexatherm.workflows.simulate.twinsession import (
     Heating,
+    SimulatedSession,
     TwinSessionSpec,
-    pose_columns,
     simulate_session,
-    write_files,
 )
+from tests.replicas import SessionReader, write_session
 from tests.sessions import BALLS, ROOT, small_plan
 from tests.workflows.test_uncertainty_shared import brute_force_full
 
@@ -35,11 +35,12 @@ HEXAPOD_TEXT = (ROOT / "configs" / "symetrie-like.yaml").read_text()
 GAIN = (3.0, 7.0, 2.0, 3.0, 9.0, 3.5)
 CMM = "cmm: {point_noise_um: 1.0, points_per_ball: 25}\n"
 N_TARGETS = 6
+STEPS = small_plan(N_TARGETS, 1).labels
 
 
-def session(folder: Path, seed: int, heating: Heating | None = None) -> Path:
+def simulated(seed: int, heating: Heating | None = None) -> SimulatedSession:
     spec = TwinSessionSpec(
-        name=folder.name,
+        name="smooth",  # one session file for every replica: read once (SessionReader)
         hexapod_text=HEXAPOD_TEXT,
         balls=BALLS,
         plan=small_plan(N_TARGETS, 1),
@@ -51,7 +52,16 @@ def session(folder: Path, seed: int, heating: Heating | None = None) -> Path:
         points_per_ball=25,
         cap_half_angle_deg=70.0,
     )
-    write_files(simulate_session(spec).files, folder)
+    return simulate_session(spec)
+
+
+def session(
+    folder: Path, seed: int, heating: Heating | None = None, twin: SimulatedSession | None = None
+) -> Path:
+    """The twin's session (``twin``, else simulated) written to ``folder``, ``truth/`` left
+    out, its session file stating the CMM's probing."""
+    twin = twin or simulated(seed, heating)
+    write_session(twin.files, folder)
     (folder / "session.yaml").write_text((folder / "session.yaml").read_text() + CMM)
     return folder
 
@@ -94,8 +104,9 @@ def replicas(
 ) -> list[tuple[ProcessResult, PoseUncertainty]]:
     root = tmp_path_factory.mktemp("smooth")
     out = []
+    reader = SessionReader()
     for seed in range(REPLICAS):
-        result = process_session(session(root / f"r{seed}", seed), interpolation="smooth")
+        result = reader.process(session(root / f"r{seed}", seed), interpolation="smooth")
         out.append((result, pose_uncertainty(result)))
     return out
 
@@ -180,9 +191,12 @@ def test_smooth_u_holds_against_the_twins_truth(tmp_path: Path) -> None:
     the smooth fit's own error (the propagated noise alone) Tx claimed 0.57x, Tz 0.80x."""
     claimed, noise_only, errors = [], [], []
     added = 0
+    reader = SessionReader()
     for seed in range(REPLICAS):
-        folder = session(tmp_path / f"r{seed}", seed, heating=MID_SESSION)
-        result = process_session(folder, interpolation="smooth")
+        twin = simulated(seed, MID_SESSION)
+        result = reader.process(
+            session(tmp_path / f"r{seed}", seed, twin=twin), interpolation="smooth"
+        )
         if result.correction.smooth is None or not result.correction.smooth.used:
             continue
         u = pose_uncertainty(result)
@@ -190,9 +204,10 @@ def test_smooth_u_holds_against_the_twins_truth(tmp_path: Path) -> None:
         added += u.smooth_excess.excess_um > 0
         excess = smooth_excess(result, pose_chain(result), u.centres.cov_mm2)
         assert excess is not None
-        truth = pd.read_csv(folder / "truth" / "steps.csv").set_index("label")
+        # the twin's truth of the targets (truth/steps.csv's truecorr columns), by label
         labels = [result.session.plan.labels[i] for i in result.correction.target_index]
-        true_pose = truth.loc[labels, pose_columns("truecorr")].to_numpy()
+        rows = [STEPS.index(label) for label in labels]
+        true_pose = twin.truth.corrected_pose[rows]
         errors.append(result.correction.corrected - true_pose)
         claimed.append(u.corrected_u)
         noise_only.append(np.sqrt(u.corrected_u**2 - np.diagonal(excess[0], axis1=1, axis2=2)))
