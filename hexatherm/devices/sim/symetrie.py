@@ -276,8 +276,13 @@ def single_axis_travel(model: SimulatedHexapod) -> tuple[FloatArray, FloatArray]
     for i, (k, sign) in enumerate(zip(axes, signs, strict=True)):
         step, largest = (1.0, 1000.0) if k < 3 else (0.5, 90.0)
         ahead = step * np.arange(1, int(largest // step) + 1)  # low + step <= largest
-        out = outside(np.full(ahead.size, k), sign * ahead)
-        first = int(np.argmax(out)) if out.any() else ahead.size
+        first = ahead.size
+        for start in range(0, ahead.size, 64):  # 64 steps at a time: the stroke ends early
+            block = ahead[start : start + 64]
+            out = outside(np.full(block.size, k), sign * block)
+            if out.any():
+                first = start + int(np.argmax(out))
+                break
         low[i] = ahead[first - 1] if first else 0.0
         high[i] = min(low[i] + step, largest)
     going = high - low > 1e-6
