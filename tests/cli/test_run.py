@@ -13,7 +13,7 @@ from hexatherm.core.planning import build_plan
 from hexatherm.io.config import plan_to_yaml, read_balls, read_hexapod
 from hexatherm.workflows.serve import AcceleratedClock, TwinMachines, TwinWorld
 from tests.sessions import ROOT
-from tests.workflows.test_run import HEATING, NOMINAL_ORIGIN, TRUE_ORIGIN
+from tests.workflows.test_run import HEATING, NOMINAL_ORIGIN, TRUE_ORIGIN, twin_machines
 
 HEXAPOD = ROOT / "configs" / "symetrie-like.yaml"
 BALLS = ROOT / "configs" / "balls-3.yaml"
@@ -31,7 +31,7 @@ def machines():
         sleep=clock.sleep,
         cmm_move_s=0.1,
     )
-    with TwinMachines(world) as m:
+    with twin_machines(world) as m:
         yield m
 
 

@@ -46,10 +46,11 @@ def assert_reads_as_general(path: Path, chunk: int, allow_truncated: bool = Fals
     assert got_warnings == want_warnings
 
 
-def long_session(tmp_path: Path, newline: str = "\r\n") -> Path:
-    """Points of 12 steps (labels O, S1 ... S11: the label column widens), inches, one
-    DATE at the top: what is in effect comes from far before most chunks."""
-    text = points_dmo(n_steps=12, balls=2, points=4).replace("UNITS/MM", "UNITS/INCH")
+def long_session(tmp_path: Path, newline: str = "\r\n", points: int = 4) -> Path:
+    """Points of 12 steps (labels O, S1 ... S11: the label column widens), 2 balls of
+    ``points`` points, inches, one DATE at the top: what is in effect comes from far
+    before most chunks."""
+    text = points_dmo(n_steps=12, balls=2, points=points).replace("UNITS/MM", "UNITS/INCH")
     lines = text.split("\r\n")
     dates = [n for n, line in enumerate(lines) if line.startswith("DATE=")]
     for n in dates[1:]:
@@ -85,13 +86,51 @@ def test_chunks_keep_context_read_one_by_one(tmp_path, chunk):
     assert_reads_as_general(path, chunk)
 
 
+def cut_ends(full: bytes) -> dict[str, int]:
+    """Where to cut a points file that ends ``... TIME, FA, OUTPUT, ENDFIL``, by what the
+    cut leaves: its last line cut inside, or ended by its CR alone, or whole (a chunk
+    that lacks its line end, ends in CR, ends in LF), and of the last record the blank
+    line before it (a DATE blanked), its TIME,
+    its FA line (in the last chunk), its OUTPUT (the FA line in an earlier chunk when the
+    chunks are lines), then all of it and part of ENDFIL."""
+    time_at = full.rindex(b"\r\nTIME=") + 2
+    fa_at = full.index(b"\r\n", time_at) + 2
+    fa_end = full.index(b"\r\n", fa_at)
+    output_end = full.index(b"\r\n", fa_end + 2)
+    endfil_at = full.rindex(b"ENDFIL")
+    return {
+        "the CR of the blank line before it": time_at - 1,
+        "inside the last TIME": time_at + 7,
+        "inside the last FA's label": fa_at + 6,
+        "inside the last FA's numbers": (fa_at + fa_end) // 2,
+        "the last FA line and its CR": fa_end + 1,
+        "the last FA line": fa_end + 2,
+        "inside the last OUTPUT": fa_end + 10,
+        "the last OUTPUT and its CR": output_end + 1,
+        "the last record, no ENDFIL": endfil_at,
+        "inside ENDFIL": endfil_at + 4,
+    }
+
+
 @pytest.mark.parametrize("chunk", [1, 5, 64, 1 << 22])
 def test_a_cut_file_is_cut_where_the_whole_file_is(tmp_path, chunk):
-    full = long_session(tmp_path).read_bytes()
-    # every 7th end of the last 200 bytes in one chunk; every 29th in small chunks
-    # (20-30 s a chunk size at every 7th, over the suite's budget)
-    for end in range(len(full) - 200, len(full), 7 if chunk > 1 << 20 else 29):
-        path = tmp_path / "cut.dmo"
+    """At each end of :func:`cut_ends`, and in one chunk at every 7th end of the last 200
+    bytes too: the records, error and warnings of the general reader.
+
+    With small chunks (every line a chunk, or a few lines) the file has one point a
+    ball: a read takes a few milliseconds a chunk, and what a cut tests is the file's
+    end and the context carried to it, which 24 records carry as 96 do (the chunks'
+    context over the longer file: :func:`test_chunks_read_as_the_whole_text`). The ends
+    are those a chunk can end on (inside a line, on its CR, on its line end) in every
+    part of the last record, where every 29th end of the last 200 bytes fell inside
+    lines only."""
+    small = chunk < 1 << 20
+    full = long_session(tmp_path, points=1 if small else 4).read_bytes()
+    ends = sorted(set(cut_ends(full).values()))
+    if not small:
+        ends += range(len(full) - 200, len(full), 7)
+    path = tmp_path / "cut.dmo"
+    for end in ends:
         path.write_bytes(full[:end])
         for allow in (False, True):
             assert_reads_as_general(path, chunk, allow_truncated=allow)

@@ -23,7 +23,7 @@ from hexatherm.core.spherefit import fit_spheres
 from hexatherm.core.twin import TwinSteps
 from hexatherm.devices.controller import InPositionCriteria
 from hexatherm.devices.sim.ipp import Fault
-from hexatherm.devices.sim.symetrie import Faults, ManualClock
+from hexatherm.devices.sim.symetrie import Faults, ManualClock, SymetrieSimulator
 from hexatherm.errors import PoseError
 from hexatherm.io.config import plan_to_yaml, read_hexapod
 from hexatherm.io.records import iso_to_seconds
@@ -46,6 +46,24 @@ TARGETS = [[5.0, -3.0, 4.0, 1.0, -2.0, 3.0], [-8.0, 6.0, -5.0, -2.5, 1.5, -4.0]]
 HEATING = MatHeating(
     tuple(Mat(g, 2400.0, ((0.0, float("inf")),)) for g in (8.0, 12.0, 5.0, 10.0, 16.0, 6.0))
 )
+
+
+#: the Symétrie twin's cycle here, s. Its default (20 ms: ESRF's BLISS client fails a
+#: command whose two replies it finds together on a loaded machine, devices/sim/symetrie.py)
+#: is wall-clock time paid by every acknowledged command and every move's end, whatever
+#: the clock of the run; hexatherm's driver reads its replies a line at a time, however
+#: they travel, and BLISS's timing is held by tests/devices/test_symetrie_bliss.py and
+#: test_bliss_peer.py, at the default
+TEST_CYCLE_S = 0.001
+
+
+def twin_machines(world: TwinWorld, **options: object) -> TwinMachines:
+    """:class:`TwinMachines` around ``world`` (``options`` as it takes them), a Symétrie
+    controller on :data:`TEST_CYCLE_S`."""
+    machines = TwinMachines(world, **options)  # type: ignore[arg-type]
+    if isinstance(machines.controller, SymetrieSimulator):
+        machines.controller.cycle_s = TEST_CYCLE_S
+    return machines
 
 
 @dataclass
@@ -102,7 +120,7 @@ class Bench:
     def restart(self, ipp_faults: Sequence[Fault] = (), **kwargs: object) -> None:
         """New servers (new ports) around the same world: machines that came back."""
         self.machines.close()
-        self.machines = TwinMachines(self.world, ipp_faults=ipp_faults, **kwargs)  # type: ignore[arg-type]
+        self.machines = twin_machines(self.world, ipp_faults=ipp_faults, **kwargs)
 
 
 def make_bench(
@@ -132,7 +150,7 @@ def make_bench(
         start_s=START - 1200.0,
         faults=faults,
     )
-    machines = TwinMachines(
+    machines = twin_machines(
         world, ipp_faults=ipp_faults, point_noise_um=noise_um, seed=3, cmm_dialect=cmm_dialect
     )
     return Bench(tmp, files, world, clock, machines)

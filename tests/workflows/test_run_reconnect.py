@@ -12,7 +12,7 @@ import pytest
 from hexatherm.devices.sim.ipp import Fault, IppSimServer
 from hexatherm.devices.sim.symetrie import Faults, SymetrieSimulator
 from hexatherm.errors import IncompleteSession
-from tests.workflows.test_run import Bench, check_complete, make_bench
+from tests.workflows.test_run import TEST_CYCLE_S, Bench, check_complete, make_bench
 
 SHORT = {"targets": [[5.0, -3.0, 4.0, 1.0, -2.0, 3.0]], "points_per_ball": 6}
 #: the restart's length, s of the run's clock
@@ -116,7 +116,9 @@ def test_a_controller_refusing_connections_while_it_restarts_is_waited_for(
     old = b.machines.controller
 
     def up() -> None:
-        b.machines.controller = SymetrieSimulator(b.world.model, port=old.port)
+        b.machines.controller = SymetrieSimulator(
+            b.world.model, port=old.port, cycle_s=TEST_CYCLE_S
+        )
 
     restart = Restart(b, "controller connection lost", old.close, up)
     try:

@@ -21,7 +21,7 @@ from hexatherm.core.heating import Mat, MatHeating
 from hexatherm.devices.controller import InPositionCriteria
 from hexatherm.errors import IncompleteSession
 from hexatherm.workflows.run.campaign import run_campaign
-from hexatherm.workflows.serve import AcceleratedClock, TwinMachines, TwinWorld
+from hexatherm.workflows.serve import AcceleratedClock, TwinWorld
 from tests.sessions import ROOT
 from tests.waiting import SAFETY_S, wait_for
 from tests.workflows.test_run import (
@@ -30,6 +30,7 @@ from tests.workflows.test_run import (
     Bench,
     check_complete,
     make_bench,
+    twin_machines,
 )
 
 #: mats off: on the wall clock (killed processes need real time) the balls must not drift
@@ -63,7 +64,7 @@ def test_sigkill_of_run_at_random_points_then_resume(tmp_path: Path) -> None:
         sleep=clock.sleep,
         cmm_move_s=0.1,
     )
-    b.machines = TwinMachines(b.world)
+    b.machines = twin_machines(b.world)
     rng = np.random.default_rng(2024)
     transcript = b.session / "ipp.transcript"
     command = [
@@ -164,7 +165,7 @@ def _serve(b: Bench, clock: _WallClock, ports: tuple[int, int], pipe: Connection
         start_s=clock.anchor_s,
         cmm_move_s=0.1,
     )
-    machines = TwinMachines(world, cmm_port=ports[0], controller_port=ports[1])
+    machines = twin_machines(world, cmm_port=ports[0], controller_port=ports[1])
     pipe.send((machines.cmm.port, machines.controller.port))
     threading.Event().wait()  # serves until the test kills the process
 

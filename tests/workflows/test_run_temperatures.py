@@ -28,7 +28,7 @@ from hexatherm.errors import AcquisitionError
 from hexatherm.io.records import iso_to_seconds
 from hexatherm.workflows.acquire.run import session_from_log
 from hexatherm.workflows.run.campaign import run_campaign
-from hexatherm.workflows.serve import AcceleratedClock, TwinMachines, TwinWorld
+from hexatherm.workflows.serve import AcceleratedClock, TwinWorld
 from tests.sessions import ROOT
 from tests.waiting import SAFETY_S, wait_for
 from tests.workflows.test_run import (
@@ -39,6 +39,7 @@ from tests.workflows.test_run import (
     URAD,
     make_bench,
     step_times,
+    twin_machines,
 )
 
 SHORT = {"targets": [[5.0, -3.0, 4.0, 1.0, -2.0, 3.0]], "points_per_ball": 6}
@@ -163,7 +164,7 @@ def test_sigkill_of_run_then_resume_loses_or_doubles_no_temperature_line(tmp_pat
         sleep=clock.sleep,
         cmm_move_s=0.1,
     )
-    b.machines = TwinMachines(b.world, thermocouple_period_s=20.0)
+    b.machines = twin_machines(b.world, thermocouple_period_s=20.0)
     log = b.session / "serial.log"
     command = [
         sys.executable, "-m", "hexatherm", "run", str(tmp_path / "plan.yaml"),
