@@ -283,13 +283,23 @@ def _coverage_deg(u: NDArray[np.float64], counts: NDArray, starts: NDArray) -> N
     mean_dir = total / np.where(cancelled, 1.0, norm)[:, None]
     md = np.repeat(mean_dir, counts, axis=0)
     cos = np.einsum("ij,ij->i", u, md)
-    if u.shape[1] == 3:
-        sin = np.linalg.norm(np.cross(u, md), axis=1)
-    else:
-        sin = np.abs(u[:, 0] * md[:, 1] - u[:, 1] * md[:, 0])
-    ang = np.degrees(np.arctan2(sin, cos))
-    cov = np.maximum.reduceat(ang, starts)
+    # the farthest direction is the one of least cosine: its angle, from the sine and
+    # the cosine (accurate at any angle), is computed for that one point of each group
+    least = np.minimum.reduceat(cos, starts)
+    at = np.flatnonzero(cos == np.repeat(least, counts))
+    first = at[np.minimum(np.searchsorted(at, starts), at.size - 1)] if at.size else starts
+    if not np.all((first >= starts) & (first < starts + counts)):  # a NaN: every point
+        ang = np.degrees(np.arctan2(_sines(u, md), cos))
+        return np.where(cancelled, 180.0, np.maximum.reduceat(ang, starts))
+    cov = np.degrees(np.arctan2(_sines(u[first], mean_dir), cos[first]))
     return np.where(cancelled, 180.0, cov)
+
+
+def _sines(u: NDArray[np.float64], w: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Sine of the angle between unit vectors ``u`` and ``w``, row by row."""
+    if u.shape[1] == 3:
+        return np.asarray(np.linalg.norm(np.cross(u, w), axis=1))
+    return np.abs(u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0])
 
 
 def _ill_conditioned(
@@ -619,13 +629,15 @@ def _plain_passes(
                 cost[fin] - 2.0 * np.einsum("ki,ki->k", step[fin], b[fin]) + quad[fin], 0.0
             )
             iterations[ids] = k + 1
-            pm = np.repeat(fin, cnt)
-            rows = pm.nonzero()[0] if at is None else at[pm]
-            moved = np.einsum("ij,ij->i", u[pm], np.repeat(step[fin, :d], cnt[fin], axis=0))
+            # written for every sphere of the pass, in place (no gather of the finished
+            # ones' points): a sphere that goes on is written again when it finishes,
+            # or by the general iteration
+            moved = np.einsum("ij,ij->i", u, np.repeat(step[:, :d], cnt, axis=0))
             if free:
-                moved += np.repeat(step[fin, d], cnt[fin])
-            residuals[rows] = e[pm] - moved
-            unit[rows] = u[pm]
+                moved += np.repeat(step[:, d], cnt)
+            rows = slice(None) if at is None else at
+            residuals[rows] = e - moved
+            unit[rows] = u
         go = ok & ~small
         if not go.any():
             break
