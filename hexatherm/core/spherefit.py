@@ -29,6 +29,14 @@ Algorithm
    residuals by less than floating-point rounding can resolve (RMS of
    ``J delta`` below ``64 eps max(r, rms|q|)``), whichever comes first.  Cost
    increases within the rounding error of the cost do not reject a step.
+5. The first three steps of every sphere are taken as *plain passes*
+   (:func:`_plain_passes`): one evaluation of the geometry per pass gives the
+   cost that accepts the step before it, the next step, and, at convergence,
+   the residuals and ``J^T J`` (carried by the last, sub-rounding step to first
+   order) instead of a cost pass per step and a final pass.  The steps and
+   tests are the general iteration's, so the centres are the same numbers; a
+   sphere whose step raises the cost, or that needs more steps, is fitted again
+   from its start by the general iteration (damping, Newton), as it always was.
 
 Thresholds
 ----------
