@@ -391,9 +391,9 @@ template_dir_option = click.option(
 
 
 def _tolerances(ctx: click.Context, param: click.Parameter, values: tuple[str, ...]) -> dict:
-    from hexatherm.workflows.process.conformity import parse_tolerances
-
     found: dict[str, object] = {}
+    if values:  # the conformity's module, only for a run that judges tolerances
+        from hexatherm.workflows.process.conformity import parse_tolerances
     for value in values:
         try:
             given = parse_tolerances(value)
@@ -430,10 +430,12 @@ def decision_rule_options(func: F) -> F:
     (ILAC-G8:09/2019), over a lab file's ``decision_rule:``."""
 
     def rule(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+        if value is None:  # the rules' module (12 kB of source): only to check a name
+            return value
         from hexatherm.workflows.common import decision_rules  # numpy: not at start-up
 
         rules = decision_rules()
-        if value is not None and value not in rules:
+        if value not in rules:
             raise click.BadParameter(f"{value!r}: one of {', '.join(rules)}", ctx, param)
         return value
 

@@ -142,7 +142,6 @@ def command(
     checks of every step), and prints the deviations from the commanded poses side by
     side, in um and urad. Repeated O and R0 (plan --origin-repeats ...) are averaged.
     """
-    from hexatherm.workflows.process.conformity import conformity_line
     from hexatherm.workflows.process.outputs import deviation_table, significance_lines
     from hexatherm.workflows.process.run import ProcessRequest, process
     from hexatherm.workflows.process.summary import (
@@ -202,6 +201,8 @@ def command(
     for line in outcome.quality.summary():
         echo_err(line)
     if outcome.conformity is not None:
+        from hexatherm.workflows.process.conformity import conformity_line  # with tolerances
+
         echo_err(conformity_line(outcome.conformity))
     for path in outcome.written:
         echo_err(f"wrote {path}")

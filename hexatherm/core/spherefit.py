@@ -29,6 +29,14 @@ Algorithm
    residuals by less than floating-point rounding can resolve (RMS of
    ``J delta`` below ``64 eps max(r, rms|q|)``), whichever comes first.  Cost
    increases within the rounding error of the cost do not reject a step.
+5. The first three steps of every sphere are taken as *plain passes*
+   (:func:`_plain_passes`): one evaluation of the geometry per pass gives the
+   cost that accepts the step before it, the next step, and, at convergence,
+   the residuals and ``J^T J`` (carried by the last, sub-rounding step to first
+   order) instead of a cost pass per step and a final pass.  The steps and
+   tests are the general iteration's, so the centres are the same numbers; a
+   sphere whose step raises the cost, or that needs more steps, is fitted again
+   from its start by the general iteration (damping, Newton), as it always was.
 
 Thresholds
 ----------
@@ -283,13 +291,23 @@ def _coverage_deg(u: NDArray[np.float64], counts: NDArray, starts: NDArray) -> N
     mean_dir = total / np.where(cancelled, 1.0, norm)[:, None]
     md = np.repeat(mean_dir, counts, axis=0)
     cos = np.einsum("ij,ij->i", u, md)
-    if u.shape[1] == 3:
-        sin = np.linalg.norm(np.cross(u, md), axis=1)
-    else:
-        sin = np.abs(u[:, 0] * md[:, 1] - u[:, 1] * md[:, 0])
-    ang = np.degrees(np.arctan2(sin, cos))
-    cov = np.maximum.reduceat(ang, starts)
+    # the farthest direction is the one of least cosine: its angle, from the sine and
+    # the cosine (accurate at any angle), is computed for that one point of each group
+    least = np.minimum.reduceat(cos, starts)
+    at = np.flatnonzero(cos == np.repeat(least, counts))
+    first = at[np.minimum(np.searchsorted(at, starts), at.size - 1)] if at.size else starts
+    if not np.all((first >= starts) & (first < starts + counts)):  # a NaN: every point
+        ang = np.degrees(np.arctan2(_sines(u, md), cos))
+        return np.where(cancelled, 180.0, np.maximum.reduceat(ang, starts))
+    cov = np.degrees(np.arctan2(_sines(u[first], mean_dir), cos[first]))
     return np.where(cancelled, 180.0, cov)
+
+
+def _sines(u: NDArray[np.float64], w: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Sine of the angle between unit vectors ``u`` and ``w``, row by row."""
+    if u.shape[1] == 3:
+        return np.asarray(np.linalg.norm(np.cross(u, w), axis=1))
+    return np.abs(u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0])
 
 
 def _ill_conditioned(
@@ -404,11 +422,13 @@ def _fit_nspheres(
         c = np.stack(cands)[best, np.arange(m)]
 
     radius_scale = np.sqrt(mean_q2)
+    fast = _plain_passes(q, counts, starts, c, r, radius_scale, free, tol_mm, label, max_iter)
     lam_lm = np.zeros(m)
     iterations = np.zeros(m, dtype=np.int64)
-    active = np.ones(m, dtype=bool)
+    # the spheres the plain passes left (a step that raised the cost, slow convergence)
+    # start again from the start: the general iteration below, as if alone
+    active = ~fast.done
     last_step = np.full(m, np.inf)
-    first = True
     for _ in range(max_iter):
         idx = np.flatnonzero(active)
         if idx.size == 0:
@@ -423,9 +443,6 @@ def _fit_nspheres(
         v, dist, e = _geometry(qs, ca, ra, cnt)
         u = _unit(v, dist)
         a, b, cost = _normal_equations(u, e, cnt, st, free)
-        if first:
-            _ill_conditioned(_condition(a), partial(_coverage_deg, u, cnt, st), label, free)
-            first = False
         # Gauss-Newton converges only linearly when the residuals are large compared
         # with the curvature of the data (noise ~ sagitta); spheres that are still
         # iterating after 3 steps, or had a step rejected, add the exact second-order
@@ -496,9 +513,18 @@ def _fit_nspheres(
         ),
     )
 
-    v, dist, e = _geometry(q, c, r, counts)
-    u = _unit(v, dist)
-    a, _, cost = _normal_equations(u, e, counts, starts, free)
+    c[fast.done] = fast.centre[fast.done]
+    r[fast.done] = fast.radius[fast.done]
+    iterations[fast.done] = fast.iterations[fast.done]
+    e, u, a, cost = fast.residuals, fast.unit, fast.normal_matrix, fast.cost
+    left = ~fast.done
+    if left.any():  # the final geometry of the spheres the general iteration fitted
+        on = np.repeat(left, counts)
+        cnt = counts[left]
+        v, dist, e_left = _geometry(q[on], c[left], r[left], cnt)
+        u[on] = _unit(v, dist)
+        e[on] = e_left
+        a[left], _, cost[left] = _normal_equations(u[on], e_left, cnt, _starts(cnt), free)
     coverage = _coverage_deg(u, counts, starts)
     _ill_conditioned(_condition(a), coverage, label, free)
     if free:
@@ -514,6 +540,129 @@ def _fit_nspheres(
         iterations=iterations,
         coverage_deg=coverage,
     )
+
+
+#: Gauss-Newton passes taken by every sphere before the general iteration (pure
+#: Gauss-Newton in both: the general one adds Newton's term from its 4th step on)
+_PLAIN_PASSES = _NEWTON_AFTER
+
+
+@dataclass(frozen=True)
+class _Plain:
+    done: NDArray[np.bool_]  # (m,) converged in the plain passes; the rest: not computed
+    centre: NDArray[np.float64]  # (m, d)
+    radius: NDArray[np.float64]  # (m,)
+    residuals: NDArray[np.float64]  # (N,) at the centre and radius
+    unit: NDArray[np.float64]  # (N, d) directions centre -> point
+    normal_matrix: NDArray[np.float64]  # (m, p, p)
+    cost: NDArray[np.float64]  # (m,)
+    iterations: NDArray[np.int64]  # (m,)
+
+
+def _plain_passes(
+    q: NDArray[np.float64],
+    counts: NDArray[np.int64],
+    starts: NDArray[np.int64],
+    c: NDArray[np.float64],
+    r: NDArray[np.float64],
+    radius_scale: NDArray[np.float64],
+    free: bool,
+    tol_mm: float,
+    label: str,
+    max_iter: int,
+) -> _Plain:
+    """Undamped Gauss-Newton steps from the start ``c``, ``r``, all spheres at once, each
+    pass's geometry serving three ends: the cost that accepts the step before it, the
+    step after it, and, when that step is below the tolerance or rounding (as the general
+    iteration judges it), the sphere's residuals and ``J^T J``: the centre and radius
+    take that last step, as in the general iteration, which then computes the residuals
+    and ``J^T J`` once more, at the point reached; here the residuals and their sum of
+    squares are carried there to first order (``e + J delta``; the step is at most
+    ``tol_mm``, or what rounding resolves) and ``J^T J`` is the point before's.
+
+    The steps, the conditioning check of the first pass and the convergence test are
+    the general iteration's own. A step that raises the cost beyond its rounding (which
+    the general iteration would damp), a singular matrix, or no convergence within
+    :data:`_PLAIN_PASSES` passes leaves the sphere not ``done``: it is fitted again from
+    its start by the general iteration, which then takes the same steps as it always
+    did."""
+    m, d = c.shape
+    p = d + 1 if free else d
+    n_points = q.shape[0]
+    done = np.zeros(m, dtype=bool)
+    centre = c.copy()
+    radius = r.copy()
+    residuals = np.empty(n_points)
+    unit = np.empty_like(q)
+    normal = np.zeros((m, p, p))
+    cost_out = np.zeros(m)
+    iterations = np.zeros(m, dtype=np.int64)
+    idx = np.arange(m)
+    at = None  # the points of the spheres in idx (None: all of them)
+    qs, cnt, st = q, counts, starts
+    ca, ra = c, r
+    prev_cost = prev_tol = None
+    for k in range(min(_PLAIN_PASSES, max_iter)):
+        v, dist, e = _geometry(qs, ca, ra, cnt)
+        u = _unit(v, dist)
+        a, b, cost = _normal_equations(u, e, cnt, st, free)
+        if k == 0:
+            _ill_conditioned(_condition(a), partial(_coverage_deg, u, cnt, st), label, free)
+        scale = np.maximum(np.abs(ra), radius_scale[idx])
+        ok = np.ones(idx.size, dtype=bool)
+        if prev_cost is not None and prev_tol is not None:
+            ok = cost <= prev_cost + prev_tol
+        try:
+            step = _solve(a, b)
+        except np.linalg.LinAlgError:
+            break
+        quad = np.einsum("ki,kij,kj->k", step, a, step)
+        jd = np.sqrt(np.clip(quad, 0.0, None))
+        small = (np.max(np.abs(step), axis=1) <= tol_mm) | (
+            jd <= _ROUNDING_FACTOR * _EPS * scale * np.sqrt(cnt)
+        )
+        fin = ok & small
+        if fin.any():
+            ids = idx[fin]
+            done[ids] = True
+            centre[ids] = ca[fin] + step[fin, :d]
+            if free:
+                radius[ids] = ra[fin] + step[fin, d]
+            normal[ids] = a[fin]
+            # the residuals and their sum of squares carried by the last step to first
+            # order, e + J delta, J = [-u, -1] (exact for the sum, |e + J delta|^2 =
+            # e.e + 2 delta.J^T e + delta.J^T J delta with J^T e = -b): the step is
+            # below 1e-12 mm, its second order below rounding
+            cost_out[ids] = np.maximum(
+                cost[fin] - 2.0 * np.einsum("ki,ki->k", step[fin], b[fin]) + quad[fin], 0.0
+            )
+            iterations[ids] = k + 1
+            # written for every sphere of the pass, in place (no gather of the finished
+            # ones' points): a sphere that goes on is written again when it finishes,
+            # or by the general iteration
+            moved = np.einsum("ij,ij->i", u, np.repeat(step[:, :d], cnt, axis=0))
+            if free:
+                moved += np.repeat(step[:, d], cnt)
+            rows = slice(None) if at is None else at
+            residuals[rows] = e - moved
+            unit[rows] = u
+        go = ok & ~small
+        if not go.any():
+            break
+        c_next = ca + step[:, :d]
+        r_next = ra + step[:, d] if free else ra
+        prev_tol = 16.0 * _EPS * scale * np.sqrt(cnt * cost)
+        prev_cost = cost
+        if not go.all():
+            pm = np.repeat(go, cnt)
+            at = pm.nonzero()[0] if at is None else at[pm]
+            qs = qs[pm]
+            idx, cnt = idx[go], cnt[go]
+            st = _starts(cnt)
+            c_next, r_next = c_next[go], r_next[go]
+            prev_cost, prev_tol = prev_cost[go], prev_tol[go]
+        ca, ra = c_next, r_next
+    return _Plain(done, centre, radius, residuals, unit, normal, cost_out, iterations)
 
 
 #: points of the spheres fitted together in one block: a block's arrays (a few MB) stay in

@@ -489,3 +489,65 @@ def test_refine_spheres_equals_the_general_fit_on_monte_carlo_draws(fixed: bool)
     np.testing.assert_allclose(centre.reshape(-1, 3), truth.centre_mm, atol=1e-10, rtol=0)
     if not fixed:
         np.testing.assert_allclose(r.reshape(-1), truth.radius_mm, atol=1e-10, rtol=0)
+
+
+# --------------------------------------------------------------------------------------
+# The plain Gauss-Newton passes against the general iteration alone
+
+
+def _hostile_spheres(seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Shallow caps, few points, noise from far below to about the cap's sagitta, far
+    from the origin, interleaved: the cases where the plain passes could stop early."""
+    rng = np.random.default_rng(seed)
+    pts, groups = [], []
+    for k in range(120):
+        n = int(rng.choice([4, 5, 6, 9, 25, 400]))
+        half = float(rng.choice([8.0, 12.0, 20.0, 45.0, 90.0, 150.0]))
+        u = cap_directions(n, half, rng, axis=rng.normal(size=3))
+        sagitta = RADIUS * (1 - np.cos(np.radians(half)))
+        noise = sagitta * float(rng.choice([1e-7, 1e-4, 1e-2, 0.1]))
+        centre = rng.uniform(-900.0, 900.0, 3)
+        pts.append(centre + (RADIUS + rng.normal(0.0, noise, n))[:, None] * u)
+        groups.append(np.full(n, k))
+    for k, seed_hard in enumerate((14, 67), start=120):
+        pts.append(_hard_sphere(seed_hard) + rng.uniform(-50.0, 50.0, 3))
+        groups.append(np.full(8, k))
+    p, g = np.vstack(pts), np.concatenate(groups)
+    perm = rng.permutation(len(g))
+    return p[perm], g[perm]
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.parametrize("fixed", [False, True])
+def test_plain_passes_agree_with_the_general_iteration(
+    seed: int, fixed: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Every output of the fit with the plain passes agrees with the general iteration's
+    (``_PLAIN_PASSES = 0``: all spheres fitted as before the passes) far below what the
+    files resolve (centres 1e-7 mm): the same centres and radii within 1e-11 mm, the same
+    iterations, residuals, RMS, form and covariance to rounding."""
+    import hexatherm.core.spherefit as sf
+
+    p, g = _hostile_spheres(seed)
+    m = int(g.max()) + 1
+    radius = None
+    if fixed:  # a fixed radius a few micrometres off the fitted one, as a nominal is
+        free = fit_spheres(p, g)
+        radius = free.radius_mm + np.random.default_rng(seed).normal(0.0, 3e-3, m)
+    fits = fit_spheres(p, g, radius_mm=radius)
+    monkeypatch.setattr(sf, "_PLAIN_PASSES", 0)
+    ref = fit_spheres(p, g, radius_mm=radius)
+    monkeypatch.undo()
+    np.testing.assert_allclose(fits.centre_mm, ref.centre_mm, rtol=0, atol=1e-11)
+    np.testing.assert_allclose(fits.radius_mm, ref.radius_mm, rtol=0, atol=1e-11)
+    np.testing.assert_array_equal(fits.iterations, ref.iterations)
+    assert fits.iterations.max() > 3  # some spheres left to the general iteration
+    np.testing.assert_allclose(fits.residuals_mm, ref.residuals_mm, rtol=0, atol=1e-11)
+    np.testing.assert_allclose(fits.rms_um, ref.rms_um, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(fits.form_um, ref.form_um, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(fits.cap_half_angle_deg, ref.cap_half_angle_deg, atol=1e-9)
+    # the covariance rests on the residuals, which the passes take one step (below
+    # 1e-12 mm) earlier: relative differences of 1e-7 where the residuals are 1e-10 mm
+    np.testing.assert_allclose(fits.cov_centre_mm2, ref.cov_centre_mm2, rtol=1e-6, atol=1e-18)
+    u_um = [1e3 * np.sqrt(np.diagonal(f.cov_centre_mm2, axis1=1, axis2=2)) for f in (fits, ref)]
+    np.testing.assert_allclose(u_um[0], u_um[1], rtol=1e-9, atol=1e-9)

@@ -155,7 +155,13 @@ def test_written_figures_have_the_pixels_of_a_plain_savefig(
     from PIL import Image
 
     folder = written[0].parent
-    for key, build in (("pose_time", dr.pose_time_figure), ("centre_rms", dr.centre_rms_figure)):
+    # (the legs' figure is written from the pose's, its lines refilled: report_pngs)
+    for key, build in (
+        ("pose_time", dr.pose_time_figure),
+        ("legs_time", dr.legs_time_figure),
+        ("centre_rms", dr.centre_rms_figure),
+        ("temperature", dr.temperature_figure),
+    ):
         plain = io.BytesIO()
         build(result).savefig(plain, format="png", dpi=50)  # the fixture's dpi
         with (

@@ -4,6 +4,7 @@ scipy.sparse. Each check runs a fresh interpreter and reads its sys.modules."""
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -83,3 +84,27 @@ def test_process_without_repeats_or_tolerances_loads_no_scipy(tmp_path: Path) ->
     code = _process_code("paper-zero-pose-dmis", out)
     assert _loaded(code, ("scipy", "pandas")) == {"scipy": False, "pandas": True}
     assert (out / "poses.csv").is_file()
+
+
+def test_a_plain_process_loads_only_what_it_uses(tmp_path: Path) -> None:
+    """Without tolerances, the twin or a hexapod's effects, process loads none of their
+    modules (each compiled at every start where Python keeps no bytecode, issue 37), nor
+    importlib.metadata for the libraries' versions, which provenance.json records all the
+    same, as importlib.metadata gives them."""
+    from importlib import metadata
+
+    out = tmp_path / "out"
+    code = _process_code("paper-zero-pose-dmis", out)  # no scipy: it reads both of them
+    lazy = (
+        "hexatherm.workflows.process.conformity",
+        "hexatherm.core.conformity",
+        "hexatherm.workflows.process.twin",
+        "hexatherm.core.effects",
+        "importlib.metadata",
+        "numpy.char",
+    )
+    assert _loaded(code, lazy) == dict.fromkeys(lazy, False)
+    provenance = json.loads((out / "provenance.json").read_text())
+    assert provenance["libraries"] == {
+        name: metadata.version(name) for name in ("numpy", "scipy", "pandas")
+    }

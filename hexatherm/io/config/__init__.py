@@ -10,7 +10,6 @@ from hexatherm.io.config.balls import BALLS_FORMAT, balls_to_yaml, read_balls
 from hexatherm.io.config.datums import DATUMS_FORMAT, read_datums
 from hexatherm.io.config.hexapod import (
     CTE_RANGE_PER_K,
-    EFFECT_PARAMETERS,
     HEXAPOD_FORMAT,
     TEMPERATURE_RANGE_C,
     hexapod_to_yaml,
@@ -49,3 +48,12 @@ __all__ = [
     "session_to_yaml",
     "write_text",
 ]
+
+
+def __getattr__(name: str) -> object:
+    """``EFFECT_PARAMETERS`` of :mod:`hexatherm.io.config.hexapod`, made on first use."""
+    if name == "EFFECT_PARAMETERS":
+        from hexatherm.io.config import hexapod
+
+        return hexapod.EFFECT_PARAMETERS
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -10,7 +10,6 @@ from typing import Any
 
 import numpy as np
 
-from hexatherm.core.effects import EFFECTS, make_effect
 from hexatherm.core.geometry import CONVENTIONS
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.thermal import LegThermalModel, SegmentSpec
@@ -21,11 +20,18 @@ from hexatherm.io.yamlfile import YamlDoc
 
 HEXAPOD_FORMAT = "hexatherm-hexapod/1"
 
-#: effect names and parameters (spec: "The hexapod twin and its effects"), from the one
-#: registry of effects that the twin and the diagnosis use
-EFFECT_PARAMETERS: dict[str, tuple[str, ...]] = {
-    name: tuple(cls.parameters) for name, cls in EFFECTS.items()
-}
+
+def __getattr__(name: str) -> Any:
+    """``EFFECT_PARAMETERS``: effect names and parameters (spec: "The hexapod twin and
+    its effects"), from the one registry of effects that the twin and the diagnosis use;
+    made on first use, so that reading a hexapod file without effects does not load
+    that registry (30 kB of source compiled at each start of ``process``)."""
+    if name == "EFFECT_PARAMETERS":
+        from hexatherm.core.effects import EFFECTS
+
+        return {key: tuple(cls.parameters) for key, cls in EFFECTS.items()}
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 #: coefficients of thermal expansion accepted in a leg model, 1/K (invar to plastics; a
 #: value in ppm/K, 23 for 23e-6, is refused)
@@ -189,6 +195,8 @@ def _read_effects(doc: YamlDoc) -> tuple[dict[str, Any], ...]:
     if not isinstance(items, list):
         raise doc.error("expected a list of effects", "thermal_model", "effects")
     effects: list[dict[str, Any]] = []
+    if items:
+        from hexatherm.core.effects import EFFECTS, make_effect
     for i in range(len(items)):
         keys = ("thermal_model", "effects", i)
         doc.check_keys(["name", "parameters"], *keys)

@@ -122,7 +122,8 @@ def point_groups(records: Records) -> tuple[npt.NDArray[np.intp], npt.NDArray[np
     change = (label[1:] != label[:-1]) | (ball[1:] != ball[:-1])
     starts = np.concatenate(([0], np.flatnonzero(change) + 1))
     run = np.cumsum(np.concatenate(([False], change)), dtype=np.intp)
-    keys = np.char.add(np.char.add(label[starts].astype(str), "\x1f"), ball[starts].astype(str))
+    # (numpy's string ``+``: ``np.char`` costs its module's import at every start)
+    keys = label[starts].astype(str) + "\x1f" + ball[starts].astype(str)
     _, first_run, groups = np.unique(keys, return_index=True, return_inverse=True)
     if first_run.size == starts.size:  # every key one run: the runs are the groups
         return run, starts.astype(np.intp)

@@ -22,7 +22,6 @@ import numpy as np
 from hexatherm.errors import InputError
 from hexatherm.io.files import STRICT, ReadOptions
 from hexatherm.limits import DISTANCE_REFUSAL_UM, QualityLimits
-from hexatherm.workflows.process.conformity import Conformity
 from hexatherm.workflows.process.measured import FileProgress
 from hexatherm.workflows.process.pipeline import Checks, ProcessResult
 from hexatherm.workflows.process.quality import QualityReport
@@ -30,6 +29,9 @@ from hexatherm.workflows.process.uncertainty import PoseUncertainty
 
 if TYPE_CHECKING:
     from hexatherm.session import Tolerance
+
+    # a plain run judges no tolerances: the conformity's module is read when it does
+    from hexatherm.workflows.process.conformity import Conformity
 
 #: ``progress(done, total)`` of the Monte Carlo draws
 DrawProgress = Callable[[int, int], None]
@@ -108,14 +110,12 @@ def compute(
     """
     from hexatherm.io.config import read_hexapod, read_session
     from hexatherm.io.outputs import check_output_settled
-    from hexatherm.workflows.process.conformity import conformity, decision_rule
     from hexatherm.workflows.process.pipeline import process_session
     from hexatherm.workflows.process.quality import (
         parse_threshold,
         quality_checks,
         session_thresholds,
     )
-    from hexatherm.workflows.process.twin import twin_poses
     from hexatherm.workflows.process.uncertainty import pose_uncertainty
 
     overrides = dict(parse_threshold(t) for t in request.quality_thresholds)
@@ -151,6 +151,8 @@ def compute(
     )
     twin, twin_note = None, ""
     if "twin" in request.methods:
+        from hexatherm.workflows.process.twin import twin_poses
+
         path = request.hexapod_path
         model = result.session.hexapod if path is None else read_hexapod(path)
         twin = twin_poses(result, model, str(path or ""))
@@ -172,6 +174,8 @@ def compute(
     tolerances = {**result.session.tolerances, **request.tolerances}
     judged = None
     if tolerances:
+        from hexatherm.workflows.process.conformity import conformity, decision_rule
+
         rule = decision_rule({}, request.decision_rule, request.guard_factor)
         judged = conformity(result, uncertainty, tolerances, request.coverage_factor, rule)
     return ProcessOutcome(request, result, uncertainty, quality, twin, twin_note, judged)

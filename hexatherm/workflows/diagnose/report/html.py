@@ -16,7 +16,7 @@ from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from hexatherm.workflows.diagnose.report.figures import report_figures
+from hexatherm.workflows.diagnose.report.figures import report_pngs
 from hexatherm.workflows.diagnose.report.markdown import report_markdown
 from hexatherm.workflows.diagnose.report.tables import FIGURE_DPI, FIGURE_FILES, REPORT_FILE
 from hexatherm.workflows.report.document import document, template_variables
@@ -227,11 +227,10 @@ def write_report_files(
     """
     out_dir = Path(out_dir)
     written = [out_dir / REPORT_FILE]
-    pngs = {}
-    for key, fig in report_figures(result).items():
-        pngs[key] = figure_png(fig, dpi)
+    pngs = report_pngs(result, lambda fig: figure_png(fig, dpi))
+    for key, data in pngs.items():
         path = out_dir / FIGURE_FILES[key]
-        path.write_bytes(pngs[key])
+        path.write_bytes(data)
         written.append(path)
     written[0].write_text(report_markdown(result, FIGURE_FILES), encoding="utf-8")
     page = out_dir / REPORT_HTML
