@@ -45,6 +45,14 @@ def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
             if excess.excess_um > 0
             else f"  smooth fit's own error: nothing added ({residuals})"
         )
+        lines.append(
+            "  smooth fit's own error on a growth shaped as the thermocouple log: "
+            f"{np.sqrt(np.mean(excess.shape_um**2)):.3g} um RMS over the targets and legs, "
+            f"up to {excess.shape_um.max():.3g} um, added to each target's own u"
+            if excess.shape_um is not None and excess.shape_um.size
+            else "  no thermocouple log: the smooth fit's error between references far apart "
+            "or across a heating switched on or off rests on the references' residuals alone"
+        )
     for check in uncertainty.repeats:
         line = (
             f"  {check.label} measured {check.n} times, averaged: their scatter is "
