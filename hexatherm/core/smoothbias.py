@@ -58,12 +58,15 @@ class GrowthExcess:
     shape_um : ndarray, shape (M,), optional
         RMS over the legs of the fit's error at each target on a growth shaped as the
         thermocouple log (:func:`log_shape_error`); None without a log.
+    widest_gap : float
+        The longest interval between consecutive references over their median one.
     """
 
     cov_mm2: FloatArray
     observed_um: float
     noise_um: float
     shape_um: FloatArray | None = None
+    widest_gap: float = 1.0
 
     @property
     def excess_um(self) -> float:
@@ -136,10 +139,12 @@ def growth_excess(
     total = float(np.trace(observed))
     share = max(0.0, 1.0 - explained / total) if total > 0 else 0.0
     cov = share * observed
+    spacing = np.diff(t)
     return GrowthExcess(
         cov_mm2=cov,
         observed_um=float(np.sqrt(np.trace(observed) / 6)) * 1e3,
         noise_um=float(np.sqrt(np.trace(noise) / 6)) * 1e3,
+        widest_gap=float(spacing.max() / np.median(spacing)),
     )
 
 

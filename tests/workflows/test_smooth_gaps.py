@@ -81,3 +81,18 @@ def test_a_long_gap_between_references_is_in_the_smooth_fits_u(tmp_path: Path) -
     # (the 17 of seeds 0-19 where smooth is used)
     assert np.all((ratio > 0.8) & (ratio < 1.3)), ratio
     assert any("shaped as the thermocouple log" in line for line in lines)
+
+
+def test_a_long_gap_without_a_log_is_warned_of(tmp_path: Path) -> None:
+    folder = gap_session(tmp_path / "g", 0)
+    logged = process_session(folder, interpolation="smooth")
+    with_log = uncertainty_summary(pose_uncertainty(logged))
+    session = folder / "session.yaml"
+    lines = session.read_text().splitlines(keepends=True)
+    session.write_text("".join(x for x in lines if not x.startswith("temperatures:")))
+    result = process_session(folder, interpolation="smooth")
+    assert result.correction.smooth is not None and result.correction.smooth.used
+    without = uncertainty_summary(pose_uncertainty(result))
+    # the references' spacing: 400 s, and 2200 s across the pause
+    assert any(x.startswith("warning: references up to 5.5x their median") for x in without)
+    assert not any(x.startswith("warning: references up to") for x in with_log)

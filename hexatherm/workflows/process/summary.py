@@ -17,6 +17,11 @@ if TYPE_CHECKING:
 MC_RELATIVE_LIMIT = 0.1
 
 
+#: references farther apart than this many times their median spacing, without a log,
+#: leave the smooth fit's error inside the gap unclaimed (a warning)
+WIDE_GAP = 2.0
+
+
 def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
     """Screen lines: where the centre uncertainties came from, and the largest pose ones."""
     lines = [f"uncertainty: centres from {uncertainty.centres.description}"]
@@ -53,6 +58,13 @@ def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
             else "  no thermocouple log: the smooth fit's error between references far apart "
             "or across a heating switched on or off rests on the references' residuals alone"
         )
+        if excess.shape_um is None and excess.widest_gap > WIDE_GAP:
+            lines.append(
+                f"warning: references up to {excess.widest_gap:.2g}x their median spacing "
+                "apart and no thermocouple log: the smooth fit's u does not hold its error "
+                "inside the widest gaps (a 30 min pause in a heating session claimed 0.3x "
+                "of the corrected poses' error); give the session its log"
+            )
     for check in uncertainty.repeats:
         line = (
             f"  {check.label} measured {check.n} times, averaged: their scatter is "
