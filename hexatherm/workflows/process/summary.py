@@ -62,8 +62,8 @@ def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
             lines.append(
                 f"warning: references up to {excess.widest_gap:.2g}x their median spacing "
                 "apart and no thermocouple log: the smooth fit's u does not hold its error "
-                "inside the widest gaps (a 30 min pause in a heating session claimed 0.3x "
-                "of the corrected poses' error); give the session its log"
+                "inside the widest gaps (a 30 min pause in a heating session claimed 0.6x "
+                "of the corrected Tx and Tz errors); give the session its log"
             )
     for check in uncertainty.repeats:
         line = (
