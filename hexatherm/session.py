@@ -82,11 +82,15 @@ class CmmNoise:
         Points probed per ball (None: the plan's ``points_per_ball``).
     cap_angle_deg : float
         Half-angle of the probed cap (default 70).
+    cap_stated : bool
+        Whether the session stated ``cap_angle_deg`` (False: the default is assumed, and
+        ``process`` checks it against the data).
     """
 
     point_noise_um: float
     points_per_ball: int | None = None
     cap_angle_deg: float = 70.0
+    cap_stated: bool = True
 
 
 #: length units a mapped table or a Calypso run may be written in -> mm per unit

@@ -29,7 +29,14 @@ from hexatherm.core.correction import smoothing_hat, target_growth
 from hexatherm.core.propagation import PoseChain
 from hexatherm.typing import FloatArray
 
-__all__ = ["GrowthExcess", "corrected_excess", "growth_excess", "own_leg_covariance"]
+__all__ = [
+    "GrowthExcess",
+    "corrected_excess",
+    "growth_excess",
+    "log_growth",
+    "log_shape_error",
+    "own_leg_covariance",
+]
 
 #: central-difference step on a leg's growth, mm
 STEP_MM = 1e-4
@@ -47,11 +54,18 @@ class GrowthExcess:
     observed_um, noise_um : float
         RMS standardized residual of the inner references' growth (all legs): observed,
         and expected from the propagated noise alone.
+    shape_um : ndarray, shape (M,), optional
+        RMS over the legs of the fit's error at each target on a growth shaped as the
+        thermocouple log (:func:`log_shape_error`); None without a log.
+    widest_gap : float
+        The longest interval between consecutive references over their median one.
     """
 
     cov_mm2: FloatArray
     observed_um: float
     noise_um: float
+    shape_um: FloatArray | None = None
+    widest_gap: float = 1.0
 
     @property
     def excess_um(self) -> float:
@@ -65,6 +79,7 @@ def growth_excess(
     ref_weights: npt.ArrayLike,
     lam: float,
     ref_leg_cov_mm2: npt.ArrayLike,
+    ref_model_mm: npt.ArrayLike | None = None,
 ) -> GrowthExcess:
     """Covariance of the smooth growth's error beyond noise, from the inner references'
     standardized residuals (module docstring).
@@ -81,6 +96,11 @@ def growth_excess(
         The chosen smoothing (times scaled to [0, 1]).
     ref_leg_cov_mm2 : array_like, shape (n, 6, 6)
         Covariance of each reference's leg lengths from its own centres.
+    ref_model_mm : array_like, shape (n, 6), optional
+        A growth shaped as the thermocouple log at the references: its residuals from the
+        same fit are the share of the observed ones that the log explains, taken off as the
+        noise's is (the log's shape is then carried to each target on its own,
+        :func:`log_shape_error`).
 
     Returns
     -------
@@ -111,14 +131,72 @@ def growth_excess(
     # the observed covariance less the noise's share of it (one scalar over the legs: the
     # legs share one heating history; per leg pair, 6x6 from a few references, the
     # difference is too noisy and its positive part too large)
+    explained = float(np.trace(noise))
+    if ref_model_mm is not None:
+        m = a @ np.asarray(ref_model_mm, dtype=float)
+        explained += float(np.sum(m**2)) / len(m)
     total = float(np.trace(observed))
-    share = max(0.0, 1.0 - float(np.trace(noise)) / total) if total > 0 else 0.0
+    share = max(0.0, 1.0 - explained / total) if total > 0 else 0.0
     cov = share * observed
+    spacing = np.diff(t)
     return GrowthExcess(
         cov_mm2=cov,
         observed_um=float(np.sqrt(np.trace(observed) / 6)) * 1e3,
         noise_um=float(np.sqrt(np.trace(noise) / 6)) * 1e3,
+        widest_gap=float(spacing.max() / np.median(spacing)),
     )
+
+
+def log_shape_error(
+    weights: npt.ArrayLike,
+    ref_times_s: npt.ArrayLike,
+    target_times_s: npt.ArrayLike,
+    log_times_s: npt.ArrayLike,
+    log_legs_C: npt.ArrayLike,
+    sensitivity_mm_per_K: npt.ArrayLike,
+) -> FloatArray:
+    """The smooth fit's error at each target on a growth shaped as the thermocouple log,
+    (M, 6) mm: ``s * (W T(t_refs) - T(t_target))`` per leg.
+
+    The residuals at the references (:func:`growth_excess`) see the fit's error where the
+    fit has data, pooled over the session; between references far apart (a gap, times
+    irregular) or across a heating switched on or off, the error at a target is larger
+    than at any reference, and only the heating's history shows it. The log gives that
+    history: the fit's weights ``W`` (M, 6, n; rows summing to 1) applied to the legs'
+    logged temperatures at the references, against their temperature at the target, times
+    each leg's growth per kelvin ``s``, is the error the fit makes on a growth that follows
+    the log (a Type B evaluation: the log's shape, the leg model's gain).
+
+    >>> t = np.array([0.0, 600.0, 1200.0])
+    >>> w = np.broadcast_to([0.5, 0.5, 0.0], (1, 6, 3))  # halfway between the first two
+    >>> logged = np.outer([20.0, 20.0, 21.0, 22.0], np.ones(6))   # a kink at 600 s
+    >>> err = log_shape_error(w, t, [300.0], [0.0, 600.0, 900.0, 1200.0], logged, 1e-2)
+    >>> float(abs(err).max())
+    0.0
+    >>> err = log_shape_error(w, t, [900.0], [0.0, 600.0, 900.0, 1200.0], logged, 1e-2)
+    >>> round(float(err[0, 0]), 6)   # 20 logged at the references' mean, 21 at 900 s
+    -0.01
+    """
+    log = (log_times_s, log_legs_C, sensitivity_mm_per_K)
+    fitted = np.einsum(
+        "mln,nl->ml", np.asarray(weights, dtype=float), log_growth(ref_times_s, *log)
+    )
+    return fitted - log_growth(target_times_s, *log)
+
+
+def log_growth(
+    times_s: npt.ArrayLike,
+    log_times_s: npt.ArrayLike,
+    log_legs_C: npt.ArrayLike,
+    sensitivity_mm_per_K: npt.ArrayLike,
+) -> FloatArray:
+    """Growth (n, 6) mm shaped as the log: each leg's logged temperature at ``times_s``
+    (linear between samples, held beyond) times its growth per kelvin."""
+    t = np.asarray(times_s, dtype=float)
+    lt = np.asarray(log_times_s, dtype=float)
+    legs = np.asarray(log_legs_C, dtype=float)
+    logged = np.column_stack([np.interp(t, lt, legs[:, i]) for i in range(6)])
+    return np.asarray(np.asarray(sensitivity_mm_per_K, dtype=float) * logged)
 
 
 def own_leg_covariance(
@@ -151,8 +229,9 @@ def corrected_excess(
     growth_cov_mm2: npt.ArrayLike,
 ) -> FloatArray:
     """Covariance (M, 6, 6) of the corrected poses (mm, deg) from an error of the growth at
-    R of covariance ``growth_cov_mm2`` (6, 6): through the growth scaling to each target's
-    legs and the FGM (the inverse of the IGM's Jacobian at the corrected pose)."""
+    R of covariance ``growth_cov_mm2`` (6, 6), or one per target (M, 6, 6): through the
+    growth scaling to each target's legs and the FGM (the inverse of the IGM's Jacobian at
+    the corrected pose)."""
     legs = chain.hexapod.legs
     if legs is None:
         raise ValueError("the hexapod has no leg model")

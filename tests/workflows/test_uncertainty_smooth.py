@@ -88,7 +88,8 @@ def test_a_calibration_weighs_smooth_poses_with_their_own_error(tmp_path: Path) 
         session(tmp_path / "s", seed=1, heating=MID_SESSION), interpolation="smooth"
     )
     u = pose_uncertainty(result)
-    assert u.smooth_excess is not None and u.smooth_excess.excess_um > 0
+    excess = u.smooth_excess
+    assert excess is not None and excess.shape_um is not None and excess.shape_um.max() > 0
     joint = joint_pose_covariance(result)
     m = len(result.correction.target_index)
     blocks = joint.reshape(m, 6, m, 6)[np.arange(m), :, np.arange(m)]
@@ -190,7 +191,7 @@ def test_smooth_u_holds_against_the_twins_truth(tmp_path: Path) -> None:
     seeded replicas where the smooth fit is used: within 0.85-1.15 per component. Without
     the smooth fit's own error (the propagated noise alone) Tx claimed 0.57x, Tz 0.80x."""
     claimed, noise_only, errors = [], [], []
-    added = 0
+    added = shaped = 0
     reader = SessionReader()
     for seed in range(REPLICAS):
         twin = simulated(seed, MID_SESSION)
@@ -202,6 +203,7 @@ def test_smooth_u_holds_against_the_twins_truth(tmp_path: Path) -> None:
         u = pose_uncertainty(result)
         assert u.smooth_excess is not None
         added += u.smooth_excess.excess_um > 0
+        shaped += u.smooth_excess.shape_um is not None and u.smooth_excess.shape_um.max() > 0
         excess = smooth_excess(result, pose_chain(result), u.centres.cov_mm2)
         assert excess is not None
         # the twin's truth of the targets (truth/steps.csv's truecorr columns), by label
@@ -212,9 +214,10 @@ def test_smooth_u_holds_against_the_twins_truth(tmp_path: Path) -> None:
         claimed.append(u.corrected_u)
         noise_only.append(np.sqrt(u.corrected_u**2 - np.diagonal(excess[0], axis1=1, axis2=2)))
     assert len(errors) >= 0.8 * REPLICAS  # smooth heating: the fit is kept (measured 49 of 50)
-    # the residuals exceed their noise in most (a fit that interpolates the references
-    # leaves no residuals: nothing added there; measured 46 of 49)
-    assert added >= 0.7 * len(errors), added
+    # the log's shape reaches every target; the residuals exceed their noise and the
+    # log's shape in some (measured 24 of 49; beyond their noise alone 46 of 49: the log
+    # explains the rest of them)
+    assert shaped == len(errors) and added >= 0.3 * len(errors), (shaped, added)
 
     def rms(x: list[np.ndarray]) -> np.ndarray:
         return np.sqrt(np.mean(np.square(x), axis=(0, 1)))

@@ -332,7 +332,8 @@ def _read_cmm(doc: YamlDoc) -> CmmNoise | None:
     cap = doc.number("cmm", "cap_angle_deg", default=70.0, positive=True)
     if cap > 180.0:
         raise doc.error(f"must be at most 180, got {cap!r}", "cmm", "cap_angle_deg")
-    return CmmNoise(sigma, points, cap)
+    stated = doc.get("cmm", "cap_angle_deg", default=None) is not None
+    return CmmNoise(sigma, points, cap, stated)
 
 
 def session_to_yaml(

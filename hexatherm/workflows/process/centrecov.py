@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from hexatherm.core.capshape import cap_for_lateral
 from hexatherm.core.propagation import cap_centre_covariance, cap_height_floor, residual_scale
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.heights import (
@@ -33,6 +34,11 @@ __all__ = ["DEFAULT_CAP_ANGLE_DEG", "CentreCovariance", "centre_covariance"]
 
 #: cap half-angle assumed for centres given without an uncertainty (as ``cmm:``'s default)
 DEFAULT_CAP_ANGLE_DEG = 70.0
+#: chance level of the registration residuals' lateral scatter beyond the assumed cap's
+#: when ``cmm:`` states no cap: above it a shallower cap is taken (0.05: 1.01x Tx and
+#: 1.05x Tz expected over-claim when the assumed cap is right, 0.96-1.03 at 45-62 deg;
+#: at 0.1, one replica in ten of a 70 deg pattern widened by chance: Rx 1.19x over 100)
+CAP_CHECK_P = 0.05
 
 
 @dataclass(frozen=True)
@@ -84,6 +90,54 @@ def heights_of(
     return height, bool(too_flat)
 
 
+def unstated_cap(
+    result: ProcessResult, points: int, sigma_mm: float, per_step: FloatArray
+) -> tuple[FloatArray, str]:
+    """The ``cmm:`` centre covariance (3, 3) of one measurement when the session did not
+    state the cap: the assumed cap's, unless the data shows a shallower one, with a
+    warning either way.
+
+    A shallower cap than the assumed one makes a fit's centre more uncertain across (1.6x
+    in variance at 50 deg) and far more along the cap's axis (3.4x), and the stated point
+    noise then under-claims. The registration residuals, pooled over the steps
+    (:func:`residual_scale`), show the centres' lateral variance over the assumed cap's,
+    blind to the platform's thermal motion; when it exceeds chance (:data:`CAP_CHECK_P`,
+    chi-square of their degrees of freedom), the cap of that lateral variance
+    (:func:`cap_for_lateral`) gives the centres' covariance, its axial part included. The
+    references' heights are not used here: a heating that bends between references
+    enlarges their scatter, and the smooth fit's own error then reads as noise. Never
+    narrower than the assumed cap: the stated point noise stands as the floor.
+    """
+    from scipy.special import chdtri  # not scipy.stats: its import is slow
+
+    assumed = cap_centre_covariance(points, DEFAULT_CAP_ANGLE_DEG, sigma_mm)
+    n, k = result.centres.centres_mm.shape[:2]
+    lateral, _ = residual_scale(
+        result.registration.residuals_mm,
+        result.centres.centres_mm,
+        per_step[:, :, None, None] * assumed,
+    )
+    dof = n * (3 * k - 6)
+    chance = float(chdtri(dof, CAP_CHECK_P)) / dof if dof > 0 else np.inf
+    shallower = lateral > chance
+    cap = cap_for_lateral(points, DEFAULT_CAP_ANGLE_DEG, lateral) if shallower else None
+    single = assumed if cap is None else cap_centre_covariance(points, cap, sigma_mm)
+    u_xyz = np.sqrt(np.diag(single)) * 1e3
+    text = (
+        f"warning: cmm: states no cap_angle_deg, a {DEFAULT_CAP_ANGLE_DEG:g} deg cap is "
+        f"assumed; the registration residuals show {lateral:.3g}x its lateral variance "
+        f"({dof} degrees of freedom, chance up to {chance:.3g}x at p = {CAP_CHECK_P:g}): "
+        + (
+            f"taken as a {cap:.3g} deg cap, u widened to {u_xyz[0]:.3g}, {u_xyz[1]:.3g}, "
+            f"{u_xyz[2]:.3g} um in x, y, z"
+            if cap is not None
+            else "u kept (no shallower cap shows)"
+        )
+        + "; state cap_angle_deg (the probing's half-angle) in cmm:"
+    )
+    return single, text
+
+
 def centre_covariance(result: ProcessResult) -> CentreCovariance:
     """Covariance (N, k, 3, 3) of every ball centre of ``result``, with its source."""
     centres = result.centres
@@ -130,7 +184,11 @@ def centre_covariance(result: ProcessResult) -> CentreCovariance:
         parts.append(
             "warning: the centres file's u_um is one number per centre; its shape is "
             f"assumed, a free-radius fit to {points} points over a {cap:g} deg cap"
-            + ("" if cmm is not None else " (the plan's points, cmm:'s default cap)")
+            + (
+                " (the plan's points, cmm:'s default cap)"
+                if cmm is None
+                else ("" if cmm.cap_stated else " (cmm:'s default cap)")
+            )
             + "; u_x_um .. r_yz columns state the covariance"
         )
     rest = source == ""
@@ -138,13 +196,19 @@ def centre_covariance(result: ProcessResult) -> CentreCovariance:
     per_step = 1.0 / np.broadcast_to(centres.measurements[:, None], (n, k))
     if rest.any() and cmm is not None:
         points = cmm.points_per_ball or result.session.plan.points_per_ball
-        single = cap_centre_covariance(points, cmm.cap_angle_deg, cmm.point_noise_um * 1e-3)
+        sigma = cmm.point_noise_um * 1e-3
+        single = cap_centre_covariance(points, cmm.cap_angle_deg, sigma)
+        checked = ""
+        if not cmm.cap_stated:
+            single, checked = unstated_cap(result, points, sigma, per_step)
         cov[rest] = per_step[rest][:, None, None] * single
         source[rest] = "cmm"
         parts.append(
             f"session cmm: point noise {cmm.point_noise_um:g} um, {points} points "
             f"over a {cmm.cap_angle_deg:g} deg cap ({int(rest.sum())} centres)"
         )
+        if checked:
+            parts.append(checked)
     elif rest.any():
         # the residuals see only part of a centre's error (three coplanar balls: nothing
         # along the plane's normal), and a cap fit's error is largest along the cap's

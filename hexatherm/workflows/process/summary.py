@@ -17,6 +17,11 @@ if TYPE_CHECKING:
 MC_RELATIVE_LIMIT = 0.1
 
 
+#: references farther apart than this many times their median spacing, without a log,
+#: leave the smooth fit's error inside the gap unclaimed (a warning)
+WIDE_GAP = 2.0
+
+
 def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
     """Screen lines: where the centre uncertainties came from, and the largest pose ones."""
     lines = [f"uncertainty: centres from {uncertainty.centres.description}"]
@@ -45,6 +50,21 @@ def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
             if excess.excess_um > 0
             else f"  smooth fit's own error: nothing added ({residuals})"
         )
+        lines.append(
+            "  smooth fit's own error on a growth shaped as the thermocouple log: "
+            f"{np.sqrt(np.mean(excess.shape_um**2)):.3g} um RMS over the targets and legs, "
+            f"up to {excess.shape_um.max():.3g} um, added to each target's own u"
+            if excess.shape_um is not None and excess.shape_um.size
+            else "  no thermocouple log: the smooth fit's error between references far apart "
+            "or across a heating switched on or off rests on the references' residuals alone"
+        )
+        if excess.shape_um is None and excess.widest_gap > WIDE_GAP:
+            lines.append(
+                f"warning: references up to {excess.widest_gap:.2g}x their median spacing "
+                "apart and no thermocouple log: the smooth fit's u does not hold its error "
+                "inside the widest gaps (a 30 min pause in a heating session claimed 0.6x "
+                "of the corrected Tx and Tz errors); give the session its log"
+            )
     for check in uncertainty.repeats:
         line = (
             f"  {check.label} measured {check.n} times, averaged: their scatter is "

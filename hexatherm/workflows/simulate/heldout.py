@@ -36,7 +36,7 @@ def heldout_truth(spec: TwinSessionSpec, commanded_poses: npt.ArrayLike) -> Floa
     hexapod = read_hexapod_text(spec.hexapod_text, "hexapod.yaml")
     plan = spec.plan
     n, k = len(plan.labels), len(spec.balls.names)
-    ball_t, step_t = step_timing(n, k, spec.seconds_per_ball, spec.seconds_per_move)
+    ball_t, step_t = step_timing(n, k, spec.seconds_per_ball, spec.seconds_per_move, spec.pauses_s)
     end = ball_t.max() + spec.seconds_per_ball
     sample_t = np.arange(0.0, end + spec.sample_period_s, spec.sample_period_s)
     truth_t = np.union1d(sample_t, step_t)

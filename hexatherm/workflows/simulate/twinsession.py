@@ -104,6 +104,9 @@ class TwinSessionSpec:
         ISO 8601 time of the session start (``t_0``).
     seconds_per_ball, seconds_per_move : float
         Probing time of one ball, and the move after each step.
+    pauses_s : tuple of float
+        Extra seconds waited before each step (one per step of the plan; empty: none):
+        references irregular in time, long gaps.
     sample_period_s : float
         Thermocouple logging period.
     thermocouple_noise_C : float
@@ -145,6 +148,7 @@ class TwinSessionSpec:
     start: str = "2019-12-20T09:00:00"
     seconds_per_ball: float = 60.0
     seconds_per_move: float = 20.0
+    pauses_s: tuple[float, ...] = ()
     sample_period_s: float = 30.0
     thermocouple_noise_C: float = 0.0
     centre_noise_mm: float = 0.0
@@ -181,14 +185,23 @@ class SimulatedSession:
 
 
 def step_timing(
-    n_steps: int, n_balls: int, seconds_per_ball: float, seconds_per_move: float
+    n_steps: int,
+    n_balls: int,
+    seconds_per_ball: float,
+    seconds_per_move: float,
+    pauses_s: tuple[float, ...] = (),
 ) -> tuple[FloatArray, FloatArray]:
     """Times (seconds from start) of every ball (n_steps, n_balls) and every step (mean).
 
     The hexapod starts at the origin step's pose: each step probes its balls one
-    after the other, then the hexapod moves to the next step's pose.
+    after the other, then the hexapod moves to the next step's pose (after
+    ``pauses_s[i]`` more seconds before step i, when given).
     """
     step_start = np.arange(n_steps) * (n_balls * seconds_per_ball + seconds_per_move)
+    if len(pauses_s):
+        if len(pauses_s) != n_steps or min(pauses_s) < 0:
+            raise ValueError(f"need {n_steps} pauses of at least 0 s, got {pauses_s!r}")
+        step_start = step_start + np.cumsum(pauses_s)
     ball_times = step_start[:, None] + (np.arange(n_balls) + 0.5) * seconds_per_ball
     return ball_times, ball_times.mean(axis=1)
 
@@ -204,7 +217,7 @@ def simulate_session(spec: TwinSessionSpec) -> SimulatedSession:
     rng = np.random.default_rng(spec.seed)
     plan, balls = spec.plan, spec.balls
     n, k = len(plan.labels), len(balls.names)
-    ball_t, step_t = step_timing(n, k, spec.seconds_per_ball, spec.seconds_per_move)
+    ball_t, step_t = step_timing(n, k, spec.seconds_per_ball, spec.seconds_per_move, spec.pauses_s)
     end = ball_t.max() + spec.seconds_per_ball
     sample_t = np.arange(0.0, end + spec.sample_period_s, spec.sample_period_s)
     truth_t = np.union1d(sample_t, step_t)
