@@ -246,3 +246,22 @@ def test_r0s_line_weighs_its_measurements_in_u(tmp_path: Path) -> None:
     ratio = np.sqrt(np.diagonal(drawn.covariance / drawn.linear_covariance, axis1=1, axis2=2))
     # 1500 draws: a standard deviation within 2 * sqrt(1 / 3000) = 3.7 % (1 sigma 1.8 %)
     assert np.all(np.abs(ratio[:, 6:] - 1.0) < 0.06), ratio[:, 6:].round(3)
+
+
+def test_monte_carlo_refits_weigh_r0s_measurements_as_its_line(tmp_path: Path) -> None:
+    """Probed points, no log: Monte Carlo refits every measurement of R0 and combines
+    them with its line's weights, as ``process`` does (before: their mean, 1/4 of a
+    measurement's variance where the line has 0.7: Monte Carlo's corrected Tz u 0.8 of
+    the linear one); its u agrees with the linear one within its draws' scatter."""
+    s = dataclasses.replace(spec(tmp_path / "s", 0, repeats=4, n_targets=2), output="points")
+    write_files(simulate_session(s).files, tmp_path / "s")
+    text = (tmp_path / "s" / "session.yaml").read_text()
+    (tmp_path / "s" / "session.yaml").write_text(
+        "".join(line for line in text.splitlines(True) if "temperatures" not in line)
+    )
+    result = process_session(tmp_path / "s")
+    drawn = pose_uncertainty(result, mc=1500, seed=5)
+    assert drawn.drawn == "points"
+    ratio = np.sqrt(np.diagonal(drawn.covariance / drawn.linear_covariance, axis1=1, axis2=2))
+    # 1500 draws: a standard deviation within 2 * sqrt(1 / 3000) = 3.7 % (1 sigma 1.8 %)
+    assert np.all(np.abs(ratio[:, 6:] - 1.0) < 0.06), ratio[:, 6:].round(3)
