@@ -218,14 +218,22 @@ def _divided(times: FloatArray, values: FloatArray, order: int) -> FloatArray:
 
 
 def _beyond_noise(times: FloatArray, values: FloatArray, var: FloatArray, order: int) -> FloatArray:
-    """The divided differences' RMS of ``order`` (6,) beyond what the values' noise (their
-    variances ``var`` (n, 6), independent) gives them: ``sqrt(max(0, mean dd^2 - mean
-    var dd))``, signed as their mean."""
-    dd = _divided(times, values, order)
-    operator = _divided(times, np.eye(times.size), order)  # (n - order, n)
-    noise = np.mean(operator**2 @ var, axis=0)
-    rms2 = np.maximum(np.mean(dd**2, axis=0) - noise, 0.0)
-    return np.asarray(np.sqrt(rms2) * np.sign(np.mean(dd, axis=0)), dtype=float)
+    """The divided differences of ``order`` (6,) beyond what the values' noise (their
+    variances ``var`` (n, 6), independent) gives them, as one error of every leg
+    together: the legs' growth has one shape (the first singular vector ``s`` of the
+    series' growth, the heating's history being the legs' one), each set's divided
+    differences are read along it (``k = dd . s``), and ``sqrt(max(0, mean k^2 - mean
+    var k)) s``, signed as their mean. Read leg by leg, the noise of a leg that barely
+    grows was taken for curvature and spread the error over every pose component (Ty
+    with O and R0 once claimed 1.2x its error)."""
+    dd = _divided(times, values, order)  # (sets, 6)
+    operator = _divided(times, np.eye(times.size), order)  # (sets, n)
+    _, _, vt = np.linalg.svd(values, full_matrices=False)
+    shape = vt[0] * (-1.0 if vt[0] @ values.sum(axis=0) < 0 else 1.0)  # unit, along growth
+    along = dd @ shape
+    noise = float(np.mean((operator**2 @ var) @ shape**2))
+    rms = np.sqrt(max(float(np.mean(along**2)) - noise, 0.0))
+    return np.asarray(rms * np.sign(np.mean(along)) * shape, dtype=float)
 
 
 def _leg_derivatives(
@@ -278,10 +286,10 @@ def _extrapolation_error(
     ``sum_i W_i l_i / sum l^2 - sum W``, and ``sum_i W_i r_i``, of covariance ``V (sum W_i^2
     - (sum W_i l_i)^2 / sum l^2)``, is the noise left outside the steps. The model error is
     the term the line or polynomial misses: the RMS divided difference of the next order
-    over consecutive members of the series, beyond what their noise gives it (in
-    squares), times ``prod_j (t_O - t_j)`` over the members used; with too few members to
-    read it, the whole last term (the parabola's departure from the line; with two, the
-    whole carry).
+    over consecutive members of the series along the growth's shape, beyond what their
+    noise gives it (in squares, :func:`_beyond_noise`), times ``prod_j (t_O - t_j)`` over
+    the members used; with too few members to read it, the whole last term (the
+    parabola's departure from the line; with two, the whole carry).
     """
     session, carry = result.session, result.carry
     assert carry is not None and carry.series is not None
