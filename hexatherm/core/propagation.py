@@ -254,6 +254,36 @@ class TargetJacobian:
     #: parts shared by every target with the two neighbours: O and R0
     COMMON_PARTS = (0, 1)
 
+    def with_parts(self, steps: npt.ArrayLike, parts: npt.ArrayLike) -> TargetJacobian:
+        """This Jacobian plus derivatives of every target's outputs by the centres of more
+        steps (``parts`` (M, S, 12, k, 3) by ``steps`` (S,), e.g. O's carry, which reads
+        some references): each added to the part of a target that holds its step, else
+        in a new part, common to every target.
+
+        >>> jac = TargetJacobian(np.ones((1, 2, 12, 1, 3)), np.array([[0, 1]]))
+        >>> more = jac.with_parts([1, 4], np.ones((1, 2, 12, 1, 3)))
+        >>> more.steps.tolist(), more.jac[0, :, 0, 0, 0].tolist(), more.common_parts
+        ([[0, 1, 4]], [1.0, 2.0, 1.0], (0, 1, 2))
+        """
+        jac, own = self.jac.copy(), self.steps.copy()
+        added = np.asarray(parts, dtype=float)
+        new_jac, new_steps = [], []
+        for step, d in zip(np.asarray(steps, dtype=np.intp), np.moveaxis(added, 1, 0), strict=True):
+            hit = own == step  # at most one part per target holds a step
+            held = hit.any(axis=1)
+            jac[hit] += d[held]
+            if not held.all():
+                new_jac.append(np.where(held[:, None, None, None], 0.0, d))
+                new_steps.append(np.where(held, -1, step))
+        if not new_jac:
+            return TargetJacobian(jac, own, self.common_parts)
+        first = jac.shape[1]
+        return TargetJacobian(
+            np.concatenate([jac, np.stack(new_jac, axis=1)], axis=1),
+            np.concatenate([own, np.stack(new_steps, axis=1)], axis=1),
+            self.common_parts + tuple(range(first, first + len(new_jac))),
+        )
+
     def covariance(self, centre_cov_mm2: npt.ArrayLike, parts: tuple[int, ...] = ()) -> FloatArray:
         """Covariance (M, 12, 12) of every target's outputs (from the given parts only).
 

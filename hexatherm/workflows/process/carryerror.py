@@ -25,6 +25,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from hexatherm.core.carry import (
     carry_centres,
@@ -33,9 +34,14 @@ from hexatherm.core.carry import (
     model_misfit,
     shift_jacobian,
 )
-from hexatherm.core.geometry import pose_from_transform
-from hexatherm.core.propagation import PoseChain, TargetJacobian, reference_scatter
-from hexatherm.core.registration import register
+from hexatherm.core.geometry import invert_transform, pose_from_transform
+from hexatherm.core.propagation import (
+    PoseChain,
+    TargetJacobian,
+    covariance_root,
+    reference_scatter,
+)
+from hexatherm.core.registration import platform_frames, register
 from hexatherm.core.smoothbias import own_leg_covariance
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.carrying import extrapolation_weights, line_at_end
@@ -64,6 +70,12 @@ class CarryError:
         How O was carried (:class:`~hexatherm.workflows.process.carrying.OriginCarry`).
     basis : str
         Without a log: what the extrapolation's error rests on (one line).
+    jacobian : TargetJacobian, optional
+        Without a log: the targets' Jacobian with O's carry as a function of the centres
+        of the steps it reads (O, R0's state, the later references), every target's
+        corrected pose moved by them through the carried O; its covariance holds the
+        carry's noise with its correlation to the correction's (``factor`` holds the
+        rest). None with a log (the thermocouples' noise is no centre's).
     """
 
     factor: FloatArray
@@ -71,6 +83,7 @@ class CarryError:
     misfit: float
     source: str = "log"
     basis: str = ""
+    jacobian: TargetJacobian | None = None
 
     def covariance(self) -> FloatArray:
         """Added covariance (M, 12, 12) of every target's outputs."""
@@ -107,8 +120,9 @@ def carry_error(
     g_o = carry.origin_growth_mm
     sigma_c, misfit, basis = np.nan, np.nan, ""
     model_o = np.zeros(6)
+    derivative: dict[int, FloatArray] = {}
     if carry.source == "references":
-        sd_o, model_o, basis = _extrapolation_error(result, chain, centre_cov_mm2)
+        derivative, sd_o, model_o, basis = _extrapolation_error(result, chain, centre_cov_mm2)
     else:
         if result.temperatures is None:
             return None
@@ -148,10 +162,21 @@ def carry_error(
     )  # (6 pose, 6 legs)
     unshifted = result.correction.corrected  # the shift's derivative at ~ the same poses
     _, by_shift = shift_jacobian(carry.shift, unshifted, hexapod.convention)
-    factor[:, 6:, :6] = by_shift @ (by_growth * sd_o)
+    on_outputs = by_shift @ by_growth  # (M, 6 pose, 6 legs)
+    carried_jacobian = None
     if carry.source == "references":
-        # the extrapolation's model error: every leg's together (R0's columns are free)
-        factor[:, 6:, 6] = by_shift @ (by_growth @ model_o)
+        # the series' noise outside the steps, and the extrapolation's model error: every
+        # leg's together (R0's columns are free)
+        factor[:, 6:, :6] = on_outputs @ sd_o
+        factor[:, 6:, 6] = on_outputs @ model_o
+        # O's growth by the centres of the steps it reads: into the targets' Jacobian
+        parts = np.zeros((m, len(derivative), 12) + jacobian.jac.shape[3:])
+        parts[:, :, 6:] = np.einsum(
+            "mpl,slbi->mspbi", on_outputs, np.stack(list(derivative.values()))
+        )
+        carried_jacobian = jacobian.with_parts(np.array(list(derivative)), parts)
+    else:
+        factor[:, 6:, :6] = on_outputs * sd_o
     # R0: its carried centres (all but the last measurement moved)
     g_r = carry.reference_growth_mm
     if carry.source == "log" and np.any(g_r != 0):
@@ -181,7 +206,7 @@ def carry_error(
             axis=1
         )  # (M, 12, k, 3)
         factor[:, :, 6:] = on_r0.reshape(m, 12, 3 * k) @ (by_c * sd_r)
-    return CarryError(factor, sigma_c, misfit, carry.source, basis)
+    return CarryError(factor, sigma_c, misfit, carry.source, basis, carried_jacobian)
 
 
 def _divided(times: FloatArray, values: FloatArray, order: int) -> FloatArray:
@@ -193,35 +218,78 @@ def _divided(times: FloatArray, values: FloatArray, order: int) -> FloatArray:
 
 
 def _beyond_noise(times: FloatArray, values: FloatArray, var: FloatArray, order: int) -> FloatArray:
-    """The divided differences' RMS of ``order`` (6,) beyond what the values' noise (their
-    variances ``var`` (n, 6), independent) gives them: ``sqrt(max(0, mean dd^2 - mean
-    var dd))``, signed as their mean."""
-    dd = _divided(times, values, order)
-    operator = _divided(times, np.eye(times.size), order)  # (n - order, n)
-    noise = np.mean(operator**2 @ var, axis=0)
-    rms2 = np.maximum(np.mean(dd**2, axis=0) - noise, 0.0)
-    return np.asarray(np.sqrt(rms2) * np.sign(np.mean(dd, axis=0)), dtype=float)
+    """The divided differences of ``order`` (6,) beyond what the values' noise (their
+    variances ``var`` (n, 6), independent) gives them, as one error of every leg
+    together: the legs' growth has one shape (the first singular vector ``s`` of the
+    series' growth, the heating's history being the legs' one), each set's divided
+    differences are read along it (``k = dd . s``), and ``sqrt(max(0, mean k^2 - mean
+    var k)) s``, signed as their mean. Read leg by leg, the noise of a leg that barely
+    grows was taken for curvature and spread the error over every pose component (Ty
+    with O and R0 once claimed 1.2x its error)."""
+    dd = _divided(times, values, order)  # (sets, 6)
+    operator = _divided(times, np.eye(times.size), order)  # (sets, n)
+    _, _, vt = np.linalg.svd(values, full_matrices=False)
+    shape = vt[0] * (-1.0 if vt[0] @ values.sum(axis=0) < 0 else 1.0)  # unit, along growth
+    along = dd @ shape
+    noise = float(np.mean((operator**2 @ var) @ shape**2))
+    rms = np.sqrt(max(float(np.mean(along**2)) - noise, 0.0))
+    return np.asarray(rms * np.sign(np.mean(along)) * shape, dtype=float)
+
+
+def _leg_derivatives(
+    chain: PoseChain, centres_mm: FloatArray, steps: npt.NDArray[np.intp]
+) -> tuple[FloatArray, FloatArray]:
+    """Derivatives (S, 6, k, 3) of the leg lengths of ``steps`` (relative to O) by their
+    own centres and by O's, by central differences of the registration and the IGM."""
+    hexapod, origin = chain.hexapod, chain.plan.origin_index
+    idx = np.concatenate([[origin], steps]).astype(np.intp)
+    sub = np.asarray(centres_mm, dtype=float)[idx]  # (S + 1, k, 3): O first
+    s1, k = sub.shape[:2]
+    weights = None if chain.weights is None else np.asarray(chain.weights)[idx]
+    step = (np.eye(3 * k) * STEP_MM).reshape(3 * k, 1, 1, k, 3) * np.array([1.0, -1.0])[
+        None, :, None, None, None
+    ]
+    moved = sub[None, None] + step  # (3k, 2, S + 1, k, 3): every step's coordinate at once
+    w = None if weights is None else np.broadcast_to(weights, moved.shape[:-1]).reshape(-1, k)
+    frames = platform_frames(moved.reshape(-1, k, 3), chain.balls_mm, w).reshape(
+        moved.shape[:3] + (4, 4)
+    )
+    nominal = platform_frames(sub, chain.balls_mm, weights)
+    own = invert_transform(nominal[0]) @ frames[:, :, 1:]
+    by_o = invert_transform(frames[:, :, :1]) @ nominal[1:]
+
+    def dq(moved_frames: FloatArray) -> FloatArray:
+        q = hexapod.igm(pose_from_transform(moved_frames, hexapod.convention).reshape(-1, 6))
+        q = q.reshape(3 * k, 2, s1 - 1, 6)
+        return np.moveaxis((q[:, 0] - q[:, 1]) / (2 * STEP_MM), 0, -1).reshape(s1 - 1, 6, k, 3)
+
+    return dq(own), dq(by_o)
 
 
 def _extrapolation_error(
     result: ProcessResult, chain: PoseChain, centre_cov_mm2: FloatArray
-) -> tuple[FloatArray, FloatArray, str]:
-    """O's mean growth read from the references' series (no log, :class:`ReferenceSeries`):
-    its noise's standard deviation per leg (6,), its model error (6,: one error of every
+) -> tuple[dict[int, FloatArray], FloatArray, FloatArray, str]:
+    """O's mean growth read from the references' series (no log, :class:`ReferenceSeries`)
+    as a function of the centres: its derivatives (6 legs, k, 3) by the centres of the
+    steps it reads (O, R0's state, the later references used), the factor (6, 6) of its
+    noise that no step of the propagation holds, its model error (6,: one error of every
     leg together, the heating's history being the legs' one), and one line on what the
     model error rests on.
 
     O's growth is ``sum_j W_j (q_j - q_R0)`` over the series (O's measurements' weights
-    averaged), scaled to O's legs, R0's state being the line ``sum_i l_i q_i`` of R0's
-    measurements: its noise ``sum_i (W_i - l_i sum W)^2 var q_i`` over R0's measurements
-    plus ``sum_j W_j^2 var q_j`` over the later references (their own centres, O held
-    fixed; one measurement of R0 has R0's state's variance over ``sum l^2``). Its model
-    error is the term the line or polynomial misses: the RMS divided difference of the
-    next order over consecutive members of the series, beyond what their noise gives it
-    (in squares), times ``prod_j (t_O - t_j)`` over the members used; with too few
-    members to read it, the whole last term (the parabola's departure from the line; with
-    two, the whole carry). Added to the outputs as independent of the correction's own
-    noise (R0's state is in both: left out, on the safe side).
+    averaged), scaled to O's legs, R0's state being the line ``s = sum_i l_i R0_i`` of
+    R0's measurements. The later references and R0's state are steps of the propagation:
+    their derivatives carry O's carry into its Jacobian, correlated with the targets'
+    correction through them (R0's state is in both). R0's measurements, each ``V = U_s /
+    sum l^2`` (the state's covariance over the line's weights), are ``(l_i / sum l^2) s``
+    plus a part ``r_i`` independent of the state: the growth reads ``s`` through
+    ``sum_i W_i l_i / sum l^2 - sum W``, and ``sum_i W_i r_i``, of covariance ``V (sum W_i^2
+    - (sum W_i l_i)^2 / sum l^2)``, is the noise left outside the steps. The model error is
+    the term the line or polynomial misses: the RMS divided difference of the next order
+    over consecutive members of the series along the growth's shape, beyond what their
+    noise gives it (in squares, :func:`_beyond_noise`), times ``prod_j (t_O - t_j)`` over
+    the members used; with too few members to read it, the whole last term (the
+    parabola's departure from the line; with two, the whole carry).
     """
     session, carry = result.session, result.carry
     assert carry is not None and carry.series is not None
@@ -231,20 +299,39 @@ def _extrapolation_error(
     refs = plan.reference_indices
     ts, g, n0 = series.times_s, series.growth_mm, series.r0_count
     n = ts.size
+    w = series.weights.mean(axis=0)
+    line = line_at_end(ts[:n0])  # R0's state from its measurements
+    spread = float(np.sum(line**2))
+    used = np.flatnonzero(w[n0:]) + 1  # the later references read (index in refs)
+    own, by_o = _leg_derivatives(chain, result.centres.centres_mm, refs[np.r_[0, used]])
+    q_r0 = result.steps.q_mm[refs[0]]
+    ratio = legs.sensitivity_mm_per_K(hexapod.igm(plan.poses[plan.origin_index][None])[0]) / (
+        legs.sensitivity_mm_per_K(q_r0)
+    )
+    on_state = float(w[:n0] @ line) / spread - float(w.sum())
+    later = w[n0 - 1 + used]
+    derivative = {
+        int(refs[0]): on_state * own[0],
+        plan.origin_index: np.einsum("j,jlbi->lbi", later, by_o[1:] - by_o[:1]),
+    }
+    for j, weight, d in zip(used, later, own[1:], strict=True):
+        derivative[int(refs[j])] = weight * d
+    derivative = {step: ratio[:, None, None] * d for step, d in derivative.items()}
+    # R0's measurements beyond its state: sum_i W_i r_i, through R0's legs
+    left = max(float(w[:n0] @ w[:n0]) - float(w[:n0] @ line) ** 2 / spread, 0.0) / spread
+    flat = own[0].reshape(6, -1)
+    block = np.zeros((flat.shape[1],) * 2)
+    for ball, cov in enumerate(np.asarray(centre_cov_mm2, dtype=float)[refs[0]]):
+        block[3 * ball : 3 * ball + 3, 3 * ball : 3 * ball + 3] = cov
+    outside = ratio[:, None] * ratio[None] * (flat @ (left * block) @ flat.T)
     legs_cov = own_leg_covariance(chain, result.centres.centres_mm, centre_cov_mm2, refs)
     var = np.diagonal(legs_cov, axis1=1, axis2=2)  # (R, 6): R0's state, then the later
-    line = line_at_end(ts[:n0])  # R0's state from its measurements
-    var_single = var[0] / float(np.sum(line**2))
-    var_series = np.concatenate([np.repeat(var_single[None], n0, axis=0), var[1:]])
-    w = series.weights.mean(axis=0)
-    # on R0's measurements: their own weight less their share of R0's state
-    on = np.concatenate([w[:n0] - w.sum() * line, w[n0:]])
-    noise = (on[:, None] ** 2 * var_series).sum(axis=0)
+    var_series = np.concatenate([np.repeat(var[0][None] / spread, n0, axis=0), var[1:]])
     models = []
     for t, row in zip(carry.origin_times_s, series.weights, strict=True):
-        used = np.flatnonzero(row)
+        members = np.flatnonzero(row)
         if t < ts[0]:
-            order = used.size  # degree + 1
+            order = members.size  # degree + 1
             if n > order:
                 rms = _beyond_noise(ts, g, var_series, order)
                 models.append(rms * float(np.prod(t - ts[:order])))
@@ -255,14 +342,10 @@ def _extrapolation_error(
                 models.append(row @ g)
         elif n >= 3:
             rms = _beyond_noise(ts, g, var_series, 2)
-            models.append(rms * float(np.prod(t - ts[used])))
+            models.append(rms * float(np.prod(t - ts[members])))
         else:
             models.append(np.zeros(6))
     model = np.mean(models, axis=0)
-    q_r0 = result.steps.q_mm[refs[0]]
-    ratio = legs.sensitivity_mm_per_K(hexapod.igm(plan.poses[plan.origin_index][None])[0]) / (
-        legs.sensitivity_mm_per_K(q_r0)
-    )
     shape = {1: "line", 2: "parabola"}[series.degree]
     basis = f"the references' noise and what the {shape} through them misses ({n} in the " + (
         f"series, the next divided differences' RMS beyond their noise over "
@@ -270,11 +353,7 @@ def _extrapolation_error(
         if n > series.degree + 1
         else "series: the whole last term)"
     )
-    return (
-        np.asarray(ratio * np.sqrt(noise), dtype=float),
-        np.asarray(ratio * model, dtype=float),
-        basis,
-    )
+    return derivative, covariance_root(outside), ratio * model, basis
 
 
 def add_common(
@@ -356,8 +435,13 @@ def carry_line(result: ProcessResult, error: CarryError | None) -> str:
                 f"thermocouple noise {error.sigma_C * 1e3:.3g} mK (Type A from the log), "
                 f"leg model gain error {error.misfit:.0%} beyond the references' noise"
             )
+        beyond = ""
+        if error.jacobian is not None:
+            # the references' noise is in the propagation, with R0's in the correction
+            basis += " (their noise propagated with the correction's: R0's state is in both)"
+            beyond = "beyond the propagation "
         text += (
-            f"; its error in u (common): {basis}: up to {u[6:9].max() * 1e3:.3g} um, "
+            f"; its error in u (common): {basis}: {beyond}up to {u[6:9].max() * 1e3:.3g} um, "
             f"{np.deg2rad(u[9:]).max() * 1e6:.3g} urad"
         )
     return text

@@ -60,6 +60,9 @@ class RepeatGroup:
     motions : ndarray, shape (n, 4, 4), optional
         The rigid motion (CMM frame) applied to each measurement's centres before they
         are averaged (R0's carry to its last thermal state); None: none (identity).
+    weights : ndarray, shape (n,), optional
+        Each measurement's weight in the step's centres (``1/n``: the mean; R0's line at
+        its last time without a log, :func:`line_at_end`); None: the mean.
     """
 
     label: str
@@ -69,6 +72,7 @@ class RepeatGroup:
     dof: int
     cov_mm2: FloatArray
     motions: FloatArray | None = None
+    weights: FloatArray | None = None
 
 
 @dataclass(frozen=True)
@@ -331,6 +335,7 @@ def carry_and_average(
     c, t, u = centres.centres_mm.copy(), centres.times_s.copy(), centres.u_um.copy()
     cov = None if centres.cov_mm2 is None else centres.cov_mm2.copy()
     count = np.ones(len(plan.labels), dtype=np.intp)
+    spread = np.ones(len(plan.labels))
     weights = registration_weights(centres.u_um)
     growth: dict[int, FloatArray] = {}
     motions: dict[int, FloatArray] = {}
@@ -359,6 +364,8 @@ def carry_and_average(
         measured = centres.centres_mm[idx]  # (n, k, 3)
         world = np.stack([motions.get(int(i), np.eye(4)) for i in idx])
         carried = carry_centres(np.eye(4), world, measured) if logged else measured
+        # R0 without a log: its line in time at its last measurement (its state)
+        w = line_at_end(times) if by_references and not is_origin else np.full(n, 1.0 / n)
         if n > 1:
             deviations, dof = _deviations(times, carried)
             one_cov = (
@@ -375,16 +382,16 @@ def carry_and_average(
                     int(dof),
                     one_cov,
                     world if logged and not is_origin else None,
+                    w,
                 )
             )
-        # R0 without a log: its line in time at its last measurement (its state)
-        w = line_at_end(times) if by_references and not is_origin else np.full(n, 1.0 / n)
         c[first] = np.einsum("i,ikj->kj", w, measured if is_origin else carried)
         t[first] = state_time if carry and not is_origin else times.mean()
         u[first] = np.sqrt(np.einsum("i,ik->k", w**2, centres.u_um[idx] ** 2))
         if cov is not None and centres.cov_mm2 is not None:
             cov[first] = np.einsum("i,ikab->kab", w**2, centres.cov_mm2[idx])
         count[first] = n
+        spread[first] = float(np.sum(w**2))
     origin_carry = None
     if carry:
         o_idx = np.asarray(repeats.origin, dtype=np.intp)
@@ -436,6 +443,7 @@ def carry_and_average(
         count[keep],
         centres.time_aware,
         None if centres.cov_from_file is None else centres.cov_from_file[keep],
+        spread[keep],
     )
     if origin_carry is not None:
         origin_carry = dataclasses.replace(origin_carry, leg_C=origin_carry.leg_C[keep])

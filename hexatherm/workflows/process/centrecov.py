@@ -192,8 +192,9 @@ def centre_covariance(result: ProcessResult) -> CentreCovariance:
             + "; u_x_um .. r_yz columns state the covariance"
         )
     rest = source == ""
-    # steps averaging repeated measurements (O, R0): 1/n of one measurement's covariance
-    per_step = 1.0 / np.broadcast_to(centres.measurements[:, None], (n, k))
+    # steps combining repeated measurements (O, R0): 1/n of one measurement's covariance
+    # for a mean, sum l^2 for R0's line at its last time (no log)
+    per_step = np.broadcast_to(centres.variance_factor[:, None], (n, k))
     if rest.any() and cmm is not None:
         points = cmm.points_per_ball or result.session.plan.points_per_ball
         sigma = cmm.point_noise_um * 1e-3

@@ -54,6 +54,11 @@ class StepCentres:
     time_aware : bool or None
         ISO times: whether the files gave a UTC offset (then every time written out
         carries one, :func:`time_text`); None for seconds.
+    spread : ndarray, shape (N,), optional
+        The sum of the squared weights of the measurements each step's centres combine
+        (its variance over one measurement's): ``1/n`` for a mean, ``sum l^2`` for R0's
+        line in time at its last measurement (no thermocouple log); None: ``1 /
+        measurements``.
     """
 
     centres_mm: FloatArray
@@ -65,6 +70,7 @@ class StepCentres:
     time_aware: bool | None = None
     #: (N, k): which of ``cov_mm2`` a centres file gave (the others are sphere fits)
     cov_from_file: npt.NDArray[np.bool_] | None = None
+    spread: FloatArray | None = None
 
     def time_text(self, seconds: float) -> str:
         """A time as the outputs write it: ISO 8601 in UTC with ``+00:00`` when the
@@ -88,6 +94,13 @@ class StepCentres:
         if self.count is None:
             return np.ones(len(self.times_s), dtype=np.intp)
         return self.count
+
+    @property
+    def variance_factor(self) -> FloatArray:
+        """Each step's centre variance over one measurement's (:attr:`spread`)."""
+        if self.spread is None:
+            return 1.0 / self.measurements
+        return self.spread
 
 
 def nominal_fit_diameter_mm(balls: Balls) -> FloatArray:

@@ -179,6 +179,16 @@ def point_sampler(result: ProcessResult, cov_mm2: FloatArray) -> CentreSampler |
         ok = np.isfinite(np.asarray(fitted.extra["sigma_um"], dtype=float))
         for label in np.asarray(fitted.label)[ok]:
             refitted[step_index[str(label)]] += 1
+    # each measurement's weight in its step's centres (R0's line without a log)
+    weight_of = {
+        label: float(w)
+        for g in result.repeats
+        for label, w in zip(
+            g.labels,
+            np.full(len(g.labels), 1.0 / len(g.labels)) if g.weights is None else g.weights,
+            strict=True,
+        )
+    }
     k = len(result.session.balls.names)
     if any(refitted[i] != count[i] * k for i in repeated):
         return None  # a repeated step's measurement is not refitted: draw every centre
@@ -191,6 +201,7 @@ def point_sampler(result: ProcessResult, cov_mm2: FloatArray) -> CentreSampler |
         sigma_mm = np.asarray(fitted.extra["sigma_um"], dtype=float) * 1e-3
         ok = np.isfinite(sigma_mm)
         step = np.array([step_index[s] for s in fitted.label])
+        share = np.array([weight_of.get(s, 1.0) for s in fitted.label])
         ball = np.array([ball_index[b] for b in fitted.ball])
         radius = fit_radii(raw, first, result.session.balls, result.fixed_diameter_mm)
         fits.append(
@@ -203,16 +214,23 @@ def point_sampler(result: ProcessResult, cov_mm2: FloatArray) -> CentreSampler |
                 ball[ok],
                 ok,
                 fitted.xyz_mm,
+                share[ok],
             )
         )
     centres = result.centres.centres_mm
     root = covariance_root(cov_mm2)
     averaged = sorted(repeated)
 
-    def put(drawn: FloatArray, rows: slice, step: IntArray, ball: IntArray, c: FloatArray) -> None:
-        """Refitted centres (d, n, 3) into ``drawn``; a repeat adds its share of the mean."""
-        share = 1.0 / count[step]
-        once = share == 1.0
+    def put(
+        drawn: FloatArray,
+        rows: slice,
+        step: IntArray,
+        ball: IntArray,
+        c: FloatArray,
+        share: FloatArray,
+    ) -> None:
+        """Refitted centres (d, n, 3) into ``drawn``; a repeat adds its share (weight)."""
+        once = count[step] == 1
         drawn[rows, step[once], ball[once]] = c[:, once]
         if not once.all():
             view = np.moveaxis(drawn[rows], 0, 2)  # (N, k, d, 3), writes through
@@ -225,7 +243,7 @@ def point_sampler(result: ProcessResult, cov_mm2: FloatArray) -> CentreSampler |
     def sample(rng: np.random.Generator, size: int) -> FloatArray:
         drawn = draw_centres(centres, root, rng, size)
         drawn[:, averaged] = 0.0  # the means of their measurements' refits, added below
-        for xyz, noise_mm, groups, radius, step, ball, ok, fitted_mm in fits:
+        for xyz, noise_mm, groups, radius, step, ball, ok, fitted_mm, share in fits:
             chunk = max(1, POINTS_PER_REFIT // len(xyz))
             n_spheres = int(groups.max()) + 1
             counts = np.bincount(groups, minlength=n_spheres)
@@ -257,7 +275,7 @@ def point_sampler(result: ProcessResult, cov_mm2: FloatArray) -> CentreSampler |
                         fixed_radius=radius is not None,
                         normal_points_mm=xyz_s,
                     )
-                    put(drawn, slice(first, first + d), step, ball, centre[:, ok])
+                    put(drawn, slice(first, first + d), step, ball, centre[:, ok], share)
                 continue
             for first in range(0, size, chunk):
                 d = min(chunk, size - first)
@@ -273,6 +291,7 @@ def point_sampler(result: ProcessResult, cov_mm2: FloatArray) -> CentreSampler |
                     step,
                     ball,
                     refit.centre_mm.reshape(d, n_spheres, 3)[:, ok],
+                    share,
                 )
         return drawn
 
@@ -332,7 +351,10 @@ def pose_uncertainty(
     centres = centre_covariance(result)
     chain = pose_chain(result)
     jacobian = target_jacobian(chain, result.centres.centres_mm)
-    linear = jacobian.covariance(centres.cov_mm2)
+    carried = carry_error(result, chain, jacobian, centres.cov_mm2)  # common
+    # without a log O's carry reads the references: a function of their centres
+    full = jacobian if carried is None or carried.jacobian is None else carried.jacobian
+    linear = full.covariance(centres.cov_mm2)
     covariance, method, draws, drawn = linear, "linear", 0, ""
     if mc:
         sampler = point_sampler(result, centres.cov_mm2)
@@ -345,13 +367,14 @@ def pose_uncertainty(
             progress=progress,
             sample=sampler,
         )
+        if full is not jacobian:  # the chain holds O's carry fixed: its part linear
+            covariance = covariance + linear - jacobian.covariance(centres.cov_mm2)
         method, draws = "monte-carlo", int(mc)
         drawn = "centres" if sampler is None else "points"
     u = np.sqrt(np.clip(np.diagonal(covariance, axis1=1, axis2=2), 0.0, None))
     if between is None:
         between = len(result.correction.target_index) <= BETWEEN_MAX_TARGETS
-    common_u, own_u, pairs = shared_parts(jacobian, centres.cov_mm2, u, linear, between)
-    carried = carry_error(result, chain, jacobian, centres.cov_mm2)  # common
+    common_u, own_u, pairs = shared_parts(full, centres.cov_mm2, u, linear, between)
     covariance, linear, common_u, own_u, pairs = add_common(
         carried, covariance, linear, common_u, own_u, pairs
     )
