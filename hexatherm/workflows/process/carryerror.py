@@ -147,19 +147,10 @@ def carry_error(
     m = len(result.correction.target_index)
     factor = np.zeros((m, 12, 12))
     # O: its carried frame, the corrected poses' frame
-    zero = np.zeros((1, 6))
     g_mean = g_o.mean(axis=0)
-    by_growth = np.stack(
-        [
-            (
-                pose_from_transform(carry_motion(hexapod, zero, g_mean + STEP_MM * e)[0])
-                - pose_from_transform(carry_motion(hexapod, zero, g_mean - STEP_MM * e)[0])
-            )
-            / (2 * STEP_MM)
-            for e in np.eye(6)
-        ],
-        axis=1,
-    )  # (6 pose, 6 legs)
+    steps = STEP_MM * np.concatenate([np.eye(6), -np.eye(6)])  # +- each leg, one batch
+    poses = pose_from_transform(carry_motion(hexapod, np.zeros((12, 6)), g_mean + steps))
+    by_growth = ((poses[:6] - poses[6:]) / (2 * STEP_MM)).T  # (6 pose, 6 legs)
     unshifted = result.correction.corrected  # the shift's derivative at ~ the same poses
     _, by_shift = shift_jacobian(carry.shift, unshifted, hexapod.convention)
     on_outputs = by_shift @ by_growth  # (M, 6 pose, 6 legs)
@@ -190,17 +181,14 @@ def carry_error(
         c = result.centres.centres_mm[r0]
         frame = register(c[None], session.balls.centres_mm).platform2cmm
         pose = plan.poses[r0][None]
-        by_c = np.stack(
-            [
-                (
-                    carry_centres(frame, carry_motion(hexapod, pose, STEP_MM * e[None]), c[None])
-                    - carry_centres(frame, carry_motion(hexapod, pose, -STEP_MM * e[None]), c[None])
-                )[0].reshape(-1)
-                / (2 * STEP_MM)
-                for e in np.eye(6)
-            ],
-            axis=1,
-        )  # (3k, 6 legs): a growth error of R0's state moves its centres
+        moved = carry_centres(
+            np.broadcast_to(frame, (12, 4, 4)),
+            carry_motion(hexapod, np.repeat(pose, 12, axis=0), steps),
+            np.broadcast_to(c, (12, *c.shape)),
+        ).reshape(12, -1)
+        by_c = (
+            (moved[:6] - moved[6:]) / (2 * STEP_MM)
+        ).T  # (3k, 6 legs): a growth error of R0's state moves its centres
         k = c.shape[0]
         on_r0 = np.where((jacobian.steps == r0)[..., None, None, None], jacobian.jac, 0.0).sum(
             axis=1
