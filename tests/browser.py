@@ -131,8 +131,6 @@ class Chromium:
                 f"the load of {page}",
             )
             data = self.call("Page.printToPDF", session, **PRINT)["data"]
-            # its folder made as the command line's --user-data-dir beside it made it
-            pdf.parent.mkdir(parents=True, exist_ok=True)
             pdf.write_bytes(base64.b64decode(data))
         finally:
             self.call("Target.closeTarget", targetId=target)
