@@ -53,16 +53,6 @@ def _no_disk_flush():
         yield
 
 
-@pytest.fixture(scope="session", autouse=True)
-def _end_the_browser():
-    """The headless Chromium the report tests print with (started on their first print,
-    :mod:`tests.browser`) ends with the session."""
-    yield
-    from tests.browser import close_shared
-
-    close_shared()
-
-
 @pytest.fixture(autouse=True)
 def _forget_pipython_callbacks():
     """pipython keeps every GCSCommands' connection callback in a list on its gateway

@@ -1,8 +1,7 @@
 """The report as a browser prints it: headless Chromium to an A4 PDF, read back with poppler.
 
 The report of the widest shipped session (``with-hidden-effect``: 40 targets, every
-commanded column) is printed as ``chromium --headless --print-to-pdf`` prints it (by one
-browser kept for the test session, :mod:`tests.browser`); the PDF's
+commanded column) is printed with ``chromium --headless --print-to-pdf``; the PDF's
 words and their boxes come from ``pdftotext -bbox`` and its images from ``pdfimages
 -list`` (poppler-utils, no Python dependency). The truths are independent of the
 report's code: ``expected/poses.csv`` (every corrected deviation, formatted here), the
@@ -31,8 +30,8 @@ import pytest
 from hexatherm.io.csvout import RESOLUTION
 from hexatherm.workflows.process.pipeline import process_session
 from hexatherm.workflows.report import build_report
-from tests.browser import shared
 from tests.shipped import SHIPPED
+from tests.waiting import SAFETY_S
 
 ROOT = Path(__file__).resolve().parents[2]
 SESSION = SHIPPED / "with-hidden-effect"
@@ -66,13 +65,27 @@ def printed(tmp_path_factory):
 
 
 def print_pdf(page: Path, pdf: Path) -> str:
-    """Print the HTML file ``page`` to ``pdf`` on A4 with headless Chromium (the test
-    process's one browser, :mod:`tests.browser`) and return the PDF's words with their
-    boxes (``pdftotext -bbox``); skip where no Chromium is installed."""
+    """Print the HTML file ``page`` to ``pdf`` on A4 with headless Chromium (its profile
+    beside ``pdf``) and return the PDF's words with their boxes (``pdftotext -bbox``);
+    skip where no Chromium is installed."""
     chromium = browser()
     if chromium is None:
         pytest.skip("no Chromium (apt-get install -y chromium poppler-utils)")
-    shared(chromium).print_pdf(page, pdf)
+    subprocess.run(
+        [
+            chromium,
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--no-pdf-header-footer",
+            f"--user-data-dir={pdf.parent / 'profile'}",
+            f"--print-to-pdf={pdf}",
+            page.as_uri(),
+        ],
+        check=True,
+        capture_output=True,
+        timeout=SAFETY_S,
+    )
     return subprocess.run(
         [poppler("pdftotext"), "-bbox", str(pdf), "-"], check=True, capture_output=True
     ).stdout.decode("utf-8")
