@@ -69,8 +69,8 @@ from hexatherm.devices.sim.symetrie import (
     SimulatedController,
     SimulatedHexapod,
     _Drop,
-    single_axis_travel,
 )
+from hexatherm.devices.sim.travel import single_axis_travel
 from hexatherm.typing import FloatArray
 
 #: the identification, ``manufacturer, model, serial, firmware``

@@ -65,8 +65,8 @@ from hexatherm.devices.sim.symetrie import (
     SimulatedController,
     SimulatedHexapod,
     _Drop,
-    single_axis_travel,
 )
+from hexatherm.devices.sim.travel import single_axis_travel
 from hexatherm.devices.sim.userframes import UserObjectFrames
 from hexatherm.typing import FloatArray
 
