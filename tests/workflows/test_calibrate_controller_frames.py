@@ -51,8 +51,9 @@ from hexatherm.workflows.calibrate.frames import frames_record
 from hexatherm.workflows.calibrate.run import Calibration, calibrate, machine_hexapod, read_campaign
 from hexatherm.workflows.run.campaign import run_campaign
 from hexatherm.workflows.run.options import RunOptions
-from hexatherm.workflows.serve import TwinMachines, TwinWorld
+from hexatherm.workflows.serve import TwinWorld
 from tests.sessions import ROOT
+from tests.workflows.test_run import twin_machines
 
 #: the user frame in the machine frame, the object frame in the platform frame (mm, deg)
 FRAMES = np.array([0.8, -1.5, 2.0, 0.4, -0.3, 1.2, 0.5, -0.3, 2.0, 0.1, -0.2, 0.3])
@@ -121,7 +122,7 @@ def measure(
         true_parameters=theta,
     )
     origin = transform_from_pose(NOMINAL_ORIGIN)
-    with TwinMachines(world, dialect=dialect, seed=seed, point_noise_um=noise_um) as machines:
+    with twin_machines(world, dialect=dialect, seed=seed, point_noise_um=noise_um) as machines:
         if frames is not None:
             driver = controller_from_url(machines.controller_url, clock=clock, sleep=clock.sleep)
             driver.connect()
