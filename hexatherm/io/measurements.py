@@ -12,9 +12,7 @@ import numpy as np
 from hexatherm.errors import InputError
 from hexatherm.io.csvfile import read_measurement_csv
 from hexatherm.io.csvtext import read_text
-from hexatherm.io.dmis import DMIS_SUFFIXES, looks_like_dmis, read_dmis
 from hexatherm.io.files import open_bounded
-from hexatherm.io.qif import QIF_SUFFIXES, looks_like_qif, read_qif
 from hexatherm.io.records import Records
 from hexatherm.session import MeasurementFormat
 
@@ -79,14 +77,21 @@ def read_measurements(
         return read_mapped(path, spec, labels, allow_truncated, keep_later)
     suffix = Path(path).suffix.lower()
     if is_qif(path):
+        from hexatherm.io.qif import read_qif
+
         records = read_qif(path, names=names, keep_later=keep_later)
         if progress is not None:
             progress(1, 1)
         return [check_coordinates(r) for r in records]
-    dmis = suffix in (".dmo", ".dms", ".dmi") or (
-        suffix != ".csv" and looks_like_dmis(read_text(path)[:4096])
-    )
+    # the DMIS and QIF readers (lxml) are imported only for a file that may be one
+    dmis = False
+    if suffix != ".csv":
+        from hexatherm.io.dmis import DMIS_SUFFIXES, looks_like_dmis
+
+        dmis = suffix in DMIS_SUFFIXES or looks_like_dmis(read_text(path)[:4096])
     if dmis:
+        from hexatherm.io.dmis import read_dmis
+
         records = read_dmis(
             path, progress=progress, allow_truncated=allow_truncated, keep_later=keep_later
         )
@@ -125,9 +130,15 @@ def is_qif(path: str | os.PathLike[str]) -> bool:
     """Whether a measurement file is read as QIF: suffix ``.qif`` (any case), or, unless it
     is ``.csv`` or a DMIS suffix, a first 4 KiB that opens a ``QIFDocument``."""
     suffix = Path(path).suffix.lower()
+    if suffix == ".csv":
+        return False
+    from hexatherm.io.dmis import DMIS_SUFFIXES
+
+    if suffix in DMIS_SUFFIXES:
+        return False
+    from hexatherm.io.qif import QIF_SUFFIXES, looks_like_qif
+
     if suffix in QIF_SUFFIXES:
         return True
-    if suffix == ".csv" or suffix in DMIS_SUFFIXES:
-        return False
     with open_bounded(path) as stream:
         return looks_like_qif(stream.read(4096))

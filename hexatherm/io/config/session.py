@@ -247,11 +247,11 @@ def read_feature_names(path: str | os.PathLike[str]) -> dict[str, str | None]:
 def _read_feature_names(doc: YamlDoc) -> dict[str, str | None]:
     """The optional ``feature_names:`` of a session file: a CMM's feature name (as its QIF
     results file gives it) -> hexatherm's ``<step>_<ball>``, or null to read it past."""
-    from hexatherm.io.qifrecords import STEP_BALL
-
     names = doc.get("feature_names", default=None)
     if names is None:
         return {}
+    from hexatherm.io.qifrecords import STEP_BALL
+
     if not isinstance(names, dict) or not names:
         raise doc.error(
             "expected a mapping of feature names to <step>_<ball> (or null), "
