@@ -34,14 +34,14 @@ from hexatherm.core.carry import (
     model_misfit,
     shift_jacobian,
 )
-from hexatherm.core.geometry import invert_transform, pose_from_transform
+from hexatherm.core.geometry import pose_from_transform
 from hexatherm.core.propagation import (
     PoseChain,
     TargetJacobian,
     covariance_root,
     reference_scatter,
 )
-from hexatherm.core.registration import platform_frames, register
+from hexatherm.core.registration import register
 from hexatherm.core.smoothbias import own_leg_covariance
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.carrying import extrapolation_weights, line_at_end
@@ -228,30 +228,13 @@ def _leg_derivatives(
     chain: PoseChain, centres_mm: FloatArray, steps: npt.NDArray[np.intp]
 ) -> tuple[FloatArray, FloatArray]:
     """Derivatives (S, 6, k, 3) of the leg lengths of ``steps`` (relative to O) by their
-    own centres and by O's, by central differences of the registration and the IGM."""
-    hexapod, origin = chain.hexapod, chain.plan.origin_index
-    idx = np.concatenate([[origin], steps]).astype(np.intp)
-    sub = np.asarray(centres_mm, dtype=float)[idx]  # (S + 1, k, 3): O first
-    s1, k = sub.shape[:2]
-    weights = None if chain.weights is None else np.asarray(chain.weights)[idx]
-    step = (np.eye(3 * k) * STEP_MM).reshape(3 * k, 1, 1, k, 3) * np.array([1.0, -1.0])[
-        None, :, None, None, None
-    ]
-    moved = sub[None, None] + step  # (3k, 2, S + 1, k, 3): every step's coordinate at once
-    w = None if weights is None else np.broadcast_to(weights, moved.shape[:-1]).reshape(-1, k)
-    frames = platform_frames(moved.reshape(-1, k, 3), chain.balls_mm, w).reshape(
-        moved.shape[:3] + (4, 4)
-    )
-    nominal = platform_frames(sub, chain.balls_mm, weights)
-    own = invert_transform(nominal[0]) @ frames[:, :, 1:]
-    by_o = invert_transform(frames[:, :, :1]) @ nominal[1:]
-
-    def dq(moved_frames: FloatArray) -> FloatArray:
-        q = hexapod.igm(pose_from_transform(moved_frames, hexapod.convention).reshape(-1, 6))
-        q = q.reshape(3 * k, 2, s1 - 1, 6)
-        return np.moveaxis((q[:, 0] - q[:, 1]) / (2 * STEP_MM), 0, -1).reshape(s1 - 1, 6, k, 3)
-
-    return dq(own), dq(by_o)
+    own centres and by O's: the poses' analytic derivatives
+    (:meth:`~hexatherm.core.propagation.PoseChain.pose_derivatives`) through the IGM's
+    Jacobian, as :func:`~hexatherm.core.smoothbias.own_leg_covariance` takes them."""
+    pose, own, by_o = chain.pose_derivatives(np.asarray(centres_mm, dtype=float), steps)
+    jac = chain.hexapod.jacobian(pose)  # (S, 6 legs, 6 pose)
+    shape = (len(steps), 6, centres_mm.shape[1], 3)
+    return (jac @ own).reshape(shape), (jac @ by_o).reshape(shape)
 
 
 def _extrapolation_error(
