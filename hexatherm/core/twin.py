@@ -42,7 +42,7 @@ from hexatherm.core.geometry import (
     pose_from_transform,
     transform_from_pose,
 )
-from hexatherm.core.hexapod import Hexapod
+from hexatherm.core.hexapod import FgmStart, Hexapod
 from hexatherm.core.plan import Plan, find_repeats
 from hexatherm.core.registration import register
 from hexatherm.core.thermal import LegThermalModel
@@ -162,6 +162,7 @@ def predict(
     positioning_error_mm: npt.ArrayLike | None = None,
     reference_state: bool = True,
     true_parameters: npt.ArrayLike | None = None,
+    prepared: PreparedPlan | None = None,
 ) -> TwinSteps:
     """Predict every step of ``plan`` from its times, a thermocouple log and effects.
 
@@ -196,13 +197,20 @@ def predict(
         joints, leg offsets and gains. The controller commands ``IGM_nominal(X_cmd)``;
         the actuators then give ``q_cmd + dq + g (q_cmd - q_home)`` (plus the thermal
         growth), and the platform stands where the true joints put it.
+    prepared : PreparedPlan, optional
+        What the prediction computes of ``plan`` before any time
+        (:meth:`PreparedPlan.of` of this ``hexapod``, ``plan`` and ``true_parameters``,
+        whose ``true_parameters`` it then stands for), for many predictions of one plan
+        at other times (the twin's servers): the same result, bit for bit.
 
     Returns
     -------
     TwinSteps
     """
     legs = _leg_model(hexapod)
-    true = _TrueGeometry.of(hexapod, true_parameters)
+    if prepared is not None and prepared.plan is not plan:
+        raise ValueError("predict: the prepared plan is another plan")
+    true = _TrueGeometry.of(hexapod, true_parameters) if prepared is None else prepared.true
     effects = tuple(effects)
     check_distinct(effects)
     t = np.asarray(times_s, dtype=float).reshape(-1)
@@ -241,6 +249,7 @@ def predict(
         reference_state,
         np.argsort(t, kind="stable"),
         true,
+        prepared,
     )
 
 
@@ -294,17 +303,19 @@ def _solve(
     reference_state: bool,
     order: npt.NDArray[np.intp],
     true: _TrueGeometry | None = None,
+    prepared: PreparedPlan | None = None,
 ) -> TwinSteps:
     """Leg lengths, poses and centres from the segment temperatures and base joints.
 
     ``balls_mm`` are the balls in the platform frame, (k, 3) or per step (N, k, 3);
     ``order`` lists the steps in the order they were moved through; ``true`` the
-    geometry the platform really has (default: the nominal ``hexapod``).
+    geometry the platform really has (default: the nominal ``hexapod``); ``prepared``
+    what of this is the plan's alone, computed once (:class:`PreparedPlan`).
     """
     legs = _leg_model(hexapod)
-    true = true or _TrueGeometry.of(hexapod, None)
-    q_cmd = hexapod.igm(plan.poses)
-    actuated = true.actuated_mm(q_cmd)
+    if prepared is None:
+        prepared = PreparedPlan.of(hexapod, plan, true=true, start=False)
+    true, q_cmd, actuated = prepared.true, prepared.q_cmd_mm, prepared.actuated_mm
     error = None if positioning_error_mm is None else np.asarray(positioning_error_mm, float)
 
     def lengths(segments: FloatArray, leg: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -319,7 +330,7 @@ def _solve(
         return growth, q
 
     growth, q = lengths(segment_C, leg_C)
-    absolute = true.solver.fgm(q, initial_poses=plan.poses, base_joints_mm=base)
+    absolute = prepared.fgm(q, base)
     platform2origin = transform_from_pose(absolute, hexapod.convention)
     origin = plan.origin_index
     origin2measured = invert_transform(platform2origin[origin])
@@ -327,15 +338,14 @@ def _solve(
 
     # the reference state: R0's last measurement (R0's only one unless it is repeated),
     # the state process carries every measurement of O and R0 to
-    repeats = find_repeats(plan)
-    r = int(repeats.reference0[-1]) if repeats.reference0 else origin
+    r = prepared.reference_index
     if reference_state:
         growth0, q0 = lengths(
             np.broadcast_to(segment_C[r], segment_C.shape),
             np.broadcast_to(leg_C[r], leg_C.shape),
         )
         base0 = None if base is None else np.broadcast_to(base[r], base.shape)
-        absolute0 = true.solver.fgm(q0, initial_poses=plan.poses, base_joints_mm=base0)
+        absolute0 = prepared.fgm(q0, base0)
         # relative to O in that state too (O's own state differs while the legs warm)
         frames0 = transform_from_pose(absolute0, hexapod.convention)
         corrected = pose_from_transform(
@@ -369,6 +379,51 @@ def _solve(
         reference_index=r,
         measured_centres_cmm_mm=measured_centres,
     )
+
+
+@dataclass(frozen=True)
+class PreparedPlan:
+    """What :func:`predict` computes of a plan before any time, computed once for many
+    predictions of the plan at other times (the twin's servers predict one pose at every
+    CMM motion): the true geometry, the commanded and actuated leg lengths, the reference
+    step and the FGM's first iteration at the plan's poses (:meth:`Hexapod.fgm_start`).
+
+    The same arithmetic on the same numbers as without it: a prediction is the same, bit
+    for bit (``tests/core/test_twin_prepared.py``).
+    """
+
+    plan: Plan
+    true: _TrueGeometry
+    q_cmd_mm: FloatArray
+    actuated_mm: FloatArray
+    reference_index: int
+    start: FgmStart | None
+
+    @classmethod
+    def of(
+        cls,
+        hexapod: Hexapod,
+        plan: Plan,
+        true_parameters: npt.ArrayLike | None = None,
+        *,
+        true: _TrueGeometry | None = None,
+        start: bool = True,
+    ) -> PreparedPlan:
+        """The plan's part of :func:`predict` with ``hexapod`` (``true_parameters`` as
+        there); ``start=False`` leaves the FGM's start to each call (a single prediction)."""
+        true = true or _TrueGeometry.of(hexapod, true_parameters)
+        q_cmd = hexapod.igm(plan.poses)
+        repeats = find_repeats(plan)
+        r = int(repeats.reference0[-1]) if repeats.reference0 else plan.origin_index
+        fgm_start = true.solver.fgm_start(plan.poses) if start else None
+        return cls(plan, true, q_cmd, true.actuated_mm(q_cmd), r, fgm_start)
+
+    def fgm(self, q_mm: FloatArray, base: FloatArray | None) -> FloatArray:
+        """The true platform's poses for leg lengths ``q_mm`` from the plan's poses, the
+        base joints ``base`` per step (None: the true geometry's)."""
+        if base is None and self.start is not None:
+            return self.true.solver.fgm(q_mm, start=self.start)
+        return self.true.solver.fgm(q_mm, initial_poses=self.plan.poses, base_joints_mm=base)
 
 
 @dataclass(frozen=True)

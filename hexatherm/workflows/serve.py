@@ -45,7 +45,7 @@ from hexatherm.core.geometry import transform_from_pose
 from hexatherm.core.heating import HeatingModel, Mat, MatHeating
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
-from hexatherm.core.twin import TwinSteps, predict
+from hexatherm.core.twin import PreparedPlan, TwinSteps, predict
 from hexatherm.devices.sim.ipp import Fault, IppSimServer
 from hexatherm.devices.sim.pi import PISimulator, PIStart
 from hexatherm.devices.sim.symetrie import (
@@ -71,6 +71,9 @@ __all__ = [
 ]
 
 AXES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
+
+#: prepared one-pose plans a :class:`TwinWorld` keeps (a campaign's steps; then anew)
+_PREPARED_POSES = 256
 
 
 class AcceleratedClock:
@@ -229,6 +232,9 @@ class TwinWorld:
         )
         self._lock = threading.Lock()
         self._cache: tuple[float, bytes, FloatArray] | None = None
+        # the one-step plans of the poses the platform stood at, prepared (the CMM asks
+        # for the balls at every motion, the platform standing at one pose for many)
+        self._plans: dict[bytes, PreparedPlan] = {}
 
     def leg_temperatures_C(self, t_s: float) -> list[float]:
         """The legs' temperatures (6 channels) at clock time ``t_s``, deg C."""
@@ -251,9 +257,20 @@ class TwinWorld:
         """The balls' centres on the CMM (k, 3) with the platform commanded to a pose at
         clock time ``t_s``: the twin's truth, CMM effects included, mm."""
         pose = [float(v) for v in np.asarray(pose_mm_deg, dtype=float).reshape(6)]
-        plan = Plan.from_steps([("O", "origin", pose)])
+        key = np.array(pose).tobytes()
+        with self._lock:
+            prepared = self._plans.get(key)
+        if prepared is None:
+            plan = Plan.from_steps([("O", "origin", pose)])
+            prepared = PreparedPlan.of(self.hexapod, plan, self.true_parameters)
+            with self._lock:
+                if len(self._plans) >= _PREPARED_POSES:
+                    self._plans.clear()
+                self._plans[key] = prepared
         log = self.log(t_s)
-        steps = self._predict(plan, [log.times_s[-1]], log, reference_state=False)
+        steps = self._predict(
+            prepared.plan, [log.times_s[-1]], log, reference_state=False, prepared=prepared
+        )
         return np.asarray(steps.measured_centres_cmm_mm[0], dtype=float)
 
     def truth(self, plan: Plan, times_s: npt.ArrayLike) -> TwinSteps:
@@ -265,12 +282,17 @@ class TwinWorld:
         return self._predict(plan, t - self.start_s, log)
 
     def _predict(
-        self, plan: Plan, times_s: npt.ArrayLike, log: ThermocoupleLog, reference_state: bool = True
+        self,
+        plan: Plan,
+        times_s: npt.ArrayLike,
+        log: ThermocoupleLog,
+        reference_state: bool = True,
+        prepared: PreparedPlan | None = None,
     ) -> TwinSteps:
         """:func:`~hexatherm.core.twin.predict` with the twin's model, balls, placement,
-        effects and true geometry."""
+        effects and true geometry (``prepared``: the plan's part, see there)."""
         args = (self.balls.centres_mm, self.origin2cmm, self.effects, self.true_parameters)
-        at = {"reference_state": reference_state, "true_parameters": args[3]}
+        at = {"reference_state": reference_state, "true_parameters": args[3], "prepared": prepared}
         return predict(self.hexapod, plan, times_s, log, *args[:3], **at)  # type: ignore[arg-type]
 
     # CmmBackend
