@@ -131,6 +131,35 @@ _TOKEN = re.compile(
 _TAG = re.compile(r"[0-9]{5}|E[0-9]{4}")
 
 
+# The lines a campaign exchanges by the thousand are calls with numbers for arguments:
+# ``X(1), Y(2), IJK(0, 0, 1)`` (a PtMeas report), ``GoTo(X(1), Y(2), Z(3))`` (a command).
+# One regular expression reads such a line whole; what it does not match whole goes
+# through the tokenizer and its parser, which read every line (tests/devices/
+# test_ipp_fastpath.py: the same values, or the same error, for both on many lines).
+_NUM = r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]{1,3})?"
+_NUMS = rf"(?:[ \t]*{_NUM}[ \t]*(?:,[ \t]*{_NUM}[ \t]*)*|[ \t]*)"
+_NAME = r"[A-Za-z][A-Za-z0-9]*(?:\.[A-Za-z][A-Za-z0-9]*)*"
+_CALL = rf"({_NAME})[ \t]*\(({_NUMS})\)"
+_CALLS_TEXT = rf"[ \t]*{_NAME}[ \t]*\({_NUMS}\)(?:[ \t]*,[ \t]*{_NAME}[ \t]*\({_NUMS}\))*[ \t]*"
+_FAST_CALLS = re.compile(_CALLS_TEXT)
+_FAST_CALL = re.compile(_CALL)
+_FAST_COMMAND = re.compile(
+    rf"[ \t]*([A-Za-z][A-Za-z0-9]*)[ \t]*\(((?:{_CALLS_TEXT})?|[ \t]*)\)[ \t]*"
+)
+_ILLEGAL = re.compile(r"[^\x20-\x7e]")
+
+
+def _fast_calls(text: str) -> tuple[Call, ...] | None:
+    """The calls of ``text`` if it is a list of calls with numbers (or none) for
+    arguments, else None (then the general parser reads it)."""
+    if _FAST_CALLS.fullmatch(text) is None:
+        return None
+    return tuple(
+        Call(m[1], tuple(float(x) for x in m[2].split(",")) if m[2].strip(" \t") else ())
+        for m in _FAST_CALL.finditer(text)
+    )
+
+
 def _tokens(text: str) -> list[tuple[str, str]]:
     out = []
     pos = 0
@@ -218,6 +247,12 @@ def parse_data(body: str) -> tuple[Value, ...]:
     >>> parse_data('X(-2.6E01), "Speed", Switch, 4.')
     (Call(name='X', args=(-26.0,)), 'Speed', Word('Switch'), 4.0)
     """
+    fast = _fast_calls(body)
+    return fast if fast is not None else _parse_data(body)
+
+
+def _parse_data(body: str) -> tuple[Value, ...]:
+    """:func:`parse_data` by the tokenizer and the parser, whatever the line."""
     parser = _Parser(body)
     items = parser.values(None)
     parser.done()
@@ -282,8 +317,8 @@ def _as_text(line: str | bytes) -> str:
         line = line.decode("latin-1")
     if line.endswith("\r\n"):
         line = line[:-2]
-    bad = [c for c in line if not 32 <= ord(c) <= 126]
-    if bad:
+    bad = _ILLEGAL.search(line)
+    if bad is not None:
         raise IppProtocolError(f"illegal character {bad[0]!r} (only ASCII 32..126 allowed)")
     return line
 
@@ -369,10 +404,20 @@ def parse_command(line: str | bytes) -> tuple[str, Call]:
     tag, rest = _split_tag(text)
     if tag == "E0000":
         raise IppProtocolError("E0000 is reserved for the server's events")
-    values = parse_data(rest)
+    fast = _FAST_COMMAND.fullmatch(rest)
+    if fast is not None:
+        args = _fast_calls(fast[2]) if fast[2].strip(" \t") else ()
+        if args is not None:
+            return tag, Call(fast[1], args)
+    return tag, _command_call(rest)
+
+
+def _command_call(rest: str) -> Call:
+    """The method call of a command line's text after its tag, by the general parser."""
+    values = _parse_data(rest)
     if len(values) != 1 or not isinstance(values[0], Call) or "." in values[0].name:
         raise IppProtocolError(f"expected one Method(args), got {rest[:40]!r}")
-    return tag, values[0]
+    return values[0]
 
 
 def format_number(value: float) -> str:
