@@ -437,6 +437,49 @@ def test_fault_split_sends_the_same_bytes_in_pieces():
     assert response([Fault("split", nth=2, chunk_bytes=1)]) == response([])
 
 
+def test_a_response_in_one_write_is_the_bytes_written_line_by_line():
+    """Without a fault a response goes out in one write; with a fault on every command
+    (a split in pieces larger than any line) line by line: the same bytes, errors and
+    reports included."""
+    commands = [
+        "StartSession()",
+        "Home()",
+        'ChangeTool("Probe1")',
+        "GoTo(X(10), Y(20), Z(60))",
+        "PtMeas(X(10), Y(20), Z(42.7), IJK(0, 0, 1))",
+        "GoTo(X(10), Y(20), Z(30))",  # into the ball: a collision
+        "GetErrStatusE()",
+        "ClearAllErrors()",
+        "OnPtMeasReport(IJK(), X(), Y(), Z(), ER())",
+        "GoTo(X(40), Y(20), Z(60))",
+        "GoTo(X(40), Y(20), Z(30))",
+        "PtMeas(X(22.7), Y(20), Z(30), IJK(1, 0, 0))",
+        "Get(X(), Y(), Z())",
+        "Nonsense(1)",
+        "EndSession()",
+    ]
+    wire = b"".join(f"{k + 1:05d} {c}\r\n".encode() for k, c in enumerate(commands))
+    last = f"{len(commands):05d} %\r\n".encode()
+
+    def response(faults):
+        with _server(faults=faults, noise_um=0.5, seed=2) as server:
+            sock = socket.create_connection(("127.0.0.1", server.port), timeout=SAFETY_S)
+            sock.sendall(wire)
+            data = b""
+            while not data.endswith(last):
+                chunk = sock.recv(65536)
+                assert chunk
+                data += chunk
+            sock.close()
+            return data
+
+    line_by_line = [Fault("split", nth=k, chunk_bytes=10**6) for k in range(1, len(commands) + 1)]
+    whole = response([])
+    assert whole == response(line_by_line)
+    assert b"! Error(3, 2504" in whole and b"00012 # IJK(1, 0, 0), X(22.69" in whole
+    assert b'00014 ! Error(3, 0501, "Nonsense"' in whole
+
+
 def test_fault_drop_closes_mid_transaction():
     for after, expected in (
         (0, []),

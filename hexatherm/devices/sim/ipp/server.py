@@ -273,6 +273,9 @@ class IppSimServer:
                 out.append(line)
             lines = [*out, *events, lines[-1]]
         try:
+            if fault is None:  # the response in one write: the same bytes, fewer wake-ups
+                conn.sendall(b"".join(line.encode("latin-1") + b"\r\n" for line in lines))
+                return True
             for index, line in enumerate(lines):
                 if fault is not None and fault.kind == "drop" and index == fault.after_lines:
                     conn.shutdown(socket.SHUT_RDWR)
