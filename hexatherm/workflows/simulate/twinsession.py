@@ -206,8 +206,14 @@ def step_timing(
     return ball_times, ball_times.mean(axis=1)
 
 
-def simulate_session(spec: TwinSessionSpec) -> SimulatedSession:
-    """Simulate ``spec``: the session's files and the truth, nothing written."""
+def simulate_session(spec: TwinSessionSpec, truth_files: bool = True) -> SimulatedSession:
+    """Simulate ``spec``: the session's files and the truth, nothing written.
+
+    Without ``truth_files`` the files leave out ``truth/`` (the twin's truth is still
+    returned as :attr:`SimulatedSession.truth`): for a caller that never reads those files
+    (noise replicas, campaigns whose truth is the hidden effects), which are a third to a
+    half of the simulation's time. The other files are the same, byte for byte, and so is
+    every random draw."""
     if spec.output not in OUTPUTS:
         raise ValueError(f"output must be one of {', '.join(OUTPUTS)}, got {spec.output!r}")
     hexapod = read_hexapod_text(spec.hexapod_text, "hexapod.yaml")
@@ -269,20 +275,26 @@ def simulate_session(spec: TwinSessionSpec) -> SimulatedSession:
         ),
         measurement_name: measurement_text,
         "temperatures.csv": csv_text(temps_frame, rounded=False),
-        **_truth_files(
-            spec,
-            truth,
-            step_t,
-            t0,
-            log,
-            sample_t,
-            stamps,
-            true_legs,
-            true_air,
-            legs.variable,
+        **(
+            _truth_files(
+                spec,
+                truth,
+                step_t,
+                t0,
+                log,
+                sample_t,
+                stamps,
+                true_legs,
+                true_air,
+                legs.variable,
+            )
+            if truth_files
+            else {}
         ),
         **spec.extra,
     }
+    if not truth_files:  # the spec's own truth/ files too (a scenario's copy)
+        files = {rel: text for rel, text in files.items() if not rel.startswith("truth/")}
     if spec.output == "serial":
         del files["session.yaml"]  # a capture, not a session yet: acquire --replay makes it one
     if spec.readme:
