@@ -31,6 +31,7 @@ the air. The hexapod's positioning noise comes from its own stream,
 
 from __future__ import annotations
 
+import functools
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -49,6 +50,7 @@ from hexatherm.core.calibration.model import (
 from hexatherm.core.effects import Effect, ThermocoupleLog
 from hexatherm.core.geometry import transform_from_pose
 from hexatherm.core.heating import Heating, HeatingModel
+from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
 from hexatherm.core.spherefit import fit_spheres, probe_radius_mm
 from hexatherm.core.twin import (
@@ -216,7 +218,7 @@ def simulate_session(spec: TwinSessionSpec, truth_files: bool = True) -> Simulat
     every random draw."""
     if spec.output not in OUTPUTS:
         raise ValueError(f"output must be one of {', '.join(OUTPUTS)}, got {spec.output!r}")
-    hexapod = read_hexapod_text(spec.hexapod_text, "hexapod.yaml")
+    hexapod = _hexapod(spec.hexapod_text)
     legs = hexapod.legs
     if legs is None:  # the reader requires legs: a guard for the type checker
         raise ValueError("the twin needs the hexapod's leg model (legs:)")
@@ -300,6 +302,13 @@ def simulate_session(spec: TwinSessionSpec, truth_files: bool = True) -> Simulat
     if spec.readme:
         files["README.md"] = spec.readme
     return SimulatedSession(files, truth, step_t)
+
+
+@functools.lru_cache(maxsize=4)
+def _hexapod(text: str) -> Hexapod:
+    """The hexapod file's text read (once per text: noise replicas simulate the same
+    hexapod hundreds of times, and reading it is some 2 ms; the twin only reads it)."""
+    return read_hexapod_text(text, "hexapod.yaml")
 
 
 def write_files(
