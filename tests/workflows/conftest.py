@@ -42,7 +42,7 @@ def diagnosed_campaign(tmp_path_factory: pytest.TempPathFactory) -> Diagnosed:
         if key not in done:
             folder = root / f"c{len(done)}"
             spec = diagnosis_campaign(hidden, seed, **options)  # type: ignore[arg-type]
-            write_session(simulate_session(spec).files, folder)  # plain files, no truth/
+            write_session(simulate_session(spec, truth_files=False).files, folder)
             done[key] = run_diagnosis(read_for_diagnosis(folder))
         return done[key]
 

@@ -111,8 +111,7 @@ def one_pose_files(seed: int, output: str, **spec: object) -> dict[str, str]:
         cap_half_angle_deg=70.0,
         **spec,  # type: ignore[arg-type]
     )
-    files = simulate_session(session).files
-    return {k: v for k, v in files.items() if not k.startswith("truth/")}
+    return simulate_session(session, truth_files=False).files
 
 
 def one_pose_session(folder: Path, seed: int, output: str, **spec: object) -> Path:

@@ -68,7 +68,7 @@ def campaign(
     path.write_text(text)
     scenario = read_scenario(path)
     folder = root / f"s{seed}"
-    write_session(simulate(scenario).files, folder)  # the truth is heldout_truth's
+    write_session(simulate(scenario, truth_files=False).files, folder)  # truth: heldout_truth
     return calibrate(read_campaign([folder]), level="joints"), scenario_spec(scenario)
 
 

@@ -77,7 +77,8 @@ SHAPE = "read it as the shape of the disagreement, not its physical cause"
 
 
 def diagnosed(folder: Path, hidden: tuple[Effect, ...], seed: int) -> DiagnosisResult:
-    write_session(simulate_session(diagnosis_campaign(hidden, seed)).files, folder)
+    twin = simulate_session(diagnosis_campaign(hidden, seed), truth_files=False)
+    write_session(twin.files, folder)
     return run_diagnosis(read_for_diagnosis(folder))
 
 

@@ -69,7 +69,8 @@ def session(
     gain: tuple[float, ...] = GAIN,
     edit: Callable[[Path], None] | None = None,
 ) -> Path:
-    write_session(simulate_session(spec(folder, seed, repeats, n_targets, gain)).files, folder)
+    twin = simulate_session(spec(folder, seed, repeats, n_targets, gain), truth_files=False)
+    write_session(twin.files, folder)
     (folder / "session.yaml").write_text((folder / "session.yaml").read_text() + CMM)
     if edit is not None:
         edit(folder)
@@ -285,7 +286,7 @@ def test_monte_carlo_refits_the_repeats_and_agrees_with_linear(tmp_path: Path) -
         points_per_ball=25,
         cap_half_angle_deg=70.0,
     )
-    write_session(simulate_session(spec).files, tmp_path / "s")
+    write_session(simulate_session(spec, truth_files=False).files, tmp_path / "s")
     result = process_session(tmp_path / "s")
     assert [len(g.labels) for g in result.repeats] == [3, 3]
     mc = pose_uncertainty(result, mc=1500, seed=2)

@@ -29,6 +29,7 @@ from hexatherm.workflows.process.measured import read_measured, registration_wei
 from hexatherm.workflows.process.pipeline import ProcessResult, process_session
 from hexatherm.workflows.process.uncertainty import centre_covariance, pose_uncertainty
 from hexatherm.workflows.simulate.twinsession import simulate_session, write_files
+from tests.replicas import write_session
 from tests.workflows.test_repeats import CMM, spec
 
 SEEDS = 20
@@ -42,8 +43,8 @@ def write(
     ``n_targets``; without its thermocouple log unless ``log``) and the twin's corrected
     truth of its targets."""
     s = spec(folder, seed, repeats=repeats, n_targets=n_targets)
-    simulated = simulate_session(s)
-    write_files(simulated.files, folder)
+    simulated = simulate_session(s, truth_files=False)
+    write_session(simulated.files, folder)
     text = (folder / "session.yaml").read_text() + CMM
     if not log:
         text = "".join(line for line in text.splitlines(True) if "temperatures" not in line)

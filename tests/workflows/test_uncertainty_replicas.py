@@ -72,8 +72,7 @@ def simulated_files(seed: int, spec: dict[str, object]) -> dict[str, str]:
             seed=seed,
             **spec,  # type: ignore[arg-type]
         )
-        files = simulate_session(session).files
-        _SIMULATED[key] = {k: v for k, v in files.items() if not k.startswith("truth/")}
+        _SIMULATED[key] = simulate_session(session, truth_files=False).files
     return _SIMULATED[key]
 
 
@@ -172,7 +171,7 @@ def short_session(folder: Path, seed: int, polar: bool) -> Path:
         fit_centres=True,
         touch_polar_deg=(5.0, 80.0) if polar else None,
     )
-    return write_session(simulate_session(session).files, folder)
+    return write_session(simulate_session(session, truth_files=False).files, folder)
 
 
 SHORT_REPLICAS = 60

@@ -52,7 +52,7 @@ def simulated(seed: int, heating: Heating | None = None) -> SimulatedSession:
         points_per_ball=25,
         cap_half_angle_deg=70.0,
     )
-    return simulate_session(spec)
+    return simulate_session(spec, truth_files=False)
 
 
 def session(

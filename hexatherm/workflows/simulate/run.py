@@ -68,9 +68,12 @@ def scenario_spec(scenario: Scenario, seed: int | None = None) -> TwinSessionSpe
     )
 
 
-def simulate(scenario: Scenario, seed: int | None = None) -> SimulatedSession:
-    """Simulate ``scenario``: the session's files and the truth, nothing written."""
-    return simulate_session(scenario_spec(scenario, seed))
+def simulate(
+    scenario: Scenario, seed: int | None = None, truth_files: bool = True
+) -> SimulatedSession:
+    """Simulate ``scenario``: the session's files and the truth, nothing written (without
+    ``truth_files``, no ``truth/``: :func:`~.twinsession.simulate_session`)."""
+    return simulate_session(scenario_spec(scenario, seed), truth_files)
 
 
 def simulate_file(

@@ -31,6 +31,7 @@ the air. The hexapod's positioning noise comes from its own stream,
 
 from __future__ import annotations
 
+import functools
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -49,6 +50,7 @@ from hexatherm.core.calibration.model import (
 from hexatherm.core.effects import Effect, ThermocoupleLog
 from hexatherm.core.geometry import transform_from_pose
 from hexatherm.core.heating import Heating, HeatingModel
+from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
 from hexatherm.core.spherefit import fit_spheres, probe_radius_mm
 from hexatherm.core.twin import (
@@ -206,11 +208,17 @@ def step_timing(
     return ball_times, ball_times.mean(axis=1)
 
 
-def simulate_session(spec: TwinSessionSpec) -> SimulatedSession:
-    """Simulate ``spec``: the session's files and the truth, nothing written."""
+def simulate_session(spec: TwinSessionSpec, truth_files: bool = True) -> SimulatedSession:
+    """Simulate ``spec``: the session's files and the truth, nothing written.
+
+    Without ``truth_files`` the files leave out ``truth/`` (the twin's truth is still
+    returned as :attr:`SimulatedSession.truth`): for a caller that never reads those files
+    (noise replicas, campaigns whose truth is the hidden effects), which are a third to a
+    half of the simulation's time. The other files are the same, byte for byte, and so is
+    every random draw."""
     if spec.output not in OUTPUTS:
         raise ValueError(f"output must be one of {', '.join(OUTPUTS)}, got {spec.output!r}")
-    hexapod = read_hexapod_text(spec.hexapod_text, "hexapod.yaml")
+    hexapod = _hexapod(spec.hexapod_text)
     legs = hexapod.legs
     if legs is None:  # the reader requires legs: a guard for the type checker
         raise ValueError("the twin needs the hexapod's leg model (legs:)")
@@ -269,25 +277,38 @@ def simulate_session(spec: TwinSessionSpec) -> SimulatedSession:
         ),
         measurement_name: measurement_text,
         "temperatures.csv": csv_text(temps_frame, rounded=False),
-        **_truth_files(
-            spec,
-            truth,
-            step_t,
-            t0,
-            log,
-            sample_t,
-            stamps,
-            true_legs,
-            true_air,
-            legs.variable,
+        **(
+            _truth_files(
+                spec,
+                truth,
+                step_t,
+                t0,
+                log,
+                sample_t,
+                stamps,
+                true_legs,
+                true_air,
+                legs.variable,
+            )
+            if truth_files
+            else {}
         ),
         **spec.extra,
     }
+    if not truth_files:  # the spec's own truth/ files too (a scenario's copy)
+        files = {rel: text for rel, text in files.items() if not rel.startswith("truth/")}
     if spec.output == "serial":
         del files["session.yaml"]  # a capture, not a session yet: acquire --replay makes it one
     if spec.readme:
         files["README.md"] = spec.readme
     return SimulatedSession(files, truth, step_t)
+
+
+@functools.lru_cache(maxsize=4)
+def _hexapod(text: str) -> Hexapod:
+    """The hexapod file's text read (once per text: noise replicas simulate the same
+    hexapod hundreds of times, and reading it is some 2 ms; the twin only reads it)."""
+    return read_hexapod_text(text, "hexapod.yaml")
 
 
 def write_files(
