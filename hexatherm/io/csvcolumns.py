@@ -190,8 +190,8 @@ def _iso_codes(
 
 
 #: bytes of a file :func:`iso_times_from_bytes` looks at in one go (its temporaries stay
-#: small: a scanning probe's file is hundreds of MB)
-_TIME_SCAN = 1 << 23
+#: small, in the CPU's caches: a scanning probe's file is hundreds of MB)
+_TIME_SCAN = 1 << 21
 
 
 def iso_times_from_bytes(
@@ -211,8 +211,8 @@ def iso_times_from_bytes(
     start = raw.find(b"\n") + 1
     if start <= 0 or start >= data.size or not 1 <= column < count:
         return None
-    blocks: list[npt.NDArray[np.uint8]] = []
-    width = -1
+    seconds: list[npt.NDArray[np.float64]] = []
+    layout: tuple[str, bool] | None = None
     while start < data.size:
         end = raw.rfind(b"\n", start, start + _TIME_SCAN) + 1
         if end <= start:  # a line longer than a block
@@ -225,20 +225,20 @@ def iso_times_from_bytes(
         if not (part[cuts[:, -1]] == 10).all() or (part[cuts[:, :-1]] == 10).any():
             return None  # a line with more or fewer fields
         first = cuts[:, column - 1] + 1
-        size = cuts[:, column] - first
-        if width < 0:
-            width = int(size[0])
-        if width <= 0 or (size != width).any():
+        width = cuts[0, column] - first[0]
+        if width <= 0 or (cuts[:, column] - first != width).any():
             return None
-        blocks.append(part[first[:, None] + np.arange(width)])
+        block = _iso_codes(part[first[:, None] + np.arange(width)])
+        if block is None or (layout is not None and block[1:] != layout):
+            return None  # not one layout (of one width) in every block
+        layout = block[1:]
+        block_seconds = _block_seconds(block[0], layout[0])
+        if block_seconds is None:
+            return None
+        seconds.append(block_seconds)
         start = end
-    codes = blocks[0] if len(blocks) == 1 else np.concatenate(blocks)
-    del blocks
-    layout = _iso_codes(codes)
-    if layout is None:
-        return None
-    seconds = _block_seconds(codes, layout[1])
-    return None if seconds is None else (seconds, layout[2])
+    assert layout is not None
+    return np.concatenate(seconds), layout[1]
 
 
 def _iso_seconds(
