@@ -23,6 +23,7 @@ import numpy as np
 import numpy.typing as npt
 
 from hexatherm.core.geometry import (
+    angle_rates,
     apply_transform,
     invert_transform,
     pose_from_transform,
@@ -38,11 +39,10 @@ __all__ = [
     "leg_growth",
     "model_misfit",
     "shifted_poses",
+    "shifted_pose_derivative",
+    "shift_derivative",
     "shift_jacobian",
 ]
-
-#: central-difference step of the composition's Jacobians, mm and deg
-STEP = 1e-6
 
 
 def leg_growth(
@@ -124,23 +124,51 @@ def shifted_poses(shift: npt.ArrayLike, poses: npt.ArrayLike, convention: str) -
     return pose_from_transform(invert_transform(np.asarray(shift, dtype=float)) @ t, convention)
 
 
+def shifted_pose_derivative(shift: FloatArray, poses: FloatArray, convention: str) -> FloatArray:
+    """Derivatives (M, 6, 6) of :func:`shifted_poses` (the poses
+    relative to a fixed frame ``shift``) by the poses, analytic: the translations turn by
+    ``D_R^T``; an angle step turns the rotation by ``E(X)`` (the inverse of
+    :func:`~hexatherm.core.geometry.angle_rates`), seen as ``D_R^T E`` in the shifted frame,
+    whose angles move by ``angle_rates(X') D_R^T E(X)``."""
+    x = np.asarray(poses, dtype=float)
+    back = np.asarray(shift, dtype=float)[:3, :3].T
+    moved = shifted_poses(shift, x, convention)
+    out = np.zeros(x.shape[:-1] + (6, 6))
+    out[..., :3, :3] = back
+    turn = back @ np.linalg.inv(angle_rates(x[..., 3:], convention))
+    out[..., 3:, 3:] = angle_rates(moved[..., 3:], convention) @ turn
+    return out
+
+
+def shift_derivative(shift: FloatArray, poses: FloatArray, convention: str) -> FloatArray:
+    """Derivatives (M, 6, 6) of :func:`shifted_poses` by the shift's own pose ``d``
+    (``shift = T(d)``), analytic. ``Y = D^-1 T(X)``: the shift's translation moves ``Y``'s
+    by ``-D_R^T``; an angle step turns ``D_R`` on the left by ``omega = E(d) delta``
+    (``E`` the inverse of :func:`~hexatherm.core.geometry.angle_rates`), which turns
+    ``Y``'s rotation by ``-D_R^T omega`` (its angles by ``angle_rates(Y)`` of that) and
+    moves its translation by ``D_R^T [X_p - D_p]x omega``."""
+    x = np.asarray(poses, dtype=float)
+    d = np.asarray(shift, dtype=float)
+    back = d[:3, :3].T
+    rad_per_deg = np.linalg.inv(angle_rates(pose_from_transform(d, convention)[3:], convention))
+    lever = x[..., :3] - d[:3, 3]
+    skew = np.zeros(x.shape[:-1] + (3, 3))  # [lever]x
+    skew[..., 0, 1], skew[..., 1, 0] = -lever[..., 2], lever[..., 2]
+    skew[..., 0, 2], skew[..., 2, 0] = lever[..., 1], -lever[..., 1]
+    skew[..., 1, 2], skew[..., 2, 1] = -lever[..., 0], lever[..., 0]
+    moved = shifted_poses(d, x, convention)
+    out = np.zeros(x.shape[:-1] + (6, 6))
+    out[..., :3, :3] = -back
+    out[..., :3, 3:] = back @ skew @ rad_per_deg
+    out[..., 3:, 3:] = -(angle_rates(moved[..., 3:], convention) @ (back @ rad_per_deg))
+    return out
+
+
 def shift_jacobian(
     shift: npt.ArrayLike, poses: npt.ArrayLike, convention: str
 ) -> tuple[FloatArray, FloatArray]:
     """Derivatives of :func:`shifted_poses` by the poses (M, 6, 6) and by the shift's own
-    pose (M, 6, 6), by central differences."""
+    pose (M, 6, 6), analytic (:func:`shifted_pose_derivative`, :func:`shift_derivative`)."""
     x = np.asarray(poses, dtype=float)
     d = np.asarray(shift, dtype=float)
-    d_pose = pose_from_transform(d, convention)
-    eye = np.eye(6) * STEP
-    by_x = (
-        shifted_poses(d, x[:, None] + eye, convention)
-        - shifted_poses(d, x[:, None] - eye, convention)
-    ) / (2 * STEP)
-    plus = transform_from_pose(d_pose + eye, convention)  # (6, 4, 4)
-    minus = transform_from_pose(d_pose - eye, convention)
-    x6 = np.broadcast_to(x[:, None], (x.shape[0], 6, 6))
-    by_d = (
-        shifted_poses(plus[None], x6, convention) - shifted_poses(minus[None], x6, convention)
-    ) / (2 * STEP)
-    return np.swapaxes(by_x, -1, -2), np.swapaxes(by_d, -1, -2)
+    return shifted_pose_derivative(d, x, convention), shift_derivative(d, x, convention)

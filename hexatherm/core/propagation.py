@@ -38,7 +38,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from hexatherm.core.carry import shifted_poses
+from hexatherm.core.carry import shifted_pose_derivative, shifted_poses
 from hexatherm.core.correction import interpolated_growth, target_growth
 from hexatherm.core.geometry import angle_rates, invert_transform, pose_from_transform
 from hexatherm.core.hexapod import Hexapod
@@ -202,22 +202,6 @@ class PoseChain:
         if shifted and self.origin_shift is not None:
             corrected = shifted_poses(self.origin_shift, corrected, self.hexapod.convention)
         return np.concatenate([pose[:, targets], corrected], axis=-1)
-
-
-def shifted_pose_derivative(shift: FloatArray, poses: FloatArray, convention: str) -> FloatArray:
-    """Derivatives (M, 6, 6) of :func:`~hexatherm.core.carry.shifted_poses` (the poses
-    relative to a fixed frame ``shift``) by the poses, analytic: the translations turn by
-    ``D_R^T``; an angle step turns the rotation by ``E(X)`` (the inverse of
-    :func:`~hexatherm.core.geometry.angle_rates`), seen as ``D_R^T E`` in the shifted frame,
-    whose angles move by ``angle_rates(X') D_R^T E(X)``."""
-    x = np.asarray(poses, dtype=float)
-    back = np.asarray(shift, dtype=float)[:3, :3].T
-    moved = shifted_poses(shift, x, convention)
-    out = np.zeros(x.shape[:-1] + (6, 6))
-    out[..., :3, :3] = back
-    turn = back @ np.linalg.inv(angle_rates(x[..., 3:], convention))
-    out[..., 3:, 3:] = angle_rates(moved[..., 3:], convention) @ turn
-    return out
 
 
 def output_difference(a: npt.ArrayLike, b: npt.ArrayLike) -> FloatArray:

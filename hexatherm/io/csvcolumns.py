@@ -92,10 +92,11 @@ def _block_seconds(codes: npt.NDArray[np.uint8], template: str) -> npt.NDArray[n
 
     def field(name: str) -> npt.NDArray[np.int64]:
         start, end = match.span(name)
-        value = np.zeros(codes.shape[0], dtype=np.int64)
-        for at in range(start, end):  # nothing when the field is absent (-1, -1)
-            value = value * 10 + (codes[:, at] - np.uint8(48))
-        return value
+        if start < 0:  # absent
+            return np.zeros(codes.shape[0], dtype=np.int64)
+        # the digits times their powers of ten, summed (whole numbers: exact)
+        digits = codes[:, start:end].astype(np.int64) - 48
+        return np.asarray(digits @ 10 ** np.arange(end - start - 1, -1, -1, dtype=np.int64))
 
     year, month, day = field("Y"), field("M"), field("D")
     hour, minute, second = field("h"), field("m"), field("s")
@@ -165,17 +166,85 @@ def _iso_block(
     codes = fixed.view(np.uint8).reshape(values.size, width + 1)
     if codes[:, width].any() or not codes[:, width - 1].all():
         return None  # a longer or a shorter one
-    digit = (codes[:, :width] - np.uint8(48)) < 10
+    return _iso_codes(codes[:, :width])
+
+
+def _iso_codes(
+    codes: npt.NDArray[np.uint8],
+) -> tuple[npt.NDArray[np.uint8], str, bool] | None:
+    """:func:`_iso_block` of times given as their bytes, a row each of one width (no NUL):
+    the codes, the layout (its digits as 0) and whether it has an offset, or None when the
+    rows do not all follow one layout that :data:`ISO_TIME` accepts."""
+    if codes.size == 0:
+        return None
+    digit = (codes - np.uint8(48)) < 10
     if not (digit == digit[0]).all():
         return None
     other = np.flatnonzero(~digit[0])
     if not (codes[:, other] == codes[0, other]).all():
         return None
-    template = np.where(digit[0], np.uint8(48), codes[0, :width]).tobytes().decode()
+    template = np.where(digit[0], np.uint8(48), codes[0]).tobytes().decode("ascii")
     match = ISO_TIME.fullmatch(template)
     if match is None:
         return None
-    return codes[:, :width], template, match.group("offset") is not None
+    return codes, template, match.group("offset") is not None
+
+
+#: bytes of a file :func:`iso_times_from_bytes` looks at in one go (its temporaries stay
+#: small, in the CPU's caches: a scanning probe's file is hundreds of MB)
+_TIME_SCAN = 1 << 21
+#: the bytes that end a field: ',' and LF
+_SEPARATORS = np.array([44, 10], dtype=np.uint8)
+
+
+def iso_times_from_bytes(
+    raw: bytes, column: int, count: int
+) -> tuple[npt.NDArray[np.float64], bool] | None:
+    """POSIX seconds of the ``time`` column (index ``column`` >= 1 of ``count``) of a CSV file
+    whose every data line holds exactly ``count`` fields, taken from the file's bytes
+    (no Python string per row), and whether they have a UTC offset; None unless every
+    line after the header has ``count - 1`` commas and its time is of one ISO layout
+    within :func:`_block_seconds`' ranges (then pandas' reading of the column decides).
+
+    ``raw`` must be what the fast reader takes: ASCII, no quote, no NUL, no CR, LF-ended.
+    Each block of lines is split at its commas and line feeds; every line's field
+    ``column`` is cut out as one row of bytes (the same text as pandas' C parser gives
+    it: nothing to unquote or strip)."""
+    data = np.frombuffer(raw, dtype=np.uint8)
+    start = raw.find(b"\n") + 1
+    if start <= 0 or start >= data.size or not 1 <= column < count:
+        return None
+    seconds: list[npt.NDArray[np.float64]] = []
+    layout: tuple[str, bool] | None = None
+    while start < data.size:
+        end = raw.rfind(b"\n", start, start + _TIME_SCAN) + 1
+        if end <= start:  # a line longer than a block
+            end = raw.find(b"\n", start) + 1
+        part = data[start:end]
+        # commas and line feeds: the bytes up to ',' found in one pass, then those two (a
+        # clean file may hold '+', of an exponent or an offset) told apart on the few found
+        found = np.flatnonzero(part <= 44)
+        found = found[np.isin(part[found], _SEPARATORS)]
+        if found.size % count:
+            return None
+        cuts = found.reshape(-1, count)
+        if not (part[cuts[:, -1]] == 10).all() or (part[cuts[:, :-1]] == 10).any():
+            return None  # a line with more or fewer fields
+        first = cuts[:, column - 1] + 1
+        width = cuts[0, column] - first[0]
+        if width <= 0 or (cuts[:, column] - first != width).any():
+            return None
+        block = _iso_codes(part[first[:, None] + np.arange(width)])
+        if block is None or (layout is not None and block[1:] != layout):
+            return None  # not one layout (of one width) in every block
+        layout = block[1:]
+        block_seconds = _block_seconds(block[0], layout[0])
+        if block_seconds is None:
+            return None
+        seconds.append(block_seconds)
+        start = end
+    assert layout is not None
+    return np.concatenate(seconds), layout[1]
 
 
 def _iso_seconds(

@@ -43,7 +43,13 @@ import pandas as pd
 from hexatherm.core.plan import NAME_PATTERN
 from hexatherm.errors import InputError
 from hexatherm.io import records as records_module
-from hexatherm.io.csvcolumns import ASCII_BLANKS, column_numbers, column_times, drop_blank_rows
+from hexatherm.io.csvcolumns import (
+    ASCII_BLANKS,
+    column_numbers,
+    column_times,
+    drop_blank_rows,
+    iso_times_from_bytes,
+)
 from hexatherm.io.csvout import csv_text
 from hexatherm.io.csvtext import complete_lines, csv_frame, decode_text
 from hexatherm.io.files import read_bytes
@@ -353,15 +359,22 @@ def _fast_measurement_csv(raw: bytes, path: str, kind: RecordKind | None) -> Rec
     numeric = [c for c in columns if c not in ("label", "ball", "time")]
     # no value can hold a blank to strip: the parser need not look for them
     blank_free = _blank_free(raw)
+    # ISO times of one layout straight from the bytes (no Python string per row; pandas
+    # then leaves the column out), else pandas reads them as text
+    times = (
+        iso_times_from_bytes(raw, BASE_COLUMNS.index("time"), len(columns)) if blank_free else None
+    )
     # names as categories: each chunk's distinct names become strings, its rows codes (no
     # Python string per row)
     dtypes: dict[str, str | type] = {"label": "category", "ball": "category", "time": object}
     dtypes.update(dict.fromkeys(numeric, float))
+    read = columns if times is None else [c for c in columns if c != "time"]
     try:
         chunks = pd.read_csv(
             io.BytesIO(raw),  # shares the bytes, no copy
             encoding="utf-8",
-            dtype=dtypes,
+            dtype={c: dtypes[c] for c in read},
+            usecols=None if times is None else read,
             keep_default_na=False,
             na_values=dict.fromkeys(numeric, [""]),
             skipinitialspace=not blank_free,
@@ -372,13 +385,18 @@ def _fast_measurement_csv(raw: bytes, path: str, kind: RecordKind | None) -> Rec
         parts = []
         with chunks:
             for frame in chunks:
-                parts.append(_clean_chunk(frame, columns, numeric, blank_free, path))
+                parts.append(_clean_chunk(frame, read, numeric, blank_free, path))
     except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError, _Unclean, InputError):
         return None
+    if times is not None:
+        for part in parts:
+            part.update(time_kind="iso", aware=times[1])
     if not parts or len({(p["time_kind"], p["aware"]) for p in parts}) != 1:
         return None  # no rows, or times of different kinds: the general reader says
     label, ball = (_spread_names([p[key] for p in parts]) for key in ("label", "ball"))
-    time_s = np.concatenate([p["time"] for p in parts])
+    time_s = times[0] if times is not None else np.concatenate([p["time"] for p in parts])
+    if time_s.size != label.size:
+        return None
     # the coordinates (and normals) were stacked chunk by chunk: one copy of them, here
     values = {c: np.concatenate([p["values"][c] for p in parts]) for c in parts[0]["values"]}
     xyz = np.concatenate([p["xyz"] for p in parts])
@@ -454,7 +472,10 @@ def _clean_chunk(
 ) -> dict:
     """One chunk of :func:`_fast_measurement_csv` as arrays; :class:`_Unclean` (or an
     InputError) when the general reader must read the file."""
-    if frame.empty or list(frame.columns) != columns or frame["time"].isna().any():
+    if frame.empty or list(frame.columns) != columns:
+        raise _Unclean
+    with_times = "time" in columns  # else the times were read from the bytes
+    if with_times and frame["time"].isna().any():
         raise _Unclean  # a short row
     named: dict[str, tuple[npt.NDArray[np.object_], npt.NDArray[np.integer]]] = {}
     for column in ("label", "ball"):
@@ -466,7 +487,7 @@ def _clean_chunk(
             raise _Unclean  # a missing name (a short row)
         # each name converted once, then spread (not a million conversions)
         named[column] = (names, codes)  # spread once, for the whole file
-    if not blank_free:
+    if not blank_free and with_times:
         # a blank somewhere in the file: is it in a time?
         times = frame["time"].to_numpy()
         if not all(isinstance(v, str) and v and v == v.strip() for v in times):
@@ -475,7 +496,7 @@ def _clean_chunk(
     values = {c: frame[c].to_numpy(dtype=np.float64) for c in numeric}
     if not all(np.isfinite(v).all() for v in values.values()):
         raise _Unclean  # empty or non-finite numbers: the general reader tells them apart
-    time, time_kind, aware = column_times(frame, path)  # (its lines are not used: clean)
+    time, time_kind, aware = column_times(frame, path) if with_times else (None, "iso", None)
     xyz = np.column_stack([values.pop(c) for c in ("x", "y", "z")])
     with_normals = all(c in values for c in POINT_EXTRA)
     ijk = np.column_stack([values.pop(c) for c in POINT_EXTRA]) if with_normals else None

@@ -177,9 +177,12 @@ def _cells(column: pd.Series) -> list[str] | None:
         return list(map(str, column.tolist()))
     if pd.api.types.is_object_dtype(dtype) or pd.api.types.is_string_dtype(dtype):
         cells = column.tolist()
-        if all(type(v) is str or type(v) is bool for v in cells):
+        kinds = set(map(type, cells))
+        if kinds <= {str, bool}:
             # text, flags, or flags with "" where a check does not apply
-            texts = [v if type(v) is str else ("True" if v else "False") for v in cells]
+            texts = cells
+            if bool in kinds:
+                texts = [v if type(v) is str else ("True" if v else "False") for v in cells]
             return None if _QUOTE.search("".join(texts)) else texts
     return None
 

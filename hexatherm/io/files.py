@@ -32,10 +32,14 @@ cut short, an earlier group of records) are :class:`InputWarning`, issued with t
 
 from __future__ import annotations
 
+import contextlib
 import errno
+import hashlib
 import io
 import os
 import stat
+from collections.abc import Iterator
+from contextvars import ContextVar
 from dataclasses import dataclass
 from typing import Any, BinaryIO
 
@@ -216,11 +220,50 @@ def read_bytes(path: str | os.PathLike[str], *, limit: int = MAX_MEASUREMENT_BYT
             if total > limit:
                 raise _too_large(limit, limit, where, more=True)
             want = _CHUNK
+        data = b"".join(parts)
+        kept = _kept.get()
+        if kept is not None and _identity(os.fstat(fd)) == _identity(info):
+            kept[_identity(info)] = hashlib.sha256(data).hexdigest()
     except OSError as exc:
         raise _os_error(exc, where) from None
     finally:
         os.close(fd)
-    return b"".join(parts)
+    return data
+
+
+#: SHA-256 digests of the files :func:`read_bytes` read while :func:`digests_kept` is on,
+#: by the file's identity (:func:`_identity`) when it was read
+_kept: ContextVar[dict[tuple[int, ...], str] | None] = ContextVar("kept", default=None)
+
+
+def _identity(info: os.stat_result) -> tuple[int, ...]:
+    """What tells a file's version apart: device, inode, size, modification time (ns)."""
+    return (info.st_dev, info.st_ino, info.st_size, info.st_mtime_ns)
+
+
+@contextlib.contextmanager
+def digests_kept() -> Iterator[None]:
+    """Within the block, :func:`read_bytes` keeps the SHA-256 of every file it reads
+    (of the bytes read, while they are in memory) for :func:`kept_digest`: a command
+    that records its inputs' digests (``provenance.json``) need not read them again."""
+    token = _kept.set({})
+    try:
+        yield
+    finally:
+        _kept.reset(token)
+
+
+def kept_digest(path: str | os.PathLike[str]) -> str | None:
+    """The SHA-256 (hex) of ``path`` kept by :func:`digests_kept` when it was read, if the
+    file is still the version read (same device, inode, size and modification time);
+    None otherwise."""
+    kept = _kept.get()
+    if not kept:
+        return None
+    try:
+        return kept.get(_identity(os.stat(path)))
+    except OSError:
+        return None
 
 
 class _BoundedReader(io.RawIOBase):

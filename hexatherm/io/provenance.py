@@ -35,6 +35,7 @@ from typing import Any
 
 from hexatherm import __version__
 from hexatherm.errors import InputError
+from hexatherm.io.files import kept_digest
 
 #: the file's name in every output folder
 PROVENANCE_NAME = "provenance.json"
@@ -110,6 +111,11 @@ def current_run() -> RunFacts | None:
 
 
 def _sha256(path: Path) -> str:
+    """The file's SHA-256: the one kept when the command read it (:func:`digests_kept`),
+    or by reading it."""
+    kept = kept_digest(path)
+    if kept is not None:
+        return kept
     digest = hashlib.sha256()
     with open(path, "rb") as handle:
         while chunk := handle.read(_CHUNK):

@@ -62,3 +62,29 @@ def test_shifted_pose_derivative_equals_central_differences(rng, convention):
         ) / (2 * h)
     np.testing.assert_allclose(analytic, numeric, rtol=0, atol=1e-7)
     assert np.abs(analytic - np.eye(6)).max() > 1e-5  # the shift does turn the angles
+
+
+@pytest.mark.parametrize("convention", ["symetrie", "pi"])
+def test_shift_derivative_equals_central_differences(rng, convention):
+    """The same poses' derivative by the shift's own pose (O's carry to R0's state): the
+    analytic one against central differences of the shift's pose, over shifts from
+    micrometres to a few mm and degrees (truncation ~1e-9)."""
+    from hexatherm.core.carry import shift_derivative
+    from hexatherm.core.geometry import pose_from_transform, transform_from_pose
+
+    poses = np.column_stack([rng.normal(0, 50, (25, 3)), rng.uniform(-20, 20, (25, 3))])
+    for scale in (1e-3, 1.0, 300.0):
+        d = rng.normal(0, 0.01, 6) * scale
+        shift = transform_from_pose(d, convention)
+        analytic = shift_derivative(shift, poses, convention)
+        h = 1e-4
+        numeric = np.zeros_like(analytic)
+        base = pose_from_transform(shift, convention)
+        for j in range(6):
+            step = np.eye(6)[j] * h
+            numeric[:, :, j] = (
+                shifted_poses(transform_from_pose(base + step, convention), poses, convention)
+                - shifted_poses(transform_from_pose(base - step, convention), poses, convention)
+            ) / (2 * h)
+        np.testing.assert_allclose(analytic, numeric, rtol=0, atol=1e-7)
+        assert np.abs(analytic[:, :3, 3:]).max() > 0.1  # the lever arm of a turn

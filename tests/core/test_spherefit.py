@@ -551,3 +551,33 @@ def test_plain_passes_agree_with_the_general_iteration(
     np.testing.assert_allclose(fits.cov_centre_mm2, ref.cov_centre_mm2, rtol=1e-6, atol=1e-18)
     u_um = [1e3 * np.sqrt(np.diagonal(f.cov_centre_mm2, axis1=1, axis2=2)) for f in (fits, ref)]
     np.testing.assert_allclose(u_um[0], u_um[1], rtol=1e-9, atol=1e-9)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    p=st.integers(2, 4),
+    seed=st.integers(0, 2**31),
+    log_spread=st.floats(0.0, 8.0),
+)
+def test_condition_screen_decides_as_the_eigenvalues(p: int, seed: int, log_spread: float) -> None:
+    """The conditioning check's cheap bound (a Cholesky elimination, no eigenvalues) makes
+    the same verdict against COND_MAX as the eigenvalues, over matrices from well to
+    hopelessly conditioned (and singular, indefinite); where it is in doubt the numbers
+    are the eigenvalues' own."""
+    from hexatherm.core import spherefit
+
+    rng = np.random.default_rng(seed)
+    x = rng.normal(size=(400, p, p)) * 10.0 ** rng.uniform(-log_spread, 0.0, (400, 1, p))
+    a = x @ np.swapaxes(x, 1, 2)
+    a[:5, :, -1] = a[:5, :, 0]  # singular
+    a[:5, -1, :] = a[:5, 0, :]
+    a[5:8] *= -1.0  # negative definite
+    lam = np.linalg.eigvalsh(a)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        exact = np.where(lam[:, 0] > 0.0, lam[:, -1] / lam[:, 0], np.inf)
+    screened = spherefit._condition(a)
+    assert np.array_equal(screened <= COND_MAX, exact <= COND_MAX)
+    doubt = ~(screened <= 1e-2 * COND_MAX)
+    np.testing.assert_array_equal(screened[doubt], exact[doubt])
+    # a bound, above (both carry rounding of about eps x cond, below 1e-6 here)
+    assert np.all(screened[~doubt] >= exact[~doubt] * (1 - 1e-5))

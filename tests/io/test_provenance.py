@@ -94,3 +94,33 @@ def test_the_command_line_of_a_path_with_a_space_runs_as_written(tmp_path: Path)
     doc = json.loads((out / PROVENANCE_NAME).read_text())
     assert shlex.split(doc["command_line"]) == ["hexatherm", *args]
     assert doc["argv"] == args[1:]
+
+
+def test_digests_of_the_bytes_read_are_the_files_and_follow_a_change(tmp_path, monkeypatch):
+    """Within ``digests_kept`` the provenance digest of a file read whole is taken from the
+    bytes read (no second read), equal to the file's SHA-256; a file changed since (same
+    size, new content) is read and hashed again; outside the block nothing is kept."""
+    import os
+
+    from hexatherm.io import files, provenance
+
+    path = tmp_path / "points.csv"
+    path.write_bytes(b"label,ball,x,y,z,time\nO,B1,1,2,3,0\n")
+    opened: list[object] = []
+    real_open = open
+    monkeypatch.setattr(
+        provenance, "open", lambda *a, **k: opened.append(a[0]) or real_open(*a, **k), raising=False
+    )
+    with files.digests_kept():
+        files.read_bytes(path)
+        (entry,) = provenance.input_entries([path])
+        assert entry["sha256"] == hashlib.sha256(path.read_bytes()).hexdigest()
+        assert opened == []  # from the bytes read
+        stat = path.stat()
+        path.write_bytes(b"label,ball,x,y,z,time\nO,B1,9,2,3,0\n")
+        os.utime(path, ns=(stat.st_atime_ns, stat.st_mtime_ns + 1_000_000))
+        (entry,) = provenance.input_entries([path])
+        assert entry["sha256"] == hashlib.sha256(path.read_bytes()).hexdigest()
+        assert opened == [path]  # changed since it was read: read again
+    files.read_bytes(path)
+    assert files.kept_digest(path) is None

@@ -102,3 +102,61 @@ def test_blank_check_in_one_pass_finds_every_blank():
     assert csvfile._blank_free(clean.replace(b"S1", b"S\x01"))
     monkey = clean * 50
     assert csvfile._blank_free(monkey)
+
+
+def _points_file(rng, values: list[str], ijk: bool) -> bytes:
+    """A points CSV (three steps, two balls) with ``values`` as its times, in order."""
+    head = "label,ball,x,y,z,time" + (",i,j,k" if ijk else "")
+    rows = []
+    for n, value in enumerate(values):
+        row = [("O", "R0", "S1")[n * 3 // len(values)], ("B1", "B2")[n % 2]]
+        row += [repr(float(v)) for v in rng.normal(100, 50, 3)] + [value]
+        row += [f"{v:.4f}" for v in rng.normal(size=3)] if ijk else []
+        rows.append(",".join(row))
+    return ("\n".join([head, *rows]) + "\n").encode()
+
+
+@pytest.mark.parametrize("layout", LAYOUTS)
+@pytest.mark.parametrize("ijk", [True, False])
+@pytest.mark.parametrize("scan", [None, 64, 4096])
+def test_times_cut_from_the_file_are_the_parsed_columns(rng, layout, ijk, scan, monkeypatch):
+    """The times cut out of a clean file's bytes (pandas then leaves the column out) are
+    the seconds, kind and offset of reading the column as text, to the bit, in blocks
+    of any size; and the cut is taken."""
+    if scan is not None:
+        monkeypatch.setattr(csvcolumns, "_TIME_SCAN", scan)
+    raw = _points_file(rng, times(rng, layout, n=300, digits=int(rng.integers(1, 10))), ijk)
+    columns = 9 if ijk else 6
+    cut = csvcolumns.iso_times_from_bytes(raw, 5, columns)
+    assert cut is not None
+    fast = csvfile._fast_measurement_csv(raw, "p.csv", None)
+    monkeypatch.setattr(csvfile, "iso_times_from_bytes", lambda *args: None)
+    text = csvfile._fast_measurement_csv(raw, "p.csv", None)
+    assert fast is not None and text is not None
+    assert (fast.time_kind, fast.time_aware) == (text.time_kind, text.time_aware)
+    np.testing.assert_array_equal(fast.time_s, text.time_s)
+    np.testing.assert_array_equal(fast.time_s, cut[0])
+    for name in ("label", "ball", "xyz_mm", "line"):
+        np.testing.assert_array_equal(getattr(fast, name), getattr(text, name))
+
+
+@pytest.mark.parametrize(
+    ("old", "new"),
+    [
+        ("T07:30:01", "T07:30:1"),  # a shorter time
+        ("T07:30:01", "T07:30:01Z"),  # another layout
+        ("T07:30:01", "T07:30:61"),  # out of range: pandas and datetime say
+        ("\nR0,", "\nR0,1,"),  # a field too many
+        (",B2,", ",B2"),  # a field too few
+        ("\nR0,", "\n\nR0,"),  # a blank line
+        ("2024-03-05T07:30:02", "2024-03-05X07:30:02"),
+    ],
+)
+def test_times_not_cut_from_an_unusual_file(rng, old, new):
+    """Anything but one ISO layout in full lines is left to pandas' reading of the column."""
+    values = [f"2024-03-05T07:30:{s:02d}" for s in range(1, 13)]
+    raw = _points_file(rng, values, ijk=False)
+    assert csvcolumns.iso_times_from_bytes(raw, 5, 6) is not None
+    changed = raw.replace(old.encode(), new.encode(), 1)
+    assert changed != raw
+    assert csvcolumns.iso_times_from_bytes(changed, 5, 6) is None

@@ -32,7 +32,7 @@ from hexatherm.core.carry import (
     carry_motion,
     leg_growth,
     model_misfit,
-    shift_jacobian,
+    shift_derivative,
 )
 from hexatherm.core.geometry import pose_from_transform
 from hexatherm.core.propagation import (
@@ -152,7 +152,7 @@ def carry_error(
     poses = pose_from_transform(carry_motion(hexapod, np.zeros((12, 6)), g_mean + steps))
     by_growth = ((poses[:6] - poses[6:]) / (2 * STEP_MM)).T  # (6 pose, 6 legs)
     unshifted = result.correction.corrected  # the shift's derivative at ~ the same poses
-    _, by_shift = shift_jacobian(carry.shift, unshifted, hexapod.convention)
+    by_shift = shift_derivative(carry.shift, unshifted, hexapod.convention)
     on_outputs = by_shift @ by_growth  # (M, 6 pose, 6 legs)
     carried_jacobian = None
     if carry.source == "references":

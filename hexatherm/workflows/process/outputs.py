@@ -312,10 +312,12 @@ def quality_file_frame(quality: QualityReport) -> pd.DataFrame:
     frame = quality.frame.copy()
     for column in frame.columns:
         if str(column).startswith("ok_"):
-            frame[column] = np.array([v is NA or v == NA or bool(v) for v in frame[column]])
+            values = frame[column].tolist()
+            frame[column] = np.array([v is NA or v == NA or bool(v) for v in values])
     for column in ("growth_leg", "warming_leg"):
-        frame[column] = np.array([int(v) if v != "" else NO_LEG for v in frame[column]])
-    frame["failed"] = [text or NONE_TEXT for text in frame["failed"]]
+        values = frame[column].tolist()
+        frame[column] = np.array([int(v) if v != "" else NO_LEG for v in values])
+    frame["failed"] = [text or NONE_TEXT for text in frame["failed"].tolist()]
     return frame
 
 

@@ -189,20 +189,22 @@ def process(
     """``hexatherm process``: check the output, compute, write the results folder."""
     import dataclasses
 
+    from hexatherm.io.files import digests_kept
     from hexatherm.workflows.process.outputs import write_results
 
-    outcome = compute(request, reading_progress, draws_progress, check_output=True)
-    written = write_results(
-        outcome.result,
-        request.out_dir,
-        overwrite=request.overwrite,
-        uncertainty=outcome.uncertainty,
-        quality=outcome.quality,
-        twin=outcome.twin,
-        conformity=outcome.conformity,
-        extra_inputs=request.extra_inputs,
-        notes=page_notes(outcome),
-    )
+    with digests_kept():  # provenance.json's digests of the bytes read, not a second read
+        outcome = compute(request, reading_progress, draws_progress, check_output=True)
+        written = write_results(
+            outcome.result,
+            request.out_dir,
+            overwrite=request.overwrite,
+            uncertainty=outcome.uncertainty,
+            quality=outcome.quality,
+            twin=outcome.twin,
+            conformity=outcome.conformity,
+            extra_inputs=request.extra_inputs,
+            notes=page_notes(outcome),
+        )
     return dataclasses.replace(outcome, written=tuple(written))
 
 
