@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hexatherm.core.propagation import reference_scatter
+from hexatherm.core.curvature import scatter_off_heating
 from hexatherm.workflows.process.pipeline import ProcessResult
 
 #: fewest degrees of freedom of the references' heights for a Type A evaluation of the
@@ -29,7 +29,8 @@ class HeightScale:
     """The centres' error along the cap's axis (z), evaluated from the references.
 
     ``ratio``: the variance the references' heights show over the assumed cap's
-    (:func:`~hexatherm.core.propagation.reference_scatter`, second differences in time);
+    (:func:`~hexatherm.core.curvature.scatter_off_heating`, second differences in time
+    off the heights' common thermal motion);
     ``used`` when they have at least :data:`MIN_HEIGHT_DOF` degrees of freedom; ``text``
     (to go after the shape's description) and ``why`` (when not used) say so."""
 
@@ -45,7 +46,9 @@ def reference_height_scale(result: ProcessResult, assumed_mm2: float) -> HeightS
     ``assumed_mm2``, one measurement's z variance by the assumed cap shape."""
     plan, centres = result.session.plan, result.centres
     ref = np.array([k == "reference" for k in plan.kinds], dtype=bool)
-    variance, dof = reference_scatter(
+    # second differences in time, off the direction the heating moves the heights along
+    # (a heating that bends between references inflated the plain ones 3.9x in variance)
+    variance, dof, projected = scatter_off_heating(
         centres.times_s[ref], centres.centres_mm[ref][:, :, 2], centres.measurements[ref]
     )
     count = int(ref.sum())
@@ -58,7 +61,8 @@ def reference_height_scale(result: ProcessResult, assumed_mm2: float) -> HeightS
     ratio = variance / assumed_mm2
     text = (
         f", its z part scaled by {ratio:.3g} (in variance) to the scatter of the "
-        f"{count} references' ball heights (Type A: second differences in time, {dof} "
-        "degrees of freedom)"
+        f"{count} references' ball heights (Type A: second differences in time"
+        + (f", {projected} of them off the heights' common thermal motion" if projected else "")
+        + f", {dof} degrees of freedom)"
     )
     return HeightScale(True, float(ratio), dof, text, "")

@@ -1,8 +1,11 @@
-"""The smooth growth's own error carried to the corrected poses (``--interpolation smooth``).
+"""The interpolation's own error carried to the corrected poses: the smooth growth's
+(``--interpolation smooth``) and the straight line's between references (linear, one
+neighbour, smooth's fallback).
 
 The glue between :class:`~hexatherm.workflows.process.pipeline.ProcessResult` and
-:mod:`hexatherm.core.smoothbias`; :func:`~hexatherm.workflows.process.uncertainty.pose_uncertainty`
-adds the result to the corrected poses' own part.
+:mod:`hexatherm.core.smoothbias` / :mod:`hexatherm.core.curvature`;
+:func:`~hexatherm.workflows.process.uncertainty.pose_uncertainty` adds the results to the
+corrected poses' own part.
 """
 
 from __future__ import annotations
@@ -11,7 +14,8 @@ import dataclasses
 
 import numpy as np
 
-from hexatherm.core.propagation import PoseChain
+from hexatherm.core.curvature import CurvatureError, curvature_error
+from hexatherm.core.propagation import PoseChain, reference_scatter
 from hexatherm.core.smoothbias import (
     GrowthExcess,
     corrected_excess,
@@ -23,7 +27,7 @@ from hexatherm.core.smoothbias import (
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.pipeline import ProcessResult
 
-__all__ = ["smooth_excess"]
+__all__ = ["curvature_excess", "smooth_excess"]
 
 
 def smooth_excess(
@@ -71,12 +75,111 @@ def smooth_excess(
     if shape is not None:
         growth_cov = growth_cov + shape[:, :, None] * shape[:, None, :]
         excess = dataclasses.replace(excess, shape_um=np.sqrt(np.mean(shape**2, axis=1)) * 1e3)
-    added = corrected_excess(
+    return to_poses(result, chain, growth_cov), excess
+
+
+def curvature_excess(
+    result: ProcessResult, chain: PoseChain, centre_cov_mm2: FloatArray
+) -> tuple[FloatArray, CurvatureError] | None:
+    """The interpolation's own error between references carried to the corrected poses,
+    (M, 6, 6), and its evaluation (:mod:`hexatherm.core.curvature`); None when no target
+    has it.
+
+    Every target interpolated from its neighbouring references (``--interpolation
+    linear``, the smooth fit's fallback to it, or one reference: ``before``, ``after``,
+    ``nearest``, two targets between two references) gets the interpolation's error of the
+    growth at its time, carried by the growth scaling and the FGM to its corrected pose,
+    as its own part. With a thermocouple log, the error on a growth shaped as the log
+    (:func:`~hexatherm.core.smoothbias.log_shape_error` with the neighbours' weights: the
+    log shows a heating switched on between two references, which no curvature of the
+    references' growth resolves). Without one, the references' growth around the target
+    (:func:`~hexatherm.core.curvature.curvature_error`). Where the smooth fit is used
+    without a log, its residuals see its error at the references' median spacing: a
+    target gets the curvature term only for the part of its interval beyond it (a gap
+    between references). With a log the smooth fit's error on the log's shape holds the
+    gap (:func:`smooth_excess`): nothing here.
+    """
+    corr = result.correction
+    smooth = corr.smooth
+    refs = result.session.plan.reference_indices
+    times = result.centres.times_s
+    temperatures, legs = result.temperatures, chain.hexapod.legs
+    m = corr.target_index.size
+    if legs is None or refs.size < 2 or m == 0:
+        return None
+    q = result.steps.q_mm
+    position = {int(step): i for i, step in enumerate(refs)}
+    used = np.zeros((m, refs.size))
+    seen = 0.0
+    if smooth is not None and smooth.used:
+        if temperatures is not None:
+            return None
+        # its residuals see the first-order part and the error at the median spacing:
+        # the straight line's curvature term beyond that spacing only
+        seen = float(np.median(np.diff(times[refs])))
+        used = _line_weights(times[refs], times[corr.target_index])
+    else:
+        for k, (b, a, w) in enumerate(
+            zip(corr.before_index, corr.after_index, corr.weight_after, strict=True)
+        ):
+            if b >= 0:
+                used[k, position[int(b)]] += 1.0 - w
+            if a >= 0:
+                used[k, position[int(a)]] += w
+    if temperatures is not None:
+        sensitivity = legs.sensitivity_mm_per_K(q[refs[0]])
+        log = (temperatures.time_s, temperatures.legs_C, sensitivity)
+        weights = np.broadcast_to(used[:, None, :], (m, 6, refs.size))
+        e = log_shape_error(weights, times[refs], times[corr.target_index], *log)
+        evaluated = np.asarray(used.any(axis=1), dtype=bool)
+        e[~evaluated] = 0.0
+        # the thermocouples' own noise (Type A, the log's second differences) is in e at
+        # the references' times and the target's: not the legs' growth, its share off
+        sigma2, _ = reference_scatter(temperatures.time_s, temperatures.legs_C)
+        sigma2 = float(sigma2) if np.isfinite(sigma2) else 0.0
+        noise = sigma2 * np.sum(np.square(sensitivity)) * (np.sum(used**2, axis=1) + 1.0)
+        total = np.sum(e**2, axis=1)
+        share = np.where(total > 0, np.clip(1.0 - noise / np.where(total > 0, total, 1.0), 0, 1), 0)
+        cov = share[:, None, None] * e[:, :, None] * e[:, None, :]
+        error = CurvatureError(
+            cov,
+            np.sqrt(np.clip(np.trace(cov, axis1=1, axis2=2), 0.0, None) / 6) * 1e3,
+            evaluated,
+            "log",
+        )
+    else:
+        legs_cov = own_leg_covariance(chain, result.centres.centres_mm, centre_cov_mm2, refs)
+        error = curvature_error(
+            times[refs], q[refs] - q[refs[0]], legs_cov, times[corr.target_index], used, seen
+        )
+    if not error.evaluated.any():
+        return None
+    return to_poses(result, chain, error.cov_mm2), error
+
+
+def to_poses(result: ProcessResult, chain: PoseChain, growth_cov_mm2: FloatArray) -> FloatArray:
+    """Covariance (M, 6, 6) of the corrected poses from one of the growth at R at each
+    target (:func:`~hexatherm.core.smoothbias.corrected_excess`)."""
+    corr = result.correction
+    q, r0 = result.steps.q_mm, result.session.plan.reference_indices[0]
+    return corrected_excess(
         chain,
         corr.reference_growth_mm,
-        q[refs[0]],
+        q[r0],
         q[corr.target_index],
         corr.corrected,
-        growth_cov,
+        growth_cov_mm2,
     )
-    return added, excess
+
+
+def _line_weights(ref_times_s: FloatArray, target_times_s: FloatArray) -> FloatArray:
+    """Weights (M, n) of the straight line through the two references around each target
+    in time (zeros outside them)."""
+    n = ref_times_s.size
+    out = np.zeros((target_times_s.size, n))
+    p = np.searchsorted(ref_times_s, target_times_s, side="right") - 1
+    for k, (i, t) in enumerate(zip(p, target_times_s, strict=True)):
+        if 0 <= i < n - 1 and ref_times_s[i + 1] > ref_times_s[i]:
+            w = (t - ref_times_s[i]) / (ref_times_s[i + 1] - ref_times_s[i])
+            out[k, i], out[k, i + 1] = 1.0 - w, w
+    return out

@@ -65,6 +65,27 @@ def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
                 "inside the widest gaps (a 30 min pause in a heating session claimed 0.6x "
                 "of the corrected Tx and Tz errors); give the session its log"
             )
+    curved = uncertainty.curvature
+    if curved is not None and curved.evaluated.any():
+        what = (
+            "on a growth shaped as the thermocouple log"
+            if curved.source == "log"
+            else "from the curvature of the references' growth (second differences)"
+        )
+        lines.append(
+            f"  straight line's own error between references {what}: "
+            f"{np.sqrt(np.mean(curved.error_um[curved.evaluated] ** 2)):.3g} um RMS over the "
+            f"targets and legs, up to {curved.error_um.max():.3g} um, added to each target's "
+            "own u"
+        )
+        if curved.source == "curvature" and curved.widest_gap > WIDE_GAP and excess is None:
+            lines.append(
+                f"warning: references up to {curved.widest_gap:.2g}x their median spacing "
+                "apart and no thermocouple log: the curvature the references show does not "
+                "hold a heating that starts or settles inside the gap (a 30 min pause in a "
+                "heating session claimed 0.2-0.45x of the corrected Tx error); give the "
+                "session its log"
+            )
     for check in uncertainty.repeats:
         line = (
             f"  {check.label} measured {check.n} times, averaged: their scatter is "

@@ -40,6 +40,7 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 import numpy.typing as npt
 
+from hexatherm.core.curvature import CurvatureError
 from hexatherm.core.propagation import (
     CentreSampler,
     PoseChain,
@@ -57,7 +58,7 @@ from hexatherm.workflows.process.centrecov import CentreCovariance, centre_covar
 from hexatherm.workflows.process.measured import fit_radii, point_groups, registration_weights
 from hexatherm.workflows.process.pipeline import ProcessResult
 from hexatherm.workflows.process.repeats import RepeatCheck, repeat_checks
-from hexatherm.workflows.process.smootherror import smooth_excess
+from hexatherm.workflows.process.smootherror import curvature_excess, smooth_excess
 
 if TYPE_CHECKING:  # the calibration's weights (and scipy.sparse): imported when used
     from hexatherm.core.calibration.weights import BandedCovariance
@@ -117,6 +118,9 @@ class PoseUncertainty:
     carry : CarryError, optional
         The error of carrying O and R0 to R0's thermal state (common to all targets), in
         ``covariance``, ``linear_covariance``, the common part and ``between_covariance``.
+    curvature : CurvatureError, optional
+        The straight line's own error between two references (:func:`curvature_excess`),
+        in ``covariance``, ``linear_covariance`` and the corrected poses' own part.
     """
 
     conventional_u: FloatArray
@@ -134,6 +138,7 @@ class PoseUncertainty:
     repeats: tuple[RepeatCheck, ...] = ()
     smooth_excess: GrowthExcess | None = None
     carry: CarryError | None = None
+    curvature: CurvatureError | None = None
 
     def ratio_to_linear(self) -> FloatArray:
         """Reported over linear standard uncertainty, (M, 12) (1 for the linear method)."""
@@ -380,10 +385,14 @@ def pose_uncertainty(
     )
     u = np.sqrt(np.clip(np.diagonal(covariance, axis1=1, axis2=2), 0.0, None))
     excess = smooth_excess(result, chain, centres.cov_mm2)
-    if excess is not None:
-        # the smooth fit's own error: a target's own part, independent between targets
+    curved = curvature_excess(result, chain, centres.cov_mm2)
+    for part in (excess, curved):
+        if part is None:
+            continue
+        # the interpolation's own error (the smooth fit's, the straight line's): a
+        # target's own part, taken as independent between targets
         added = np.zeros_like(linear)
-        added[:, 6:, 6:] = excess[0]
+        added[:, 6:, 6:] = part[0]
         covariance, linear = covariance + added, linear + added
         extra = np.diagonal(added, axis1=1, axis2=2)  # (M, 12)
         u = np.sqrt(np.clip(np.diagonal(covariance, axis1=1, axis2=2), 0.0, None))
@@ -407,6 +416,7 @@ def pose_uncertainty(
         repeats=repeat_checks(result, centres.cov_mm2),
         smooth_excess=None if excess is None else excess[1],
         carry=carried,
+        curvature=None if curved is None else curved[1],
     )
 
 

@@ -1,0 +1,258 @@
+"""The interpolation's own error between references: the shape of the growth.
+
+Linear interpolation of the growth at R between the references before (``t0``) and after
+(``t1``) a target is exact for a growth that is a straight line in time; for one that
+bends, it errs at the target's time ``t`` by ``e(t) = (t - t0)(t1 - t) / 2 * g''`` (the
+interpolation error of a straight line through two points of a function whose second
+derivative is ``g''`` there; exact for a quadratic). A target that takes one reference
+only (``before``/``after``/``nearest``, or two targets between two references: the
+first takes the reference before it, the second the one after) errs at first order,
+by the growth between that reference and its own time. The propagation carries the
+references' noise, not these errors: under a heating that bends between references the
+corrected poses then claimed down to 0.22x of their error against the twin's truth
+(issue 35, two targets per pair of references).
+
+The references' growth shows both without a log. With ``W`` the interpolation's weights
+of the target over the references (what the correction used) and ``L`` the straight
+line's through the two references around the target in time, the error is ``(W - L) g``
+(first order; zero for linear between those two) plus the straight line's
+``f g''``, ``f = (t - t0)(t1 - t) / 2``. The references' second divided differences, leg
+by leg, ``2 g[t_(i-1), t_i, t_(i+1)]``, estimate ``g''`` around each inner reference; the
+target takes the mean of the stencils centred on the two around it (the one there is at
+the ends). So the error is ``c G`` for one vector ``c = W - L + f s`` over the
+references (``s`` the stencil). Its noise, from the references' own (``S_j`` the 6x6
+covariance of reference j's leg lengths), is ``N = sum_j c_j^2 S_j``; O's and R0's noise
+is common to every reference's growth and cancels (``c`` sums to zero).
+``E[(cG)(cG)^T] = e e^T + N``: the noise's share is taken off as one scalar over the legs
+(``share = max(0, 1 - tr N / |cG|^2)``, the legs share one heating history), so what the
+propagation already holds of the references' noise is not counted twice, and the
+covariance added to the growth at R at the target is ``share (cG)(cG)^T``: a Type A
+evaluation of the growth's shape, a Type B one of the quadratic model across the
+interval. ``f`` grows with the square of the interval: a gap between references is
+covered by the same term, as far as the references around it show its curvature.
+
+Where it holds: a growth whose curvature changes little over three references (the
+stencil reads it over the two intervals around each reference; a heating switched on
+between two references, or one that starts or settles inside a gap, is seen only in
+part). With two references only, or a target outside the references (extrapolated),
+nothing is evaluated.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from hexatherm.typing import FloatArray
+
+__all__ = [
+    "CurvatureError",
+    "curvature_error",
+    "scatter_off_heating",
+    "second_difference_stencils",
+]
+
+
+@dataclass(frozen=True)
+class CurvatureError:
+    """The straight line's own error of the growth at R at each target.
+
+    Attributes
+    ----------
+    cov_mm2 : ndarray, shape (M, 6, 6)
+        Covariance of the growth at R at each target (zero where nothing was evaluated).
+    error_um : ndarray, shape (M,)
+        RMS over the legs of that error (``sqrt(tr / 6)``), um.
+    evaluated : ndarray of bool, shape (M,)
+        Targets between two references with a curvature to read (three references or more).
+    source : {"curvature", "log"}
+        The references' curvature (:func:`curvature_error`), or the straight line's error
+        on a growth shaped as a thermocouple log (set by the caller).
+    widest_gap : float
+        The longest interval between consecutive references over their median one.
+    """
+
+    cov_mm2: FloatArray
+    error_um: FloatArray
+    evaluated: npt.NDArray[np.bool_]
+    source: str = "curvature"
+    widest_gap: float = 1.0
+
+
+def second_difference_stencils(times_s: npt.ArrayLike) -> FloatArray:
+    """Stencils (n, n) of the second derivative at each inner reference from its
+    neighbours, ``2 g[t_(i-1), t_i, t_(i+1)]`` (rows 1..n-2; rows 0, n-1 and any whose
+    neighbours share a time are zero).
+
+    >>> t = np.array([0.0, 1.0, 3.0])
+    >>> s = second_difference_stencils(t)
+    >>> float(s[1] @ t**2)   # exact for a quadratic: g'' = 2
+    2.0
+    """
+    t = np.asarray(times_s, dtype=float)
+    n = len(t)
+    out = np.zeros((n, n))
+    for i in range(1, n - 1):
+        h1, h2 = t[i] - t[i - 1], t[i + 1] - t[i]
+        if h1 <= 0 or h2 <= 0:
+            continue
+        out[i, i - 1] = 2 / (h1 * (h1 + h2))
+        out[i, i] = -2 / (h1 * h2)
+        out[i, i + 1] = 2 / (h2 * (h1 + h2))
+    return out
+
+
+def curvature_error(
+    ref_times_s: npt.ArrayLike,
+    ref_growth_mm: npt.ArrayLike,
+    ref_leg_cov_mm2: npt.ArrayLike,
+    target_times_s: npt.ArrayLike,
+    used_weights: npt.ArrayLike,
+    spacing_seen_s: float = 0.0,
+) -> CurvatureError:
+    """The interpolation's own error of the growth at R at each target (module
+    docstring).
+
+    Parameters
+    ----------
+    ref_times_s : array_like, shape (n,)
+        Times of the references, increasing.
+    ref_growth_mm : array_like, shape (n, 6)
+        Growth of every leg at the references (``q_R - q_R0``; any common offset cancels).
+    ref_leg_cov_mm2 : array_like, shape (n, 6, 6)
+        Covariance of each reference's leg lengths from its own centres.
+    target_times_s : array_like, shape (M,)
+    used_weights : array_like, shape (M, n)
+        The interpolation's weights of each target over the references (rows summing to
+        1: the two neighbours', or 1 on the one reference used); a row of zeros: none.
+    spacing_seen_s : float
+        An interval whose error is already evaluated elsewhere (the smooth fit's residuals
+        see its error at the references' spacing): ``f`` is taken beyond that of a target
+        halfway across it, ``max(0, f - spacing^2 / 8)``. 0: the whole of ``f``.
+
+    Returns
+    -------
+    CurvatureError
+
+    Examples
+    --------
+    A quadratic growth, noise-free: the error of the straight line exactly.
+
+    >>> t = np.array([0.0, 100.0, 200.0, 300.0])
+    >>> g = np.outer(1e-6 * t**2, np.ones(6))
+    >>> err = curvature_error(t, g, np.zeros((4, 6, 6)), [150.0], [[0, 0.5, 0.5, 0]])
+    >>> lin = (g[1] + g[2]) / 2 - 1e-6 * 150.0**2   # the straight line's error at 150 s
+    >>> bool(np.allclose(np.sqrt(np.diagonal(err.cov_mm2[0])), lin))
+    True
+    """
+    t = np.asarray(ref_times_s, dtype=float)
+    g = np.asarray(ref_growth_mm, dtype=float)
+    s = np.asarray(ref_leg_cov_mm2, dtype=float)
+    ts = np.asarray(target_times_s, dtype=float)
+    used = np.asarray(used_weights, dtype=float).reshape(len(ts), len(t))
+    m, n = len(ts), len(t)
+    cov = np.zeros((m, 6, 6))
+    evaluated = np.zeros(m, dtype=bool)
+    stencils = second_difference_stencils(t)
+    has = np.abs(stencils).sum(axis=1) > 0
+    # the two references around each target in time (-1: outside them)
+    around = np.searchsorted(t, ts, side="right") - 1
+    for k in range(m):
+        p = int(around[k])
+        if not used[k].any() or p < 0 or p + 1 >= n or t[p + 1] <= t[p]:
+            continue
+        rows = [i for i in (p, p + 1) if has[i]]
+        if not rows:
+            continue
+        w = (ts[k] - t[p]) / (t[p + 1] - t[p])
+        line = np.zeros(n)
+        line[p], line[p + 1] = 1.0 - w, w
+        f = (ts[k] - t[p]) * (t[p + 1] - ts[k]) / 2
+        f = max(0.0, f - spacing_seen_s**2 / 8)
+        c = used[k] - line + f * stencils[rows].mean(axis=0)  # (n,)
+        error = c @ g  # (6,)
+        noise = np.einsum("j,jlm->lm", c**2, s)
+        total = float(error @ error)
+        share = max(0.0, 1.0 - float(np.trace(noise)) / total) if total > 0 else 0.0
+        cov[k] = share * np.outer(error, error)
+        evaluated[k] = True
+    error_um = np.sqrt(np.clip(np.trace(cov, axis1=1, axis2=2), 0.0, None) / 6) * 1e3
+    spacing = np.diff(t)
+    widest = float(spacing.max() / np.median(spacing)) if spacing.size else 1.0
+    return CurvatureError(cov, error_um, evaluated, widest_gap=widest)
+
+
+#: chance level of the heights' scatter along the heating's direction beyond the rest's,
+#: above which the heating's motion is taken off (:func:`scatter_off_heating`)
+HEATING_P = 0.05
+
+
+def scatter_off_heating(
+    times_s: npt.ArrayLike, values: npt.ArrayLike, weights: npt.ArrayLike | None = None
+) -> tuple[float, int, int]:
+    """Type A variance of repeated measurements of k columns that a heating moves along
+    one direction: ``(s^2, dof, projected)``.
+
+    As :func:`~hexatherm.core.propagation.reference_scatter` (each inner measurement
+    against the straight line through its two neighbours, ``e_i``, pooled), unless the
+    ``e_i`` show a common motion: the direction the columns move together along over the
+    session (the references' ball heights under a heating: the platform's thermal
+    motion, one direction when the legs share one heating history), taken for each
+    ``e_i`` as the first principal axis of the measurements outside its stencil (at least
+    two), so that it does not follow ``e_i``'s own noise. Noise of equal variance in
+    every column puts ``1 / k`` of it along that axis, ``chi^2`` of m degrees of freedom
+    over the m stencils against the rest's ``(k - 1) m``; when their ratio exceeds chance
+    (:data:`HEATING_P`, Fisher's F), a curvature of the heating between neighbours is
+    there (it inflated the plain second differences 3.9x in variance under mats switched
+    on mid-session), and the variance is read off that axis, ``E |P e_i|^2 = (k - 1) s^2
+    factor_i``, on ``(k - 1)`` degrees of freedom a stencil. Otherwise the plain
+    estimate stands (all its degrees of freedom). Stencils with fewer than two
+    measurements outside are kept whole. ``projected`` counts the stencils read off the
+    axis (0: the plain estimate).
+
+    >>> rng = np.random.default_rng(2)
+    >>> t = np.arange(41) * 400.0
+    >>> heat = 40e-3 * (1 - np.exp(-np.clip(t - 1000.0, 0, None) / 600.0))  # 40 um, a kink
+    >>> v = np.outer(heat, [1.0, 0.5, -0.8]) + rng.normal(scale=1e-3, size=(41, 3))
+    >>> s2, dof, projected = scatter_off_heating(t, v)
+    >>> bool(abs(np.sqrt(s2) * 1e3 - 1.0) < 0.15), dof, projected
+    (True, 78, 39)
+    """
+    t = np.asarray(times_s, dtype=float)
+    v = np.asarray(values, dtype=float).reshape(len(t), -1)
+    w = np.ones(len(t)) if weights is None else np.asarray(weights, dtype=float)
+    n, k = v.shape
+    plain, along, off = 0.0, 0.0, 0.0  # sums of e^2 / factor: all, along the axis, off it
+    dof_plain, dof_off, projected = 0, 0, 0
+    for i in range(1, n - 1):
+        span = t[i + 1] - t[i - 1]
+        if span <= 0:
+            continue
+        f = (t[i] - t[i - 1]) / span
+        e = v[i] - ((1 - f) * v[i - 1] + f * v[i + 1])
+        factor = 1 / w[i] + (1 - f) ** 2 / w[i - 1] + f**2 / w[i + 1]
+        plain += float(e @ e) / factor
+        dof_plain += k
+        rest = np.r_[0 : i - 1, i + 2 : n]
+        if rest.size >= 2 and k > 1:
+            spread = v[rest] - v[rest].mean(axis=0)
+            axis = np.linalg.svd(spread, full_matrices=False)[2][0]
+            a = float(axis @ e)
+            along += a**2 / factor
+            off += (float(e @ e) - a**2) / factor
+            dof_off += k - 1
+            projected += 1
+        else:
+            off += float(e @ e) / factor
+            dof_off += k
+    if dof_plain == 0:
+        return float("nan"), 0, 0
+    if projected and off > 0:
+        from scipy.special import fdtri  # not scipy.stats: its import is slow
+
+        ratio = (along / projected) / (off / dof_off)
+        if ratio > float(fdtri(projected, dof_off, 1.0 - HEATING_P)):
+            return off / dof_off, dof_off, projected
+    return plain / dof_plain, dof_plain, 0
