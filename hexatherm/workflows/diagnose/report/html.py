@@ -153,6 +153,7 @@ def report_html(
     generated: str | None = None,
     template_dir: Path | None = None,
     extra_inputs: Sequence[Path] = (),
+    markdown: str | None = None,
 ) -> str:
     """The page ``report.html`` of a diagnosis.
 
@@ -171,6 +172,9 @@ def report_html(
     extra_inputs : sequence of Path
         Further files the page was made from, listed in its provenance after the
         session's (the ``--hexapod`` model, the lab's template files).
+    markdown : str, optional
+        The story, if made already: :func:`report_markdown` of ``result`` with the
+        figures' file names (made here otherwise).
     """
     from hexatherm.io.provenance import current_run, now_iso
 
@@ -209,7 +213,9 @@ def report_html(
             ("Hexapod", f"{result.data.hexapod.name} ({result.data.hexapod_source})"),
         ],
         signatures=None,
-        story=Markup("".join(markdown_html(report_markdown(result, names), pngs, keep))),
+        story=Markup(
+            "".join(markdown_html(markdown or report_markdown(result, names), pngs, keep))
+        ),
         provenance=provenance(
             current_run() if facts is None else facts,
             [*session.input_files(), *extra_inputs],
@@ -243,8 +249,12 @@ def write_report_files(
         path = out_dir / FIGURE_FILES[key]
         path.write_bytes(data)
         written.append(path)
-    written[0].write_text(report_markdown(result, FIGURE_FILES), encoding="utf-8")
+    names = {key: FIGURE_FILES[key] for key in pngs}  # all of them: report.md's links
+    markdown = report_markdown(result, names)
+    written[0].write_text(markdown, encoding="utf-8")
     page = out_dir / REPORT_HTML
-    html = report_html(result, pngs, template_dir=template_dir, extra_inputs=extra_inputs)
+    html = report_html(
+        result, pngs, template_dir=template_dir, extra_inputs=extra_inputs, markdown=markdown
+    )
     page.write_text(html, encoding="utf-8")
     return [*written, page]
