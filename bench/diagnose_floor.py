@@ -54,18 +54,12 @@ def cpu_seconds(args: list[str], code: Path) -> float:
     return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
-def median(values: list[float]) -> float:
-    ordered = sorted(values)
-    mid = len(ordered) // 2
-    return ordered[mid] if len(ordered) % 2 else 0.5 * (ordered[mid - 1] + ordered[mid])
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--triples", type=int, default=5)
     parser.add_argument("--code", type=Path, default=ROOT, help="the checkout run")
     args = parser.parse_args()
-    from analyses import diagnosis_session  # type: ignore[import-not-found]
+    from analyses import diagnosis_session, median  # type: ignore[import-not-found]
 
     session = diagnosis_session(16)
     print(f"load average at the start: {os.getloadavg()[0]:.1f}")
