@@ -47,10 +47,20 @@ def units(text: str, keep: Collection[str] = ()) -> str:
     >>> units("hexapod: Messung um 10 (um); Bum", keep=["Messung um 10", "B"])
     'hexapod: Messung um 10 (µm); Bum'
     """
+    return _units(text, _kept_pattern(keep))
+
+
+def _kept_pattern(keep: Collection[str]) -> re.Pattern[str] | None:
+    """The pattern of the texts ``keep`` for :func:`_units`, longest first (None: none)."""
     kept = sorted({k for k in keep if k}, key=len, reverse=True)
-    spans = []
-    if kept:
-        spans = [m.span() for m in re.finditer("|".join(map(re.escape, kept)), text)]
+    return re.compile("|".join(map(re.escape, kept))) if kept else None
+
+
+def _units(text: str, kept: re.Pattern[str] | None) -> str:
+    """:func:`units` with the kept texts' pattern made once (a page asks for hundreds)."""
+    if _UNIT_WORDS.search(text) is None:
+        return text
+    spans = [] if kept is None else [m.span() for m in kept.finditer(text)]
 
     def unit(match: re.Match[str]) -> str:
         if any(a <= match.start() < b for a, b in spans):
@@ -65,7 +75,7 @@ def _text(token: Token) -> str:
 
 
 def _figure_token(
-    inline: Token, figures: Mapping[str, bytes], keep: Collection[str] = ()
+    inline: Token, figures: Mapping[str, bytes], kept: re.Pattern[str] | None = None
 ) -> Token | None:
     """An ``html_block`` token holding the figure a paragraph of one image links to."""
     from markdown_it.token import Token
@@ -74,7 +84,7 @@ def _figure_token(
     if len(children) != 1 or children[0].type != "image":
         return None
     image = children[0]
-    caption = units(_text(image), keep)
+    caption = _units(_text(image), kept)
     png = figures.get(str(image.attrGet("src")))
     html = "" if png is None else render_macro("figure", figure(png, caption, caption)) + "\n"
     return Token("html_block", "", 0, content=html, block=True)
@@ -109,6 +119,7 @@ def markdown_html(
 
     parser = MarkdownIt("commonmark", {"html": False, "breaks": True}).enable("table")
     tokens = parser.parse(markdown)
+    kept = _kept_pattern(keep)
     out: list[Token] = []
     k = 0
     while k < len(tokens):
@@ -117,7 +128,7 @@ def markdown_html(
             k += 3  # open, inline, close: the page's title
             continue
         if token.type == "paragraph_open" and not token.hidden:
-            replaced = _figure_token(tokens[k + 1], figures, keep)
+            replaced = _figure_token(tokens[k + 1], figures, kept)
             if replaced is not None:
                 out.append(replaced)
                 k += 3
@@ -129,7 +140,7 @@ def markdown_html(
                 token.attrSet("class", "num")
         for child in token.children or ():
             if child.type in ("text", "code_inline"):
-                child.content = units(child.content, keep)
+                child.content = _units(child.content, kept)
         out.append(token)
         k += 1
     return [parser.renderer.render(out, parser.options, {})]
@@ -142,6 +153,7 @@ def report_html(
     generated: str | None = None,
     template_dir: Path | None = None,
     extra_inputs: Sequence[Path] = (),
+    markdown: str | None = None,
 ) -> str:
     """The page ``report.html`` of a diagnosis.
 
@@ -160,6 +172,9 @@ def report_html(
     extra_inputs : sequence of Path
         Further files the page was made from, listed in its provenance after the
         session's (the ``--hexapod`` model, the lab's template files).
+    markdown : str, optional
+        The story, if made already: :func:`report_markdown` of ``result`` with the
+        figures' file names (made here otherwise).
     """
     from hexatherm.io.provenance import current_run, now_iso
 
@@ -198,7 +213,9 @@ def report_html(
             ("Hexapod", f"{result.data.hexapod.name} ({result.data.hexapod_source})"),
         ],
         signatures=None,
-        story=Markup("".join(markdown_html(report_markdown(result, names), pngs, keep))),
+        story=Markup(
+            "".join(markdown_html(markdown or report_markdown(result, names), pngs, keep))
+        ),
         provenance=provenance(
             current_run() if facts is None else facts,
             [*session.input_files(), *extra_inputs],
@@ -232,8 +249,12 @@ def write_report_files(
         path = out_dir / FIGURE_FILES[key]
         path.write_bytes(data)
         written.append(path)
-    written[0].write_text(report_markdown(result, FIGURE_FILES), encoding="utf-8")
+    names = {key: FIGURE_FILES[key] for key in pngs}  # all of them: report.md's links
+    markdown = report_markdown(result, names)
+    written[0].write_text(markdown, encoding="utf-8")
     page = out_dir / REPORT_HTML
-    html = report_html(result, pngs, template_dir=template_dir, extra_inputs=extra_inputs)
+    html = report_html(
+        result, pngs, template_dir=template_dir, extra_inputs=extra_inputs, markdown=markdown
+    )
     page.write_text(html, encoding="utf-8")
     return [*written, page]
