@@ -5,6 +5,7 @@ drawn at :data:`FIGURE_DPI` with units as the report writes them (µm, µrad, °
 
 from __future__ import annotations
 
+import io
 from collections.abc import Collection, Sequence
 from typing import TYPE_CHECKING
 
@@ -456,17 +457,13 @@ def registration_figure(result: Processed) -> Figure:
 
 def figure_png(fig: Figure, dpi: int = FIGURE_DPI) -> bytes:
     """The figure as PNG bytes (RGBA, zlib level :data:`PNG_COMPRESS_LEVEL`): the pixels
-    of ``fig.savefig(format="png", dpi=dpi)``, drawn once by the figure's Agg canvas at
-    ``dpi`` and written by :func:`hexatherm.io.png.png_bytes` (rows unfiltered: in less
-    than half of Pillow's time, whose filter search is most of ``savefig``'s encoding)."""
-    from hexatherm.io.png import png_bytes
-
-    canvas = fig.canvas
-    original = fig.dpi
-    fig.dpi = dpi
-    try:
-        canvas.draw()
-        pixels = np.asarray(canvas.buffer_rgba())  # type: ignore[attr-defined]
-        return png_bytes(pixels, dpi=dpi, level=PNG_COMPRESS_LEVEL)
-    finally:
-        fig.dpi = original
+    of ``fig.savefig(format="png", dpi=dpi)``, drawn once."""
+    buffer = io.BytesIO()
+    fig.savefig(
+        buffer,
+        format="png",
+        dpi=dpi,
+        metadata={"Software": None},
+        pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL},
+    )
+    return buffer.getvalue()

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -26,12 +26,8 @@ from hexatherm.workflows.diagnose.report.tables import (
 from hexatherm.workflows.report.text import unit_text
 
 if TYPE_CHECKING:
-    from matplotlib.artist import Artist
     from matplotlib.axes import Axes
-    from matplotlib.axis import Axis
-    from matplotlib.backend_bases import RendererBase
     from matplotlib.figure import Figure
-    from matplotlib.ticker import Locator
 
     from hexatherm.workflows.diagnose.run import DiagnosisResult
 
@@ -52,153 +48,21 @@ def _new_figure(width_in: float, height_in: float, **margins: float) -> Figure:
 
 
 #: the most intervals between ticks on an axis of diagnose's figures, and the tick steps
-#: (matplotlib's own by default, which give up to 9 ticks an axis): a reader still finds
-#: a labelled grid line every 1-2 divisions of the data
+#: (matplotlib's own by default, which give up to 9 ticks an axis): every tick is an
+#: object matplotlib makes and draws with its label and grid line, two thirds of the
+#: figures' drawing with the default (32 axes); a reader still finds a labelled grid
+#: line every 1-2 divisions of the data
 TICK_INTERVALS = 4
 TICK_STEPS = (1.0, 2.0, 2.5, 5.0, 10.0)
 
-#: the grid lines' width (points) of diagnose's panels
-GRID_LINEWIDTH = 0.3
-
-#: the tick labels' font size (points) of diagnose's panels
-TICK_LABELSIZE = 8
-
 
 def _few_ticks(ax: Axes) -> None:
-    """At most :data:`TICK_INTERVALS` intervals between the ticks of both axes of ``ax``,
-    drawn by one :class:`_PanelTicks` artist (grid, marks, labels) rather than by
-    matplotlib's tick objects (5 artists a tick, two thirds of the figures' drawing):
-    the same places, labels, sizes and colours. The axis labels are placed beside the
-    tick labels as matplotlib places them."""
-    from matplotlib.ticker import MaxNLocator, NullLocator
+    """At most :data:`TICK_INTERVALS` intervals between the ticks of both axes of ``ax``
+    (shared axes share the locator)."""
+    from matplotlib.ticker import MaxNLocator
 
-    ax.grid(True, linewidth=GRID_LINEWIDTH)  # what an axis handed back to matplotlib draws
-    ax.tick_params(labelsize=TICK_LABELSIZE)
-    locators = []
     for axis in (ax.xaxis, ax.yaxis):
-        locator = MaxNLocator(nbins=TICK_INTERVALS, steps=list(TICK_STEPS))
-        locators.append(locator)
-        axis.set_major_locator(NullLocator())
-    ax.add_artist(_panel_ticks(ax, locators[0], locators[1]))
-
-
-def _panel_ticks(ax: Axes, x_locator: Locator, y_locator: Locator) -> Artist:
-    """The :class:`_PanelTicks` artist of ``ax`` (matplotlib imported on use)."""
-    import matplotlib
-    from matplotlib.artist import Artist
-    from matplotlib.lines import Line2D
-    from matplotlib.markers import TICKDOWN, TICKLEFT, MarkerStyle
-    from matplotlib.text import Text
-    from matplotlib.ticker import NullLocator
-    from matplotlib.transforms import Bbox
-
-    class _PanelTicks(Artist):
-        """The ticks of both axes of one panel, drawn just before the axes' own axis
-        artists (which then draw only the axis labels, placed here).
-
-        Per axis: the tick places of its locator within the view, one grid line a tick
-        (one path), one tick mark a tick (one line of markers) and the formatter's label
-        of each (the tick labels matplotlib would draw). An axis whose formatter wants an
-        offset or a power of ten is handed back to matplotlib (its locator set again)."""
-
-        zorder = 1.5  # the axis artists' (axisbelow "line"), added before them
-
-        def draw(self, renderer: RendererBase) -> None:
-            if not self.get_visible():
-                return
-            for axis, locator, is_x in (
-                (ax.xaxis, x_locator, True),
-                (ax.yaxis, y_locator, False),
-            ):
-                if isinstance(axis.get_major_locator(), NullLocator):
-                    self._draw_axis(renderer, axis, locator, is_x)
-            self.stale = False
-
-        def _draw_axis(
-            self, renderer: RendererBase, axis: Axis, locator: Locator, is_x: bool
-        ) -> None:
-            low, high = sorted(axis.get_view_interval())
-            locs = list(locator.tick_values(low, high))
-            formatter = axis.get_major_formatter()
-            labels = formatter.format_ticks(locs)
-            if formatter.get_offset():
-                axis.set_major_locator(locator)  # matplotlib's own ticks, offset and all
-                return
-            tolerance = 1e-10 * (high - low)
-            shown_locs = [
-                (float(v), t)
-                for v, t in zip(locs, labels, strict=True)
-                if low - tolerance <= v <= high + tolerance
-            ]
-            name = "x" if is_x else "y"
-            rc: Mapping[str, Any] = matplotlib.rcParams  # type: ignore[assignment]
-            size = rc[f"{name}tick.major.size"]
-            pad = size + rc[f"{name}tick.major.pad"]
-            colour = rc[f"{name}tick.color"]
-            places = [v for v, _ in shown_locs]
-            across = [0.0] * len(places)
-            grid_a = [c for v in places for c in (v, v, np.nan)]
-            grid_b = [c for _ in places for c in (0.0, 1.0, np.nan)]
-            grid = Line2D(
-                grid_a if is_x else grid_b,
-                grid_b if is_x else grid_a,
-                color=rc["grid.color"],
-                alpha=rc["grid.alpha"],
-                linestyle=rc["grid.linestyle"],
-                linewidth=GRID_LINEWIDTH,
-            )
-            marks = Line2D(
-                places if is_x else across,
-                across if is_x else places,
-                color=colour,
-                markeredgecolor=colour,
-                linestyle="none",
-                marker=MarkerStyle(TICKDOWN if is_x else TICKLEFT),
-                markersize=size,
-                markeredgewidth=rc[f"{name}tick.major.width"],
-            )
-            if is_x:
-                grid.set_transform(ax.get_xaxis_transform(which="grid"))
-                marks.set_transform(ax.get_xaxis_transform(which="tick1"))
-                text_transform, va, ha = ax.get_xaxis_text1_transform(pad)
-                shown = axis.get_tick_params(which="major").get("labelbottom", True)
-            else:
-                grid.set_transform(ax.get_yaxis_transform(which="grid"))
-                marks.set_transform(ax.get_yaxis_transform(which="tick1"))
-                text_transform, va, ha = ax.get_yaxis_text1_transform(pad)
-                shown = axis.get_tick_params(which="major").get("labelleft", True)
-            for line in (grid, marks):
-                line.set_figure(self.figure)
-                line.draw(renderer)
-            boxes = []
-            if shown:
-                for value, label in shown_locs:
-                    text = Text(
-                        value if is_x else 0.0,
-                        0.0 if is_x else value,
-                        label,
-                        fontsize=TICK_LABELSIZE,
-                        color=colour,
-                        verticalalignment=va,
-                        horizontalalignment=ha,
-                        transform=text_transform,
-                    )
-                    text.set_figure(self.figure)
-                    text.draw(renderer)
-                    if label:
-                        boxes.append(text.get_window_extent(renderer))
-            # the axis label beside the tick labels, where matplotlib puts it
-            spine = ax.spines["bottom" if is_x else "left"].get_window_extent(renderer)
-            bbox = Bbox.union([*boxes, spine])
-            gap = axis.labelpad * self.figure.dpi / 72
-            x, y = axis.label.get_position()
-            transform = axis.label.get_transform()
-            if is_x:
-                axis.set_label_coords(x, bbox.y0 - gap, transform=transform)
-            else:
-                axis.set_label_coords(bbox.x0 - gap, y, transform=transform)
-
-    return _PanelTicks()
+        axis.set_major_locator(MaxNLocator(nbins=TICK_INTERVALS, steps=list(TICK_STEPS)))
 
 
 def _time_order(result: DiagnosisResult) -> tuple[npt.NDArray[np.intp], FloatArray]:
@@ -254,6 +118,8 @@ def _series_time_figure(
                 label=state,
             )
             ax.axhline(0.0, color="#999999", linewidth=0.6, zorder=0)
+            ax.grid(True, linewidth=0.3)
+            ax.tick_params(labelsize=8)
             _few_ticks(ax)
             ax.set_ylabel(f"{names[j]} ({unit_text(units[j])})", fontsize=9)
             if j == 0:
@@ -407,6 +273,8 @@ def temperature_figure(result: DiagnosisResult) -> Figure:
                 label=state,
             )
         ax.axhline(0.0, color="#999999", linewidth=0.6, zorder=0)
+        ax.grid(True, linewidth=0.3)
+        ax.tick_params(labelsize=8)
         _few_ticks(ax)
         ax.set_title(POSE_COMPONENTS[j], fontsize=10)
         ax.set_ylabel(f"{POSE_COMPONENTS[j]} ({unit_text(POSE_UNITS[j])})", fontsize=9)
