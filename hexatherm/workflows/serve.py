@@ -72,9 +72,6 @@ __all__ = [
 
 AXES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
 
-#: prepared one-pose plans a :class:`TwinWorld` keeps (a campaign's steps; then anew)
-_PREPARED_POSES = 256
-
 
 class AcceleratedClock:
     """POSIX seconds that run ``scale`` times faster than the wall clock.
@@ -232,9 +229,7 @@ class TwinWorld:
         )
         self._lock = threading.Lock()
         self._cache: tuple[float, bytes, FloatArray] | None = None
-        # the one-step plans of the poses the platform stood at, prepared (the CMM asks
-        # for the balls at every motion, the platform standing at one pose for many)
-        self._plans: dict[bytes, PreparedPlan] = {}
+        self._plans: dict[bytes, PreparedPlan] = {}  # one-pose plans, prepared (many motions)
 
     def leg_temperatures_C(self, t_s: float) -> list[float]:
         """The legs' temperatures (6 channels) at clock time ``t_s``, deg C."""
@@ -258,19 +253,14 @@ class TwinWorld:
         clock time ``t_s``: the twin's truth, CMM effects included, mm."""
         pose = [float(v) for v in np.asarray(pose_mm_deg, dtype=float).reshape(6)]
         key = np.array(pose).tobytes()
-        with self._lock:
-            prepared = self._plans.get(key)
+        prepared = self._plans.get(key)  # two threads may prepare a pose twice: the same
         if prepared is None:
+            if len(self._plans) >= 256:  # more poses than a campaign's steps: anew
+                self._plans.clear()
             plan = Plan.from_steps([("O", "origin", pose)])
-            prepared = PreparedPlan.of(self.hexapod, plan, self.true_parameters)
-            with self._lock:
-                if len(self._plans) >= _PREPARED_POSES:
-                    self._plans.clear()
-                self._plans[key] = prepared
+            prepared = self._plans[key] = PreparedPlan.of(self.hexapod, plan, self.true_parameters)
         log = self.log(t_s)
-        steps = self._predict(
-            prepared.plan, [log.times_s[-1]], log, reference_state=False, prepared=prepared
-        )
+        steps = self._predict(prepared.plan, [log.times_s[-1]], log, prepared)
         return np.asarray(steps.measured_centres_cmm_mm[0], dtype=float)
 
     def truth(self, plan: Plan, times_s: npt.ArrayLike) -> TwinSteps:
@@ -282,18 +272,13 @@ class TwinWorld:
         return self._predict(plan, t - self.start_s, log)
 
     def _predict(
-        self,
-        plan: Plan,
-        times_s: npt.ArrayLike,
-        log: ThermocoupleLog,
-        reference_state: bool = True,
-        prepared: PreparedPlan | None = None,
+        self, plan: Plan, t_s: npt.ArrayLike, log: ThermocoupleLog, prep: PreparedPlan | None = None
     ) -> TwinSteps:
         """:func:`~hexatherm.core.twin.predict` with the twin's model, balls, placement,
-        effects and true geometry (``prepared``: the plan's part, see there)."""
+        effects and true geometry; with a prepared one-pose plan, no reference state."""
         args = (self.balls.centres_mm, self.origin2cmm, self.effects, self.true_parameters)
-        at = {"reference_state": reference_state, "true_parameters": args[3], "prepared": prepared}
-        return predict(self.hexapod, plan, times_s, log, *args[:3], **at)  # type: ignore[arg-type]
+        at = {"reference_state": prep is None, "true_parameters": args[3], "prepared": prep}
+        return predict(self.hexapod, plan, t_s, log, *args[:3], **at)  # type: ignore[arg-type]
 
     # CmmBackend
     def ball_centres_mm(self, t_s: float) -> FloatArray:
