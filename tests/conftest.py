@@ -32,17 +32,6 @@ def pytest_configure(config: pytest.Config) -> None:
         signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
-@pytest.hookimpl(optionalhook=True)
-def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object:
-    """``pytest -n 2`` (xdist's ``--dist load``): a module sharing a fixture wider than a
-    test runs whole in one test process, not in both (:mod:`tests.scheduling`)."""
-    if config.getvalue("dist") != "load":
-        return None  # another --dist asked for: xdist's own
-    from tests.scheduling import ModuleFixtureScheduling
-
-    return ModuleFixtureScheduling(config, log)
-
-
 def _fsync_without_the_flush(fd: object) -> None:
     """``os.fsync`` in this test process: the descriptor is checked as fsync checks it (a
     closed or bad one raises OSError, EBADF), the flush to the platter is not made.
