@@ -42,7 +42,6 @@ from hexatherm.core.propagation import (
     reference_scatter,
 )
 from hexatherm.core.registration import register
-from hexatherm.core.smoothbias import own_leg_covariance
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.carrying import extrapolation_weights, line_at_end
 from hexatherm.workflows.process.pipeline import ProcessResult
@@ -105,9 +104,16 @@ def _leg_sd(
 
 
 def carry_error(
-    result: ProcessResult, chain: PoseChain, jacobian: TargetJacobian, centre_cov_mm2: FloatArray
+    result: ProcessResult,
+    chain: PoseChain,
+    jacobian: TargetJacobian,
+    centre_cov_mm2: FloatArray,
+    legs_cov_mm2: FloatArray,
 ) -> CarryError | None:
-    """The carry's error (module docstring); None when nothing was carried."""
+    """The carry's error (module docstring); None when nothing was carried.
+
+    ``legs_cov_mm2`` (R, 6, 6) is the references' leg lengths' covariance from their own
+    centres (:func:`~hexatherm.core.smoothbias.own_leg_covariance`)."""
     carry = result.carry
     session = result.session
     legs, hexapod = session.hexapod.legs, session.hexapod
@@ -122,7 +128,9 @@ def carry_error(
     model_o = np.zeros(6)
     derivative: dict[int, FloatArray] = {}
     if carry.source == "references":
-        derivative, sd_o, model_o, basis = _extrapolation_error(result, chain, centre_cov_mm2)
+        derivative, sd_o, model_o, basis = _extrapolation_error(
+            result, chain, centre_cov_mm2, legs_cov_mm2
+        )
     else:
         if result.temperatures is None:
             return None
@@ -135,9 +143,8 @@ def carry_error(
         misfit = 1.0
         if refs.size > 1:
             # the references' growth is measured with their noise and R0's: not the model's
-            legs_cov = own_leg_covariance(chain, result.centres.centres_mm, centre_cov_mm2, refs)
-            noise = np.trace(legs_cov[1:], axis1=1, axis2=2).sum() + (refs.size - 1) * np.trace(
-                legs_cov[0]
+            noise = np.trace(legs_cov_mm2[1:], axis1=1, axis2=2).sum() + (refs.size - 1) * np.trace(
+                legs_cov_mm2[0]
             )
             misfit = model_misfit(q[refs[1:]] - q[refs[0]], predicted[1:], float(noise))
         misfit = min(misfit, 1.0) if np.isfinite(misfit) else 1.0
@@ -238,7 +245,7 @@ def _leg_derivatives(
 
 
 def _extrapolation_error(
-    result: ProcessResult, chain: PoseChain, centre_cov_mm2: FloatArray
+    result: ProcessResult, chain: PoseChain, centre_cov_mm2: FloatArray, legs_cov: FloatArray
 ) -> tuple[dict[int, FloatArray], FloatArray, FloatArray, str]:
     """O's mean growth read from the references' series (no log, :class:`ReferenceSeries`)
     as a function of the centres: its derivatives (6 legs, k, 3) by the centres of the
@@ -295,7 +302,6 @@ def _extrapolation_error(
     for ball, cov in enumerate(np.asarray(centre_cov_mm2, dtype=float)[refs[0]]):
         block[3 * ball : 3 * ball + 3, 3 * ball : 3 * ball + 3] = cov
     outside = ratio[:, None] * ratio[None] * (flat @ (left * block) @ flat.T)
-    legs_cov = own_leg_covariance(chain, result.centres.centres_mm, centre_cov_mm2, refs)
     var = np.diagonal(legs_cov, axis1=1, axis2=2)  # (R, 6): R0's state, then the later
     var_series = np.concatenate([np.repeat(var[0][None] / spread, n0, axis=0), var[1:]])
     models = []

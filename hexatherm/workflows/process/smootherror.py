@@ -31,7 +31,10 @@ __all__ = ["curvature_excess", "smooth_excess"]
 
 
 def smooth_excess(
-    result: ProcessResult, chain: PoseChain, centre_cov_mm2: FloatArray
+    result: ProcessResult,
+    chain: PoseChain,
+    centre_cov_mm2: FloatArray,
+    legs_cov_mm2: FloatArray | None = None,
 ) -> tuple[FloatArray, GrowthExcess] | None:
     """The smooth growth's own error carried to the corrected poses, (M, 6, 6), and its
     evaluation at the references; None unless the smooth fit was used.
@@ -45,6 +48,10 @@ def smooth_excess(
     (:func:`~hexatherm.core.smoothbias.log_shape_error`): what the residuals at the
     references cannot see at a target far from them (a gap, irregular times) or across a
     heating switched on or off.
+
+    ``legs_cov_mm2`` (R, 6, 6): the references' leg lengths' covariance from their own
+    centres (:func:`~hexatherm.core.smoothbias.own_leg_covariance`), made here when not
+    given (only when the smooth fit was used).
     """
     corr = result.correction
     smooth = corr.smooth
@@ -53,7 +60,9 @@ def smooth_excess(
     refs = result.session.plan.reference_indices
     q = result.steps.q_mm
     times = result.centres.times_s
-    legs_cov = own_leg_covariance(chain, result.centres.centres_mm, centre_cov_mm2, refs)
+    legs_cov = legs_cov_mm2
+    if legs_cov is None:
+        legs_cov = own_leg_covariance(chain, result.centres.centres_mm, centre_cov_mm2, refs)
     temperatures, legs = result.temperatures, chain.hexapod.legs
     shape, ref_model = None, None
     if temperatures is not None and legs is not None:
@@ -79,7 +88,7 @@ def smooth_excess(
 
 
 def curvature_excess(
-    result: ProcessResult, chain: PoseChain, centre_cov_mm2: FloatArray
+    result: ProcessResult, chain: PoseChain, legs_cov_mm2: FloatArray
 ) -> tuple[FloatArray, CurvatureError] | None:
     """The interpolation's own error between references carried to the corrected poses,
     (M, 6, 6), and its evaluation (:mod:`hexatherm.core.curvature`); None when no target
@@ -93,7 +102,9 @@ def curvature_excess(
     (:func:`~hexatherm.core.smoothbias.log_shape_error` with the neighbours' weights: the
     log shows a heating switched on between two references, which no curvature of the
     references' growth resolves). Without one, the references' growth around the target
-    (:func:`~hexatherm.core.curvature.curvature_error`). Where the smooth fit is used
+    (:func:`~hexatherm.core.curvature.curvature_error`, with ``legs_cov_mm2`` (R, 6, 6),
+    the references' leg lengths' covariance from their own centres:
+    :func:`~hexatherm.core.smoothbias.own_leg_covariance`). Where the smooth fit is used
     without a log, its residuals see its error at the references' median spacing: a
     target gets the curvature term only for the part of its interval beyond it (a gap
     between references). With a log the smooth fit's error on the log's shape holds the
@@ -148,9 +159,8 @@ def curvature_excess(
             "log",
         )
     else:
-        legs_cov = own_leg_covariance(chain, result.centres.centres_mm, centre_cov_mm2, refs)
         error = curvature_error(
-            times[refs], q[refs] - q[refs[0]], legs_cov, times[corr.target_index], used, seen
+            times[refs], q[refs] - q[refs[0]], legs_cov_mm2, times[corr.target_index], used, seen
         )
     if not error.evaluated.any():
         return None

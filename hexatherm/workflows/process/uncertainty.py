@@ -50,7 +50,7 @@ from hexatherm.core.propagation import (
     monte_carlo_covariance,
     target_jacobian,
 )
-from hexatherm.core.smoothbias import GrowthExcess
+from hexatherm.core.smoothbias import GrowthExcess, own_leg_covariance
 from hexatherm.core.spherefit import fit_spheres, refine_spheres
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.carryerror import CarryError, add_common, carry_error
@@ -356,7 +356,12 @@ def pose_uncertainty(
     centres = centre_covariance(result)
     chain = pose_chain(result)
     jacobian = target_jacobian(chain, result.centres.centres_mm)
-    carried = carry_error(result, chain, jacobian, centres.cov_mm2)  # common
+    # the references' legs from their own centres: the carry's, the smooth fit's and the
+    # straight line's errors read them
+    legs_cov = own_leg_covariance(
+        chain, result.centres.centres_mm, centres.cov_mm2, result.session.plan.reference_indices
+    )
+    carried = carry_error(result, chain, jacobian, centres.cov_mm2, legs_cov)  # common
     # without a log O's carry reads the references: a function of their centres
     full = jacobian if carried is None or carried.jacobian is None else carried.jacobian
     linear = full.covariance(centres.cov_mm2)
@@ -384,8 +389,8 @@ def pose_uncertainty(
         carried, covariance, linear, common_u, own_u, pairs
     )
     u = np.sqrt(np.clip(np.diagonal(covariance, axis1=1, axis2=2), 0.0, None))
-    excess = smooth_excess(result, chain, centres.cov_mm2)
-    curved = curvature_excess(result, chain, centres.cov_mm2)
+    excess = smooth_excess(result, chain, centres.cov_mm2, legs_cov)
+    curved = curvature_excess(result, chain, legs_cov)
     for part in (excess, curved):
         if part is None:
             continue
