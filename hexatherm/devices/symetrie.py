@@ -267,6 +267,7 @@ class SymetrieController(SocketController):
         self.info["user_frame_in_machine"] = format_pose(mm_deg[0])
         self.info["object_frame_in_platform"] = format_pose(mm_deg[1])
         self.info["frames_mm_deg"] = format_frames(mm_deg)
+        self.frames_mm_deg = np.asarray(mm_deg, dtype=float).ravel()
 
     # ---------------------------------------------------------------- replies
     def _transact(self, command: str, args: str = "", *, accepted: bool = False) -> str:

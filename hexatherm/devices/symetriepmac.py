@@ -249,6 +249,7 @@ class SymetriePmacController(SocketController):
         self.info["user_frame_in_machine"] = format_pose(frames[:6])
         self.info["object_frame_in_platform"] = format_pose(frames[6:])
         self.info["frames_mm_deg"] = format_frames(frames)
+        self.frames_mm_deg = np.asarray(frames, dtype=float).ravel()
 
     # ---------------------------------------------------------------- gpascii
     def _query(self, line: str) -> list[str]:

@@ -11,15 +11,13 @@ import numpy as np
 import pytest
 
 from hexatherm.core.calibration.frames import (
-    campaign_transforms,
     command,
     corrected_frames,
     fit_frames,
     frame_correction,
     frames_covariance,
-    machine_in_origin,
-    poses_from_origin,
 )
+from hexatherm.core.frames import campaign_transforms, machine_in_origin, poses_from_origin
 from hexatherm.core.geometry import (
     apply_transform,
     invert_transform,

@@ -21,9 +21,9 @@ rigid error. ``G`` is the pose of the corrected *user*
 calibration, ``H`` that of the corrected *object* (Symétrie) or *tool* (PI) frame in the
 platform frame. A campaign measured with frames ``U0``, ``O0`` set is, relative to its
 frame O (the platform at the origin step), a campaign with no frames of the nominal
-hexapod whose base joints are moved by ``M0^-1 = O0 U0^-1`` (:func:`machine_in_origin`)
-and whose commanded poses are ``O0 X O0^-1`` (:func:`poses_from_origin`): the same leg
-lengths, exactly; the controller then takes ``U0 O0^-1 G O0`` and ``H O0``
+hexapod whose base joints are moved by ``M0^-1 = O0 U0^-1`` and whose commanded poses
+are ``O0 X O0^-1`` (:mod:`hexatherm.core.frames`, which ``run`` and ``process`` use too):
+the same leg lengths, exactly; the controller then takes ``U0 O0^-1 G O0`` and ``H O0``
 (:func:`corrected_frames`). What stays is not a frame: the controller's own
 geometry parameters would take it (``controller.yaml``'s neutral form).
 
@@ -47,6 +47,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import least_squares
 
+from hexatherm.core.frames import campaign_transforms
 from hexatherm.core.geometry import (
     Convention,
     apply_transform,
@@ -182,44 +183,6 @@ def fit_frames(
     return FramesFit(v, residuals(v).reshape(-1, 6), jac)
 
 
-def campaign_transforms(
-    values_mm_deg: npt.ArrayLike, convention: Convention = "symetrie"
-) -> tuple[FloatArray, FloatArray]:
-    """``U0`` and ``O0`` (4 x 4 each) of the 12 values a controller reported during a
-    campaign: its user (work) frame in the machine frame, then its object (tool) frame in
-    the platform frame (mm, deg, in ``convention``: Symétrie's own by default)."""
-    v = np.asarray(values_mm_deg, float).reshape(12)
-    frames = transform_from_pose(np.stack([v[:6], v[6:]]), convention)
-    return frames[0], frames[1]
-
-
-def poses_from_origin(
-    poses: npt.ArrayLike, obj: npt.ArrayLike, convention: Convention
-) -> FloatArray:
-    """The nominal poses (N, 6) relative to frame O of the platform for commanded poses
-    ``X`` (N, 6) given to a controller whose object (tool) frame is ``O0`` (4 x 4): the
-    controller puts the platform at ``M = U0 X O0^-1`` in its machine frame and at
-    ``M0 = U0 O0^-1`` for the origin step, so the platform relative to frame O (where
-    the origin step put it) is ``M0^-1 M = O0 X O0^-1``, the user frame gone.
-
-    >>> import numpy as np
-    >>> o0 = transform_from_pose([1.0, 2.0, 3.0, 0.0, 0.0, 90.0])
-    >>> poses_from_origin([[1.0, 0, 0, 0, 0, 0]], o0, "symetrie").round(12) + 0.0
-    array([[0., 1., 0., 0., 0., 0.]])
-    """
-    x = transform_from_pose(np.atleast_2d(check_poses(poses)), convention)
-    o0 = np.asarray(obj, float)
-    return np.asarray(pose_from_transform(o0 @ x @ invert_transform(o0), convention), float)
-
-
-def machine_in_origin(user: npt.ArrayLike, obj: npt.ArrayLike) -> FloatArray:
-    """The machine frame (ZERO) in frame O of a campaign whose frames were ``U0``, ``O0``
-    (4 x 4): ``M0^-1 = O0 U0^-1``. The nominal base joints in frame O are this applied
-    to those of the hexapod file (machine frame), and the controller's zero pose with no
-    frames is this pose relative to frame O."""
-    return np.asarray(np.asarray(obj, float) @ invert_transform(np.asarray(user, float)), float)
-
-
 def in_frame(points_mm: npt.ArrayLike, pose: npt.ArrayLike, convention: Convention) -> FloatArray:
     """Points (k, 3) given in a frame A, expressed in the frame whose pose in A is
     ``pose`` (6,): ``T(pose)^-1 p``."""
@@ -233,7 +196,8 @@ def corrected_frames(
     """The 12 values (mm, deg, ``convention``) a controller is given: its user (work)
     frame's pose in the machine frame (ZERO), then its object (tool) frame's in the
     platform frame, from the fitted ``values`` (``G`` then ``H``, relative to the
-    campaign's frame O: :func:`fit_frames` on poses from :func:`poses_from_origin`) and
+    campaign's frame O: :func:`fit_frames` on poses from
+    :func:`~hexatherm.core.frames.poses_from_origin`) and
     the frames ``U0``, ``O0`` set during the campaign (``during``: 12 values, mm and deg,
     Symétrie convention, as ``run.yaml`` records them; zero when not given):
     ``U0 O0^-1 G O0`` and ``H O0``.

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from hexatherm.core.frames import platform_in_machine
 from hexatherm.core.geometry import (
     Convention,
     check_convention,
@@ -114,6 +115,10 @@ class SocketController:
         self.url = f"{self.scheme}://{host}:{port}"
         self.commanded_pose_mm_deg: FloatArray | None = None
         self.info: dict[str, str] = {}
+        #: the user frame in the machine frame then the object frame in the platform frame
+        #: (12 values, mm and deg, Symétrie convention) the controller reported when it
+        #: connected; None: it reports none (PI: moved only in its ZERO system)
+        self.frames_mm_deg: FloatArray | None = None
         #: what :meth:`check_ready` found (name -> state in words), for the run's record
         self.readiness: dict[str, str] = {}
         self._conn: _Connection | None = None
@@ -272,19 +277,37 @@ class SocketController:
         """
         self.readiness = {}
 
+    def platform_pose(self, pose_mm_deg: npt.ArrayLike) -> FloatArray:
+        """The platform's pose in the machine frame (6,) that commanding ``pose_mm_deg``
+        makes the controller drive, through the frames it reported
+        (:attr:`frames_mm_deg`, ``U0 X O0^-1``); the pose itself without frames."""
+        pose = self._check_pose(pose_mm_deg)
+        if self.frames_mm_deg is None:
+            return pose
+        return platform_in_machine(self.frames_mm_deg, pose, self.convention)
+
     def validate(self, pose_mm_deg: npt.ArrayLike) -> None:
         """Raise :class:`PoseRefusedError` unless the pose can be reached; never moves.
 
-        With a hexapod model, every leg's length (its inverse geometric model) must lie
-        within the stroke; then the controller checks the pose itself.
+        With a hexapod model, every leg's length (the inverse geometric model of the
+        platform's pose the controller's frames make of it, :meth:`platform_pose`) must
+        lie within the stroke; then the controller checks the pose itself.
         """
         pose = self._check_pose(pose_mm_deg)
         if self.hexapod is not None:
-            legs = stroke_violations(self.hexapod, pose)
+            platform = self.platform_pose(pose)
+            legs = stroke_violations(self.hexapod, platform)
             if legs:
+                framed = ""
+                if self.frames_mm_deg is not None and self.frames_mm_deg.any():
+                    framed = (
+                        f" (the platform at {format_pose(platform)} in the machine frame, "
+                        "through the controller's user and object frames)"
+                    )
                 raise PoseRefusedError(
                     f"pose {format_pose(pose)} refused before asking the controller: "
                     + "; ".join(legs)
+                    + framed
                 )
         with self._lock:
             self._validate_wire(self._to_native(pose), pose)

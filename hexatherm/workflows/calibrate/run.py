@@ -42,14 +42,10 @@ from hexatherm.core.calibration import (
     fit_calibration,
     select_level,
 )
-from hexatherm.core.calibration.frames import (
-    campaign_transforms,
-    in_frame,
-    machine_in_origin,
-    poses_from_origin,
-)
+from hexatherm.core.calibration.frames import in_frame
 from hexatherm.core.correction import Interpolation
-from hexatherm.core.geometry import apply_transform, pose_from_transform, to_um_urad
+from hexatherm.core.frames import campaign_transforms, hexapod_in_origin, machine_in_origin
+from hexatherm.core.geometry import pose_from_transform, to_um_urad
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.errors import CalibrationError, InputError
 from hexatherm.io.config import hexapod_to_yaml, read_hexapod, read_hexapod_text, read_session
@@ -174,8 +170,8 @@ class Campaign:
         The controller's frames during the sessions (``run.yaml``'s record; its
         ``values_mm_deg`` None: not recorded, assumed zero). When they are not zero,
         :attr:`nominal` is the hexapod file's geometry with its base joints moved into
-        frame O (the platform at the origin step, :func:`~hexatherm.core.calibration.
-        frames.machine_in_origin`) and :attr:`commanded` the nominal poses relative to
+        frame O (the platform at the origin step, :func:`~hexatherm.core.frames.
+        hexapod_in_origin`) and :attr:`commanded` the nominal poses relative to
         it (``O0 X O0^-1``): the same leg lengths as the controller drove.
     structure : BandedCovariance or None
         :attr:`covariance` with its structure (O and R0 low-rank, the rest banded), what
@@ -258,11 +254,9 @@ def read_campaign(
         process_session(path, interpolation, reading=reading, hexapod=geometry) for path in paths
     ]
     check_distinct_measurements(results)
-    nominal = specs[0].hexapod
-    user, obj = campaign_transforms(frames.values)
-    if frames.values.any():  # the campaign relative to frame O, as with no frames
-        base = apply_transform(machine_in_origin(user, obj), nominal.base_joints_mm)
-        nominal = dataclasses.replace(nominal, base_joints_mm=base)
+    # the campaign relative to frame O, as with no frames (process_session's sessions too:
+    # their plans' poses are O0 X O0^-1)
+    nominal = hexapod_in_origin(specs[0].hexapod, frames.values, np.zeros(6))[0]
     check_reference_states(results, warn=geometry is None)  # --iterate's rounds: said once
     labels: list[str] = []
     commanded, measured = [], []
@@ -274,10 +268,7 @@ def read_campaign(
         name = names[k - 1]
         tag = f"{name}#{k}" if names.count(name) > 1 else name  # sessions of one name apart
         labels += [f"{tag}:{result.session.plan.labels[i]}" for i in targets]
-        plan_poses = result.session.plan.poses[targets]
-        if frames.values.any():
-            plan_poses = poses_from_origin(plan_poses, obj, nominal.convention)
-        commanded.append(plan_poses)
+        commanded.append(result.session.plan.poses[targets])
         if twin is not None:
             measured.append(twin_poses(result, twin.with_geometry(geometry), twin.path))
         else:

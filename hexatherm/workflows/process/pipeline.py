@@ -43,6 +43,7 @@ from hexatherm.io.temperatures import Temperatures
 from hexatherm.session import DISTANCE_REFUSAL_UM, QualityLimits, Session
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.carrying import OriginCarry, RepeatGroup, carry_and_average
+from hexatherm.workflows.process.frames import session_frames, session_in_origin
 from hexatherm.workflows.process.measured import (
     FileProgress,
     StepCentres,
@@ -59,7 +60,11 @@ class ProcessResult:
     ``records`` are the centres of every measurement file (fitted to the probed
     points where the file holds points); ``points`` gives, for each of them, the
     probed points they were fitted to (None for a centres file), and
-    ``fixed_diameter_mm`` the fits' setting (see :func:`fit_points`).
+    ``fixed_diameter_mm`` the fits' setting (see :func:`fit_points`). ``frames`` are the
+    controller's frames the session was measured with (``run.yaml``'s 12 values, mm and
+    deg; None: zero or not recorded): ``session`` is then the session relative to frame O
+    (:func:`hexatherm.workflows.process.frames.session_in_origin`: its plan's poses those the
+    frames made of the commanded ones, its hexapod's base joints moved).
     """
 
     session: Session
@@ -75,6 +80,7 @@ class ProcessResult:
     fixed_diameter_mm: float | None = None
     repeats: tuple[RepeatGroup, ...] = ()
     carry: OriginCarry | None = None
+    frames: FloatArray | None = None
 
     @property
     def repeat_of(self) -> dict[str, str]:
@@ -327,6 +333,10 @@ def process_session(
     session = read_session(path) if session is None else session
     if hexapod is not None:
         session = dataclasses.replace(session, hexapod=hexapod)
+    # with the controller's frames set, the session as frame O sees it (the commanded poses
+    # compared with the measured ones, the IGM and FGM of the correction)
+    frames = session_frames(session).values
+    session = session_in_origin(session, frames)
     records, points, centres, temperatures = read_measured(
         session, fixed_diameter_mm, progress, reading
     )
@@ -419,4 +429,5 @@ def process_session(
         fixed_diameter_mm,
         repeats,
         carry,
+        frames if frames.any() else None,
     )

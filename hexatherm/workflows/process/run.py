@@ -154,7 +154,8 @@ def compute(
         from hexatherm.workflows.process.twin import twin_poses
 
         path = request.hexapod_path
-        model = result.session.hexapod if path is None else read_hexapod(path)
+        # the file's model (the machine frame): twin_poses moves it into frame O
+        model = session_file.hexapod if path is None else read_hexapod(path)
         twin = twin_poses(result, model, str(path or ""))
         gap = (twin - result.correction.corrected)[:, :3] * 1e3
         effects = ", ".join(e["name"] for e in model.effects) or "none"

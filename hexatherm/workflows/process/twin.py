@@ -18,6 +18,7 @@ from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.twin import twin_corrected
 from hexatherm.errors import InputError
 from hexatherm.io.temperatures import Temperatures
+from hexatherm.workflows.process.frames import model_in_origin
 from hexatherm.workflows.process.measured import check_log_span
 from hexatherm.workflows.process.pipeline import ProcessResult
 
@@ -27,9 +28,13 @@ def twin_poses(
 ) -> npt.NDArray[np.float64]:
     """Twin-corrected pose (M, 6) of every target of ``result``, mm and deg.
 
-    ``source`` names the hexapod file in error messages.
+    ``source`` names the hexapod file in error messages. ``hexapod`` is the model as its
+    file gives it (the machine frame): with the controller's frames set during the
+    session, it is moved into frame O as the session is
+    (:func:`~hexatherm.workflows.process.frames.model_in_origin`).
     """
     session = result.session
+    hexapod = model_in_origin(hexapod, result.frames)
     if result.temperatures is None:
         raise InputError(
             "the twin corrects from the thermocouple log: add 'temperatures: "

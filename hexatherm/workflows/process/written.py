@@ -125,8 +125,13 @@ def read_written(
 ) -> tuple[WrittenResult, WrittenUncertainty, QualityReport | None]:
     """The results folder ``folder`` that ``process`` wrote for ``session`` with
     ``options`` (its ``provenance.json``), read back; ResultsError naming a file that is
-    not what process writes."""
+    not what process writes. With the controller's frames set during the session
+    (``run.yaml``), the session is seen from its frame O as ``process`` saw it
+    (:func:`~hexatherm.workflows.process.frames.session_in_origin`)."""
+    from hexatherm.workflows.process.frames import session_frames, session_in_origin
     from hexatherm.workflows.process.measured import session_temperatures
+
+    session = session_in_origin(session, session_frames(session).values)
 
     poses_path, legs_path = folder / "poses.csv", folder / "legs.csv"
     poses, legs = _read_csv(poses_path), _read_csv(legs_path)

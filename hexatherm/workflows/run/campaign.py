@@ -51,6 +51,7 @@ from hexatherm.errors import (
 from hexatherm.io.atomic import atomic_write_text
 from hexatherm.io.manifest import MANIFEST_NAME
 from hexatherm.io.recording import check_new_recording, check_resume, recording_manifest
+from hexatherm.io.runrecord import read_recorded_frames
 from hexatherm.io.seriallog import (
     LOG_NAME,
     POINTS_HEADER,
@@ -340,6 +341,8 @@ class _Campaign:
         self.stopped = ""
         #: the CMM's event that changed its tool away from the run's (:meth:`_restore_tool`)
         self.tool_event: IppEvent | None = None
+        #: the controller's frames were said (once, when not zero)
+        self.frames_said = False
 
     # ------------------------------------------------------------------ state
     def _fit_centre(self, xyz: FloatArray) -> FloatArray:
@@ -599,6 +602,19 @@ class _Campaign:
                 controller.url,
                 controller.info,
                 controller.readiness,
+            )
+        # the balls predicted through the frames the session's records give (one setting
+        # for the whole session: read_recorded_frames refuses records that differ)
+        frames = read_recorded_frames(self.folder).values
+        self.geometry.use_frames(frames)
+        if frames.any() and not self.frames_said:
+            self.frames_said = True
+            self.notify(
+                "info",
+                "controller frames (user, object; mm, deg): "
+                + ", ".join(f"{v:.6g}" for v in frames)
+                + ": the balls are predicted, and the stroke checked, where they put the "
+                "platform",
             )
 
     def _on_event(self, event: IppEvent) -> None:

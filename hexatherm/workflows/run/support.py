@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from hexatherm.core.frames import hexapod_in_origin
 from hexatherm.core.geometry import apply_transform, transform_from_pose
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.devices.controller import SocketController
@@ -126,6 +127,15 @@ class _Geometry:
         self.hexapod, self.balls, self.poses, self.probe = hexapod, balls, poses, probe
         self.step2origin = transform_from_pose(poses, hexapod.convention)
 
+    def use_frames(self, values_mm_deg: FloatArray | None) -> None:
+        """Predict with the controller's frames (12 values, mm and deg, Symétrie
+        convention; None: none): the platform at each step relative to frame O is then
+        ``O0 X O0^-1`` for the commanded ``X`` (:func:`~hexatherm.core.frames.
+        hexapod_in_origin`), not ``X``."""
+        values = np.zeros(12) if values_mm_deg is None else values_mm_deg
+        poses = hexapod_in_origin(self.hexapod, values, self.poses)[1]
+        self.step2origin = transform_from_pose(poses, self.hexapod.convention)
+
     def centres(self, origin2cmm: FloatArray, index: int | slice = slice(None)) -> FloatArray:
         """Predicted centres (k, 3) of step ``index`` (or (N, k, 3) of all)."""
         frames = origin2cmm @ self.step2origin[index]
@@ -236,6 +246,7 @@ def dry_run(
     controller.connect()
     try:
         controller.check_ready()
+        geometry.use_frames(controller.frames_mm_deg)
         if controller.readiness:
             notify(
                 "info",
