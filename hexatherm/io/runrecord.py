@@ -1,4 +1,5 @@
-"""What ``run.yaml`` recorded of the controller's coordinate frames, for ``calibrate``.
+"""What ``run.yaml`` recorded of the controller's coordinate frames, for ``run`` (its
+predictions of the balls), ``process`` and ``calibrate``.
 
 ``hexatherm run`` appends a record to ``run.yaml``'s ``controller:`` list at every
 connection (docs/formats.md, ``run.yaml``). A Symétrie controller's record holds its user
