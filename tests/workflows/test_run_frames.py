@@ -102,6 +102,7 @@ def test_run_probes_every_ball_where_the_frames_put_it_and_process_finds_the_tru
         results.folder, read_session(results.session_file), results.options, results.notes, STRICT
     )
     conv, corr = report_deviations(written)
+    assert "O0 X O0^-1" in results.notes["controller_frames"]
     cols = [
         f"d{a}_{{}}_{u}"
         for a, u in zip(

@@ -212,8 +212,17 @@ def process(
 def page_notes(outcome: ProcessOutcome) -> dict[str, Any]:
     """What ``report``'s page says of a results folder beyond its CSV files, recorded in
     its ``provenance.json`` (``process``): the warnings of processing and where the ball
-    centres' uncertainty came from (one line each, as the screen said them)."""
-    return {
+    centres' uncertainty came from (one line each, as the screen said them); the
+    controller's frames the commanded poses went through, when not zero."""
+    notes: dict[str, Any] = {
         "warnings": list(outcome.result.warnings),
         "centres_uncertainty": outcome.uncertainty.centres.description,
     }
+    frames = outcome.result.frames
+    if frames is not None:  # what the commanded poses (Tx_cmd_mm ...) went through
+        notes["controller_frames"] = (
+            "user, object frames "
+            + " ".join(f"{v:.15g}" for v in frames)
+            + " (mm, deg; run.yaml): the commanded poses relative to frame O are O0 X O0^-1"
+        )
+    return notes
