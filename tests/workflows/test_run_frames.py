@@ -24,10 +24,11 @@ import pytest
 from hexatherm.core.geometry import invert_transform, pose_from_transform, transform_from_pose
 from hexatherm.devices.symetrie import format_wire, pose_to_wire
 from hexatherm.devices.urls import controller_from_url
-from hexatherm.errors import PoseError
+from hexatherm.errors import PoseError, StepError
 from hexatherm.io.config import read_session
 from hexatherm.io.files import STRICT
 from hexatherm.io.provenance import run_context
+from hexatherm.workflows.process.pipeline import Checks, process_session
 from hexatherm.workflows.process.run import ProcessRequest, process
 from hexatherm.workflows.process.written import read_written
 from hexatherm.workflows.report.figures import pose_deviations as report_deviations
@@ -116,6 +117,9 @@ def test_run_probes_every_ball_where_the_frames_put_it_and_process_finds_the_tru
         np.testing.assert_allclose(conv if tag == "conv" else corr, got, atol=2e-3)
         assert np.abs(got[:, :3] - want[:, :3]).max() < 0.3
         assert np.abs(got[:, 3:] - want[:, 3:]).max() < 10.0
+    # a refusal shows the commanded pose the frames make (a tolerance below the heating)
+    with pytest.raises(StepError, match=r"commanded \[.*\] \(the plan's through the controller's"):
+        process_session(b.session, checks=Checks(pose_tolerance=(1e-4, 1.0)))
     thermal = (truth.pose[idx] - truth.corrected_pose[idx])[:, :3] * 1e3
     assert np.abs(thermal).max() > 3.0  # the correction took off micrometres
     np.testing.assert_allclose(

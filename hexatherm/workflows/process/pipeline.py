@@ -159,6 +159,7 @@ def check_poses(
     steps: StepPoses,
     check: PoseCheck,
     records: Sequence[Records] = (),
+    framed: bool = False,
 ) -> None:
     """Refuse a step whose measured pose relative to O is not its commanded one, or
     whose measured balls are a mirror image of the balls file's.
@@ -171,6 +172,9 @@ def check_poses(
     even within the tolerance (a small motion mirrors into a small deviation; a
     reflection is never a rotation: :func:`hexatherm.core.plausibility.mirrored`),
     naming the step and the file and line of its first measurement in ``records``.
+    ``framed``: the session's plan holds the poses the controller's frames made of the
+    commanded ones (:func:`~hexatherm.workflows.process.frames.session_in_origin`), which
+    the message says.
     """
     if not check.enabled:
         return
@@ -202,6 +206,8 @@ def check_poses(
         return "[" + ", ".join(f"{v:.4f}" for v in p) + "]"
 
     offset = " less the declared offset" if np.any(check.offset) else ""
+    if framed:
+        offset = " (the plan's through the controller's frames, run.yaml)" + offset
     scaled = ""
     if check.scaled and dev.tolerance_deg[i] < check.tolerance_deg:
         angle = np.abs(commanded[i, 3:]).max()
@@ -385,6 +391,7 @@ def process_session(
         step_poses(session.hexapod, registration.platform2cmm, plan.origin_index),
         session_pose_check(session, checks),
         records,
+        framed=bool(frames.any()),
     )
     q_steps = session.hexapod.igm(plan.poses)
     outside = np.flatnonzero(session.hexapod.check_stroke(q_steps).any(axis=1))
