@@ -143,33 +143,15 @@ def test_a_calibrations_claim_holds_with_the_interpolation_error_in_its_weights(
     before 0.64 1.02 0.88 0.92 0.94 0.83 (the poses' own interpolation error left out of
     the weights: the fit leaned on the poses it errs most at), now 1.07 1.16 0.95 1.07
     0.98 0.98."""
-    from hexatherm.io.scenario import read_scenario
     from hexatherm.workflows.calibrate.claim import pose_claim
-    from hexatherm.workflows.calibrate.run import calibrate, read_campaign
     from hexatherm.workflows.simulate.heldout import heldout_truth
-    from hexatherm.workflows.simulate.run import scenario_spec, simulate
-    from tests.sessions import calibration_scenario, calibration_targets
-    from tests.workflows.test_calibration_claim import N_TARGETS, heldout_poses
+    from tests.workflows.test_calibration_claim import campaign, heldout_poses
 
     claimed, observed = [], []
     for seed in range(10):
-        text = calibration_scenario(
-            calibration_targets(seed, N_TARGETS),
-            geometry_seed=seed + 100,
-            seed=seed,
-            points_per_ball=8,
-            cmm={"point_noise_um": 0.3},
-            thermocouples={"period_s": 30, "noise_C": 0.02},
-            timing={"seconds_per_point": 2.0, "seconds_per_move": 20},
-            extra=BENDING,
-        )
-        path = tmp_path / f"s{seed}.yaml"
-        path.write_text(text)
-        scenario = read_scenario(path)
-        folder = write_session(simulate(scenario, truth_files=False).files, tmp_path / f"s{seed}")
-        run = calibrate(read_campaign([folder]), level="joints")
+        run, spec = campaign(tmp_path, seed, heating=BENDING)
         held = heldout_poses(run, seed)
-        error = to_um_urad(run.fit.predict(held) - heldout_truth(scenario_spec(scenario), held))
+        error = to_um_urad(run.fit.predict(held) - heldout_truth(spec, held))
         claimed.append(np.mean(pose_claim(run, held).sigma_um_urad ** 2, axis=0))
         observed.append(np.mean(error**2, axis=0))
     ratio = np.sqrt(np.mean(claimed, axis=0) / np.mean(observed, axis=0))
