@@ -49,14 +49,16 @@ def pairs_plan(pairs: int = 3) -> Plan:
     return Plan.from_steps(steps, reference_pose=REFERENCE)
 
 
-def pairs_session(folder: Path, seed: int, *, log: bool = True, on_s: float = 1000.0) -> Path:
+def pairs_session(
+    folder: Path, seed: int, *, log: bool = True, on_s: float = 1000.0, pairs: int = 3
+) -> Path:
     """The twin session of :func:`pairs_plan` (steps 200 s apart), mats on at ``on_s``
     (tau 600 s), with its truth; ``log``: with its thermocouple log."""
     spec = TwinSessionSpec(
         name=folder.name,
         hexapod_text=(ROOT / "configs" / "symetrie-like.yaml").read_text(),
         balls=BALLS,
-        plan=pairs_plan(),
+        plan=pairs_plan(pairs),
         heating=Heating(on_s=on_s, tau_s=600.0, gain_C=GAIN),
         seed=seed,
         output="centres",

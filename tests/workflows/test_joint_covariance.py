@@ -14,8 +14,15 @@ import pytest
 from click.testing import CliRunner
 
 from hexatherm.cli import main
+from hexatherm.workflows.process.errorterms import error_terms
 from hexatherm.workflows.process.pipeline import process_session
-from hexatherm.workflows.process.uncertainty import joint_pose_covariance, pose_uncertainty
+from hexatherm.workflows.process.uncertainty import (
+    centre_covariance,
+    joint_pose_covariance,
+    joint_pose_covariance_structured,
+    pose_chain,
+    pose_uncertainty,
+)
 from tests.shipped import SHIPPED
 from tests.workflows.test_interpolation_shared import pairs_session
 
@@ -82,3 +89,22 @@ def test_joint_covariance_is_what_process_writes_to_covariance_csv(
             mine = joint[6 * a + y, 6 * b + y] * to_unit2[y]
             # written at the file's resolution, 1e-6 um2 and urad2 (io/csvout.py)
             np.testing.assert_allclose(mine, stated, rtol=0, atol=0.51e-6)
+
+
+def test_the_structure_the_fit_whitens_with_is_the_joint_covariance(tmp_path: Path) -> None:
+    """Without a log (O's carry reads the references: more low-rank columns) and with two
+    targets between the same references (their shared error in the band): the
+    structured covariance is the dense one (17 targets: a band is worth it)."""
+    result = process_session(pairs_session(tmp_path / "s", 0, log=False, pairs=8))
+    structure = joint_pose_covariance_structured(result)
+    assert structure is not None
+    dense = joint_pose_covariance(result)
+    np.testing.assert_allclose(structure.dense(), dense, rtol=0, atol=1e-13 * np.abs(dense).max())
+    # the shared error is in the band: the two targets of the first interval share no
+    # step beyond O, R0 and those O's carry reads (all in the low-rank part), Tx
+    terms = error_terms(result, pose_chain(result), centre_covariance(result).cov_mm2)
+    assert terms.curved is not None
+    f = terms.curved[0]
+    band = dense[0, 6] - structure.common[0] @ structure.common[6]
+    assert band == pytest.approx(f[0, 0] * f[1, 0], rel=1e-9)
+    assert abs(band) > 0.01 * dense[0, 0]

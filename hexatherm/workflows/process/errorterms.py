@@ -31,8 +31,10 @@ __all__ = ["ErrorTerms", "error_terms", "structured_covariance"]
 @dataclass(frozen=True)
 class ErrorTerms:
     """What the poses' covariance holds beyond the targets' Jacobian of the centres: its
-    parts, made once for :func:`pose_uncertainty` and the calibration's weights
-    (:func:`joint_pose_covariance`), so that both hold the same.
+    parts, made once for :func:`~hexatherm.workflows.process.uncertainty.pose_uncertainty`
+    and the calibration's weights
+    (:func:`~hexatherm.workflows.process.uncertainty.joint_pose_covariance`), so that both
+    hold the same.
 
     Attributes
     ----------
