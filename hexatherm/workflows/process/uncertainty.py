@@ -112,14 +112,17 @@ class PoseUncertainty:
         The scatter of repeated O and R0 against their claimed uncertainty.
     smooth_excess : GrowthExcess, optional
         With ``--interpolation smooth`` when the smooth fit is used: the fit's own error
-        of the growth at R beyond the references' noise (:func:`smooth_excess`), in
+        of the growth at R beyond the references' noise
+        (:func:`~hexatherm.workflows.process.smootherror.smooth_excess`), in
         ``covariance``, ``linear_covariance`` and the corrected poses' own part.
     carry : CarryError, optional
         The error of carrying O and R0 to R0's thermal state (common to all targets), in
         ``covariance``, ``linear_covariance``, the common part and ``between_covariance``.
     curvature : CurvatureError, optional
-        The straight line's own error between two references (:func:`curvature_excess`),
-        in ``covariance``, ``linear_covariance`` and the corrected poses' own part.
+        The straight line's own error between two references
+        (:func:`~hexatherm.workflows.process.smootherror.curvature_excess`), in
+        ``covariance``, ``linear_covariance``, the corrected poses' own part and
+        ``between_covariance`` (shared by two targets of one interval).
     """
 
     conventional_u: FloatArray
