@@ -95,11 +95,14 @@ class BandedCovariance:
         return cls(band, u)
 
     def plus(
-        self, common: FloatArray | None = None, banded: FloatArray | None = None
+        self,
+        common: FloatArray | None = None,
+        banded: FloatArray | sparse.spmatrix | None = None,
     ) -> BandedCovariance | None:
         """This covariance plus ``C C^T`` (more columns of ``U``: ``common`` (n, r')) and
-        ``D D^T`` (into the band: ``banded`` (n, s), each column's rows within the band's
-        width of each other, else the band widened; None beyond a quarter of ``n``).
+        ``D D^T`` (into the band: ``banded`` (n, s), dense or sparse, each column's rows
+        within the band's width of each other, else the band widened; None beyond a
+        quarter of ``n``).
 
         >>> b = BandedCovariance(np.ones((6, 48)), np.zeros((48, 1)))
         >>> d = np.zeros((48, 1)); d[[0, 7]] = 1.0
@@ -109,9 +112,10 @@ class BandedCovariance:
         """
         u = self.common if common is None else np.hstack([self.common, common])
         band = self.band
-        if banded is not None and banded.size:
+        if banded is not None and banded.shape[1]:
             n = self.size
-            b = sparse.coo_matrix(sparse.csr_matrix(banded) @ sparse.csr_matrix(banded).T)
+            d = sparse.csr_matrix(banded)
+            b = sparse.coo_matrix(d @ d.T)
             lower = b.row >= b.col
             rows, cols, values = b.row[lower], b.col[lower], b.data[lower]
             width = int((rows - cols).max(initial=0))

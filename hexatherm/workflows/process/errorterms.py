@@ -149,13 +149,16 @@ def structured_covariance(
         common = common[:, np.any(common != 0.0, axis=0)]  # R0's: zero unless repeated
     banded = None
     if terms.curved is not None and outputs == slice(6, 12):
-        # one column per interval: its targets' error vectors
+        from scipy import sparse
+
+        # one column per interval: its targets' error vectors (sparse: one interval a
+        # target or two, and a thousand targets)
         f, error = terms.curved
         assert error.interval is not None
-        groups = np.unique(error.interval[error.interval >= 0])
-        columns = np.zeros((m, 6, groups.size))
-        for j, g in enumerate(groups):
-            mine = error.interval == g
-            columns[mine, :, j] = f[mine]
-        banded = columns.reshape(m * 6, groups.size)
+        mine = np.flatnonzero(error.interval >= 0)
+        groups, column = np.unique(error.interval[mine], return_inverse=True)
+        rows = (6 * mine[:, None] + np.arange(6)).ravel()
+        banded = sparse.csr_matrix(
+            (f[mine].ravel(), (rows, np.repeat(column, 6))), shape=(m * 6, groups.size)
+        )
     return structure.plus(common, banded)
