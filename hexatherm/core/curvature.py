@@ -31,11 +31,25 @@ evaluation of the growth's shape, a Type B one of the quadratic model across the
 interval. ``f`` grows with the square of the interval: a gap between references is
 covered by the same term, as far as the references around it show its curvature.
 
+A target past the last reference (extrapolated: it takes the last reference alone) errs
+by the growth since that reference: ``L`` is then the line through the last two
+references carried on to its time, and ``f`` (negative there) the straight line's
+extrapolation error, with the stencil of the last inner reference; the same ``c``. With
+two references only, the first-order part alone (no curvature to read).
+
+Two targets in one interval between the same two references (or both past the last one)
+err by the same growth curve's error there: ``e_a = c_a G`` and ``e_b = c_b G`` read the
+same references, and their errors are as correlated as those vectors say (of opposite
+signs for the two targets of T T R, one taking the reference before, the other the one
+after). So each target's error is the vector ``v = sqrt(share) c G`` (its covariance
+``v v^T``) and its interval (:attr:`CurvatureError.interval`): the covariance between two
+targets of one interval is ``v_a v_b^T``; targets of different intervals are taken as
+independent (each interval's curvature read from its own references).
+
 Where it holds: a growth whose curvature changes little over three references (the
 stencil reads it over the two intervals around each reference; a heating switched on
 between two references, or one that starts or settles inside a gap, is seen only in
-part). With two references only, or a target outside the references (extrapolated),
-nothing is evaluated.
+part). A target before the first reference is not evaluated.
 """
 
 from __future__ import annotations
@@ -62,16 +76,23 @@ class CurvatureError:
     Attributes
     ----------
     cov_mm2 : ndarray, shape (M, 6, 6)
-        Covariance of the growth at R at each target (zero where nothing was evaluated).
+        Covariance of the growth at R at each target (zero where nothing was evaluated):
+        ``v v^T`` of :attr:`vector_mm`.
     error_um : ndarray, shape (M,)
         RMS over the legs of that error (``sqrt(tr / 6)``), um.
     evaluated : ndarray of bool, shape (M,)
-        Targets between two references with a curvature to read (three references or more).
+        Targets with an error evaluated.
     source : {"curvature", "log"}
         The references' curvature (:func:`curvature_error`), or the straight line's error
         on a growth shaped as a thermocouple log (set by the caller).
     widest_gap : float
         The longest interval between consecutive references over their median one.
+    vector_mm : ndarray, shape (M, 6)
+        Each target's error ``v`` of the growth at R (``cov_mm2 = v v^T``), mm.
+    interval : ndarray of int, shape (M,)
+        The interval of each target: the index of the reference before it (the last
+        one for a target past it); -1 where nothing was evaluated. Two targets of one
+        interval share their error: covariance ``v_a v_b^T``.
     """
 
     cov_mm2: FloatArray
@@ -79,6 +100,28 @@ class CurvatureError:
     evaluated: npt.NDArray[np.bool_]
     source: str = "curvature"
     widest_gap: float = 1.0
+    vector_mm: FloatArray | None = None
+    interval: npt.NDArray[np.intp] | None = None
+
+    @classmethod
+    def from_vectors(
+        cls,
+        vector_mm: FloatArray,
+        interval: npt.NDArray[np.intp],
+        source: str = "curvature",
+        widest_gap: float = 1.0,
+    ) -> CurvatureError:
+        """From each target's error vector ``v`` (M, 6) and its interval (M,; -1: none)."""
+        v = np.where((interval >= 0)[:, None], vector_mm, 0.0)
+        return cls(
+            v[:, :, None] * v[:, None, :],
+            np.sqrt(np.mean(v**2, axis=1)) * 1e3,
+            np.asarray(interval >= 0, dtype=bool),
+            source,
+            widest_gap,
+            v,
+            np.asarray(interval, dtype=np.intp),
+        )
 
 
 def second_difference_stencils(times_s: npt.ArrayLike) -> FloatArray:
@@ -153,35 +196,39 @@ def curvature_error(
     ts = np.asarray(target_times_s, dtype=float)
     used = np.asarray(used_weights, dtype=float).reshape(len(ts), len(t))
     m, n = len(ts), len(t)
-    cov = np.zeros((m, 6, 6))
-    evaluated = np.zeros(m, dtype=bool)
+    vector = np.zeros((m, 6))
+    interval = np.full(m, -1, dtype=np.intp)
     stencils = second_difference_stencils(t)
     has = np.abs(stencils).sum(axis=1) > 0
-    # the two references around each target in time (-1: outside them)
+    # the reference before each target in time (-1: before the first; n - 1: past the last)
     around = np.searchsorted(t, ts, side="right") - 1
     for k in range(m):
-        p = int(around[k])
-        if not used[k].any() or p < 0 or p + 1 >= n or t[p + 1] <= t[p]:
-            continue
-        rows = [i for i in (p, p + 1) if has[i]]
-        if not rows:
+        # the straight line through the two references around the target, or through the
+        # last two for a target past the last (extrapolated)
+        p = min(int(around[k]), n - 2)
+        if not used[k].any() or p < 0 or t[p + 1] <= t[p]:
             continue
         w = (ts[k] - t[p]) / (t[p + 1] - t[p])
         line = np.zeros(n)
         line[p], line[p + 1] = 1.0 - w, w
-        f = (ts[k] - t[p]) * (t[p + 1] - ts[k]) / 2
-        f = max(0.0, f - spacing_seen_s**2 / 8)
-        c = used[k] - line + f * stencils[rows].mean(axis=0)  # (n,)
+        rows = [i for i in (p, p + 1) if has[i]]
+        if not rows and np.allclose(used[k], line):
+            continue  # on the line, and no curvature to read
+        f = (ts[k] - t[p]) * (t[p + 1] - ts[k]) / 2  # negative past the last reference
+        if spacing_seen_s > 0:
+            f = max(0.0, f - spacing_seen_s**2 / 8)
+        c = used[k] - line  # (n,)
+        if rows:
+            c = c + f * stencils[rows].mean(axis=0)
         error = c @ g  # (6,)
         noise = np.einsum("j,jlm->lm", c**2, s)
         total = float(error @ error)
         share = max(0.0, 1.0 - float(np.trace(noise)) / total) if total > 0 else 0.0
-        cov[k] = share * np.outer(error, error)
-        evaluated[k] = True
-    error_um = np.sqrt(np.clip(np.trace(cov, axis1=1, axis2=2), 0.0, None) / 6) * 1e3
+        vector[k] = np.sqrt(share) * error
+        interval[k] = around[k]
     spacing = np.diff(t)
     widest = float(spacing.max() / np.median(spacing)) if spacing.size else 1.0
-    return CurvatureError(cov, error_um, evaluated, widest_gap=widest)
+    return CurvatureError.from_vectors(vector, interval, widest_gap=widest)
 
 
 #: chance level of the heights' scatter along the heating's direction beyond the rest's,

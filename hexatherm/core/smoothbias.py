@@ -33,6 +33,8 @@ __all__ = [
     "GrowthExcess",
     "corrected_excess",
     "growth_excess",
+    "growth_to_pose",
+    "leg_derivatives",
     "log_growth",
     "log_shape_error",
     "own_leg_covariance",
@@ -199,23 +201,37 @@ def log_growth(
     return np.asarray(np.asarray(sensitivity_mm_per_K, dtype=float) * logged)
 
 
+def leg_derivatives(
+    chain: PoseChain, centres_mm: npt.ArrayLike, steps: npt.ArrayLike
+) -> tuple[FloatArray, FloatArray]:
+    """Derivatives (S, 6, k, 3) of the leg lengths of ``steps`` (relative to O) by their
+    own centres and by O's: the poses' analytic derivatives
+    (:meth:`~hexatherm.core.propagation.PoseChain.pose_derivatives`) through the IGM's
+    Jacobian."""
+    c = np.asarray(centres_mm, dtype=float)
+    idx = np.asarray(steps, dtype=np.intp)
+    pose, own, by_o = chain.pose_derivatives(c, idx)
+    jac = chain.hexapod.jacobian(pose)  # (S, 6 legs, 6 pose)
+    shape = (idx.size, 6, c.shape[1], 3)
+    return (jac @ own).reshape(shape), (jac @ by_o).reshape(shape)
+
+
 def own_leg_covariance(
     chain: PoseChain,
     centres_mm: npt.ArrayLike,
     centre_cov_mm2: npt.ArrayLike,
     steps: npt.ArrayLike,
+    own: FloatArray | None = None,
 ) -> FloatArray:
     """Covariance (len(steps), 6, 6) of the leg lengths of ``steps`` from their own centres
-    (O held fixed): the poses' analytic derivatives
-    (:meth:`~hexatherm.core.propagation.PoseChain.pose_derivatives`) and the IGM's Jacobian."""
-    c = np.asarray(centres_mm, dtype=float)
+    (O held fixed), by their derivatives ``own`` (S, 6, k, 3) (:func:`leg_derivatives`,
+    made here when not given)."""
     cov = np.asarray(centre_cov_mm2, dtype=float)
     idx = np.asarray(steps, dtype=np.intp)
-    k = c.shape[1]
-    # the poses' analytic derivatives by the steps' own centres (O's frame held)
-    pose, own, _ = chain.pose_derivatives(c, idx)
-    dq = (chain.hexapod.jacobian(pose) @ own).reshape(idx.size, 6, k, 3)
-    dq = np.moveaxis(dq, 1, -1)  # (R, k, 3, 6)
+    if own is None:
+        own = leg_derivatives(chain, centres_mm, idx)[0]
+    k = own.shape[2]
+    dq = np.moveaxis(own, 1, -1)  # (R, k, 3, 6)
     weighted = (cov[idx] @ dq).reshape(idx.size, 3 * k, 6)  # U dq, ball by ball
     return np.asarray(np.swapaxes(dq.reshape(idx.size, 3 * k, 6), 1, 2) @ weighted)
 
@@ -230,8 +246,21 @@ def corrected_excess(
 ) -> FloatArray:
     """Covariance (M, 6, 6) of the corrected poses (mm, deg) from an error of the growth at
     R of covariance ``growth_cov_mm2`` (6, 6), or one per target (M, 6, 6): through the
-    growth scaling to each target's legs and the FGM (the inverse of the IGM's Jacobian at
-    the corrected pose)."""
+    growth scaling to each target's legs and the FGM (:func:`growth_to_pose`)."""
+    jd = growth_to_pose(chain, growth_mm, q_r0_mm, q_s_mm, corrected)
+    return np.asarray(jd @ np.asarray(growth_cov_mm2, dtype=float) @ np.swapaxes(jd, 1, 2))
+
+
+def growth_to_pose(
+    chain: PoseChain,
+    growth_mm: npt.ArrayLike,
+    q_r0_mm: npt.ArrayLike,
+    q_s_mm: npt.ArrayLike,
+    corrected: npt.ArrayLike,
+) -> FloatArray:
+    """Derivatives (M, 6, 6) of the corrected poses (mm, deg) by the growth at R of each
+    target (mm): the growth scaling to its legs (leg by leg) and the FGM (the inverse of
+    the IGM's Jacobian at the corrected pose)."""
     legs = chain.hexapod.legs
     if legs is None:
         raise ValueError("the hexapod has no leg model")
@@ -243,5 +272,4 @@ def corrected_excess(
         target_growth(legs, g + STEP_MM, q_r0, q_s) - target_growth(legs, g - STEP_MM, q_r0, q_s)
     ) / (2 * STEP_MM)
     jac = np.linalg.inv(chain.hexapod.jacobian(np.asarray(corrected, dtype=float)))  # (M, 6, 6)
-    jd = jac * d_growth[:, None, :]
-    return np.asarray(jd @ np.asarray(growth_cov_mm2, dtype=float) @ np.swapaxes(jd, 1, 2))
+    return np.asarray(jac * d_growth[:, None, :])

@@ -49,6 +49,36 @@ def test_a_quadratic_growth_gives_the_straight_lines_error_exactly() -> None:
     assert np.allclose(seen.cov_mm2, err.cov_mm2 * beyond[:, None, None] ** 2)
 
 
+def test_a_target_past_the_last_reference_gets_the_growth_since_it_exactly() -> None:
+    """Extrapolated (it takes the last reference alone): the line through the last two
+    carried on, and the quadratic's extrapolation error; before issue 35, nothing. With
+    two references only, the first-order part alone (exact on a straight line)."""
+    targets = np.array([2100.0, 2500.0])
+    used = np.zeros((2, len(TIMES)))
+    used[:, -1] = 1.0
+    err = curvature_error(TIMES, quadratic(TIMES), np.zeros((6, 6, 6)), targets, used)
+    truth = quadratic(TIMES[-1]) - quadratic(targets)  # the growth since the last reference
+    assert np.allclose(err.vector_mm**2, truth**2, rtol=1e-9, atol=1e-24)
+    assert err.evaluated.all() and err.interval.tolist() == [5, 5]
+    two = curvature_error(
+        TIMES[:2], SLOPE * TIMES[:2, None], np.zeros((2, 6, 6)), [400.0], [[0, 1]]
+    )
+    assert np.allclose(two.vector_mm[0] ** 2, (SLOPE * 100.0) ** 2, rtol=1e-9)
+
+
+def test_two_targets_of_one_interval_carry_signed_vectors() -> None:
+    """T T R: the first takes the reference before, the second the one after; their
+    errors are of opposite signs, and the covariance between them is ``v_a v_b^T``."""
+    targets = np.array([400.0, 700.0, 1300.0])
+    used = np.zeros((3, len(TIMES)))
+    used[0, 1], used[1, 2], used[2, 3] = 1.0, 1.0, 1.0
+    growth = np.outer(1e-9 * TIMES**2, np.ones(6))  # every leg grows, faster and faster
+    err = curvature_error(TIMES, growth, np.zeros((6, 6, 6)), targets, used)
+    assert err.interval.tolist() == [1, 1, 3]
+    assert np.all(err.vector_mm[0] < 0) and np.all(err.vector_mm[1] > 0)
+    assert np.allclose(err.cov_mm2, err.vector_mm[:, :, None] * err.vector_mm[:, None, :])
+
+
 def test_one_reference_gives_the_growth_since_it_exactly() -> None:
     """Two targets between two references: the first takes the one before, the second
     the one after (a first-order error, the growth between that reference and the

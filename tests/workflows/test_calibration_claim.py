@@ -51,9 +51,14 @@ WARM = f"heating: {{air_C: 21.3, mats: [{MATS}]}}\n"
 
 
 def campaign(
-    root: Path, seed: int, noise_um: float = 0.3, thermocouple_noise_C: float = 0.02
+    root: Path,
+    seed: int,
+    noise_um: float = 0.3,
+    thermocouple_noise_C: float = 0.02,
+    heating: str = WARM,
 ) -> tuple[Calibration, TwinSessionSpec]:
-    """A simulated campaign calibrated at the joints level, and its twin's spec."""
+    """A simulated campaign calibrated at the joints level, and its twin's spec
+    (``heating``: the scenario's ``heating:`` text)."""
     text = calibration_scenario(
         calibration_targets(seed, N_TARGETS),
         geometry_seed=seed + 100,
@@ -62,7 +67,7 @@ def campaign(
         cmm={"point_noise_um": noise_um},
         thermocouples={"period_s": 30, "noise_C": thermocouple_noise_C},
         timing={"seconds_per_point": 2.0, "seconds_per_move": 20},
-        extra=WARM,
+        extra=heating,
     )
     path = root / f"s{seed}.yaml"
     path.write_text(text)

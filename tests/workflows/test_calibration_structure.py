@@ -61,7 +61,8 @@ def test_the_structure_is_the_dense_covariance(campaign: Campaign, dense: np.nda
     assert campaign.dense_covariance is None  # the dense matrix is not built for the fit
     n = campaign.measured.shape[0]
     assert structure.band.shape == (12, 6 * n)  # a pose and its neighbour: 12 diagonals
-    assert structure.common.shape == (6 * n, 2 * 2 * 9)  # O and R0 of 3 balls, 2 sessions
+    # O and R0 of 3 balls and O's carry to R0's thermal state (6 legs), 2 sessions
+    assert structure.common.shape == (6 * n, 2 * (2 * 9 + 6))
     assert rel(structure.dense(), dense) < 1e-13
     assert rel(campaign.covariance, dense) < 1e-13  # on request
     # there is something between the targets to get right: the off-band part is O and R0
@@ -71,14 +72,14 @@ def test_the_structure_is_the_dense_covariance(campaign: Campaign, dense: np.nda
 
 def test_each_session_is_its_own_group(campaign: Campaign) -> None:
     """Sessions are independent: the low-rank part is factored per session, each with
-    its own O and R0 columns (18 each), in the folds too."""
+    its own O and R0 columns (18 each) and O's carry (6), in the folds too."""
     structure = campaign.structure
     assert structure is not None
     assert structure.groups == (6 * 14, 6 * 9)
     groups = structure.group_rows()
     assert [(a, b, c.tolist()) for a, b, c in groups] == [
-        (0, 84, list(range(18))),
-        (84, 138, list(range(18, 36))),
+        (0, 84, list(range(24))),
+        (84, 138, list(range(24, 48))),
     ]
     fold = np.arange(1, 23, 3)  # poses 1, 4, .., 13 of the first session, 16, 19, 22 of the second
     rows = (6 * fold[:, None] + np.arange(6)).ravel()

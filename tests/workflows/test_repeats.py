@@ -20,7 +20,7 @@ from hexatherm.cli import main
 from hexatherm.core.plan import Plan, find_repeats, without_repeats
 from hexatherm.core.planning import sequence_steps
 from hexatherm.io.config import read_plan
-from hexatherm.workflows.process import uncertainty
+from hexatherm.workflows.process import errorterms
 from hexatherm.workflows.process.outputs import write_results
 from hexatherm.workflows.process.pipeline import ProcessResult, process_session
 from hexatherm.workflows.process.uncertainty import PoseUncertainty, pose_uncertainty
@@ -176,7 +176,7 @@ def test_the_common_part_falls_as_one_over_sqrt_n(
 ) -> None:
     # the propagated parts only: the interpolation's own error (an own part, another for
     # the repeats' other times) is tested against the truth in test_interpolation_error.py
-    monkeypatch.setattr(uncertainty, "curvature_excess", lambda *args: None)
+    monkeypatch.setattr(errorterms, "curvature_excess", lambda *args: None)
     common_1, own_1, _ = common_and_own(session(tmp_path / "one", seed=5, repeats=1))
     common_n, own_n, u = common_and_own(session(tmp_path / "n", seed=5, repeats=repeats))
     # the error of carrying the repeats to R0's last state (issue 35) is common too

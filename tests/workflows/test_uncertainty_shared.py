@@ -17,7 +17,7 @@ import pytest
 
 from hexatherm.core import propagation
 from hexatherm.core.propagation import TargetJacobian, output_difference, target_jacobian
-from hexatherm.workflows.process import uncertainty
+from hexatherm.workflows.process import errorterms
 from hexatherm.workflows.process.outputs import (
     covariance_frame,
     deviation_columns,
@@ -133,8 +133,16 @@ def test_poses_and_covariance_files_carry_the_parts(
     assert row["cov_dRx_conv_urad2"] == pytest.approx(
         u.between_covariance[3, 0, 3] * URAD_PER_DEG**2
     )
-    # every pair shares O and R0: positively correlated
-    assert (cov.filter(like="cov_") > 0).all().all()
+    # every pair shares O and R0: positively correlated, but for the corrected poses of
+    # two targets between the same two references (S1, S2 and S3, S4), whose errors of
+    # the growth there are of opposite signs (the first takes the reference before it, the
+    # second the one after)
+    assert (cov.filter(like="conv_") > 0).all().all()
+    interval = {"S1": 0, "S2": 0, "S3": 1, "S4": 1}
+    apart = cov["label_a"].map(interval) != cov["label_b"].map(interval)
+    apart |= cov["label_a"] == cov["label_b"]
+    assert (cov[apart].filter(like="corr_") > 0).all().all()
+    assert (cov[~apart].filter(like="cov_dTz_corr") < 0).all().all()
 
 
 def test_monte_carlo_keeps_the_linear_shares(
@@ -150,7 +158,7 @@ def test_monte_carlo_keeps_the_linear_shares(
     # the targets with one neighbour get the interpolation's own error, an own part
     # added after the propagation (linear or Monte Carlo): the shares are the propagated
     # part's
-    monkeypatch.setattr(uncertainty, "curvature_excess", lambda *args: None)
+    monkeypatch.setattr(errorterms, "curvature_excess", lambda *args: None)
     bare = pose_uncertainty(one_sided)
     added = lin_u**2 - np.concatenate([bare.conventional_u, bare.corrected_u], 1) ** 2
     assert added[:, :6].max() == 0 and added[:, 6:].max() > 0

@@ -94,6 +94,41 @@ class BandedCovariance:
         np.add.at(band, (rows - cols, cols), values)
         return cls(band, u)
 
+    def plus(
+        self,
+        common: FloatArray | None = None,
+        banded: FloatArray | sparse.spmatrix | None = None,
+    ) -> BandedCovariance | None:
+        """This covariance plus ``C C^T`` (more columns of ``U``: ``common`` (n, r')) and
+        ``D D^T`` (into the band: ``banded`` (n, s), dense or sparse, each column's rows
+        within the band's width of each other, else the band widened; None beyond a
+        quarter of ``n``).
+
+        >>> b = BandedCovariance(np.ones((6, 48)), np.zeros((48, 1)))
+        >>> d = np.zeros((48, 1)); d[[0, 7]] = 1.0
+        >>> wider = b.plus(np.ones((48, 1)), d)
+        >>> bool(np.allclose(wider.dense(), b.dense() + 1.0 + d @ d.T)), wider.band.shape
+        (True, (12, 48))
+        """
+        u = self.common if common is None else np.hstack([self.common, common])
+        band = self.band
+        if banded is not None and banded.shape[1]:
+            n = self.size
+            d = sparse.csr_matrix(banded)
+            b = sparse.coo_matrix(d @ d.T)
+            lower = b.row >= b.col
+            rows, cols, values = b.row[lower], b.col[lower], b.data[lower]
+            width = int((rows - cols).max(initial=0))
+            if width >= band.shape[0]:
+                width = 6 * (width // 6 + 1) - 1  # whole poses, as :meth:`from_factor`
+                if width + 1 > max(n // 4, 6):
+                    return None
+                band = np.pad(band, ((0, width + 1 - band.shape[0]), (0, 0)))
+            else:
+                band = band.copy()
+            np.add.at(band, (rows - cols, cols), values)
+        return BandedCovariance(band, u, self.groups)
+
     @classmethod
     def stacked(cls, parts: list[BandedCovariance]) -> BandedCovariance:
         """Independent groups (sessions): the covariance block-diagonal in them."""

@@ -25,7 +25,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
 from hexatherm.core.carry import (
     carry_centres,
@@ -42,6 +41,7 @@ from hexatherm.core.propagation import (
     reference_scatter,
 )
 from hexatherm.core.registration import register
+from hexatherm.core.smoothbias import leg_derivatives
 from hexatherm.typing import FloatArray
 from hexatherm.workflows.process.carrying import extrapolation_weights, line_at_end
 from hexatherm.workflows.process.pipeline import ProcessResult
@@ -109,11 +109,15 @@ def carry_error(
     jacobian: TargetJacobian,
     centre_cov_mm2: FloatArray,
     legs_cov_mm2: FloatArray,
+    derivatives: tuple[FloatArray, FloatArray] | None = None,
 ) -> CarryError | None:
     """The carry's error (module docstring); None when nothing was carried.
 
     ``legs_cov_mm2`` (R, 6, 6) is the references' leg lengths' covariance from their own
-    centres (:func:`~hexatherm.core.smoothbias.own_leg_covariance`)."""
+    centres (:func:`~hexatherm.core.smoothbias.own_leg_covariance`), ``derivatives`` the
+    references' leg lengths' derivatives by their own centres and O's
+    (:func:`~hexatherm.core.smoothbias.leg_derivatives`, (R, 6, k, 3) each), made when
+    needed and not given."""
     carry = result.carry
     session = result.session
     legs, hexapod = session.hexapod.legs, session.hexapod
@@ -129,7 +133,7 @@ def carry_error(
     derivative: dict[int, FloatArray] = {}
     if carry.source == "references":
         derivative, sd_o, model_o, basis = _extrapolation_error(
-            result, chain, centre_cov_mm2, legs_cov_mm2
+            result, chain, centre_cov_mm2, legs_cov_mm2, derivatives
         )
     else:
         if result.temperatures is None:
@@ -231,21 +235,12 @@ def _beyond_noise(times: FloatArray, values: FloatArray, var: FloatArray, order:
     return np.asarray(rms * np.sign(np.mean(along)) * shape, dtype=float)
 
 
-def _leg_derivatives(
-    chain: PoseChain, centres_mm: FloatArray, steps: npt.NDArray[np.intp]
-) -> tuple[FloatArray, FloatArray]:
-    """Derivatives (S, 6, k, 3) of the leg lengths of ``steps`` (relative to O) by their
-    own centres and by O's: the poses' analytic derivatives
-    (:meth:`~hexatherm.core.propagation.PoseChain.pose_derivatives`) through the IGM's
-    Jacobian, as :func:`~hexatherm.core.smoothbias.own_leg_covariance` takes them."""
-    pose, own, by_o = chain.pose_derivatives(np.asarray(centres_mm, dtype=float), steps)
-    jac = chain.hexapod.jacobian(pose)  # (S, 6 legs, 6 pose)
-    shape = (len(steps), 6, centres_mm.shape[1], 3)
-    return (jac @ own).reshape(shape), (jac @ by_o).reshape(shape)
-
-
 def _extrapolation_error(
-    result: ProcessResult, chain: PoseChain, centre_cov_mm2: FloatArray, legs_cov: FloatArray
+    result: ProcessResult,
+    chain: PoseChain,
+    centre_cov_mm2: FloatArray,
+    legs_cov: FloatArray,
+    derivatives: tuple[FloatArray, FloatArray] | None = None,
 ) -> tuple[dict[int, FloatArray], FloatArray, FloatArray, str]:
     """O's mean growth read from the references' series (no log, :class:`ReferenceSeries`)
     as a function of the centres: its derivatives (6 legs, k, 3) by the centres of the
@@ -281,7 +276,11 @@ def _extrapolation_error(
     line = line_at_end(ts[:n0])  # R0's state from its measurements
     spread = float(np.sum(line**2))
     used = np.flatnonzero(w[n0:]) + 1  # the later references read (index in refs)
-    own, by_o = _leg_derivatives(chain, result.centres.centres_mm, refs[np.r_[0, used]])
+    read = np.r_[0, used]
+    if derivatives is None:  # the references' legs by their own centres and O's
+        own, by_o = leg_derivatives(chain, result.centres.centres_mm, refs[read])
+    else:
+        own, by_o = derivatives[0][read], derivatives[1][read]
     q_r0 = result.steps.q_mm[refs[0]]
     ratio = legs.sensitivity_mm_per_K(hexapod.igm(plan.poses[plan.origin_index][None])[0]) / (
         legs.sensitivity_mm_per_K(q_r0)

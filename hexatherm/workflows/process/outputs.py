@@ -177,7 +177,8 @@ def covariance_frame(result: ProcessResult, uncertainty: PoseUncertainty) -> pd.
     ``cov_dTx_conv_um2`` .. ``cov_dRz_conv_urad2``, ``cov_dTx_corr_um2`` ..
     ``cov_dRz_corr_urad2``: the covariance of that deviation (as in ``poses.csv``) of
     target a with the same of target b, um^2 and urad^2. Every pair shares O's and R0's
-    noise; neighbours share a reference too.
+    noise; neighbours share a reference too, and two targets of one interval between
+    references their interpolation's own error.
     """
     between = uncertainty.between_covariance
     if between is None:

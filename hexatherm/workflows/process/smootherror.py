@@ -18,8 +18,8 @@ from hexatherm.core.curvature import CurvatureError, curvature_error
 from hexatherm.core.propagation import PoseChain, reference_scatter
 from hexatherm.core.smoothbias import (
     GrowthExcess,
-    corrected_excess,
     growth_excess,
+    growth_to_pose,
     log_growth,
     log_shape_error,
     own_leg_covariance,
@@ -91,8 +91,9 @@ def curvature_excess(
     result: ProcessResult, chain: PoseChain, legs_cov_mm2: FloatArray
 ) -> tuple[FloatArray, CurvatureError] | None:
     """The interpolation's own error between references carried to the corrected poses,
-    (M, 6, 6), and its evaluation (:mod:`hexatherm.core.curvature`); None when no target
-    has it.
+    each target's error vector (M, 6: mm, deg; its covariance ``F F^T``, and ``F_a F_b^T``
+    between two targets of one interval, :attr:`CurvatureError.interval`), and its
+    evaluation (:mod:`hexatherm.core.curvature`); None when no target has it.
 
     Every target interpolated from its neighbouring references (``--interpolation
     linear``, the smooth fit's fallback to it, or one reference: ``before``, ``after``,
@@ -151,12 +152,10 @@ def curvature_excess(
         noise = sigma2 * np.sum(np.square(sensitivity)) * (np.sum(used**2, axis=1) + 1.0)
         total = np.sum(e**2, axis=1)
         share = np.where(total > 0, np.clip(1.0 - noise / np.where(total > 0, total, 1.0), 0, 1), 0)
-        cov = share[:, None, None] * e[:, :, None] * e[:, None, :]
-        error = CurvatureError(
-            cov,
-            np.sqrt(np.clip(np.trace(cov, axis1=1, axis2=2), 0.0, None) / 6) * 1e3,
-            evaluated,
-            "log",
+        # the interval: the reference before the target (the last one past it)
+        around = np.searchsorted(times[refs], times[corr.target_index], side="right") - 1
+        error = CurvatureError.from_vectors(
+            np.sqrt(share)[:, None] * e, np.where(evaluated, around, -1), "log"
         )
     else:
         error = curvature_error(
@@ -164,21 +163,24 @@ def curvature_excess(
         )
     if not error.evaluated.any():
         return None
-    return to_poses(result, chain, error.cov_mm2), error
+    assert error.vector_mm is not None
+    return np.einsum("mpl,ml->mp", to_pose_factor(result, chain), error.vector_mm), error
 
 
 def to_poses(result: ProcessResult, chain: PoseChain, growth_cov_mm2: FloatArray) -> FloatArray:
     """Covariance (M, 6, 6) of the corrected poses from one of the growth at R at each
     target (:func:`~hexatherm.core.smoothbias.corrected_excess`)."""
+    by_growth = to_pose_factor(result, chain)
+    return np.asarray(by_growth @ growth_cov_mm2 @ np.swapaxes(by_growth, 1, 2))
+
+
+def to_pose_factor(result: ProcessResult, chain: PoseChain) -> FloatArray:
+    """Derivatives (M, 6 pose, 6 legs) of each target's corrected pose (mm, deg) by an
+    error of the growth at R at its time (:func:`~hexatherm.core.smoothbias.growth_to_pose`)."""
     corr = result.correction
     q, r0 = result.steps.q_mm, result.session.plan.reference_indices[0]
-    return corrected_excess(
-        chain,
-        corr.reference_growth_mm,
-        q[r0],
-        q[corr.target_index],
-        corr.corrected,
-        growth_cov_mm2,
+    return growth_to_pose(
+        chain, corr.reference_growth_mm, q[r0], q[corr.target_index], corr.corrected
     )
 
 

@@ -48,17 +48,16 @@ from hexatherm.core.propagation import (
     covariance_root,
     draw_centres,
     monte_carlo_covariance,
-    target_jacobian,
 )
-from hexatherm.core.smoothbias import GrowthExcess, own_leg_covariance
+from hexatherm.core.smoothbias import GrowthExcess
 from hexatherm.core.spherefit import fit_spheres, refine_spheres
 from hexatherm.typing import FloatArray
-from hexatherm.workflows.process.carryerror import CarryError, add_common, carry_error
+from hexatherm.workflows.process.carryerror import CarryError, add_common
 from hexatherm.workflows.process.centrecov import CentreCovariance, centre_covariance
+from hexatherm.workflows.process.errorterms import error_terms, structured_covariance
 from hexatherm.workflows.process.measured import fit_radii, point_groups, registration_weights
 from hexatherm.workflows.process.pipeline import ProcessResult
 from hexatherm.workflows.process.repeats import RepeatCheck, repeat_checks
-from hexatherm.workflows.process.smootherror import curvature_excess, smooth_excess
 
 if TYPE_CHECKING:  # the calibration's weights (and scipy.sparse): imported when used
     from hexatherm.core.calibration.weights import BandedCovariance
@@ -113,14 +112,17 @@ class PoseUncertainty:
         The scatter of repeated O and R0 against their claimed uncertainty.
     smooth_excess : GrowthExcess, optional
         With ``--interpolation smooth`` when the smooth fit is used: the fit's own error
-        of the growth at R beyond the references' noise (:func:`smooth_excess`), in
+        of the growth at R beyond the references' noise
+        (:func:`~hexatherm.workflows.process.smootherror.smooth_excess`), in
         ``covariance``, ``linear_covariance`` and the corrected poses' own part.
     carry : CarryError, optional
         The error of carrying O and R0 to R0's thermal state (common to all targets), in
         ``covariance``, ``linear_covariance``, the common part and ``between_covariance``.
     curvature : CurvatureError, optional
-        The straight line's own error between two references (:func:`curvature_excess`),
-        in ``covariance``, ``linear_covariance`` and the corrected poses' own part.
+        The straight line's own error between two references
+        (:func:`~hexatherm.workflows.process.smootherror.curvature_excess`), in
+        ``covariance``, ``linear_covariance``, the corrected poses' own part and
+        ``between_covariance`` (shared by two targets of one interval).
     """
 
     conventional_u: FloatArray
@@ -355,15 +357,8 @@ def pose_uncertainty(
     """
     centres = centre_covariance(result)
     chain = pose_chain(result)
-    jacobian = target_jacobian(chain, result.centres.centres_mm)
-    # the references' legs from their own centres: the carry's, the smooth fit's and the
-    # straight line's errors read them
-    legs_cov = own_leg_covariance(
-        chain, result.centres.centres_mm, centres.cov_mm2, result.session.plan.reference_indices
-    )
-    carried = carry_error(result, chain, jacobian, centres.cov_mm2, legs_cov)  # common
-    # without a log O's carry reads the references: a function of their centres
-    full = jacobian if carried is None or carried.jacobian is None else carried.jacobian
+    terms = error_terms(result, chain, centres.cov_mm2)
+    jacobian, full, carried = terms.jacobian, terms.full, terms.carried
     linear = full.covariance(centres.cov_mm2)
     covariance, method, draws, drawn = linear, "linear", 0, ""
     if mc:
@@ -389,22 +384,19 @@ def pose_uncertainty(
         carried, covariance, linear, common_u, own_u, pairs
     )
     u = np.sqrt(np.clip(np.diagonal(covariance, axis1=1, axis2=2), 0.0, None))
-    excess = smooth_excess(result, chain, centres.cov_mm2, legs_cov)
-    curved = curvature_excess(result, chain, legs_cov)
-    for part in (excess, curved):
-        if part is None:
-            continue
-        # the interpolation's own error (the smooth fit's, the straight line's): a
-        # target's own part, taken as independent between targets
+    # the interpolation's own error (the smooth fit's, the straight line's): a target's
+    # own part; the straight line's shared by the targets of one interval
+    own = terms.own_blocks()
+    if own is not None:
         added = np.zeros_like(linear)
-        added[:, 6:, 6:] = part[0]
+        added[:, 6:, 6:] = own
         covariance, linear = covariance + added, linear + added
         extra = np.diagonal(added, axis1=1, axis2=2)  # (M, 12)
         u = np.sqrt(np.clip(np.diagonal(covariance, axis1=1, axis2=2), 0.0, None))
         own_u = np.sqrt(own_u**2 + extra)
         if pairs is not None:
-            m = u.shape[0]
-            pairs[:, np.arange(m), np.arange(m)] += extra.T
+            pairs[6:] += terms.between_targets()
+    excess, curved = terms.excess, terms.curved
     return PoseUncertainty(
         conventional_u=u[:, :6],
         corrected_u=u[:, 6:],
@@ -428,29 +420,26 @@ def pose_uncertainty(
 def joint_pose_covariance(result: ProcessResult, corrected: bool = True) -> FloatArray:
     """Covariance (6M, 6M) of all targets' corrected (or conventional) poses together, by
     linear propagation: target by target, mm and deg, every term between targets and
-    components included (what a calibration weighs the poses with); the smooth fit's own
-    error, where it was used, on each corrected pose's own block."""
+    components included (what a calibration weighs the poses with); the same terms as
+    :func:`pose_uncertainty` (its ``covariance.csv``): O's carry to R0's state (with its
+    noise in the propagation without a log), the smooth fit's own error on each
+    corrected pose's own block, the straight line's own error shared by the targets of
+    one interval."""
     centres = centre_covariance(result)
-    chain = pose_chain(result)
-    jacobian = target_jacobian(chain, result.centres.centres_mm)
-    joint = jacobian.joint_covariance(centres.cov_mm2, slice(6, 12) if corrected else slice(0, 6))
-    excess = smooth_excess(result, chain, centres.cov_mm2) if corrected else None
-    if excess is not None:
-        for m, block in enumerate(excess[0]):
-            joint[6 * m : 6 * m + 6, 6 * m : 6 * m + 6] += block
-    return joint
+    terms = error_terms(result, pose_chain(result), centres.cov_mm2)
+    outputs = slice(6, 12) if corrected else slice(0, 6)
+    return terms.full.joint_covariance(centres.cov_mm2, outputs) + terms.joint(outputs)
 
 
 def joint_pose_covariance_structured(
     result: ProcessResult, corrected: bool = True
 ) -> BandedCovariance | None:
-    """:func:`joint_pose_covariance` with its structure (the O and R0 part low-rank, the
-    rest banded; None when it is not banded), for a calibration's whitening."""
+    """:func:`joint_pose_covariance` with its structure (the O and R0 part and the carry's
+    low-rank, the rest banded; None when it is not banded), for a calibration's
+    whitening."""
     centres = centre_covariance(result)
-    jacobian = target_jacobian(pose_chain(result), result.centres.centres_mm)
-    return jacobian.joint_covariance_structured(
-        centres.cov_mm2, slice(6, 12) if corrected else slice(0, 6)
-    )
+    terms = error_terms(result, pose_chain(result), centres.cov_mm2)
+    return structured_covariance(terms, centres.cov_mm2, slice(6, 12) if corrected else slice(0, 6))
 
 
 def joint_pose_covariance_for_fit(
@@ -459,21 +448,14 @@ def joint_pose_covariance_for_fit(
     """What a calibration whitens the poses with: the covariance with its structure
     (:func:`joint_pose_covariance_structured`) where it has one, else dense
     (:func:`joint_pose_covariance`: the smooth growth, whose own error on each pose's
-    block the structure does not carry), from one Jacobian of the targets."""
+    block the structure does not carry), from one evaluation of the terms."""
     centres = centre_covariance(result)
-    chain = pose_chain(result)
-    jacobian = target_jacobian(chain, result.centres.centres_mm)
+    terms = error_terms(result, pose_chain(result), centres.cov_mm2)
     outputs = slice(6, 12) if corrected else slice(0, 6)
-    excess = smooth_excess(result, chain, centres.cov_mm2) if corrected else None
-    if excess is None:
-        structure = jacobian.joint_covariance_structured(centres.cov_mm2, outputs)
-        if structure is not None:
-            return structure
-    joint = jacobian.joint_covariance(centres.cov_mm2, outputs)
-    if excess is not None:
-        for m, block in enumerate(excess[0]):
-            joint[6 * m : 6 * m + 6, 6 * m : 6 * m + 6] += block
-    return joint
+    structure = structured_covariance(terms, centres.cov_mm2, outputs)
+    if structure is not None:
+        return structure
+    return terms.full.joint_covariance(centres.cov_mm2, outputs) + terms.joint(outputs)
 
 
 def shared_parts(

@@ -287,8 +287,9 @@ def shared_parts_table(uncertainty: Uncertain, coverage_factor: float = 2.0) -> 
         "the targets. Every corrected pose rests on the one measurement of frame O and of "
         "R0: their error moves all targets together (a common offset that reads as a bias "
         "shared by every target, not scatter between them; poses.csv u_common_*, and "
-        "covariance.csv between targets). The own part is independent from target to "
-        "target: it is what differences between targets carry. Total = "
+        "covariance.csv between targets). The own part is what differences between "
+        "targets carry (neighbours share a reference, and two targets between the same "
+        "references their interpolation error: covariance.csv). Total = "
         "sqrt(common\u00b2 + own\u00b2)."
     )
     return table(header, rows, caption=caption)
