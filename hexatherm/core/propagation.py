@@ -526,7 +526,9 @@ def target_jacobian(
     used = (steps >= 0) & (np.arange(5) != 0)
     at = np.maximum(steps, 0)
     # 4. dq_corr and the outputs by each part's centres: (M, 5, 12, 3k)
-    dq_corr = np.where(used[..., None, None], coef[..., None] * dq_own[at], 0.0)
+    dq_corr = dq_own[at]  # one array, scaled and cleared in place (were three of its size)
+    dq_corr *= coef[..., None]
+    dq_corr[~used] = 0.0
     dq_corr[:, 0] = np.einsum("mpl,mplj->mlj", np.where(used[..., None], coef, 0.0), dq_origin[at])
     jac = np.zeros((m, 5, OUTPUTS_PER_TARGET, 3 * k))
     jac[:, 0, :6] = dpose_origin[targets]
