@@ -13,6 +13,7 @@ then targets, each with a reference step right before and/or right after it.
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -144,12 +145,23 @@ class Plan:
     @property
     def reference_indices(self) -> npt.NDArray[np.intp]:
         """Indices of the reference steps, in order."""
-        return np.array([i for i, k in enumerate(self.kinds) if k == "reference"], dtype=np.intp)
+        return self._kind_indices["reference"].copy()
 
     @property
     def target_indices(self) -> npt.NDArray[np.intp]:
         """Indices of the target steps, in order."""
-        return np.array([i for i, k in enumerate(self.kinds) if k == "target"], dtype=np.intp)
+        return self._kind_indices["target"].copy()
+
+    @functools.cached_property
+    def _kind_indices(self) -> dict[str, npt.NDArray[np.intp]]:
+        """The steps of each kind, found once (``process`` asks for them dozens of times,
+        20,002 steps each at 10,000 targets); the properties hand out copies. The kinds are a
+        tuple: they cannot change under the cache."""
+        kinds = np.array(self.kinds, dtype=object)
+        return {
+            kind: np.flatnonzero(kinds == kind).astype(np.intp)
+            for kind in ("origin", "reference", "target")
+        }
 
     @property
     def origin_index(self) -> int:

@@ -276,13 +276,15 @@ class TargetJacobian:
         :attr:`common_parts`.
         """
         cov = np.asarray(centre_cov_mm2, dtype=float)
-        m, n_parts, n_out, k = self.jac.shape[:4]
-        use = np.zeros(n_parts, dtype=bool)
-        use[list(parts) if parts else slice(None)] = True
-        live = (self.steps >= 0) & use
-        part_cov = np.where(live[..., None, None, None], cov[np.maximum(self.steps, 0)], 0.0)
+        jac, steps = self.jac, self.steps
+        if parts:  # those parts alone (the others would add products of zeros)
+            picked = sorted(set(parts))
+            jac, steps = jac[:, picked], steps[:, picked]
+        m, _, n_out, k = jac.shape[:4]
+        live = steps >= 0
+        part_cov = np.where(live[..., None, None, None], cov[np.maximum(steps, 0)], 0.0)
         # J U J^T as two batched products (einsum's own path copied the operands about)
-        by_ball = np.swapaxes(self.jac, 2, 3)  # (M, P, k, 12, 3)
+        by_ball = np.swapaxes(jac, 2, 3)  # (M, P, k, 12, 3)
         weighted = (by_ball @ part_cov).transpose(0, 3, 1, 2, 4).reshape(m, n_out, -1)
         plain = by_ball.transpose(0, 3, 1, 2, 4).reshape(m, n_out, -1)
         return np.asarray(weighted @ np.swapaxes(plain, 1, 2))
@@ -524,7 +526,9 @@ def target_jacobian(
     used = (steps >= 0) & (np.arange(5) != 0)
     at = np.maximum(steps, 0)
     # 4. dq_corr and the outputs by each part's centres: (M, 5, 12, 3k)
-    dq_corr = np.where(used[..., None, None], coef[..., None] * dq_own[at], 0.0)
+    dq_corr = dq_own[at]  # one array, scaled and cleared in place (were three of its size)
+    dq_corr *= coef[..., None]
+    dq_corr[~used] = 0.0
     dq_corr[:, 0] = np.einsum("mpl,mplj->mlj", np.where(used[..., None], coef, 0.0), dq_origin[at])
     jac = np.zeros((m, 5, OUTPUTS_PER_TARGET, 3 * k))
     jac[:, 0, :6] = dpose_origin[targets]

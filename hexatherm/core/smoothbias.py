@@ -37,6 +37,7 @@ __all__ = [
     "leg_derivatives",
     "log_growth",
     "log_shape_error",
+    "neighbour_shape_error",
     "own_leg_covariance",
 ]
 
@@ -183,6 +184,41 @@ def log_shape_error(
     fitted = np.einsum(
         "mln,nl->ml", np.asarray(weights, dtype=float), log_growth(ref_times_s, *log)
     )
+    return fitted - log_growth(target_times_s, *log)
+
+
+def neighbour_shape_error(
+    columns: npt.ArrayLike,
+    weights: npt.ArrayLike,
+    ref_times_s: npt.ArrayLike,
+    target_times_s: npt.ArrayLike,
+    log_times_s: npt.ArrayLike,
+    log_legs_C: npt.ArrayLike,
+    sensitivity_mm_per_K: npt.ArrayLike,
+) -> FloatArray:
+    """:func:`log_shape_error` of weights that are zero but on a few references, the same
+    on every leg (a straight line between two neighbours): each target's references
+    ``columns`` (M, k; indices into ``ref_times_s``, distinct within a row) and their
+    ``weights`` (M, k; 0 for a side not used), (M, 6) mm. The same numbers without the
+    dense weights: at 10,000 targets and as many references those are 800 MB and
+    6 x 10^8 products, nearly all of zeros; here k products a target and leg.
+
+    >>> t = np.array([0.0, 600.0, 1200.0])
+    >>> logged = np.outer([20.0, 20.0, 21.0, 22.0], np.ones(6))   # a kink at 600 s
+    >>> err = neighbour_shape_error([[0, 1]], [[0.5, 0.5]], t, [900.0],
+    ...                             [0.0, 600.0, 900.0, 1200.0], logged, 1e-2)
+    >>> round(float(err[0, 0]), 6)   # as log_shape_error's halfway weights
+    -0.01
+    """
+    log = (log_times_s, log_legs_C, sensitivity_mm_per_K)
+    growth = log_growth(ref_times_s, *log)  # (n, 6)
+    cols = np.asarray(columns, dtype=np.intp)
+    w = np.asarray(weights, dtype=float)
+    fitted = np.zeros((cols.shape[0], growth.shape[1]))
+    # the sum over the references of log_shape_error, of its terms that are not zero
+    # (adding a zero changes no sum)
+    for j in range(cols.shape[1]):
+        fitted += w[:, j, None] * growth[cols[:, j]]
     return fitted - log_growth(target_times_s, *log)
 
 

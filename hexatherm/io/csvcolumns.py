@@ -62,16 +62,24 @@ def ns_seconds(ns: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
     array([ 1.5 , -2.25])
     """
     whole, rest = np.divmod(ns, 1_000_000_000)
-    seconds = whole + rest / 1e9
-    big = np.abs(ns) > 2**53
+    return _whole_and_rest(whole, rest, np.abs(ns) > 2**53)
+
+
+def _whole_and_rest(
+    whole: npt.NDArray[np.int64], rest: npt.NDArray[np.int64], big: npt.NDArray[np.bool_]
+) -> npt.NDArray[np.float64]:
+    """:func:`ns_seconds` of ``whole * 10**9 + rest`` nanoseconds (``0 <= rest < 10**9``;
+    ``big``: where their magnitude is beyond ``2**53``)."""
+    seconds = np.asarray(whole + rest / 1e9, dtype=np.float64)
     if big.any():
         fixable = big & (rest != 0) & (np.abs(whole) < 2**52)
         floor = whole.astype(np.float64)
-        seconds = np.where(fixable & (seconds == floor), np.nextafter(seconds, np.inf), seconds)
-        seconds = np.where(
-            fixable & (seconds == floor + 1.0), np.nextafter(seconds, -np.inf), seconds
-        )
-    return np.asarray(seconds, dtype=np.float64)
+        # moved only where rounding put them on a whole second (a few): not every one
+        up = np.flatnonzero(fixable & (seconds == floor))
+        seconds[up] = np.nextafter(seconds[up], np.inf)
+        down = np.flatnonzero(fixable & (seconds == floor + 1.0))
+        seconds[down] = np.nextafter(seconds[down], -np.inf)
+    return seconds
 
 
 #: the fields of an ISO time's layout (its digits written as 0): where each is
@@ -85,20 +93,30 @@ def _block_seconds(codes: npt.NDArray[np.uint8], template: str) -> npt.NDArray[n
     """POSIX seconds of ISO times of one layout from their bytes (rows of ``codes``;
     ``template`` the layout with its digits as 0), field by field in integers, as
     :func:`_iso_seconds` gives them; None when a field is out of its range or the
-    year beyond 1678-2261 (then pandas and ``datetime`` decide, and say what is wrong)."""
+    year beyond 1678-2261 (then pandas and ``datetime`` decide, and say what is wrong).
+
+    A block whose rows share their date (a file's lines of one day) has it converted
+    once, from its first row."""
     match = _ISO_FIELDS.fullmatch(template)
     if match is None:
         return None
+    date_end = match.end("D")
+    one_date = bool((codes[:, :date_end] == codes[0, :date_end]).all())
+    date_rows = codes[:1] if one_date else codes
 
-    def field(name: str) -> npt.NDArray[np.int64]:
+    def field(name: str, rows: npt.NDArray[np.uint8] = codes) -> npt.NDArray[np.int64]:
         start, end = match.span(name)
         if start < 0:  # absent
-            return np.zeros(codes.shape[0], dtype=np.int64)
-        # the digits times their powers of ten, summed (whole numbers: exact)
-        digits = codes[:, start:end].astype(np.int64) - 48
-        return np.asarray(digits @ 10 ** np.arange(end - start - 1, -1, -1, dtype=np.int64))
+            return np.zeros(rows.shape[0], dtype=np.int64)
+        # digit by digit, times ten (whole numbers: exact); the layout holds digits there
+        value = rows[:, start].astype(np.int64) - 48
+        for at in range(start + 1, end):
+            value *= 10
+            value += rows[:, at]
+            value -= 48
+        return value
 
-    year, month, day = field("Y"), field("M"), field("D")
+    year, month, day = field("Y", date_rows), field("M", date_rows), field("D", date_rows)
     hour, minute, second = field("h"), field("m"), field("s")
     leap = (year % 4 == 0) & ((year % 100 != 0) | (year % 400 == 0))
     month_days = np.array([0, 31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31])
@@ -109,17 +127,14 @@ def _block_seconds(codes: npt.NDArray[np.uint8], template: str) -> npt.NDArray[n
         & (month <= 12)
         & (day >= 1)
         & (day <= month_days[np.clip(month, 0, 12)] + (leap & (month == 2)))
-        & (hour <= 23)
-        & (minute <= 59)
-        & (second <= 59)
-    )
+    ).all() and ((hour <= 23) & (minute <= 59) & (second <= 59)).all()
     offset = np.zeros(1, dtype=np.int64)
     if match.group("sign") is not None:
         oh, om = field("oh"), field("om")
-        ok &= (oh <= 23) & (om <= 59)
+        ok = ok and bool(((oh <= 23) & (om <= 59)).all())
         sign = 1 if codes[0, match.start("sign")] == ord("+") else -1
         offset = sign * (oh * 3600 + om * 60)
-    if not ok.all():
+    if not ok:
         return None
     # days from 1970-01-01 of the proleptic Gregorian calendar (H. Hinnant's days_from_civil)
     y = year - (month <= 2)
@@ -129,8 +144,11 @@ def _block_seconds(codes: npt.NDArray[np.uint8], template: str) -> npt.NDArray[n
     days = era * 146097 + yoe * 365 + yoe // 4 - yoe // 100 + doy - 719468
     whole = days * 86400 + hour * 3600 + minute * 60 + second - offset
     digits = match.end("f") - match.start("f") if match.group("f") is not None else 0
-    fraction = field("f") * 10 ** (9 - digits) if digits else 0
-    return ns_seconds(whole * 1_000_000_000 + fraction)
+    fraction = field("f") * 10 ** (9 - digits) if digits else np.zeros_like(whole)
+    # ns_seconds of the nanoseconds whole * 10**9 + fraction (0 <= fraction < 10**9),
+    # which it would split into these two again
+    big = np.abs(whole * 1_000_000_000 + fraction) > 2**53
+    return _whole_and_rest(whole, fraction, big)
 
 
 def _iso_layout(values: npt.NDArray[np.object_]) -> bool | None:

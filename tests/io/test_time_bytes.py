@@ -63,6 +63,45 @@ def test_times_from_bytes_are_pandas_seconds(rng, layout, digits):
     assert block is not None and csvcolumns._block_seconds(block[0], block[1]) is not None
 
 
+@pytest.mark.parametrize("layout", LAYOUTS)
+@pytest.mark.parametrize("digits", [1, 6, 9])
+@pytest.mark.parametrize("day", ["1969-12-31", "2024-02-29", "2261-12-31", "1678-01-01"])
+def test_times_of_one_day_are_pandas_seconds(rng, layout, digits, day):
+    """A block whose times share their date (its days converted once, from the first
+    row), and the same block with its last time a day later, against pandas to the bit."""
+    start = datetime.fromisoformat(day).replace(tzinfo=UTC)
+    values = [
+        (start + timedelta(seconds=float(s))).strftime(layout)
+        for s in np.sort(rng.uniform(0.0, 86399.999999, 300))
+    ]
+    if ".%f" in layout:  # the fraction cut (or padded) to `digits`
+        values = [
+            f"{v.split('.', 1)[0]}.{(v.split('.', 1)[1][:6] + '123')[:digits]}"
+            f"{v.split('.', 1)[1][6:]}"
+            for v in values
+        ]
+    later = (start + timedelta(days=1, seconds=5)).strftime(layout)
+    if ".%f" in layout:
+        later = f"{later.split('.', 1)[0]}.{'7' * digits}{later.split('.', 1)[1][6:]}"
+    for rows in (values, [*values[:-1], later]):
+        if rows[-1].startswith("2262"):
+            continue  # beyond pandas' nanoseconds
+        text = pd.Series(np.array(rows, dtype=object))
+        block = csvcolumns._iso_block(text.to_numpy(dtype=object))
+        assert block is not None
+        fast = csvcolumns._block_seconds(block[0], block[1])
+        assert fast is not None
+        stamps = pd.to_datetime(text, utc=True, format="ISO8601")
+        np.testing.assert_array_equal(fast, (stamps - pd.Timestamp(0, tz="UTC")).dt.total_seconds())
+
+
+def test_an_invalid_date_shared_by_every_row_is_left_to_pandas():
+    for day in ("2023-02-29", "2024-04-31", "2024-00-10", "2300-01-01"):
+        values = [f"{day}T10:00:0{i}" for i in range(5)]
+        block = csvcolumns._iso_block(np.array(values, dtype=object))
+        assert block is not None and csvcolumns._block_seconds(block[0], block[1]) is None
+
+
 @pytest.mark.parametrize(
     "bad",
     [

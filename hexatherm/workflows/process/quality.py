@@ -100,12 +100,20 @@ class QualityReport:
 
     def failing(self, check: str) -> pd.Series:
         """Whether ``check`` (a key of :data:`CHECKS`) failed at each step (boolean)."""
-        return self.frame[f"ok_{check}"].map(lambda ok: ok is False).astype(bool)
+        # over the column's objects as a list (Series.map infers types per call: 20x slower)
+        column = self.frame[f"ok_{check}"]
+        failed = [ok is False for ok in column.tolist()]
+        return pd.Series(failed, index=column.index, dtype=bool, name=column.name)
 
     def ran(self, check: str) -> pd.Series:
         """Whether ``check`` could run at each step (boolean)."""
-        return (
-            self.frame[f"ok_{check}"].map(lambda ok: isinstance(ok, bool | np.bool_)).astype(bool)
+        column = self.frame[f"ok_{check}"]
+        flags = (bool, np.bool_)
+        return pd.Series(
+            [type(ok) in flags for ok in column.tolist()],
+            index=column.index,
+            dtype=bool,
+            name=column.name,
         )
 
     @property
@@ -264,6 +272,12 @@ def _ball_values(result: ProcessResult) -> tuple[FloatArray, FloatArray]:
             np.fmax.at(form, (si, bi), values)
         if rec.diameter_mm is not None:
             dev = (rec.diameter_mm - nominal_mm[bi]) * 1e3
+            cells = si * shape[1] + bi
+            if np.isnan(diameter.ravel()[cells]).all() and np.unique(cells).size == cells.size:
+                # each cell once and none set yet (one file, no repeats): the loop below
+                # would set each to its value
+                diameter[si, bi] = dev
+                continue
             for i, j, value in zip(si, bi, dev, strict=True):
                 if not abs(diameter[i, j]) >= abs(value):  # NaN or smaller: the worse one
                     diameter[i, j] = value

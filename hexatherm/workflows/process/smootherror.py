@@ -14,6 +14,7 @@ import dataclasses
 
 import numpy as np
 
+from hexatherm.core.correction import Correction
 from hexatherm.core.curvature import CurvatureError, curvature_error
 from hexatherm.core.propagation import PoseChain, reference_scatter
 from hexatherm.core.smoothbias import (
@@ -22,12 +23,13 @@ from hexatherm.core.smoothbias import (
     growth_to_pose,
     log_growth,
     log_shape_error,
+    neighbour_shape_error,
     own_leg_covariance,
 )
-from hexatherm.typing import FloatArray
+from hexatherm.typing import FloatArray, IntArray
 from hexatherm.workflows.process.pipeline import ProcessResult
 
-__all__ = ["curvature_excess", "smooth_excess"]
+__all__ = ["curvature_excess", "neighbour_weights", "smooth_excess"]
 
 
 def smooth_excess(
@@ -120,8 +122,9 @@ def curvature_excess(
     if legs is None or refs.size < 2 or m == 0:
         return None
     q = result.steps.q_mm
-    position = {int(step): i for i, step in enumerate(refs)}
-    used = np.zeros((m, refs.size))
+    # the neighbours' weights, two a target: (M, n) dense weights only where
+    # curvature_error reads them (no log)
+    columns, weights = neighbour_weights(corr, refs, q.shape[0])
     seen = 0.0
     if smooth is not None and smooth.used:
         if temperatures is not None:
@@ -130,26 +133,22 @@ def curvature_excess(
         # the straight line's curvature term beyond that spacing only
         seen = float(np.median(np.diff(times[refs])))
         used = _line_weights(times[refs], times[corr.target_index])
-    else:
-        for k, (b, a, w) in enumerate(
-            zip(corr.before_index, corr.after_index, corr.weight_after, strict=True)
-        ):
-            if b >= 0:
-                used[k, position[int(b)]] += 1.0 - w
-            if a >= 0:
-                used[k, position[int(a)]] += w
+    elif temperatures is None:
+        used = np.zeros((m, refs.size))
+        rows = np.arange(m)
+        used[rows, columns[:, 0]] = weights[:, 0]
+        used[rows, columns[:, 1]] += weights[:, 1]
     if temperatures is not None:
         sensitivity = legs.sensitivity_mm_per_K(q[refs[0]])
         log = (temperatures.time_s, temperatures.legs_C, sensitivity)
-        weights = np.broadcast_to(used[:, None, :], (m, 6, refs.size))
-        e = log_shape_error(weights, times[refs], times[corr.target_index], *log)
-        evaluated = np.asarray(used.any(axis=1), dtype=bool)
+        e = neighbour_shape_error(columns, weights, times[refs], times[corr.target_index], *log)
+        evaluated = np.asarray((weights != 0.0).any(axis=1), dtype=bool)
         e[~evaluated] = 0.0
         # the thermocouples' own noise (Type A, the log's second differences) is in e at
         # the references' times and the target's: not the legs' growth, its share off
         sigma2, _ = reference_scatter(temperatures.time_s, temperatures.legs_C)
         sigma2 = float(sigma2) if np.isfinite(sigma2) else 0.0
-        noise = sigma2 * np.sum(np.square(sensitivity)) * (np.sum(used**2, axis=1) + 1.0)
+        noise = sigma2 * np.sum(np.square(sensitivity)) * (np.sum(weights**2, axis=1) + 1.0)
         total = np.sum(e**2, axis=1)
         share = np.where(total > 0, np.clip(1.0 - noise / np.where(total > 0, total, 1.0), 0, 1), 0)
         # the interval: the reference before the target (the last one past it)
@@ -182,6 +181,29 @@ def to_pose_factor(result: ProcessResult, chain: PoseChain) -> FloatArray:
     return growth_to_pose(
         chain, corr.reference_growth_mm, q[r0], q[corr.target_index], corr.corrected
     )
+
+
+def neighbour_weights(
+    correction: Correction, refs: IntArray, n_steps: int
+) -> tuple[IntArray, FloatArray]:
+    """The references each target's straight line uses: their columns (M, 2; into
+    ``refs``, the one before first) and weights (M, 2; ``1 - w`` and ``w``, 0 for a side not
+    used, whose column is then 0)."""
+    position = np.zeros(n_steps, dtype=np.intp)
+    position[refs] = np.arange(refs.size)
+    before, after = correction.before_index, correction.after_index
+    w = np.asarray(correction.weight_after, dtype=float)
+    columns = np.stack(
+        [np.where(before >= 0, position[before], 0), np.where(after >= 0, position[after], 0)],
+        axis=1,
+    )
+    weights = np.stack([np.where(before >= 0, 1.0 - w, 0.0), np.where(after >= 0, w, 0.0)], axis=1)
+    # one reference on both sides (never from choose_references): one column, its weights
+    # added as the dense weights add them
+    same = columns[:, 0] == columns[:, 1]
+    weights[same, 0] += weights[same, 1]
+    weights[same, 1] = 0.0
+    return columns, weights
 
 
 def _line_weights(ref_times_s: FloatArray, target_times_s: FloatArray) -> FloatArray:

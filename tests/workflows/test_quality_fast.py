@@ -1,0 +1,73 @@
+"""The quality checks' fast paths against the loops they replace: the diameter of every
+step and ball (each cell once: set at once), the checks' ran/failed flags (lists, not
+Series.map)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pandas as pd
+
+from hexatherm.session import QualityLimits
+from hexatherm.workflows.process.measured import nominal_fit_diameter_mm
+from hexatherm.workflows.process.pipeline import process_session
+from hexatherm.workflows.process.quality import NA, QualityReport, _ball_values
+from tests.workflows.test_quality import session
+
+
+def loop_diameters(result) -> np.ndarray:
+    """_ball_values' diameters as its loop makes them, record by record, cell by cell."""
+    plan, balls = result.session.plan, result.session.balls
+    step_index = {label: i for i, label in enumerate(plan.labels)}
+    step_index.update({label: step_index[kept] for label, kept in result.repeat_of.items()})
+    ball_index = {name: j for j, name in enumerate(balls.names)}
+    nominal_mm = nominal_fit_diameter_mm(balls)
+    diameter = np.full((len(plan.labels), len(balls.names)), np.nan)
+    for rec in result.records:
+        for label, ball, d in zip(rec.label, rec.ball, rec.diameter_mm, strict=True):
+            i, j = step_index[label], ball_index[ball]
+            value = (d - nominal_mm[j]) * 1e3
+            if not abs(diameter[i, j]) >= abs(value):
+                diameter[i, j] = value
+    return diameter
+
+
+def test_diameters_as_the_loop_makes_them(tmp_path):
+    result = process_session(session(tmp_path / "s"))
+    _, diameter = _ball_values(result)
+    np.testing.assert_array_equal(diameter, loop_diameters(result))
+    assert not np.isnan(diameter).any()
+    # every cell twice (the records of two files): the loop keeps the larger deviation
+    rec = result.records[0]
+    bigger = dataclasses.replace(
+        rec, diameter_mm=rec.diameter_mm + np.linspace(-2e-3, 2e-3, len(rec))
+    )
+    twice = dataclasses.replace(result, records=(rec, bigger))
+    _, diameter = _ball_values(twice)
+    np.testing.assert_array_equal(diameter, loop_diameters(twice))
+    assert not np.array_equal(diameter, _ball_values(result)[1])
+    # a NaN diameter in the file's records: as the loop leaves it
+    nan = rec.diameter_mm.copy()
+    nan[::3] = np.nan
+    holed = dataclasses.replace(result, records=(dataclasses.replace(rec, diameter_mm=nan),))
+    np.testing.assert_array_equal(_ball_values(holed)[1], loop_diameters(holed))
+
+
+def test_ran_and_failing_as_series_map():
+    values = [True, False, NA, np.True_, np.False_, "", None, 0, 1.0]
+    frame = pd.DataFrame(
+        {
+            "label": [f"S{i}" for i in range(len(values))],
+            "ok_form": pd.Series(values, dtype=object),
+        },
+        index=np.arange(3, 3 + len(values)),
+    )
+    report = QualityReport(frame, QualityLimits())
+    column = frame["ok_form"]
+    pd.testing.assert_series_equal(
+        report.failing("form"), column.map(lambda ok: ok is False).astype(bool)
+    )
+    pd.testing.assert_series_equal(
+        report.ran("form"), column.map(lambda ok: isinstance(ok, bool | np.bool_)).astype(bool)
+    )
