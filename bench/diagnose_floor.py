@@ -6,9 +6,14 @@ it computes: start Python, import numpy, pandas (the CSV reader), ``scipy.optimi
 figure like diagnose's first, with matplotlib's defaults: 6 x 2 panels of one 66-step line
 each, saved as a PNG at 150 dpi. Each is a whole child process, one BLAS thread, run in
 alternating triples with ``hexatherm diagnose`` on ``bench/analyses.py``'s 16-target
-session (``--code DIR``: the code run, default this checkout).
+session (``--code DIR``: the code run, default this checkout). With ``--baseline DIR`` (a
+checkout of the code before) ``diagnose`` of that code runs in each round too (before
+and now in turn first), and the median of now over before is printed. With
+``--bytecode`` hexatherm's modules are compiled once into ``bench/.cache/pycache/`` and
+read from there, as an installed copy reads them (numpy's, scipy's and matplotlib's are
+compiled when pip installs them).
 
-    python bench/diagnose_floor.py [--triples 5] [--code DIR]
+    python bench/diagnose_floor.py [--triples 5] [--code DIR] [--baseline DIR] [--bytecode]
 """
 
 from __future__ import annotations
@@ -45,32 +50,58 @@ fig.savefig(io.BytesIO(), format="png", dpi=150)
 """
 
 
+#: set by ``--bytecode``: hexatherm's modules compiled once, as installed
+BYTECODE = [False]
+
+
 def cpu_seconds(args: list[str], code: Path) -> float:
     """CPU seconds (user + system) of the child ``python ARGS`` (one BLAS thread)."""
     env = dict(os.environ, PYTHONPATH=str(code), OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
+    if BYTECODE[0]:
+        env.pop("PYTHONDONTWRITEBYTECODE", None)
+        env["PYTHONPYCACHEPREFIX"] = str(ROOT / "bench" / ".cache" / "pycache")
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     subprocess.run([sys.executable, *args], cwd=code, env=env, check=True, capture_output=True)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
+def _diagnose(session: Path, code: Path) -> float:
+    """CPU seconds of ``hexatherm diagnose`` of ``session`` run from ``code``."""
+    out = Path(tempfile.mkdtemp())
+    try:
+        command = ["-m", "hexatherm", "diagnose", str(session), "-o", str(out / "out")]
+        return cpu_seconds(command, code)
+    finally:
+        shutil.rmtree(out)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--triples", type=int, default=5)
     parser.add_argument("--code", type=Path, default=ROOT, help="the checkout run")
+    parser.add_argument("--baseline", type=Path, help="a checkout of the code before")
+    parser.add_argument("--bytecode", action="store_true", help="compiled modules, as installed")
     args = parser.parse_args()
+    BYTECODE[0] = args.bytecode
     from analyses import diagnosis_session, median  # type: ignore[import-not-found]
 
     session = diagnosis_session(16)
     print(f"load average at the start: {os.getloadavg()[0]:.1f}")
-    rows: dict[str, list[float]] = {"imports": [], "imports + one figure": [], "diagnose": []}
-    for _ in range(args.triples):
+    rows: dict[str, list[float]] = {"imports": [], "imports + one figure": []}
+    codes = {"diagnose": args.code}
+    if args.baseline is not None:
+        codes = {"diagnose before": args.baseline, **codes}
+    rows.update({name: [] for name in codes})
+    for code in codes.values():  # once each first: compiled (with --bytecode), files cached
+        _diagnose(session, code)
+    for round_ in range(args.triples):
         rows["imports"].append(cpu_seconds(["-c", IMPORTS], args.code))
         rows["imports + one figure"].append(cpu_seconds(["-c", IMPORTS + FIGURE], args.code))
-        out = Path(tempfile.mkdtemp())
-        command = ["-m", "hexatherm", "diagnose", str(session), "-o", str(out / "out")]
-        rows["diagnose"].append(cpu_seconds(command, args.code))
-        shutil.rmtree(out)
+        # before and now in turn first (one order kept in every round, load 9-10: now /
+        # before 1.05; the same codes in turn: 0.98)
+        for name, code in sorted(codes.items(), reverse=bool(round_ % 2)):
+            rows[name].append(_diagnose(session, code))
     print("| | CPU, median (s) | range (s) | diagnose / it (median of triples) |")
     print("|---|---:|---:|---:|")
     for name, values in rows.items():
@@ -79,6 +110,11 @@ def main() -> None:
             f"| {name} | {median(values):.2f} | {min(values):.2f}-{max(values):.2f} "
             f"| {ratio:.2f}x |"
         )
+    if args.baseline is not None:
+        paired = median(
+            [n / b for n, b in zip(rows["diagnose"], rows["diagnose before"], strict=True)]
+        )
+        print(f"diagnose now / before, median of the rounds: {paired:.2f}")
     print(f"load average at the end: {os.getloadavg()[0]:.1f}")
 
 

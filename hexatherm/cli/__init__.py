@@ -28,6 +28,7 @@ import sys
 import textwrap
 from typing import Any
 
+from hexatherm.cli import collector
 from hexatherm.cli.signals import exit_on_signals
 
 
@@ -117,6 +118,14 @@ class LazyGroup(click.Group):
         module = importlib.import_module(COMMANDS[cmd_name][0])
         command: click.Command = module.command
         return command
+
+    def main(self, *args: Any, **kwargs: Any) -> Any:
+        """Run the command line with the garbage collector paused until the command has
+        imported its modules (:mod:`hexatherm.cli.collector`: each command resumes it in
+        :func:`~hexatherm.cli.collector.imports_done`; restored at the end whatever
+        happens)."""
+        with collector.paused():
+            return super().main(*args, **kwargs)
 
     def make_context(
         self,

@@ -9,7 +9,14 @@ from typing import TYPE_CHECKING
 
 import click
 
-from hexatherm.cli.options import MAX_BAUD, CheckedFloat, clean_errors, echo_err, max_gap_option
+from hexatherm.cli.options import (
+    MAX_BAUD,
+    CheckedFloat,
+    clean_errors,
+    echo_err,
+    imports_done,
+    max_gap_option,
+)
 from hexatherm.workflows.limits import DEFAULTS, radius_limit_um
 
 if TYPE_CHECKING:
@@ -227,6 +234,8 @@ def command(
     """
     from hexatherm.workflows.acquire.recorder import FitChecks
     from hexatherm.workflows.acquire.run import AcquireRequest, PortSettings, record
+
+    imports_done()
 
     if replay_log is not None:
         if port is not None or resume or temperature_port is not None:

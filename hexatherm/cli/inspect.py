@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from hexatherm.cli.options import clean_errors, echo_err, reading_options
+from hexatherm.cli.options import clean_errors, echo_err, imports_done, reading_options
 from hexatherm.workflows.common import ReadOptions
 
 
@@ -40,6 +40,8 @@ def command(file: Path, as_csv: bool, session: Path | None, reading: ReadOptions
         program_without_actuals,
         session_reading,
     )
+
+    imports_done()
 
     if is_session(file):
         lines, table = session_reading(file, reading)

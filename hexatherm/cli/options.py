@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import functools
-import gc
 import math
 import os
 import re
@@ -15,6 +14,7 @@ from typing import Any, TypeVar
 
 import click
 
+from hexatherm.cli.collector import imports_done as imports_done
 from hexatherm.errors import HexathermError, InputWarning
 from hexatherm.workflows.common import ReadOptions, run_context
 
@@ -253,20 +253,6 @@ max_gap_option = click.option(
     show_default=True,
     help="Warn when a target and its reference are further apart (s).",
 )
-
-
-def imports_done() -> None:
-    """Keep the garbage collector off what the command has imported (:func:`gc.freeze`).
-
-    Called by the commands that compute, once their modules are loaded: numpy, pandas,
-    scipy and hexatherm leave hundreds of thousands of objects that live as long as the
-    process, and every full collection would walk them again (0.3-0.4 s of a 4 s
-    ``diagnose``). Nothing is computed differently; objects made later are collected
-    as before. Only the first call freezes: a process that runs several commands (the
-    tests) keeps collecting what the earlier ones left.
-    """
-    if gc.get_freeze_count() == 0:
-        gc.freeze()
 
 
 def clean_errors(func: F) -> F:

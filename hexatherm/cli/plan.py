@@ -14,6 +14,7 @@ from hexatherm.cli.options import (
     CheckedFloat,
     clean_errors,
     echo_err,
+    imports_done,
     max_gap_option,
     overwrite_option,
 )
@@ -314,6 +315,8 @@ def command(
     operator's sheet and the plan as QIF 3 sphere features.
     """
     from hexatherm.workflows.plan import PlanFiles, PlanRequest, write_plan
+
+    imports_done()
 
     sources_given = sum(x is not None for x in (targets_path, grid, n_random))
     if sources_given != 1:

@@ -10,6 +10,7 @@ from hexatherm.cli.options import (
     CheckedFloat,
     clean_errors,
     echo_err,
+    imports_done,
     overwrite_option,
     reading_options,
 )
@@ -67,6 +68,8 @@ def command(
     second's, the origin is the first bore's centre on the face plus the offset.
     """
     from hexatherm.workflows.register import register
+
+    imports_done()
 
     result = register(
         measurement, datums_path, out, fixed_diameter, diameter_tolerance_um, overwrite, reading

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from hexatherm.cli.options import CheckedFloat, clean_errors, echo_err
+from hexatherm.cli.options import CheckedFloat, clean_errors, echo_err, imports_done
 
 
 @click.command("replay")
@@ -52,6 +52,8 @@ def command(sessions_dir: Path, update: bool, tol_mm: float, tol_deg: float) -> 
         format_worst,
         replay_session,
     )
+
+    imports_done()
 
     tolerances = {**DEFAULT_TOLERANCES, "mm": tol_mm, "deg": tol_deg}
     sessions = find_sessions(sessions_dir)

@@ -8,7 +8,13 @@ from pathlib import Path
 
 import click
 
-from hexatherm.cli.options import CHECK_FAILED_EXIT, CheckedFloat, clean_errors, echo_err
+from hexatherm.cli.options import (
+    CHECK_FAILED_EXIT,
+    CheckedFloat,
+    clean_errors,
+    echo_err,
+    imports_done,
+)
 from hexatherm.cli.signals import signals_interrupt
 from hexatherm.errors import Terminated
 from hexatherm.workflows.limits import DEFAULTS, radius_limit_um
@@ -277,6 +283,8 @@ def command(
     from hexatherm.workflows.run.campaign import STOPPED_NOTE
     from hexatherm.workflows.run.options import BallChecks
     from hexatherm.workflows.run.run import RunRequest, run
+
+    imports_done()
 
     if dry_run and resume:
         raise click.UsageError("--dry-run checks a plan: not with --resume")

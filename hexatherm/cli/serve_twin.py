@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from hexatherm.cli.options import CheckedFloat, clean_errors, echo_err
+from hexatherm.cli.options import CheckedFloat, clean_errors, echo_err, imports_done
 
 
 @click.command("serve-twin")
@@ -169,6 +169,8 @@ def command(
     from hexatherm.errors import HexathermError
     from hexatherm.workflows.serve import ServeFaults, parse_fault
     from hexatherm.workflows.serve_twin import ServeRequest, Serving, serve_twin
+
+    imports_done()
 
     if scenario is None and (hexapod_path is None or balls_path is None):
         raise click.UsageError("give --hexapod and --balls (or a --scenario)")

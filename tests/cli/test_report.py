@@ -10,7 +10,7 @@ import shutil
 import pytest
 from click.testing import CliRunner
 
-import hexatherm.workflows.report
+import hexatherm.workflows.report.html
 from hexatherm.cli import main
 from hexatherm.io.manifest import read_manifest
 from tests.shipped import SHIPPED

@@ -120,3 +120,86 @@ def test_process_of_a_csv_session_loads_no_dmis_or_qif_reader(tmp_path: Path) ->
     assert (tmp_path / "csv" / "poses.csv").is_file()
     code = _process_code("paper-zero-pose-dmis", tmp_path / "dmis")
     assert _loaded(code, lazy) == {**dict.fromkeys(lazy, False), "hexatherm.io.dmis": True}
+
+
+#: what a plain ``process`` of a points CSV must not load: the figures' and pages' libraries
+#: (matplotlib with Pillow, jinja2, markdown-it), the QIF reader's lxml, scipy (no repeats
+#: of O or R0, no tolerances), the other readers and the other commands' workflows
+#: (each a start-up cost of every run, issue 37)
+NOT_FOR_PROCESS = (
+    "matplotlib",
+    "PIL",
+    "jinja2",
+    "markdown_it",
+    "lxml",
+    "scipy",
+    "hexatherm.io.dmis",
+    "hexatherm.io.qif",
+    "hexatherm.core.diagnosis",
+    "hexatherm.core.twin",
+    "hexatherm.core.calibration",
+    "hexatherm.workflows.report",
+    "hexatherm.workflows.diagnose",
+)
+
+
+def test_process_of_a_points_csv_loads_no_heavy_module(tmp_path: Path) -> None:
+    """serial-capture (points.csv, spheres fitted): none of :data:`NOT_FOR_PROCESS` is
+    imported, while the modules of its own path are (the check sees what is loaded)."""
+    out = tmp_path / "out"
+    code = _process_code("serial-capture", out)
+    own = ("pandas", "hexatherm.io.csvfile", "hexatherm.core.spherefit", "yaml", "click")
+    loaded = _loaded(code, NOT_FOR_PROCESS + own)
+    assert loaded == {**dict.fromkeys(NOT_FOR_PROCESS, False), **dict.fromkeys(own, True)}
+    expected = SESSIONS / "serial-capture" / "expected" / "poses.csv"
+    assert (out / "poses.csv").read_bytes() == expected.read_bytes()
+
+
+def test_diagnose_leaves_process_pipeline_and_report_page_unloaded() -> None:
+    """diagnose's modules (those its command imports, its page's included) leave out what
+    it never calls: process's pipeline (correction, checks, carry), the sphere fits (a
+    session of centres), process's output tables, and report's own page and tables, which
+    ``hexatherm.workflows.report`` loads on first use."""
+    code = (
+        "import hexatherm.cli, hexatherm.cli.diagnose, hexatherm.io.config\n"
+        "import hexatherm.io.outputs, hexatherm.workflows.diagnose.command\n"
+        "import hexatherm.workflows.diagnose.run, hexatherm.workflows.diagnose.outputs\n"
+        "import hexatherm.workflows.diagnose.report\n"
+    )
+    lazy = (
+        "hexatherm.workflows.process.pipeline",
+        "hexatherm.core.correction",
+        "hexatherm.core.spherefit",
+        "hexatherm.workflows.process.outputs",
+        "hexatherm.workflows.process.views",
+        "hexatherm.workflows.report.html",
+        "hexatherm.workflows.report.tables",
+    )
+    used = ("hexatherm.workflows.report.page", "hexatherm.core.diagnosis")
+    loaded = _loaded(code, lazy + used)
+    assert loaded == {**dict.fromkeys(lazy, False), **dict.fromkeys(used, True)}
+
+
+def test_report_package_gives_every_name_of_its_modules() -> None:
+    """Every name of ``hexatherm.workflows.report.__all__`` is its module's object, the
+    lazy ones too (PEP 562); ``verdict`` stays the function though its module shares the
+    name; an unknown name is an AttributeError."""
+    code = (
+        "import importlib, hexatherm.workflows.report as r\n"
+        "import hexatherm.workflows.report.html\n"  # loads the verdict module too
+        "assert callable(r.verdict) and r.verdict.__module__.endswith('.verdict')\n"
+        "for name, module in r.LAZY.items():\n"
+        "    own = importlib.import_module(r.__name__ + '.' + module)\n"
+        "    assert getattr(r, name) is getattr(own, name), name\n"
+        "assert set(r.LAZY) <= set(r.__all__) and set(r.__all__) <= set(dir(r))\n"
+        "assert all(getattr(r, name) is not None for name in r.__all__)\n"
+        "try:\n"
+        "    r.no_such_name\n"
+        "except AttributeError:\n"
+        "    pass\n"
+        "else:\n"
+        "    raise AssertionError('no AttributeError')\n"
+    )
+    assert _loaded(code, ("hexatherm.workflows.report.tables",)) == {
+        "hexatherm.workflows.report.tables": True
+    }

@@ -10,7 +10,6 @@ from hexatherm.core.plan import NAME_PATTERN
 from hexatherm.core.registration import check_ball_layout
 from hexatherm.errors import RegistrationError
 from hexatherm.io.config.yamlout import _dump
-from hexatherm.io.csvout import fixed_text
 from hexatherm.io.yamlfile import YamlDoc
 from hexatherm.session import Balls
 
@@ -67,6 +66,7 @@ def balls_to_yaml(
     platform frame (``u_centre_um``, written at 1e-4 um); ``resolution_mm``: centres
     rounded to it (a power of ten; default: every digit).
     """
+    from hexatherm.io.csvout import fixed_text  # only when written: readers go without it
 
     def centre(c: np.ndarray) -> list[float]:
         if resolution_mm is None:

@@ -13,7 +13,6 @@ from typing import TypeVar
 import numpy as np
 import numpy.typing as npt
 
-from hexatherm.core.spherefit import fit_spheres, probe_radius_mm
 from hexatherm.errors import FitError, InputError, PlanError
 from hexatherm.io.files import STRICT, ReadOptions
 from hexatherm.io.measurements import read_measurements
@@ -105,6 +104,8 @@ class StepCentres:
 
 def nominal_fit_diameter_mm(balls: Balls) -> FloatArray:
     """Diameter a sphere fit should find for each ball (probe tip added if uncompensated)."""
+    from hexatherm.core.spherefit import probe_radius_mm  # a session of centres fits none
+
     return np.array(
         [
             2 * probe_radius_mm(d, balls.tip_diameter_mm, balls.probe_compensated)
@@ -186,6 +187,8 @@ def fit_points(
     With ``fixed_diameter_mm`` (or, when it is 0 and ``balls`` is given, the nominal
     fit diameter of each ball) the radius is fixed.
     """
+    from hexatherm.core.spherefit import fit_spheres  # a session of centres fits none
+
     groups, first = point_groups(records)
     radius = fit_radii(records, first, balls, fixed_diameter_mm)
     try:

@@ -46,10 +46,10 @@ from hexatherm.core.geometry import to_um_urad
 from hexatherm.io.csvout import csv_text
 from hexatherm.io.outputs import output_dir
 from hexatherm.workflows.process.measured import nominal_fit_diameter_mm
-from hexatherm.workflows.process.pipeline import ProcessResult
 
 if TYPE_CHECKING:
     from hexatherm.workflows.process.conformity import Conformity
+    from hexatherm.workflows.process.pipeline import ProcessResult
     from hexatherm.workflows.process.quality import QualityReport
     from hexatherm.workflows.process.uncertainty import PoseUncertainty
     from hexatherm.workflows.process.views import Processed, Uncertain

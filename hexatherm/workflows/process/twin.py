@@ -10,6 +10,8 @@ the first reference step, like the references' correction.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import numpy.typing as npt
 
@@ -20,7 +22,9 @@ from hexatherm.errors import InputError
 from hexatherm.io.temperatures import Temperatures
 from hexatherm.workflows.process.frames import model_in_origin
 from hexatherm.workflows.process.measured import check_log_span
-from hexatherm.workflows.process.pipeline import ProcessResult
+
+if TYPE_CHECKING:  # diagnose reads the twin's model here, without process's pipeline
+    from hexatherm.workflows.process.pipeline import ProcessResult
 
 
 def twin_poses(

@@ -36,6 +36,9 @@ matplotlib is imported inside them only.
 
 from __future__ import annotations
 
+import importlib
+from typing import TYPE_CHECKING, Any
+
 from hexatherm.workflows.report.figures import (
     CONVENTIONAL_COLOUR,
     CORRECTED_COLOUR,
@@ -58,14 +61,6 @@ from hexatherm.workflows.report.figures import (
     target_labels,
     temperature_figure,
 )
-from hexatherm.workflows.report.html import (
-    build_report,
-    metadata_rows,
-    provenance_block,
-    report_html,
-    verdict_failed,
-    verdict_items,
-)
 from hexatherm.workflows.report.page import (
     STYLE,
     Cell,
@@ -75,18 +70,62 @@ from hexatherm.workflows.report.page import (
     table,
 )
 from hexatherm.workflows.report.render import Figure, Table, render_page
-from hexatherm.workflows.report.tables import (
-    FAIL_MARK,
-    commanded_columns,
-    failing_rows,
-    growth_table,
-    poses_table,
-    poses_table_html,
-    quality_summary,
-    quality_table,
-)
 from hexatherm.workflows.report.text import exact, fixed, unit_text
 from hexatherm.workflows.report.verdict import Extreme, Verdict, verdict
+
+#: the page of ``report`` and its tables, loaded on first use (PEP 562): ``diagnose``
+#: builds its own page from the figures, ``page`` and ``render``, and would otherwise load
+#: ``process``'s pipeline and tables with them
+LAZY = {
+    "build_report": "html",
+    "metadata_rows": "html",
+    "provenance_block": "html",
+    "report_html": "html",
+    "verdict_failed": "html",
+    "verdict_items": "html",
+    "FAIL_MARK": "tables",
+    "commanded_columns": "tables",
+    "failing_rows": "tables",
+    "growth_table": "tables",
+    "poses_table": "tables",
+    "poses_table_html": "tables",
+    "quality_summary": "tables",
+    "quality_table": "tables",
+}
+
+if TYPE_CHECKING:
+    from hexatherm.workflows.report.html import (
+        build_report,
+        metadata_rows,
+        provenance_block,
+        report_html,
+        verdict_failed,
+        verdict_items,
+    )
+    from hexatherm.workflows.report.tables import (
+        FAIL_MARK,
+        commanded_columns,
+        failing_rows,
+        growth_table,
+        poses_table,
+        poses_table_html,
+        quality_summary,
+        quality_table,
+    )
+
+
+def __getattr__(name: str) -> Any:
+    """The names of :data:`LAZY`, imported from their module when first asked for."""
+    if name not in LAZY:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{LAZY[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *LAZY})
+
 
 __all__ = [
     "FAIL_MARK",

@@ -15,12 +15,13 @@ import numpy.typing as npt
 from hexatherm.core.geometry import to_um_urad
 from hexatherm.io.records import seconds_to_iso
 from hexatherm.typing import FloatArray
-from hexatherm.workflows.process.views import Processed, Uncertain
 from hexatherm.workflows.report.text import exact, unit_text
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
+
+    from hexatherm.workflows.process.views import Processed, Uncertain
 
 
 POSE_NAMES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")

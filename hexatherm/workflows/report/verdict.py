@@ -16,8 +16,6 @@ import numpy as np
 
 from hexatherm.core.geometry import to_um_urad
 from hexatherm.typing import FloatArray
-from hexatherm.workflows.process.outputs import insignificant_corrections
-from hexatherm.workflows.process.views import Processed, Uncertain
 from hexatherm.workflows.report.figures import POSE_NAMES, pose_deviations, target_labels
 
 if TYPE_CHECKING:
@@ -25,6 +23,7 @@ if TYPE_CHECKING:
     from hexatherm.session import Tolerance
     from hexatherm.workflows.process.conformity import Conformity
     from hexatherm.workflows.process.quality import QualityReport
+    from hexatherm.workflows.process.views import Processed, Uncertain
 
 
 @dataclass(frozen=True)
@@ -159,6 +158,10 @@ def verdict(
     rule : DecisionRule, optional
         The decision rule of the conformity statement (default: ISO 14253-1, w = U).
     """
+    # process's output tables, with its pipeline: not loaded by diagnose, whose page takes
+    # this package's figures and text only
+    from hexatherm.workflows.process.outputs import insignificant_corrections
+
     if not coverage_factor > 0:
         raise ValueError(f"coverage factor {coverage_factor}: must be > 0")
     conventional, corrected = pose_deviations(result)
