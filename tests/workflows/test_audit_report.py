@@ -300,6 +300,9 @@ def test_short_labels_keep_the_figure_as_it_was(tmp_path):
     assert fig.subplotpars.bottom == 0.1
     texts, boxes, _ = drawn_ticks(fig)
     assert texts == [f"S{i}" for i in range(1, 11)]
+    # the top row's ticks are the bottom row's (shared x; labelled at the bottom only)
+    for ax in fig.axes[:6]:
+        assert list(ax.get_xticks()) == list(range(1, 11)) and ax.get_xlim() == (0.4, 10.6)
 
 
 def test_a_long_unbroken_name_or_label_does_not_shrink_the_printed_page(tmp_path):
