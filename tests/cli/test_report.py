@@ -26,15 +26,28 @@ def run(*args):
 @pytest.fixture
 def session(tmp_path):
     """A copy of the shipped session (the default output goes into the session folder)."""
+    return session_copy(tmp_path)
+
+
+def session_copy(tmp_path):
     folder = tmp_path / "paper"
     shutil.copytree(SESSION, folder, ignore=shutil.ignore_patterns("expected", "truth"))
     return folder
 
 
-def test_report_writes_the_page_into_the_session_folder(session):
+@pytest.fixture(scope="module")
+def reported(tmp_path_factory):
+    """``report SESSION`` of a fresh copy (processed first), rendered once for the tests
+    that read it: the session folder, the command's result, the page it wrote."""
+    session = session_copy(tmp_path_factory.mktemp("reported"))
     result = run("report", session)
-    assert result.exit_code == 0, result.output
     page = (session / "report.html").read_text(encoding="utf-8")
+    return session, result, page
+
+
+def test_report_writes_the_page_into_the_session_folder(reported):
+    session, result, page = reported
+    assert result.exit_code == 0, result.output
     images = IMG.findall(page)
     assert len(images) == 4
     assert all(base64.b64decode(data).startswith(b"\x89PNG\r\n\x1a\n") for data in images)
@@ -145,10 +158,9 @@ def test_report_is_listed_by_help():
     assert "Write the HTML report of a processed session's results." in result.output
 
 
-def test_report_prints_the_pages_verdict(session, tmp_path):
-    result = run("report", session, "-o", tmp_path / "r.html")
+def test_report_prints_the_pages_verdict(reported):
+    _, result, page = reported  # the page as written, before any other test's --overwrite
     assert result.exit_code == 0, result.output
-    page = (tmp_path / "r.html").read_text(encoding="utf-8")
     lines = result.stdout.splitlines()
     assert lines[0].startswith("Targets: 10;")
     deviation = next(line for line in lines if line.startswith("Largest corrected deviation"))

@@ -20,9 +20,6 @@ from tests.replicas import write_session
 
 Diagnosed = Callable[..., DiagnosisResult]
 
-#: the null campaigns (nothing hidden, 8 targets) of the false-effect and adequacy tests
-NULL_SEEDS = tuple(range(100, 120))
-
 
 @pytest.fixture(scope="session")
 def diagnosed_campaign(tmp_path_factory: pytest.TempPathFactory) -> Diagnosed:
@@ -47,9 +44,3 @@ def diagnosed_campaign(tmp_path_factory: pytest.TempPathFactory) -> Diagnosed:
         return done[key]
 
     return diagnosed
-
-
-@pytest.fixture(scope="session")
-def null_campaigns(diagnosed_campaign: Diagnosed) -> dict[int, DiagnosisResult]:
-    """The diagnoses of the 20 null campaigns of :data:`NULL_SEEDS`."""
-    return {seed: diagnosed_campaign((), seed, n_targets=8) for seed in NULL_SEEDS}

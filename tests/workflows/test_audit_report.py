@@ -15,13 +15,14 @@ import os
 import re
 import shutil
 from pathlib import Path
+from unittest import mock
 
 import pytest
 from click.testing import CliRunner
 
 from hexatherm.cli import main
 from hexatherm.errors import InputError
-from hexatherm.workflows.report.render import render_page
+from hexatherm.workflows.report.render import Drawing, render_page
 from tests.audit import hashes, refusal, session_copy
 from tests.shipped import SHIPPED
 
@@ -39,14 +40,20 @@ def templates(folder: Path, files: dict[str, str | bytes]) -> Path:
 
 def report_refused(tmp_path: Path, folder: Path) -> str:
     """``report`` of a copy of paper-zero-pose with the lab's templates ``folder``:
-    refused, nothing written, no input changed; its one line."""
+    refused before any figure is drawn, nothing written, no input changed; its one line."""
+    from hexatherm.workflows.report import figures
+
     session = session_copy(tmp_path)
     before = hashes(session, folder)
     out = tmp_path / "out" / "report.html"
-    result = CliRunner().invoke(
-        main, ["report", str(session), "--template-dir", str(folder), "-o", str(out)]
-    )
+    drawn = []
+    real = figures.figure_png
+    with mock.patch.object(figures, "figure_png", lambda *a, **k: drawn.append(a) or real(*a, **k)):
+        result = CliRunner().invoke(
+            main, ["report", str(session), "--template-dir", str(folder), "-o", str(out)]
+        )
     line = refusal(result)
+    assert drawn == [], line  # fails fast: a bad template costs no figure
     assert not out.exists() and not out.parent.exists()
     assert hashes(session, folder) == before
     return line
@@ -106,6 +113,27 @@ def test_a_loop_only_rendering_finds_is_refused_naming_the_template(tmp_path):
     with pytest.raises(InputError, match=r"closing\.html\.j2:2: template: .*loop") as caught:
         render_page("closing.html.j2", folder.resolve(), title="t", header_rows=[])
     assert str(folder.resolve() / "closing.html.j2") in str(caught.value)
+
+
+def test_a_pages_figures_are_drawn_once_the_labs_templates_rendered_without_them(tmp_path):
+    # a template that fails while rendering costs no figure (fail fast); a good one gets
+    # the figure drawn once, its pixels in the page
+    drawn = []
+
+    def draw() -> bytes:
+        drawn.append(1)
+        return b"\x89PNG drawn"
+
+    page = '<p>\n<img src="{{ f.uri }}" alt="{{ f.alt }}">{{ more }}\n'
+    folder = templates(tmp_path / "t", {"page.html.j2": page})
+    with pytest.raises(InputError, match=r"page\.html\.j2:2: template: .*'more'"):
+        render_page("page.html.j2", folder.resolve(), f=Drawing(draw, "a figure", "c"))
+    assert drawn == []
+    html = render_page("page.html.j2", folder.resolve(), f=Drawing(draw, "a fig", "c"), more=1)
+    assert drawn == [1]
+    uri = base64.b64encode(b"\x89PNG drawn").decode("ascii")
+    assert f'src="data:image/png;base64,{uri}"' in html
+    assert 'alt="a fig"' in html
 
 
 @pytest.mark.parametrize(
@@ -272,6 +300,9 @@ def test_short_labels_keep_the_figure_as_it_was(tmp_path):
     assert fig.subplotpars.bottom == 0.1
     texts, boxes, _ = drawn_ticks(fig)
     assert texts == [f"S{i}" for i in range(1, 11)]
+    # the top row's ticks are the bottom row's (shared x; labelled at the bottom only)
+    for ax in fig.axes[:6]:
+        assert list(ax.get_xticks()) == list(range(1, 11)) and ax.get_xlim() == (0.4, 10.6)
 
 
 def test_a_long_unbroken_name_or_label_does_not_shrink_the_printed_page(tmp_path):

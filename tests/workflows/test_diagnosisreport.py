@@ -45,6 +45,22 @@ def written(result: DiagnosisResult, tmp_path_factory: pytest.TempPathFactory) -
     return dr.write_report_files(result, out, dpi=50)  # small: fast
 
 
+#: the page's figures, by FIGURE_FILES key, and what makes each
+BUILDERS = (
+    ("pose_time", dr.pose_time_figure),
+    ("legs_time", dr.legs_time_figure),
+    ("centre_rms", dr.centre_rms_figure),
+    ("temperature", dr.temperature_figure),
+)
+
+
+@pytest.fixture(scope="module")
+def built(result: DiagnosisResult) -> dict:
+    """Each figure built afresh once (not the ones written): the tests read their data
+    and draw them, neither changes them."""
+    return {key: build(result) for key, build in BUILDERS}
+
+
 def _hours(result: DiagnosisResult) -> tuple[np.ndarray, np.ndarray]:
     obs = result.data.observations
     order = np.argsort(obs.times_s, kind="stable")
@@ -148,7 +164,7 @@ def test_report_html_is_the_same_story_with_the_figures_embedded(
 
 # -------------------------------------------------------------------- figures
 def test_written_figures_have_the_pixels_of_a_plain_savefig(
-    result: DiagnosisResult, written: list[Path]
+    built: dict, written: list[Path]
 ) -> None:
     # the PNG written (figure_png: a faster zlib level) and a plain savefig of the same
     # figure built afresh decode to the same pixels
@@ -156,14 +172,9 @@ def test_written_figures_have_the_pixels_of_a_plain_savefig(
 
     folder = written[0].parent
     # (the legs' figure is written from the pose's, its lines refilled: report_pngs)
-    for key, build in (
-        ("pose_time", dr.pose_time_figure),
-        ("legs_time", dr.legs_time_figure),
-        ("centre_rms", dr.centre_rms_figure),
-        ("temperature", dr.temperature_figure),
-    ):
+    for key, _ in BUILDERS:
         plain = io.BytesIO()
-        build(result).savefig(plain, format="png", dpi=50)  # the fixture's dpi
+        built[key].savefig(plain, format="png", dpi=50)  # the fixture's dpi
         with (
             Image.open(folder / dr.FIGURE_FILES[key]) as fast,
             Image.open(plain) as slow,
@@ -172,11 +183,11 @@ def test_written_figures_have_the_pixels_of_a_plain_savefig(
             np.testing.assert_array_equal(np.asarray(fast), np.asarray(slow))
 
 
-def test_pose_and_leg_figures_hold_the_residuals(result: DiagnosisResult) -> None:
+def test_pose_and_leg_figures_hold_the_residuals(result: DiagnosisResult, built: dict) -> None:
     order, hours = _hours(result)
     for fig, attr in (
-        (dr.pose_time_figure(result), "pose_um"),
-        (dr.legs_time_figure(result), "legs_um"),
+        (built["pose_time"], "pose_um"),
+        (built["legs_time"], "legs_um"),
     ):
         axes = np.array(fig.axes).reshape(6, 2)
         for c, (state, res) in enumerate((("before", result.before), ("after", result.after))):
@@ -187,10 +198,10 @@ def test_pose_and_leg_figures_hold_the_residuals(result: DiagnosisResult) -> Non
                 np.testing.assert_allclose(line.get_ydata(), values[order, j])
 
 
-def test_centre_and_temperature_figures(result: DiagnosisResult) -> None:
+def test_centre_and_temperature_figures(result: DiagnosisResult, built: dict) -> None:
     order, hours = _hours(result)
     obs = result.data.observations
-    fig = dr.centre_rms_figure(result)
+    fig = built["centre_rms"]
     ax, temp_ax = fig.axes
     for label, fit in (("before", result.diagnosis.baseline), ("after", result.diagnosis.final)):
         line = [ln for ln in ax.get_lines() if ln.get_label().startswith(label + ":")][0]
@@ -205,7 +216,7 @@ def test_centre_and_temperature_figures(result: DiagnosisResult) -> None:
     )
     np.testing.assert_allclose(_line(temp_ax, "mean leg temperature").get_ydata(), mean_temp)
 
-    fig = dr.temperature_figure(result)
+    fig = built["temperature"]
     assert len(fig.axes) == 6
     for j, ax in enumerate(fig.axes):
         for state, res in (("before", result.before), ("after", result.after)):

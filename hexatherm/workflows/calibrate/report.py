@@ -522,7 +522,7 @@ def report_html(
         ),
         singular_values=", ".join(f"{v:.3g}" for v in obs.singular_values),
         map_figure=figure(
-            _map_figure(stroke, run.campaign.commanded),
+            lambda: _map_figure(stroke, run.campaign.commanded),
             "predicted uncertainty map",
             "Largest predicted standard uncertainty (k = 1) of Tx, Ty, Tz of a pose the "
             "calibrated model predicts, from its parameters' uncertainty (the claim adds "
@@ -530,20 +530,20 @@ def report_html(
             "blank: out of the stroke. Crosses: the campaign's targets (all components).",
         ),
         residual_figure=figure(
-            _residual_figure(run),
+            lambda: _residual_figure(run),
             "residuals before and after",
             "Translation and rotation residual of every target: measured minus the nominal "
             "geometry's prediction (the commanded pose), and minus the calibrated model's.",
         ),
         workspace_figure=figure(
-            _workspace_figure(run),
+            lambda: _workspace_figure(run),
             "residuals over the workspace",
             "Translation residual of every target at its commanded Tx and Ty (all other "
             "components as commanded), before (nominal geometry) and after (calibrated), "
             "on one colour scale.",
         ),
         correlation_figure=figure(
-            _correlation_figure(run),
+            lambda: _correlation_figure(run),
             "correlation matrix of the parameters",
             "Correlation coefficient of every pair of fitted parameters (their covariance "
             "over the product of their standard uncertainties); near ±1: the campaign "

@@ -283,8 +283,8 @@ def pose_figure(
         ax.set_title(f"{POSE_NAMES[j]} ({unit})", fontsize=10)
         ax.set_ylabel(f"{POSE_NAMES[j]} \u2212 commanded ({unit})", fontsize=9)
         ax.grid(True, linewidth=0.3)
-        _trial_ticks(ax, labels)
         if j >= 3:
+            _trial_ticks(ax, labels)
             ax.set_xlabel("trial (target step)", fontsize=9)
     _room_below(fig, axes.flat[3])
     handles, names = axes.flat[0].get_legend_handles_labels()

@@ -431,7 +431,7 @@ def report_html(
         warnings=list(result.warnings),
         uncertainty_given=uncertainty is not None,
         pose_figure=figure(
-            pose_figure(result, uncertainty, coverage_factor, failing),
+            lambda: pose_figure(result, uncertainty, coverage_factor, failing),
             "pose parameters per trial",
             pose_caption,
         ),
@@ -443,20 +443,22 @@ def report_html(
         if uncertainty is None
         else f"Uncertainty: {summary.basis}; ball centres: {uncertainty.centres.description}. "
         f"U = k\u00b7u with k = {k_text}.",
-        temperature_figure=figure(
-            temperature_figure(result),
+        temperature_figure=None
+        if result.temperatures is None  # no log: no Figure 7
+        else figure(
+            lambda: temperature_figure(result),
             "measured temperatures",
             "Thermocouple temperatures over time; ticks at the bottom: the targets' times.",
         ),
         growth_figure=figure(
-            growth_figure(result),
+            lambda: growth_figure(result),
             "leg growth at the references",
             "Growth of each leg since R0 (\u00b5m), from the IGM of the measured reference "
             "poses; ticks at the bottom: the targets' times.",
         ),
         growth=growth_table(result, failing),
         registration_figure=figure(
-            registration_figure(result),
+            lambda: registration_figure(result),
             "registration residuals",
             "RMS distance between the measured ball centres and the registered "
             "balls file, per step (\u00b5m).",

@@ -15,12 +15,12 @@ from __future__ import annotations
 import html
 import os
 import shlex
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, overload
 
 from hexatherm import __version__
-from hexatherm.workflows.report.render import PACKAGE_TEMPLATES, Figure, Table
+from hexatherm.workflows.report.render import PACKAGE_TEMPLATES, Drawing, Figure, Table
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure as MplFigure
@@ -78,14 +78,37 @@ def table(
     )
 
 
-def figure(fig: MplFigure | bytes | None, alt: str, caption: str, dpi: int = 150) -> Figure | None:
+#: what makes a matplotlib figure (None: there is none, not to be given to :func:`figure`)
+Maker = Callable[[], "MplFigure | None"]
+
+
+@overload
+def figure(fig: Maker, alt: str, caption: str, dpi: int = 150) -> Drawing: ...
+@overload
+def figure(
+    fig: MplFigure | bytes | None, alt: str, caption: str, dpi: int = 150
+) -> Figure | None: ...
+def figure(
+    fig: MplFigure | bytes | Maker | None, alt: str, caption: str, dpi: int = 150
+) -> Figure | Drawing | None:
     """A figure (a matplotlib figure, drawn at ``dpi``, or PNG bytes) to embed, with its
-    caption; None for None."""
+    caption; None for None. A function making the matplotlib figure (where there is one)
+    gives a :class:`~.render.Drawing`: made and drawn by :func:`~.render.render_page`,
+    after the rest of the page."""
+    from hexatherm.workflows.report.figures import figure_png
+
+    if callable(fig):
+        make = fig
+
+        def draw() -> bytes:
+            made = make()
+            assert made is not None, f"{alt}: a Drawing is given where there is a figure"
+            return figure_png(made, dpi)
+
+        return Drawing(draw, alt, caption)
     if fig is None:
         return None
     if not isinstance(fig, bytes):
-        from hexatherm.workflows.report.figures import figure_png
-
         fig = figure_png(fig, dpi)
     return Figure(fig, alt, caption)
 

@@ -31,7 +31,7 @@ import html
 import os
 import re
 import traceback
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
@@ -145,6 +145,24 @@ class Figure:
     @property
     def uri(self) -> str:
         return "data:image/png;base64," + base64.b64encode(self.png).decode("ascii")
+
+
+@dataclass(frozen=True)
+class Drawing:
+    """A figure not drawn yet: ``draw()`` gives its PNG. :func:`render_page` draws it
+    once a lab's templates have rendered the page without it (the costly part last: a
+    template that fails while rendering is refused before any figure is drawn)."""
+
+    draw: Callable[[], bytes]
+    alt: str
+    caption: str
+
+    def drawn(self) -> Figure:
+        return Figure(self.draw(), self.alt, self.caption)
+
+    def undrawn(self) -> Figure:
+        """The figure without its pixels (an empty PNG): what the rehearsal renders."""
+        return Figure(b"", self.alt, self.caption)
 
 
 def _inside(folder: Path, name: str) -> bool:
@@ -487,7 +505,21 @@ def render_page(name: str, template_dir: Path | None = None, **context: Any) -> 
     :mod:`~hexatherm.workflows.report.sandbox`; a template's failure, or a bound
     exceeded, is an :class:`InputError` naming its file and line, and so is a file of the
     lab's folder read by a name computed while rendering (the provenance lists the files
-    named by a constant, :func:`named_files`)."""
+    named by a constant, :func:`named_files`).
+
+    The figures of ``context`` given as :class:`Drawing` are drawn after the rest: with a
+    lab's templates (``template_dir``), the page is first rendered with them undrawn, so
+    that a template failing while rendering (a field the page does not give, an asset out
+    of the folder, an unsafe attribute) is refused before the figures cost their time;
+    the page written is the one rendered with the figures drawn."""
+    drawings = {key: value for key, value in context.items() if isinstance(value, Drawing)}
+    if drawings and template_dir is not None:
+        _render(name, template_dir, {**context, **{k: d.undrawn() for k, d in drawings.items()}})
+    return _render(name, template_dir, {**context, **{k: d.drawn() for k, d in drawings.items()}})
+
+
+def _render(name: str, template_dir: Path | None, context: dict[str, Any]) -> str:
+    """:func:`render_page` of figures drawn or undrawn."""
     env = environment(template_dir)
     try:
         with render_bounds():
@@ -532,6 +564,7 @@ def render_macro(name: str, *args: Any) -> str:
 
 
 __all__ = [
+    "Drawing",
     "Figure",
     "Markup",
     "Table",
