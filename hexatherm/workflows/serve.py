@@ -67,7 +67,6 @@ __all__ = [
     "TwinWorld",
     "default_heating",
     "parse_fault",
-    "time_scale_warning",
 ]
 
 AXES = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
@@ -98,50 +97,6 @@ class AcceleratedClock:
         """Wait ``seconds`` of this clock."""
         if seconds > 0:
             time.sleep(seconds / self.scale)
-
-
-def time_scale_warning(scale: float, heating: HeatingModel) -> str | None:
-    """What ``--time-scale`` does to a rehearsal's thermal behaviour (None at 1).
-
-    ``hexatherm run`` stamps its session with the wall clock, while the twin's legs heat
-    on the accelerated one: in the session's times, the heating is ``scale`` times
-    faster (its time constants ``scale`` times shorter), and the legs drift ``scale``
-    times more while a ball is probed and between a target and its references.
-
-    >>> print(time_scale_warning(60.0, default_heating()))
-    --time-scale 60: the twin's legs heat 60 times faster than the wall clock that \
-hexatherm run stamps its session with: the heating's 2400 s time constant lasts 40 s \
-of the session's times, and the legs drift 60 times more while a ball is probed and \
-between a target and its references than they would at the real pace. The rehearsal \
-checks the campaign (moves, probing, logs, resume), not the thermal drift nor how well \
-process corrects it (--time-scale 1 for those)
-    """
-    if scale == 1.0:
-        return None
-    taus = [m.tau_s for m in heating.mats] if isinstance(heating, MatHeating) else []
-    tau_s = getattr(heating, "tau_s", None)
-    if isinstance(tau_s, float):
-        taus.append(tau_s)
-
-    def three(value: float) -> str:  # 3 significant digits, no exponent below 1e6
-        return f"{float(f'{value:.3g}'):g}"
-
-    factor = three(scale if scale > 1 else 1.0 / scale)
-    faster, more = ("faster", "more") if scale > 1 else ("slower", "less")
-    constant = (
-        f"the heating's {min(taus):g} s time constant lasts {three(min(taus) / scale)} s of the "
-        "session's times, and "
-        if taus
-        else ""
-    )
-    return (
-        f"--time-scale {scale:g}: the twin's legs heat {factor} times {faster} than the "
-        f"wall clock that hexatherm run stamps its session with: {constant}the legs drift "
-        f"{factor} times {more} while a ball is probed and between a target and its "
-        "references than they would at the real pace. The rehearsal checks the campaign "
-        "(moves, probing, logs, resume), not the thermal drift nor how well process corrects "
-        "it (--time-scale 1 for those)"
-    )
 
 
 def default_heating() -> MatHeating:
@@ -230,6 +185,7 @@ class TwinWorld:
         self._lock = threading.Lock()
         self._cache: tuple[float, bytes, FloatArray] | None = None
         self._plans: dict[bytes, PreparedPlan] = {}  # one-pose plans, prepared (many motions)
+        self._states: dict[bytes, FloatArray] = {}  # centres by pose and legs, no effects
 
     def leg_temperatures_C(self, t_s: float) -> list[float]:
         """The legs' temperatures (6 channels) at clock time ``t_s``, deg C."""
@@ -260,8 +216,19 @@ class TwinWorld:
             plan = Plan.from_steps([("O", "origin", pose)])
             prepared = self._plans[key] = PreparedPlan.of(self.hexapod, plan, self.true_parameters)
         log = self.log(t_s)
+        # without effects, which alone read the log's history, the centres are a function
+        # of the pose and the legs' temperatures at the log's start and at t_s: a still
+        # world's legs (or legs back where they were) are predicted once per pose
+        state = key + log.legs_at([log.t0_s, log.times_s[-1]]).tobytes()
+        if not self.effects and state in self._states:
+            return self._states[state].copy()
         steps = self._predict(prepared.plan, [log.times_s[-1]], log, prepared)
-        return np.asarray(steps.measured_centres_cmm_mm[0], dtype=float)
+        centres = np.asarray(steps.measured_centres_cmm_mm[0], dtype=float)
+        if not self.effects:
+            if len(self._states) >= 4096:  # legs that keep changing: anew
+                self._states.clear()
+            self._states[state] = centres.copy()
+        return centres
 
     def truth(self, plan: Plan, times_s: npt.ArrayLike) -> TwinSteps:
         """The twin's truth for a plan measured at clock times ``times_s`` (N,): the true

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from hexatherm.core.effects import Effect
-from hexatherm.core.heating import HeatingModel
+from hexatherm.core.heating import HeatingModel, MatHeating
 from hexatherm.io.config import read_balls, read_hexapod
 from hexatherm.io.scenario import read_scenario
 from hexatherm.workflows.serve import (
@@ -25,13 +25,56 @@ from hexatherm.workflows.serve import (
     TwinMachines,
     TwinWorld,
     default_heating,
-    time_scale_warning,
 )
 
 #: where frame O is on the CMM without a scenario or --origin-on-cmm (mm, deg)
 DEFAULT_ORIGIN_ON_CMM = (450.0, 320.0, 210.0, 0.0, 0.0, 15.0)
 #: the probing noise without a scenario or --point-noise-um (um)
 DEFAULT_POINT_NOISE_UM = 0.5
+
+
+def time_scale_warning(scale: float, heating: HeatingModel) -> str | None:
+    """What ``--time-scale`` does to a rehearsal's thermal behaviour (None at 1).
+
+    ``hexatherm run`` stamps its session with the wall clock, while the twin's legs heat
+    on the accelerated one: in the session's times, the heating is ``scale`` times
+    faster (its time constants ``scale`` times shorter), and the legs drift ``scale``
+    times more while a ball is probed and between a target and its references.
+
+    >>> print(time_scale_warning(60.0, default_heating()))
+    --time-scale 60: the twin's legs heat 60 times faster than the wall clock that \
+hexatherm run stamps its session with: the heating's 2400 s time constant lasts 40 s \
+of the session's times, and the legs drift 60 times more while a ball is probed and \
+between a target and its references than they would at the real pace. The rehearsal \
+checks the campaign (moves, probing, logs, resume), not the thermal drift nor how well \
+process corrects it (--time-scale 1 for those)
+    """
+    if scale == 1.0:
+        return None
+    taus = [m.tau_s for m in heating.mats] if isinstance(heating, MatHeating) else []
+    tau_s = getattr(heating, "tau_s", None)
+    if isinstance(tau_s, float):
+        taus.append(tau_s)
+
+    def three(value: float) -> str:  # 3 significant digits, no exponent below 1e6
+        return f"{float(f'{value:.3g}'):g}"
+
+    factor = three(scale if scale > 1 else 1.0 / scale)
+    faster, more = ("faster", "more") if scale > 1 else ("slower", "less")
+    constant = (
+        f"the heating's {min(taus):g} s time constant lasts {three(min(taus) / scale)} s of the "
+        "session's times, and "
+        if taus
+        else ""
+    )
+    return (
+        f"--time-scale {scale:g}: the twin's legs heat {factor} times {faster} than the "
+        f"wall clock that hexatherm run stamps its session with: {constant}the legs drift "
+        f"{factor} times {more} while a ball is probed and between a target and its "
+        "references than they would at the real pace. The rehearsal checks the campaign "
+        "(moves, probing, logs, resume), not the thermal drift nor how well process corrects "
+        "it (--time-scale 1 for those)"
+    )
 
 
 @dataclass(frozen=True)

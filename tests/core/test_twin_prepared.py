@@ -101,37 +101,76 @@ def test_a_prepared_plan_of_another_plan_is_refused() -> None:
         )
 
 
-@pytest.mark.parametrize("effects", ["none", "legs"])
-def test_the_twins_balls_are_the_general_predictions_at_every_time(effects: str) -> None:
-    """``centres_at`` keeps the poses it prepared; at each of many times and poses,
-    visited and visited again, its centres are a one-step ``predict`` of its own log."""
-    heating = MatHeating(tuple(Mat(g, 2400.0, ((0.0, np.inf),)) for g in (8, 12, 5, 10, 16, 6)))
-    world = TwinWorld(
+def world_of(heating: MatHeating, effects: str = "none", start_s: float = -1200.0) -> TwinWorld:
+    """A twin world of the true geometry :data:`TRUTH` with ``heating`` and ``effects``."""
+    return TwinWorld(
         HEXAPOD,
         BALLS,
         heating=heating,
         origin_on_cmm=[450.4, 320.3, 210.2, 0.1, -0.1, 15.2],
         effects=EFFECTS[effects],
         clock=lambda: 0.0,
-        start_s=-1200.0,
+        start_s=start_s,
         true_parameters=TRUTH,
     )
+
+
+def own_prediction(world: TwinWorld, pose: np.ndarray, time_s: float) -> np.ndarray:
+    """A one-step ``predict`` of ``pose`` from ``world``'s own log at ``time_s``: its
+    balls on the CMM."""
+    log = world.log(time_s)
+    plan = Plan.from_steps([("O", "origin", [float(v) for v in pose])])
+    return predict(
+        HEXAPOD,
+        plan,
+        [log.times_s[-1]],
+        log,
+        BALLS.centres_mm,
+        world.origin2cmm,
+        world.effects,
+        reference_state=False,
+        true_parameters=TRUTH,
+    ).measured_centres_cmm_mm[0]
+
+
+@pytest.mark.parametrize("effects", ["none", "legs"])
+def test_the_twins_balls_are_the_general_predictions_at_every_time(effects: str) -> None:
+    """``centres_at`` keeps the poses it prepared; at each of many times and poses,
+    visited and visited again, its centres are a one-step ``predict`` of its own log."""
+    heating = MatHeating(tuple(Mat(g, 2400.0, ((0.0, np.inf),)) for g in (8, 12, 5, 10, 16, 6)))
+    world = world_of(heating, effects)
     poses = RNG.uniform(-1, 1, (3, 6)) * [8, 8, 5, 2, 2, 3]
     for k, time_s in enumerate(np.arange(0.0, 600.0, 37.0)):
         pose = poses[k % 3]
         got = world.centres_at(pose, time_s)
-        log = world.log(time_s)
-        plan = Plan.from_steps([("O", "origin", [float(v) for v in pose])])
-        want = predict(
-            HEXAPOD,
-            plan,
-            [log.times_s[-1]],
-            log,
-            BALLS.centres_mm,
-            world.origin2cmm,
-            EFFECTS[effects],
-            reference_state=False,
-            true_parameters=TRUTH,
-        ).measured_centres_cmm_mm[0]
+        want = own_prediction(world, pose, time_s)
         assert got.tobytes() == want.tobytes()
     assert len(world._plans) == 3
+
+
+def test_a_still_worlds_balls_are_predicted_once_per_pose_and_are_the_predictions() -> None:
+    """Without effects the twin's centres rest on the pose and the legs' temperatures: while
+    the mats are off (still legs) ``centres_at`` predicts each pose once, and once they
+    heat, at every time; at every time and pose its centres are a one-step ``predict`` of
+    its own log, bit for bit."""
+    heating = MatHeating(tuple(Mat(g, 2400.0, ((300.0, np.inf),)) for g in (8, 12, 5, 10, 16, 6)))
+    world = world_of(heating, start_s=0.0)
+    predicted = []
+    own = world._predict
+
+    def counted(*args, **kwargs):  # type: ignore[no-untyped-def]
+        predicted.append(args[1][0])
+        return own(*args, **kwargs)
+
+    world._predict = counted  # type: ignore[method-assign]
+    poses = RNG.uniform(-1, 1, (3, 6)) * [8, 8, 5, 2, 2, 3]
+    times = np.arange(0.0, 600.0, 23.0)
+    for k, time_s in enumerate(times):
+        pose = poses[k % 3]
+        got = world.centres_at(pose, time_s)
+        want = own_prediction(world, pose, time_s)
+        assert got.tobytes() == want.tobytes()
+    still = times[times <= 300.0]
+    assert len(still) > 6  # each pose visited again while still
+    # the mats come on at 300 s: before, one prediction per pose; after, one per time
+    assert predicted == [*still[:3], *times[times > 300.0]]

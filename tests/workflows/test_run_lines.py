@@ -16,7 +16,8 @@ from hexatherm.errors import IncompleteSession
 from hexatherm.io.records import iso_to_seconds
 from hexatherm.workflows.run.campaign import STOPPED_NOTE, run_campaign
 from hexatherm.workflows.run.pace import Pace, clock_text, duration_text
-from hexatherm.workflows.serve import default_heating, time_scale_warning
+from hexatherm.workflows.serve import default_heating
+from hexatherm.workflows.serve_twin import time_scale_warning
 from tests.workflows.test_run import make_bench
 
 STEP_LINE = re.compile(
