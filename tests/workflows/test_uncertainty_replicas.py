@@ -25,7 +25,7 @@ import pytest
 from hexatherm.core.propagation import linear_covariance
 from hexatherm.io.csvfile import centres_to_csv
 from hexatherm.io.measurements import read_measurements
-from hexatherm.workflows.process import uncertainty
+from hexatherm.workflows.process import errorterms
 from hexatherm.workflows.process.measured import fit_points
 from hexatherm.workflows.process.pipeline import process_session
 from hexatherm.workflows.process.uncertainty import centre_covariance, pose_chain, pose_uncertainty
@@ -40,7 +40,7 @@ def noise_only() -> Iterator[None]:
     interpolation's own error between references (a bias, the same in every replica,
     tested against the twin's truth in test_interpolation_error.py) is left out of u."""
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(uncertainty, "curvature_excess", lambda *args: None)
+        patch.setattr(errorterms, "curvature_excess", lambda *args: None)
         yield
 
 
