@@ -15,7 +15,6 @@ from pathlib import Path
 from click.testing import CliRunner
 
 from hexatherm.cli import main
-from tests.shipped import SHIPPED
 from tests.workflows.test_report_identity import (
     EXPECTED,
     IDENT,
@@ -121,12 +120,16 @@ def refused(tmp_path: Path, templates: dict[str, str], *extra: str) -> tuple[str
     for name, text in templates.items():
         (folder / name).write_text(text, encoding="utf-8")
     out = tmp_path / "report.html"
-    session = SHIPPED / "paper-zero-pose"
+    # a copy: report processes a session without results into it (and takes that back
+    # on refusal), which must not happen in the shipped tree while other tests read it
+    session = session_copy("paper-zero-pose", tmp_path)
+    before = sorted(session.rglob("*"))
     result = CliRunner().invoke(
         main, ["report", str(session), "--template-dir", str(folder), *extra, "-o", str(out)]
     )
     assert result.exit_code != 0
     assert not out.exists()
+    assert sorted(session.rglob("*")) == before  # nothing left in the session either
     lines = [line for line in result.output.splitlines() if line.strip()]
     return lines[-1], folder
 
@@ -149,7 +152,7 @@ def test_a_bad_template_is_refused_naming_file_and_line(tmp_path):
     lab = tmp_path / "lab.yaml"
     lab.write_text(LAB + "templates: nowhere\n", encoding="utf-8")
     out = tmp_path / "r.html"
-    session = SHIPPED / "paper-zero-pose"
+    session = session_copy("paper-zero-pose", tmp_path)
     result = CliRunner().invoke(main, ["report", str(session), "--lab", str(lab), "-o", str(out)])
     assert result.exit_code != 0 and not out.exists()
     assert f"lab.yaml:{LAB.count(chr(10)) + 1}: field 'templates'" in result.output
