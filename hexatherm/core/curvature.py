@@ -125,26 +125,45 @@ class CurvatureError:
 
 
 def second_difference_stencils(times_s: npt.ArrayLike) -> FloatArray:
-    """Stencils (n, n) of the second derivative at each inner reference from its
-    neighbours, ``2 g[t_(i-1), t_i, t_(i+1)]`` (rows 1..n-2; rows 0, n-1 and any whose
-    neighbours share a time are zero).
+    """Stencils of the second derivative at each inner reference from its neighbours,
+    ``2 g[t_(i-1), t_i, t_(i+1)]``, as three diagonals (n, 3): row i holds the
+    coefficients of references i-1, i and i+1 (rows 0, n-1 and any whose neighbours
+    share a time are zero).
 
     >>> t = np.array([0.0, 1.0, 3.0])
     >>> s = second_difference_stencils(t)
-    >>> float(s[1] @ t**2)   # exact for a quadratic: g'' = 2
+    >>> float(s[1] @ t[0:3] ** 2)   # exact for a quadratic: g'' = 2
     2.0
     """
     t = np.asarray(times_s, dtype=float)
     n = len(t)
-    out = np.zeros((n, n))
-    for i in range(1, n - 1):
-        h1, h2 = t[i] - t[i - 1], t[i + 1] - t[i]
-        if h1 <= 0 or h2 <= 0:
-            continue
-        out[i, i - 1] = 2 / (h1 * (h1 + h2))
-        out[i, i] = -2 / (h1 * h2)
-        out[i, i + 1] = 2 / (h2 * (h1 + h2))
+    out = np.zeros((n, 3))
+    if n < 3:
+        return out
+    h1, h2 = np.diff(t)[:-1], np.diff(t)[1:]
+    ok = (h1 > 0) & (h2 > 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inner = np.stack([2 / (h1 * (h1 + h2)), -2 / (h1 * h2), 2 / (h2 * (h1 + h2))], axis=1)
+    out[1:-1] = np.where(ok[:, None], inner, 0.0)
     return out
+
+
+def _sparse_rows(
+    used_weights: npt.ArrayLike, used_columns: npt.ArrayLike | None, m: int, n: int
+) -> tuple[npt.NDArray[np.intp], FloatArray]:
+    """The weights as columns and values (M, K): from dense (M, n) rows, their nonzero
+    entries (zero-padded, column 0), or as given."""
+    if used_columns is not None:
+        columns = np.asarray(used_columns, dtype=np.intp).reshape(m, -1)
+        return columns, np.asarray(used_weights, dtype=float).reshape(m, -1)
+    dense = np.asarray(used_weights, dtype=float).reshape(m, n)
+    nonzero = dense != 0.0
+    k = max(int(nonzero.sum(axis=1).max(initial=0)), 1)
+    # each row's nonzero columns first, in order (a stable sort of "is zero")
+    order = np.argsort(~nonzero, axis=1, kind="stable")[:, :k]
+    keep = np.take_along_axis(nonzero, order, axis=1)
+    values = np.where(keep, np.take_along_axis(dense, order, axis=1), 0.0)
+    return np.where(keep, order, 0).astype(np.intp), values
 
 
 def curvature_error(
@@ -154,6 +173,7 @@ def curvature_error(
     target_times_s: npt.ArrayLike,
     used_weights: npt.ArrayLike,
     spacing_seen_s: float = 0.0,
+    used_columns: npt.ArrayLike | None = None,
 ) -> CurvatureError:
     """The interpolation's own error of the growth at R at each target (module
     docstring).
@@ -167,13 +187,17 @@ def curvature_error(
     ref_leg_cov_mm2 : array_like, shape (n, 6, 6)
         Covariance of each reference's leg lengths from its own centres.
     target_times_s : array_like, shape (M,)
-    used_weights : array_like, shape (M, n)
+    used_weights : array_like, shape (M, n), or (M, K) with ``used_columns``
         The interpolation's weights of each target over the references (rows summing to
         1: the two neighbours', or 1 on the one reference used); a row of zeros: none.
     spacing_seen_s : float
         An interval whose error is already evaluated elsewhere (the smooth fit's residuals
         see its error at the references' spacing): ``f`` is taken beyond that of a target
         halfway across it, ``max(0, f - spacing^2 / 8)``. 0: the whole of ``f``.
+    used_columns : array_like of int, shape (M, K), optional
+        The references ``used_weights`` (then (M, K)) are on, K a target
+        (:func:`~hexatherm.workflows.process.smootherror.neighbour_weights`' form: two, a
+        side not used weighing 0); a column given twice adds its weights.
 
     Returns
     -------
@@ -189,45 +213,74 @@ def curvature_error(
     >>> lin = (g[1] + g[2]) / 2 - 1e-6 * 150.0**2   # the straight line's error at 150 s
     >>> bool(np.allclose(np.sqrt(np.diagonal(err.cov_mm2[0])), lin))
     True
+
+    The same with the two references' columns and weights:
+
+    >>> two = curvature_error(t, g, np.zeros((4, 6, 6)), [150.0], [[0.5, 0.5]], 0.0, [[1, 2]])
+    >>> bool(np.allclose(two.vector_mm, err.vector_mm, rtol=1e-12, atol=0))
+    True
     """
     t = np.asarray(ref_times_s, dtype=float)
     g = np.asarray(ref_growth_mm, dtype=float)
     s = np.asarray(ref_leg_cov_mm2, dtype=float)
     ts = np.asarray(target_times_s, dtype=float)
-    used = np.asarray(used_weights, dtype=float).reshape(len(ts), len(t))
     m, n = len(ts), len(t)
-    vector = np.zeros((m, 6))
-    interval = np.full(m, -1, dtype=np.intp)
-    stencils = second_difference_stencils(t)
-    has = np.abs(stencils).sum(axis=1) > 0
-    # the reference before each target in time (-1: before the first; n - 1: past the last)
-    around = np.searchsorted(t, ts, side="right") - 1
-    for k in range(m):
-        # the straight line through the two references around the target, or through the
-        # last two for a target past the last (extrapolated)
-        p = min(int(around[k]), n - 2)
-        if not used[k].any() or p < 0 or t[p + 1] <= t[p]:
-            continue
-        w = (ts[k] - t[p]) / (t[p + 1] - t[p])
-        line = np.zeros(n)
-        line[p], line[p + 1] = 1.0 - w, w
-        rows = [i for i in (p, p + 1) if has[i]]
-        if not rows and np.allclose(used[k], line):
-            continue  # on the line, and no curvature to read
-        f = (ts[k] - t[p]) * (t[p + 1] - ts[k]) / 2  # negative past the last reference
-        if spacing_seen_s > 0:
-            f = max(0.0, f - spacing_seen_s**2 / 8)
-        c = used[k] - line  # (n,)
-        if rows:
-            c = c + f * stencils[rows].mean(axis=0)
-        error = c @ g  # (6,)
-        noise = np.einsum("j,jlm->lm", c**2, s)
-        total = float(error @ error)
-        share = max(0.0, 1.0 - float(np.trace(noise)) / total) if total > 0 else 0.0
-        vector[k] = np.sqrt(share) * error
-        interval[k] = around[k]
     spacing = np.diff(t)
     widest = float(spacing.max() / np.median(spacing)) if spacing.size else 1.0
+    interval = np.full(m, -1, dtype=np.intp)
+    if n < 2 or m == 0:
+        return CurvatureError.from_vectors(np.zeros((m, 6)), interval, widest_gap=widest)
+    columns, values = _sparse_rows(used_weights, used_columns, m, n)
+    stencils = second_difference_stencils(t)  # (n, 3): on i-1, i, i+1
+    has = np.abs(stencils).sum(axis=1) > 0
+    # the reference before each target in time (-1: before the first; n - 1: past the
+    # last), and the straight line through the two around it, or through the last two
+    # for a target past the last (extrapolated)
+    around = np.searchsorted(t, ts, side="right") - 1
+    p = np.minimum(around, n - 2)
+    pc = np.clip(p, 0, n - 2)
+    t0, t1 = t[pc], t[pc + 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w = (ts - t0) / (t1 - t0)
+    f = (ts - t0) * (t1 - ts) / 2  # negative past the last reference
+    if spacing_seen_s > 0:
+        f = np.maximum(0.0, f - spacing_seen_s**2 / 8)
+    # every target's c over its own references: the ones it used, then p-1 .. p+2 (the
+    # line's two and the stencils' of p and p + 1); zero past either end
+    k = columns.shape[1]
+    window = pc[:, None] + np.arange(-1, 3)
+    inside = (window >= 0) & (window < n)
+    cols = np.concatenate([columns, np.clip(window, 0, n - 1)], axis=1)  # (M, K + 4)
+    zeros = np.zeros((m, 4))
+    used = np.concatenate([values, zeros], axis=1)
+    line = np.concatenate([np.zeros((m, k)), zeros], axis=1)
+    line[:, k + 1], line[:, k + 2] = 1.0 - w, w
+    rows_p, rows_q = has[pc], has[pc + 1]
+    count = rows_p.astype(float) + rows_q
+    stencil = np.zeros((m, 4))
+    stencil[:, 0:3] += np.where(rows_p[:, None], stencils[pc], 0.0)
+    stencil[:, 1:4] += np.where(rows_q[:, None], stencils[pc + 1], 0.0)
+    mean = np.concatenate(
+        [np.zeros((m, k)), stencil / np.where(count > 0, count, 1.0)[:, None]], axis=1
+    )
+    mean[:, k:] = np.where(inside, mean[:, k:], 0.0)
+    # each reference once: the entries of one column added, kept at its first
+    same = cols[:, :, None] == cols[:, None, :]  # (M, J, J)
+    first = ~np.any(np.tril(same, -1), axis=2)
+    u = np.where(first, np.einsum("mij,mj->mi", same, used), 0.0)
+    ln = np.where(first, np.einsum("mij,mj->mi", same, line), 0.0)
+    st = np.where(first, np.einsum("mij,mj->mi", same, mean), 0.0)
+    on_line = np.all(np.abs(u - ln) <= 1e-8 + 1e-5 * np.abs(ln), axis=1)  # np.allclose
+    c = (u - ln) + f[:, None] * st
+    c = np.where((count > 0)[:, None], c, u - ln)
+    ok = np.any(u != 0.0, axis=1) & (p >= 0) & (t1 > t0) & ~((count == 0) & on_line)
+    error = np.einsum("mj,mjl->ml", c, g[cols])  # (M, 6)
+    noise = np.einsum("mj,mj->m", c**2, np.trace(s, axis1=1, axis2=2)[cols])
+    total = np.einsum("ml,ml->m", error, error)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        share = np.where(total > 0, np.maximum(0.0, 1.0 - noise / total), 0.0)
+    vector = np.where(ok[:, None], np.sqrt(share)[:, None] * error, 0.0)
+    interval = np.where(ok, around, -1).astype(np.intp)
     return CurvatureError.from_vectors(vector, interval, widest_gap=widest)
 
 

@@ -122,8 +122,7 @@ def curvature_excess(
     if legs is None or refs.size < 2 or m == 0:
         return None
     q = result.steps.q_mm
-    # the neighbours' weights, two a target: (M, n) dense weights only where
-    # curvature_error reads them (no log)
+    # the references each target's straight line uses, two a target (columns, weights)
     columns, weights = neighbour_weights(corr, refs, q.shape[0])
     seen = 0.0
     if smooth is not None and smooth.used:
@@ -133,11 +132,8 @@ def curvature_excess(
         # the straight line's curvature term beyond that spacing only
         seen = float(np.median(np.diff(times[refs])))
         used = _line_weights(times[refs], times[corr.target_index])
-    elif temperatures is None:
-        used = np.zeros((m, refs.size))
-        rows = np.arange(m)
-        used[rows, columns[:, 0]] = weights[:, 0]
-        used[rows, columns[:, 1]] += weights[:, 1]
+    else:
+        used = columns, weights
     if temperatures is not None:
         sensitivity = legs.sensitivity_mm_per_K(q[refs[0]])
         log = (temperatures.time_s, temperatures.legs_C, sensitivity)
@@ -158,7 +154,13 @@ def curvature_excess(
         )
     else:
         error = curvature_error(
-            times[refs], q[refs] - q[refs[0]], legs_cov_mm2, times[corr.target_index], used, seen
+            times[refs],
+            q[refs] - q[refs[0]],
+            legs_cov_mm2,
+            times[corr.target_index],
+            used[1],
+            seen,
+            used[0],
         )
     if not error.evaluated.any():
         return None
@@ -206,14 +208,23 @@ def neighbour_weights(
     return columns, weights
 
 
-def _line_weights(ref_times_s: FloatArray, target_times_s: FloatArray) -> FloatArray:
-    """Weights (M, n) of the straight line through the two references around each target
-    in time (zeros outside them)."""
+def _line_weights(
+    ref_times_s: FloatArray, target_times_s: FloatArray
+) -> tuple[IntArray, FloatArray]:
+    """The straight line through the two references around each target in time: their
+    columns (M, 2) and weights (M, 2), :func:`neighbour_weights`' form (both 0 outside
+    them)."""
     n = ref_times_s.size
-    out = np.zeros((target_times_s.size, n))
     p = np.searchsorted(ref_times_s, target_times_s, side="right") - 1
-    for k, (i, t) in enumerate(zip(p, target_times_s, strict=True)):
-        if 0 <= i < n - 1 and ref_times_s[i + 1] > ref_times_s[i]:
-            w = (t - ref_times_s[i]) / (ref_times_s[i + 1] - ref_times_s[i])
-            out[k, i], out[k, i + 1] = 1.0 - w, w
-    return out
+    pc = np.clip(p, 0, max(n - 2, 0))
+    inside = (p >= 0) & (p < n - 1)
+    if n >= 2:
+        t0, t1 = ref_times_s[pc], ref_times_s[pc + 1]
+        inside &= t1 > t0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            w = (target_times_s - t0) / (t1 - t0)
+    else:
+        w = np.zeros(target_times_s.size)
+    columns = np.where(inside[:, None], np.stack([pc, pc + 1], axis=1), 0)
+    weights = np.where(inside[:, None], np.stack([1.0 - w, w], axis=1), 0.0)
+    return columns.astype(np.intp), weights
