@@ -216,6 +216,21 @@ def _divided(times: FloatArray, values: FloatArray, order: int) -> FloatArray:
     return dd
 
 
+def _divided_band(times: FloatArray, order: int) -> FloatArray:
+    """The divided differences' operator as its band (n - order, order + 1): row i holds
+    the coefficients of values i .. i + order in :func:`_divided`'s set i (the rows of
+    ``_divided(times, np.eye(n), order)`` without their zeros, the same numbers)."""
+    band = np.ones((times.size, 1))
+    for k in range(1, order + 1):
+        width = band.shape[1]
+        padded = np.zeros((band.shape[0], width + 1))
+        padded[:, :width] = band
+        shifted = np.zeros((band.shape[0] - 1, width + 1))
+        shifted[:, 1:] = band[1:]
+        band = (shifted - padded[:-1]) / (times[k:] - times[:-k])[:, None]
+    return band
+
+
 def _beyond_noise(times: FloatArray, values: FloatArray, var: FloatArray, order: int) -> FloatArray:
     """The divided differences of ``order`` (6,) beyond what the values' noise (their
     variances ``var`` (n, 6), independent) gives them, as one error of every leg
@@ -226,11 +241,13 @@ def _beyond_noise(times: FloatArray, values: FloatArray, var: FloatArray, order:
     grows was taken for curvature and spread the error over every pose component (Ty
     with O and R0 once claimed 1.2x its error)."""
     dd = _divided(times, values, order)  # (sets, 6)
-    operator = _divided(times, np.eye(times.size), order)  # (sets, n)
+    band = _divided_band(times, order)  # (sets, order + 1): the operator on the values
     _, _, vt = np.linalg.svd(values, full_matrices=False)
     shape = vt[0] * (-1.0 if vt[0] @ values.sum(axis=0) < 0 else 1.0)  # unit, along growth
     along = dd @ shape
-    noise = float(np.mean((operator**2 @ var) @ shape**2))
+    sets = band.shape[0]
+    var_band = var[np.arange(sets)[:, None] + np.arange(order + 1)]  # (sets, order + 1, 6)
+    noise = float(np.mean(np.einsum("sj,sjl->sl", band**2, var_band) @ shape**2))
     rms = np.sqrt(max(float(np.mean(along**2)) - noise, 0.0))
     return np.asarray(rms * np.sign(np.mean(along)) * shape, dtype=float)
 
