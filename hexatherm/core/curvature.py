@@ -225,7 +225,10 @@ def curvature_error(
     s = np.asarray(ref_leg_cov_mm2, dtype=float)
     ts = np.asarray(target_times_s, dtype=float)
     m, n = len(ts), len(t)
+    # over the spacings between distinct times: references that share a time (a CMM
+    # output stamped once) would make the median 0 and the ratio inf or nan
     spacing = np.diff(t)
+    spacing = spacing[spacing > 0]
     widest = float(spacing.max() / np.median(spacing)) if spacing.size else 1.0
     interval = np.full(m, -1, dtype=np.intp)
     if n < 2 or m == 0:

@@ -4,6 +4,8 @@ as the reference; and smootherror._line_weights against its former loop."""
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -182,3 +184,17 @@ def test_hostile_references() -> None:
                 check(got, want, 1e-2)
             cols, w = _line_weights(t, ts)
             np.testing.assert_array_equal(to_dense(cols, w, n), loop_line_weights(t, ts))
+
+
+def test_widest_gap_is_read_over_distinct_times() -> None:
+    # three of five references share a time (a CMM output stamped once): the median of
+    # all spacings is 0; the widest gap is read over the distinct ones: 300 s over their
+    # median, 200 s
+    t = np.array([0.0, 0.0, 0.0, 100.0, 400.0])
+    g = np.outer(1e-6 * t**2, np.ones(6))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        err = curvature_error(t, g, np.zeros((5, 6, 6)), [250.0], [[0, 0, 0, 0.5, 0.5]])
+        same = curvature_error(np.zeros(3), g[:3], np.zeros((3, 6, 6)), [0.0], [[1, 0, 0]])
+    assert err.widest_gap == pytest.approx(300.0 / 200.0)
+    assert same.widest_gap == 1.0
