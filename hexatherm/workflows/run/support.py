@@ -290,8 +290,12 @@ def dry_run(
 #: items (reads of the port) the queue between the port's reader and the log holds at most:
 #: a full queue makes the reader wait (the port's own buffer holds the rest)
 QUEUE_ITEMS = 1000
-#: a batch of reads completing more lines than this is a flood: only its newest row is kept
-FLOOD_LINES = 10
+#: a batch of reads completing more lines than this is a flood: only its newest row is kept.
+#: A batch is what arrived while the log was busy or its threads were not scheduled (a
+#: loaded machine): lines of a logger at its pace (a 10 Hz one held up for 100 s, a serial
+#: line at 9600 baud streaming for a minute) stay under it and are all logged; a logger
+#: streaming as fast as a socket goes exceeds it in one read (64 KiB: over 1000 lines)
+FLOOD_LINES = 1000
 #: reads taken from the queue at once
 BATCH_ITEMS = 256
 
