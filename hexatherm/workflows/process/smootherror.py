@@ -131,9 +131,9 @@ def curvature_excess(
         # its residuals see the first-order part and the error at the median spacing:
         # the straight line's curvature term beyond that spacing only
         seen = float(np.median(np.diff(times[refs])))
-        used = _line_weights(times[refs], times[corr.target_index])
+        line_columns, line_weights = _line_weights(times[refs], times[corr.target_index])
     else:
-        used = columns, weights
+        line_columns, line_weights = columns, weights
     if temperatures is not None:
         sensitivity = legs.sensitivity_mm_per_K(q[refs[0]])
         log = (temperatures.time_s, temperatures.legs_C, sensitivity)
@@ -158,9 +158,9 @@ def curvature_excess(
             q[refs] - q[refs[0]],
             legs_cov_mm2,
             times[corr.target_index],
-            used[1],
+            line_weights,
             seen,
-            used[0],
+            line_columns,
         )
     if not error.evaluated.any():
         return None
