@@ -22,6 +22,11 @@ BALLS = Balls(
 )
 
 
+#: the legs' heating gains (K at the end of the heating) of the twin sessions the
+#: workflow tests simulate: six unequal legs, so that the heating tilts the platform
+LEG_GAIN_C = (3.0, 7.0, 2.0, 3.0, 9.0, 3.5)
+
+
 def small_plan(n_targets: int = 3, seed: int = 1) -> Plan:
     rng = np.random.default_rng(seed)
     steps = [("O", "origin", [0.0] * 6), ("R0", "reference", REFERENCE)]
@@ -36,7 +41,7 @@ def make_session(
     *,
     n_targets: int = 3,
     noise_mm: float = 0.0,
-    gain=(3.0, 7.0, 2.0, 3.0, 9.0, 3.5),
+    gain=LEG_GAIN_C,
     tau_s: float = 2400.0,
     seed: int = 1,
     output: str = "centres",

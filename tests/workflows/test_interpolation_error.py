@@ -27,9 +27,9 @@ from hexatherm.workflows.simulate.twinsession import (
     simulate_session,
     write_files,
 )
-from tests.sessions import BALLS, REFERENCE, ROOT, small_plan
+from tests.sessions import BALLS, LEG_GAIN_C, REFERENCE, ROOT, small_plan
 
-GAIN = (3.0, 7.0, 2.0, 3.0, 9.0, 3.5)
+GAIN = LEG_GAIN_C
 REPLICAS = 10
 CMM = "cmm: {point_noise_um: 1.0, points_per_ball: 25, cap_angle_deg: 70}\n"
 

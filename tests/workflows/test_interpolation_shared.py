@@ -26,9 +26,9 @@ from hexatherm.workflows.simulate.twinsession import (
     simulate_session,
 )
 from tests.replicas import SessionReader, write_session
-from tests.sessions import BALLS, REFERENCE, ROOT
+from tests.sessions import BALLS, LEG_GAIN_C, REFERENCE, ROOT
 
-GAIN = (3.0, 7.0, 2.0, 3.0, 9.0, 3.5)
+GAIN = LEG_GAIN_C
 REPLICAS = 10
 CMM = "cmm: {point_noise_um: 1.0, points_per_ball: 25, cap_angle_deg: 70}\n"
 #: Tx and Tz: the components this heating's error falls on (docs/uncertainty.md)

@@ -37,7 +37,7 @@ from hexatherm.errors import PlanError
 from hexatherm.workflows.process.pipeline import Checks, process_session
 from hexatherm.workflows.process.quality import quality_checks
 from hexatherm.workflows.simulate.twinsession import Heating, TwinSessionSpec, write_twin_session
-from tests.sessions import BALLS, REFERENCE, ROOT, make_session
+from tests.sessions import BALLS, LEG_GAIN_C, REFERENCE, ROOT, make_session
 from tests.shipped import SHIPPED
 from tests.workflows.test_run import make_bench
 
@@ -280,7 +280,7 @@ def small(tmp_path_factory):
         hexapod_text=(ROOT / "configs" / "symetrie-like.yaml").read_text(),
         balls=BALLS,
         plan=Plan.from_steps(steps, reference_pose=SMALL_REFERENCE),
-        heating=Heating(on_s=0.0, tau_s=2400.0, gain_C=(3.0, 7.0, 2.0, 3.0, 9.0, 3.5)),
+        heating=Heating(on_s=0.0, tau_s=2400.0, gain_C=LEG_GAIN_C),
         seed=4,
     )
     truth = write_twin_session(spec, folder)
@@ -384,7 +384,7 @@ def convention_session(folder: Path, convention: str) -> Path:
         hexapod_text=text,
         balls=BALLS,
         plan=Plan.from_steps(steps, reference_pose=REFERENCE),
-        heating=Heating(on_s=0.0, tau_s=2400.0, gain_C=(3.0, 7.0, 2.0, 3.0, 9.0, 3.5)),
+        heating=Heating(on_s=0.0, tau_s=2400.0, gain_C=LEG_GAIN_C),
         seed=6,
     )
     write_twin_session(spec, folder)

@@ -23,10 +23,10 @@ from hexatherm.workflows.simulate.twinsession import (
     simulate_session,
     write_files,
 )
-from tests.sessions import BALLS, REFERENCE, ROOT, small_plan
+from tests.sessions import BALLS, LEG_GAIN_C, REFERENCE, ROOT, small_plan
 
 HEXAPOD_TEXT = (ROOT / "configs" / "symetrie-like.yaml").read_text()
-GAIN = (3.0, 7.0, 2.0, 3.0, 9.0, 3.5)
+GAIN = LEG_GAIN_C
 
 
 def session(folder, *, plan=None, gain=GAIN, output="points", noise_mm=0.5e-3, **kw):

@@ -30,7 +30,7 @@ from hexatherm.workflows.process.twin import twin_poses
 from hexatherm.workflows.register import register_balls
 from hexatherm.workflows.replay import find_sessions, replay_session
 from hexatherm.workflows.simulate.twinsession import Heating, TwinSessionSpec, write_twin_session
-from tests.sessions import BALLS, REFERENCE, ROOT
+from tests.sessions import BALLS, LEG_GAIN_C, REFERENCE, ROOT
 from tests.shipped import SHIPPED
 
 DATUMS = SHIPPED / "register-datums"
@@ -54,7 +54,7 @@ def twin(folder: Path, output: str = "centres") -> Path:
         hexapod_text=(ROOT / "configs" / "symetrie-like.yaml").read_text(),
         balls=BALLS,
         plan=plan(),
-        heating=Heating(on_s=0.0, tau_s=2400.0, gain_C=(3.0, 7.0, 2.0, 3.0, 9.0, 3.5)),
+        heating=Heating(on_s=0.0, tau_s=2400.0, gain_C=LEG_GAIN_C),
         seed=3,
         output=output,
     )

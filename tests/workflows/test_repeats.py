@@ -30,10 +30,10 @@ from hexatherm.workflows.simulate.twinsession import (
     simulate_session,
 )
 from tests.replicas import SessionReader, write_session
-from tests.sessions import BALLS, REFERENCE, ROOT
+from tests.sessions import BALLS, LEG_GAIN_C, REFERENCE, ROOT
 
 HEXAPOD_TEXT = (ROOT / "configs" / "symetrie-like.yaml").read_text()
-GAIN = (3.0, 7.0, 2.0, 3.0, 9.0, 3.5)
+GAIN = LEG_GAIN_C
 CMM = "cmm: {point_noise_um: 1.0, points_per_ball: 25}\n"
 
 

@@ -32,10 +32,10 @@ from hexatherm.workflows.simulate.twinsession import (
     simulate_session,
     write_files,
 )
-from tests.sessions import BALLS, ROOT, make_session, small_plan
+from tests.sessions import BALLS, LEG_GAIN_C, ROOT, make_session, small_plan
 
 HEXAPOD_TEXT = (ROOT / "configs" / "symetrie-like.yaml").read_text()
-GAIN = (3.0, 7.0, 2.0, 3.0, 9.0, 3.5)
+GAIN = LEG_GAIN_C
 
 
 def points_session(folder, seed=0, n_targets=3, noise_mm=1e-3, **kw):

@@ -26,9 +26,9 @@ from hexatherm.workflows.simulate.twinsession import (
     simulate_session,
     write_files,
 )
-from tests.sessions import BALLS, ROOT, small_plan
+from tests.sessions import BALLS, LEG_GAIN_C, ROOT, small_plan
 
-GAIN = (3.0, 7.0, 2.0, 3.0, 9.0, 3.5)
+GAIN = LEG_GAIN_C
 REPLICAS = 16
 
 

@@ -31,7 +31,7 @@ from hexatherm.workflows.process.pipeline import process_session
 from hexatherm.workflows.process.uncertainty import centre_covariance, pose_chain, pose_uncertainty
 from hexatherm.workflows.simulate.twinsession import Heating, TwinSessionSpec, simulate_session
 from tests.replicas import SessionReader, write_session
-from tests.sessions import BALLS, ROOT, small_plan
+from tests.sessions import BALLS, LEG_GAIN_C, ROOT, small_plan
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -45,7 +45,7 @@ def noise_only() -> Iterator[None]:
 
 
 HEXAPOD_TEXT = (ROOT / "configs" / "symetrie-like.yaml").read_text()
-GAIN = (3.0, 7.0, 2.0, 3.0, 9.0, 3.5)
+GAIN = LEG_GAIN_C
 REPLICAS = 100
 
 

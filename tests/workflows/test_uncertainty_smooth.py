@@ -28,11 +28,11 @@ from hexatherm.workflows.simulate.twinsession import (
     simulate_session,
 )
 from tests.replicas import SessionReader, write_session
-from tests.sessions import BALLS, ROOT, small_plan
+from tests.sessions import BALLS, LEG_GAIN_C, ROOT, small_plan
 from tests.workflows.test_uncertainty_shared import brute_force_full
 
 HEXAPOD_TEXT = (ROOT / "configs" / "symetrie-like.yaml").read_text()
-GAIN = (3.0, 7.0, 2.0, 3.0, 9.0, 3.5)
+GAIN = LEG_GAIN_C
 CMM = "cmm: {point_noise_um: 1.0, points_per_ball: 25}\n"
 N_TARGETS = 6
 STEPS = small_plan(N_TARGETS, 1).labels
