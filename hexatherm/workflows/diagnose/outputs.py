@@ -187,7 +187,7 @@ def diagnosis_document(result: DiagnosisResult) -> dict[str, Any]:
         )
     data = result.data
     verdict = diagnosis.adequacy
-    return {
+    doc: dict[str, Any] = {
         "baseline_rms_um": _number(diagnosis.baseline_rms_um),
         "added": added,
         "final_rms_um": _number(diagnosis.final_rms_um),
@@ -207,8 +207,11 @@ def diagnosis_document(result: DiagnosisResult) -> dict[str, Any]:
         "hexapod": data.hexapod_source,
         "model": [e.as_dict() for e in data.current],
         "centre_uncertainty": data.uncertainty_source,
-        "hexatherm": __version__,
     }
+    if data.frames_said is not None:  # what the commanded poses went through
+        doc["controller_frames"] = data.frames_said
+    doc["hexatherm"] = __version__
+    return doc
 
 
 def diagnosis_json(result: DiagnosisResult) -> str:
@@ -220,7 +223,7 @@ def diagnosed_hexapod_yaml(result: DiagnosisResult) -> str:
     """The hexapod file with the added effects (their joint fit) appended to ``thermal_model``;
     the session's own model when the diagnosed one corrects the held-out targets worse
     (:attr:`~hexatherm.core.diagnosis.Diagnosis.writes_diagnosed`: a caution says so)."""
-    hexapod = result.data.hexapod
+    hexapod = result.data.written_hexapod
     if not result.diagnosis.writes_diagnosed:
         return hexapod_to_yaml(hexapod)
     added = tuple(e.as_dict() for e in result.diagnosis.final.effects)
@@ -269,6 +272,7 @@ def story(result: DiagnosisResult) -> str:
         f"{' with air' if obs.log.air_C is not None else ' (no air column)'}",
         f"model: {data.hexapod_source} hexapod, thermal model: {model}",
         f"centre uncertainties: {data.uncertainty_source}",
+        *([] if data.frames_said is None else [f"controller frames: {data.frames_said}"]),
         f"gap between measurements and twin: {d.baseline_rms_um:.3f} um RMS "
         f"({d.baseline_heldout_rms_um:.3f} um held out)",
     ]

@@ -8,6 +8,7 @@ the diagnosis. Writing is :mod:`hexatherm.workflows.diagnose.outputs`' job.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,8 +29,10 @@ from hexatherm.core.residuals import PoseResiduals
 from hexatherm.errors import InputError
 from hexatherm.io.config import read_hexapod, read_session
 from hexatherm.io.files import STRICT, ReadOptions
+from hexatherm.io.runrecord import RecordedFrames
 from hexatherm.io.temperatures import Temperatures
 from hexatherm.session import Session
+from hexatherm.workflows.process.frames import session_frames, session_in_origin
 from hexatherm.workflows.process.measured import constant_legs_warning, read_measured
 from hexatherm.workflows.process.twin import model_effects, thermocouple_log
 
@@ -41,8 +44,13 @@ class SessionData:
     Attributes
     ----------
     session : Session
+        As frame O sees it: with the controller's frames set during the session
+        (``run.yaml``), its plan's poses ``O0 X O0^-1``
+        (:func:`~hexatherm.workflows.process.frames.session_in_origin`).
     hexapod : Hexapod
-        The model diagnosed (the session's hexapod or the one given).
+        The model diagnosed (the session's hexapod or the one given) relative to frame O:
+        its base joints moved by ``O0 U0^-1`` when the frames were set, so that its IGM of
+        the session's poses gives the legs the controller drove.
     hexapod_source : str
         Where the hexapod came from (the session, or the file given).
     current : tuple of Effect
@@ -53,6 +61,11 @@ class SessionData:
         Where the centres' uncertainties come from, in words.
     warnings : tuple of str
         What the diagnosis rests on that the user should know (a constant log).
+    file_hexapod : Hexapod or None
+        The hexapod as its file gives it (machine frame), what the diagnosed model file is
+        written from; None: ``hexapod`` (no frames were set).
+    frames : RecordedFrames or None
+        The controller's frames the session was measured with (None: not read).
     """
 
     session: Session
@@ -63,6 +76,27 @@ class SessionData:
     temperatures: Temperatures
     uncertainty_source: str
     warnings: tuple[str, ...] = ()
+    file_hexapod: Hexapod | None = None
+    frames: RecordedFrames | None = None
+
+    @property
+    def frames_said(self) -> str | None:
+        """The controller's frames in one line when they were set (None: zero, or not
+        recorded): what the diagnosis's commanded poses went through."""
+        if self.frames is None or self.frames.values_mm_deg is None:
+            return None
+        if not self.frames.values_mm_deg.any():
+            return None
+        return (
+            "user, object frames "
+            + " ".join(f"{v:.15g}" for v in self.frames.values_mm_deg)
+            + " (mm, deg; run.yaml): the commanded poses relative to frame O are O0 X O0^-1"
+        )
+
+    @property
+    def written_hexapod(self) -> Hexapod:
+        """The hexapod in its file's frame (the machine's): what ``hexapod.yaml`` holds."""
+        return self.hexapod if self.file_hexapod is None else self.file_hexapod
 
 
 @dataclass(frozen=True)
@@ -91,8 +125,13 @@ def read_for_diagnosis(
             path=str(session.path),
             field="temperatures",
         )
-    hexapod = session.hexapod if hexapod_path is None else read_hexapod(hexapod_path)
-    current = model_effects(hexapod, str(hexapod_path or session.path))
+    file_hexapod = session.hexapod if hexapod_path is None else read_hexapod(hexapod_path)
+    current = model_effects(file_hexapod, str(hexapod_path or session.path))
+    # with the controller's frames set, the session as frame O sees it (as process does):
+    # the twin's commanded legs are the IGM of the poses relative to frame O
+    frames = session_frames(session)
+    session = session_in_origin(dataclasses.replace(session, hexapod=file_hexapod), frames.values)
+    hexapod = session.hexapod
     _, _, centres, temperatures = read_measured(session, reading=reading)
     assert temperatures is not None  # the session names them (checked above)
     # after the files are read: what is wrong in them is said first
@@ -143,6 +182,8 @@ def read_for_diagnosis(
         temperatures,
         source,
         () if constant is None else (constant,),
+        file_hexapod,
+        frames,
     )
 
 
