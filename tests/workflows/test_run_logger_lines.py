@@ -100,6 +100,35 @@ def test_lines_that_waited_while_the_machine_was_loaded_are_all_logged(tmp_path:
     assert not b.messages
 
 
+def test_a_flood_after_a_partial_line_leaves_it_out_and_replays(tmp_path: Path) -> None:
+    """A flood whose first line completes a line the previous read began: that line is one
+    of those left out (never glued to the newest row the flood keeps), the line the flood
+    leaves pending is completed by the next read, and ``serial.log`` replays into the same
+    ``temperatures.csv``."""
+    b = make_bench(tmp_path, **SHORT)  # type: ignore[arg-type]
+    b.machines.close()
+    folder = tmp_path / "log"
+    folder.mkdir()
+    thermo = _Thermocouples(folder, PortSettings("loop://"), b.files, clock=b.clock)
+    first, pending = burst_line(0), burst_line(2000)
+    flood = first[12:] + b"".join(burst_line(k) for k in range(1, 1501)) + pending[:9]
+    try:
+        thermo._record_reads([("rx", "temperature", thermo.stamp(), first[:12])])
+        thermo._record_reads([("rx", "temperature", thermo.stamp(), flood)])
+        thermo._record_reads([("rx", "temperature", thermo.stamp(), pending[9:])])
+    finally:
+        thermo.close("complete")
+    rows = pd.read_csv(folder / "temperatures.csv")
+    k = np.round((rows["leg1"].to_numpy() - 20.0) * 1e3).astype(int)
+    assert k.tolist() == [1500, 2000]  # the flood's newest row, then the pending line
+    assert (rows["leg2"] == 21.0).all() and (rows["ch7"] == 19.0).all()
+    assert thermo.skipped_lines == 1500  # line 0 (begun before the flood) and 1..1499
+    session_from_log(b.files, folder / "serial.log", tmp_path / "replay", b.notify)
+    assert (tmp_path / "replay" / "temperatures.csv").read_bytes() == (
+        folder / "temperatures.csv"
+    ).read_bytes()
+
+
 def test_a_logger_sending_nan_rows_is_said_at_once(tmp_path: Path) -> None:
     b = make_bench(tmp_path, **SHORT)  # type: ignore[arg-type]
 
