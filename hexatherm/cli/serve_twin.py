@@ -204,7 +204,10 @@ def command(
     stop = threading.Event()
 
     def ready(serving: Serving) -> None:
+        # from the moment the URLs are out, Ctrl-C (or SIGTERM) stops the serving: a
+        # KeyboardInterrupt raised before wait() began would end it as interrupted (130)
         signal.signal(signal.SIGTERM, lambda *_: stop.set())
+        signal.signal(signal.SIGINT, lambda *_: stop.set())
         click.echo(f"cmm: {serving.cmm_url}")
         click.echo(f"controller: {serving.controller_url}")
         click.echo(f"thermocouples: {serving.thermocouples_url}")

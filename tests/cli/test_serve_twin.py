@@ -101,6 +101,31 @@ def test_serve_twin_cmm_dialect_dme_1_4() -> None:
             proc.communicate()
 
 
+def test_ctrl_c_as_soon_as_the_urls_are_out_stops_it() -> None:
+    """Ctrl-C right after the first URL is printed (while the others and the rehearsal
+    line are still being written) stops the serving as any Ctrl-C does: exit 0,
+    "stopped". It exited 130 ("interrupted") when the signal came before the wait for it
+    began: a whole-suite run under load saw it after two I++ sessions."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "hexatherm", "serve-twin", "--hexapod", str(HEXAPOD),
+         "--balls", str(BALLS), "--time-scale", "100"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )  # fmt: skip
+    try:
+        assert proc.stdout is not None
+        assert proc.stdout.readline().startswith("cmm: ipp://127.0.0.1:")
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+        assert proc.returncode == 0, err
+        assert err.rstrip().endswith("stopped")
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+
+
 def test_a_bad_fault_is_refused() -> None:
     result = CliRunner().invoke(
         main, ["serve-twin", "--hexapod", str(HEXAPOD), "--balls", str(BALLS),
