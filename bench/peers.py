@@ -31,7 +31,8 @@ them back (``get_coordinates_systems``), and, after frames set with the platform
 from zero, three absolute moves, a move relative to the object frame and one relative to
 the user frame, reads the object pose in the user frame (``s_uto_tx``), the platform's
 in the machine frame (``get_machine_positions``: ``s_mtp_tx``) and the legs; and
-validates a pose the struts reach without the frames but not with them. Compared with
+validates a pose the struts reach without the frames but not with them, and lets
+hexatherm's own driver read the frames CGSE set (what ``run.yaml`` records). Compared with
 hexatherm's maths: :func:`hexatherm.core.frames.platform_in_machine` (``M = U X O^-1``)
 and the IGM of the hexapod file for the absolute moves (1 nm, 1 nrad), the twin's own
 rules for the relative ones.
@@ -63,6 +64,7 @@ from hexatherm.core.geometry import invert_transform, pose_from_transform, trans
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.devices.sim.symetrie import SimulatedHexapod
 from hexatherm.devices.sim.symetriepmac import SymetriePmacSimulator
+from hexatherm.devices.symetriepmac import SymetriePmacController
 from hexatherm.io.config import read_hexapod
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -152,6 +154,7 @@ def main() -> int:
                     twins[f"{name}, {label}"] = twin
                     problems += against_hexatherm(f"{name}, {label}", twin, frames, hexapod)
                     problems += validation(f"{name}, {label}", controller, frames, hexapod)
+                    problems += hexatherm_reads(f"{name}, {label}", controller, sim.port, frames)
             finally:
                 controller.disconnect()
             print(
@@ -281,6 +284,18 @@ def validation(name: str, controller: Any, frames: list[float], hexapod: Hexapod
     if bare[0] != 0 or framed[0] <= 0 or not hexapod.check_stroke(legs).any():
         return [f"{name}: validation of {REFUSED} {bare}, {framed}"]
     return []
+
+
+def hexatherm_reads(name: str, controller: Any, port: int, frames: list[float]) -> list[str]:
+    """The frames CGSE set, as hexatherm's own driver reads them at its connection (what
+    ``run.yaml`` records: ``frames_mm_deg``)."""
+    controller.configure_coordinates_systems(*frames)
+    with SymetriePmacController("127.0.0.1", port) as driver:
+        read = np.asarray(driver.frames_mm_deg, dtype=float)
+        recorded = driver.info["frames_mm_deg"]
+    controller.configure_coordinates_systems(*[0.0] * 12)
+    print(f"{name}: hexatherm's driver reads the frames CGSE set: frames_mm_deg {recorded}")
+    return frames_back(f"{name}: hexatherm's driver", read, frames)
 
 
 def cgse_simulator(twins: dict[str, dict[str, Record]], hexapod: Hexapod) -> list[str]:
