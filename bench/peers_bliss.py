@@ -28,6 +28,20 @@ next to the twin's truth (the true pose, the IGM of ``configs/symetrie-like.yaml
 the legs, the speeds it was started with, its stroke for the limits) and the script
 exits 1 on any difference over 1 nm (mm and deg) or any call that fails.
 
+**The controller's frames.** BLISS's API v2 client reads the frames (``get_origin``,
+``user_cs``, ``object_cs``: ``CFG#CS?3``) and both poses of ``STA#HEXAPOD?``
+(``object_pose``, the object in the user frame, ``uTo``; ``platform_pose``, the platform
+in the machine frame, ``mTp``) but cannot set them: ``HexapodProtocolV2`` has no
+``set_origin`` (``SHexapod``'s ``user_origin``/``object_origin`` raise
+``NotImplementedError`` on API v2; its gpascii and PMAC protocols set them). So a second
+twin is started with frames already set (as Symétrie's own software would have left
+them: ``FRAMES``, those of ``tests/workflows/test_run_frames.py``), and BLISS reads them,
+moves to three poses (``MOVES``) and reads both poses and the legs, against hexatherm's
+maths: :func:`hexatherm.core.frames.platform_in_machine` (``M = U X O^-1``) and the IGM
+of the hexapod file (1 nm, 1 nrad). BLISS 2.4's ``get_origin`` hands the 12 values as
+the wire has them, metres and radians (its poses are converted to mm and deg): the
+script converts them before comparing.
+
 ``--cycle-ms`` sets the twin's cycle between a command's ``:1`` and ``:2`` (20 ms by
 default): BLISS's reader fails a command ("Error 2") whose two replies it finds waiting
 together, which a loaded machine makes more likely the shorter the cycle (docs/run.md).
@@ -53,10 +67,15 @@ FAR = [-1.0, 2.0, -2.5, -0.2, 0.3, -1.0]  # the move stopped on its way
 UNREACHABLE = [0.0, 0.0, 80.0, 0.0, 0.0, 0.0]
 TOLERANCE = 1e-6  # mm and deg: 1 nm
 CALL_TIMEOUT_S = 15.0
+#: the twin's frames (user in machine, object in platform; mm, deg) and the moves in them
+FRAMES = [0.8, -1.5, 122.0, 0.4, -0.3, 21.2, 0.5, -0.3, 120.0, 0.1, -0.2, 20.3]
+MOVES = ([0.0] * 6, POSE, [-2.0, 1.5, -3.0, -2.5, 2.0, -4.0])
+NM, NRAD = 1e-6, float(np.degrees(1e-9))  # mm, deg
 
 
-def serve_twin(cycle_s: float) -> int:
-    """The child: the twin's API v2 server; ``truth`` on stdin -> a JSON line."""
+def serve_twin(cycle_s: float, frames: list[float] | None = None) -> int:
+    """The child: the twin's API v2 server (with ``frames`` set, 12 values, mm and deg);
+    ``truth`` on stdin -> a JSON line."""
     from hexatherm.devices.sim.symetrie import SimulatedHexapod, SymetrieSimulator
     from hexatherm.io.config import read_hexapod
 
@@ -64,6 +83,8 @@ def serve_twin(cycle_s: float) -> int:
         read_hexapod(HEXAPOD), speed_mm_s=SPEED_MM_S, speed_deg_s=SPEED_DEG_S, settle_s=0.05
     )
     with SymetrieSimulator(model, cycle_s=cycle_s) as sim:
+        if frames is not None:
+            sim.frames = np.array(frames, dtype=float)
         print(sim.port, flush=True)
         for line in sys.stdin:
             if line.strip() != "truth":
@@ -82,9 +103,10 @@ def serve_twin(cycle_s: float) -> int:
 class Twin:
     """The twin's process, asked for its truth."""
 
-    def __init__(self, cycle_s: float) -> None:
+    def __init__(self, cycle_s: float, frames: list[float] | None = None) -> None:
+        extra = [] if frames is None else ["--twin-frames", json.dumps(frames)]
         self.process = subprocess.Popen(
-            [sys.executable, __file__, "--serve-twin", repr(cycle_s)],
+            [sys.executable, __file__, "--serve-twin", repr(cycle_s), *extra],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             text=True,
@@ -144,6 +166,19 @@ class Peer:
         print(f"{name}: {np.asarray(got, float).tolist()}, {what}: max |diff| {diff:.2e}")
         if not diff < TOLERANCE:
             self.problem(f"{name}: differs from {what} by {diff:.2e}")
+
+    def compare_pose(self, name: str, got: Any, truth: Any, what: str) -> None:
+        """A pose (mm, deg) against hexatherm's: 1 nm, 1 nrad."""
+        if got is None:
+            return
+        d = np.abs(np.asarray(got, float) - np.asarray(truth, float))
+        dt, dr = float(d[:3].max()), float(d[3:].max())
+        print(
+            f"{name}: {np.round(np.asarray(got, float), 6).tolist()}, hexatherm's {what}:"
+            f" max |diff| {dt:.1e} mm, {dr:.1e} deg"
+        )
+        if not (dt < NM and dr < NRAD):
+            self.problem(f"{name}: differs from hexatherm's {what} by {dt:.1e} mm, {dr:.1e} deg")
 
     def on_path(self, name: str, got: Any, before: Any, after: Any, legs: bool) -> None:
         """What BLISS read against the twin's truth at some time between two asks of it:
@@ -270,6 +305,39 @@ def moves(peer: Peer, refusal: type[Exception]) -> None:
     peer.check_state("after stop")
 
 
+def controller_frames(peer: Peer) -> None:
+    """The frames BLISS reads and the poses and legs it reads after moves in them,
+    against hexatherm's maths (the twin started with ``FRAMES`` set)."""
+    from hexatherm.core.frames import platform_in_machine
+
+    client, twin = peer.client, peer.twin
+    origin = peer.call("frames: get_origin (CFG#CS?3)", client.get_origin)
+    if origin is not None:
+        raw = np.concatenate([origin["user_cs"], origin["object_cs"]])
+        print(f"frames: get_origin {raw.tolist()} (as the wire has them: m, rad)")
+        got = raw.reshape(2, 6) * np.array([1e3] * 3 + [np.degrees(1.0)] * 3)
+        peer.compare_pose("frames: user frame (mm, deg)", got[0], FRAMES[:6], "set")
+        peer.compare_pose("frames: object frame (mm, deg)", got[1], FRAMES[6:], "set")
+    for k, pose in enumerate(MOVES):
+        step = f"frames: move {k}"
+        peer.call(f"{step} (MOVE#ABS, waits for its :2)", lambda p=pose: client.move(p))
+        twin.settled()
+        machine = platform_in_machine(FRAMES, pose, "symetrie")
+        peer.compare_pose(f"{step}: twin's true pose", twin.truth()["pose"], machine, "M")
+        full = peer.call(
+            f"{step}: full_system_status (STA#HEXAPOD?)", lambda: client.full_system_status
+        )
+        if full is not None:
+            peer.compare_pose(f"{step}: object_pose (uTo)", full["object_pose"], pose, "X")
+            peer.compare_pose(f"{step}: platform_pose (mTp)", full["platform_pose"], machine, "M")
+        axes = peer.call(
+            f"{step}: full_actuators_status (STA#AXES?)", lambda: client.full_actuators_status
+        )
+        if axes is not None:
+            igm = peer.hexapod.igm(machine)[0]
+            peer.compare(f"{step}: leg lengths", [a["length"] for a in axes], igm, "IGM of M (mm)")
+
+
 def main(cycle_ms: float | None) -> int:
     import warnings
 
@@ -318,6 +386,20 @@ def main(cycle_ms: float | None) -> int:
         client.comm.close()
         received = twin.truth()["received"]
         twin.close()
+    print("a second twin, its frames set:", FRAMES)
+    twin = Twin(cycle_s, FRAMES)
+    client = HexapodProtocolV2({"tcp": {"url": f"127.0.0.1:{twin.port}"}})
+    peer.client, peer.twin = client, twin
+    try:
+        peer.call("frames: connect (greeting)", client.connect)
+        controller_frames(peer)
+    finally:
+        reader = getattr(client, "_HexapodProtocolV2__read_task", None)
+        if reader is not None:
+            reader.kill()
+        client.comm.close()
+        received += twin.truth()["received"]
+        twin.close()
     n = len(peer.calls)
     print(f"{n - len(peer.bad)}/{n} BLISS calls read the twin's truth")
     print(f"the twin received {received} command lines")
@@ -352,7 +434,8 @@ if __name__ == "__main__":
         help="the twin's controller cycle between a command's :1 and :2 (default: its own)",
     )
     parser.add_argument("--serve-twin", type=float, default=None, help=argparse.SUPPRESS)
+    parser.add_argument("--twin-frames", type=json.loads, default=None, help=argparse.SUPPRESS)
     options = parser.parse_args()
     if options.serve_twin is not None:
-        sys.exit(serve_twin(options.serve_twin))
+        sys.exit(serve_twin(options.serve_twin, options.twin_frames))
     sys.exit(main(options.cycle_ms))

@@ -4,8 +4,9 @@ A Symétrie controller takes a user frame ``U0`` (its pose in the machine frame)
 object frame ``O0`` (its pose in the platform frame), 12 values (mm, deg, Symétrie's
 convention: ``R = Rz Ry Rx``, fixed axes) as ``run.yaml`` records them; a commanded pose
 ``X`` is the object's in the user frame, so the platform stands at ``M = U0 X O0^-1`` in
-the machine frame (CGSE's simulator links the frames so; hexatherm's twin too:
-``devices/sim/userframes.py``) and its legs are the nominal IGM of ``M``
+the machine frame (CGSE's simulator links the frames so, to 2e-12 mm and 1e-12 deg in
+``bench/peers.py``; hexatherm's twin too: ``devices/sim/userframes.py``) and its legs
+are the nominal IGM of ``M``
 (:func:`platform_in_machine`). The origin step (``X = 0``) puts it at ``M0 = U0 O0^-1``:
 relative to frame O (the platform there, what every measured pose refers to), the
 platform at ``X`` stands at ``M0^-1 M = O0 X O0^-1`` (:func:`poses_from_origin`, the user

@@ -467,7 +467,9 @@ class SymetriePmacSimulator(UserObjectFrames, SimulatedController):
     def _target(self, mode: int, pose: FloatArray) -> FloatArray:
         """The absolute pose (wire: mm, deg, Symétrie convention) of a move in ``mode``: 0
         absolute, 1 relative in the object frame (``T = T(now) T(step)``), 2 relative in
-        the user frame (``T = T(step) T(now)``, *choice*)."""
+        the user frame (``T = T(step) T(now)``, *choice*: CGSE's simulator adds the step's
+        translation along the user axes and turns about the object's own axes: 0.084 mm
+        apart after a step of 2 to 3 deg; docs/formats.md, section 9.7)."""
         step = np.array(pose, dtype=float)
         if mode == 0:
             return step
