@@ -17,10 +17,11 @@ import numpy as np
 import pytest
 import yaml
 
+from hexatherm.core.frames import platform_in_machine
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.devices.controller import InPositionCriteria
 from hexatherm.devices.sim.symetrie import Faults, ManualClock, SimulatedHexapod
-from hexatherm.devices.sim.symetriepmac import SymetriePmacSimulator, strip_telnet
+from hexatherm.devices.sim.symetriepmac import SymetriePmacSimulator, move_target, strip_telnet
 from hexatherm.devices.symetriepmac import SymetriePmacController
 from hexatherm.devices.urls import controller_from_url
 from hexatherm.errors import (
@@ -341,12 +342,51 @@ def test_relative_moves_in_the_object_and_the_user_frame(
     assert g.move(2, [1.0, 0, 0, 0, 0, 0]) == 0  # user relative
     settle(model, clock)
     np.testing.assert_allclose(model.true_pose(), [2 + c, 2 + s, 0.5, 0, 0, 15.0], atol=1e-9)
+    # a user-relative turn: about the object's own axes, the position kept (CGSE's rule;
+    # composed in the user frame, T(step) T(now), it would swing the platform about the
+    # user frame's origin: 0.2 mm here)
+    assert g.move(2, [0, 0, 0, 0, 0, 5.0]) == 0
+    settle(model, clock)
+    np.testing.assert_allclose(model.true_pose(), [2 + c, 2 + s, 0.5, 0, 0, 20.0], atol=1e-9)
     # checks: a relative step beyond the stroke breaks the actuator limits (bit 3) and is
     # refused as a move (-40: not feasible); nothing moves
     assert g.valid(1, [0, 0, 0, 0, 0, 0]) == 0
     assert g.valid(1, OUT_OF_STROKE) == 1 << 3
     moves = model.moves
     assert g.move(2, OUT_OF_STROKE) == -40 and model.moves == moves
+
+
+#: CGSE's own test of its hexapod simulators (github.com/IvS-KULeuven/cgse,
+#: projects/generic/symetrie-hexapod/tests/test_puna_simulator.py, test_absolute_movement,
+#: since commit 0801fe6c): the frames it sets, its moves and the object (user) and
+#: platform (machine) poses it expects, 10 digits, checked there to a relative 1e-5
+CGSE_FRAMES = [-2, -2, -2, -3, -4, -5, 0, 0, 3, 30.0, 30.0, 0]
+CGSE_MOVES = [
+    (0, [1, 3, 4, 35, 25, 10], (-0.5550577685, 1.2043056694, -1.0689145898, 1.0195290202,
+                                -8.466485292, 2.79932335)),
+    (1, [-1, -1, -1, 1, 7, -1], (-2.317005597, 0.8737649564, -2.006061295, 3.052233715,
+                                 -1.9466592653, 4.741402017)),
+    (2, [-2, -2, -2, 1, 7, -1], (-4.710341626, -0.97799175, -4.017462423, 5.310002306,
+                                 4.496313461, 6.918574645)),
+]  # fmt: skip
+CGSE_OBJECT = [
+    (1.0, 3.0, 4.0, 35.0, 25.0, 10.0),
+    (-0.4295447122, 2.49856887, 3.160383195, 37.82597474, 31.25750377, 13.736721917),
+    (-2.429542106, 0.4985648, 1.1603886537, 41.37225134, 37.32309944, 18.14008525),
+]
+
+
+def test_moves_give_the_poses_cgses_own_test_expects() -> None:
+    """The twin's rules for absolute, object- and user-relative moves, and hexatherm's
+    platform ``U X O^-1``, against the poses CGSE's test expects (as it checks them: a
+    relative 1e-5). The user-relative one was 0.44 mm and 3.6 deg away with the step
+    composed in the user frame."""
+    now = np.zeros(6)
+    for (mode, step, machine), expected in zip(CGSE_MOVES, CGSE_OBJECT, strict=True):
+        now = move_target(mode, now, np.array(step, float))
+        assert now.tolist() == pytest.approx(expected, rel=1e-5)
+        platform = platform_in_machine(CGSE_FRAMES, now, "symetrie")
+        assert platform.tolist() == pytest.approx(machine, rel=1e-5)
 
 
 def test_workspace_limits_specific_positions_and_version(

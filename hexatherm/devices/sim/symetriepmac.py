@@ -465,18 +465,9 @@ class SymetriePmacSimulator(UserObjectFrames, SimulatedController):
         return -46  # JOG, MAINTENANCE, CFG_DEFAULT: not served by the twin
 
     def _target(self, mode: int, pose: FloatArray) -> FloatArray:
-        """The absolute pose (wire: mm, deg, Symétrie convention) of a move in ``mode``: 0
-        absolute, 1 relative in the object frame (``T = T(now) T(step)``), 2 relative in
-        the user frame (``T = T(step) T(now)``, *choice*: CGSE's simulator adds the step's
-        translation along the user axes and turns about the object's own axes: 0.084 mm
-        apart after a step of 2 to 3 deg; docs/formats.md, section 9.7)."""
-        step = np.array(pose, dtype=float)
-        if mode == 0:
-            return step
-        now = transform_from_pose(self._object_pose(self.model.target), "symetrie")
-        move = transform_from_pose(step, "symetrie")
-        frame = now @ move if mode == 1 else move @ now
-        return np.asarray(pose_from_transform(frame, "symetrie"), dtype=float)
+        """The absolute pose (wire) of a move in ``mode`` from where the twin is going
+        (:func:`move_target`)."""
+        return move_target(mode, self._object_pose(self.model.target), pose)
 
     def _broken(self, wire: FloatArray) -> int:
         """The validation bits a pose breaks (0: it can be reached): machine and user
@@ -516,3 +507,30 @@ class SymetriePmacSimulator(UserObjectFrames, SimulatedController):
             return -11
         self.limits_enabled[lim] = bool(p[1])
         return 0
+
+
+def move_target(mode: int, now: FloatArray, step: FloatArray) -> FloatArray:
+    """The absolute pose (wire: the object's in the user frame, mm, deg, Symétrie
+    convention) of a move in ``mode`` from the object pose ``now``: 0 absolute (``step``
+    itself); 1 relative in the object frame, ``T = T(now) T(step)``; 2 relative in the
+    user frame: the step's translation along the user frame's axes, its rotation about
+    the object's own axes (``t = t(now) + t(step)``, ``R = R(now) R(step)``), as CGSE's
+    simulator moves, and as the poses CGSE's own test expects from a controller
+    (``test_puna_simulator.py``, 10 digits; docs/formats.md, section 9.7).
+
+    >>> now, step = np.array([1.0, 2, 0.5, 0, 0, 15]), np.array([1.0, 0, 0, 0, 0, 5])
+    >>> move_target(2, now, step).round(9) + 0.0
+    array([ 2. ,  2. ,  0.5,  0. ,  0. , 20. ])
+    """
+    step = np.array(step, dtype=float)
+    if mode == 0:
+        return step
+    a = transform_from_pose(np.asarray(now, float), "symetrie")
+    b = transform_from_pose(step, "symetrie")
+    if mode == 1:
+        frame = a @ b
+    else:
+        frame = np.eye(4)
+        frame[:3, :3] = a[:3, :3] @ b[:3, :3]
+        frame[:3, 3] = a[:3, 3] + b[:3, 3]
+    return np.asarray(pose_from_transform(frame, "symetrie"), dtype=float)
