@@ -232,22 +232,32 @@ def _divided_band(times: FloatArray, order: int) -> FloatArray:
 
 
 def _beyond_noise(times: FloatArray, values: FloatArray, var: FloatArray, order: int) -> FloatArray:
-    """The divided differences of ``order`` (6,) beyond what the values' noise (their
-    variances ``var`` (n, 6), independent) gives them, as one error of every leg
-    together: the legs' growth has one shape (the first singular vector ``s`` of the
-    series' growth, the heating's history being the legs' one), each set's divided
-    differences are read along it (``k = dd . s``), and ``sqrt(max(0, mean k^2 - mean
-    var k)) s``, signed as their mean. Read leg by leg, the noise of a leg that barely
-    grows was taken for curvature and spread the error over every pose component (Ty
-    with O and R0 once claimed 1.2x its error)."""
+    """The divided differences of ``order`` (6,) beyond what the values' noise gives
+    them, as one error of every leg together: the legs' growth has one shape (the first
+    singular vector ``s`` of the series' growth, the heating's history being the legs'
+    one), each set's divided differences are read along it (``k = dd . s``), and
+    ``sqrt(max(0, mean k^2 - mean var k)) s``, signed as their mean. Read leg by leg, the
+    noise of a leg that barely grows was taken for curvature and spread the error over
+    every pose component (Ty with O and R0 once claimed 1.2x its error).
+
+    ``var`` is each value's covariance over the legs (n, 6, 6), the values independent
+    of one another; or its variances alone (n, 6: the legs independent). A value's legs
+    come from one pose: their errors are correlated (legs 1 and 6 at +0.94 at the
+    reference pose), and ``s^T S s`` is 1.27x ``sum s_l^2 S_ll`` there: read from the
+    variances alone, noise passed for curvature."""
     dd = _divided(times, values, order)  # (sets, 6)
     band = _divided_band(times, order)  # (sets, order + 1): the operator on the values
     _, _, vt = np.linalg.svd(values, full_matrices=False)
     shape = vt[0] * (-1.0 if vt[0] @ values.sum(axis=0) < 0 else 1.0)  # unit, along growth
     along = dd @ shape
     sets = band.shape[0]
-    var_band = var[np.arange(sets)[:, None] + np.arange(order + 1)]  # (sets, order + 1, 6)
-    noise = float(np.mean(np.einsum("sj,sjl->sl", band**2, var_band) @ shape**2))
+    var = np.asarray(var, dtype=float)
+    if var.ndim == 3:  # each value's variance along the shape
+        on_shape = np.einsum("l,jlm,m->j", shape, var, shape)
+    else:
+        on_shape = var @ shape**2
+    var_band = on_shape[np.arange(sets)[:, None] + np.arange(order + 1)]  # (sets, order + 1)
+    noise = float(np.mean(np.sum(band**2 * var_band, axis=1)))
     rms = np.sqrt(max(float(np.mean(along**2)) - noise, 0.0))
     return np.asarray(rms * np.sign(np.mean(along)) * shape, dtype=float)
 
@@ -318,8 +328,9 @@ def _extrapolation_error(
     for ball, cov in enumerate(np.asarray(centre_cov_mm2, dtype=float)[refs[0]]):
         block[3 * ball : 3 * ball + 3, 3 * ball : 3 * ball + 3] = cov
     outside = ratio[:, None] * ratio[None] * (flat @ (left * block) @ flat.T)
-    var = np.diagonal(legs_cov, axis1=1, axis2=2)  # (R, 6): R0's state, then the later
-    var_series = np.concatenate([np.repeat(var[0][None] / spread, n0, axis=0), var[1:]])
+    # each member's legs' covariance (R0's measurements: the state's over the line's
+    # weights), then the later references'
+    var_series = np.concatenate([np.repeat(legs_cov[:1] / spread, n0, axis=0), legs_cov[1:]])
     models = []
     for t, row in zip(carry.origin_times_s, series.weights, strict=True):
         members = np.flatnonzero(row)
