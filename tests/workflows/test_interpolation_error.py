@@ -47,11 +47,20 @@ def pairs_plan() -> Plan:
 
 
 def heated(
-    folder: Path, seed: int, *, gap_s: float = 0.0, cmm: bool = True, plan: Plan | None = None
+    folder: Path,
+    seed: int,
+    *,
+    gap_s: float = 0.0,
+    cmm: bool = True,
+    plan: Plan | None = None,
+    pauses: tuple[float, ...] | None = None,
 ) -> Path:
-    """A twin session heated from 1000 s; ``gap_s`` pauses before the fourth reference;
-    ``cmm``: the session states the probing (else its centres carry no u at all)."""
+    """A twin session heated from 1000 s; ``gap_s`` pauses before the fourth reference
+    (``pauses``: before every step instead); ``cmm``: the session states the probing
+    (else its centres carry no u at all)."""
     plan = small_plan(6, 1) if plan is None else plan
+    if pauses is None:
+        pauses = tuple(gap_s if i == 7 else 0.0 for i in range(len(plan.labels)))
     spec = TwinSessionSpec(
         name=folder.name,
         hexapod_text=(ROOT / "configs" / "symetrie-like.yaml").read_text(),
@@ -62,7 +71,7 @@ def heated(
         output="centres",
         fit_centres=True,
         point_noise_mm=1e-3,
-        pauses_s=tuple(gap_s if i == 7 else 0.0 for i in range(len(plan.labels))),
+        pauses_s=pauses,
     )
     write_files(simulate_session(spec).files, folder)
     if cmm:

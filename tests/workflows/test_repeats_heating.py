@@ -23,7 +23,7 @@ from hexatherm.cli import main
 from hexatherm.core.correction import correct
 from hexatherm.core.registration import register
 from hexatherm.io.config import read_session
-from hexatherm.workflows.process.carryerror import _beyond_noise, _divided
+from hexatherm.workflows.process.carryerror import _response_term
 from hexatherm.workflows.process.carrying import carry_and_average, line_at_end
 from hexatherm.workflows.process.measured import read_measured, registration_weights
 from hexatherm.workflows.process.pipeline import ProcessResult, process_session
@@ -270,22 +270,23 @@ def test_monte_carlo_refits_weigh_r0s_measurements_as_its_line(tmp_path: Path) -
 
 
 def test_the_model_error_follows_the_growths_shape() -> None:
-    """The term the line misses, read from the series' divided differences beyond their
-    noise, points where the heating's curvature does (every leg the same history, its
-    own gain) and has its size: over 50 noise draws of 0.05 um, the cosine with the
-    noise-free curvature is above 0.99 and the size's RMS within 0.8-1.25 of it
-    (measured: 1.000 and 1.03). Before, leg by leg, a leg's noise read as curvature:
-    cosine 0.41-0.99 (median 0.88), so the error went into pose components the heating
-    did not move (with O and R0 once, Ty claimed 1.2x its observed error)."""
+    """The term the line misses at O's time, read from the series along the growth's
+    shape (every leg the same history, its own gain), points where the heating's
+    curvature there does and has its size: over 50 noise draws of 0.05 um, the cosine
+    with the exact half curvature at the first interval's middle is above 0.99 and the
+    size's RMS within 0.8-1.25 of it. Before (issue 35's round 3), leg by leg, a leg's
+    noise read as curvature: cosine 0.41-0.99 (median 0.88), so the error went into
+    pose components the heating did not move (with O and R0 once, Ty claimed 1.2x its
+    observed error)."""
     t = np.arange(7) * 400.0
     gains_mm = np.array([3, 7, 2, 3, 9, 3.5]) * 1e-3
     truth = np.outer(1 - np.exp(-t / 2400), gains_mm)
     var = np.full(truth.shape, 0.05e-3**2)
-    curvature = _divided(t, truth, 2).mean(axis=0)
+    curvature = -gains_mm * np.exp(-200.0 / 2400) / 2400**2 / 2  # g'' / 2 at 200 s
     cosines, sizes = [], []
     for seed in range(50):
         noisy = truth + np.random.default_rng(seed).normal(0, 0.05e-3, truth.shape)
-        missed = _beyond_noise(t, noisy, var, 2)
+        missed = _response_term(t, noisy, var, 2, -200.0)
         cosines.append(missed @ curvature / np.linalg.norm(missed) / np.linalg.norm(curvature))
         sizes.append(np.linalg.norm(missed) / np.linalg.norm(curvature))
     assert min(cosines) > 0.99, np.round(cosines, 3)

@@ -231,25 +231,60 @@ def _divided_band(times: FloatArray, order: int) -> FloatArray:
     return band
 
 
-def _beyond_noise(times: FloatArray, values: FloatArray, var: FloatArray, order: int) -> FloatArray:
-    """The divided differences of ``order`` (6,) beyond what the values' noise (their
-    variances ``var`` (n, 6), independent) gives them, as one error of every leg
+def _response_term(
+    times: FloatArray, values: FloatArray, var: FloatArray, order: int, at_s: float
+) -> FloatArray:
+    """The divided difference of ``order`` (6,; 2: half the curvature, 3: a sixth of the
+    third derivative) of the series at time ``at_s``, as a first-order response of the
+    legs to their heating gives it: between changes of the heating, the curvature is
+    ``-g' / tau`` and the third derivative ``g' / tau^2``. One error of every leg
     together: the legs' growth has one shape (the first singular vector ``s`` of the
-    series' growth, the heating's history being the legs' one), each set's divided
-    differences are read along it (``k = dd . s``), and ``sqrt(max(0, mean k^2 - mean
-    var k)) s``, signed as their mean. Read leg by leg, the noise of a leg that barely
-    grows was taken for curvature and spread the error over every pose component (Ty
-    with O and R0 once claimed 1.2x its error)."""
-    dd = _divided(times, values, order)  # (sets, 6)
-    band = _divided_band(times, order)  # (sets, order + 1): the operator on the values
+    series' growth, the heating's history being the legs' one), read along it.
+
+    ``g'`` is the slope of the series' interval at ``at_s`` (its first before the first
+    member), its square less its noise's; ``1 / (2 tau)`` the regression of the series'
+    second divided differences ``k_i`` on its slopes ``v_i`` at the inner members
+    (centred), ``r = -sum k_i v_i / sum (v_i^2 - noise)``, its square less its noise's.
+    The second divided differences' RMS over the whole series (before) held the heating's
+    switching anywhere in it as if it were at O: with the mats switched on after R1 it
+    claimed 10x O's growth error there, with them switched on just before R0 0.19x; tied
+    to the slope at O, 1.01x and 0.96x (issue 35).
+
+    ``var`` is each value's covariance over the legs (n, 6, 6), the values independent
+    of one another; or its variances alone (n, 6: the legs independent). A value's legs
+    come from one pose: their errors are correlated (legs 1 and 6 at +0.94 at the
+    twins' reference pose), and ``s^T S s`` is 1.27x ``sum s_l^2 S_ll`` there."""
+    n = times.size
+    if n < 3:
+        return np.zeros(6)
     _, _, vt = np.linalg.svd(values, full_matrices=False)
     shape = vt[0] * (-1.0 if vt[0] @ values.sum(axis=0) < 0 else 1.0)  # unit, along growth
-    along = dd @ shape
+    y = values @ shape
+    var = np.asarray(var, dtype=float)
+    if var.ndim == 3:  # each value's variance along the shape
+        on_shape = np.einsum("l,jlm,m->j", shape, var, shape)
+    else:
+        on_shape = var @ shape**2
+    i = int(np.clip(np.searchsorted(times, at_s, side="right") - 1, 0, n - 2))
+    h = times[i + 1] - times[i]
+    slope = (y[i + 1] - y[i]) / h
+    slope2 = max(slope**2 - (on_shape[i] + on_shape[i + 1]) / h**2, 0.0)
+    curvature = _divided(times, values, 2) @ shape  # (sets,): g'' / 2 at the inner members
+    span = times[2:] - times[:-2]
+    centred = (y[2:] - y[:-2]) / span  # the slope there
+    spread = float(np.sum(centred**2 - (on_shape[2:] + on_shape[:-2]) / span**2))
+    if not spread > 0:
+        return np.zeros(6)
+    rate = -float(curvature @ centred) / spread  # 1 / (2 tau)
+    band = _divided_band(times, 2)
     sets = band.shape[0]
-    var_band = var[np.arange(sets)[:, None] + np.arange(order + 1)]  # (sets, order + 1, 6)
-    noise = float(np.mean(np.einsum("sj,sjl->sl", band**2, var_band) @ shape**2))
-    rms = np.sqrt(max(float(np.mean(along**2)) - noise, 0.0))
-    return np.asarray(rms * np.sign(np.mean(along)) * shape, dtype=float)
+    var_curvature = np.sum(band**2 * on_shape[np.arange(sets)[:, None] + np.arange(3)], axis=1)
+    rate2 = max(rate**2 - float(centred**2 @ var_curvature) / spread**2, 0.0)
+    if order == 2:
+        k = -np.sign(rate) * np.sqrt(rate2 * slope2)
+    else:
+        k = 4 * rate2 / 6 * np.sqrt(slope2)
+    return np.asarray(k * np.sign(slope) * shape, dtype=float)
 
 
 def _extrapolation_error(
@@ -275,11 +310,13 @@ def _extrapolation_error(
     plus a part ``r_i`` independent of the state: the growth reads ``s`` through
     ``sum_i W_i l_i / sum l^2 - sum W``, and ``sum_i W_i r_i``, of covariance ``V (sum W_i^2
     - (sum W_i l_i)^2 / sum l^2)``, is the noise left outside the steps. The model error is
-    the term the line or polynomial misses: the RMS divided difference of the next order
-    over consecutive members of the series along the growth's shape, beyond what their
-    noise gives it (in squares, :func:`_beyond_noise`), times ``prod_j (t_O - t_j)`` over
-    the members used; with too few members to read it, the whole last term (the
-    parabola's departure from the line; with two, the whole carry).
+    the term the line or polynomial misses: the divided difference of the next order at
+    O's time along the growth's shape as a first-order response of the legs gives it
+    (the slope there over the series' time constant, each beyond its noise:
+    :func:`_response_term`), times ``prod_j (t_O - t_j)`` over the members used; with
+    too few members to read it, the whole last term (the parabola's departure from the
+    line; with two, the whole carry). A heating switched on or off between O and the
+    members is not held.
     """
     session, carry = result.session, result.carry
     assert carry is not None and carry.series is not None
@@ -318,31 +355,32 @@ def _extrapolation_error(
     for ball, cov in enumerate(np.asarray(centre_cov_mm2, dtype=float)[refs[0]]):
         block[3 * ball : 3 * ball + 3, 3 * ball : 3 * ball + 3] = cov
     outside = ratio[:, None] * ratio[None] * (flat @ (left * block) @ flat.T)
-    var = np.diagonal(legs_cov, axis1=1, axis2=2)  # (R, 6): R0's state, then the later
-    var_series = np.concatenate([np.repeat(var[0][None] / spread, n0, axis=0), var[1:]])
+    # each member's legs' covariance (R0's measurements: the state's over the line's
+    # weights), then the later references'
+    var_series = np.concatenate([np.repeat(legs_cov[:1] / spread, n0, axis=0), legs_cov[1:]])
     models = []
     for t, row in zip(carry.origin_times_s, series.weights, strict=True):
         members = np.flatnonzero(row)
         if t < ts[0]:
             order = members.size  # degree + 1
             if n > order:
-                rms = _beyond_noise(ts, g, var_series, order)
-                models.append(rms * float(np.prod(t - ts[:order])))
+                term = _response_term(ts, g, var_series, order, t)
+                models.append(term * float(np.prod(t - ts[:order])))
             elif order == 3:
                 line2 = extrapolation_weights(ts[:2], np.array([t]))[0]
                 models.append(row[:3] @ g[:3] - line2 @ g[:2])
             else:
                 models.append(row @ g)
         elif n >= 3:
-            rms = _beyond_noise(ts, g, var_series, 2)
-            models.append(rms * float(np.prod(t - ts[members])))
+            term = _response_term(ts, g, var_series, 2, t)
+            models.append(term * float(np.prod(t - ts[members])))
         else:
             models.append(np.zeros(6))
     model = np.mean(models, axis=0)
     shape = {1: "line", 2: "parabola"}[series.degree]
     basis = f"the references' noise and what the {shape} through them misses ({n} in the " + (
-        f"series, the next divided differences' RMS beyond their noise over "
-        f"{n - series.degree - 1} sets)"
+        "series; the legs a first-order response to their heating: the curvature at O's "
+        f"time its slope over the time constant, read over {n - 2} sets beyond their noise)"
         if n > series.degree + 1
         else "series: the whole last term)"
     )
