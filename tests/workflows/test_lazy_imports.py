@@ -7,7 +7,11 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
+
+import pytest
 
 from tests.shipped import SHIPPED
 
@@ -37,6 +41,55 @@ def _process_code(session: str, out: Path) -> str:
     )
 
 
+#: runs ``process`` on a shipped session as :func:`_process_code` does and prints gc's count
+#: of frozen objects once the command's module is imported and after the command, then every
+#: module left loaded
+PROCESS_SCRIPT = """import gc, sys
+from hexatherm.cli import main
+before = gc.get_freeze_count()
+try:
+    main(["process", {session!r}, "-o", {out!r}])
+except SystemExit as stop:
+    assert not stop.code, stop.code
+print(before, gc.get_freeze_count())
+print(" ".join(sorted(sys.modules)))
+"""
+
+
+@dataclass(frozen=True)
+class Processed:
+    """``process`` of a shipped session in a fresh interpreter: the modules it left loaded,
+    gc's frozen objects before and after the command, and its output folder."""
+
+    modules: frozenset[str]
+    frozen: tuple[int, int]
+    out: Path
+
+    def loaded(self, modules: tuple[str, ...]) -> dict[str, bool]:
+        return {m: m in self.modules for m in modules}
+
+
+@pytest.fixture(scope="module")
+def processed(tmp_path_factory: pytest.TempPathFactory) -> Callable[[str], Processed]:
+    """``processed(session)``: :data:`PROCESS_SCRIPT` run once per session in this module
+    (the same command in the same fresh interpreter for every test that reads it; none
+    writes into its output)."""
+    done: dict[str, Processed] = {}
+
+    def run(session: str) -> Processed:
+        if session not in done:
+            out = tmp_path_factory.mktemp(session) / "out"
+            code = PROCESS_SCRIPT.format(session=str(SESSIONS / session), out=str(out))
+            lines = subprocess.run(
+                [sys.executable, "-c", code], check=True, capture_output=True, text=True
+            ).stdout.splitlines()
+            before, after = (int(n) for n in lines[-2].split())
+            done[session] = Processed(frozenset(lines[-1].split()), (before, after), out)
+        return done[session]
+
+    return run
+
+
 def test_diagnose_does_not_import_scipy_stats() -> None:
     code = (
         "import hexatherm.cli, hexatherm.cli.diagnose\n"
@@ -49,52 +102,47 @@ def test_diagnose_does_not_import_scipy_stats() -> None:
     }
 
 
-def test_process_of_a_small_session_does_not_import_scipy_sparse(tmp_path: Path) -> None:
+def test_process_of_a_small_session_does_not_import_scipy_sparse(
+    processed: Callable[[str], Processed],
+) -> None:
     """paper-zero-pose: its covariance between targets takes the dense path."""
-    out = tmp_path / "out"
-    code = _process_code("paper-zero-pose", out)
-    assert _loaded(code, ("scipy.sparse", "pandas")) == {"scipy.sparse": False, "pandas": True}
-    assert (out / "covariance.csv").is_file()
+    run = processed("paper-zero-pose")
+    assert run.loaded(("scipy.sparse", "pandas")) == {"scipy.sparse": False, "pandas": True}
+    assert (run.out / "covariance.csv").is_file()
 
 
-def test_process_keeps_the_collector_off_its_imports(tmp_path: Path) -> None:
+def test_process_keeps_the_collector_off_its_imports(
+    processed: Callable[[str], Processed],
+) -> None:
     """Once its modules are loaded, a command freezes them (gc.freeze: full collections
     no longer walk numpy's, pandas' and scipy's objects); the results are the replay's."""
-    out = tmp_path / "out"
-    code = (
-        "import gc\n"
-        "from hexatherm.cli import main\n"
-        "assert gc.get_freeze_count() == 0\n"
-        "try:\n"
-        f"    main(['process', {str(SESSIONS / 'paper-zero-pose')!r}, '-o', {str(out)!r}])\n"
-        "except SystemExit as stop:\n"
-        "    assert not stop.code, stop.code\n"
-        "assert gc.get_freeze_count() > 10000, gc.get_freeze_count()\n"
-    )
-    assert _loaded(code, ("numpy",)) == {"numpy": True}
+    run = processed("paper-zero-pose")
+    before, after = run.frozen
+    assert before == 0 and after > 10000, run.frozen
+    assert run.loaded(("numpy",)) == {"numpy": True}
     expected = SESSIONS / "paper-zero-pose" / "expected" / "poses.csv"
-    assert (out / "poses.csv").read_bytes() == expected.read_bytes()
+    assert (run.out / "poses.csv").read_bytes() == expected.read_bytes()
 
 
-def test_process_without_repeats_or_tolerances_loads_no_scipy(tmp_path: Path) -> None:
+def test_process_without_repeats_or_tolerances_loads_no_scipy(
+    processed: Callable[[str], Processed],
+) -> None:
     """paper-zero-pose-dmis (O and R0 measured once, no --tolerance): nothing of scipy is
     needed, and its import is a fifth of a small process's CPU (issue 37); the conformity
     rules that `--tolerance`'s help names come without ``scipy.special``."""
-    out = tmp_path / "out"
-    code = _process_code("paper-zero-pose-dmis", out)
-    assert _loaded(code, ("scipy", "pandas")) == {"scipy": False, "pandas": True}
-    assert (out / "poses.csv").is_file()
+    run = processed("paper-zero-pose-dmis")
+    assert run.loaded(("scipy", "pandas")) == {"scipy": False, "pandas": True}
+    assert (run.out / "poses.csv").is_file()
 
 
-def test_a_plain_process_loads_only_what_it_uses(tmp_path: Path) -> None:
+def test_a_plain_process_loads_only_what_it_uses(processed: Callable[[str], Processed]) -> None:
     """Without tolerances, the twin or a hexapod's effects, process loads none of their
     modules (each compiled at every start where Python keeps no bytecode, issue 37), nor
     importlib.metadata for the libraries' versions, which provenance.json records all the
     same, as importlib.metadata gives them."""
     from importlib import metadata
 
-    out = tmp_path / "out"
-    code = _process_code("paper-zero-pose-dmis", out)  # no scipy: it reads both of them
+    run = processed("paper-zero-pose-dmis")  # no scipy: it reads both of them
     lazy = (
         "hexatherm.workflows.process.conformity",
         "hexatherm.core.conformity",
@@ -103,23 +151,25 @@ def test_a_plain_process_loads_only_what_it_uses(tmp_path: Path) -> None:
         "importlib.metadata",
         "numpy.char",
     )
-    assert _loaded(code, lazy) == dict.fromkeys(lazy, False)
-    provenance = json.loads((out / "provenance.json").read_text())
+    assert run.loaded(lazy) == dict.fromkeys(lazy, False)
+    provenance = json.loads((run.out / "provenance.json").read_text())
     assert provenance["libraries"] == {
         name: metadata.version(name) for name in ("numpy", "scipy", "pandas")
     }
 
 
-def test_process_of_a_csv_session_loads_no_dmis_or_qif_reader(tmp_path: Path) -> None:
+def test_process_of_a_csv_session_loads_no_dmis_or_qif_reader(
+    processed: Callable[[str], Processed],
+) -> None:
     """A session of CSV files loads neither the DMIS reader nor the QIF one with lxml (about
     60 ms of a 0.4 s floor where Python keeps no bytecode, issue 37); a DMIS session loads
     the DMIS reader, and still not lxml."""
     lazy = ("hexatherm.io.dmis", "hexatherm.io.qif", "hexatherm.io.qifrecords", "lxml")
-    code = _process_code("paper-zero-pose", tmp_path / "csv")
-    assert _loaded(code, lazy) == dict.fromkeys(lazy, False)
-    assert (tmp_path / "csv" / "poses.csv").is_file()
-    code = _process_code("paper-zero-pose-dmis", tmp_path / "dmis")
-    assert _loaded(code, lazy) == {**dict.fromkeys(lazy, False), "hexatherm.io.dmis": True}
+    csv = processed("paper-zero-pose")
+    assert csv.loaded(lazy) == dict.fromkeys(lazy, False)
+    assert (csv.out / "poses.csv").is_file()
+    dmis = processed("paper-zero-pose-dmis")
+    assert dmis.loaded(lazy) == {**dict.fromkeys(lazy, False), "hexatherm.io.dmis": True}
 
 
 #: what a plain ``process`` of a points CSV must not load: the figures' and pages' libraries
