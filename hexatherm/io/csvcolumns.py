@@ -211,8 +211,6 @@ def _iso_codes(
 #: bytes of a file :func:`iso_times_from_bytes` looks at in one go (its temporaries stay
 #: small, in the CPU's caches: a scanning probe's file is hundreds of MB)
 _TIME_SCAN = 1 << 21
-#: the bytes that end a field: ',' and LF
-_SEPARATORS = np.array([44, 10], dtype=np.uint8)
 
 
 def iso_times_from_bytes(
@@ -242,17 +240,24 @@ def iso_times_from_bytes(
         # commas and line feeds: the bytes up to ',' found in one pass, then those two (a
         # clean file may hold '+', of an exponent or an offset) told apart on the few found
         found = np.flatnonzero(part <= 44)
-        found = found[np.isin(part[found], _SEPARATORS)]
+        found_bytes = part[found]
+        feeds = found_bytes == 10
+        separators = feeds | (found_bytes == 44)
+        if not separators.all():
+            found, feeds = found[separators], feeds[separators]
         if found.size % count:
             return None
         cuts = found.reshape(-1, count)
-        if not (part[cuts[:, -1]] == 10).all() or (part[cuts[:, :-1]] == 10).any():
+        feeds = feeds.reshape(-1, count)
+        if not feeds[:, -1].all() or feeds[:, :-1].any():
             return None  # a line with more or fewer fields
         first = cuts[:, column - 1] + 1
         width = cuts[0, column] - first[0]
         if width <= 0 or (cuts[:, column] - first != width).any():
             return None
-        block = _iso_codes(part[first[:, None] + np.arange(width)])
+        # every line's time, a row of ``width`` bytes each: rows of the block's windows
+        # (whole rows copied, not ``width`` indices per line gathered one by one)
+        block = _iso_codes(np.lib.stride_tricks.sliding_window_view(part, width)[first])
         if block is None or (layout is not None and block[1:] != layout):
             return None  # not one layout (of one width) in every block
         layout = block[1:]
