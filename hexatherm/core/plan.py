@@ -79,18 +79,18 @@ class Plan:
         """:meth:`from_steps` of the steps given as columns: their labels, kinds and poses
         (N, 6) already one array (a plan file's 20,002 steps are not made 20,002 arrays
         and stacked again)."""
-        labels = tuple(str(label) for label in labels)
-        kinds = tuple(cast(StepKind, kind) for kind in kinds)
-        poses = np.array(poses, dtype=float).reshape(-1, 6)
+        names = tuple(str(label) for label in labels)
+        step_kinds = tuple(cast(StepKind, kind) for kind in kinds)
+        rows = np.array(poses, dtype=float).reshape(-1, 6)
         if reference_pose is None:
-            refs = [p for p, k in zip(poses, kinds, strict=True) if k == "reference"]
+            refs = [p for p, k in zip(rows, step_kinds, strict=True) if k == "reference"]
             reference = refs[0] if refs else np.zeros(6)
         else:
             reference = np.asarray(reference_pose, dtype=float)
         plan = cls(
-            labels,
-            kinds,
-            poses,
+            names,
+            step_kinds,
+            rows,
             np.asarray(reference, float),
             int(points_per_ball),
         )
