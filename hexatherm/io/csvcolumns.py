@@ -216,7 +216,7 @@ _TIME_SCAN = 1 << 21
 def iso_times_from_bytes(
     raw: bytes, column: int, count: int
 ) -> tuple[npt.NDArray[np.float64], bool] | None:
-    """POSIX seconds of the ``time`` column (index ``column`` >= 1 of ``count``) of a CSV file
+    """POSIX seconds of the ``time`` column (index ``column`` of ``count``) of a CSV file
     whose every data line holds exactly ``count`` fields, taken from the file's bytes
     (no Python string per row), and whether they have a UTC offset; None unless every
     line after the header has ``count - 1`` commas and its time is of one ISO layout
@@ -228,7 +228,7 @@ def iso_times_from_bytes(
     it: nothing to unquote or strip)."""
     data = np.frombuffer(raw, dtype=np.uint8)
     start = raw.find(b"\n") + 1
-    if start <= 0 or start >= data.size or not 1 <= column < count:
+    if start <= 0 or start >= data.size or not 0 <= column < count:
         return None
     seconds: list[npt.NDArray[np.float64]] = []
     layout: tuple[str, bool] | None = None
@@ -251,7 +251,10 @@ def iso_times_from_bytes(
         feeds = feeds.reshape(-1, count)
         if not feeds[:, -1].all() or feeds[:, :-1].any():
             return None  # a line with more or fewer fields
-        first = cuts[:, column - 1] + 1
+        if column:
+            first = cuts[:, column - 1] + 1
+        else:  # the first field: where each line starts (the block starts with a line)
+            first = np.concatenate(([0], cuts[:-1, -1] + 1))
         width = cuts[0, column] - first[0]
         if width <= 0 or (cuts[:, column] - first != width).any():
             return None

@@ -274,3 +274,33 @@ def test_the_faster_cut_is_the_former_one_on_clean_and_hostile_files(seed, monke
                 assert new[1] == old[1]
     assert csvcolumns.iso_times_from_bytes(raw, 5, columns) is not None  # the clean file
     assert refused > len(cases)  # the hostile edits were refused, as before
+
+
+@pytest.mark.parametrize("layout", LAYOUTS)
+@pytest.mark.parametrize("scan", [None, 64, 4096])
+def test_times_cut_from_the_first_column_are_the_parsed_column(rng, layout, scan, monkeypatch):
+    """A thermocouple log's times (its first column) cut from the bytes are the seconds and
+    offset flag of reading the column as text (``column_times``), to the bit; a line with
+    a field too many or too few, or a time of another layout, is not cut."""
+    if scan is not None:
+        monkeypatch.setattr(csvcolumns, "_TIME_SCAN", scan)
+    values = times(rng, layout, n=150, digits=int(rng.integers(1, 10)))
+    temps = rng.normal(20, 0.5, (len(values), 6))
+    lines = ["time,leg1,leg2,leg3,leg4,leg5,leg6"]
+    lines += [
+        ",".join([v, *(f"{t:.3f}" for t in row)]) for v, row in zip(values, temps, strict=True)
+    ]
+    raw = ("\n".join(lines) + "\n").encode()
+    cut = csvcolumns.iso_times_from_bytes(raw, 0, 7)
+    assert cut is not None
+    frame = pd.DataFrame({"time": np.array(values, dtype=object)}, index=np.arange(len(values)) + 2)
+    seconds, kind, aware = column_times(frame, "t.csv")
+    np.testing.assert_array_equal(cut[0], seconds)
+    assert kind == "iso" and cut[1] == aware
+    second = raw.index(b"\n", raw.index(b"\n") + 1) + 1  # the second data line's start
+    for changed in (
+        raw[:second] + b"1," + raw[second:],  # a field too many
+        raw[:-8] + raw[-8:].replace(b",", b"", 1),  # a field too few, on the last line
+        raw[:second] + raw[second:].replace(b":", b"-", 1),  # another layout on one line
+    ):
+        assert csvcolumns.iso_times_from_bytes(changed, 0, 7) is None
