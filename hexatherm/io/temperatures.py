@@ -150,10 +150,12 @@ def _fast_temperatures(text: str, path: str) -> Temperatures | None:
     if not (np.isfinite(values).all() and (values >= low).all() and (values <= high).all()):
         return None
     frame.index = np.arange(len(frame)) + 2
+    kind: TimeKind = "iso"
+    aware: bool | None
     if cut is not None:
         if cut[0].size != len(frame):
             return None
-        time, kind, aware = cut[0], "iso", cut[1]
+        time, aware = cut
     else:
         try:
             time, kind, aware = column_times(frame, path)
