@@ -214,18 +214,21 @@ def _table_bytes(
     n, count = frame.shape
     fields: list[tuple[np.ndarray, np.ndarray] | None] = [None] * count
     fixed: dict[float, list[int]] = {}
-    for j in range(count):
-        column = frame.iloc[:, j]
+    floats: dict[int, np.ndarray] = {}
+    # the columns in order, each once (``items``, not ``iloc`` per column: its indexing
+    # machinery costs more than the column of a 1000-row table)
+    for j, (_, column) in enumerate(frame.items()):
         step = steps[j]
         if j not in given and column.dtype == np.float64 and step is not None:
             fixed.setdefault(step, []).append(j)
+            floats[j] = column.to_numpy()
             continue
         texts = given[j] if j in given else _cells(column)
         fields[j] = None if texts is None else _text_field(texts)
         if fields[j] is None:
             return None
     for step, columns in fixed.items():
-        block = np.column_stack([frame.iloc[:, j].to_numpy() for j in columns])
+        block = np.column_stack([floats[j] for j in columns])
         field, length = fixed_fields(block, step)
         width = field.shape[-1]
         used = np.arange(width) >= width - length[..., None]
