@@ -192,7 +192,11 @@ def command(
         )
     for line in session_lines(outcome):
         echo_err(line)
-    click.echo(deviation_table(outcome.result, outcome.twin, outcome.uncertainty, coverage_factor))
+    click.echo(
+        deviation_table(
+            outcome.result, outcome.twin, outcome.uncertainty, coverage_factor, outcome.poses_csv
+        )
+    )
     for line in significance_lines(outcome.result, outcome.uncertainty, coverage_factor):
         click.echo(line)
     for line in uncertainty_summary(outcome.uncertainty):

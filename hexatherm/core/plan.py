@@ -27,6 +27,8 @@ from hexatherm.errors import StepError
 StepKind = Literal["origin", "reference", "target"]
 STEP_KINDS: tuple[StepKind, ...] = ("origin", "reference", "target")
 NAME_PATTERN = re.compile(r"[A-Za-z0-9-]+")
+#: names of :data:`NAME_PATTERN`, one a line: every label of a plan checked in one match
+NAME_LINES = re.compile(r"[A-Za-z0-9-]+(?:\n[A-Za-z0-9-]+)*")
 #: commanded reference poses equal to this tolerance are the same pose (mm, deg)
 SAME_POSE_TOL = 1e-9
 
@@ -63,15 +65,32 @@ class Plan:
         labels = tuple(str(s[0]) for s in steps)
         kinds = tuple(cast(StepKind, s[1]) for s in steps)
         poses = np.array([np.asarray(s[2], dtype=float) for s in steps]).reshape(-1, 6)
+        return cls.from_columns(labels, kinds, poses, reference_pose, points_per_ball)
+
+    @classmethod
+    def from_columns(
+        cls,
+        labels: Sequence[str],
+        kinds: Sequence[str],
+        poses: npt.ArrayLike,
+        reference_pose: Sequence[float] | npt.NDArray[np.float64] | None = None,
+        points_per_ball: int = 25,
+    ) -> Plan:
+        """:meth:`from_steps` of the steps given as columns: their labels, kinds and poses
+        (N, 6) already one array (a plan file's 20,002 steps are not made 20,002 arrays
+        and stacked again)."""
+        names = tuple(str(label) for label in labels)
+        step_kinds = tuple(cast(StepKind, kind) for kind in kinds)
+        rows = np.array(poses, dtype=float).reshape(-1, 6)
         if reference_pose is None:
-            refs = [p for p, k in zip(poses, kinds, strict=True) if k == "reference"]
+            refs = [p for p, k in zip(rows, step_kinds, strict=True) if k == "reference"]
             reference = refs[0] if refs else np.zeros(6)
         else:
             reference = np.asarray(reference_pose, dtype=float)
         plan = cls(
-            labels,
-            kinds,
-            poses,
+            names,
+            step_kinds,
+            rows,
             np.asarray(reference, float),
             int(points_per_ball),
         )
@@ -82,6 +101,27 @@ class Plan:
         """Raise :class:`StepError` naming the step when the plan cannot be processed."""
         if not self.labels:
             raise StepError("the plan has no steps")
+        if not self._steps_valid():
+            self._name_invalid_step()
+        self._validate_order()
+
+    def _steps_valid(self) -> bool:
+        """Whether every step passes :meth:`_name_invalid_step`'s checks, all at once: the
+        labels as one text (a label holds no line break), a set of them, the kinds' set,
+        the poses' finiteness (a plan of 20,002 steps is not looped over when it is valid)."""
+        labels = self.labels
+        joined = "\n".join(labels)
+        return (
+            joined.count("\n") == len(labels) - 1  # no label holds a line break itself
+            and NAME_LINES.fullmatch(joined) is not None
+            and len(set(labels)) == len(labels)
+            and set(self.kinds) <= set(STEP_KINDS)
+            and bool(np.isfinite(self.poses).all())
+        )
+
+    def _name_invalid_step(self) -> None:
+        """Raise :class:`StepError` naming the first step with a bad label, a label seen
+        before, an unknown kind or a non-finite pose."""
         seen: dict[str, int] = {}
         finite = np.all(np.isfinite(self.poses), axis=1).tolist()  # one pass, not one a step
         for i, (label, kind) in enumerate(zip(self.labels, self.kinds, strict=True)):
@@ -100,6 +140,11 @@ class Plan:
                 )
             if not finite[i]:
                 raise StepError("pose has a non-finite value", step=label, index=i)
+
+    def _validate_order(self) -> None:
+        """Raise :class:`StepError` naming the step when the steps' order cannot be
+        processed: the origin not first or twice, references differing, a target before
+        R0 or without a reference next to it."""
         if self.kinds[0] != "origin":
             raise StepError(
                 "the first step must be the origin (kind: origin)", step=self.labels[0], index=0
@@ -134,13 +179,19 @@ class Plan:
                     step=self.labels[i],
                     index=i,
                 )
-        for i, (before, after) in zip(self.target_indices, self.adjacent_references(), strict=True):
-            if before < 0 and after < 0:
-                raise StepError(
-                    "target has no reference step adjacent to it (right before or after)",
-                    step=self.labels[i],
-                    index=int(i),
-                )
+        alone = [
+            i
+            for i, (before, after) in zip(
+                self.target_indices.tolist(), self.adjacent_references(), strict=True
+            )
+            if before < 0 and after < 0
+        ]
+        if alone:
+            raise StepError(
+                "target has no reference step adjacent to it (right before or after)",
+                step=self.labels[alone[0]],
+                index=alone[0],
+            )
 
     @property
     def reference_indices(self) -> npt.NDArray[np.intp]:
@@ -170,12 +221,12 @@ class Plan:
 
     def adjacent_references(self) -> list[tuple[int, int]]:
         """For each target, the indices of the reference right before and after it (-1: none)."""
-        out = []
-        for i in self.target_indices:
-            before = i - 1 if i > 0 and self.kinds[i - 1] == "reference" else -1
-            after = i + 1 if i + 1 < len(self.kinds) and self.kinds[i + 1] == "reference" else -1
-            out.append((int(before), int(after)))
-        return out
+        targets = self._kind_indices["target"]
+        reference = np.zeros(len(self.kinds) + 2, dtype=bool)  # a step of no kind at each end
+        reference[self._kind_indices["reference"] + 1] = True
+        before = np.where(reference[targets], targets - 1, -1)
+        after = np.where(reference[targets + 2], targets + 1, -1)
+        return list(zip(before.tolist(), after.tolist(), strict=True))
 
 
 @dataclass(frozen=True)

@@ -211,14 +211,12 @@ def _iso_codes(
 #: bytes of a file :func:`iso_times_from_bytes` looks at in one go (its temporaries stay
 #: small, in the CPU's caches: a scanning probe's file is hundreds of MB)
 _TIME_SCAN = 1 << 21
-#: the bytes that end a field: ',' and LF
-_SEPARATORS = np.array([44, 10], dtype=np.uint8)
 
 
 def iso_times_from_bytes(
     raw: bytes, column: int, count: int
 ) -> tuple[npt.NDArray[np.float64], bool] | None:
-    """POSIX seconds of the ``time`` column (index ``column`` >= 1 of ``count``) of a CSV file
+    """POSIX seconds of the ``time`` column (index ``column`` of ``count``) of a CSV file
     whose every data line holds exactly ``count`` fields, taken from the file's bytes
     (no Python string per row), and whether they have a UTC offset; None unless every
     line after the header has ``count - 1`` commas and its time is of one ISO layout
@@ -230,7 +228,7 @@ def iso_times_from_bytes(
     it: nothing to unquote or strip)."""
     data = np.frombuffer(raw, dtype=np.uint8)
     start = raw.find(b"\n") + 1
-    if start <= 0 or start >= data.size or not 1 <= column < count:
+    if start <= 0 or start >= data.size or not 0 <= column < count:
         return None
     seconds: list[npt.NDArray[np.float64]] = []
     layout: tuple[str, bool] | None = None
@@ -242,17 +240,27 @@ def iso_times_from_bytes(
         # commas and line feeds: the bytes up to ',' found in one pass, then those two (a
         # clean file may hold '+', of an exponent or an offset) told apart on the few found
         found = np.flatnonzero(part <= 44)
-        found = found[np.isin(part[found], _SEPARATORS)]
+        found_bytes = part[found]
+        feeds = found_bytes == 10
+        separators = feeds | (found_bytes == 44)
+        if not separators.all():
+            found, feeds = found[separators], feeds[separators]
         if found.size % count:
             return None
         cuts = found.reshape(-1, count)
-        if not (part[cuts[:, -1]] == 10).all() or (part[cuts[:, :-1]] == 10).any():
+        feeds = feeds.reshape(-1, count)
+        if not feeds[:, -1].all() or feeds[:, :-1].any():
             return None  # a line with more or fewer fields
-        first = cuts[:, column - 1] + 1
+        if column:
+            first = cuts[:, column - 1] + 1
+        else:  # the first field: where each line starts (the block starts with a line)
+            first = np.concatenate(([0], cuts[:-1, -1] + 1))
         width = cuts[0, column] - first[0]
         if width <= 0 or (cuts[:, column] - first != width).any():
             return None
-        block = _iso_codes(part[first[:, None] + np.arange(width)])
+        # every line's time, a row of ``width`` bytes each: rows of the block's windows
+        # (whole rows copied, not ``width`` indices per line gathered one by one)
+        block = _iso_codes(np.lib.stride_tricks.sliding_window_view(part, width)[first])
         if block is None or (layout is not None and block[1:] != layout):
             return None  # not one layout (of one width) in every block
         layout = block[1:]

@@ -11,7 +11,13 @@ import numpy.typing as npt
 import pandas as pd
 
 from hexatherm.errors import InputError
-from hexatherm.io.csvcolumns import ASCII_BLANKS, column_numbers, column_times, drop_blank_rows
+from hexatherm.io.csvcolumns import (
+    ASCII_BLANKS,
+    column_numbers,
+    column_times,
+    drop_blank_rows,
+    iso_times_from_bytes,
+)
 from hexatherm.io.csvtext import complete_lines, csv_frame, read_text
 from hexatherm.io.records import TimeKind
 
@@ -118,10 +124,16 @@ def _fast_temperatures(text: str, path: str) -> Temperatures | None:
     if "" in columns or text.count(",") != (len(columns) - 1) * text.count("\n"):
         return None  # a nameless column, or a line with too few or too many fields
     numeric = columns[1:]
+    raw = text.encode("ascii")
+    # ISO times of one layout straight from the bytes (no Python string per row; pandas
+    # then leaves the column out), else pandas reads them as text
+    cut = iso_times_from_bytes(raw, 0, len(columns))
+    read = columns if cut is None else numeric
     try:
         frame = pd.read_csv(
-            io.BytesIO(text.encode("ascii")),
+            io.BytesIO(raw),
             dtype={"time": object, **dict.fromkeys(numeric, float)},
+            usecols=None if cut is None else read,
             keep_default_na=False,
             na_values=dict.fromkeys(numeric, [""]),
             skip_blank_lines=False,
@@ -129,17 +141,26 @@ def _fast_temperatures(text: str, path: str) -> Temperatures | None:
         )
     except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError):
         return None
-    if frame.empty or list(frame.columns) != columns or frame["time"].isna().any():
+    if frame.empty or list(frame.columns) != read:
+        return None
+    if cut is None and frame["time"].isna().any():
         return None
     values = frame[numeric].to_numpy(dtype=np.float64)
     low, high = TEMPERATURE_RANGE_C
     if not (np.isfinite(values).all() and (values >= low).all() and (values <= high).all()):
         return None
     frame.index = np.arange(len(frame)) + 2
-    try:
-        time, kind, aware = column_times(frame, path)
-    except InputError:
-        return None
+    kind: TimeKind = "iso"
+    aware: bool | None
+    if cut is not None:
+        if cut[0].size != len(frame):
+            return None
+        time, aware = cut
+    else:
+        try:
+            time, kind, aware = column_times(frame, path)
+        except InputError:
+            return None
     if np.any(np.diff(time) < 0):
         return None
     others = {c: values[:, j + 6] for j, c in enumerate(columns[7:])}

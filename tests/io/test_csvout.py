@@ -7,6 +7,7 @@ from decimal import ROUND_HALF_EVEN, Decimal
 import numpy as np
 import pandas as pd
 
+from hexatherm.io import csvout
 from hexatherm.io.csvfile import centres_to_csv
 from hexatherm.io.csvout import RESOLUTION, csv_text, fixed_text, resolution_of
 from hexatherm.io.records import Records
@@ -132,3 +133,31 @@ def test_the_joined_text_is_what_pandas_writes() -> None:
     for frame in frames:
         for rounded in (True, False):
             assert csv_text(frame, rounded) == _pandas_text(frame, rounded)
+
+
+def _former_digits(n: np.ndarray, count: int) -> np.ndarray:
+    """``csvout._digits`` as it was before issue 37's second round (each four digits
+    gathered as a row of four bytes): the reference the gather of 4-byte words is held to."""
+    chunks = -(-count // 4)
+    out = np.empty((*n.shape, 4 * chunks), np.uint8)
+    rest = n
+    for k in range(chunks):
+        rest, low = np.divmod(rest, 10000)
+        out[..., 4 * (chunks - 1 - k) : 4 * (chunks - k)] = csvout._DIGITS4[low]
+    return out[..., 4 * chunks - count :]
+
+
+def test_digits_as_words_are_the_former_digit_rows() -> None:
+    # issue 37 (write10k): every count, every shape the writer gives, the edges of a
+    # four-digit chunk and of the 2**50 steps the writer formats itself, and beyond
+    rng = np.random.default_rng(37)
+    edges = np.array([0, 1, 9, 10, 9999, 10000, 10001, 99_999_999, 2**50 - 1, 2**50, 2**62])
+    for count in range(1, 20):
+        for shape in ((0,), (1,), (7,), (50, 3), (4, 5, 2)):
+            n = rng.integers(0, 2**62, shape) // 10 ** rng.integers(0, 18, shape)
+            for values in (n, np.resize(edges, shape)):
+                new = csvout._digits(values, count)
+                np.testing.assert_array_equal(new, _former_digits(values, count))
+                assert new.shape == (*shape, count)
+    # and the texts: the last `count` digits, zero padded
+    assert bytes(csvout._digits(np.array([1234567]), 9)[0]) == b"001234567"

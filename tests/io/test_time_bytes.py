@@ -199,3 +199,108 @@ def test_times_not_cut_from_an_unusual_file(rng, old, new):
     changed = raw.replace(old.encode(), new.encode(), 1)
     assert changed != raw
     assert csvcolumns.iso_times_from_bytes(changed, 5, 6) is None
+
+
+def _former_iso_times_from_bytes(raw: bytes, column: int, count: int):
+    """``iso_times_from_bytes`` as it was before issue 37's second round (the separators
+    told apart by ``np.isin``, every time's bytes gathered index by index): the reference
+    the faster cut is held to."""
+    data = np.frombuffer(raw, dtype=np.uint8)
+    start = raw.find(b"\n") + 1
+    if start <= 0 or start >= data.size or not 1 <= column < count:
+        return None
+    seconds = []
+    layout = None
+    while start < data.size:
+        end = raw.rfind(b"\n", start, start + csvcolumns._TIME_SCAN) + 1
+        if end <= start:
+            end = raw.find(b"\n", start) + 1
+        part = data[start:end]
+        found = np.flatnonzero(part <= 44)
+        found = found[np.isin(part[found], np.array([44, 10], dtype=np.uint8))]
+        if found.size % count:
+            return None
+        cuts = found.reshape(-1, count)
+        if not (part[cuts[:, -1]] == 10).all() or (part[cuts[:, :-1]] == 10).any():
+            return None
+        first = cuts[:, column - 1] + 1
+        width = cuts[0, column] - first[0]
+        if width <= 0 or (cuts[:, column] - first != width).any():
+            return None
+        block = csvcolumns._iso_codes(part[first[:, None] + np.arange(width)])
+        if block is None or (layout is not None and block[1:] != layout):
+            return None
+        layout = block[1:]
+        block_seconds = csvcolumns._block_seconds(block[0], layout[0])
+        if block_seconds is None:
+            return None
+        seconds.append(block_seconds)
+        start = end
+    assert layout is not None
+    return np.concatenate(seconds), layout[1]
+
+
+#: what a hostile edit puts into a clean file: separators, bytes below ',' that a clean
+#: file may hold ('+', '!'), a line feed, a digit where a separator was, a longer field
+_HOSTILE = [b",", b"\n", b"+", b"!", b"*", b"7", b",,", b"\n\n", b"2024-03-05T07:30:02"]
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_the_faster_cut_is_the_former_one_on_clean_and_hostile_files(seed, monkeypatch):
+    # issue 37 (write10k): the separators told apart by two comparisons instead of
+    # np.isin, and each line's time taken as a row of the block's windows; the seconds,
+    # the offset flag and every refusal (None) are the former code's, in blocks of any size
+    rng = np.random.default_rng(seed)
+    monkeypatch.setattr(csvcolumns, "_TIME_SCAN", int(rng.choice([64, 300, 4096, 1 << 21])))
+    layout = LAYOUTS[seed % len(LAYOUTS)]
+    ijk = bool(seed % 2)
+    raw = _points_file(rng, times(rng, layout, n=200, digits=int(rng.integers(1, 10))), ijk)
+    columns = 9 if ijk else 6
+    cases = [raw]
+    for _ in range(30):  # one hostile edit each, anywhere past the header
+        at = int(rng.integers(raw.find(b"\n") + 1, len(raw)))
+        edit = _HOSTILE[int(rng.integers(len(_HOSTILE)))]
+        cases.append(raw[:at] + edit + raw[at + int(rng.integers(0, 3)) :])
+    cases.append(raw.replace(b"+", b"-"))  # offsets of the other sign, where there are
+    refused = 0
+    for case in cases:
+        for column, count in ((5, columns), (1, columns), (5, columns + 1)):
+            new = csvcolumns.iso_times_from_bytes(case, column, count)
+            old = _former_iso_times_from_bytes(case, column, count)
+            assert (new is None) == (old is None)
+            refused += new is None
+            if new is not None and old is not None:
+                np.testing.assert_array_equal(new[0], old[0])
+                assert new[1] == old[1]
+    assert csvcolumns.iso_times_from_bytes(raw, 5, columns) is not None  # the clean file
+    assert refused > len(cases)  # the hostile edits were refused, as before
+
+
+@pytest.mark.parametrize("layout", LAYOUTS)
+@pytest.mark.parametrize("scan", [None, 64, 4096])
+def test_times_cut_from_the_first_column_are_the_parsed_column(rng, layout, scan, monkeypatch):
+    """A thermocouple log's times (its first column) cut from the bytes are the seconds and
+    offset flag of reading the column as text (``column_times``), to the bit; a line with
+    a field too many or too few, or a time of another layout, is not cut."""
+    if scan is not None:
+        monkeypatch.setattr(csvcolumns, "_TIME_SCAN", scan)
+    values = times(rng, layout, n=150, digits=int(rng.integers(1, 10)))
+    temps = rng.normal(20, 0.5, (len(values), 6))
+    lines = ["time,leg1,leg2,leg3,leg4,leg5,leg6"]
+    lines += [
+        ",".join([v, *(f"{t:.3f}" for t in row)]) for v, row in zip(values, temps, strict=True)
+    ]
+    raw = ("\n".join(lines) + "\n").encode()
+    cut = csvcolumns.iso_times_from_bytes(raw, 0, 7)
+    assert cut is not None
+    frame = pd.DataFrame({"time": np.array(values, dtype=object)}, index=np.arange(len(values)) + 2)
+    seconds, kind, aware = column_times(frame, "t.csv")
+    np.testing.assert_array_equal(cut[0], seconds)
+    assert kind == "iso" and cut[1] == aware
+    second = raw.index(b"\n", raw.index(b"\n") + 1) + 1  # the second data line's start
+    for changed in (
+        raw[:second] + b"1," + raw[second:],  # a field too many
+        raw[:-8] + raw[-8:].replace(b",", b"", 1),  # a field too few, on the last line
+        raw[:second] + raw[second:].replace(b":", b"-", 1),  # another layout on one line
+    ):
+        assert csvcolumns.iso_times_from_bytes(changed, 0, 7) is None

@@ -12,7 +12,7 @@ import pandas as pd
 from hexatherm.session import QualityLimits
 from hexatherm.workflows.process.measured import nominal_fit_diameter_mm
 from hexatherm.workflows.process.pipeline import process_session
-from hexatherm.workflows.process.quality import NA, QualityReport, _ball_values
+from hexatherm.workflows.process.quality import CHECKS, DETAILS, NA, QualityReport, _ball_values
 from tests.workflows.test_quality import session
 
 
@@ -71,3 +71,36 @@ def test_ran_and_failing_as_series_map():
     pd.testing.assert_series_equal(
         report.ran("form"), column.map(lambda ok: isinstance(ok, bool | np.bool_)).astype(bool)
     )
+
+
+def _former_failing_texts(report: QualityReport, check: str) -> list[str]:
+    """``QualityReport.failing_texts`` as it was: the whole frame's failing rows taken."""
+    rows = report.frame.loc[report.failing(check)]
+    labels = rows["label"].astype(str).tolist()
+    if check not in DETAILS:
+        return labels
+    column, text = DETAILS[check]
+    return [
+        f"{label} ({text.format(where)})" if where != "" else label
+        for label, where in zip(labels, rows[column].tolist(), strict=True)
+    ]
+
+
+def test_failing_texts_from_two_columns_are_the_former_rows_texts():
+    # issue 37 (write10k): the failing steps' labels and legs from the two columns named,
+    # not the whole frame's rows; random flags (True, False, NA, numpy bools), legs given
+    # as text, whole numbers or "" (no leg), labels that look like numbers
+    rng = np.random.default_rng(37)
+    for n in (0, 1, 7, 200):
+        flags = np.array([True, False, NA, np.True_, np.False_], dtype=object)
+        legs = np.array(["", "3", 4, "6", 0], dtype=object)
+        data = {"label": [f"S{i}" if i % 5 else str(i) for i in range(n)], "kind": ["target"] * n}
+        for check, (column, _, _) in CHECKS.items():
+            data[column] = rng.normal(size=n)
+            data[f"ok_{check}"] = list(rng.choice(flags, n))
+        for column, _ in DETAILS.values():
+            data[column] = list(rng.choice(legs, n))
+        data["failed"] = [""] * n
+        report = QualityReport(pd.DataFrame(data), QualityLimits())
+        for check in CHECKS:
+            assert report.failing_texts(check) == _former_failing_texts(report, check)

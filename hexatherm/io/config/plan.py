@@ -172,8 +172,8 @@ def _read_plan_fast(text: str) -> Plan | None:
         int(found["points_per_ball"][1]) if "points_per_ball" in found else DEFAULT_POINTS_PER_BALL
     )
     try:
-        return Plan.from_steps(
-            zip(labels, kinds, poses, strict=True), reference_pose=reference, points_per_ball=ppb
+        return Plan.from_columns(
+            labels, kinds, poses, reference_pose=reference, points_per_ball=ppb
         )
     except StepError:
         return None

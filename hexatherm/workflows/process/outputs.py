@@ -327,11 +327,20 @@ def session_inputs(result: ProcessResult) -> list[Path]:
     return result.session.input_files()
 
 
+#: the most targets the screen table shows whole; of a longer campaign it shows the first
+#: and last :data:`SCREEN_ENDS` and says where all of them are (pandas' ``display.max_rows``
+#: and ``min_rows`` alike: 10,000 targets are 20,000 lines no one reads on a terminal)
+SCREEN_TARGETS = 60
+#: targets shown at each end of a shortened screen table
+SCREEN_ENDS = 5
+
+
 def deviation_table(
     result: ProcessResult,
     twin: np.ndarray | None = None,
     uncertainty: PoseUncertainty | None = None,
     coverage_factor: float = 2.0,
+    poses_csv: str | Path | None = None,
 ) -> str:
     """Side-by-side table of conventional and corrected deviations from the commanded pose.
 
@@ -339,6 +348,12 @@ def deviation_table(
     third block: the poses corrected by the twin from the thermocouples. With
     ``uncertainty`` every target's row is followed by its expanded uncertainties
     ``U = k u`` (``coverage_factor``), each under its value (the twin's block has none).
+    The last row is the spread (max - min) of every column over all the targets.
+
+    With ``poses_csv`` (the file that holds every target's deviations) a campaign of more
+    than :data:`SCREEN_TARGETS` targets is shortened to its first and last
+    :data:`SCREEN_ENDS` targets, a line between them saying how many more there are and
+    where they all are.
     """
     corr = result.correction
     plan = result.session.plan
@@ -370,20 +385,29 @@ def deviation_table(
         f"{'step':{width}}  " + "  |  ".join(block for _ in titles),
         f"{'':{width}}  " + "  |  ".join(units for _ in titles),
     ]
+    shown = np.arange(len(labels))
+    if poses_csv is not None and len(labels) > SCREEN_TARGETS:
+        shown = np.r_[0:SCREEN_ENDS, len(labels) - SCREEN_ENDS : len(labels)]
     # Python floats, one format per row: numpy scalars format the same, several times slower
     row_text = " ".join(["{:8.3f}"] * 6).format
-    values = [table.tolist() for table in tables]
-    u_values = [None if u is None else u.tolist() for u in expanded]
+    values = [table[shown].tolist() for table in tables]
+    u_values = [None if u is None else u[shown].tolist() for u in expanded]
     u_head = f"{'  ' + u_label:{width}}  "
-    for i, label in enumerate(labels):
-        lines.append(f"{label:{width}}  " + "  |  ".join(row_text(*v[i]) for v in values))
+    for row, i in enumerate(shown.tolist()):
+        if row == SCREEN_ENDS and len(shown) < len(labels):
+            lines.append(
+                f"... {len(labels) - len(shown):,} more targets: every target's deviations "
+                f"(dTx_conv_um ...) and standard uncertainties (u_dTx_conv_um ...) are in "
+                f"{poses_csv}"
+            )
+        lines.append(f"{labels[i]:{width}}  " + "  |  ".join(row_text(*v[row]) for v in values))
         if uncertainty is not None:
             lines.append(
                 u_head
                 + "  |  ".join(
                     " " * 53
                     if u is None
-                    else " ".join(f"{'±' + format(v, '.3f'):>8}" for v in u[i])
+                    else " ".join(f"{'±' + format(v, '.3f'):>8}" for v in u[row])
                     for u in u_values
                 )
             )

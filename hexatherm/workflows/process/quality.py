@@ -129,14 +129,17 @@ class QualityReport:
     def failing_texts(self, check: str) -> list[str]:
         """Labels of the steps that failed ``check``, with where on the step
         (:data:`DETAILS`: ``R3 (leg 2)``)."""
-        rows = self.frame.loc[self.failing(check)]
-        labels = rows["label"].astype(str).tolist()
+        # the two columns it names, not the whole frame's rows (the screen asks each check)
+        failing = self.failing(check)
+        if not failing.any():
+            return []
+        labels = self.frame["label"][failing].astype(str).tolist()
         if check not in DETAILS:
             return labels
         column, text = DETAILS[check]
         return [
             f"{label} ({text.format(where)})" if where != "" else label
-            for label, where in zip(labels, rows[column].tolist(), strict=True)
+            for label, where in zip(labels, self.frame[column][failing].tolist(), strict=True)
         ]
 
     def summary(self) -> list[str]:

@@ -92,6 +92,11 @@ class ProcessOutcome:
     written: tuple[Path, ...] = ()
 
     @property
+    def poses_csv(self) -> Path | None:
+        """The ``poses.csv`` written (every target's deviations), None before writing."""
+        return next((p for p in self.written if p.name == "poses.csv"), None)
+
+    @property
     def tolerances(self) -> dict[str, Tolerance]:
         """The tolerances judged: the session file's, then the request's."""
         return {**self.result.session.tolerances, **self.request.tolerances}
