@@ -58,6 +58,20 @@ def test_a_target_past_the_last_reference_has_the_smooth_fits_error_without_a_lo
     assert np.all((ratio > 0.75) & (ratio < 1.6)), ratio
 
 
+def test_the_screen_says_the_smooth_fits_error_past_the_last_reference(tmp_path: Path) -> None:
+    from hexatherm.workflows.process.pipeline import process_session
+    from hexatherm.workflows.process.summary import uncertainty_summary
+    from hexatherm.workflows.process.uncertainty import pose_uncertainty
+    from tests.workflows.test_interpolation_shared import pairs_session
+
+    folder = pairs_session(tmp_path / "s", 0, log=False, on_s=2000.0, pairs=PAIRS)
+    u = pose_uncertainty(process_session(folder, interpolation="smooth"))
+    assert u.smooth_excess is not None and u.smooth_excess.past_um is not None
+    assert np.count_nonzero(u.smooth_excess.past_um) == 1  # E alone
+    said = [x for x in uncertainty_summary(u) if "past the last reference" in x]
+    assert len(said) == 1 and "at 1 target(s)" in said[0], said
+
+
 def test_interval_pairs_are_the_dense_masks_pairs() -> None:
     """The pairs of targets of one interval, as the dense (M, M) mask gave them (-1: of
     none), over random intervals with runs of 1-5 targets in any order."""

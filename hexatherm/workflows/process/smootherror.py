@@ -131,6 +131,8 @@ def smooth_excess(
         # fit's straight continuation
         shared = past_last_error(result, legs_cov)
         growth_cov = growth_cov + shared @ np.swapaxes(shared, 1, 2)
+        past_um = np.sqrt(np.sum(shared**2, axis=(1, 2)) / 6) * 1e3
+        excess = dataclasses.replace(excess, past_um=past_um)
     by_growth = to_pose_factor(result, chain)
     cov = np.asarray(by_growth @ growth_cov @ np.swapaxes(by_growth, 1, 2))
     interval = np.searchsorted(times[refs], times[corr.target_index], side="right") - 1
