@@ -62,6 +62,9 @@ class GrowthExcess:
         thermocouple log (:func:`log_shape_error`); None without a log.
     widest_gap : float
         The longest interval between consecutive references over their median one.
+    past_um : ndarray, shape (M,), optional
+        RMS over the legs of the fit's error past the last reference without a log, at
+        each target (0 for those before it); None with a log.
     """
 
     cov_mm2: FloatArray
@@ -69,6 +72,7 @@ class GrowthExcess:
     noise_um: float
     shape_um: FloatArray | None = None
     widest_gap: float = 1.0
+    past_um: FloatArray | None = None
 
     @property
     def excess_um(self) -> float:

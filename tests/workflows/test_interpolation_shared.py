@@ -73,15 +73,19 @@ def pairs_session(
     return folder
 
 
-def replicas(root: Path, **options: object) -> tuple[np.ndarray, np.ndarray, np.ndarray, list]:
+def replicas(
+    root: Path, interpolation: str = "linear", replicas: int = REPLICAS, **options: object
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, list]:
     """Errors of the corrected poses against the twin's truth (R, M, 6), their claimed u
     (R, M, 6) and covariance between targets (R, 6, M, M), and the targets' labels."""
     reader = SessionReader()
     errors, claimed, between = [], [], []
     labels: list[str] = []
-    for seed in range(REPLICAS):
+    for seed in range(replicas):
         folder = pairs_session(root / f"r{seed}", seed, **options)  # type: ignore[arg-type]
-        result = reader.process(folder)
+        result = reader.process(folder, interpolation=interpolation)
+        if interpolation == "smooth":  # the conditions chosen keep it (measured)
+            assert result.correction.smooth is not None and result.correction.smooth.used
         u = pose_uncertainty(result)
         truth = pd.read_csv(folder / "truth" / "steps.csv").set_index("label")
         labels = [result.session.plan.labels[i] for i in result.correction.target_index]

@@ -61,21 +61,48 @@ def no_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return pairs_session(tmp_path_factory.mktemp("joint") / "s", 0, log=False)
 
 
-@pytest.mark.parametrize("session", ["paper-zero-pose", "serial-capture", "no-log"])
+@pytest.fixture(scope="module")
+def smooth_pairs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """Twin sessions the smooth fit is used on, two targets between every two references
+    and one past the last: with a log (mats on from the start) and without (mats on 600 s
+    before the last reference)."""
+    root = tmp_path_factory.mktemp("smooth")
+    return {
+        "smooth": pairs_session(root / "log", 0, on_s=0.0, pairs=4),
+        "smooth-no-log": pairs_session(root / "nolog", 0, log=False, on_s=2000.0, pairs=4),
+    }
+
+
+@pytest.mark.parametrize(
+    "session", ["paper-zero-pose", "serial-capture", "no-log", "smooth", "smooth-no-log"]
+)
 def test_joint_covariance_is_what_process_writes_to_covariance_csv(
-    session: str, no_log: Path, tmp_path: Path
+    session: str, no_log: Path, smooth_pairs: dict[str, Path], tmp_path: Path
 ) -> None:
     """Before: the calibration's weights left out O's carry (its noise through the
     references without a log, its model error) and the straight line's own error, which
     ``covariance.csv`` holds: their u of the corrected poses was 0.93-1.0 of the file's
     on paper-zero-pose (median over the targets), 0.75-0.80 on serial-capture (no log),
-    down to 0.21 (Tx at S14) on with-hidden-effect."""
-    folder = no_log if session == "no-log" else SHIPPED / session
+    down to 0.21 (Tx at S14) on with-hidden-effect. With ``--interpolation smooth``, the
+    smooth fit's own error shared by two targets of one interval (with a log) and past
+    the last reference (without) is in both."""
+    folder = {"no-log": no_log, **smooth_pairs}.get(session, SHIPPED / session)
+    smooth = session.startswith("smooth")
+    options = ["--interpolation", "smooth"] if smooth else []
     out = tmp_path / "out"
-    run = CliRunner().invoke(main, ["process", str(folder), "-o", str(out)])
+    run = CliRunner().invoke(main, ["process", str(folder), "-o", str(out), *options])
     assert run.exit_code == 0, run.output
     written = pd.read_csv(out / "covariance.csv")
-    result = process_session(folder)
+    result = process_session(folder, interpolation="smooth" if smooth else "linear")
+    if smooth:
+        assert result.correction.smooth is not None and result.correction.smooth.used
+        terms = error_terms(result, pose_chain(result), centre_covariance(result).cov_mm2)
+        assert terms.excess is not None
+        a, b, vectors = terms.shared()[-1]
+        if session == "smooth":  # shared by the targets of one interval
+            assert np.abs(np.einsum("pyk,pyk->py", vectors[a], vectors[b])).max() > 0
+        else:  # the target past the last reference has it, no other
+            assert np.abs(vectors[-1]).max() > 0 and not np.any(vectors[:-1])
     labels = [result.session.plan.labels[i] for i in result.correction.target_index]
     index = {label: k for k, label in enumerate(labels)}
     a = written["label_a"].map(index).to_numpy()

@@ -3,8 +3,9 @@ for :func:`~hexatherm.workflows.process.uncertainty.pose_uncertainty` (``poses.c
 ``covariance.csv``) and a calibration's weights
 (:func:`~hexatherm.workflows.process.uncertainty.joint_pose_covariance`), so that both
 hold the same terms: O's carry to R0's thermal state (common to every target; without a
-log its noise in the Jacobian), the smooth fit's own error (each target's own), and the
-straight line's own error between references (shared by the targets of one interval).
+log its noise in the Jacobian), the smooth fit's own error and the straight line's own
+error between references (each shared by the targets of one interval: the smooth fit's
+with a log, and past the last reference without one).
 """
 
 from __future__ import annotations
@@ -16,11 +17,11 @@ import numpy as np
 
 from hexatherm.core.curvature import CurvatureError
 from hexatherm.core.propagation import PoseChain, TargetJacobian, target_jacobian
-from hexatherm.core.smoothbias import GrowthExcess, leg_derivatives, own_leg_covariance
-from hexatherm.typing import FloatArray
+from hexatherm.core.smoothbias import leg_derivatives, own_leg_covariance
+from hexatherm.typing import FloatArray, IntArray
 from hexatherm.workflows.process.carryerror import CarryError, carry_error
 from hexatherm.workflows.process.pipeline import ProcessResult
-from hexatherm.workflows.process.smootherror import curvature_excess, smooth_excess
+from hexatherm.workflows.process.smootherror import SmoothExcess, curvature_excess, smooth_excess
 
 if TYPE_CHECKING:  # the calibration's weights (and scipy.sparse): imported when used
     from hexatherm.core.calibration.weights import BandedCovariance
@@ -45,8 +46,9 @@ class ErrorTerms:
         else ``jacobian``).
     carried : CarryError, optional
         The carry of O and R0 to R0's thermal state beyond the propagation (common).
-    excess : (ndarray (M, 6, 6), GrowthExcess), optional
-        The smooth fit's own error on each corrected pose (its own, independent).
+    excess : SmoothExcess, optional
+        The smooth fit's own error on each corrected pose, and its part shared by the
+        targets of one interval (with a log; without, past the last reference).
     curved : (ndarray (M, 6), CurvatureError), optional
         The straight line's own error of each corrected pose, as a vector ``F`` (mm,
         deg): ``F F^T`` its own, ``F_a F_b^T`` between two targets of one interval.
@@ -55,27 +57,34 @@ class ErrorTerms:
     jacobian: TargetJacobian
     full: TargetJacobian
     carried: CarryError | None
-    excess: tuple[FloatArray, GrowthExcess] | None
+    excess: SmoothExcess | None
     curved: tuple[FloatArray, CurvatureError] | None
 
     def own_blocks(self) -> FloatArray | None:
         """Each corrected pose's covariance (M, 6, 6) from the interpolation's own error
         (the smooth fit's, the straight line's); None: none."""
-        out = None if self.excess is None else self.excess[0]
+        out = None if self.excess is None else self.excess.cov
         if self.curved is not None:
             f = self.curved[0]
             out = f[:, :, None] * f[:, None, :] + (0.0 if out is None else out)
         return out
 
-    def shared(self) -> FloatArray | None:
-        """(M, M) 1 where two targets share the straight line's error (one interval,
-        the diagonal included), else 0; None without it."""
-        if self.curved is None:
-            return None
-        interval = self.curved[1].interval
-        assert interval is not None
-        same = (interval[:, None] == interval[None, :]) & (interval >= 0)[:, None]
-        return np.asarray(same, dtype=float)
+    def shared(self) -> list[tuple[IntArray, IntArray, FloatArray]]:
+        """The interpolation's own errors shared within an interval (the straight line's,
+        the smooth fit's): for each, the pairs of distinct targets of one interval
+        (``a``, ``b``: both orders) and the targets' error vectors ``V`` (M, 6, K):
+        ``V_a V_b^T`` their covariance."""
+        terms = []
+        if self.curved is not None:
+            terms.append((self.curved[0][:, :, None], self.curved[1].interval))
+        if self.excess is not None:
+            terms.append((self.excess.vectors, self.excess.interval))
+        out = []
+        for vectors, interval in terms:
+            assert interval is not None
+            a, b = interval_pairs(interval)
+            out.append((np.r_[a, b], np.r_[b, a], vectors))
+        return out
 
     def between_targets(self) -> FloatArray:
         """The corrected outputs' covariance (6, M, M) between targets from the
@@ -85,11 +94,8 @@ class ErrorTerms:
         m = own.shape[0]
         out = np.zeros((6, m, m))
         out[:, np.arange(m), np.arange(m)] = np.diagonal(own, axis1=1, axis2=2).T
-        same = self.shared()
-        if same is not None:
-            f = self.curved[0].T  # type: ignore[index]  # (6, M)
-            np.fill_diagonal(same, 0.0)  # the diagonal is in own already
-            out += same * f[:, :, None] * f[:, None, :]
+        for a, b, v in self.shared():
+            out[:, a, b] += np.einsum("pyk,pyk->yp", v[a], v[b])
         return out
 
     def joint(self, outputs: slice) -> FloatArray:
@@ -103,14 +109,29 @@ class ErrorTerms:
             out += factor @ factor.T
         if outputs != slice(6, 12):
             return out
-        if self.excess is not None:
-            for k, block in enumerate(self.excess[0]):
-                out[6 * k : 6 * k + 6, 6 * k : 6 * k + 6] += block
-        same = self.shared()
-        if same is not None:
-            f = self.curved[0]  # type: ignore[index]
-            out += (same[:, None, :, None] * f[:, :, None, None] * f[None, None]).reshape(out.shape)
+        blocks = out.reshape(m, 6, m, 6)  # a view: target, output, target, output
+        own = self.own_blocks()
+        if own is not None:
+            blocks[np.arange(m), :, np.arange(m)] += own
+        for a, b, v in self.shared():
+            blocks[a, :, b] += v[a] @ np.swapaxes(v[b], 1, 2)
         return out
+
+
+def interval_pairs(interval: IntArray) -> tuple[IntArray, IntArray]:
+    """The pairs (``a``, ``b``; each once) of distinct targets of one interval (-1:
+    none); as many as there are, not M^2 (the targets in order of their interval, each
+    beside the next ones of its run)."""
+    order = np.argsort(interval, kind="stable")
+    runs = interval[order]
+    a, b = [np.zeros(0, np.intp)], [np.zeros(0, np.intp)]
+    for lag in range(1, order.size):
+        same = (runs[lag:] == runs[:-lag]) & (runs[lag:] >= 0)
+        if not same.any():  # no run longer than lag
+            break
+        a.append(order[:-lag][same])
+        b.append(order[lag:][same])
+    return np.concatenate(a), np.concatenate(b)
 
 
 def error_terms(result: ProcessResult, chain: PoseChain, centre_cov_mm2: FloatArray) -> ErrorTerms:

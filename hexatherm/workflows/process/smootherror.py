@@ -11,6 +11,7 @@ corrected poses' own part.
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import numpy as np
 
@@ -29,7 +30,31 @@ from hexatherm.core.smoothbias import (
 from hexatherm.typing import FloatArray, IntArray
 from hexatherm.workflows.process.pipeline import ProcessResult
 
-__all__ = ["curvature_excess", "neighbour_weights", "smooth_excess"]
+__all__ = ["SmoothExcess", "curvature_excess", "neighbour_weights", "smooth_excess"]
+
+
+class SmoothExcess(NamedTuple):
+    """The smooth growth's own error on the corrected poses (:func:`smooth_excess`).
+
+    Attributes
+    ----------
+    cov : ndarray, shape (M, 6, 6)
+        Each target's own (mm, deg).
+    evaluation : GrowthExcess
+        Its evaluation at the references.
+    vectors : ndarray, shape (M, 6, K)
+        Its part shared by the targets of one interval, as error vectors of each
+        corrected pose: ``V_a V_b^T`` the covariance between two of them (``V V^T`` is in
+        ``cov``).
+    interval : ndarray of int, shape (M,)
+        The interval of each target: the reference before it (the last one for a target
+        past it; -1 before the first: its own).
+    """
+
+    cov: FloatArray
+    evaluation: GrowthExcess
+    vectors: FloatArray
+    interval: IntArray
 
 
 def smooth_excess(
@@ -37,7 +62,7 @@ def smooth_excess(
     chain: PoseChain,
     centre_cov_mm2: FloatArray,
     legs_cov_mm2: FloatArray | None = None,
-) -> tuple[FloatArray, GrowthExcess] | None:
+) -> SmoothExcess | None:
     """The smooth growth's own error carried to the corrected poses, (M, 6, 6), and its
     evaluation at the references; None unless the smooth fit was used.
 
@@ -45,11 +70,19 @@ def smooth_excess(
     (:func:`~hexatherm.core.smoothbias.growth_excess`) give the covariance of the growth
     at R that the fixed-smoothing propagation leaves out (the spline's bias, the smoothing's
     choice); it is carried to every target's legs by the growth scaling and through the
-    FGM, as the target's own part (not shared with the other targets). With a
-    thermocouple log, each target also gets the fit's error on a growth shaped as the log
-    (:func:`~hexatherm.core.smoothbias.log_shape_error`): what the residuals at the
-    references cannot see at a target far from them (a gap, irregular times) or across a
-    heating switched on or off.
+    FGM. With a thermocouple log, each target also gets the fit's error on a growth
+    shaped as the log (:func:`~hexatherm.core.smoothbias.log_shape_error`): what the
+    residuals at the references cannot see at a target far from them (a gap, irregular
+    times) or across a heating switched on or off. Without one, a target past the last
+    reference gets the fit's error there (:func:`past_last_error`).
+
+    Two targets of one interval (between the same two references, or both past the last)
+    share: with a log, both terms (the fit's error is a smooth function of time, nearly
+    the same at two targets of one interval once the log's shape is taken off; measured
+    against the twin's truth, docs/uncertainty.md); without one, the error past the last
+    reference (the Type A part is then each target's own: measured, shared it claimed
+    0.58 of the difference of two targets' errors where the fit bends across the
+    interval, own 0.82).
 
     ``legs_cov_mm2`` (R, 6, 6): the references' leg lengths' covariance from their own
     centres (:func:`~hexatherm.core.smoothbias.own_leg_covariance`), made here when not
@@ -82,11 +115,68 @@ def smooth_excess(
         legs_cov,
         ref_model,
     )
-    growth_cov = np.broadcast_to(excess.cov_mm2, (corr.target_index.size, 6, 6))
+    m = corr.target_index.size
+    growth_cov = np.broadcast_to(excess.cov_mm2, (m, 6, 6))
     if shape is not None:
         growth_cov = growth_cov + shape[:, :, None] * shape[:, None, :]
         excess = dataclasses.replace(excess, shape_um=np.sqrt(np.mean(shape**2, axis=1)) * 1e3)
-    return to_poses(result, chain, growth_cov), excess
+        # shared within an interval: the excess as vectors (its eigenvectors times the
+        # square roots of their values; with the log's shape taken off, what is left
+        # varies slowly across an interval), and the log's shape
+        values, axes = np.linalg.eigh(excess.cov_mm2)
+        root = np.broadcast_to(axes * np.sqrt(np.clip(values, 0.0, None)), (m, 6, 6))
+        shared = np.concatenate([root, shape[:, :, None]], axis=2)
+    else:
+        # without a log the excess is each target's own; past the last reference, the
+        # fit's straight continuation
+        shared = past_last_error(result, legs_cov)
+        growth_cov = growth_cov + shared @ np.swapaxes(shared, 1, 2)
+        past_um = np.sqrt(np.sum(shared**2, axis=(1, 2)) / 6) * 1e3
+        excess = dataclasses.replace(excess, past_um=past_um)
+    by_growth = to_pose_factor(result, chain)
+    cov = np.asarray(by_growth @ growth_cov @ np.swapaxes(by_growth, 1, 2))
+    interval = np.searchsorted(times[refs], times[corr.target_index], side="right") - 1
+    return SmoothExcess(cov, excess, by_growth @ shared, interval.astype(np.intp))
+
+
+def past_last_error(result: ProcessResult, legs_cov_mm2: FloatArray) -> FloatArray:
+    """The smooth fit's own error of the growth at R at each target past the last
+    reference, without a log, as two vectors (M, 6, 2; zero for the other targets).
+
+    The references' residuals see the fit between references, not its straight
+    continuation past the last one (a natural spline's). With the fit's weights ``W``
+    there (the same on every leg: one smoothing) and ``L`` the line through the last two
+    references carried on, the error is ``(W - L) G`` (the fit against that line) plus
+    the line's own extrapolation error, ``f g''`` with ``f = (t - t0)(t1 - t) / 2``
+    (negative) and ``g''`` read by the last inner reference's stencil
+    (:func:`~hexatherm.core.curvature.curvature_error`). That stencil reads the curvature
+    before the last reference, not past it (a heating switched on settles: its curvature
+    turns), so the second is a vector of unknown sign, independent of the first. Each
+    with its noise's share off (``max(0, 1 - tr N / |v|^2)``, ``N = sum_j c_j^2 S_j``).
+    """
+    corr = result.correction
+    assert corr.smooth is not None
+    refs = result.session.plan.reference_indices
+    t, ts = result.centres.times_s[refs], result.centres.times_s[corr.target_index]
+    out = np.zeros((ts.size, 6, 2))
+    past = np.flatnonzero(ts > t[-1])
+    if past.size == 0:
+        return out
+    q = result.steps.q_mm
+    growth = q[refs] - q[refs[0]]
+    w = (ts[past] - t[-2]) / (t[-1] - t[-2])
+    line = np.zeros((past.size, t.size))
+    line[:, -2], line[:, -1] = 1.0 - w, w
+    c = corr.smooth.weights[past, 0, :] - line
+    first = c @ growth
+    noise = (c**2) @ np.trace(legs_cov_mm2, axis1=1, axis2=2)
+    total = np.sum(first**2, axis=1)
+    share = np.where(total > 0, np.maximum(0.0, 1.0 - noise / np.where(total > 0, total, 1.0)), 0.0)
+    out[past, :, 0] = np.sqrt(share)[:, None] * first
+    curved = curvature_error(t, growth, legs_cov_mm2, ts[past], line)
+    assert curved.vector_mm is not None
+    out[past, :, 1] = curved.vector_mm
+    return out
 
 
 def curvature_excess(
@@ -166,13 +256,6 @@ def curvature_excess(
         return None
     assert error.vector_mm is not None
     return np.einsum("mpl,ml->mp", to_pose_factor(result, chain), error.vector_mm), error
-
-
-def to_poses(result: ProcessResult, chain: PoseChain, growth_cov_mm2: FloatArray) -> FloatArray:
-    """Covariance (M, 6, 6) of the corrected poses from one of the growth at R at each
-    target (:func:`~hexatherm.core.smoothbias.corrected_excess`)."""
-    by_growth = to_pose_factor(result, chain)
-    return np.asarray(by_growth @ growth_cov_mm2 @ np.swapaxes(by_growth, 1, 2))
 
 
 def to_pose_factor(result: ProcessResult, chain: PoseChain) -> FloatArray:

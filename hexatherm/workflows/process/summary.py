@@ -58,6 +58,12 @@ def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
             else "  no thermocouple log: the smooth fit's error between references far apart "
             "or across a heating switched on or off rests on the references' residuals alone"
         )
+        if excess.past_um is not None and np.any(excess.past_um > 0):
+            lines.append(
+                "  smooth fit's own error past the last reference (its straight continuation):"
+                f" up to {excess.past_um.max():.3g} um RMS over the legs, at "
+                f"{np.count_nonzero(excess.past_um)} target(s), added to their own u"
+            )
         if excess.shape_um is None and excess.widest_gap > WIDE_GAP:
             lines.append(
                 f"warning: references up to {excess.widest_gap:.2g}x their median spacing "
