@@ -162,8 +162,15 @@ def rotation_derivatives(angles_deg: npt.ArrayLike, convention: str = "symetrie"
 
 def angle_rates(angles_deg: npt.ArrayLike, convention: str = "symetrie") -> FloatArray:
     """The change of ``[Rx, Ry, Rz]`` (deg) per small rotation ``omega`` (rad) applied on
-    the left, ``R -> (I + [omega]x) R``: matrices (..., 3, 3), the inverse of the one
-    whose column k is ``vee(dR/dangle_k R^T)`` (:func:`rotation_derivatives`).
+    the left, ``R -> (I + [omega]x) R``: matrices (..., 3, 3), the inverse of
+    :func:`angle_velocities` (whose column k is ``vee(dR/dangle_k R^T)``, from
+    :func:`rotation_derivatives`), in closed form: for ``R = Rz Ry Rx`` (symetrie)
+
+        ``[[cz/cy, sz/cy, 0], [-sz, cz, 0], [sy cz/cy, sy sz/cy, 1]]``
+
+    and for ``R = Rx Ry Rz`` (pi) ``[[1, sy sx/cy, -sy cx/cy], [0, cx, sx], [0, -sx/cy,
+    cx/cy]]``, times ``180/pi`` (``c``, ``s`` the cosines and sines of the angles; the
+    determinant of the velocities is ``cy``: singular only at the gimbal lock).
 
     >>> import numpy as np
     >>> np.round(angle_rates([0, 0, 0]), 6) + 0.0  # at zero: 180/pi deg per rad, axis by axis
@@ -171,11 +178,54 @@ def angle_rates(angles_deg: npt.ArrayLike, convention: str = "symetrie") -> Floa
            [ 0.     , 57.29578,  0.     ],
            [ 0.     ,  0.     , 57.29578]])
     """
-    a = np.asarray(angles_deg, dtype=float)
-    rot = rotation_from_angles(a, convention)
-    skew = rotation_derivatives(a, convention) @ np.swapaxes(rot, -1, -2)[..., None, :, :]
-    columns = np.stack([skew[..., 2, 1], skew[..., 0, 2], skew[..., 1, 0]], axis=-1)
-    return np.asarray(np.linalg.inv(np.swapaxes(columns, -1, -2)), dtype=float)
+    convention = check_convention(convention)
+    a = np.deg2rad(np.asarray(angles_deg, dtype=float))
+    c, s = np.cos(a), np.sin(a)
+    cx, cy, cz = c[..., 0], c[..., 1], c[..., 2]
+    sx, sy, sz = s[..., 0], s[..., 1], s[..., 2]
+    out = np.zeros(a.shape[:-1] + (3, 3))
+    per_deg = 180.0 / np.pi
+    secant = per_deg / cy
+    if convention == "symetrie":
+        out[..., 0, 0], out[..., 0, 1] = cz * secant, sz * secant
+        out[..., 1, 0], out[..., 1, 1] = -sz * per_deg, cz * per_deg
+        out[..., 2, 0], out[..., 2, 1] = sy * cz * secant, sy * sz * secant
+        out[..., 2, 2] = per_deg
+    else:
+        out[..., 0, 0] = per_deg
+        out[..., 0, 1], out[..., 0, 2] = sy * sx * secant, -sy * cx * secant
+        out[..., 1, 1], out[..., 1, 2] = cx * per_deg, sx * per_deg
+        out[..., 2, 1], out[..., 2, 2] = -sx * secant, cx * secant
+    return out
+
+
+def angle_velocities(angles_deg: npt.ArrayLike, convention: str = "symetrie") -> FloatArray:
+    """The small rotation ``omega`` (rad, applied on the left: ``R -> (I + [omega]x) R``)
+    per degree of each of ``[Rx, Ry, Rz]``: matrices (..., 3, 3) whose column k is
+    ``vee(dR/dangle_k R^T)``, the inverse of :func:`angle_rates`, in closed form: the
+    columns are ``Rz Ry e_x``, ``Rz e_y``, ``e_z`` for ``R = Rz Ry Rx`` (symetrie) and
+    ``e_x``, ``Rx e_y``, ``Rx Ry e_z`` for ``R = Rx Ry Rz`` (pi), times ``pi/180``.
+
+    >>> import numpy as np
+    >>> bool(np.allclose(angle_velocities([10, -20, 30]) @ angle_rates([10, -20, 30]), np.eye(3)))
+    True
+    """
+    convention = check_convention(convention)
+    a = np.deg2rad(np.asarray(angles_deg, dtype=float))
+    c, s = np.cos(a), np.sin(a)
+    cx, cy, cz = c[..., 0], c[..., 1], c[..., 2]
+    sx, sy, sz = s[..., 0], s[..., 1], s[..., 2]
+    out = np.zeros(a.shape[:-1] + (3, 3))
+    rad = np.pi / 180.0
+    if convention == "symetrie":
+        out[..., 0, 0], out[..., 1, 0], out[..., 2, 0] = cz * cy * rad, sz * cy * rad, -sy * rad
+        out[..., 0, 1], out[..., 1, 1] = -sz * rad, cz * rad
+        out[..., 2, 2] = rad
+    else:
+        out[..., 0, 0] = rad
+        out[..., 1, 1], out[..., 2, 1] = cx * rad, sx * rad
+        out[..., 0, 2], out[..., 1, 2], out[..., 2, 2] = sy * rad, -sx * cy * rad, cx * cy * rad
+    return out
 
 
 def angles_from_rotation(rotation: npt.ArrayLike, convention: str = "symetrie") -> FloatArray:
