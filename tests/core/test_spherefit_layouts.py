@@ -1,0 +1,147 @@
+"""The sphere fit's faster paths of issue 37 against the ones they replace: the padded
+layout of equal point counts against the flat one (``reduceat``), the Cholesky solve
+written out against LAPACK's, and the Kasa start without eigenvalues against the
+eigen-decomposition's; on random and hostile spheres (shallow caps, few points, noise
+up to the sagitta, nearly coplanar points, far from the origin)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import hexatherm.core.spherefit as sf
+from hexatherm.core.spherefit import fit_spheres
+from hexatherm.errors import FitError
+
+from .test_spherefit import RADIUS, cap_directions
+
+
+def _spheres(seed: int, counts: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """One sphere per count: caps from 8 to 180 deg, noise from 1e-7 to 0.1 of the cap's
+    sagitta, centres up to 900 mm from the origin, points in file order."""
+    rng = np.random.default_rng(seed)
+    pts, groups = [], []
+    for k, n in enumerate(counts):
+        half = float(rng.choice([8.0, 12.0, 20.0, 45.0, 70.0, 150.0, 180.0]))
+        u = cap_directions(n, half, rng, axis=rng.normal(size=3))
+        sagitta = RADIUS * (1 - np.cos(np.radians(min(half, 90.0))))
+        noise = sagitta * float(rng.choice([1e-7, 1e-4, 1e-2, 0.1]))
+        centre = rng.uniform(-900.0, 900.0, 3)
+        pts.append(centre + (RADIUS + rng.normal(0.0, noise, n))[:, None] * u)
+        groups.append(np.full(n, k))
+    return np.vstack(pts), np.concatenate(groups)
+
+
+def _assert_same_fits(fits: sf.SphereFits, ref: sf.SphereFits) -> None:
+    """Agreement far below what the files resolve (1e-7 mm): rounding and, where a step
+    at the convergence test's edge is taken one pass later, that step (<= 1e-12 mm)."""
+    np.testing.assert_allclose(fits.centre_mm, ref.centre_mm, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(fits.radius_mm, ref.radius_mm, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(fits.residuals_mm, ref.residuals_mm, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(fits.rms_um, ref.rms_um, rtol=1e-7, atol=1e-7)
+    np.testing.assert_allclose(fits.form_um, ref.form_um, rtol=1e-7, atol=1e-7)
+    np.testing.assert_allclose(fits.cap_half_angle_deg, ref.cap_half_angle_deg, atol=1e-8)
+    u = [1e3 * np.sqrt(np.diagonal(f.cov_centre_mm2, axis1=1, axis2=2)) for f in (fits, ref)]
+    np.testing.assert_allclose(u[0], u[1], rtol=1e-6, atol=1e-9)
+    assert np.abs(fits.iterations - ref.iterations).max() <= 1
+
+
+CASES = {
+    "equal counts": [25] * 300,
+    "nearly equal (padded, masked)": [24, 25, 26, 25, 23] * 60,
+    "few points": [4, 5, 4, 5, 5] * 40,
+    "one sphere": [25],
+}
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+@pytest.mark.parametrize("fixed", [False, True])
+@pytest.mark.parametrize("case", list(CASES))
+def test_padded_layout_equals_the_flat_one(
+    case: str, fixed: bool, seed: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    p, g = _spheres(seed, CASES[case])
+    radius = None
+    if fixed:  # a nominal radius a few micrometres off
+        radius = RADIUS + np.random.default_rng(seed).normal(0.0, 3e-3, int(g.max()) + 1)
+    fits = fit_spheres(p, g, radius_mm=radius)
+    monkeypatch.setattr(sf, "PADDED_FILL", 0.0)  # every block flat, as before
+    ref = fit_spheres(p, g, radius_mm=radius)
+    _assert_same_fits(fits, ref)
+
+
+def test_padded_layout_over_blocks_and_shuffled_points(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Several blocks (a small block size), the points in any order."""
+    p, g = _spheres(3, [25] * 200 + [30] * 50)
+    perm = np.random.default_rng(3).permutation(len(g))
+    monkeypatch.setattr(sf, "BLOCK_POINTS", 1000)
+    fits = fit_spheres(p[perm], g[perm])
+    monkeypatch.setattr(sf, "PADDED_FILL", 0.0)
+    _assert_same_fits(fits, fit_spheres(p[perm], g[perm]))
+
+
+@pytest.mark.parametrize("padded", [True, False])
+def test_an_ill_conditioned_sphere_is_named_alike_in_both_layouts(
+    padded: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A 0.05 deg cap among good ones: the same error, naming the same sphere and its
+    cap (the padded layout's directions flattened for the message)."""
+    p, g = _spheres(4, [25] * 20)
+    rng = np.random.default_rng(4)
+    p[g == 7] = [1.0, 2.0, 3.0] + RADIUS * cap_directions(25, 0.05, rng)
+    if not padded:
+        monkeypatch.setattr(sf, "PADDED_FILL", 0.0)
+    with pytest.raises(FitError) as raised:
+        fit_spheres(p, g)
+    message = str(raised.value)
+    assert message.startswith("sphere 7: the normal equations are ill-conditioned")
+    assert "cap of half-angle 0.0" in message
+
+
+def _solve_before(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``_solve`` as it was: LAPACK's LU with pivoting, one matrix at a time."""
+    return np.asarray(np.linalg.solve(a, b[..., None])[..., 0])
+
+
+@pytest.mark.parametrize("p", [2, 3, 4])
+def test_cholesky_solve_equals_lapack(p: int) -> None:
+    rng = np.random.default_rng(p)
+    m = 500
+    # normal matrices from well to badly conditioned (column scales over 6 decades)
+    x = rng.normal(size=(m, 30, p)) * 10.0 ** rng.uniform(-3.0, 3.0, (m, 1, p))
+    a = np.swapaxes(x, 1, 2) @ x
+    b = rng.normal(size=(m, p))
+    ours, ref = sf._solve(a, b), _solve_before(a, b)
+    # backward errors alike: both residuals at the rounding of a x
+    scale = np.abs(a).max(axis=(1, 2)) * np.abs(ref).max(axis=1) + np.abs(b).max(axis=1)
+    for x_ in (ours, ref):
+        resid = np.abs(np.einsum("mij,mj->mi", a, x_) - b).max(axis=1)
+        assert np.all(resid <= 1e-12 * scale)
+    cond = np.linalg.cond(a)
+    err = np.abs(ours - ref).max(axis=1) / np.abs(ref).max(axis=1)
+    assert np.all(err <= 1e-15 * cond + 1e-13)
+
+
+def test_cholesky_solve_falls_back_to_lapack_off_positive_definite() -> None:
+    """An indefinite matrix: LU's answer; a singular one: LU's LinAlgError."""
+    a = np.array([[[1.0, 2.0], [2.0, 1.0]], [[2.0, 0.0], [0.0, 3.0]]])
+    b = np.array([[1.0, 0.0], [1.0, 1.0]])
+    np.testing.assert_allclose(sf._solve(a, b), _solve_before(a, b), rtol=1e-15)
+    with pytest.raises(np.linalg.LinAlgError):
+        sf._solve(np.zeros((1, 3, 3)), np.ones((1, 3)))
+    assert sf._solve(np.zeros((0, 4, 4)), np.zeros((0, 4))).shape == (0, 4)
+
+
+@pytest.mark.parametrize("seed", [5, 6])
+def test_kasa_start_without_eigenvalues_reaches_the_same_fits(
+    seed: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The eigen-decomposition for every scatter matrix (``_KASA_COND = 0``: as before)
+    against the Cholesky start where the bound allows it; nearly coplanar spheres (a
+    1 deg cap, ratio about 1e-4) go through the eigenvalues either way."""
+    p, g = _spheres(seed, [25] * 100 + [9] * 50)
+    rng = np.random.default_rng(seed)
+    p[g == 3] = [5.0, 0.0, 0.0] + RADIUS * cap_directions(25, 2.0, rng)
+    fits = fit_spheres(p, g, radius_mm=None)
+    monkeypatch.setattr(sf, "_KASA_COND", 0.0)
+    _assert_same_fits(fits, fit_spheres(p, g))
