@@ -436,7 +436,8 @@ def _fit_nspheres(
 
     # Scatter matrices and degeneracy (coplanarity) test.
     ia, ib = np.triu_indices(d)
-    s_up = np.add.reduceat(q[:, ia] * q[:, ib], starts, axis=0)
+    points = _layout(q, counts, free)
+    s_up, t, sum_q2 = points.moments()
     scatter = np.empty((m, d, d))
     scatter[:, ia, ib] = s_up
     scatter[:, ib, ia] = s_up
@@ -475,9 +476,7 @@ def _fit_nspheres(
 
     # Algebraic (Kasa) start, decoupled because the points are centred:
     # c = S^-1 sum(q |q|^2) / 2,  r^2 = mean|q|^2 + |c|^2.
-    q2 = np.einsum("ij,ij->i", q, q)
-    t = np.add.reduceat(q * q2[:, None], starts, axis=0)
-    mean_q2 = np.add.reduceat(q2, starts) / counts
+    mean_q2 = sum_q2 / counts
     c = np.empty((m, d))
     if easy.any():
         c[easy] = _solve(scatter[easy], t[easy]) / 2.0
@@ -502,7 +501,7 @@ def _fit_nspheres(
         c = np.stack(cands)[best, np.arange(m)]
 
     radius_scale = np.sqrt(mean_q2)
-    fast = _plain_passes(q, counts, starts, c, r, radius_scale, free, tol_mm, label, max_iter)
+    fast = _plain_passes(points, c, r, radius_scale, free, tol_mm, label, max_iter)
     lam_lm = np.zeros(m)
     iterations = np.zeros(m, dtype=np.int64)
     # the spheres the plain passes left (a step that raised the cost, slow convergence)
@@ -605,7 +604,9 @@ def _fit_nspheres(
         u[on] = _unit(v, dist)
         e[on] = e_left
         a[left], _, cost[left] = _normal_equations(u[on], e_left, cnt, _starts(cnt), free)
-    coverage = _coverage_deg(u, counts, starts)
+    coverage = None if left.any() else points.final_coverage()
+    if coverage is None:
+        coverage = _coverage_deg(u, counts, starts)
     _ill_conditioned(_condition(a), coverage, label, free)
     if free:
         _raise_first(
@@ -662,8 +663,22 @@ class _FlatPoints:
         self.u, self.e = _unit(v, dist), e
         return _normal_equations(self.u, e, self.cnt, self.st, self.free)
 
+    def moments(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """Per sphere: the scatter matrix's upper triangle ``sum q_i q_j`` (i <= j),
+        ``sum q |q|^2`` and ``sum |q|^2`` (the Kasa start's sums)."""
+        q = self.q
+        ia, ib = np.triu_indices(q.shape[1])
+        q2 = np.einsum("ij,ij->i", q, q)
+        s_up = np.add.reduceat(q[:, ia] * q[:, ib], self.st, axis=0)
+        return s_up, np.add.reduceat(q * q2[:, None], self.st, axis=0), np.add.reduceat(q2, self.st)
+
     def coverage(self) -> NDArray[np.float64]:
         return _coverage_deg(self.u, self.cnt, self.st)
+
+    def final_coverage(self) -> NDArray[np.float64] | None:
+        """The caps' half-angles from the directions written (None: the caller computes
+        them from its own)."""
+        return None
 
     def write(self, step: NDArray[np.float64]) -> None:
         """The residuals carried by ``step`` and the directions, of every active sphere
@@ -703,7 +718,7 @@ class _PaddedPoints:
             self.mask = np.arange(width) < counts[:, None]  # row-major: the points' order
             self.q = np.zeros((d, m, width))
             self.q[:, self.mask] = q.T
-        self.full_mask = self.mask
+        self.full_mask, self.full_counts = self.mask, counts
         self.idx = np.arange(m)
         self.residuals_out = np.zeros((m, width))
         self.unit_out = np.zeros((d, m, width))
@@ -740,8 +755,36 @@ class _PaddedPoints:
         flat = u.reshape(self.d, -1) if self.mask is None else u[:, self.mask]
         return np.ascontiguousarray(flat.T)
 
+    def moments(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """:meth:`_FlatPoints.moments`, as dot products along the rows."""
+        q, d = self.q, self.d
+        ia, ib = np.triu_indices(d)
+        s_up = np.stack([np.einsum("mw,mw->m", q[i], q[j]) for i, j in zip(ia, ib, strict=True)], 1)
+        q2 = np.einsum("imw,imw->mw", q, q)
+        return s_up, np.einsum("imw,mw->mi", q, q2), np.einsum("mw->m", q2)
+
     def coverage(self) -> NDArray[np.float64]:
         return _coverage_deg(self._flat_unit(self.u), self.cnt, _starts(self.cnt))
+
+    def final_coverage(self) -> NDArray[np.float64] | None:
+        """:func:`_coverage_deg` of every sphere from the directions written (all of
+        them: the caller asks only when the passes fitted every sphere), along the rows:
+        the farthest direction is the first of least cosine, as there. None where a
+        cosine is not finite (:func:`_coverage_deg`'s own fallback decides)."""
+        u, mask, counts = self.unit_out, self.full_mask, self.full_counts
+        total = np.einsum("imw->mi", u)
+        norm = np.linalg.norm(total, axis=1)
+        cancelled = norm <= 1e-12 * counts
+        mean_dir = total / np.where(cancelled, 1.0, norm)[:, None]
+        cos = np.einsum("imw,mi->mw", u, mean_dir)
+        if mask is not None:
+            cos[~mask] = np.inf
+        if not np.all(np.isfinite(cos) | np.isposinf(cos)) or np.any(np.isposinf(cos.min(1))):
+            return None
+        rows = np.arange(cos.shape[0])
+        first = np.argmin(cos, axis=1)
+        cov = np.degrees(np.arctan2(_sines(u[:, rows, first].T, mean_dir), cos[rows, first]))
+        return np.asarray(np.where(cancelled, 180.0, cov))
 
     def write(self, step: NDArray[np.float64]) -> None:
         """The residuals carried by ``step`` and the directions, of every active sphere."""
@@ -767,10 +810,20 @@ class _PaddedPoints:
         return self.residuals_out[self.full_mask], unit
 
 
+_Points = _FlatPoints | _PaddedPoints
+
+
+def _layout(q: NDArray[np.float64], counts: NDArray[np.int64], free: bool) -> _Points:
+    """Spheres of equal (or nearly equal: :data:`PADDED_FILL`) point counts laid out one a
+    row (:class:`_PaddedPoints`), others one after the other (:class:`_FlatPoints`)."""
+    m = counts.size
+    if m > 0 and counts.max() * m <= PADDED_FILL * q.shape[0]:
+        return _PaddedPoints(q, counts, free)
+    return _FlatPoints(q, counts, free)
+
+
 def _plain_passes(
-    q: NDArray[np.float64],
-    counts: NDArray[np.int64],
-    starts: NDArray[np.int64],
+    points: _Points,
     c: NDArray[np.float64],
     r: NDArray[np.float64],
     radius_scale: NDArray[np.float64],
@@ -793,13 +846,10 @@ def _plain_passes(
     the general iteration would damp), a singular matrix, or no convergence within
     :data:`_PLAIN_PASSES` passes leaves the sphere not ``done``: it is fitted again from
     its start by the general iteration, which then takes the same steps as it always
-    did. Spheres of equal (or nearly equal: :data:`PADDED_FILL`) point counts are laid
-    out one a row (:class:`_PaddedPoints`), others one after the other
-    (:class:`_FlatPoints`)."""
+    did. ``points``: the spheres' points in their layout (:func:`_layout`)."""
     m, d = c.shape
     p = d + 1 if free else d
-    padded = m > 0 and counts.max() * m <= PADDED_FILL * q.shape[0]
-    points = _PaddedPoints(q, counts, free) if padded else _FlatPoints(q, counts, free)
+    counts = points.cnt
     done = np.zeros(m, dtype=bool)
     centre = c.copy()
     radius = r.copy()

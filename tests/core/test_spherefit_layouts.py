@@ -32,12 +32,14 @@ def _spheres(seed: int, counts: list[int]) -> tuple[np.ndarray, np.ndarray]:
     return np.vstack(pts), np.concatenate(groups)
 
 
-def _assert_same_fits(fits: sf.SphereFits, ref: sf.SphereFits) -> None:
+def _assert_same_fits(fits: sf.SphereFits, ref: sf.SphereFits, atol_mm: float = 1e-10) -> None:
     """Agreement far below what the files resolve (1e-7 mm): rounding and, where a step
-    at the convergence test's edge is taken one pass later, that step (<= 1e-12 mm)."""
-    np.testing.assert_allclose(fits.centre_mm, ref.centre_mm, rtol=0, atol=1e-10)
-    np.testing.assert_allclose(fits.radius_mm, ref.radius_mm, rtol=0, atol=1e-10)
-    np.testing.assert_allclose(fits.residuals_mm, ref.residuals_mm, rtol=0, atol=1e-10)
+    at the convergence test's edge is taken one pass later, that step (<= 1e-12 mm); a
+    sphere of 4 or 5 points on a shallow cap with noise near the sagitta is determined
+    only to its condition number times the rounding of the sums (1e-8 mm there)."""
+    np.testing.assert_allclose(fits.centre_mm, ref.centre_mm, rtol=0, atol=atol_mm)
+    np.testing.assert_allclose(fits.radius_mm, ref.radius_mm, rtol=0, atol=atol_mm)
+    np.testing.assert_allclose(fits.residuals_mm, ref.residuals_mm, rtol=0, atol=atol_mm)
     np.testing.assert_allclose(fits.rms_um, ref.rms_um, rtol=1e-7, atol=1e-7)
     np.testing.assert_allclose(fits.form_um, ref.form_um, rtol=1e-7, atol=1e-7)
     np.testing.assert_allclose(fits.cap_half_angle_deg, ref.cap_half_angle_deg, atol=1e-8)
@@ -67,7 +69,7 @@ def test_padded_layout_equals_the_flat_one(
     fits = fit_spheres(p, g, radius_mm=radius)
     monkeypatch.setattr(sf, "PADDED_FILL", 0.0)  # every block flat, as before
     ref = fit_spheres(p, g, radius_mm=radius)
-    _assert_same_fits(fits, ref)
+    _assert_same_fits(fits, ref, 1e-8 if case == "few points" else 1e-10)
 
 
 def test_padded_layout_over_blocks_and_shuffled_points(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -144,4 +146,40 @@ def test_kasa_start_without_eigenvalues_reaches_the_same_fits(
     p[g == 3] = [5.0, 0.0, 0.0] + RADIUS * cap_directions(25, 2.0, rng)
     fits = fit_spheres(p, g, radius_mm=None)
     monkeypatch.setattr(sf, "_KASA_COND", 0.0)
+    _assert_same_fits(fits, fit_spheres(p, g))
+
+
+def test_padded_caps_equal_the_flat_ones_directions_cancelling_too(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The caps' half-angles from the padded directions: the six points on the axes (the
+    directions cancel: 180 deg), a hemisphere and random caps, equal and ragged counts."""
+    axes = np.vstack([np.eye(3), -np.eye(3)])
+    p, g = _spheres(7, [6] * 30 + [7] * 3)
+    p[g == 2] = [10.0, 0.0, 0.0] + RADIUS * axes
+    rng = np.random.default_rng(7)
+    p[g == 5] = RADIUS * cap_directions(6, 90.0, rng)
+    fits = fit_spheres(p, g)
+    monkeypatch.setattr(sf, "PADDED_FILL", 0.0)
+    ref = fit_spheres(p, g)
+    assert fits.cap_half_angle_deg[2] == 180.0
+    np.testing.assert_allclose(fits.cap_half_angle_deg, ref.cap_half_angle_deg, atol=1e-9)
+
+
+def test_padded_caps_when_spheres_finish_at_different_passes(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Noiseless spheres finish a pass before noisy ones (the padded rows kept shrink);
+    every sphere finishes within the passes, so the caps come from the padded layout."""
+    rng = np.random.default_rng(8)
+    pts, groups = [], []
+    for k in range(200):
+        u = cap_directions(25, 70.0, rng, axis=rng.normal(size=3))
+        noise = 0.0 if k % 3 == 0 else 5e-4
+        pts.append(rng.uniform(-500, 500, 3) + (RADIUS + rng.normal(0, noise, 25))[:, None] * u)
+        groups.append(np.full(25, k))
+    p, g = np.vstack(pts), np.concatenate(groups)
+    fits = fit_spheres(p, g)
+    assert fits.iterations.max() <= 3 and np.unique(fits.iterations).size > 1
+    monkeypatch.setattr(sf, "PADDED_FILL", 0.0)
     _assert_same_fits(fits, fit_spheres(p, g))
