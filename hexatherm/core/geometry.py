@@ -228,6 +228,37 @@ def angle_velocities(angles_deg: npt.ArrayLike, convention: str = "symetrie") ->
     return out
 
 
+def inverse3(m: npt.ArrayLike) -> FloatArray:
+    """Inverses (N, 3, 3) of the matrices ``m`` (N, 3, 3) by their adjugates (LAPACK's call
+    per matrix costs more than the arithmetic): the registration's rotation Hessians,
+    the sphere fits' normal matrices. A matrix whose determinant is near zero against
+    its size (``|det| <= 1e-8 max|m|^3``, where the adjugate's rounding would show) is
+    inverted by LAPACK's :func:`numpy.linalg.inv` instead (raising ``LinAlgError`` on a
+    singular one).
+
+    >>> import numpy as np
+    >>> m = np.array([[[2.0, 1.0, 0.0], [1.0, 3.0, 1.0], [0.0, 1.0, 4.0]]])
+    >>> bool(np.allclose(inverse3(m) @ m, np.eye(3), atol=1e-15))
+    True
+    """
+    m = np.asarray(m, dtype=float)
+    a, b, c = m[:, 0, 0], m[:, 0, 1], m[:, 0, 2]
+    d, e, f = m[:, 1, 0], m[:, 1, 1], m[:, 1, 2]
+    g, h, i = m[:, 2, 0], m[:, 2, 1], m[:, 2, 2]
+    adj = np.empty_like(m)
+    adj[:, 0, 0], adj[:, 0, 1], adj[:, 0, 2] = e * i - f * h, c * h - b * i, b * f - c * e
+    adj[:, 1, 0], adj[:, 1, 1], adj[:, 1, 2] = f * g - d * i, a * i - c * g, c * d - a * f
+    adj[:, 2, 0], adj[:, 2, 1], adj[:, 2, 2] = d * h - e * g, b * g - a * h, a * e - b * d
+    det = a * adj[:, 0, 0] + b * adj[:, 1, 0] + c * adj[:, 2, 0]
+    size = np.abs(m).max(axis=(1, 2)) if m.shape[0] else np.zeros(0)
+    doubt = ~(np.abs(det) > 1e-8 * size**3)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = adj / det[:, None, None]
+    if doubt.any():
+        out[doubt] = np.linalg.inv(m[doubt])
+    return out
+
+
 def angles_from_rotation(rotation: npt.ArrayLike, convention: str = "symetrie") -> FloatArray:
     """``[Rx, Ry, Rz]`` in degrees from rotation matrices (..., 3, 3).
 

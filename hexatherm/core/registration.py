@@ -27,6 +27,7 @@ from itertools import permutations
 import numpy as np
 import numpy.typing as npt
 
+from hexatherm.core.geometry import inverse3
 from hexatherm.errors import RegistrationError
 from hexatherm.typing import FloatArray
 
@@ -177,7 +178,7 @@ def frame_derivatives(
     cross *= w_norm[..., None, None]
     n, k = w.shape
     rhs = np.moveaxis(cross, 1, 2).reshape(n, 3, 3 * k)
-    d_rot = _inverse3(hessian) @ rhs  # (N, 3, k*3)
+    d_rot = inverse3(hessian) @ rhs  # (N, 3, k*3)
     lever = (rot @ balls_mean[..., None])[..., 0]  # R b_mean, (N, 3)
     d_trans = np.cross(lever[:, :, None], d_rot, axis=1)
     d_trans += (w_norm[:, None, :, None] * np.eye(3)[None, :, None, :]).reshape(n, 3, 3 * k)
@@ -285,26 +286,6 @@ def _kabsch(cov: FloatArray) -> FloatArray:
 #: relative gap between the two largest eigenvalues of Horn's matrix below which the
 #: rotation is computed by SVD instead (where Horn's eigenvector loses digits)
 _SEPARATION = 0.05
-
-
-def _inverse3(m: FloatArray) -> FloatArray:
-    """Inverses (N, 3, 3) of the matrices ``m`` by their adjugates (the registration's
-    rotation Hessians ``tr(M) I - M``: well conditioned, their eigenvalues sums of the
-    balls' spread; LAPACK's call per matrix costs more than the arithmetic); LAPACK's
-    :func:`numpy.linalg.inv` (raising on a singular matrix) where a determinant is not
-    far from zero against the matrix's size."""
-    a, b, c = m[:, 0, 0], m[:, 0, 1], m[:, 0, 2]
-    d, e, f = m[:, 1, 0], m[:, 1, 1], m[:, 1, 2]
-    g, h, i = m[:, 2, 0], m[:, 2, 1], m[:, 2, 2]
-    adj = np.empty_like(m)
-    adj[:, 0, 0], adj[:, 0, 1], adj[:, 0, 2] = e * i - f * h, c * h - b * i, b * f - c * e
-    adj[:, 1, 0], adj[:, 1, 1], adj[:, 1, 2] = f * g - d * i, a * i - c * g, c * d - a * f
-    adj[:, 2, 0], adj[:, 2, 1], adj[:, 2, 2] = d * h - e * g, b * g - a * h, a * e - b * d
-    det = a * adj[:, 0, 0] + b * adj[:, 1, 0] + c * adj[:, 2, 0]
-    size = np.abs(m).max(axis=(1, 2)) if m.shape[0] else np.zeros(0)
-    if not np.all(np.abs(det) > 1e-8 * size**3):
-        return np.asarray(np.linalg.inv(m), dtype=float)
-    return adj / det[:, None, None]
 
 
 def _det3(

@@ -79,6 +79,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from hexatherm.core.geometry import inverse3
 from hexatherm.errors import FitError
 
 __all__ = [
@@ -278,34 +279,50 @@ def _newton_term(
     return out
 
 
-def _solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``x`` with ``a x = b`` for the (m, p, p) matrices ``a`` (normal equations: symmetric,
-    positive definite): a Cholesky factorization and its two substitutions written out
-    over the m matrices at once (p is 2 to 4: a few dozen array operations instead of
-    LAPACK's call per matrix); where a pivot is not positive (or not finite), LU with
-    pivoting for all of them (:func:`numpy.linalg.solve`, which raises ``LinAlgError`` on
-    a singular matrix)."""
-    m, p = b.shape
-    if m == 0:
-        return np.zeros((0, p))
+def _cholesky(a: NDArray[np.float64]) -> tuple[list[list[NDArray[np.float64]]], NDArray[np.bool_]]:
+    """The Cholesky factors of the (m, p, p) symmetric matrices ``a`` written out over the
+    m matrices at once (p is 2 to 4: a few dozen array operations instead of LAPACK's call
+    per matrix): ``low[i][j]`` (j <= i) the (m,) entries, and where every pivot was
+    positive (elsewhere the entries are NaN or infinite)."""
+    m, p = a.shape[:2]
     low: list[list[NDArray[np.float64]]] = [[] for _ in range(p)]  # low[i][j], j <= i
+    ok = np.ones(m, dtype=bool)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         for j in range(p):
             pivot = a[:, j, j] - sum((low[j][k] ** 2 for k in range(j)), np.zeros(m))
-            if not np.all(pivot > 0.0) or not np.all(np.isfinite(pivot)):
-                return np.asarray(np.linalg.solve(a, b[..., None])[..., 0], dtype=np.float64)
+            ok &= pivot > 0.0
             root = np.sqrt(pivot)
             low[j].append(root)
             for i in range(j + 1, p):
                 dot = sum((low[i][k] * low[j][k] for k in range(j)), np.zeros(m))
                 low[i].append((a[:, i, j] - dot) / root)
-        y: list[NDArray[np.float64]] = []
-        for i in range(p):
-            y.append((b[:, i] - sum((low[i][k] * y[k] for k in range(i)), np.zeros(m))) / low[i][i])
-        x: list[NDArray[np.float64]] = [np.zeros(m)] * p
-        for i in reversed(range(p)):
-            rest = sum((low[k][i] * x[k] for k in range(i + 1, p)), np.zeros(m))
-            x[i] = (y[i] - rest) / low[i][i]
+    return low, ok
+
+
+def _solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``x`` with ``a x = b`` for the (m, p, p) matrices ``a`` (normal equations: symmetric,
+    positive definite) and ``b`` (m, p), or (m, p, r) for r right-hand sides: the
+    Cholesky factors of :func:`_cholesky` and their two substitutions; where a pivot is
+    not positive (or not finite), LU with pivoting for all of them
+    (:func:`numpy.linalg.solve`, which raises ``LinAlgError`` on a singular matrix)."""
+    m, p = b.shape[:2]
+    many = b.ndim == 3
+    if m == 0:
+        return np.zeros(b.shape)
+    low, ok = _cholesky(a)
+    if not ok.all() or not all(np.all(np.isfinite(row[-1])) for row in low):
+        solved = np.linalg.solve(a, b if many else b[..., None])
+        return np.asarray(solved if many else solved[..., 0], dtype=np.float64)
+    col = (lambda v: v[:, None]) if many else (lambda v: v)
+    zero = np.zeros(b.shape[:1] + b.shape[2:])
+    y: list[NDArray[np.float64]] = []
+    for i in range(p):
+        rest = sum((col(low[i][k]) * y[k] for k in range(i)), zero)
+        y.append((b[:, i] - rest) / col(low[i][i]))
+    x: list[NDArray[np.float64]] = [zero] * p
+    for i in reversed(range(p)):
+        rest = sum((col(low[k][i]) * x[k] for k in range(i + 1, p)), zero)
+        x[i] = (y[i] - rest) / col(low[i][i])
     return np.stack(x, axis=1)
 
 
@@ -331,21 +348,17 @@ def _condition(a: NDArray[np.float64]) -> NDArray[np.float64]:
 
 def _condition_bound(a: NDArray[np.float64]) -> NDArray[np.float64]:
     """An upper bound of the condition numbers of :func:`_condition` (NaN where the
-    elimination meets a pivot that is not positive)."""
+    elimination meets a pivot that is not positive): the determinant from the pivots of
+    :func:`_cholesky` (the squares of its diagonal)."""
     m, p = a.shape[:2]
     if p < 2:
         return np.ones(m)
-    work = a.copy()
-    det = np.ones(m)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for i in range(p):
-            pivot = work[:, i, i].copy()
-            det *= np.where(pivot > 0.0, pivot, np.nan)
-            if i + 1 < p:
-                row = work[:, i, i + 1 :] / pivot[:, None]
-                work[:, i + 1 :, i + 1 :] -= work[:, i + 1 :, i, None] * row[:, None, :]
+    low, ok = _cholesky(a)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        det = np.prod([low[j][j] ** 2 for j in range(p)], axis=0)
+        det = np.where(ok, det, np.nan)
         trace = np.einsum("kii->k", a)
-        return trace * (trace / (p - 1)) ** (p - 1) / det
+        return np.asarray(trace * (trace / (p - 1)) ** (p - 1) / det)
 
 
 def _coverage_deg(u: NDArray[np.float64], counts: NDArray, starts: NDArray) -> NDArray[np.float64]:
@@ -973,12 +986,21 @@ def _fit_in_blocks(
 
 
 def _covariance(sol: _Solution, counts: NDArray[np.int64]) -> NDArray[np.float64]:
-    """Parameter covariance ``s^2 (J^T J)^-1`` with ``s^2 = SSR / (n - p)`` (NaN if n == p)."""
-    p = sol.normal_matrix.shape[1]
+    """The centre's covariance (m, 3, 3): the centre block of ``s^2 (J^T J)^-1`` with
+    ``s^2 = SSR / (n - p)`` (NaN if n == p). That block is the inverse of the centre
+    block's Schur complement ``A - b b^T / n`` (free radius: ``J^T J = [[A, b], [b^T,
+    n]]``; a fixed radius: ``A``), inverted by its adjugate (:func:`inverse3`: no LAPACK
+    call per sphere)."""
+    a = sol.normal_matrix
+    p = a.shape[1]
     dof = counts - p
     with np.errstate(divide="ignore", invalid="ignore"):
         s2 = np.where(dof > 0, sol.cost / np.where(dof > 0, dof, 1), np.nan)
-    return s2[:, None, None] * np.linalg.inv(sol.normal_matrix)
+    centre = a[:, :3, :3]
+    if p == 4:
+        column = a[:, :3, 3]
+        centre = centre - column[:, :, None] * column[:, None, :] / a[:, 3, 3, None, None]
+    return s2[:, None, None] * inverse3(centre)
 
 
 # --------------------------------------------------------------------------------------
@@ -1142,7 +1164,7 @@ def fit_spheres(
         residuals[order] = sol.residuals
     e = sol.residuals
     form = np.maximum.reduceat(e, starts) - np.minimum.reduceat(e, starts)
-    cov = _covariance(sol, counts)[:, :3, :3]
+    cov = _covariance(sol, counts)
     return SphereFits(
         centre_mm=centroid + sol.centre,
         radius_mm=sol.radius.copy(),

@@ -183,3 +183,46 @@ def test_padded_caps_when_spheres_finish_at_different_passes(
     assert fits.iterations.max() <= 3 and np.unique(fits.iterations).size > 1
     monkeypatch.setattr(sf, "PADDED_FILL", 0.0)
     _assert_same_fits(fits, fit_spheres(p, g))
+
+
+def _covariance_before(normal: np.ndarray, cost: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """``_covariance`` as it was: LAPACK's inverse of every normal matrix, its centre block."""
+    p = normal.shape[1]
+    dof = counts - p
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s2 = np.where(dof > 0, cost / np.where(dof > 0, dof, 1), np.nan)
+    return (s2[:, None, None] * np.linalg.inv(normal))[:, :3, :3]
+
+
+@pytest.mark.parametrize("p", [3, 4])
+def test_centre_covariance_by_the_schur_complement_equals_the_inverse(p: int) -> None:
+    """Normal matrices of caps from 180 deg down to 0.1 deg (condition numbers past 1e6), an
+    interpolating sphere (n == p: NaN): the same centre covariance as LAPACK's inverse,
+    to the inverse's own rounding (condition number x eps)."""
+    rng = np.random.default_rng(p)
+    normals, counts = [], []
+    for k in range(300):
+        n = p if k == 0 else int(rng.integers(p + 1, 40))
+        half = float(rng.choice([180.0, 70.0, 20.0, 5.0, 1.0, 0.3, 0.1]))
+        u = cap_directions(n, half, rng, axis=rng.normal(size=3))
+        jac = np.column_stack([-u, -np.ones(n)])[:, :p]
+        normals.append(jac.T @ jac)
+        counts.append(n)
+    normal, count = np.array(normals), np.array(counts)
+    cost = rng.uniform(1e-9, 1e-6, count.size)
+    sol = sf._Solution(
+        centre=np.zeros((count.size, 3)),
+        radius=np.ones(count.size),
+        residuals=np.zeros(count.sum()),
+        normal_matrix=normal,
+        cost=cost,
+        iterations=np.ones(count.size, dtype=np.int64),
+        coverage_deg=np.zeros(count.size),
+    )
+    ours, ref = sf._covariance(sol, count), _covariance_before(normal, cost, count)
+    assert np.isnan(ours[0]).all() and np.isnan(ref[0]).all()
+    cond = np.linalg.cond(normal[1:])
+    assert cond.max() > 1e6  # some far from well conditioned
+    size = np.abs(ref[1:]).max(axis=(1, 2))
+    err = np.abs(ours[1:] - ref[1:]).max(axis=(1, 2))
+    assert np.all(err <= 1e-13 * cond * size)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hexatherm.core import registration
+from hexatherm.core.geometry import inverse3
 from hexatherm.core.hexapod import NEAR_MM, Hexapod
 from hexatherm.core.propagation import target_jacobian
 from hexatherm.core.thermal import LegThermalModel
@@ -76,10 +76,10 @@ def test_adjugate_inverses_equal_lapacks():
     m[:10] = -m[:10]  # not positive definite: the adjugate does not care
     ref = np.linalg.inv(m)
     cond = np.linalg.cond(m)[:, None, None]
-    assert np.all(np.abs(registration._inverse3(m) - ref) <= 1e-14 * cond * np.abs(ref).max())
+    assert np.all(np.abs(inverse3(m) - ref) <= 1e-14 * cond * np.abs(ref).max())
     singular = np.array([[[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 0.0, 1.0]]])
     with pytest.raises(np.linalg.LinAlgError):  # LAPACK's own verdict
-        registration._inverse3(singular)
+        inverse3(singular)
 
 
 def test_sensitivity_in_closed_form_equals_the_segments_sum():
