@@ -160,6 +160,20 @@ def rotation_derivatives(angles_deg: npt.ArrayLike, convention: str = "symetrie"
     return np.stack(parts, axis=-3) * (np.pi / 180.0)
 
 
+def _trig(
+    angles_deg: npt.ArrayLike,
+) -> tuple[tuple[FloatArray, ...], tuple[FloatArray, ...], FloatArray]:
+    """Cosines and sines of ``[Rx, Ry, Rz]`` (deg, (..., 3)), each (...,), and zeros
+    (..., 3, 3) for the matrix made of them."""
+    a = np.deg2rad(np.asarray(angles_deg, dtype=float))
+    c, s = np.cos(a), np.sin(a)
+    return (
+        (c[..., 0], c[..., 1], c[..., 2]),
+        (s[..., 0], s[..., 1], s[..., 2]),
+        np.zeros(a.shape[:-1] + (3, 3)),
+    )
+
+
 def angle_rates(angles_deg: npt.ArrayLike, convention: str = "symetrie") -> FloatArray:
     """The change of ``[Rx, Ry, Rz]`` (deg) per small rotation ``omega`` (rad) applied on
     the left, ``R -> (I + [omega]x) R``: matrices (..., 3, 3), the inverse of
@@ -179,11 +193,7 @@ def angle_rates(angles_deg: npt.ArrayLike, convention: str = "symetrie") -> Floa
            [ 0.     ,  0.     , 57.29578]])
     """
     convention = check_convention(convention)
-    a = np.deg2rad(np.asarray(angles_deg, dtype=float))
-    c, s = np.cos(a), np.sin(a)
-    cx, cy, cz = c[..., 0], c[..., 1], c[..., 2]
-    sx, sy, sz = s[..., 0], s[..., 1], s[..., 2]
-    out = np.zeros(a.shape[:-1] + (3, 3))
+    (cx, cy, cz), (sx, sy, sz), out = _trig(angles_deg)
     per_deg = 180.0 / np.pi
     secant = per_deg / cy
     if convention == "symetrie":
@@ -211,11 +221,7 @@ def angle_velocities(angles_deg: npt.ArrayLike, convention: str = "symetrie") ->
     True
     """
     convention = check_convention(convention)
-    a = np.deg2rad(np.asarray(angles_deg, dtype=float))
-    c, s = np.cos(a), np.sin(a)
-    cx, cy, cz = c[..., 0], c[..., 1], c[..., 2]
-    sx, sy, sz = s[..., 0], s[..., 1], s[..., 2]
-    out = np.zeros(a.shape[:-1] + (3, 3))
+    (cx, cy, cz), (sx, sy, sz), out = _trig(angles_deg)
     rad = np.pi / 180.0
     if convention == "symetrie":
         out[..., 0, 0], out[..., 1, 0], out[..., 2, 0] = cz * cy * rad, sz * cy * rad, -sy * rad
