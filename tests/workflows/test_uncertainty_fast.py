@@ -15,6 +15,7 @@ from hexatherm.core.propagation import target_jacobian
 from hexatherm.core.thermal import LegThermalModel
 from hexatherm.workflows.process.pipeline import process_session
 from hexatherm.workflows.process.uncertainty import pose_chain
+from tests.conftest import make_hexapod
 
 from .test_uncertainty import points_session
 
@@ -43,14 +44,7 @@ def test_jacobian_at_newtons_poses_equals_the_certified_fgms(processed, monkeypa
 
 @pytest.mark.parametrize("convention", ["symetrie", "pi"])
 def test_fgm_near_equals_the_fgm(convention):
-    hexapod = Hexapod.symmetric(
-        base_radius_mm=150,
-        platform_radius_mm=100,
-        base_half_angle_deg=10,
-        platform_half_angle_deg=10,
-        height_mm=200,
-        convention=convention,
-    )
+    hexapod = make_hexapod(convention)
     rng = np.random.default_rng(11)
     poses = np.column_stack([rng.uniform(-20, 20, (200, 3)), rng.uniform(-5, 5, (200, 3))])
     q = hexapod.igm(poses)
