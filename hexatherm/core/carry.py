@@ -24,6 +24,7 @@ import numpy.typing as npt
 
 from hexatherm.core.geometry import (
     angle_rates,
+    angle_velocities,
     apply_transform,
     invert_transform,
     pose_from_transform,
@@ -135,7 +136,7 @@ def shifted_pose_derivative(shift: FloatArray, poses: FloatArray, convention: st
     moved = shifted_poses(shift, x, convention)
     out = np.zeros(x.shape[:-1] + (6, 6))
     out[..., :3, :3] = back
-    turn = back @ np.linalg.inv(angle_rates(x[..., 3:], convention))
+    turn = back @ angle_velocities(x[..., 3:], convention)
     out[..., 3:, 3:] = angle_rates(moved[..., 3:], convention) @ turn
     return out
 
@@ -150,7 +151,7 @@ def shift_derivative(shift: FloatArray, poses: FloatArray, convention: str) -> F
     x = np.asarray(poses, dtype=float)
     d = np.asarray(shift, dtype=float)
     back = d[:3, :3].T
-    rad_per_deg = np.linalg.inv(angle_rates(pose_from_transform(d, convention)[3:], convention))
+    rad_per_deg = angle_velocities(pose_from_transform(d, convention)[3:], convention)
     lever = x[..., :3] - d[:3, 3]
     skew = np.zeros(x.shape[:-1] + (3, 3))  # [lever]x
     skew[..., 0, 1], skew[..., 1, 0] = -lever[..., 2], lever[..., 2]

@@ -160,10 +160,31 @@ def rotation_derivatives(angles_deg: npt.ArrayLike, convention: str = "symetrie"
     return np.stack(parts, axis=-3) * (np.pi / 180.0)
 
 
+def _trig(
+    angles_deg: npt.ArrayLike,
+) -> tuple[tuple[FloatArray, ...], tuple[FloatArray, ...], FloatArray]:
+    """Cosines and sines of ``[Rx, Ry, Rz]`` (deg, (..., 3)), each (...,), and zeros
+    (..., 3, 3) for the matrix made of them."""
+    a = np.deg2rad(np.asarray(angles_deg, dtype=float))
+    c, s = np.cos(a), np.sin(a)
+    return (
+        (c[..., 0], c[..., 1], c[..., 2]),
+        (s[..., 0], s[..., 1], s[..., 2]),
+        np.zeros(a.shape[:-1] + (3, 3)),
+    )
+
+
 def angle_rates(angles_deg: npt.ArrayLike, convention: str = "symetrie") -> FloatArray:
     """The change of ``[Rx, Ry, Rz]`` (deg) per small rotation ``omega`` (rad) applied on
-    the left, ``R -> (I + [omega]x) R``: matrices (..., 3, 3), the inverse of the one
-    whose column k is ``vee(dR/dangle_k R^T)`` (:func:`rotation_derivatives`).
+    the left, ``R -> (I + [omega]x) R``: matrices (..., 3, 3), the inverse of
+    :func:`angle_velocities` (whose column k is ``vee(dR/dangle_k R^T)``, from
+    :func:`rotation_derivatives`), in closed form: for ``R = Rz Ry Rx`` (symetrie)
+
+        ``[[cz/cy, sz/cy, 0], [-sz, cz, 0], [sy cz/cy, sy sz/cy, 1]]``
+
+    and for ``R = Rx Ry Rz`` (pi) ``[[1, sy sx/cy, -sy cx/cy], [0, cx, sx], [0, -sx/cy,
+    cx/cy]]``, times ``180/pi`` (``c``, ``s`` the cosines and sines of the angles; the
+    determinant of the velocities is ``cy``: singular only at the gimbal lock).
 
     >>> import numpy as np
     >>> np.round(angle_rates([0, 0, 0]), 6) + 0.0  # at zero: 180/pi deg per rad, axis by axis
@@ -171,11 +192,77 @@ def angle_rates(angles_deg: npt.ArrayLike, convention: str = "symetrie") -> Floa
            [ 0.     , 57.29578,  0.     ],
            [ 0.     ,  0.     , 57.29578]])
     """
-    a = np.asarray(angles_deg, dtype=float)
-    rot = rotation_from_angles(a, convention)
-    skew = rotation_derivatives(a, convention) @ np.swapaxes(rot, -1, -2)[..., None, :, :]
-    columns = np.stack([skew[..., 2, 1], skew[..., 0, 2], skew[..., 1, 0]], axis=-1)
-    return np.asarray(np.linalg.inv(np.swapaxes(columns, -1, -2)), dtype=float)
+    convention = check_convention(convention)
+    (cx, cy, cz), (sx, sy, sz), out = _trig(angles_deg)
+    per_deg = 180.0 / np.pi
+    secant = per_deg / cy
+    if convention == "symetrie":
+        out[..., 0, 0], out[..., 0, 1] = cz * secant, sz * secant
+        out[..., 1, 0], out[..., 1, 1] = -sz * per_deg, cz * per_deg
+        out[..., 2, 0], out[..., 2, 1] = sy * cz * secant, sy * sz * secant
+        out[..., 2, 2] = per_deg
+    else:
+        out[..., 0, 0] = per_deg
+        out[..., 0, 1], out[..., 0, 2] = sy * sx * secant, -sy * cx * secant
+        out[..., 1, 1], out[..., 1, 2] = cx * per_deg, sx * per_deg
+        out[..., 2, 1], out[..., 2, 2] = -sx * secant, cx * secant
+    return out
+
+
+def angle_velocities(angles_deg: npt.ArrayLike, convention: str = "symetrie") -> FloatArray:
+    """The small rotation ``omega`` (rad, applied on the left: ``R -> (I + [omega]x) R``)
+    per degree of each of ``[Rx, Ry, Rz]``: matrices (..., 3, 3) whose column k is
+    ``vee(dR/dangle_k R^T)``, the inverse of :func:`angle_rates`, in closed form: the
+    columns are ``Rz Ry e_x``, ``Rz e_y``, ``e_z`` for ``R = Rz Ry Rx`` (symetrie) and
+    ``e_x``, ``Rx e_y``, ``Rx Ry e_z`` for ``R = Rx Ry Rz`` (pi), times ``pi/180``.
+
+    >>> import numpy as np
+    >>> bool(np.allclose(angle_velocities([10, -20, 30]) @ angle_rates([10, -20, 30]), np.eye(3)))
+    True
+    """
+    convention = check_convention(convention)
+    (cx, cy, cz), (sx, sy, sz), out = _trig(angles_deg)
+    rad = np.pi / 180.0
+    if convention == "symetrie":
+        out[..., 0, 0], out[..., 1, 0], out[..., 2, 0] = cz * cy * rad, sz * cy * rad, -sy * rad
+        out[..., 0, 1], out[..., 1, 1] = -sz * rad, cz * rad
+        out[..., 2, 2] = rad
+    else:
+        out[..., 0, 0] = rad
+        out[..., 1, 1], out[..., 2, 1] = cx * rad, sx * rad
+        out[..., 0, 2], out[..., 1, 2], out[..., 2, 2] = sy * rad, -sx * cy * rad, cx * cy * rad
+    return out
+
+
+def inverse3(m: npt.ArrayLike) -> FloatArray:
+    """Inverses (N, 3, 3) of the matrices ``m`` (N, 3, 3) by their adjugates (LAPACK's call
+    per matrix costs more than the arithmetic): the registration's rotation Hessians,
+    the sphere fits' normal matrices. A matrix whose determinant is near zero against
+    its size (``|det| <= 1e-8 max|m|^3``, where the adjugate's rounding would show) is
+    inverted by LAPACK's :func:`numpy.linalg.inv` instead (raising ``LinAlgError`` on a
+    singular one).
+
+    >>> import numpy as np
+    >>> m = np.array([[[2.0, 1.0, 0.0], [1.0, 3.0, 1.0], [0.0, 1.0, 4.0]]])
+    >>> bool(np.allclose(inverse3(m) @ m, np.eye(3), atol=1e-15))
+    True
+    """
+    m = np.asarray(m, dtype=float)
+    a, b, c = m[:, 0, 0], m[:, 0, 1], m[:, 0, 2]
+    d, e, f = m[:, 1, 0], m[:, 1, 1], m[:, 1, 2]
+    g, h, i = m[:, 2, 0], m[:, 2, 1], m[:, 2, 2]
+    adj = np.empty_like(m)
+    adj[:, 0, 0], adj[:, 0, 1], adj[:, 0, 2] = e * i - f * h, c * h - b * i, b * f - c * e
+    adj[:, 1, 0], adj[:, 1, 1], adj[:, 1, 2] = f * g - d * i, a * i - c * g, c * d - a * f
+    adj[:, 2, 0], adj[:, 2, 1], adj[:, 2, 2] = d * h - e * g, b * g - a * h, a * e - b * d
+    det = a * adj[:, 0, 0] + b * adj[:, 1, 0] + c * adj[:, 2, 0]
+    size = np.abs(m).max(axis=(1, 2)) if m.shape[0] else np.zeros(0)
+    doubt = ~(np.abs(det) > 1e-8 * size**3)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = adj / det[:, None, None]
+    if doubt.any():
+        out[doubt] = np.linalg.inv(m[doubt])
+    return out
 
 
 def angles_from_rotation(rotation: npt.ArrayLike, convention: str = "symetrie") -> FloatArray:

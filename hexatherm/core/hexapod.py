@@ -43,6 +43,10 @@ SINGULAR_RCOND = 1e-9
 FGM_MAX_ITER = 100
 #: how far (mm) the FGM accepts leg lengths beyond the stroke
 STROKE_TOLERANCE_MM = 0.1
+#: :meth:`Hexapod.fgm_near`: the farthest (mm, any leg) its start poses' legs may be from
+#: the leg lengths for plain Newton, and its most steps; beyond either, :meth:`Hexapod.fgm`
+NEAR_MM = 0.1
+NEAR_STEPS = 4
 #: Kantorovich's h = beta L eta allowed per FGM step (the theorem needs h <= 1/2)
 _KANTOROVICH_H = 0.45
 #: the certified ball changes no leg by more than this fraction of the shortest
@@ -303,6 +307,48 @@ class Hexapod:
         return (q < self.stroke_mm[0]) | (q > self.stroke_mm[1])
 
     # ------------------------------------------------------------------ FGM
+    def fgm_near(
+        self, q_mm: npt.ArrayLike, poses_mm: npt.ArrayLike, tol_mm: float = FGM_TOLERANCE_MM
+    ) -> tuple[FloatArray, FloatArray]:
+        """The FGM of leg lengths ``q_mm`` (N, 6) from poses ``poses_mm`` (N, 6) already
+        next to them (the corrected poses a correction found, where a Jacobian is to be
+        evaluated): plain Newton while every start's legs are within :data:`NEAR_MM` of
+        ``q_mm`` (a thousandth of a leg: deep inside the region where the certified
+        :meth:`fgm` takes its first step to the end, on the same assembly mode) and every
+        pose reaches ``max|IGM(X) - q| <= tol_mm`` within :data:`NEAR_STEPS` steps; else
+        :meth:`fgm` from them. Returns the poses and the IGM's Jacobian (N, 6, 6) there,
+        which the last check computed anyway.
+
+        >>> hexapod = Hexapod.symmetric(base_radius_mm=150, platform_radius_mm=100,
+        ...     base_half_angle_deg=10, platform_half_angle_deg=10, height_mm=200)
+        >>> pose = np.array([[1.0, -2.0, 3.0, 0.5, -0.4, 0.3]])
+        >>> x, jac = hexapod.fgm_near(hexapod.igm(pose), pose + 1e-4)
+        >>> bool(np.abs(x - pose).max() < 1e-9), jac.shape
+        (True, (1, 6, 6))
+        """
+        q = np.asarray(q_mm, dtype=float)
+        start = np.asarray(check_poses(poses_mm), dtype=float)
+        x = start
+        base = self.base_joints_mm
+        for step in range(NEAR_STEPS + 1):
+            legs, plat, cos, sin = self._legs(x, base)
+            lengths = self._lengths(legs)
+            jac = self._jacobian(legs, lengths, plat, cos, sin)
+            resid = lengths - q
+            worst = np.abs(resid).max(axis=1)
+            if step == 0 and not np.all(worst <= NEAR_MM):
+                break
+            if np.all(worst <= tol_mm):
+                return x, jac
+            if step == NEAR_STEPS:
+                break
+            try:
+                x = x - np.linalg.solve(jac, resid[..., None])[..., 0]
+            except np.linalg.LinAlgError:
+                break
+        x = self.fgm(q, initial_poses=start)
+        return x, self.jacobian(x)
+
     def fgm(
         self,
         q_mm: npt.ArrayLike,

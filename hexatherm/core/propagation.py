@@ -170,6 +170,15 @@ class PoseChain:
         by_origin = np.concatenate([back @ moved, -(rates @ (back @ d_rot[0]))], axis=1)
         return pose, own, by_origin
 
+    def fgm_start(self) -> FloatArray | None:
+        """The FGM's start poses (M, 6): :attr:`initial_poses` relative to O as measured
+        (where the FGM finds the corrected poses, before they are expressed in O carried
+        to R0's state by :attr:`origin_shift`); None without them."""
+        if self.initial_poses is None or self.origin_shift is None:
+            return self.initial_poses
+        back = invert_transform(np.asarray(self.origin_shift, dtype=float))
+        return shifted_poses(back, self.initial_poses, self.hexapod.convention)
+
     def outputs_from_poses(self, pose: FloatArray, shifted: bool = True) -> FloatArray:
         """Outputs (b, M, 12) from the poses (b, N, 6) of every step relative to O (the
         corrected ones relative to O as measured unless ``shifted``)."""
@@ -191,11 +200,8 @@ class PoseChain:
             reference_growth = np.einsum("mln,bnl->bml", self.growth_weights, q) - q_r0[:, None, :]
         q_s = q[:, targets]
         corrected_q = q_s - target_growth(legs, reference_growth, q_r0[:, None], q_s)
-        start = (
-            pose[:, targets]
-            if self.initial_poses is None
-            else np.broadcast_to(self.initial_poses, (b, m, 6))
-        )
+        initial = self.fgm_start()
+        start = pose[:, targets] if initial is None else np.broadcast_to(initial, (b, m, 6))
         corrected = self.hexapod.fgm(
             corrected_q.reshape(-1, 6), initial_poses=start.reshape(-1, 6)
         ).reshape(b, m, 6)
@@ -434,7 +440,9 @@ def target_jacobian(
        ``q_corr = q_S - g(G, q_R0, q_S)`` with
        ``G = (1 - w)(q_B - q_R0) + w (q_A - q_R0)``; the partial derivatives of
        ``q_corr`` by ``G``, ``q_R0`` and ``q_S`` are diagonal (central differences);
-    4. ``dX_corr = J(X_corr)^-1 dq_corr`` (the FGM inverts the IGM).
+    4. ``dX_corr = J(X_corr)^-1 dq_corr`` (the FGM inverts the IGM), ``X_corr`` the FGM
+       of the corrected legs by Newton from the chain's corrected poses
+       (:meth:`~hexatherm.core.hexapod.Hexapod.fgm_near`, which gives ``J`` too).
 
     A step that plays two parts for a target (R0 as the reference before the
     first targets) gets the sum of both Jacobians. The result equals the
@@ -488,8 +496,13 @@ def target_jacobian(
     d_growth = (q_corr(growth + h, q_r0, q_s) - q_corr(growth - h, q_r0, q_s)) / (2 * h)
     d_r0 = (q_corr(growth, q_r0 + h, q_s) - q_corr(growth, q_r0 - h, q_s)) / (2 * h)
     d_s = (q_corr(growth, q_r0, q_s + h) - q_corr(growth, q_r0, q_s - h)) / (2 * h)
-    unshifted = chain.outputs_from_poses(pose[None], shifted=False)[0, :, 6:]
-    jac_fgm_inv = np.asarray(np.linalg.inv(hexapod.jacobian(unshifted)), float)
+    # 4. the corrected poses (relative to O as measured) and the IGM's Jacobian there:
+    # the FGM of the corrected legs, from the chain's corrected poses brought back there
+    start = chain.fgm_start()
+    unshifted, jac_fgm = hexapod.fgm_near(
+        q_corr(growth, q_r0, q_s), pose[targets] if start is None else start
+    )
+    jac_fgm_inv = np.asarray(np.linalg.inv(jac_fgm), float)
     if chain.origin_shift is not None:
         # the corrected poses expressed in O carried to R0's state: a fixed rigid shift
         by_pose = shifted_pose_derivative(chain.origin_shift, unshifted, hexapod.convention)

@@ -27,6 +27,7 @@ from itertools import permutations
 import numpy as np
 import numpy.typing as npt
 
+from hexatherm.core.geometry import inverse3
 from hexatherm.errors import RegistrationError
 from hexatherm.typing import FloatArray
 
@@ -176,7 +177,8 @@ def frame_derivatives(
     cross[..., 2, 0], cross[..., 2, 1] = -a[..., 1], a[..., 0]
     cross *= w_norm[..., None, None]
     n, k = w.shape
-    d_rot = np.linalg.solve(hessian, np.moveaxis(cross, 1, 2).reshape(n, 3, 3 * k))  # (N, 3, k*3)
+    rhs = np.moveaxis(cross, 1, 2).reshape(n, 3, 3 * k)
+    d_rot = inverse3(hessian) @ rhs  # (N, 3, k*3)
     lever = (rot @ balls_mean[..., None])[..., 0]  # R b_mean, (N, 3)
     d_trans = np.cross(lever[:, :, None], d_rot, axis=1)
     d_trans += (w_norm[:, None, :, None] * np.eye(3)[None, :, None, :]).reshape(n, 3, 3 * k)

@@ -9,13 +9,17 @@ Algorithm
 ---------
 1. Points are grouped by sphere, sorted by group (stable) and centred on their
    group centroid, so that far-from-origin coordinates do not cost precision.
-2. Start: the linear Kasa fit, solved through the eigen-decomposition of the
-   3x3 scatter matrix ``S = sum q q^T`` of each group.  With a fixed radius the
+2. Start: the linear Kasa fit, ``S c = sum(q |q|^2) / 2`` with the 3x3 scatter
+   matrix ``S = sum q q^T`` of each group, solved by Cholesky where a cheap bound
+   of its condition number is at most ``1e6``, else through its eigen-decomposition
+   (whose eigenvalues the coplanarity test then reads).  With a fixed radius the
    start is the best (by geometric cost) of the Kasa centre and the two mirror
    points at distance ``sqrt(R^2 - rho^2)`` either side of the best-fit plane.
 3. Gauss-Newton on the normal equations ``J^T J delta = -J^T e`` of all spheres
-   at once (per-sphere sums with :func:`numpy.add.reduceat`, batched
-   :func:`numpy.linalg.solve`).  A step that increases a sphere's cost is
+   at once (per-sphere sums with :func:`numpy.add.reduceat`, or, for spheres of
+   equal point counts laid out one a row, dot products along the rows; a batched
+   Cholesky solve written out over the spheres, LU where a matrix is not positive
+   definite).  A step that increases a sphere's cost is
    rejected and retried with Levenberg-Marquardt damping
    ``J^T J + lambda diag(J^T J)``.  Gauss-Newton converges only linearly when
    the residuals are not small compared with the curvature of the data (noise
@@ -71,11 +75,11 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import partial
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from hexatherm.core.geometry import inverse3
 from hexatherm.errors import FitError
 
 __all__ = [
@@ -98,6 +102,9 @@ _ROUNDING_FACTOR = 64.0  # convergence floor: RMS of J delta below 64 eps * scal
 _LAMBDA_START = 1e-3  # first Levenberg-Marquardt damping after a rejected step
 _LAMBDA_MIN = 1e-9  # damping below this is switched off (pure Gauss-Newton)
 _NEWTON_AFTER = 3  # iterations after which a sphere switches to Newton steps when possible
+#: largest condition-number bound of a scatter matrix whose Kasa start is a Cholesky solve
+#: (no eigenvalues); above it, the eigenvalues (the coplanarity test needs 1e12)
+_KASA_COND = 1e6
 
 
 @dataclass(frozen=True)
@@ -272,8 +279,51 @@ def _newton_term(
     return out
 
 
+def _cholesky(a: NDArray[np.float64]) -> tuple[list[list[NDArray[np.float64]]], NDArray[np.bool_]]:
+    """The Cholesky factors of the (m, p, p) symmetric matrices ``a`` written out over the
+    m matrices at once (p is 2 to 4: a few dozen array operations instead of LAPACK's call
+    per matrix): ``low[i][j]`` (j <= i) the (m,) entries, and where every pivot was
+    positive (elsewhere the entries are NaN or infinite)."""
+    m, p = a.shape[:2]
+    low: list[list[NDArray[np.float64]]] = [[] for _ in range(p)]  # low[i][j], j <= i
+    ok = np.ones(m, dtype=bool)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        for j in range(p):
+            pivot = a[:, j, j] - sum((low[j][k] ** 2 for k in range(j)), np.zeros(m))
+            ok &= pivot > 0.0
+            root = np.sqrt(pivot)
+            low[j].append(root)
+            for i in range(j + 1, p):
+                dot = sum((low[i][k] * low[j][k] for k in range(j)), np.zeros(m))
+                low[i].append((a[:, i, j] - dot) / root)
+    return low, ok
+
+
 def _solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    return np.asarray(np.linalg.solve(a, b[..., None])[..., 0], dtype=np.float64)
+    """``x`` with ``a x = b`` for the (m, p, p) matrices ``a`` (normal equations: symmetric,
+    positive definite) and ``b`` (m, p), or (m, p, r) for r right-hand sides: the
+    Cholesky factors of :func:`_cholesky` and their two substitutions; where a pivot is
+    not positive (or not finite), LU with pivoting for all of them
+    (:func:`numpy.linalg.solve`, which raises ``LinAlgError`` on a singular matrix)."""
+    m, p = b.shape[:2]
+    many = b.ndim == 3
+    if m == 0:
+        return np.zeros(b.shape)
+    low, ok = _cholesky(a)
+    if not ok.all() or not all(np.all(np.isfinite(row[-1])) for row in low):
+        solved = np.linalg.solve(a, b if many else b[..., None])
+        return np.asarray(solved if many else solved[..., 0], dtype=np.float64)
+    col = (lambda v: v[:, None]) if many else (lambda v: v)
+    zero = np.zeros(b.shape[:1] + b.shape[2:])
+    y: list[NDArray[np.float64]] = []
+    for i in range(p):
+        rest = sum((col(low[i][k]) * y[k] for k in range(i)), zero)
+        y.append((b[:, i] - rest) / col(low[i][i]))
+    x: list[NDArray[np.float64]] = [zero] * p
+    for i in reversed(range(p)):
+        rest = sum((col(low[k][i]) * x[k] for k in range(i + 1, p)), zero)
+        x[i] = (y[i] - rest) / col(low[i][i])
+    return np.stack(x, axis=1)
 
 
 def _condition(a: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -298,21 +348,17 @@ def _condition(a: NDArray[np.float64]) -> NDArray[np.float64]:
 
 def _condition_bound(a: NDArray[np.float64]) -> NDArray[np.float64]:
     """An upper bound of the condition numbers of :func:`_condition` (NaN where the
-    elimination meets a pivot that is not positive)."""
+    elimination meets a pivot that is not positive): the determinant from the pivots of
+    :func:`_cholesky` (the squares of its diagonal)."""
     m, p = a.shape[:2]
     if p < 2:
         return np.ones(m)
-    work = a.copy()
-    det = np.ones(m)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for i in range(p):
-            pivot = work[:, i, i].copy()
-            det *= np.where(pivot > 0.0, pivot, np.nan)
-            if i + 1 < p:
-                row = work[:, i, i + 1 :] / pivot[:, None]
-                work[:, i + 1 :, i + 1 :] -= work[:, i + 1 :, i, None] * row[:, None, :]
+    low, ok = _cholesky(a)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        det = np.prod([low[j][j] ** 2 for j in range(p)], axis=0)
+        det = np.where(ok, det, np.nan)
         trace = np.einsum("kii->k", a)
-        return trace * (trace / (p - 1)) ** (p - 1) / det
+        return np.asarray(trace * (trace / (p - 1)) ** (p - 1) / det)
 
 
 def _coverage_deg(u: NDArray[np.float64], counts: NDArray, starts: NDArray) -> NDArray[np.float64]:
@@ -403,14 +449,26 @@ def _fit_nspheres(
 
     # Scatter matrices and degeneracy (coplanarity) test.
     ia, ib = np.triu_indices(d)
-    s_up = np.add.reduceat(q[:, ia] * q[:, ib], starts, axis=0)
+    points = _layout(q, counts, free)
+    s_up, t, sum_q2 = points.moments()
     scatter = np.empty((m, d, d))
     scatter[:, ia, ib] = s_up
     scatter[:, ib, ia] = s_up
-    lam, vec = np.linalg.eigh(scatter)
+    # the eigenvalues decide the degeneracy and give the Kasa start; where the cheap
+    # bound of the condition number (no eigenvalues) shows the scatter matrix well
+    # conditioned, neither is needed: it passes, and the start is a Cholesky solve
+    # (a fixed radius needs the best-fit plane's normal: its eigenvectors, always)
+    easy = _condition_bound(scatter) <= _KASA_COND if free else np.zeros(m, dtype=bool)
+    hard = ~easy
+    lam = np.full((m, d), np.nan)
+    vec = np.full((m, d, d), np.nan)
+    if hard.any():
+        lam[hard], vec[hard] = np.linalg.eigh(scatter[hard])
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.sqrt(np.clip(lam[:, 0], 0.0, None) / lam[:, -1])
     ratio = np.where(lam[:, -1] > 0.0, ratio, 0.0)
+    if easy.any():
+        ratio[easy] = 1.0 / np.sqrt(_KASA_COND)  # at least this: far above COPLANAR_RTOL
 
     def degenerate(k: int) -> str:
         if lam[k, -1] <= 0.0:
@@ -431,11 +489,13 @@ def _fit_nspheres(
 
     # Algebraic (Kasa) start, decoupled because the points are centred:
     # c = S^-1 sum(q |q|^2) / 2,  r^2 = mean|q|^2 + |c|^2.
-    q2 = np.einsum("ij,ij->i", q, q)
-    t = np.add.reduceat(q * q2[:, None], starts, axis=0)
-    mean_q2 = np.add.reduceat(q2, starts) / counts
-    t_eig = np.einsum("mji,mj->mi", vec, t) / (2.0 * lam)
-    c = np.einsum("mij,mj->mi", vec, t_eig)
+    mean_q2 = sum_q2 / counts
+    c = np.empty((m, d))
+    if easy.any():
+        c[easy] = _solve(scatter[easy], t[easy]) / 2.0
+    if hard.any():
+        t_eig = np.einsum("mji,mj->mi", vec[hard], t[hard]) / (2.0 * lam[hard])
+        c[hard] = np.einsum("mij,mj->mi", vec[hard], t_eig)
     if free:
         r = np.sqrt(mean_q2 + np.einsum("ij,ij->i", c, c))
     else:
@@ -454,7 +514,7 @@ def _fit_nspheres(
         c = np.stack(cands)[best, np.arange(m)]
 
     radius_scale = np.sqrt(mean_q2)
-    fast = _plain_passes(q, counts, starts, c, r, radius_scale, free, tol_mm, label, max_iter)
+    fast = _plain_passes(points, c, r, radius_scale, free, tol_mm, label, max_iter)
     lam_lm = np.zeros(m)
     iterations = np.zeros(m, dtype=np.int64)
     # the spheres the plain passes left (a step that raised the cost, slow convergence)
@@ -557,7 +617,9 @@ def _fit_nspheres(
         u[on] = _unit(v, dist)
         e[on] = e_left
         a[left], _, cost[left] = _normal_equations(u[on], e_left, cnt, _starts(cnt), free)
-    coverage = _coverage_deg(u, counts, starts)
+    coverage = None if left.any() else points.final_coverage()
+    if coverage is None:
+        coverage = _coverage_deg(u, counts, starts)
     _ill_conditioned(_condition(a), coverage, label, free)
     if free:
         _raise_first(
@@ -591,10 +653,190 @@ class _Plain:
     iterations: NDArray[np.int64]  # (m,)
 
 
+#: the padded layout (:class:`_PaddedPoints`) when the spheres padded to the most points
+#: of any of them hold at most this many times the points (equal counts: 1)
+PADDED_FILL = 1.25
+
+
+class _FlatPoints:
+    """The active spheres' points one after the other, any counts: the sums by
+    :func:`numpy.add.reduceat`, the centres repeated to every point."""
+
+    def __init__(self, q: NDArray[np.float64], counts: NDArray[np.int64], free: bool) -> None:
+        self.q, self.cnt, self.st, self.free = q, counts, _starts(counts), free
+        self.at: NDArray[np.intp] | None = None  # the active points (None: all)
+        self.residuals_out = np.empty(q.shape[0])
+        self.unit_out = np.empty_like(q)
+
+    def evaluate(
+        self, c: NDArray[np.float64], r: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """``J^T J``, ``-J^T e`` and ``e^T e`` of the active spheres at ``c``, ``r``."""
+        v, dist, e = _geometry(self.q, c, r, self.cnt)
+        self.u, self.e = _unit(v, dist), e
+        return _normal_equations(self.u, e, self.cnt, self.st, self.free)
+
+    def moments(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """Per sphere: the scatter matrix's upper triangle ``sum q_i q_j`` (i <= j),
+        ``sum q |q|^2`` and ``sum |q|^2`` (the Kasa start's sums)."""
+        q = self.q
+        ia, ib = np.triu_indices(q.shape[1])
+        q2 = np.einsum("ij,ij->i", q, q)
+        s_up = np.add.reduceat(q[:, ia] * q[:, ib], self.st, axis=0)
+        return s_up, np.add.reduceat(q * q2[:, None], self.st, axis=0), np.add.reduceat(q2, self.st)
+
+    def coverage(self) -> NDArray[np.float64]:
+        return _coverage_deg(self.u, self.cnt, self.st)
+
+    def final_coverage(self) -> NDArray[np.float64] | None:
+        """The caps' half-angles from the directions written (None: the caller computes
+        them from its own)."""
+        return None
+
+    def write(self, step: NDArray[np.float64]) -> None:
+        """The residuals carried by ``step`` and the directions, of every active sphere
+        (in place: a sphere that goes on is written again when it finishes)."""
+        d = self.q.shape[1]
+        moved = np.einsum("ij,ij->i", self.u, np.repeat(step[:, :d], self.cnt, axis=0))
+        if self.free:
+            moved += np.repeat(step[:, d], self.cnt)
+        rows = slice(None) if self.at is None else self.at
+        self.residuals_out[rows] = self.e - moved
+        self.unit_out[rows] = self.u
+
+    def keep(self, go: NDArray[np.bool_]) -> None:
+        pm = np.repeat(go, self.cnt)
+        self.at = pm.nonzero()[0] if self.at is None else self.at[pm]
+        self.q, self.cnt = self.q[pm], self.cnt[go]
+        self.st = _starts(self.cnt)
+
+    def results(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        return self.residuals_out, self.unit_out
+
+
+class _PaddedPoints:
+    """The active spheres' points as a (d, m, w) array, one sphere a row padded to the
+    most points ``w`` (the padding weighs nothing: its residuals and directions are
+    zero): the centres broadcast along the rows and the sums are dot products along
+    them, no repeat and no ``reduceat``. The same sums as :class:`_FlatPoints`' (their
+    rounding aside: numpy's dot products add in another order)."""
+
+    def __init__(self, q: NDArray[np.float64], counts: NDArray[np.int64], free: bool) -> None:
+        m, width, d = counts.size, int(counts.max()), q.shape[1]
+        self.free, self.d, self.cnt = free, d, counts
+        self.mask: NDArray[np.bool_] | None = None
+        if np.all(counts == width):
+            self.q = np.ascontiguousarray(q.T).reshape(d, m, width)
+        else:
+            self.mask = np.arange(width) < counts[:, None]  # row-major: the points' order
+            self.q = np.zeros((d, m, width))
+            self.q[:, self.mask] = q.T
+        self.full_mask, self.full_counts = self.mask, counts
+        self.idx = np.arange(m)
+        self.residuals_out = np.zeros((m, width))
+        self.unit_out = np.zeros((d, m, width))
+
+    def evaluate(
+        self, c: NDArray[np.float64], r: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """``J^T J``, ``-J^T e`` and ``e^T e`` of the active spheres at ``c``, ``r``."""
+        d, free = self.d, self.free
+        v = self.q - c.T[:, :, None]
+        dist = np.sqrt(np.einsum("imw,imw->mw", v, v))
+        e = dist - r[:, None]
+        u = v / np.where(dist > 0.0, dist, 1.0)
+        if self.mask is not None:
+            e *= self.mask
+            u *= self.mask
+        self.u, self.e = u, e
+        m = c.shape[0]
+        p = d + 1 if free else d
+        a = np.empty((m, p, p))
+        b = np.empty((m, p))
+        for i in range(d):
+            for j in range(i, d):
+                a[:, i, j] = a[:, j, i] = np.einsum("mw,mw->m", u[i], u[j])
+            b[:, i] = np.einsum("mw,mw->m", u[i], e)
+        if free:
+            a[:, :d, d] = a[:, d, :d] = np.einsum("imw->mi", u)
+            a[:, d, d] = self.cnt
+            b[:, d] = np.einsum("mw->m", e)
+        return a, b, np.einsum("mw,mw->m", e, e)
+
+    def _flat_unit(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(d, m, w) directions as (N, d), the points' order."""
+        flat = u.reshape(self.d, -1) if self.mask is None else u[:, self.mask]
+        return np.ascontiguousarray(flat.T)
+
+    def moments(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """:meth:`_FlatPoints.moments`, as dot products along the rows."""
+        q, d = self.q, self.d
+        ia, ib = np.triu_indices(d)
+        s_up = np.stack([np.einsum("mw,mw->m", q[i], q[j]) for i, j in zip(ia, ib, strict=True)], 1)
+        q2 = np.einsum("imw,imw->mw", q, q)
+        return s_up, np.einsum("imw,mw->mi", q, q2), np.einsum("mw->m", q2)
+
+    def coverage(self) -> NDArray[np.float64]:
+        return _coverage_deg(self._flat_unit(self.u), self.cnt, _starts(self.cnt))
+
+    def final_coverage(self) -> NDArray[np.float64] | None:
+        """:func:`_coverage_deg` of every sphere from the directions written (all of
+        them: the caller asks only when the passes fitted every sphere), along the rows:
+        the farthest direction is the first of least cosine, as there. None where a
+        cosine is not finite (:func:`_coverage_deg`'s own fallback decides)."""
+        u, mask, counts = self.unit_out, self.full_mask, self.full_counts
+        total = np.einsum("imw->mi", u)
+        norm = np.linalg.norm(total, axis=1)
+        cancelled = norm <= 1e-12 * counts
+        mean_dir = total / np.where(cancelled, 1.0, norm)[:, None]
+        cos = np.einsum("imw,mi->mw", u, mean_dir)
+        if mask is not None:
+            cos[~mask] = np.inf
+        if not np.all(np.isfinite(cos) | np.isposinf(cos)) or np.any(np.isposinf(cos.min(1))):
+            return None
+        rows = np.arange(cos.shape[0])
+        first = np.argmin(cos, axis=1)
+        cov = np.degrees(np.arctan2(_sines(u[:, rows, first].T, mean_dir), cos[rows, first]))
+        return np.asarray(np.where(cancelled, 180.0, cov))
+
+    def write(self, step: NDArray[np.float64]) -> None:
+        """The residuals carried by ``step`` and the directions, of every active sphere."""
+        d = self.d
+        moved = np.einsum("imw,mi->mw", self.u, step[:, :d])
+        if self.free:
+            moved += step[:, d, None]
+            if self.mask is not None:
+                moved *= self.mask
+        self.residuals_out[self.idx] = self.e - moved
+        self.unit_out[:, self.idx] = self.u
+
+    def keep(self, go: NDArray[np.bool_]) -> None:
+        self.q, self.idx, self.cnt = self.q[:, go], self.idx[go], self.cnt[go]
+        if self.mask is not None:
+            self.mask = self.mask[go]
+
+    def results(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        if self.full_mask is None:
+            residuals = self.residuals_out.reshape(-1)
+            return residuals, np.ascontiguousarray(self.unit_out.reshape(self.d, -1).T)
+        unit = np.ascontiguousarray(self.unit_out[:, self.full_mask].T)
+        return self.residuals_out[self.full_mask], unit
+
+
+_Points = _FlatPoints | _PaddedPoints
+
+
+def _layout(q: NDArray[np.float64], counts: NDArray[np.int64], free: bool) -> _Points:
+    """Spheres of equal (or nearly equal: :data:`PADDED_FILL`) point counts laid out one a
+    row (:class:`_PaddedPoints`), others one after the other (:class:`_FlatPoints`)."""
+    m = counts.size
+    if m > 0 and counts.max() * m <= PADDED_FILL * q.shape[0]:
+        return _PaddedPoints(q, counts, free)
+    return _FlatPoints(q, counts, free)
+
+
 def _plain_passes(
-    q: NDArray[np.float64],
-    counts: NDArray[np.int64],
-    starts: NDArray[np.int64],
+    points: _Points,
     c: NDArray[np.float64],
     r: NDArray[np.float64],
     radius_scale: NDArray[np.float64],
@@ -617,29 +859,24 @@ def _plain_passes(
     the general iteration would damp), a singular matrix, or no convergence within
     :data:`_PLAIN_PASSES` passes leaves the sphere not ``done``: it is fitted again from
     its start by the general iteration, which then takes the same steps as it always
-    did."""
+    did. ``points``: the spheres' points in their layout (:func:`_layout`)."""
     m, d = c.shape
     p = d + 1 if free else d
-    n_points = q.shape[0]
+    counts = points.cnt
     done = np.zeros(m, dtype=bool)
     centre = c.copy()
     radius = r.copy()
-    residuals = np.empty(n_points)
-    unit = np.empty_like(q)
     normal = np.zeros((m, p, p))
     cost_out = np.zeros(m)
     iterations = np.zeros(m, dtype=np.int64)
     idx = np.arange(m)
-    at = None  # the points of the spheres in idx (None: all of them)
-    qs, cnt, st = q, counts, starts
+    cnt = counts
     ca, ra = c, r
     prev_cost = prev_tol = None
     for k in range(min(_PLAIN_PASSES, max_iter)):
-        v, dist, e = _geometry(qs, ca, ra, cnt)
-        u = _unit(v, dist)
-        a, b, cost = _normal_equations(u, e, cnt, st, free)
+        a, b, cost = points.evaluate(ca, ra)
         if k == 0:
-            _ill_conditioned(_condition(a), partial(_coverage_deg, u, cnt, st), label, free)
+            _ill_conditioned(_condition(a), points.coverage, label, free)
         scale = np.maximum(np.abs(ra), radius_scale[idx])
         ok = np.ones(idx.size, dtype=bool)
         if prev_cost is not None and prev_tol is not None:
@@ -672,12 +909,7 @@ def _plain_passes(
             # written for every sphere of the pass, in place (no gather of the finished
             # ones' points): a sphere that goes on is written again when it finishes,
             # or by the general iteration
-            moved = np.einsum("ij,ij->i", u, np.repeat(step[:, :d], cnt, axis=0))
-            if free:
-                moved += np.repeat(step[:, d], cnt)
-            rows = slice(None) if at is None else at
-            residuals[rows] = e - moved
-            unit[rows] = u
+            points.write(step)
         go = ok & ~small
         if not go.any():
             break
@@ -686,14 +918,12 @@ def _plain_passes(
         prev_tol = 16.0 * _EPS * scale * np.sqrt(cnt * cost)
         prev_cost = cost
         if not go.all():
-            pm = np.repeat(go, cnt)
-            at = pm.nonzero()[0] if at is None else at[pm]
-            qs = qs[pm]
+            points.keep(go)
             idx, cnt = idx[go], cnt[go]
-            st = _starts(cnt)
             c_next, r_next = c_next[go], r_next[go]
             prev_cost, prev_tol = prev_cost[go], prev_tol[go]
         ca, ra = c_next, r_next
+    residuals, unit = points.results()
     return _Plain(done, centre, radius, residuals, unit, normal, cost_out, iterations)
 
 
@@ -756,12 +986,21 @@ def _fit_in_blocks(
 
 
 def _covariance(sol: _Solution, counts: NDArray[np.int64]) -> NDArray[np.float64]:
-    """Parameter covariance ``s^2 (J^T J)^-1`` with ``s^2 = SSR / (n - p)`` (NaN if n == p)."""
-    p = sol.normal_matrix.shape[1]
+    """The centre's covariance (m, 3, 3): the centre block of ``s^2 (J^T J)^-1`` with
+    ``s^2 = SSR / (n - p)`` (NaN if n == p). That block is the inverse of the centre
+    block's Schur complement ``A - b b^T / n`` (free radius: ``J^T J = [[A, b], [b^T,
+    n]]``; a fixed radius: ``A``), inverted by its adjugate (:func:`inverse3`: no LAPACK
+    call per sphere)."""
+    a = sol.normal_matrix
+    p = a.shape[1]
     dof = counts - p
     with np.errstate(divide="ignore", invalid="ignore"):
         s2 = np.where(dof > 0, sol.cost / np.where(dof > 0, dof, 1), np.nan)
-    return s2[:, None, None] * np.linalg.inv(sol.normal_matrix)
+    centre = a[:, :3, :3]
+    if p == 4:
+        column = a[:, :3, 3]
+        centre = centre - column[:, :, None] * column[:, None, :] / a[:, 3, 3, None, None]
+    return s2[:, None, None] * inverse3(centre)
 
 
 # --------------------------------------------------------------------------------------
@@ -839,9 +1078,9 @@ def fit_spheres(
     Notes
     -----
     Only the iteration loop is in Python; every iteration handles all the
-    spheres that have not converged yet with :func:`numpy.add.reduceat` and a
-    batched :func:`numpy.linalg.solve`.  See the module docstring for the
-    algorithm and the thresholds.
+    spheres that have not converged yet with :func:`numpy.add.reduceat` (or dot
+    products along the rows of spheres of equal point counts) and a batched
+    Cholesky solve.  See the module docstring for the algorithm and the thresholds.
 
     Examples
     --------
@@ -925,7 +1164,7 @@ def fit_spheres(
         residuals[order] = sol.residuals
     e = sol.residuals
     form = np.maximum.reduceat(e, starts) - np.minimum.reduceat(e, starts)
-    cov = _covariance(sol, counts)[:, :3, :3]
+    cov = _covariance(sol, counts)
     return SphereFits(
         centre_mm=centroid + sol.centre,
         radius_mm=sol.radius.copy(),

@@ -136,8 +136,13 @@ class LegThermalModel:
         return self.fixed_length_mm + self.variable * var_len[..., None]
 
     def sensitivity_mm_per_K(self, q_mm: npt.ArrayLike) -> FloatArray:
-        """Growth per kelvin of each leg with all its segments equally heated, (..., 6)."""
-        return (self.cte_per_K * self.segment_lengths_mm(q_mm)).sum(axis=-1)
+        """Growth per kelvin of each leg with all its segments equally heated, (..., 6):
+        ``sum_s cte_s L_s``, affine in ``q`` (only the variable segment's length moves
+        with it): ``sum_s cte_s fixed_s + cte_var (q - sum fixed)``, without the
+        segments' (..., 6, S) lengths."""
+        q = np.asarray(q_mm, dtype=float)
+        fixed = (self.cte_per_K * self.fixed_length_mm).sum(axis=1)
+        return fixed + self.variable_cte_per_K * (q - self.total_fixed_length_mm)
 
     def bound_sensitivity_mm_per_K(self, q_mm: npt.ArrayLike) -> FloatArray:
         """``sum_s |cte_s| L_s`` of each leg, (..., 6): the largest ``|growth|`` per kelvin

@@ -81,3 +81,45 @@ def test_checks_have_precise_messages():
     bad[0, 0] = -1
     with pytest.raises(ValueError, match="not a proper rotation"):
         g.check_transforms(bad)
+
+
+def _angle_rates_before(angles, convention):
+    """``angle_rates`` as it was (issue 37 replaced it by its closed form): the inverse of
+    the matrix whose column k is ``vee(dR/dangle_k R^T)``, from the derivatives."""
+    a = np.asarray(angles, dtype=float)
+    rot = g.rotation_from_angles(a, convention)
+    skew = g.rotation_derivatives(a, convention) @ np.swapaxes(rot, -1, -2)[..., None, :, :]
+    columns = np.stack([skew[..., 2, 1], skew[..., 0, 2], skew[..., 1, 0]], axis=-1)
+    velocities = np.swapaxes(columns, -1, -2)
+    return velocities, np.linalg.inv(velocities)
+
+
+@pytest.mark.parametrize("convention", ["symetrie", "pi"])
+def test_closed_form_angle_rates_equal_the_former_inverse(convention, rng):
+    # random angles, zero, +-180 and near the gimbal lock (Ry -> +-90: cond ~ 1/cos Ry)
+    angles = np.vstack(
+        [
+            np.column_stack(
+                [
+                    rng.uniform(-180, 180, 500),
+                    rng.uniform(-89, 89, 500),
+                    rng.uniform(-180, 180, 500),
+                ]
+            ),
+            [[0.0, 0.0, 0.0], [180.0, 0.0, -180.0], [30.0, 89.9, -40.0], [-5.0, -89.99, 170.0]],
+        ]
+    )
+    velocities, rates = _angle_rates_before(angles, convention)
+    ours = g.angle_rates(angles, convention)
+    # relative to each matrix's size: the former inverse loses ~cond * eps near the lock
+    size = np.abs(rates).max(axis=(1, 2))[:, None, None]
+    assert np.all(np.abs(ours - rates) <= 1e-12 * size)
+    np.testing.assert_allclose(g.angle_velocities(angles, convention), velocities, atol=1e-15)
+    # and each is the other's inverse (the identity to rounding)
+    np.testing.assert_allclose(
+        g.angle_velocities(angles, convention) @ ours,
+        np.broadcast_to(np.eye(3), ours.shape),
+        atol=1e-9,
+    )
+    # one pose (no leading axis) as many
+    assert g.angle_rates(angles[3], convention).shape == (3, 3)
