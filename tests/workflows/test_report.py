@@ -123,15 +123,36 @@ def _zlib_level_class(png: bytes) -> int:
 
 
 def test_figure_png_has_the_pixels_of_a_plain_savefig(hidden):
-    # figure_png encodes at a faster zlib level than savefig's default: other bytes, the
-    # same pixels (each figure drawn fresh)
+    # figure_png writes RGB at a faster zlib level than savefig's RGBA at its default:
+    # other bytes, the same pixels (each figure drawn fresh): the same colours, and
+    # savefig's alpha, the channel left out, opaque everywhere
     png = figure_png(pose_figure(hidden))
     plain = io.BytesIO()
     pose_figure(hidden).savefig(plain, format="png", dpi=FIGURE_DPI)
     fast_pixels, plain_pixels = _pixels(png), _pixels(plain.getvalue())
-    assert fast_pixels.shape == (round(6.2 * FIGURE_DPI), round(9.5 * FIGURE_DPI), 4)
-    np.testing.assert_array_equal(fast_pixels, plain_pixels)
+    assert fast_pixels.shape == (round(6.2 * FIGURE_DPI), round(9.5 * FIGURE_DPI), 3)
+    np.testing.assert_array_equal(fast_pixels, plain_pixels[..., :3])
+    assert (plain_pixels[..., 3] == 255).all()
     assert (_zlib_level_class(png), _zlib_level_class(plain.getvalue())) == (1, 2)
+
+
+def test_figure_png_keeps_the_alpha_of_a_see_through_figure():
+    # a figure whose face lets the background through is written RGBA, its alpha kept
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    def made() -> Figure:
+        fig = Figure(figsize=(2.0, 1.0))
+        FigureCanvasAgg(fig)
+        fig.patch.set_alpha(0.0)
+        fig.subplots().plot([0.0, 1.0], [1.0, 0.0])
+        return fig
+
+    plain = io.BytesIO()
+    made().savefig(plain, format="png", dpi=50)
+    fast_pixels, plain_pixels = _pixels(figure_png(made(), 50)), _pixels(plain.getvalue())
+    assert fast_pixels.shape == (50, 100, 4) and plain_pixels[..., 3].min() == 0
+    np.testing.assert_array_equal(fast_pixels, plain_pixels)
 
 
 def test_pose_figure_plots_every_trial_conventional_and_corrected(paper):

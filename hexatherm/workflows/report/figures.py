@@ -457,14 +457,21 @@ def registration_figure(result: Processed) -> Figure:
 
 
 def figure_png(fig: Figure, dpi: int = FIGURE_DPI) -> bytes:
-    """The figure as PNG bytes (RGBA, zlib level :data:`PNG_COMPRESS_LEVEL`): the pixels
-    of ``fig.savefig(format="png", dpi=dpi)``, drawn once."""
+    """The figure as PNG bytes: the pixels of ``fig.savefig(format="png", dpi=dpi)``,
+    drawn once, written by Pillow at zlib level :data:`PNG_COMPRESS_LEVEL`, as RGB when
+    every pixel is opaque (a figure's white face: the alpha channel, a quarter of the
+    bytes to filter and compress, says nothing), RGBA otherwise."""
+    from PIL import Image
+
+    # savefig's own drawing (its dpi, face and edge colours) into raw RGBA bytes
+    raw = io.BytesIO()
+    fig.savefig(raw, format="rgba", dpi=dpi)
+    width, height = (int(v) for v in fig.get_size_inches() * dpi)
+    pixels = raw.getbuffer()
+    assert len(pixels) == 4 * width * height, (len(pixels), width, height)
+    opaque = np.frombuffer(pixels, dtype=np.uint8)[3::4].min() == 255
+    mode = "RGB" if opaque else "RGBA"
+    image = Image.frombytes(mode, (width, height), pixels, "raw", "RGBX" if opaque else "RGBA")
     buffer = io.BytesIO()
-    fig.savefig(
-        buffer,
-        format="png",
-        dpi=dpi,
-        metadata={"Software": None},
-        pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL},
-    )
+    image.save(buffer, format="png", compress_level=PNG_COMPRESS_LEVEL, dpi=(dpi, dpi))
     return buffer.getvalue()

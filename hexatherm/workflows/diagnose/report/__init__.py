@@ -19,7 +19,8 @@ From a :class:`~hexatherm.workflows.diagnose.run.DiagnosisResult`:
   (figures embedded, provenance; :mod:`hexatherm.workflows.report.page`), and
   :func:`write_report_files` writes both with the PNGs into a folder.
 
-matplotlib is imported inside the figure functions only.
+diagnose always draws its figures: matplotlib's Figure and Agg canvas load with these
+modules (never with another command's).
 """
 
 from __future__ import annotations

@@ -8,6 +8,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
+# diagnose always draws its figures: matplotlib's Figure and Agg canvas load with the
+# command's modules, while the command line keeps the collector paused (until the
+# command's ``imports_done``, cli/collector.py), not in the middle of its work, where
+# every collection walked what they leave (about 100 of diagnose's 225 collections)
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
 from hexatherm.core.residuals import (
     LEG_NAMES,
     POSE_COMPONENTS,
@@ -27,7 +34,6 @@ from hexatherm.workflows.report.text import unit_text
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
-    from matplotlib.figure import Figure
 
     from hexatherm.workflows.diagnose.run import DiagnosisResult
 
@@ -35,12 +41,6 @@ if TYPE_CHECKING:
 # ------------------------------------------------------------------- figures
 def _new_figure(width_in: float, height_in: float, **margins: float) -> Figure:
     """A figure on the Agg canvas (no pyplot: nothing global, nothing to close)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
     fig = Figure(figsize=(width_in, height_in))
     FigureCanvasAgg(fig)
     fig.subplots_adjust(**{"left": 0.08, "right": 0.98, "bottom": 0.08, "top": 0.92, **margins})
