@@ -35,7 +35,7 @@ validates a pose the struts reach without the frames but not with them, and lets
 hexatherm's own driver read the frames CGSE set (what ``run.yaml`` records). Compared with
 hexatherm's maths: :func:`hexatherm.core.frames.platform_in_machine` (``M = U X O^-1``)
 and the IGM of the hexapod file for the absolute moves (1 nm, 1 nrad), the twin's own
-rules for the relative ones.
+rules for the relative ones (``move_target``: CGSE's, below).
 
 CGSE also has a simulator of its own, ``egse.hexapod.symetrie.hexapod.HexapodSimulator``
 (base of its ``PunaSimulator``, ``ZondaSimulator``, ``JoranSimulator``): no geometry and
@@ -63,7 +63,7 @@ from hexatherm.core.frames import campaign_transforms, platform_in_machine
 from hexatherm.core.geometry import invert_transform, pose_from_transform, transform_from_pose
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.devices.sim.symetrie import SimulatedHexapod
-from hexatherm.devices.sim.symetriepmac import SymetriePmacSimulator
+from hexatherm.devices.sim.symetriepmac import SymetriePmacSimulator, move_target
 from hexatherm.devices.symetriepmac import SymetriePmacController
 from hexatherm.io.config import read_hexapod
 
@@ -217,20 +217,6 @@ def differs(got: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
     return float(d[:3].max()), float(d[3:].max())
 
 
-def relative(kind: str, start: list[float], step: list[float]) -> np.ndarray:
-    """A relative move from ``start`` (wire poses): in the object frame ``T(start)
-    T(step)``; in the user frame the step's translation along the user axes and its
-    rotation about the object's own, ``t(start) + t(step)``, ``R(start) R(step)``."""
-    a, b = transform_from_pose(start, "symetrie"), transform_from_pose(step, "symetrie")
-    if kind == "object":
-        frame = a @ b
-    else:
-        frame = np.eye(4)
-        frame[:3, :3] = a[:3, :3] @ b[:3, :3]
-        frame[:3, 3] = a[:3, 3] + b[:3, 3]
-    return np.asarray(pose_from_transform(frame, "symetrie"), dtype=float)
-
-
 def truths(frames: list[float]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """hexatherm's object and platform poses (wire: mm, deg) for each step of
     :func:`sequence`: the machine pose ``U X O^-1`` of each object pose ``X``."""
@@ -240,7 +226,7 @@ def truths(frames: list[float]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     for k, pose in enumerate(MOVES):
         out[f"move_absolute {k}"] = (np.array(pose), platform_in_machine(frames, pose, "symetrie"))
     for kind in ("object", "user"):
-        x = relative(kind, MOVES[1], STEP)
+        x = move_target(1 if kind == "object" else 2, np.array(MOVES[1]), np.array(STEP))
         out[f"move_relative_{kind}"] = (x, platform_in_machine(frames, x, "symetrie"))
     return out
 

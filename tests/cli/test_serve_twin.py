@@ -5,6 +5,8 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import pytest
 from click.testing import CliRunner
@@ -22,16 +24,30 @@ HEXAPOD = ROOT / "configs" / "symetrie-like.yaml"
 BALLS = ROOT / "configs" / "balls-3.yaml"
 
 
-def test_serve_twin_prints_its_urls_serves_and_stops_on_ctrl_c() -> None:
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "hexatherm", "serve-twin", "--hexapod", str(HEXAPOD),
-         "--balls", str(BALLS), "--dialect", "pi", "--time-scale", "100",
-         "--fault", "ipp-error:severity=2,method=IsHomed,nth=1"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )  # fmt: skip
+@contextmanager
+def serving(*options: str) -> Iterator[subprocess.Popen[str]]:
+    """``hexatherm serve-twin`` of the symetrie-like hexapod and its three balls with
+    ``options``, its standard output and error piped; killed if still running at the end."""
+    command = [sys.executable, "-m", "hexatherm", "serve-twin", "--hexapod", str(HEXAPOD),
+               "--balls", str(BALLS), *options]  # fmt: skip
+    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
+        yield proc
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+
+
+def test_serve_twin_prints_its_urls_serves_and_stops_on_ctrl_c() -> None:
+    with serving(
+        "--dialect",
+        "pi",
+        "--time-scale",
+        "100",
+        "--fault",
+        "ipp-error:severity=2,method=IsHomed,nth=1",
+    ) as proc:
         assert proc.stdout is not None
         cmm_line, controller_line = proc.stdout.readline(), proc.stdout.readline()
         thermo_line = proc.stdout.readline()
@@ -68,21 +84,10 @@ def test_serve_twin_prints_its_urls_serves_and_stops_on_ctrl_c() -> None:
         # what the accelerated time does to the rehearsal's heating, said before serving
         assert err.count("warning: --time-scale 100: the twin's legs heat 100 times faster") == 1
         assert "the heating's 2400 s time constant lasts 24 s of the session's times" in err
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
 
 
 def test_serve_twin_cmm_dialect_dme_1_4() -> None:
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "hexatherm", "serve-twin", "--hexapod", str(HEXAPOD),
-         "--balls", str(BALLS), "--cmm-dialect", "dme-1.4", "--time-scale", "100"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )  # fmt: skip
-    try:
+    with serving("--cmm-dialect", "dme-1.4", "--time-scale", "100") as proc:
         assert proc.stdout is not None
         cmm_line = proc.stdout.readline()
         host, port = parse_ipp_url(cmm_line.split()[1])
@@ -95,10 +100,6 @@ def test_serve_twin_cmm_dialect_dme_1_4() -> None:
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=30)
         assert proc.returncode == 0, err
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
 
 
 def test_ctrl_c_as_soon_as_the_urls_are_out_stops_it() -> None:
@@ -106,24 +107,13 @@ def test_ctrl_c_as_soon_as_the_urls_are_out_stops_it() -> None:
     line are still being written) stops the serving as any Ctrl-C does: exit 0,
     "stopped". It exited 130 ("interrupted") when the signal came before the wait for it
     began: a whole-suite run under load saw it after two I++ sessions."""
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "hexatherm", "serve-twin", "--hexapod", str(HEXAPOD),
-         "--balls", str(BALLS), "--time-scale", "100"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )  # fmt: skip
-    try:
+    with serving("--time-scale", "100") as proc:
         assert proc.stdout is not None
         assert proc.stdout.readline().startswith("cmm: ipp://127.0.0.1:")
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=30)
         assert proc.returncode == 0, err
         assert err.rstrip().endswith("stopped")
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
 
 
 def test_a_bad_fault_is_refused() -> None:

@@ -3,29 +3,17 @@
 from __future__ import annotations
 
 import signal
-import subprocess
-import sys
 
 import numpy as np
 
 from hexatherm.devices.symetriepmac import SymetriePmacController
 from hexatherm.devices.urls import controller_from_url
 from hexatherm.io.config import read_hexapod
-from tests.sessions import ROOT
-
-HEXAPOD = ROOT / "configs" / "symetrie-like.yaml"
-BALLS = ROOT / "configs" / "balls-3.yaml"
+from tests.cli.test_serve_twin import HEXAPOD, serving
 
 
 def test_serve_twin_serves_the_gpascii_dialect() -> None:
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "hexatherm", "serve-twin", "--hexapod", str(HEXAPOD),
-         "--balls", str(BALLS), "--dialect", "symetrie-pmac"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )  # fmt: skip
-    try:
+    with serving("--dialect", "symetrie-pmac") as proc:
         assert proc.stdout is not None
         proc.stdout.readline()
         controller_line = proc.stdout.readline()
@@ -46,7 +34,3 @@ def test_serve_twin_serves_the_gpascii_dialect() -> None:
         _, err = proc.communicate(timeout=60)
         assert proc.returncode == 0, err
         assert "--controller symetrie-pmac://127.0.0.1:" in err
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
