@@ -179,9 +179,9 @@ class PoseChain:
         back = invert_transform(np.asarray(self.origin_shift, dtype=float))
         return shifted_poses(back, self.initial_poses, self.hexapod.convention)
 
-    def outputs_from_poses(self, pose: FloatArray, shifted: bool = True) -> FloatArray:
+    def outputs_from_poses(self, pose: FloatArray) -> FloatArray:
         """Outputs (b, M, 12) from the poses (b, N, 6) of every step relative to O (the
-        corrected ones relative to O as measured unless ``shifted``)."""
+        corrected ones in O carried to R0's state when :attr:`origin_shift` is set)."""
         b, n = pose.shape[:2]
         targets = self.plan.target_indices
         m = targets.size
@@ -205,7 +205,7 @@ class PoseChain:
         corrected = self.hexapod.fgm(
             corrected_q.reshape(-1, 6), initial_poses=start.reshape(-1, 6)
         ).reshape(b, m, 6)
-        if shifted and self.origin_shift is not None:
+        if self.origin_shift is not None:
             corrected = shifted_poses(self.origin_shift, corrected, self.hexapod.convention)
         return np.concatenate([pose[:, targets], corrected], axis=-1)
 
