@@ -115,6 +115,7 @@ class CurvatureError:
     widest_gap: float = 1.0
     vector_mm: FloatArray | None = None
     interval: npt.NDArray[np.intp] | None = None
+    past: npt.NDArray[np.bool_] | None = None
 
     @classmethod
     def from_vectors(
@@ -123,8 +124,10 @@ class CurvatureError:
         interval: npt.NDArray[np.intp],
         source: str = "curvature",
         widest_gap: float = 1.0,
+        past: npt.NDArray[np.bool_] | None = None,
     ) -> CurvatureError:
-        """From each target's error vector ``v`` (M, 6) and its interval (M,; -1: none)."""
+        """From each target's error vector ``v`` (M, 6) and its interval (M,; -1: none);
+        ``past``: the targets past the last reference."""
         v = np.where((interval >= 0)[:, None], vector_mm, 0.0)
         return cls(
             v[:, :, None] * v[:, None, :],
@@ -134,6 +137,7 @@ class CurvatureError:
             widest_gap,
             v,
             np.asarray(interval, dtype=np.intp),
+            None if past is None else np.asarray(past & (interval >= 0), dtype=bool),
         )
 
 
@@ -299,7 +303,7 @@ def curvature_error(
     ok = ok_a & (p >= 0) & (t1 > t0)
     vector = np.where(ok[:, None], vector, 0.0)
     interval = np.where(ok, around, -1).astype(np.intp)
-    return CurvatureError.from_vectors(vector, interval, widest_gap=widest)
+    return CurvatureError.from_vectors(vector, interval, widest_gap=widest, past=around >= n - 1)
 
 
 def _error_vector(
