@@ -89,8 +89,8 @@ def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
             lines.append(
                 f"warning: references up to {excess.widest_gap:.2g}x their median spacing "
                 "apart and no thermocouple log: the smooth fit's u does not hold its error "
-                "inside the widest gaps (a 30 min pause in a heating session claimed 0.6x "
-                "of the corrected Tx and Tz errors); give the session its log"
+                "inside the widest gaps (a 30 min pause in a heating session claimed 0.56x "
+                "and 0.72x of the corrected Tx and Tz errors); give the session its log"
             )
     curved = uncertainty.curvature
     if curved is not None and curved.evaluated.any():
@@ -109,9 +109,10 @@ def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
             lines.append(
                 f"warning: references up to {curved.widest_gap:.2g}x their median spacing "
                 "apart and no thermocouple log: the curvature the references show does not "
-                "hold a heating that starts or settles inside the gap (a 30 min pause in a "
-                "heating session claimed 0.2-0.45x of the corrected Tx error); give the "
-                "session its log"
+                "hold a heating that starts or settles inside the gap (a 30 min pause "
+                "after mats switched on 90 s before a reference claimed 0.55x of the "
+                "corrected Tx error; a step inside one interval 0.42x); give the session "
+                "its log"
             )
     past = past_warning(uncertainty)
     if past:
