@@ -416,8 +416,9 @@ def _start_deceleration(times: FloatArray, values: FloatArray, var: FloatArray) 
     members or a first slope within :data:`DECELERATION_SEEN` standard deviations.
 
     Over 20 noise replicas (1 um point noise, steps 200 s apart): legs of two time
-    constants (150 s, 3000 s) heated from the start 1.5 or more in 11, the twin's
-    first-order response (2400 s) from the start in 1 (1.63), no heating in none."""
+    constants (150 s, 3000 s) heated from the start 1.5 or more in 9, the air drifting
+    periodically with the legs lagging it in 9, the twin's first-order response (2400 s)
+    from the start in 1 (1.63), no heating in 1 (2.07)."""
     if times.size < 3 or not np.all(np.diff(times[:3]) > 0):
         return float("nan")
     shape = np.linalg.svd(values, full_matrices=False)[2][0]
