@@ -46,8 +46,23 @@ def _t(t_s: npt.ArrayLike) -> FloatArray:
     return np.asarray(t_s, dtype=float).reshape(-1)
 
 
+class _Together:
+    """Every leg the same history ``rise(t)`` (0 to 1) times its gain, in still air."""
+
+    scale: float
+
+    def rise(self, t: FloatArray) -> FloatArray:
+        raise NotImplementedError
+
+    def air(self, t_s: npt.ArrayLike) -> FloatArray:
+        return np.full(_t(t_s).size, AIR_C)
+
+    def legs(self, t_s: npt.ArrayLike) -> FloatArray:
+        return AIR_C + np.outer(self.rise(_t(t_s)), self.scale * GAIN_C)
+
+
 @dataclass(frozen=True)
-class TwoTimeConstants:
+class TwoTimeConstants(_Together):
     """From ``on_s``: a share ``fast`` of the gain with ``tau_fast_s``, the rest with
     ``tau_slow_s``."""
 
@@ -57,46 +72,34 @@ class TwoTimeConstants:
     fast: float = 0.5
     scale: float = 1.0
 
-    def air(self, t_s: npt.ArrayLike) -> FloatArray:
-        return np.full(_t(t_s).size, AIR_C)
-
-    def legs(self, t_s: npt.ArrayLike) -> FloatArray:
-        dt = np.clip(_t(t_s) - self.on_s, 0.0, None)
-        rise = self.fast * -np.expm1(-dt / self.tau_fast_s)
-        rise += (1 - self.fast) * -np.expm1(-dt / self.tau_slow_s)
-        return AIR_C + np.outer(rise, self.scale * GAIN_C)
+    def rise(self, t: FloatArray) -> FloatArray:
+        dt = np.clip(t - self.on_s, 0.0, None)
+        fast = self.fast * -np.expm1(-dt / self.tau_fast_s)
+        return fast + (1 - self.fast) * -np.expm1(-dt / self.tau_slow_s)
 
 
 @dataclass(frozen=True)
-class RampPlateau:
+class RampPlateau(_Together):
     """A straight warming from ``start_s`` to ``end_s``, then flat."""
 
     start_s: float = 700.0
     end_s: float = 1700.0
     scale: float = 1.0
 
-    def air(self, t_s: npt.ArrayLike) -> FloatArray:
-        return np.full(_t(t_s).size, AIR_C)
-
-    def legs(self, t_s: npt.ArrayLike) -> FloatArray:
-        rise = np.clip((_t(t_s) - self.start_s) / (self.end_s - self.start_s), 0.0, 1.0)
-        return AIR_C + np.outer(rise, self.scale * GAIN_C)
+    def rise(self, t: FloatArray) -> FloatArray:
+        return np.clip((t - self.start_s) / (self.end_s - self.start_s), 0.0, 1.0)
 
 
 @dataclass(frozen=True)
-class SmoothStep:
+class SmoothStep(_Together):
     """A logistic step of width ``width_s`` centred at ``at_s``."""
 
     at_s: float = 1500.0
     width_s: float = 20.0
     scale: float = 1.0
 
-    def air(self, t_s: npt.ArrayLike) -> FloatArray:
-        return np.full(_t(t_s).size, AIR_C)
-
-    def legs(self, t_s: npt.ArrayLike) -> FloatArray:
-        rise = 0.5 * (1 + np.tanh((_t(t_s) - self.at_s) / (2 * self.width_s)))
-        return AIR_C + np.outer(rise, self.scale * GAIN_C)
+    def rise(self, t: FloatArray) -> FloatArray:
+        return 0.5 * (1 + np.tanh((t - self.at_s) / (2 * self.width_s)))
 
 
 @dataclass(frozen=True)

@@ -68,29 +68,13 @@ def test_the_shapes_are_not_first_order_responses() -> None:
 
 def _shaped_session(folder, seed: int, heating: object, pauses: tuple[float, ...]):  # noqa: ANN001, ANN202
     """A twin session of 6 targets between 7 references (steps 200 s apart) whose legs
-    follow ``heating``, its thermocouple log dropped, ``cmm:`` stating the probing."""
-    from hexatherm.workflows.simulate.twinsession import write_files
+    follow ``heating``, ``cmm:`` stating the probing, its thermocouple log dropped."""
+    from tests.workflows.test_interpolation_error import heated
 
-    plan = small_plan(6, 1)
-    spec = TwinSessionSpec(
-        name=folder.name,
-        hexapod_text=(ROOT / "configs" / "symetrie-like.yaml").read_text(),
-        balls=BALLS,
-        plan=plan,
-        heating=heating,  # type: ignore[arg-type]
-        seed=seed,
-        output="centres",
-        fit_centres=True,
-        point_noise_mm=1e-3,
-        pauses_s=pauses,
-    )
-    write_files(simulate_session(spec).files, folder)
+    heated(folder, seed, pauses=pauses, heating=heating)  # type: ignore[arg-type]
     session = folder / "session.yaml"
     lines = session.read_text().splitlines(keepends=True)
-    kept = "".join(x for x in lines if not x.startswith("temperatures:"))
-    session.write_text(
-        kept + "cmm: {point_noise_um: 1.0, points_per_ball: 25, cap_angle_deg: 70}\n"
-    )
+    session.write_text("".join(x for x in lines if not x.startswith("temperatures:")))
     return folder
 
 
