@@ -46,10 +46,23 @@ after). So each target's error is the vector ``v = sqrt(share) c G`` (its covari
 targets of one interval is ``v_a v_b^T``; targets of different intervals are taken as
 independent (each interval's curvature read from its own references).
 
-Where it holds: a growth whose curvature changes little over three references (the
-stencil reads it over the two intervals around each reference; a heating switched on
-between two references, or one that starts or settles inside a gap, is seen only in
-part). A target before the first reference is not evaluated.
+The interval's own curvature (issue 35, an independent generator's kinks): each
+stencil is the growth's curvature averaged under a hat over the two intervals around
+its reference, so the two stencils around a target's interval hold half of a kink
+inside it, and their mean half of it again; a heating switched on inside the interval
+(or settling in a gap) read so claimed 0.34 of the corrected Tx error (two time
+constants, a 30 min pause). With a stencil on either side of those two, the interval's
+own curvature is ``s_p + s_(p+1) - (s_(p-1) + s_(p+2)) / 2`` (the outer stencils read
+off the halves of the neighbouring intervals' curvature; a quadratic: the same as the
+mean, a kink inside: twice it). Both are evaluated (each with its noise's share off)
+and the larger error taken: the references do not tell whether the curvature is spread
+over the intervals or inside this one.
+
+Where it holds: a growth whose curvature changes little over three references, or one
+bend inside the interval; a step (a rise and a settling both inside one interval) has
+no curvature the stencils read in sum, and one that starts or settles past the last
+reference is extrapolated (a limit: docs/uncertainty.md). A target before the first
+reference is not evaluated.
 """
 
 from __future__ import annotations
@@ -102,6 +115,7 @@ class CurvatureError:
     widest_gap: float = 1.0
     vector_mm: FloatArray | None = None
     interval: npt.NDArray[np.intp] | None = None
+    past: npt.NDArray[np.bool_] | None = None
 
     @classmethod
     def from_vectors(
@@ -110,8 +124,10 @@ class CurvatureError:
         interval: npt.NDArray[np.intp],
         source: str = "curvature",
         widest_gap: float = 1.0,
+        past: npt.NDArray[np.bool_] | None = None,
     ) -> CurvatureError:
-        """From each target's error vector ``v`` (M, 6) and its interval (M,; -1: none)."""
+        """From each target's error vector ``v`` (M, 6) and its interval (M,; -1: none);
+        ``past``: the targets past the last reference."""
         v = np.where((interval >= 0)[:, None], vector_mm, 0.0)
         return cls(
             v[:, :, None] * v[:, None, :],
@@ -121,6 +137,7 @@ class CurvatureError:
             widest_gap,
             v,
             np.asarray(interval, dtype=np.intp),
+            None if past is None else np.asarray(past & (interval >= 0), dtype=bool),
         )
 
 
@@ -248,26 +265,60 @@ def curvature_error(
     f = (ts - t0) * (t1 - ts) / 2  # negative past the last reference
     if spacing_seen_s > 0:
         f = np.maximum(0.0, f - spacing_seen_s**2 / 8)
-    # every target's c over its own references: the ones it used, then p-1 .. p+2 (the
-    # line's two and the stencils' of p and p + 1); zero past either end
+    # every target's c over its own references: the ones it used, then p-2 .. p+3 (the
+    # line's two and the stencils of p-1 .. p+2); zero past either end
     k = columns.shape[1]
-    window = pc[:, None] + np.arange(-1, 3)
+    window = pc[:, None] + np.arange(-2, 4)
     inside = (window >= 0) & (window < n)
-    cols = np.concatenate([columns, np.clip(window, 0, n - 1)], axis=1)  # (M, K + 4)
-    zeros = np.zeros((m, 4))
+    cols = np.concatenate([columns, np.clip(window, 0, n - 1)], axis=1)  # (M, K + 6)
+    zeros = np.zeros((m, 6))
     used = np.concatenate([values, zeros], axis=1)
     line = np.concatenate([np.zeros((m, k)), zeros], axis=1)
-    line[:, k + 1], line[:, k + 2] = 1.0 - w, w
-    rows_p, rows_q = has[pc], has[pc + 1]
+    line[:, k + 2], line[:, k + 3] = 1.0 - w, w
+    # the stencils of p - 1, p, p + 1, p + 2 on the window (offsets 0-2, 1-3, 2-4, 3-5)
+    rows = [has[np.clip(pc + j, 0, n - 1)] & (pc + j >= 0) & (pc + j < n) for j in (-1, 0, 1, 2)]
+    parts = []
+    for j, row in zip((-1, 0, 1, 2), rows, strict=True):
+        part = np.zeros((m, 6))
+        part[:, j + 1 : j + 4] = np.where(row[:, None], stencils[np.clip(pc + j, 0, n - 1)], 0.0)
+        parts.append(part)
+    rows_p, rows_q = rows[1], rows[2]
     count = rows_p.astype(float) + rows_q
-    stencil = np.zeros((m, 4))
-    stencil[:, 0:3] += np.where(rows_p[:, None], stencils[pc], 0.0)
-    stencil[:, 1:4] += np.where(rows_q[:, None], stencils[pc + 1], 0.0)
-    mean = np.concatenate(
-        [np.zeros((m, k)), stencil / np.where(count > 0, count, 1.0)[:, None]], axis=1
+    spread_mean = (parts[1] + parts[2]) / np.where(count > 0, count, 1.0)[:, None]
+    # the interval's own curvature: the two stencils around it hold half of its curvature
+    # each and half of their outer intervals'; those halves read off the outer stencils
+    # (a quadratic: the same; a kink inside the interval: twice the mean's)
+    all_four = rows[0] & rows_p & rows_q & rows[3]
+    own_part = np.where(
+        all_four[:, None], parts[1] + parts[2] - (parts[0] + parts[3]) / 2, spread_mean
     )
-    mean[:, k:] = np.where(inside, mean[:, k:], 0.0)
-    # each reference once: the entries of one column added, kept at its first
+    trace = np.trace(s, axis1=1, axis2=2)
+    candidates = []
+    for stencil in (spread_mean, own_part):
+        mean = np.concatenate([np.zeros((m, k)), np.where(inside, stencil, 0.0)], axis=1)
+        candidates.append(_error_vector(cols, used, line, mean, f, count, g, trace))
+    (vec_a, ok_a), (vec_b, _) = candidates
+    larger = np.einsum("ml,ml->m", vec_b, vec_b) > np.einsum("ml,ml->m", vec_a, vec_a)
+    vector = np.where(larger[:, None], vec_b, vec_a)
+    ok = ok_a & (p >= 0) & (t1 > t0)
+    vector = np.where(ok[:, None], vector, 0.0)
+    interval = np.where(ok, around, -1).astype(np.intp)
+    return CurvatureError.from_vectors(vector, interval, widest_gap=widest, past=around >= n - 1)
+
+
+def _error_vector(
+    cols: npt.NDArray[np.intp],
+    used: FloatArray,
+    line: FloatArray,
+    mean: FloatArray,
+    f: FloatArray,
+    count: FloatArray,
+    g: FloatArray,
+    trace: FloatArray,
+) -> tuple[FloatArray, npt.NDArray[np.bool_]]:
+    """Each target's error vector ``sqrt(share) c G`` (M, 6) for ``c = W - L + f s`` over
+    its columns ``cols`` (``used``: W, ``line``: L, ``mean``: the stencil s), each
+    reference once; and whether it has one (a target on its line with no stencil: none)."""
     same = cols[:, :, None] == cols[:, None, :]  # (M, J, J)
     first = ~np.any(np.tril(same, -1), axis=2)
     u = np.where(first, np.einsum("mij,mj->mi", same, used), 0.0)
@@ -276,15 +327,13 @@ def curvature_error(
     on_line = np.all(np.abs(u - ln) <= 1e-8 + 1e-5 * np.abs(ln), axis=1)  # np.allclose
     c = (u - ln) + f[:, None] * st
     c = np.where((count > 0)[:, None], c, u - ln)
-    ok = np.any(u != 0.0, axis=1) & (p >= 0) & (t1 > t0) & ~((count == 0) & on_line)
+    ok = np.any(u != 0.0, axis=1) & ~((count == 0) & on_line)
     error = np.einsum("mj,mjl->ml", c, g[cols])  # (M, 6)
-    noise = np.einsum("mj,mj->m", c**2, np.trace(s, axis1=1, axis2=2)[cols])
+    noise = np.einsum("mj,mj->m", c**2, trace[cols])
     total = np.einsum("ml,ml->m", error, error)
     with np.errstate(divide="ignore", invalid="ignore"):
         share = np.where(total > 0, np.maximum(0.0, 1.0 - noise / total), 0.0)
-    vector = np.where(ok[:, None], np.sqrt(share)[:, None] * error, 0.0)
-    interval = np.where(ok, around, -1).astype(np.intp)
-    return CurvatureError.from_vectors(vector, interval, widest_gap=widest)
+    return np.sqrt(share)[:, None] * error, ok
 
 
 #: chance level of the heights' scatter along the heating's direction beyond the rest's,

@@ -1,6 +1,7 @@
 """curvature_error's sparse form (two columns a target, the stencils as three diagonals,
 vectorized over targets) against the dense (M, n) implementation it replaced, kept here
-as the reference; and smootherror._line_weights against its former loop."""
+as the reference (with the interval's own curvature of issue 35's round 5 added, target
+by target); and smootherror._line_weights against its former loop."""
 
 from __future__ import annotations
 
@@ -51,14 +52,20 @@ def dense_curvature_error(
         f = (ts[k] - t[p]) * (t[p + 1] - ts[k]) / 2
         if seen > 0:
             f = max(0.0, f - seen**2 / 8)
-        c = used[k] - line
-        if rows:
-            c = c + f * stencils[rows].mean(axis=0)
-        error = c @ g
-        noise = np.einsum("j,jlm->lm", c**2, s)
-        total = float(error @ error)
-        share = max(0.0, 1.0 - float(np.trace(noise)) / total) if total > 0 else 0.0
-        vector[k] = np.sqrt(share) * error
+        readings = [stencils[rows].mean(axis=0)] if rows else [np.zeros(n)]
+        if 1 <= p and p + 2 <= n - 1 and all(has[i] for i in (p - 1, p, p + 1, p + 2)):
+            # the interval's own curvature (issue 35, round 5): the larger error is taken
+            readings.append(stencils[p] + stencils[p + 1] - (stencils[p - 1] + stencils[p + 2]) / 2)
+        best = np.zeros(6)
+        for reading in readings:
+            c = used[k] - line + (f * reading if rows else 0.0)
+            error = c @ g
+            noise = np.einsum("j,jlm->lm", c**2, s)
+            total = float(error @ error)
+            share = max(0.0, 1.0 - float(np.trace(noise)) / total) if total > 0 else 0.0
+            if share * total > best @ best:
+                best = np.sqrt(share) * error
+        vector[k] = best
         interval[k] = around[k]
     return vector, interval
 

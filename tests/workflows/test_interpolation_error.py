@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from hexatherm.core.heating import HeatingModel
 from hexatherm.core.plan import Plan
 from hexatherm.workflows.process.pipeline import process_session
 from hexatherm.workflows.process.summary import uncertainty_summary
@@ -54,10 +55,11 @@ def heated(
     cmm: bool = True,
     plan: Plan | None = None,
     pauses: tuple[float, ...] | None = None,
+    heating: HeatingModel | None = None,
 ) -> Path:
-    """A twin session heated from 1000 s; ``gap_s`` pauses before the fourth reference
-    (``pauses``: before every step instead); ``cmm``: the session states the probing
-    (else its centres carry no u at all)."""
+    """A twin session heated from 1000 s (``heating``: by that instead); ``gap_s`` pauses
+    before the fourth reference (``pauses``: before every step instead); ``cmm``: the
+    session states the probing (else its centres carry no u at all)."""
     plan = small_plan(6, 1) if plan is None else plan
     if pauses is None:
         pauses = tuple(gap_s if i == 7 else 0.0 for i in range(len(plan.labels)))
@@ -66,7 +68,7 @@ def heated(
         hexapod_text=(ROOT / "configs" / "symetrie-like.yaml").read_text(),
         balls=BALLS,
         plan=plan,
-        heating=Heating(on_s=1000.0, tau_s=600.0, gain_C=GAIN),
+        heating=Heating(on_s=1000.0, tau_s=600.0, gain_C=GAIN) if heating is None else heating,
         seed=seed,
         output="centres",
         fit_centres=True,

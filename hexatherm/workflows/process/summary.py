@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from hexatherm.workflows.process.carryerror import carry_line
+from hexatherm.workflows.process.carryerror import carry_line, carry_warning
 
 if TYPE_CHECKING:
     from hexatherm.workflows.process.run import ProcessOutcome
@@ -20,6 +20,27 @@ MC_RELATIVE_LIMIT = 0.1
 #: references farther apart than this many times their median spacing, without a log,
 #: leave the smooth fit's error inside the gap unclaimed (a warning)
 WIDE_GAP = 2.0
+
+
+def past_warning(uncertainty: PoseUncertainty) -> str:
+    """A warning for targets past the last reference without a thermocouple log: their u
+    holds the growth's continuation past it, which no reference shows (a limit of the
+    method, over-claimed where the heating settles there, under where it starts)."""
+    curved, excess = uncertainty.curvature, uncertainty.smooth_excess
+    count = 0
+    if curved is not None and curved.source == "curvature" and curved.past is not None:
+        count = int(np.count_nonzero(curved.past))
+    if excess is not None and excess.shape_um is None and excess.past_um is not None:
+        count = max(count, int(np.count_nonzero(excess.past_um > 0)))
+    if not count:
+        return ""
+    return (
+        f"warning: {count} target(s) after the last reference and no thermocouple log: their "
+        "u holds the growth's straight continuation beyond it, which no reference shows "
+        "(a heating switched on 300-600 s before the last reference, 200 s before such a "
+        "target: linear claimed 1.2-11x of its corrected Tx error, smooth 0.3-1.1x); "
+        "measure a reference after the last target, or give the session its log"
+    )
 
 
 def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
@@ -68,8 +89,8 @@ def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
             lines.append(
                 f"warning: references up to {excess.widest_gap:.2g}x their median spacing "
                 "apart and no thermocouple log: the smooth fit's u does not hold its error "
-                "inside the widest gaps (a 30 min pause in a heating session claimed 0.6x "
-                "of the corrected Tx and Tz errors); give the session its log"
+                "inside the widest gaps (a 30 min pause in a heating session claimed 0.56x "
+                "and 0.72x of the corrected Tx and Tz errors); give the session its log"
             )
     curved = uncertainty.curvature
     if curved is not None and curved.evaluated.any():
@@ -88,10 +109,14 @@ def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
             lines.append(
                 f"warning: references up to {curved.widest_gap:.2g}x their median spacing "
                 "apart and no thermocouple log: the curvature the references show does not "
-                "hold a heating that starts or settles inside the gap (a 30 min pause in a "
-                "heating session claimed 0.2-0.45x of the corrected Tx error); give the "
-                "session its log"
+                "hold a heating that starts or settles inside the gap (a 30 min pause "
+                "after mats switched on 90 s before a reference claimed 0.55x of the "
+                "corrected Tx error; a step inside one interval 0.42x); give the session "
+                "its log"
             )
+    past = past_warning(uncertainty)
+    if past:
+        lines.append(past)
     for check in uncertainty.repeats:
         line = (
             f"  {check.label} measured {check.n} times, averaged: their scatter is "
@@ -182,6 +207,9 @@ def session_lines(outcome: ProcessOutcome) -> list[str]:
     carried = carry_line(result, outcome.uncertainty.carry)
     if carried:
         lines.append(carried)
+    warning = carry_warning(outcome.uncertainty.carry)
+    if warning:
+        lines.append(warning)
     smooth = result.correction.smooth
     if smooth is not None:
         lams = ", ".join(sorted({f"{v:.2g}" for v in smooth.lam})) if smooth.used else ""
