@@ -5,6 +5,7 @@ long-lived commands and a user's own allocator settings are left alone."""
 from __future__ import annotations
 
 import os
+import platform
 import subprocess
 import sys
 
@@ -42,7 +43,10 @@ def _clean_environment() -> dict[str, str]:
     return {k: v for k, v in os.environ.items() if k not in allocator.ALLOCATOR_VARIABLES}
 
 
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's allocator")
+@pytest.mark.skipif(
+    not sys.platform.startswith("linux") or platform.libc_ver()[0] != "glibc",
+    reason="glibc's allocator",
+)
 def test_a_freed_array_is_reused_without_new_pages() -> None:
     """After the setting, the second 64 MB array takes the first's pages (no faults);
     without it (``run``, long-lived) both are paged in afresh (glibc hands back a block
