@@ -28,7 +28,7 @@ import sys
 import textwrap
 from typing import Any
 
-from hexatherm.cli import collector
+from hexatherm.cli import allocator, collector
 from hexatherm.cli.signals import exit_on_signals
 
 
@@ -141,7 +141,10 @@ class LazyGroup(click.Group):
         return ctx
 
     def invoke(self, ctx: click.Context) -> object:
-        """Run the command; Ctrl-C exits with :data:`INTERRUPTED` (click would say 1)."""
+        """Run the command; Ctrl-C exits with :data:`INTERRUPTED` (click would say 1). A
+        command that computes keeps the memory it frees for its next arrays
+        (:mod:`hexatherm.cli.allocator`)."""
+        allocator.keep_freed_memory(_command_of(ctx.meta.get(ARGV_KEY, [])))
         try:
             return super().invoke(ctx)
         except KeyboardInterrupt:

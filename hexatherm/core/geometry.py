@@ -265,6 +265,25 @@ def inverse3(m: npt.ArrayLike) -> FloatArray:
     return out
 
 
+def cross_columns(a: npt.ArrayLike, b: npt.ArrayLike) -> FloatArray:
+    """``a x b_j`` for every column ``b_j`` of ``b``: ``a`` (..., 3), ``b`` (..., 3, n)
+    (the leading axes broadcast), the result (..., 3, n) contiguous. The products and
+    differences of :func:`numpy.cross` (``a1 b2 - a2 b1``, ...: the same numbers), without
+    its moves of the axis to the end and back and its copies (the registration's and
+    the poses' derivatives: a lever by 3k columns of 20,000 steps).
+
+    >>> import numpy as np
+    >>> a, b = np.array([[1.0, 2.0, 3.0]]), np.array([[[1.0, 0.0], [0.0, 1.0], [0.0, 0.0]]])
+    >>> bool(np.array_equal(cross_columns(a, b), np.cross(a[:, :, None], b, axis=1)))
+    True
+    """
+    a = np.asarray(a, dtype=float)[..., :, None]
+    b = np.asarray(b, dtype=float)
+    a0, a1, a2 = a[..., 0, :], a[..., 1, :], a[..., 2, :]
+    b0, b1, b2 = b[..., 0, :], b[..., 1, :], b[..., 2, :]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-2)
+
+
 def angles_from_rotation(rotation: npt.ArrayLike, convention: str = "symetrie") -> FloatArray:
     """``[Rx, Ry, Rz]`` in degrees from rotation matrices (..., 3, 3).
 

@@ -40,7 +40,12 @@ import numpy.typing as npt
 
 from hexatherm.core.carry import shifted_pose_derivative, shifted_poses
 from hexatherm.core.correction import interpolated_growth, target_growth
-from hexatherm.core.geometry import angle_rates, invert_transform, pose_from_transform
+from hexatherm.core.geometry import (
+    angle_rates,
+    cross_columns,
+    invert_transform,
+    pose_from_transform,
+)
 from hexatherm.core.hexapod import Hexapod
 from hexatherm.core.plan import Plan
 from hexatherm.core.registration import frame_derivatives, platform_frames
@@ -166,7 +171,7 @@ class PoseChain:
         d_rot, d_trans = d_rot.reshape(-1, 3, 3 * k), d_trans.reshape(-1, 3, 3 * k)
         own = np.concatenate([back @ d_trans[1:], rates @ (back @ d_rot[1:])], axis=1)
         lever = frames[1:, :3, 3] - frames[0, :3, 3]  # t_j - t_O, (S, 3)
-        moved = np.cross(lever[:, :, None], d_rot[0][None], axis=1) - d_trans[0]
+        moved = cross_columns(lever, d_rot[0]) - d_trans[0]
         by_origin = np.concatenate([back @ moved, -(rates @ (back @ d_rot[0]))], axis=1)
         return pose, own, by_origin
 
@@ -782,7 +787,12 @@ def reference_scatter(
     keep = np.flatnonzero(t[2:] - t[:-2] > 0)  # neighbours at one time draw no line
     if not keep.size:
         return float("nan"), 0
-    before, mid, after = keep, keep + 1, keep + 2
+    # every measurement kept (the usual case: a log's times all differ): the three as
+    # views, not gathered (a thermocouple log's 283,000 rows x 6 legs, twice a run)
+    whole = keep.size == len(t) - 2
+    before, mid, after = (
+        (slice(0, -2), slice(1, -1), slice(2, None)) if whole else (keep, keep + 1, keep + 2)
+    )
     f = (t[mid] - t[before]) / (t[after] - t[before])
     e = v[mid] - ((1 - f)[:, None] * v[before] + f[:, None] * v[after])
     factor = 1 / w[mid] + (1 - f) ** 2 / w[before] + f**2 / w[after]

@@ -27,7 +27,7 @@ from itertools import permutations
 import numpy as np
 import numpy.typing as npt
 
-from hexatherm.core.geometry import inverse3
+from hexatherm.core.geometry import cross_columns, inverse3
 from hexatherm.errors import RegistrationError
 from hexatherm.typing import FloatArray
 
@@ -180,7 +180,7 @@ def frame_derivatives(
     rhs = np.moveaxis(cross, 1, 2).reshape(n, 3, 3 * k)
     d_rot = inverse3(hessian) @ rhs  # (N, 3, k*3)
     lever = (rot @ balls_mean[..., None])[..., 0]  # R b_mean, (N, 3)
-    d_trans = np.cross(lever[:, :, None], d_rot, axis=1)
+    d_trans = cross_columns(lever, d_rot)
     d_trans += (w_norm[:, None, :, None] * np.eye(3)[None, :, None, :]).reshape(n, 3, 3 * k)
     return out, d_rot.reshape(n, 3, k, 3), d_trans.reshape(n, 3, k, 3)
 
