@@ -28,6 +28,8 @@ BLOCK_ROWS = 65_536
 #: the decimals of every float column (the listing's ``float_format``)
 DECIMALS = 4
 _SPACE = ord(" ")
+#: 1, 10, ..., 10**18: an int64's places
+_POW10 = 10 ** np.arange(19, dtype=np.int64)
 
 
 class Column(Protocol):
@@ -75,23 +77,22 @@ class IntColumn:
 
     def cells(self, start: int, stop: int, width: int) -> npt.NDArray[np.uint8]:
         values = self.values[start:stop]
-        field = np.full((values.size, width), _SPACE, np.uint8)
         if values.size and int(values.min()) == np.iinfo(np.int64).min:  # no magnitude
+            field = np.full((values.size, width), _SPACE, np.uint8)
             for row, value in enumerate(values.tolist()):
                 text = f"{value:d}".encode("ascii")
                 field[row, width - len(text) :] = np.frombuffer(text, np.uint8)
             return field
-        rest = np.abs(values)
-        rows = np.arange(values.size)
-        at = np.full(values.size, width - 1)
-        going = np.ones(values.size, dtype=bool)  # a zero is one digit
-        while going.any():
-            rest, digit = np.divmod(rest, 10)
-            field[rows[going], at[going]] = ord("0") + digit[going]
-            at -= going
-            going &= rest > 0
+        # every place's digit at once, the places left of a number's first digit blank
+        magnitude = np.abs(values)
+        places = min(width, _POW10.size)
+        digits = magnitude[:, None] // _POW10[places - 1 :: -1] % 10
+        field = np.full((values.size, width), _SPACE, np.uint8)
+        field[:, width - places :] = digits + ord("0")
+        count = np.searchsorted(_POW10[1:], magnitude, side="right") + 1
+        _blank_left(field, count)
         signs = np.flatnonzero(values < 0)
-        field[signs, at[signs]] = ord("-")
+        field[signs, width - 1 - count[signs]] = ord("-")
         return field
 
 
@@ -119,6 +120,8 @@ class FloatColumn:
 
     def cells(self, start: int, stop: int, width: int) -> npt.NDArray[np.uint8]:
         values = self.values[start:stop]
+        if np.isnan(values).all():  # na_rep: nothing (a points file's sizes)
+            return np.full((values.size, width), _SPACE, np.uint8)
         field, length = fixed_fields(values, 10.0**-DECIMALS)
         length = length.astype(np.intp)
         # fixed_fields writes a value that rounds to zero as 0.0000; format keeps its sign
@@ -142,6 +145,7 @@ class TextColumn:
         self.texts = list(texts)
         self.codes = None if codes is None else np.asarray(codes, dtype=np.intp)
         self.rows = rows
+        self._tables: dict[int, npt.NDArray[np.uint8]] = {}
 
     def width(self) -> int:
         if self.codes is None:
@@ -150,13 +154,20 @@ class TextColumn:
         return max((len(self.texts[i]) for i in used.tolist()), default=0)
 
     def cells(self, start: int, stop: int, width: int) -> npt.NDArray[np.uint8]:
-        table = np.full((len(self.texts), width), _SPACE, np.uint8)
-        for i, text in enumerate(self.texts):
-            if len(text) <= width:  # (texts no row uses may be longer)
-                table[i, width - len(text) :] = np.frombuffer(text.encode("ascii"), np.uint8)
+        table = self._table(width)
         if self.codes is None:
             return np.broadcast_to(table[0], (stop - start, width))
         return table[self.codes[start:stop]]
+
+    def _table(self, width: int) -> npt.NDArray[np.uint8]:
+        """Every text right-aligned in ``width`` bytes (made once a width); a text no row
+        uses may be longer: its last ``width`` bytes."""
+        if self._tables.get(width) is None:
+            texts = np.array(self.texts, dtype=np.bytes_)
+            longest = max(width, texts.dtype.itemsize)
+            field = np.strings.rjust(texts, longest).view(np.uint8).reshape(-1, longest)
+            self._tables[width] = field[:, longest - width :]
+        return self._tables[width]
 
 
 def text_column(texts: Sequence[str], codes: npt.ArrayLike | None, rows: int) -> TextColumn | None:
