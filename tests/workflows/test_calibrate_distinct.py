@@ -63,3 +63,30 @@ def test_one_size_other_content_is_taken_the_same_content_refused(
     digest = hashlib.sha256(b"1,2\n").hexdigest()[:12]
     assert f"its p.csv and q.csv have one SHA-256, {digest}..." in str(refused.value)
     assert "holds the same measurements as" in str(refused.value)
+
+
+def test_the_sessions_read_once_make_the_same_campaign(monkeypatch: pytest.MonkeyPatch) -> None:
+    # the former code read each session file again in read_campaign and process_session
+    import numpy as np
+
+    from hexatherm.io.config import read_session
+    from hexatherm.workflows.calibrate import run
+    from hexatherm.workflows.process import pipeline
+    from tests.shipped import SHIPPED
+
+    session = SHIPPED / "calibration-geometry"
+    before = run.read_campaign([session])
+    spec = read_session(session)
+    reads: list[object] = []
+
+    def refused(path: object) -> None:
+        reads.append(path)
+        raise AssertionError("the session was read again")
+
+    monkeypatch.setattr(run, "read_session", refused)
+    monkeypatch.setattr(pipeline, "read_session", refused)
+    now = run.read_campaign([session], specs=[spec])
+    assert reads == []
+    assert now.labels == before.labels
+    for name in ("commanded", "measured", "covariance"):
+        assert np.array_equal(getattr(now, name), getattr(before, name)), name

@@ -62,7 +62,8 @@ def run_calibrate(
     if out is None:
         first = sessions[0] if sessions[0].is_dir() else sessions[0].parent
         out = first / "calibration"
-    inputs = [f for s in sessions for f in read_session(s).input_files()]
+    specs = [read_session(s) for s in sessions]  # read once: the campaign reads them too
+    inputs = [f for spec in specs for f in spec.input_files()]
     if lab is not None:
         inputs.append(lab)
     inputs += template_inputs
@@ -83,6 +84,7 @@ def run_calibrate(
                 level,
                 residuals,
                 twin,
+                specs,
             )
         else:
             campaign = read_campaign(
@@ -91,6 +93,7 @@ def run_calibrate(
                 reading,
                 interpolation,  # type: ignore[arg-type]
                 twin=twin,
+                specs=specs,
             )
             run = calibrate(campaign, level, residuals)
         files = output_files(
