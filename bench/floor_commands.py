@@ -4,7 +4,7 @@
 How to run it (from a checkout, its environment active, ``PYTHONPATH`` unset or this
 checkout)::
 
-    git archive f556510 | tar -x -C /tmp/before      # the code before, any commit
+    mkdir /tmp/before && git archive f556510 | tar -x -C /tmp/before  # the code before
     python bench/floor_commands.py --baseline /tmp/before --pairs 3 --bytecode
     python bench/floor_commands.py --baseline /tmp/before --commands inspect \\
         --rows 1000x400 --pairs 5
