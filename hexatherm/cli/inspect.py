@@ -35,7 +35,7 @@ def command(file: Path, as_csv: bool, session: Path | None, reading: ReadOptions
     tables) and lists every centre read, with its file.
     """
     from hexatherm.workflows.inspect import (
-        feature_table,
+        feature_listing,
         is_session,
         program_without_actuals,
         session_reading,
@@ -44,28 +44,30 @@ def command(file: Path, as_csv: bool, session: Path | None, reading: ReadOptions
     imports_done()
 
     if is_session(file):
-        lines, table = session_reading(file, reading)
+        lines, listing = session_reading(file, reading)
         for line in lines:
             echo_err(line)
     else:
-        table = feature_table(file, reading, session)
+        listing = feature_listing(file, reading, session)
     if as_csv:
-        table.to_csv(sys.stdout, index=False, lineterminator="\n")
+        listing.frame().to_csv(sys.stdout, index=False, lineterminator="\n")
+    elif not len(listing):
+        click.echo("(no features)")
     else:
-        click.echo(
-            table.to_string(index=False, na_rep="", float_format=lambda v: f"{v:.4f}")
-            if len(table)
-            else "(no features)"
-        )
-    for note in table.attrs.get("notes", []):
+        blocks = listing.text_blocks()
+        if blocks is None:
+            click.echo(listing.text())
+        else:
+            for block in blocks:
+                click.echo(block, nl=False)
+    for note in listing.notes:
         echo_err(note)
-    counts = table["type"].value_counts()
     echo_err(
-        f"{file}: {len(table)} features ("
-        + ", ".join(f"{n} {kind}" for kind, n in counts.items())
+        f"{file}: {len(listing)} features ("
+        + ", ".join(f"{n} {kind}" for kind, n in listing.counts())
         + ")"
     )
-    if not is_session(file) and program_without_actuals(file, table):
+    if not is_session(file) and program_without_actuals(file, len(listing)):
         echo_err(
             f"{file} is a DMIS program (nominal features and MEAS statements, as plan --dmis "
             "writes), not the CMM's output of running it: inspect lists the actual "

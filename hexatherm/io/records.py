@@ -8,6 +8,7 @@ errors can point at it.
 
 from __future__ import annotations
 
+import functools
 import warnings
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
@@ -110,13 +111,92 @@ def seconds_to_iso_texts(seconds: npt.ArrayLike) -> list[str]:
     ['2020-01-01T00:00:10.250000', '1970-01-01T00:00:00.000000', '1970-01-01T00:00:02.000000']
     """
     values = np.asarray(seconds, dtype=float).ravel()
-    low, high = _ISO_SPAN_S
-    if not (np.all(values >= low) and np.all(values <= high)):
+    micro = _microseconds(values)
+    if micro is None:
         return [seconds_to_iso(v) for v in values.tolist()]
-    fraction, whole = np.modf(values)
-    micro = whole.astype(np.int64) * 1_000_000 + np.rint(fraction * 1e6).astype(np.int64)
     texts = np.datetime_as_string(micro.astype("datetime64[us]"), unit="us")
     return [str(t) for t in texts.tolist()]
+
+
+def _microseconds(values: npt.NDArray[np.float64]) -> npt.NDArray[np.int64] | None:
+    """POSIX seconds as whole microseconds, rounded as ``datetime.fromtimestamp`` rounds
+    them (the fraction of the second times 1e6, half to even); None when a time is
+    outside 1970-9999 (:data:`_ISO_SPAN_S`) or not a number."""
+    low, high = _ISO_SPAN_S
+    if not (np.all(values >= low) and np.all(values <= high)):
+        return None
+    fraction, whole = np.modf(values)
+    return whole.astype(np.int64) * 1_000_000 + np.rint(fraction * 1e6).astype(np.int64)
+
+
+#: the texts ``00`` to ``99``, two ASCII bytes each
+_DIGITS2 = np.frombuffer("".join(f"{i:02d}" for i in range(100)).encode(), np.uint8).reshape(100, 2)
+
+
+def _date_fields(days: npt.NDArray[np.int64]) -> npt.NDArray[np.uint8]:
+    """``YYYY-MM-DD`` of days since 1970-01-01 (0 <= days <= 9999-12-31's), ASCII bytes
+    (n, 10): the proleptic Gregorian date in integers (H. Hinnant's ``civil_from_days``)."""
+    era, day_of_era = np.divmod(days + 719_468, 146_097)  # from 0000-03-01: years from March
+    year_of_era = (
+        day_of_era - day_of_era // 1460 + day_of_era // 36_524 - day_of_era // 146_096
+    ) // 365
+    day_of_year = day_of_era - (365 * year_of_era + year_of_era // 4 - year_of_era // 100)
+    month_march = (5 * day_of_year + 2) // 153  # 0: March .. 11: February
+    day = day_of_year - (153 * month_march + 2) // 5 + 1
+    month = np.where(month_march < 10, month_march + 3, month_march - 9)
+    year = year_of_era + 400 * era + (month <= 2)
+    out = np.empty((days.size, 10), np.uint8)
+    out[:, [4, 7]] = ord("-")
+    for at, part in ((0, year // 100), (2, year % 100), (5, month), (8, day)):
+        out[:, at : at + 2] = _DIGITS2[part]
+    return out
+
+
+@functools.cache
+def _clock_fields() -> tuple[npt.NDArray[np.uint64], npt.NDArray[np.uint8]]:
+    """``HH:MM:SS`` of every second of a day as one 8-byte word each, and the texts
+    ``000`` to ``999`` (three bytes each): the tables :func:`seconds_to_iso_fields`
+    gathers from."""
+    second = np.arange(86_400)
+    clock = np.empty((86_400, 8), np.uint8)
+    clock[:, [2, 5]] = ord(":")
+    for at, part in ((0, second // 3600), (3, second // 60 % 60), (6, second % 60)):
+        clock[:, at : at + 2] = _DIGITS2[part]
+    thousand = np.frombuffer("".join(f"{i:03d}" for i in range(1000)).encode(), np.uint8)
+    return clock.view(np.uint64).ravel(), thousand.reshape(1000, 3)
+
+
+def seconds_to_iso_fields(seconds: npt.ArrayLike) -> npt.NDArray[np.uint8] | None:
+    """:func:`seconds_to_iso_texts` as ASCII bytes, one row of 26 per time
+    (``YYYY-MM-DDTHH:MM:SS.ffffff``), from integers and tables: each distinct day's date
+    once (:func:`_date_fields`), the time of day and the microseconds gathered from
+    :func:`_clock_fields`. For listings of millions of times (numpy's
+    ``datetime_as_string`` takes about a microsecond a time). None when a time is
+    outside 1970-9999 (:func:`seconds_to_iso_texts` writes those value by value).
+
+    >>> bytes(seconds_to_iso_fields([1577836810.25])[0]).decode()
+    '2020-01-01T00:00:10.250000'
+    """
+    micro = _microseconds(np.asarray(seconds, dtype=float).ravel())
+    if micro is None:
+        return None
+    days, rest = np.divmod(micro, 86_400_000_000)
+    second, fraction = np.divmod(rest, 1_000_000)
+    out = np.empty((micro.size, 26), np.uint8)
+    if micro.size:
+        first, last = int(days.min()), int(days.max())
+        if last - first < micro.size:  # a session's few days: each day's date once
+            out[:, :10] = _date_fields(np.arange(first, last + 1))[days - first]
+        else:
+            out[:, :10] = _date_fields(days)
+    clock, thousand = _clock_fields()
+    out[:, 10] = ord("T")
+    out[:, 11:19] = clock[second].view(np.uint8).reshape(-1, 8)
+    out[:, 19] = ord(".")
+    high, low = np.divmod(fraction, 1000)
+    out[:, 20:23] = thousand[high]
+    out[:, 23:26] = thousand[low]
+    return out
 
 
 def concat_records(records: list[Records]) -> Records:

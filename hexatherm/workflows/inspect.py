@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 import pandas as pd
 
 from hexatherm.io.config.session import read_feature_names
@@ -16,10 +18,155 @@ from hexatherm.io.dmis import DMIS_SUFFIXES, looks_like_dmis, read_dmis_features
 from hexatherm.io.files import STRICT, ReadOptions
 from hexatherm.io.measurements import is_qif
 from hexatherm.io.qif import scan_qif
-from hexatherm.io.records import Records, seconds_to_iso
+from hexatherm.io.records import Records, seconds_to_iso, seconds_to_iso_texts
+from hexatherm.io.texttable import (
+    DECIMALS,
+    Column,
+    FloatColumn,
+    IntColumn,
+    IsoColumn,
+    text_column,
+    text_table,
+)
 from hexatherm.session import MeasurementFormat
 
 COLUMNS = ["line", "label", "type", "x_mm", "y_mm", "z_mm", "size_mm", "time"]
+
+
+@dataclass(frozen=True)
+class Listing:
+    """What ``inspect`` lists: a CSV file's (or a session's) records, listed from their
+    arrays, or the table of a DMIS or QIF file.
+
+    Attributes
+    ----------
+    records : tuple of Records
+        The records listed, one row each (a file's, or every entry's of a session).
+    files : bool
+        A session's listing: a ``file`` column first, the name of each row's file.
+    table : DataFrame or None
+        A DMIS or QIF file's features (then ``records`` is empty); its ``attrs["notes"]``
+        say what was read.
+    """
+
+    records: tuple[Records, ...] = ()
+    files: bool = False
+    table: pd.DataFrame | None = None
+
+    def __len__(self) -> int:
+        if self.table is not None:
+            return len(self.table)
+        return sum(len(r) for r in self.records)
+
+    @property
+    def notes(self) -> list[str]:
+        """What was read, beyond the table (a QIF file's unit, names, steps)."""
+        return [] if self.table is None else list(self.table.attrs.get("notes", []))
+
+    def counts(self) -> list[tuple[str, int]]:
+        """How many features of each type, the most first (ties: the first seen
+        first, as pandas' ``value_counts``)."""
+        if self.table is not None:
+            if "type" not in self.table:
+                return []
+            counted = self.table["type"].value_counts()
+            return [(str(k), int(n)) for k, n in counted.items()]
+        seen: dict[str, int] = {}
+        for rec in self.records:
+            kind = _TYPES[rec.kind]
+            seen[kind] = seen.get(kind, 0) + len(rec)
+        return sorted(seen.items(), key=lambda item: -item[1])
+
+    def frame(self) -> pd.DataFrame:
+        """The listing as one DataFrame: the columns of :data:`COLUMNS` (after ``file``
+        for a session)."""
+        if self.table is not None:
+            return self.table
+        frames = []
+        for rec in self.records:
+            table = _records_table(rec)
+            if self.files:
+                table.insert(0, "file", Path(rec.path).name)
+            frames.append(table)
+        if not self.files:
+            return frames[0]
+        return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+
+    def text(self) -> str:
+        """The text table, as pandas writes it (every row)."""
+        return self.frame().to_string(
+            index=False, na_rep="", float_format=lambda v: f"{v:.{DECIMALS}f}"
+        )
+
+    def text_blocks(self) -> Iterator[bytes] | None:
+        """:meth:`text` with a line break after every line, as bytes a block of lines at
+        a time, laid out from the records' arrays (:mod:`hexatherm.io.texttable`): no
+        text per cell, the memory of one block. None where pandas lays it out (a DMIS
+        or QIF table; names that are not plain ASCII)."""
+        if self.table is not None or not self.records:
+            return None
+        columns = _records_columns(self.records, self.files)
+        if columns is None:
+            return None
+        return text_table(columns, len(self))
+
+
+#: the ``type`` of a record's row
+_TYPES = {"centres": "SPHERE", "points": "POINT"}
+
+
+def _records_columns(records: Sequence[Records], files: bool) -> list[tuple[str, Column]] | None:
+    """The columns of :meth:`Listing.frame` as :mod:`~hexatherm.io.texttable` columns;
+    None when a name needs pandas (not plain ASCII) or the files mix ISO times and
+    seconds."""
+    rows = [len(r) for r in records]
+    total = sum(rows)
+    # a row's label_ball from the runs of rows of one step and ball (a text per run)
+    names: list[str] = []
+    codes = []
+    for rec in records:
+        starts = _run_starts(rec)
+        run = np.zeros(len(rec), dtype=np.intp)
+        run[starts[1:]] = 1
+        codes.append(len(names) + np.cumsum(run))
+        names += [f"{a}_{b}" for a, b in zip(rec.label[starts], rec.ball[starts], strict=True)]
+    labels = text_column(names, np.concatenate(codes) if codes else None, total)
+    kinds = list(dict.fromkeys(_TYPES[r.kind] for r in records))
+    each = np.repeat(np.arange(len(records)), rows)
+    kind_codes = [kinds.index(_TYPES[r.kind]) for r in records]
+    types = text_column(kinds, np.asarray(kind_codes, dtype=np.intp)[each], total)
+    file_names = text_column([Path(r.path).name for r in records], each, total)
+    times = {r.time_kind for r in records}
+    if labels is None or file_names is None or types is None or len(times) > 1:
+        return None
+    joined = {
+        "line": np.concatenate([r.line for r in records]),
+        "xyz": np.concatenate([r.xyz_mm for r in records]),
+        "size": np.concatenate(
+            [
+                r.diameter_mm if r.diameter_mm is not None else np.full(len(r), np.nan)
+                for r in records
+            ]
+        ),
+        "time": np.concatenate([r.time_s for r in records]),
+    }
+    columns: list[tuple[str, Column]] = [("file", file_names)] if files else []
+    columns += [
+        ("line", IntColumn(joined["line"])),
+        ("label", labels),
+        ("type", types),
+        *((f"{a}_mm", FloatColumn(joined["xyz"][:, k])) for k, a in enumerate("xyz")),
+        ("size_mm", FloatColumn(joined["size"])),
+        ("time", IsoColumn(joined["time"]) if times == {"iso"} else FloatColumn(joined["time"])),
+    ]
+    return columns
+
+
+def _run_starts(rec: Records) -> npt.NDArray[np.intp]:
+    """The first row of every run of rows of one step and ball (a points file's sphere)."""
+    label, ball = rec.label, rec.ball
+    change = (label[1:] != label[:-1]) | (ball[1:] != ball[:-1])
+    return np.flatnonzero(np.concatenate((len(rec) > 0, change), axis=None))
 
 
 def feature_table(
@@ -27,6 +174,16 @@ def feature_table(
     reading: ReadOptions = STRICT,
     session: str | os.PathLike[str] | None = None,
 ) -> pd.DataFrame:
+    """Every feature of a DMIS output or a centres/points CSV, one row each: the table
+    of :func:`feature_listing`."""
+    return feature_listing(path, reading, session).frame()
+
+
+def feature_listing(
+    path: str | os.PathLike[str],
+    reading: ReadOptions = STRICT,
+    session: str | os.PathLike[str] | None = None,
+) -> Listing:
     """Every feature of a DMIS output or a centres/points CSV, one row each (``reading``:
     a file cut short, a ball probed twice in one step, as the other commands read it).
     A QIF file's table carries what was read in ``attrs["notes"]`` (:func:`qif_table`),
@@ -34,7 +191,7 @@ def feature_table(
     path = Path(path)
     if is_qif(path):
         names = None if session is None else read_feature_names(session)
-        return qif_table(path, reading, names)
+        return Listing(table=qif_table(path, reading, names))
     if path.suffix.lower() in DMIS_SUFFIXES or (
         path.suffix.lower() != ".csv" and looks_like_dmis(read_text(path)[:4096])
     ):
@@ -51,18 +208,18 @@ def feature_table(
                     "" if feat.time is None else feat.time.isoformat(),
                 ]
             )
-        return pd.DataFrame(rows, columns=COLUMNS)
+        return Listing(table=pd.DataFrame(rows, columns=COLUMNS))
     rec = read_measurement_csv(
         path, allow_truncated=reading.allow_truncated, keep_later=reading.keep_later
     )
-    return _records_table(rec)
+    return Listing((rec,))
 
 
-def program_without_actuals(path: str | os.PathLike[str], table: pd.DataFrame) -> bool:
+def program_without_actuals(path: str | os.PathLike[str], features: int) -> bool:
     """Whether ``path`` is a DMIS program (nominal ``F(...)`` features and ``MEAS``
     statements, as ``plan --dmis`` writes) rather than a CMM's output: it has no actual
-    feature ``FA(...)`` to list."""
-    if len(table):
+    feature ``FA(...)`` to list (``features``: how many were listed)."""
+    if features:
         return False
     text = read_text(Path(path))
     if not looks_like_dmis(text[:4096]):
@@ -84,9 +241,9 @@ def is_session(path: str | os.PathLike[str]) -> bool:
 
 def session_reading(
     path: str | os.PathLike[str], reading: ReadOptions = STRICT
-) -> tuple[list[str], pd.DataFrame]:
+) -> tuple[list[str], Listing]:
     """What a session's measurement entries read, before anything is processed: one
-    line per entry (its format and mapping, units, steps, balls, times) and the table
+    line per entry (its format and mapping, units, steps, balls, times) and the listing
     of every centre read (``file`` and the columns of :func:`feature_table`), in mm and
     UTC when an offset is known. Runs given a step by their time order are warned of
     by the reader (an :class:`~hexatherm.errors.InputWarning`)."""
@@ -95,7 +252,7 @@ def session_reading(
 
     session = read_session(path)
     lines: list[str] = []
-    frames = []
+    records: list[Records] = []
     for file in session.measurements:
         spec = session.formats.get(file)
         found = read_measurements(
@@ -105,18 +262,14 @@ def session_reading(
             spec=spec,
             labels=session.plan.labels,
         )
-        for rec in found:
-            table = _records_table(rec)
-            table.insert(0, "file", Path(rec.path).name)
-            frames.append(table)
+        records += found
         lines.append(_entry_line(file, spec, found, session.utc_offset_s))
-    table = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
-    return lines, table
+    return lines, Listing(tuple(records), files=True)
 
 
 def _records_table(rec: Records) -> pd.DataFrame:
     """A file's records, one row each (times in UTC when the file gave offsets)."""
-    times = [seconds_to_iso(t) for t in rec.time_s] if rec.time_kind == "iso" else rec.time_s
+    times = seconds_to_iso_texts(rec.time_s) if rec.time_kind == "iso" else rec.time_s
     return pd.DataFrame(
         {
             "line": rec.line,
@@ -135,8 +288,11 @@ def _entry_line(
     file: Path, spec: MeasurementFormat | None, found: list[Records], offset_s: float | None
 ) -> str:
     """One entry's summary: what it is, how it is mapped, what it holds."""
-    labels = list(dict.fromkeys(str(s) for r in found for s in r.label))
-    balls = sorted({str(b) for r in found for b in r.ball})
+    # the names where they change: a points file's runs of rows, not its every row
+    runs = [_run_starts(r) for r in found]
+    pairs = list(zip(found, runs, strict=True))
+    labels = list(dict.fromkeys(str(s) for r, at in pairs for s in r.label[at]))
+    balls = sorted({str(b) for r, at in pairs for b in r.ball[at]})
     times = np.concatenate([r.time_s for r in found]) if found else np.zeros(0)
     kind = found[0].time_kind if found else "seconds"
     span = ""

@@ -142,7 +142,7 @@ INTERRUPTIBLE = {
     "report": (hexatherm.workflows.process.pipeline, "process_session", [S, "-o", "{tmp}/r.html"]),
     "diagnose": (hexatherm.workflows.diagnose.run, "read_for_diagnosis", [S, "-o", "{tmp}/d"]),
     "fit-spheres": (hexatherm.io.measurements, "read_measurements", [DMIS]),
-    "inspect": (hexatherm.workflows.inspect, "feature_table", [S / "centres.csv"]),
+    "inspect": (hexatherm.workflows.inspect, "feature_listing", [S / "centres.csv"]),
     "register": (
         hexatherm.workflows.register,
         "register_balls",

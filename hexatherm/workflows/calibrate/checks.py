@@ -34,7 +34,9 @@
 from __future__ import annotations
 
 import os
+import stat
 import warnings
+from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -66,28 +68,42 @@ MAX_REFERENCE_STATE_K = 0.5
 
 
 def check_distinct_sessions(specs: Sequence[Session]) -> None:
-    """Refuse a measurement file (by SHA-256) that two of the sessions hold."""
+    """Refuse a measurement file (by SHA-256) that two of the sessions hold. Only files
+    of one size can have one content: a file whose size no other has is not read here
+    (a scanning session's 150 MB would be read once more for nothing)."""
     seen: dict[str, tuple[Session, Path]] = {}
-    for spec in specs:
-        for path in spec.measurements:
-            digest = sha256_file(Path(os.path.realpath(path)))  # a live link is its file
-            if digest is None:
-                continue  # not a regular file: the measurement reader names why
-            if digest in seen:
-                first, where = seen[digest]
-                same = (
-                    "is the same session as"
-                    if Path(first.path).resolve() == Path(spec.path).resolve()
-                    else "holds the same measurements as"
-                )
-                raise InputError(
-                    f"{same} {first.path} (its {where.name} and {Path(path).name} have one "
-                    f"SHA-256, {digest[:12]}...): a session given twice counts its poses "
-                    "twice; give each session once",
-                    path=str(spec.path),
-                    field="measurements",
-                )
-            seen[digest] = (spec, Path(path))
+    files = [(spec, path, _size(path)) for spec in specs for path in spec.measurements]
+    sizes = Counter(size for _, _, size in files if size is not None)
+    for spec, path, size in files:
+        if size is None or sizes[size] < 2:
+            continue  # alone in its size, or not a regular file (the reader names why)
+        digest = sha256_file(Path(os.path.realpath(path)))  # a live link is its file
+        if digest is None:
+            continue
+        if digest in seen:
+            first, where = seen[digest]
+            same = (
+                "is the same session as"
+                if Path(first.path).resolve() == Path(spec.path).resolve()
+                else "holds the same measurements as"
+            )
+            raise InputError(
+                f"{same} {first.path} (its {where.name} and {Path(path).name} have one "
+                f"SHA-256, {digest[:12]}...): a session given twice counts its poses "
+                "twice; give each session once",
+                path=str(spec.path),
+                field="measurements",
+            )
+        seen[digest] = (spec, Path(path))
+
+
+def _size(path: Path) -> int | None:
+    """A regular file's size (a live link's file's), None for anything else."""
+    try:
+        info = os.stat(path)
+    except OSError:
+        return None
+    return info.st_size if stat.S_ISREG(info.st_mode) else None
 
 
 #: two ball centres are one measurement when every coordinate agrees within this share of

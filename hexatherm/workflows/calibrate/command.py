@@ -48,6 +48,7 @@ def run_calibrate(
     """``hexatherm calibrate SESSIONS`` (see the module)."""
     from hexatherm.io.config import read_session
     from hexatherm.io.config.identity import read_lab
+    from hexatherm.io.files import digests_kept
     from hexatherm.io.outputs import check_output_settled, output_dir
     from hexatherm.workflows.calibrate.outputs import output_files
     from hexatherm.workflows.calibrate.run import (
@@ -61,7 +62,8 @@ def run_calibrate(
     if out is None:
         first = sessions[0] if sessions[0].is_dir() else sessions[0].parent
         out = first / "calibration"
-    inputs = [f for s in sessions for f in read_session(s).input_files()]
+    specs = [read_session(s) for s in sessions]  # read once: the campaign reads them too
+    inputs = [f for spec in specs for f in spec.input_files()]
     if lab is not None:
         inputs.append(lab)
     inputs += template_inputs
@@ -69,38 +71,43 @@ def run_calibrate(
         inputs.append(twin_model)
     twin = None if twin_model is None else TwinModel.read(twin_model)
     check_output_settled(out, kind="folder", inputs=inputs, overwrite=overwrite)
-    moves: list[float] = []
-    if iterate:
-        run, moves = calibrate_iterated(
-            sessions,
-            poses,  # type: ignore[arg-type]
-            reading,
-            interpolation,  # type: ignore[arg-type]
-            level,
-            residuals,
-            twin,
+    # provenance.json's and the report's digests of the bytes read, not a second and a
+    # third read of the measurements (a scanning session's 150 MB)
+    with digests_kept():
+        moves: list[float] = []
+        if iterate:
+            run, moves = calibrate_iterated(
+                sessions,
+                poses,  # type: ignore[arg-type]
+                reading,
+                interpolation,  # type: ignore[arg-type]
+                level,
+                residuals,
+                twin,
+                specs,
+            )
+        else:
+            campaign = read_campaign(
+                sessions,
+                poses,  # type: ignore[arg-type]
+                reading,
+                interpolation,  # type: ignore[arg-type]
+                twin=twin,
+                specs=specs,
+            )
+            run = calibrate(campaign, level, residuals)
+        files = output_files(
+            run,
+            inputs,
+            out,
+            lab_fields,
+            coverage_factor,
+            templates,
+            report_number,
+            title,
+            lab_tolerances,
         )
-    else:
-        campaign = read_campaign(
-            sessions,
-            poses,  # type: ignore[arg-type]
-            reading,
-            interpolation,  # type: ignore[arg-type]
-            twin=twin,
-        )
-        run = calibrate(campaign, level, residuals)
-    files = output_files(
-        run,
-        inputs,
-        out,
-        lab_fields,
-        coverage_factor,
-        templates,
-        report_number,
-        title,
-        lab_tolerances,
-    )
-    with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
-        for name, text in files.items():
-            (tmp / name).write_text(text, encoding="utf-8")
+        with output_dir(out, inputs=inputs, overwrite=overwrite) as tmp:
+            for name, text in files.items():
+                (tmp / name).write_text(text, encoding="utf-8")
     return Calibrated(run, out, files, tuple(moves))

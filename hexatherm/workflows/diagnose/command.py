@@ -39,6 +39,7 @@ def diagnose(
     """``hexatherm diagnose SESSION`` (see the module); ``progress(round, done, total)``
     over the candidates of every round."""
     from hexatherm.io.config import read_session
+    from hexatherm.io.files import digests_kept
     from hexatherm.io.outputs import check_output_settled, output_dir
     from hexatherm.workflows.diagnose.outputs import diagnosed_hexapod_yaml, diagnosis_json
     from hexatherm.workflows.diagnose.report import write_report_files
@@ -52,19 +53,24 @@ def diagnose(
     # before any work: never into, around or onto the session's files (checked again
     # under the output's lock when the results are written)
     check_output_settled(out_dir, kind="folder", inputs=inputs, overwrite=overwrite)
-    data = read_for_diagnosis(session, hexapod_path, reading)
-    if on_read is not None:
-        on_read(data)
-    result = run_diagnosis(data, progress)
-    files = {
-        "diagnosis.json": diagnosis_json(result),
-        "hexapod.yaml": diagnosed_hexapod_yaml(result),
-    }
     written: list[Path] = []
-    with output_dir(out_dir, inputs=inputs, overwrite=overwrite) as tmp:
-        for name, text in files.items():
-            (tmp / name).write_text(text, encoding="utf-8")
-            written.append(out_dir / name)
-        pages = write_report_files(result, tmp, template_dir=templates, extra_inputs=extra_inputs)
-        written += [out_dir / p.relative_to(tmp) for p in pages]
+    # provenance.json's and the report's digests of the bytes read, not a second and a
+    # third read of the measurements (a scanning session's 150 MB)
+    with digests_kept():
+        data = read_for_diagnosis(session, hexapod_path, reading)
+        if on_read is not None:
+            on_read(data)
+        result = run_diagnosis(data, progress)
+        files = {
+            "diagnosis.json": diagnosis_json(result),
+            "hexapod.yaml": diagnosed_hexapod_yaml(result),
+        }
+        with output_dir(out_dir, inputs=inputs, overwrite=overwrite) as tmp:
+            for name, text in files.items():
+                (tmp / name).write_text(text, encoding="utf-8")
+                written.append(out_dir / name)
+            pages = write_report_files(
+                result, tmp, template_dir=templates, extra_inputs=extra_inputs
+            )
+            written += [out_dir / p.relative_to(tmp) for p in pages]
     return Diagnosed(result, tuple(written))
