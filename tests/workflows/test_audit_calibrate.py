@@ -252,9 +252,17 @@ def test_what_process_warns_of_a_session_calibrate_says_too(tmp_path: Path) -> N
     assert (tmp_path / "out" / "hexapod.yaml").exists()
 
 
-def test_a_clean_session_calibrates_without_a_warning(tmp_path: Path) -> None:
-    session = copy_session(GEOMETRY, tmp_path / "s")
-    done = run("calibrate", session, "-o", tmp_path / "out", "--level", "offsets")
+@pytest.fixture(scope="module")
+def clean_calibration(tmp_path_factory: pytest.TempPathFactory):
+    """``calibrate --level offsets`` of a copy of calibration-geometry, run once for the
+    two tests that read what it says of a clean campaign: (the copy, the result)."""
+    tmp = tmp_path_factory.mktemp("clean")
+    session = copy_session(GEOMETRY, tmp / "s")
+    return session, run("calibrate", session, "-o", tmp / "out", "--level", "offsets")
+
+
+def test_a_clean_session_calibrates_without_a_warning(clean_calibration) -> None:
+    session, done = clean_calibration
     assert done.exit_code == 0, done.output
     where = session / "session.yaml"
     assert f"warning: {where}" not in done.output, done.output
@@ -417,8 +425,7 @@ def test_the_claim_says_which_components_the_poses_never_vary(tmp_path: Path) ->
     )
 
 
-def test_a_campaign_that_varies_every_component_has_no_such_warning(tmp_path: Path) -> None:
-    session = copy_session(GEOMETRY, tmp_path / "s")
-    done = run("calibrate", session, "-o", tmp_path / "out", "--level", "offsets")
+def test_a_campaign_that_varies_every_component_has_no_such_warning(clean_calibration) -> None:
+    _, done = clean_calibration
     assert done.exit_code == 0, done.output
     assert "never vary" not in done.output
