@@ -25,11 +25,27 @@ def drop_blank_rows(frame: pd.DataFrame) -> pd.DataFrame:
     return frame[~blank.to_numpy()]
 
 
+#: a plus sign before a number's digits
+_PLUS = r"^\+(?=[0-9.])"
+
+
+def to_numbers(text: pd.Series) -> npt.NDArray[np.float64]:
+    """The numbers of a column of texts (NaN where not a number), as pandas' C parser reads
+    them (the fast readers'): a leading ``+`` is taken off first, for ``pd.to_numeric``
+    reads ``+113.63956695822269`` one step off (113.63956695822267) where the parser and
+    ``float`` read 113.63956695822269."""
+    if text.dtype == object or pd.api.types.is_string_dtype(text.dtype):
+        signed = text.str.startswith("+", na=False)
+        if signed.any():
+            text = text.str.replace(_PLUS, "", regex=True)
+    return pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
+
+
 def column_numbers(
     frame: pd.DataFrame, column: str, path: str, allow_empty: bool = False
 ) -> npt.NDArray[np.float64]:
     text = frame[column]
-    values = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
+    values = to_numbers(text)
     bad = ~np.isfinite(values)
     if allow_empty:
         bad &= (text != "").to_numpy()
@@ -454,7 +470,7 @@ def column_times(
     if all(":" in value for value in text.to_numpy()):
         is_number = np.zeros(len(text), dtype=bool)  # numbers have no ':': skip parsing them
     else:
-        numeric = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
+        numeric = to_numbers(text)
         is_number = np.isfinite(numeric)
         if np.all(is_number):
             return numeric, "seconds", None
