@@ -25,11 +25,27 @@ def drop_blank_rows(frame: pd.DataFrame) -> pd.DataFrame:
     return frame[~blank.to_numpy()]
 
 
+#: a plus sign before a number's digits
+_PLUS = r"^\+(?=[0-9.])"
+
+
+def to_numbers(text: pd.Series) -> npt.NDArray[np.float64]:
+    """The numbers of a column of texts (NaN where not a number), as pandas' C parser reads
+    them (the fast readers'): a leading ``+`` is taken off first, for ``pd.to_numeric``
+    reads ``+113.63956695822269`` one step off (113.63956695822267) where the parser and
+    ``float`` read 113.63956695822269."""
+    if text.dtype == object or pd.api.types.is_string_dtype(text.dtype):
+        signed = text.str.startswith("+", na=False)
+        if signed.any():
+            text = text.str.replace(_PLUS, "", regex=True)
+    return pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
+
+
 def column_numbers(
     frame: pd.DataFrame, column: str, path: str, allow_empty: bool = False
 ) -> npt.NDArray[np.float64]:
     text = frame[column]
-    values = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
+    values = to_numbers(text)
     bad = ~np.isfinite(values)
     if allow_empty:
         bad &= (text != "").to_numpy()
@@ -226,11 +242,35 @@ def iso_times_from_bytes(
     Each block of lines is split at its commas and line feeds; every line's field
     ``column`` is cut out as one row of bytes (the same text as pandas' C parser gives
     it: nothing to unquote or strip)."""
+    cut = times_and_names_from_bytes(raw, column, count)
+    return None if cut is None else cut[:2]
+
+
+#: the longest name :func:`times_and_names_from_bytes` cuts from the bytes (a longer one:
+#: pandas reads the names)
+NAME_WIDTH = 64
+#: the bytes a name may hold (``core.plan.NAME_PATTERN``: ASCII letters, digits, ``-``)
+NAME_BYTES = np.zeros(256, dtype=bool)
+for _low, _high in ((b"A", b"Z"), (b"a", b"z"), (b"0", b"9"), (b"-", b"-")):
+    NAME_BYTES[_low[0] : _high[0] + 1] = True
+
+
+def times_and_names_from_bytes(
+    raw: bytes, column: int, count: int, names: tuple[int, ...] = ()
+) -> tuple[npt.NDArray[np.float64], bool, list[npt.NDArray[np.str_]]] | None:
+    """:func:`iso_times_from_bytes`, and the fields ``names`` (indices below ``count``)
+    of every line as str arrays, cut from the same split of the bytes: each a name of
+    1 to :data:`NAME_WIDTH` of :data:`NAME_BYTES`, else None (the caller reads the file
+    another way). The arrays are what ``numpy.asarray(list_of_names, dtype=str)`` makes
+    (a unicode array as wide as the longest name)."""
     data = np.frombuffer(raw, dtype=np.uint8)
     start = raw.find(b"\n") + 1
     if start <= 0 or start >= data.size or not 0 <= column < count:
         return None
+    if not all(0 <= c < column for c in names):
+        return None  # names before the time (16 bytes at least: see _name_runs)
     seconds: list[npt.NDArray[np.float64]] = []
+    named: list[list[tuple[npt.NDArray[np.uint64], npt.NDArray[np.intp]]]] = [[] for _ in names]
     layout: tuple[str, bool] | None = None
     while start < data.size:
         end = raw.rfind(b"\n", start, start + _TIME_SCAN) + 1
@@ -251,10 +291,10 @@ def iso_times_from_bytes(
         feeds = feeds.reshape(-1, count)
         if not feeds[:, -1].all() or feeds[:, :-1].any():
             return None  # a line with more or fewer fields
-        if column:
-            first = cuts[:, column - 1] + 1
-        else:  # the first field: where each line starts (the block starts with a line)
-            first = np.concatenate(([0], cuts[:-1, -1] + 1))
+        # where each line starts (the block starts with a line)
+        lines = np.concatenate(([0], cuts[:-1, -1] + 1)) if column == 0 or 0 in names else None
+        first = lines if column == 0 else cuts[:, column - 1] + 1
+        assert first is not None
         width = cuts[0, column] - first[0]
         if width <= 0 or (cuts[:, column] - first != width).any():
             return None
@@ -268,9 +308,80 @@ def iso_times_from_bytes(
         if block_seconds is None:
             return None
         seconds.append(block_seconds)
+        for k, c in enumerate(names):
+            begin = lines if c == 0 else cuts[:, c - 1] + 1
+            assert begin is not None
+            runs = _name_runs(data, begin + start, cuts[:, c] + start)
+            if runs is None:
+                return None
+            named[k].append(runs)
         start = end
     assert layout is not None
-    return np.concatenate(seconds), layout[1]
+    spread = [_unicode(runs) for runs in named]
+    if any(names is None for names in spread):
+        return None
+    return np.concatenate(seconds), layout[1], spread  # type: ignore[return-value]
+
+
+#: the bytes of a name kept in a word of 8 (little-endian: the first byte the lowest), by
+#: the name's length within the word: 0 to 8
+_WORD_MASKS = np.array([(1 << (8 * n)) - 1 for n in range(9)], dtype="<u8")
+
+
+def _name_runs(
+    data: npt.NDArray[np.uint8], begin: npt.NDArray[np.intp], end: npt.NDArray[np.intp]
+) -> tuple[npt.NDArray[np.uint64], npt.NDArray[np.intp]] | None:
+    """The names ``data[begin:end]`` of a block's rows as runs of one name each (a file's
+    rows come in runs: a step's ball is probed point after point): each run's name as
+    words of 8 bytes (little-endian, NUL past its end) and its length; None for a name
+    of no bytes or more than :data:`NAME_WIDTH`.
+
+    Each name is read as words of 8 bytes from where it starts (``data`` seen as 8-byte
+    words at every offset) and the bytes past its end masked off: a few word operations
+    a row, not one per byte. ``data`` must hold 16 bytes after the start of any name
+    (the names come before an ISO time)."""
+    width = end - begin
+    most = int(width.max())
+    if int(width.min()) < 1 or most > NAME_WIDTH:
+        return None
+    at_every = np.ndarray(shape=(data.size - 7,), dtype="<u8", buffer=data, strides=(1,))
+    count = -(-most // 8)
+    rows = np.empty((begin.size, count), dtype="<u8")
+    for k in range(count):
+        # a word past the file's last 8 bytes is clipped: its bytes are past the name's end
+        word = at_every[np.minimum(begin + 8 * k, at_every.size - 1)]
+        rows[:, k] = word & _WORD_MASKS[np.clip(width - 8 * k, 0, 8)]
+    change = (rows[1:] != rows[:-1]).any(axis=1) if count > 1 else rows[1:, 0] != rows[:-1, 0]
+    starts = np.flatnonzero(np.concatenate(([True], change)))
+    return rows[starts], np.diff(np.append(starts, begin.size))
+
+
+def _unicode(
+    runs: list[tuple[npt.NDArray[np.uint64], npt.NDArray[np.intp]]],
+) -> npt.NDArray[np.str_] | None:
+    """The rows of ``runs`` (:func:`_name_runs` of each block) as one str array, as wide
+    as the longest name: each distinct name checked (:data:`NAME_BYTES`) and converted
+    once, then spread to its rows; None when a name holds another byte."""
+    count = max(r[0].shape[1] for r in runs)
+    words = np.zeros((sum(r[0].shape[0] for r in runs), count), dtype="<u8")
+    at = 0
+    for names, _ in runs:
+        words[at : at + names.shape[0], : names.shape[1]] = names
+        at += names.shape[0]
+    if count == 1:  # names of up to 8 bytes: one word each, sorted as numbers
+        distinct, which = np.unique(words[:, 0], return_inverse=True)
+        distinct = distinct[:, None]
+    else:
+        distinct, which = np.unique(words, axis=0, return_inverse=True)
+    text = np.ascontiguousarray(distinct).view(np.uint8).reshape(distinct.shape[0], 8 * count)
+    length = np.count_nonzero(text, axis=1)
+    inside = np.arange(8 * count) < length[:, None]
+    if not (NAME_BYTES[text] | ~inside).all() or (text[~inside] != 0).any():
+        return None  # a byte outside names (a NUL inside a name ends it too early)
+    names = text.view(f"S{8 * count}").ravel()
+    most = int(length.max())
+    lengths = np.concatenate([r[1] for r in runs])
+    return np.repeat(names.astype(f"U{most}")[which.ravel()], lengths)
 
 
 def _iso_seconds(
@@ -359,7 +470,7 @@ def column_times(
     if all(":" in value for value in text.to_numpy()):
         is_number = np.zeros(len(text), dtype=bool)  # numbers have no ':': skip parsing them
     else:
-        numeric = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
+        numeric = to_numbers(text)
         is_number = np.isfinite(numeric)
         if np.all(is_number):
             return numeric, "seconds", None

@@ -49,6 +49,7 @@ from hexatherm.io.csvcolumns import (
     column_times,
     drop_blank_rows,
     iso_times_from_bytes,
+    times_and_names_from_bytes,
 )
 from hexatherm.io.csvout import csv_text
 from hexatherm.io.csvtext import complete_lines, csv_frame, decode_text
@@ -359,16 +360,21 @@ def _fast_measurement_csv(raw: bytes, path: str, kind: RecordKind | None) -> Rec
     numeric = [c for c in columns if c not in ("label", "ball", "time")]
     # no value can hold a blank to strip: the parser need not look for them
     blank_free = _blank_free(raw)
-    # ISO times of one layout straight from the bytes (no Python string per row; pandas
-    # then leaves the column out), else pandas reads them as text
-    times = (
-        iso_times_from_bytes(raw, BASE_COLUMNS.index("time"), len(columns)) if blank_free else None
-    )
+    # ISO times of one layout and the names straight from the bytes (no Python string per
+    # row; pandas then reads the numbers only), else the times alone, else pandas reads
+    # them as text
+    time_column = BASE_COLUMNS.index("time")
+    cut = times_and_names_from_bytes(raw, time_column, len(columns), (0, 1)) if blank_free else None
+    times = cut[:2] if cut is not None else None
+    if blank_free and cut is None:
+        times = iso_times_from_bytes(raw, time_column, len(columns))
     # names as categories: each chunk's distinct names become strings, its rows codes (no
     # Python string per row)
     dtypes: dict[str, str | type] = {"label": "category", "ball": "category", "time": object}
     dtypes.update(dict.fromkeys(numeric, float))
     read = columns if times is None else [c for c in columns if c != "time"]
+    if cut is not None:
+        read = numeric
     try:
         chunks = pd.read_csv(
             io.BytesIO(raw),  # shares the bytes, no copy
@@ -393,7 +399,10 @@ def _fast_measurement_csv(raw: bytes, path: str, kind: RecordKind | None) -> Rec
             part.update(time_kind="iso", aware=times[1])
     if not parts or len({(p["time_kind"], p["aware"]) for p in parts}) != 1:
         return None  # no rows, or times of different kinds: the general reader says
-    label, ball = (_spread_names([p[key] for p in parts]) for key in ("label", "ball"))
+    if cut is not None:
+        label, ball = cut[2]
+    else:
+        label, ball = (_spread_names([p[key] for p in parts]) for key in ("label", "ball"))
     time_s = times[0] if times is not None else np.concatenate([p["time"] for p in parts])
     if time_s.size != label.size:
         return None
@@ -478,7 +487,7 @@ def _clean_chunk(
     if with_times and frame["time"].isna().any():
         raise _Unclean  # a short row
     named: dict[str, tuple[npt.NDArray[np.object_], npt.NDArray[np.integer]]] = {}
-    for column in ("label", "ball"):
+    for column in ("label", "ball") if "label" in columns else ():  # else cut from the bytes
         names = frame[column].cat.categories.to_numpy(dtype=object)
         codes = frame[column].cat.codes.to_numpy()
         if not all(isinstance(v, str) and NAME_PATTERN.fullmatch(v) for v in names):

@@ -38,7 +38,7 @@ import hashlib
 import io
 import os
 import stat
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextvars import ContextVar
 from dataclasses import dataclass
 from typing import Any, BinaryIO
@@ -264,6 +264,21 @@ def kept_digest(path: str | os.PathLike[str]) -> str | None:
         return kept.get(_identity(os.stat(path)))
     except OSError:
         return None
+
+
+def digest_of(fd: int, info: os.stat_result, compute: Callable[[], str]) -> str:
+    """The SHA-256 of the open file ``fd`` (status ``info``): kept by :func:`digests_kept`
+    for its identity, else ``compute()``, kept when on and the file did not change while
+    read. ``--overwrite`` looks at the former results three times (before the work,
+    before writing, under the lock): a file of one identity is hashed once."""
+    kept = _kept.get()
+    key = _identity(info)
+    if kept is not None and key in kept:
+        return kept[key]
+    digest = compute()
+    if kept is not None and _identity(os.fstat(fd)) == key:
+        kept[key] = digest
+    return digest
 
 
 class _BoundedReader(io.RawIOBase):

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from hexatherm import __version__
+from hexatherm.io.files import digest_of
 
 #: the manifest's file name, in every folder hexatherm writes into
 MANIFEST_NAME = ".hexatherm-manifest.json"
@@ -195,21 +196,27 @@ def read_manifest(folder: PathLike) -> Manifest | None:
 
 def sha256_file(path: Path) -> str | None:
     """SHA-256 of a regular file's content (not following links); ``None`` if unreadable."""
-    digest = hashlib.sha256()
     try:
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | os.O_NONBLOCK)
     except OSError:
         return None
-    try:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
-            return None
+
+    def content() -> str:
+        digest = hashlib.sha256()
         while chunk := os.read(fd, _CHUNK):
             digest.update(chunk)
+        return digest.hexdigest()
+
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            return None
+        # within a command that keeps digests, a file of the same identity is read once
+        return digest_of(fd, info, content)
     except OSError:
         return None
     finally:
         os.close(fd)
-    return digest.hexdigest()
 
 
 def foreign_entries(folder: PathLike) -> list[tuple[str, str]]:

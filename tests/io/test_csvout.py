@@ -161,3 +161,57 @@ def test_digits_as_words_are_the_former_digit_rows() -> None:
                 assert new.shape == (*shape, count)
     # and the texts: the last `count` digits, zero padded
     assert bytes(csvout._digits(np.array([1234567]), 9)[0]) == b"001234567"
+
+
+def _former_field(column: pd.Series) -> tuple[np.ndarray, np.ndarray] | None:
+    """``csvout``'s field of a column before issue 37's seventh round: a Python text per
+    cell (``_cells``), laid out by ``_text_field``; the reference of ``_column_field``."""
+    texts = csvout._cells(column)
+    return None if texts is None else csvout._text_field(texts)
+
+
+def _written(cell: tuple[np.ndarray, np.ndarray] | None) -> list[bytes] | None:
+    """Each row's bytes of a field (what the writer takes of it), or None."""
+    if cell is None:
+        return None
+    field, used = cell
+    return [bytes(row[mask]) for row, mask in zip(field, used, strict=True)]
+
+
+def test_column_fields_are_the_former_texts_per_cell() -> None:
+    # issue 37 (io10k): flags, whole numbers and pandas' str columns laid out without a
+    # text per cell; random and hostile columns against the former writer, cell by cell
+    rng = np.random.default_rng(3707)
+    n = 300
+    words = ["S1", "origin", "R0", "", "a b", "µm", "x,y", 'q"', "line\nbreak", "2024-03-05"]
+    columns = [
+        pd.Series(rng.random(n) > 0.5),
+        pd.Series(np.zeros(n, bool)),
+        pd.Series(np.ones(n, bool)),
+        pd.Series(rng.integers(-(2**63), 2**63 - 1, n, dtype=np.int64, endpoint=True)),
+        pd.Series(np.array([0, -1, 1, 2**63 - 1, -(2**63)] * 60, dtype=np.int64)),
+        pd.Series(rng.choice(words[:6], n), dtype="str"),
+        pd.Series([f"S{i}" for i in rng.integers(0, 40, n)], dtype="str"),
+        pd.Series(rng.choice(words, n), dtype="str"),  # cells to quote: pandas
+        pd.Series(["a", None] * (n // 2), dtype="str"),  # a missing text: pandas
+        pd.Series(["a\x00", "b"] * (n // 2), dtype="str"),  # a NUL: pandas
+        pd.Series([], dtype="str"),
+        pd.Series([], dtype=bool),
+        pd.Series([], dtype=np.int64),
+        pd.Series(rng.choice(words[:3], n), dtype=object),
+        pd.Series([True, "ok", False] * (n // 3), dtype=object),
+        pd.Series([True, 1, "x"] * (n // 3), dtype=object),  # mixed types: pandas
+        pd.Series(np.arange(n, dtype=np.int32)),  # pandas
+        pd.Series(rng.normal(size=n)),
+    ]
+    for column in columns:
+        assert _written(csvout._column_field(column)) == _written(_former_field(column)), (
+            column.dtype,
+            column.head(3).tolist(),
+        )
+    # whole tables (laid out here; with a cell to quote, by pandas): pandas' bytes
+    for count in (7, 8):
+        frame = pd.DataFrame({f"c{j}": column for j, column in enumerate(columns[:count])})
+        frame["Tx_mm"] = rng.normal(size=n)
+        for rounded in (True, False):
+            assert csv_text(frame, rounded) == _pandas_text(frame, rounded)

@@ -124,3 +124,44 @@ def test_digests_of_the_bytes_read_are_the_files_and_follow_a_change(tmp_path, m
         assert opened == [path]  # changed since it was read: read again
     files.read_bytes(path)
     assert files.kept_digest(path) is None
+
+
+def test_former_results_are_hashed_once_per_version(tmp_path, monkeypatch):
+    """issue 37 (io10k): within ``digests_kept`` (``process``), ``sha256_file`` of a file
+    it hashed before (the former results, looked at before the work, before writing and
+    under the lock) is the kept digest, read once; a file changed since (new content, a
+    later time) or replaced (another inode) is read again; every digest is the file's
+    SHA-256 (hashlib of its bytes), and outside the block each call reads the file."""
+    import os
+
+    from hexatherm.io import files, manifest
+
+    path = tmp_path / "poses.csv"
+    path.write_bytes(b"label,Tx_mm\nS1,0.1000000\n")
+    reads: list[int] = []
+    real_read = os.read
+    monkeypatch.setattr(manifest.os, "read", lambda fd, n: reads.append(fd) or real_read(fd, n))
+
+    def digest() -> str | None:
+        reads.clear()
+        return manifest.sha256_file(path)
+
+    def truth() -> str:
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+
+    with files.digests_kept():
+        assert digest() == truth() and reads
+        for _ in range(2):
+            assert digest() == truth() and not reads  # kept
+        stat = path.stat()
+        path.write_bytes(b"label,Tx_mm\nS1,0.2000000\n")  # same size
+        os.utime(path, ns=(stat.st_atime_ns, stat.st_mtime_ns + 1_000_000))
+        assert digest() == truth() and reads  # changed: read again
+        assert digest() == truth() and not reads
+        replaced = tmp_path / "new.csv"
+        replaced.write_bytes(b"label,Tx_mm\nS2,0.3000000\n")
+        os.replace(replaced, path)
+        assert digest() == truth() and reads  # another file: read
+    for _ in range(2):
+        assert digest() == truth() and reads  # nothing kept outside the block
+    assert manifest.sha256_file(tmp_path) is None and manifest.sha256_file(tmp_path / "x") is None

@@ -622,3 +622,30 @@ def test_progress_callbacks_report_lines(tmp_path, monkeypatch):
     points = write(tmp_path, points_csv(), "points.csv")
     measurements.read_measurements(points, progress=lambda done, total: calls.append((done, total)))
     assert calls == [(25, 25)]
+
+
+def test_a_plus_sign_reads_as_the_fast_reader_and_float_read_it(tmp_path):
+    # issue 37 (io10k; found by the fuzz test above): pd.to_numeric read
+    # "+113.63956695822269" one step off (…267), where pandas' C parser (the fast reader)
+    # and float read …269: the general reader (a quote, a BOM, a CR sends a file there)
+    # now takes the sign off first; a '+' before no digit stays refused
+    rng = np.random.default_rng(37)
+    texts = [repr(float(v)) for v in rng.normal(100, 50, 3 * 300)]
+    signed = ["+" + t if not t.startswith("-") else t for t in texts]
+    rows = [
+        ",".join(
+            [("O", "R0", "S1")[i // 100], ("B1", "B2")[i // 50 % 2], *signed[3 * i : 3 * i + 3]]
+        )
+        + f",{i}.5"
+        for i in range(300)
+    ]
+    body = "label,ball,x,y,z,time\n" + "\n".join(rows) + "\n"
+    path = tmp_path / "points.csv"
+    for text in (body, "\ufeff" + body, body.replace("\n", "\r\n")):  # fast, general, general
+        path.write_bytes(text.encode())
+        check_csv(path)
+        (records,) = [csvfile.read_measurement_csv(path)]
+        np.testing.assert_array_equal(records.xyz_mm.ravel(), [float(t) for t in signed])
+    path.write_bytes(("\ufeff" + body.replace(signed[0], "+-" + texts[0], 1)).encode())
+    with pytest.raises(InputError, match="not a finite number"):
+        csvfile.read_measurement_csv(path)

@@ -104,3 +104,32 @@ def test_failing_texts_from_two_columns_are_the_former_rows_texts():
         report = QualityReport(pd.DataFrame(data), QualityLimits())
         for check in CHECKS:
             assert report.failing_texts(check) == _former_failing_texts(report, check)
+
+
+def test_ok_cells_and_file_flags_are_the_former_loops():
+    # issue 37 (io10k): a check's ok_ cells made by numpy, and quality.csv's flags from
+    # them, against the former list comprehensions, on random and edge masks
+    from hexatherm.workflows.process.outputs import quality_file_frame
+    from hexatherm.workflows.process.quality import ok_cells
+
+    rng = np.random.default_rng(3737)
+    for n in (0, 1, 2, 7, 500):
+        for p_bad, p_missing in ((0.5, 0.3), (0.0, 0.0), (1.0, 0.0), (0.2, 1.0)):
+            bad = rng.random(n) < p_bad
+            missing = rng.random(n) < p_missing
+            bad &= ~missing
+            former = [NA if m else not b for m, b in zip(missing, bad, strict=True)]
+            cells = ok_cells(bad, missing)
+            assert cells == former
+            assert [type(c) for c in cells] == [type(c) for c in former]
+    # quality.csv's flags: NA (could not run: passes) or the cell's truth
+    cells = [True, False, NA, np.True_, np.False_, 1, 0, "", "x", np.nan, 2.5]
+    frame = pd.DataFrame({"ok_form": cells, "ok_time_gap": cells[::-1]})
+    frame["growth_leg"] = frame["warming_leg"] = ["", "3"] * 5 + [""]
+    frame["failed"] = ""
+    written = quality_file_frame(QualityReport(frame, QualityLimits()))
+    for column in ("ok_form", "ok_time_gap"):
+        values = frame[column].tolist()
+        former = np.array([v is NA or v == NA or bool(v) for v in values])
+        assert written[column].dtype == former.dtype
+        np.testing.assert_array_equal(written[column].to_numpy(), former)

@@ -313,8 +313,9 @@ def quality_file_frame(quality: QualityReport) -> pd.DataFrame:
     frame = quality.frame.copy()
     for column in frame.columns:
         if str(column).startswith("ok_"):
-            values = frame[column].tolist()
-            frame[column] = np.array([v is NA or v == NA or bool(v) for v in values])
+            cells = frame[column].to_numpy(dtype=object)
+            # NA (the check could not run: it passes) or the cell's truth, cell by cell in C
+            frame[column] = (cells == NA) | cells.astype(bool)
     for column in ("growth_leg", "warming_leg"):
         values = frame[column].tolist()
         frame[column] = np.array([int(v) if v != "" else NO_LEG for v in values])
