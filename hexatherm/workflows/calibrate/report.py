@@ -122,12 +122,23 @@ def stroke_map(run: Calibration, seed: int = 0) -> StrokeMap:
 
 
 def _map_figure(stroke: StrokeMap, commanded: FloatArray) -> Figure:
-    from hexatherm.workflows.report.figures import _new_figure
+    from hexatherm.workflows.report.figures import (
+        WIDE_TICK_INTERVALS,
+        _new_figure,
+        few_ticks,
+        in_view_locator,
+    )
 
     fig = _new_figure(6.0, 4.6, left=0.11, right=0.9, bottom=0.12, top=0.9)
     ax = fig.add_subplot(1, 1, 1)
     image = ax.pcolormesh(stroke.tx, stroke.ty, stroke.map_um, shading="nearest", cmap="viridis")
-    fig.colorbar(image, ax=ax, label="largest σ of Tx, Ty, Tz (µm)")
+    fig.colorbar(
+        image,
+        ax=ax,
+        label="largest σ of Tx, Ty, Tz (µm)",
+        ticks=in_view_locator(WIDE_TICK_INTERVALS),
+    )
+    few_ticks(ax, nbins=WIDE_TICK_INTERVALS)
     ax.plot(commanded[:, 0], commanded[:, 1], "w+", markersize=6, label="campaign targets")
     ax.set_xlabel("Tx (mm)")
     ax.set_ylabel("Ty (mm)")
@@ -137,14 +148,17 @@ def _map_figure(stroke: StrokeMap, commanded: FloatArray) -> Figure:
 
 
 def _residual_figure(run: Calibration) -> Figure:
-    """The residual of every target before and after, translation and rotation."""
-    from hexatherm.workflows.report.figures import _new_figure
+    """The residual of every target before and after, translation and rotation (the
+    targets' axis shared, labelled under the lower panel)."""
+    from hexatherm.workflows.report.figures import WIDE_TICK_INTERVALS, _new_figure, few_ticks
 
     fig = _new_figure(7.0, 5.4, left=0.1, right=0.98, bottom=0.1, top=0.93, hspace=0.35)
     n = len(run.campaign.labels)
     label = "calibrated (held out)" if run.heldout else "calibrated"
+    axes = fig.subplots(2, 1, sharex=True)
+    few_ticks(axes[0], "x", nbins=WIDE_TICK_INTERVALS)
     for row, (part, unit) in enumerate(((slice(0, 3), "µm"), (slice(3, 6), "µrad"))):
-        ax = fig.add_subplot(2, 1, row + 1)
+        ax = axes[row]
         before = np.linalg.norm(run.residuals_before_um_urad[:, part], axis=1)
         after = np.linalg.norm(run.residuals_after_um_urad[:, part], axis=1)
         x = np.arange(1, n + 1)
@@ -163,9 +177,17 @@ def _residual_figure(run: Calibration) -> Figure:
 def _workspace_figure(run: Calibration) -> Figure:
     """The translation residual of every target at its commanded Tx, Ty: before and
     after, one colour scale."""
-    from hexatherm.workflows.report.figures import _new_figure
+    from hexatherm.workflows.report.figures import (
+        WIDE_TICK_INTERVALS,
+        _new_figure,
+        few_ticks,
+        in_view_locator,
+    )
 
     fig = _new_figure(7.6, 3.6, left=0.08, right=0.9, bottom=0.14, top=0.86, wspace=0.25)
+    axes = fig.subplots(1, 2, sharey=True)  # Ty's tick labels on the left panel only
+    few_ticks(axes[0], nbins=WIDE_TICK_INTERVALS)
+    few_ticks(axes[1], "x", nbins=WIDE_TICK_INTERVALS)
     xy = run.campaign.commanded[:, :2]
     before = np.linalg.norm(run.residuals_before_um_urad[:, :3], axis=1)
     after = np.linalg.norm(run.residuals_after_um_urad[:, :3], axis=1)
@@ -173,7 +195,7 @@ def _workspace_figure(run: Calibration) -> Figure:
     after_name = "calibrated (held out)" if run.heldout else "calibrated"
     images = []
     for k, (values, name) in enumerate(((before, "nominal geometry"), (after, after_name))):
-        ax = fig.add_subplot(1, 2, k + 1)
+        ax = axes[k]
         image = ax.scatter(
             xy[:, 0], xy[:, 1], c=values, vmin=0.0, vmax=top, cmap="viridis", s=28, gid=name
         )
@@ -183,14 +205,23 @@ def _workspace_figure(run: Calibration) -> Figure:
         ax.set_title(name, fontsize=9)
         images.append(image)
     cax = fig.add_axes((0.92, 0.14, 0.02, 0.72))
-    fig.colorbar(images[-1], cax=cax, label="|measured − predicted| translation (µm)")
+    fig.colorbar(
+        images[-1],
+        cax=cax,
+        label="|measured − predicted| translation (µm)",
+        ticks=in_view_locator(WIDE_TICK_INTERVALS),
+    )
     fig.suptitle("Residuals over the workspace (every target at its commanded Tx, Ty)", fontsize=10)
     return fig
 
 
 def _correlation_figure(run: Calibration) -> Figure:
     """The fitted parameters' correlation matrix as a heatmap."""
-    from hexatherm.workflows.report.figures import _new_figure
+    from hexatherm.workflows.report.figures import (
+        WIDE_TICK_INTERVALS,
+        _new_figure,
+        in_view_locator,
+    )
 
     fit = run.fit
     index = [i for i, m in enumerate(fit.model.mask) if m]
@@ -198,7 +229,9 @@ def _correlation_figure(run: Calibration) -> Figure:
     fig = _new_figure(6.6, 5.8, left=0.16, right=0.94, bottom=0.16, top=0.94)
     ax = fig.add_subplot(1, 1, 1)
     image = ax.imshow(rho, vmin=-1.0, vmax=1.0, cmap="RdBu_r", interpolation="nearest")
-    fig.colorbar(image, ax=ax, label="correlation ρ", shrink=0.85)
+    fig.colorbar(
+        image, ax=ax, label="correlation ρ", shrink=0.85, ticks=in_view_locator(WIDE_TICK_INTERVALS)
+    )
     names = list(fit.names)
     step = max(1, len(names) // 24)
     ticks = np.arange(0, len(names), step)

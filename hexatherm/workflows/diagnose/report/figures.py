@@ -30,6 +30,7 @@ from hexatherm.workflows.diagnose.report.tables import (
     changed,
     start_time_s,
 )
+from hexatherm.workflows.report.figures import WIDE_TICK_INTERVALS, few_ticks
 from hexatherm.workflows.report.text import unit_text
 
 if TYPE_CHECKING:
@@ -47,22 +48,10 @@ def _new_figure(width_in: float, height_in: float, **margins: float) -> Figure:
     return fig
 
 
-#: the most intervals between ticks on an axis of diagnose's figures, and the tick steps
-#: (matplotlib's own by default, which give up to 9 ticks an axis): every tick is an
-#: object matplotlib makes and draws with its label and grid line, two thirds of the
-#: figures' drawing with the default (32 axes); a reader still finds a labelled grid
-#: line every 1-2 divisions of the data
-TICK_INTERVALS = 4
-TICK_STEPS = (1.0, 2.0, 2.5, 5.0, 10.0)
-
-
 def _few_ticks(ax: Axes) -> None:
-    """At most :data:`TICK_INTERVALS` intervals between the ticks of both axes of ``ax``
-    (shared axes share the locator)."""
-    from matplotlib.ticker import MaxNLocator
-
-    for axis in (ax.xaxis, ax.yaxis):
-        axis.set_major_locator(MaxNLocator(nbins=TICK_INTERVALS, steps=list(TICK_STEPS)))
+    """Few ticks on both axes of ``ax``, those in the view only
+    (:func:`~hexatherm.workflows.report.figures.few_ticks`; shared axes share the locator)."""
+    few_ticks(ax, "xy")
 
 
 def _time_order(result: DiagnosisResult) -> tuple[npt.NDArray[np.intp], FloatArray]:
@@ -241,6 +230,8 @@ def centre_rms_figure(result: DiagnosisResult) -> Figure:
         label="mean leg temperature",
     )
     temp_ax.set_ylabel("mean leg temperature (°C)", fontsize=9, color=TEMPERATURE_COLOUR)
+    few_ticks(ax, nbins=WIDE_TICK_INTERVALS)
+    few_ticks(temp_ax, "y", nbins=WIDE_TICK_INTERVALS)
     handles, labels = ax.get_legend_handles_labels()
     more, more_labels = temp_ax.get_legend_handles_labels()
     ax.legend(handles + more, labels + more_labels, fontsize=8, loc="upper left")
