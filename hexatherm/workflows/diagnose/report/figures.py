@@ -48,12 +48,6 @@ def _new_figure(width_in: float, height_in: float, **margins: float) -> Figure:
     return fig
 
 
-def _few_ticks(ax: Axes) -> None:
-    """Few ticks on both axes of ``ax``, those in the view only
-    (:func:`~hexatherm.workflows.report.figures.few_ticks`; shared axes share the locator)."""
-    few_ticks(ax, "xy")
-
-
 def _time_order(result: DiagnosisResult) -> tuple[npt.NDArray[np.intp], FloatArray]:
     """Steps in time order and their time in hours since the start."""
     times = result.data.observations.times_s
@@ -109,7 +103,7 @@ def _series_time_figure(
             ax.axhline(0.0, color="#999999", linewidth=0.6, zorder=0)
             ax.grid(True, linewidth=0.3)
             ax.tick_params(labelsize=8)
-            _few_ticks(ax)
+            few_ticks(ax)
             ax.set_ylabel(f"{names[j]} ({unit_text(units[j])})", fontsize=9)
             if j == 0:
                 ax.set_title(_model_title(result, state), fontsize=10)
@@ -266,7 +260,7 @@ def temperature_figure(result: DiagnosisResult) -> Figure:
         ax.axhline(0.0, color="#999999", linewidth=0.6, zorder=0)
         ax.grid(True, linewidth=0.3)
         ax.tick_params(labelsize=8)
-        _few_ticks(ax)
+        few_ticks(ax)
         ax.set_title(POSE_COMPONENTS[j], fontsize=10)
         ax.set_ylabel(f"{POSE_COMPONENTS[j]} ({unit_text(POSE_UNITS[j])})", fontsize=9)
         if j >= 3:
