@@ -97,8 +97,8 @@ _DIGITS4 = np.frombuffer("".join(f"{i:04d}" for i in range(10000)).encode(), np.
 )
 #: :data:`_DIGITS4`'s rows as one 4-byte word each: a gather of words, not of 4-byte rows
 _DIGITS4_WORDS = _DIGITS4.view(np.uint32).ravel()
-#: 1, 10, ..., 10**18
-_POW10 = 10 ** np.arange(19, dtype=np.int64)
+#: 1, 10, ..., 10**18: an int64's places (also the listings' of :mod:`hexatherm.io.texttable`)
+POW10 = 10 ** np.arange(19, dtype=np.int64)
 #: below 2**50 steps a scaled double is within 2**-3 of a whole step and its rounding
 #: error (at most 2**-53 of it) can be told from a half step; beyond, ``format`` writes it
 _SCALED_LIMIT = 2.0**50
@@ -140,7 +140,7 @@ def fixed_fields(values: np.ndarray, resolution: float) -> tuple[np.ndarray, np.
     magnitude = np.abs(np.where(sure, rounded, 0.0)).astype(np.int64)
     negative = sure & (rounded < 0)
     whole, fraction = np.divmod(magnitude, 10**decimals)
-    whole_digits = np.searchsorted(_POW10[1:], whole, side="right") + 1
+    whole_digits = np.searchsorted(POW10[1:], whole, side="right") + 1
     most = int(whole_digits.max()) if whole_digits.size else 1
     width = 1 + most + 1 + decimals
     field = np.empty((*values.shape, width), np.uint8)

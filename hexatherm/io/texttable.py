@@ -20,7 +20,7 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
-from hexatherm.io.csvout import fixed_fields
+from hexatherm.io.csvout import POW10, fixed_fields
 from hexatherm.io.records import seconds_to_iso, seconds_to_iso_fields
 
 #: rows laid out at a time: a block's bytes (a few MB), never the whole text
@@ -28,8 +28,6 @@ BLOCK_ROWS = 65_536
 #: the decimals of every float column (the listing's ``float_format``)
 DECIMALS = 4
 _SPACE = ord(" ")
-#: 1, 10, ..., 10**18: an int64's places
-_POW10 = 10 ** np.arange(19, dtype=np.int64)
 
 
 class Column(Protocol):
@@ -85,11 +83,11 @@ class IntColumn:
             return field
         # every place's digit at once, the places left of a number's first digit blank
         magnitude = np.abs(values)
-        places = min(width, _POW10.size)
-        digits = magnitude[:, None] // _POW10[places - 1 :: -1] % 10
+        places = min(width, POW10.size)
+        digits = magnitude[:, None] // POW10[places - 1 :: -1] % 10
         field = np.full((values.size, width), _SPACE, np.uint8)
         field[:, width - places :] = digits + ord("0")
-        count = np.searchsorted(_POW10[1:], magnitude, side="right") + 1
+        count = np.searchsorted(POW10[1:], magnitude, side="right") + 1
         _blank_left(field, count)
         signs = np.flatnonzero(values < 0)
         field[signs, width - 1 - count[signs]] = ord("-")
