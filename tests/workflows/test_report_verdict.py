@@ -23,6 +23,7 @@ from hexatherm.workflows.process.pipeline import process_session
 from hexatherm.workflows.process.quality import quality_checks
 from hexatherm.workflows.process.uncertainty import pose_uncertainty
 from hexatherm.workflows.report import (
+    FIGURE_DPI,
     exact,
     fixed,
     pose_figure,
@@ -190,6 +191,27 @@ def test_failing_targets_are_marked_in_every_table_and_the_pose_figure(hidden, p
         centres = sorted(round(float(np.mean(b.get_x() + b.get_width() / 2))) for b in bands)
         assert centres == [2, 25]
     assert "failed a check" in [t.get_text() for t in fig.legends[0].get_texts()]
+
+
+@pytest.mark.parametrize("failing", [{}, {"S2": "temperature", "S25": "temperature"}])
+def test_the_pose_figure_legend_hides_no_title(hidden, failing):
+    """Figure 6's legend above the panels takes two rows with the failed checks' band
+    (four entries in three columns): measured by matplotlib's renderer at the dpi the
+    report draws it, its box meets neither a panel's title nor the figure's."""
+    result, u, _ = hidden
+    fig = pose_figure(result, u, failing=failing)
+    fig.set_dpi(FIGURE_DPI)
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    legend = fig.legends[0].get_window_extent(renderer)
+    assert len(fig.legends[0].get_texts()) == (4 if failing else 3)
+    titles = [ax.title for ax in fig.axes] + [fig._suptitle]
+    assert [t.get_text()[:2] for t in titles[:6]] == ["Tx", "Ty", "Tz", "Rx", "Ry", "Rz"]
+    for title in titles:
+        box = title.get_window_extent(renderer)
+        assert box.height > 0 and not box.overlaps(legend), title.get_text()
+    # one row of legend: the panels' top as it was
+    assert failing or fig.subplotpars.top == pytest.approx(0.84)
 
 
 def test_numbers_text():

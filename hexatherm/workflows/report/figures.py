@@ -21,6 +21,7 @@ from hexatherm.workflows.report.text import exact, unit_text
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
+    from matplotlib.legend import Legend
     from matplotlib.ticker import MaxNLocator
 
     from hexatherm.workflows.process.views import Processed, Uncertain
@@ -251,6 +252,18 @@ def _room_below(fig: Figure, ax: Axes) -> None:
         fig.subplots_adjust(bottom=(need + 2.0 * points) / height)
 
 
+def _room_above(fig: Figure, legend: Legend, axes: Sequence[Axes]) -> None:
+    """Lower the top of ``fig``'s panels when their titles would reach into ``legend``
+    (above them: a legend of two rows, measured, not drawn), by as much as they do and
+    a gap of 2 points (a legend of one row leaves 2.2); as it was otherwise."""
+    renderer = fig.canvas.get_renderer()  # type: ignore[attr-defined]
+    floor = legend.get_window_extent(renderer).y0 - 2.0 * fig.dpi / 72.0
+    reach = max(ax.title.get_window_extent(renderer).y1 for ax in axes)
+    if reach > floor:
+        height = fig.bbox.height
+        fig.subplots_adjust(top=fig.subplotpars.top - (reach - floor) / height)
+
+
 def pose_figure(
     result: Processed,
     uncertainty: Uncertain | None = None,
@@ -344,7 +357,10 @@ def pose_figure(
             ax.set_xlabel("trial (target step)", fontsize=9)
     _room_below(fig, axes.flat[3])
     handles, names = axes.flat[0].get_legend_handles_labels()
-    fig.legend(handles, names, loc="upper center", bbox_to_anchor=(0.5, 0.925), ncols=3, fontsize=9)
+    legend = fig.legend(
+        handles, names, loc="upper center", bbox_to_anchor=(0.5, 0.925), ncols=3, fontsize=9
+    )
+    _room_above(fig, legend, axes.flat[:3])  # two rows (the failed checks' band)
     bar_text = (
         f"error bars: expanded uncertainty U = k\u00b7u, k = {exact(coverage_factor)}"
         if uncertainty is not None
