@@ -8,7 +8,8 @@ each, saved as a PNG at 150 dpi. Each is a whole child process, one BLAS thread,
 alternating triples with ``hexatherm diagnose`` on ``bench/analyses.py``'s 16-target
 session (``--code DIR``: the code run, default this checkout). With ``--baseline DIR`` (a
 checkout of the code before) ``diagnose`` of that code runs in each round too (before
-and now in turn first), and the median of now over before is printed. With
+and now in turn first), and the median of now over before is printed; each round is
+printed as it ends, with the load average then and its own now / before. With
 ``--bytecode`` hexatherm's modules are compiled once into ``bench/.cache/pycache/`` and
 read from there, as an installed copy reads them (numpy's, scipy's and matplotlib's are
 compiled when pip installs them).
@@ -102,6 +103,12 @@ def main() -> None:
         # before 1.05; the same codes in turn: 0.98)
         for name, code in sorted(codes.items(), reverse=bool(round_ % 2)):
             rows[name].append(_diagnose(session, code))
+        # each round as it ends, with the load then (a shared machine's load moves)
+        times = ", ".join(f"{name} {values[-1]:.2f} s" for name, values in rows.items())
+        paired = ""
+        if args.baseline is not None:
+            paired = f"; now / before {rows['diagnose'][-1] / rows['diagnose before'][-1]:.3f}"
+        print(f"round {round_ + 1}, load {os.getloadavg()[0]:.1f}: {times}{paired}", flush=True)
     print("| | CPU, median (s) | range (s) | diagnose / it (median of triples) |")
     print("|---|---:|---:|---:|")
     for name, values in rows.items():
