@@ -113,7 +113,12 @@ class CurvatureError:
     second_shape : float
         The references' growth's second shape's energy over its noise's
         (:func:`second_shape`; 0: not read). Beyond :data:`LEGS_DIFFER` the legs'
-        histories differ, which this term and O's carry do not hold (a limit).
+        histories differ, which O's carry does not hold (a limit), and this term
+        takes :attr:`vector_mm` along the growth's first shape and the rest leg by leg.
+    spread_mm : ndarray, shape (M, 6), optional
+        Where the legs' histories differ: each leg's part of the error beyond the
+        growth's first shape, taken as independent between the legs (covariance
+        ``diag(d^2)``; between two targets of one interval ``diag(d_a d_b)``), mm.
     """
 
     cov_mm2: FloatArray
@@ -125,6 +130,7 @@ class CurvatureError:
     interval: npt.NDArray[np.intp] | None = None
     past: npt.NDArray[np.bool_] | None = None
     second_shape: float = 0.0
+    spread_mm: FloatArray | None = None
 
     @classmethod
     def from_vectors(
@@ -135,14 +141,20 @@ class CurvatureError:
         widest_gap: float = 1.0,
         past: npt.NDArray[np.bool_] | None = None,
         second_shape: float = 0.0,
+        spread_mm: FloatArray | None = None,
     ) -> CurvatureError:
         """From each target's error vector ``v`` (M, 6) and its interval (M,; -1: none);
         ``past``: the targets past the last reference; ``second_shape``: see
-        :func:`second_shape`."""
+        :func:`second_shape`; ``spread_mm`` (M, 6): each leg's own part, independent
+        between the legs (:attr:`spread_mm`)."""
         v = np.where((interval >= 0)[:, None], vector_mm, 0.0)
+        d = None if spread_mm is None else np.where((interval >= 0)[:, None], spread_mm, 0.0)
+        cov = v[:, :, None] * v[:, None, :]
+        if d is not None:
+            cov = cov + d[:, :, None] ** 2 * np.eye(6)
         return cls(
-            v[:, :, None] * v[:, None, :],
-            np.sqrt(np.mean(v**2, axis=1)) * 1e3,
+            cov,
+            np.sqrt(np.mean(v**2 + (0.0 if d is None else d**2), axis=1)) * 1e3,
             np.asarray(interval >= 0, dtype=bool),
             source,
             widest_gap,
@@ -150,6 +162,7 @@ class CurvatureError:
             np.asarray(interval, dtype=np.intp),
             None if past is None else np.asarray(past & (interval >= 0), dtype=bool),
             second_shape,
+            d,
         )
 
 
@@ -241,6 +254,7 @@ def curvature_error(
     used_weights: npt.ArrayLike,
     spacing_seen_s: float = 0.0,
     used_columns: npt.ArrayLike | None = None,
+    by_leg: bool = True,
 ) -> CurvatureError:
     """The interpolation's own error of the growth at R at each target (module
     docstring).
@@ -265,6 +279,10 @@ def curvature_error(
         The references ``used_weights`` (then (M, K)) are on, K a target
         (:func:`~hexatherm.workflows.process.smootherror.neighbour_weights`' form: two, a
         side not used weighing 0); a column given twice adds its weights.
+    by_leg : bool
+        Where the legs' histories differ (:func:`second_shape` beyond
+        :data:`LEGS_DIFFER`), the error beyond the growth's first shape leg by leg
+        (:attr:`CurvatureError.spread_mm`); False: one vector always.
 
     Returns
     -------
@@ -353,8 +371,24 @@ def curvature_error(
     ok = ok_a & (p >= 0) & (t1 > t0)
     vector = np.where(ok[:, None], vector, 0.0)
     interval = np.where(ok, around, -1).astype(np.intp)
+    # legs whose histories differ (lagging one another, heated unevenly): the stencils
+    # read each leg's curvature, but not where inside the intervals around it each leg's
+    # bends; the part along the growth's first shape stays one error of every leg, the
+    # rest is taken leg by leg (independent between the legs)
+    differ = second_shape(g, s)
+    spread = None
+    if by_leg and differ > LEGS_DIFFER:
+        shape = np.linalg.svd(g, full_matrices=False)[2][0]
+        along = (vector @ shape)[:, None] * shape
+        spread = np.abs(vector - along)
+        vector = along
     return CurvatureError.from_vectors(
-        vector, interval, widest_gap=widest, past=around >= n - 1, second_shape=second_shape(g, s)
+        vector,
+        interval,
+        widest_gap=widest,
+        past=around >= n - 1,
+        second_shape=differ,
+        spread_mm=spread,
     )
 
 

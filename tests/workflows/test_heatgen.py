@@ -132,15 +132,19 @@ def test_targets_past_the_last_reference_are_said_without_a_log(tmp_path) -> Non
 
 
 def test_legs_whose_histories_differ_are_said_without_a_log(tmp_path) -> None:  # noqa: ANN001
-    """Legs heated unevenly (each its own onset and time constant), no log: O's carry and
-    the straight line's error between references read the legs' growth as one history in
-    time. Against the generator's truth, with 1 nm point noise (what u claims is then
-    the model terms alone, what the error is the model's miss), the corrected Rz claims
-    0.61x of its error (over 30 seeds at 1 um: 0.77x). The references' growth follows a
-    second shape over the legs 11-25x its noise there (0.1-2.7x where the legs share one
-    history): the screen says so. So it does under the air drifting with the legs
-    lagging 0-400 s (seed 0: 11x), and not under two time constants (one history) or the
-    twin's own heating."""
+    """Legs heated unevenly (each its own onset and time constant), no log. The straight
+    line's own error between references was one vector over the legs a target: the
+    stencils read each leg's curvature but not where inside the intervals each leg
+    bends, and the vector's direction over the legs set which components it claimed.
+    Against the generator's truth, with 1 nm point noise (u then claims the model terms
+    alone, the error is the model's miss), the corrected Rz claimed 0.61x of its error;
+    with the part beyond the growth's first shape taken leg by leg, 0.88x (over 30 seeds
+    at 1 um: 0.77 -> 0.84, ``bench/nolog_shapes.py``). What is left is O's carry (leg 1
+    heated from between R0 and R1, which no reference tells from a leg warming since
+    before O): the references' growth follows a second shape over the legs 11-25x its
+    noise there (0.1-2.7x where the legs share one history), and the screen says so. So
+    it does under the air drifting with the legs lagging 0-400 s (seed 0: 11x), and not
+    under two time constants (one history) or the twin's own heating."""
     from hexatherm.workflows.process.pipeline import process_session
     from hexatherm.workflows.process.summary import differ_warning
     from hexatherm.workflows.process.uncertainty import pose_uncertainty
@@ -164,7 +168,7 @@ def test_legs_whose_histories_differ_are_said_without_a_log(tmp_path) -> None:  
     cmm = "cmm: {point_noise_um: 0.001, points_per_ball: 25, cap_angle_deg: 70}\n"
     session.write_text("".join(x for x in lines if not x.startswith("temperatures:")) + cmm)
     rz = claimed_over_observed([clean])[5]
-    assert rz < 0.7, rz
+    assert 0.8 < rz < 1.2, rz
 
     def said(folder) -> str:  # noqa: ANN001
         return differ_warning(pose_uncertainty(process_session(folder)))

@@ -47,18 +47,20 @@ def past_warning(uncertainty: PoseUncertainty) -> str:
 def differ_warning(uncertainty: PoseUncertainty) -> str:
     """A warning when the references' growth follows two or more shapes over the legs
     beyond its noise without a thermocouple log (:func:`~hexatherm.core.curvature.second_shape`):
-    the legs' histories differ, and O's carry and the straight line's error between
-    references read the legs' growth as one history in time (a limit, docs/uncertainty.md)."""
+    the legs' histories differ, and O's carry, extrapolated back from the references
+    along one history in time, does not hold how each leg grew before R0 (a limit,
+    docs/uncertainty.md)."""
     curved = uncertainty.curvature
     if curved is None or curved.source != "curvature" or not curved.second_shape > LEGS_DIFFER:
         return ""
     return (
         f"warning: the references' growth follows a second shape over the legs "
         f"{curved.second_shape:.2g}x its noise and there is no thermocouple log: the legs' "
-        "histories differ (lagging one another, heated unevenly), which O's carry and the "
-        "straight line's error between references do not hold (the air drifting with the "
-        "legs lagging 0-400 s: the corrected Ty claimed 0.63x of its error; legs heated "
-        "unevenly: Rz 0.77x); give the session its log"
+        "histories differ (lagging one another, heated unevenly), and O's carry to R0's "
+        "state, extrapolated back from the references, does not hold how each leg grew "
+        "before R0 (the air drifting with the legs lagging 0-400 s: the corrected Ty "
+        "claimed 0.65x of its error; a leg heated from between R0 and R1: Rz 0.84x); "
+        "measure O and R0 with the legs settled, or give the session its log"
     )
 
 
