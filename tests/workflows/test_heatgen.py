@@ -180,3 +180,44 @@ def test_legs_whose_histories_differ_are_said_without_a_log(tmp_path) -> None:  
     mats = Heating(on_s=1000.0, tau_s=600.0, gain_C=tuple(heatgen.GAIN_C))
     twin = _shaped_session(tmp_path / "twin", 0, mats, ())
     assert said(one) == "" and said(twin) == ""
+
+
+def test_the_legs_own_parts_are_in_the_calibrations_structure(tmp_path) -> None:  # noqa: ANN001
+    """Legs heated unevenly, two targets between the same references, no log: the line's
+    own error leg by leg (seven columns a target, shared within an interval) is in the
+    structured joint covariance a calibration whitens with as in the dense one."""
+    from hexatherm.workflows.process.errorterms import error_terms
+    from hexatherm.workflows.process.pipeline import process_session
+    from hexatherm.workflows.process.uncertainty import (
+        centre_covariance,
+        joint_pose_covariance,
+        joint_pose_covariance_structured,
+        pose_chain,
+    )
+    from tests.workflows.test_interpolation_error import CMM
+    from tests.workflows.test_interpolation_shared import pairs_plan
+
+    folder = tmp_path / "pairs"
+    spec = TwinSessionSpec(
+        name="pairs",
+        hexapod_text=(ROOT / "configs" / "symetrie-like.yaml").read_text(),
+        balls=BALLS,
+        plan=pairs_plan(8),
+        heating=heatgen.Uneven(),  # type: ignore[arg-type]
+        seed=0,
+        output="centres",
+        fit_centres=True,
+        point_noise_mm=1e-3,
+    )
+    write_files(simulate_session(spec).files, folder)
+    lines = (folder / "session.yaml").read_text().splitlines(keepends=True)
+    text = "".join(x for x in lines if not x.startswith("temperatures:")) + CMM
+    (folder / "session.yaml").write_text(text)
+    result = process_session(folder)
+    terms = error_terms(result, pose_chain(result), centre_covariance(result).cov_mm2)
+    assert terms.curved is not None and terms.curved[1].spread_mm is not None
+    assert terms.curved[0].shape[2] == 7
+    structure = joint_pose_covariance_structured(result)
+    assert structure is not None
+    dense = joint_pose_covariance(result)
+    np.testing.assert_allclose(structure.dense(), dense, rtol=0, atol=1e-13 * np.abs(dense).max())
