@@ -75,8 +75,10 @@ import numpy.typing as npt
 from hexatherm.typing import FloatArray
 
 __all__ = [
+    "LEGS_DIFFER",
     "CurvatureError",
     "curvature_error",
+    "second_shape",
     "scatter_off_heating",
     "second_difference_stencils",
 ]
@@ -106,6 +108,17 @@ class CurvatureError:
         The interval of each target: the index of the reference before it (the last
         one for a target past it); -1 where nothing was evaluated. Two targets of one
         interval share their error: covariance ``v_a v_b^T``.
+    past : ndarray of bool, shape (M,), optional
+        The targets past the last reference.
+    second_shape : float
+        The references' growth's second shape's energy over its noise's
+        (:func:`second_shape`; 0: not read). Beyond :data:`LEGS_DIFFER` the legs'
+        histories differ, which O's carry does not hold (a limit), and this term
+        takes :attr:`vector_mm` along the growth's first shape and the rest leg by leg.
+    spread_mm : ndarray, shape (M, 6), optional
+        Where the legs' histories differ: each leg's part of the error beyond the
+        growth's first shape, taken as independent between the legs (covariance
+        ``diag(d^2)``; between two targets of one interval ``diag(d_a d_b)``), mm.
     """
 
     cov_mm2: FloatArray
@@ -116,6 +129,8 @@ class CurvatureError:
     vector_mm: FloatArray | None = None
     interval: npt.NDArray[np.intp] | None = None
     past: npt.NDArray[np.bool_] | None = None
+    second_shape: float = 0.0
+    spread_mm: FloatArray | None = None
 
     @classmethod
     def from_vectors(
@@ -125,20 +140,68 @@ class CurvatureError:
         source: str = "curvature",
         widest_gap: float = 1.0,
         past: npt.NDArray[np.bool_] | None = None,
+        second_shape: float = 0.0,
+        spread_mm: FloatArray | None = None,
     ) -> CurvatureError:
         """From each target's error vector ``v`` (M, 6) and its interval (M,; -1: none);
-        ``past``: the targets past the last reference."""
+        ``past``: the targets past the last reference; ``second_shape``: see
+        :func:`second_shape`; ``spread_mm`` (M, 6): each leg's own part, independent
+        between the legs (:attr:`spread_mm`)."""
         v = np.where((interval >= 0)[:, None], vector_mm, 0.0)
+        d = None if spread_mm is None else np.where((interval >= 0)[:, None], spread_mm, 0.0)
+        cov = v[:, :, None] * v[:, None, :]
+        if d is not None:
+            cov = cov + d[:, :, None] ** 2 * np.eye(6)
         return cls(
-            v[:, :, None] * v[:, None, :],
-            np.sqrt(np.mean(v**2, axis=1)) * 1e3,
+            cov,
+            np.sqrt(np.mean(v**2 + (0.0 if d is None else d**2), axis=1)) * 1e3,
             np.asarray(interval >= 0, dtype=bool),
             source,
             widest_gap,
             v,
             np.asarray(interval, dtype=np.intp),
             None if past is None else np.asarray(past & (interval >= 0), dtype=bool),
+            second_shape,
+            d,
         )
+
+
+#: the references' growth's second shape beyond this many times its noise's energy: the
+#: legs' histories differ (:func:`second_shape`)
+LEGS_DIFFER = 4.0
+
+
+def second_shape(growth_mm: npt.ArrayLike, leg_cov_mm2: npt.ArrayLike) -> float:
+    """How far the references' growth (n, 6: since the first, ``q_R - q_R0``) follows a
+    second shape over the legs beyond its noise: the energy of its second singular vector
+    ``s`` (its squared singular value) over the noise's along it, ``sum_(j>0) s^T (S_j +
+    S_0) s`` (``S_j`` reference j's leg covariance, (n, 6, 6); each growth holds the
+    first reference's noise too); 0 with fewer than three references.
+
+    Legs that share one heating history (every leg a gain times one history in time)
+    grow along one shape, and the curvature of the references' growth and O's carry read
+    them so; legs lagging one another or heated unevenly follow two or more. Over 30
+    noise replicas each (1 um point noise, 3 balls, 7 references 400 s apart), the
+    second shape held 0.1-2.7x its noise where the legs share one history (the twin's
+    heatings from the start, mid-session, after a 30 min pause, none; two time
+    constants, a ramp, a step; once 5.4x of 120 with five references), 2.8-28x (22 of 30
+    beyond :data:`LEGS_DIFFER`) under the air drifting periodically with the legs lagging
+    0-400 s, 11-25x with the legs heated unevenly (``tests/heatgen.py``).
+
+    >>> t = np.arange(7.0)[:, None]
+    >>> cov = np.broadcast_to(np.eye(6) * 1e-6, (7, 6, 6))
+    >>> one = t * np.array([3.0, 7, 2, 3, 9, 3.5]) * 1e-3       # one history
+    >>> lag = np.sin(t - np.arange(6) * 0.5) * 5e-3              # lagging legs
+    >>> bool(second_shape(one, cov) < 1e-20), bool(second_shape(lag, cov) > LEGS_DIFFER)
+    (True, True)
+    """
+    g = np.asarray(growth_mm, dtype=float)
+    cov = np.asarray(leg_cov_mm2, dtype=float)
+    if g.shape[0] < 3:
+        return 0.0
+    _, sv, vt = np.linalg.svd(g, full_matrices=False)
+    noise = float(vt[1] @ (cov[1:] + cov[:1]).sum(axis=0) @ vt[1])
+    return float(sv[1] ** 2 / noise) if noise > 0 else 0.0
 
 
 def second_difference_stencils(times_s: npt.ArrayLike) -> FloatArray:
@@ -191,6 +254,7 @@ def curvature_error(
     used_weights: npt.ArrayLike,
     spacing_seen_s: float = 0.0,
     used_columns: npt.ArrayLike | None = None,
+    by_leg: bool = True,
 ) -> CurvatureError:
     """The interpolation's own error of the growth at R at each target (module
     docstring).
@@ -215,6 +279,10 @@ def curvature_error(
         The references ``used_weights`` (then (M, K)) are on, K a target
         (:func:`~hexatherm.workflows.process.smootherror.neighbour_weights`' form: two, a
         side not used weighing 0); a column given twice adds its weights.
+    by_leg : bool
+        Where the legs' histories differ (:func:`second_shape` beyond
+        :data:`LEGS_DIFFER`), the error beyond the growth's first shape leg by leg
+        (:attr:`CurvatureError.spread_mm`); False: one vector always.
 
     Returns
     -------
@@ -303,7 +371,25 @@ def curvature_error(
     ok = ok_a & (p >= 0) & (t1 > t0)
     vector = np.where(ok[:, None], vector, 0.0)
     interval = np.where(ok, around, -1).astype(np.intp)
-    return CurvatureError.from_vectors(vector, interval, widest_gap=widest, past=around >= n - 1)
+    # legs whose histories differ (lagging one another, heated unevenly): the stencils
+    # read each leg's curvature, but not where inside the intervals around it each leg's
+    # bends; the part along the growth's first shape stays one error of every leg, the
+    # rest is taken leg by leg (independent between the legs)
+    differ = second_shape(g, s)
+    spread = None
+    if by_leg and differ > LEGS_DIFFER:
+        shape = np.linalg.svd(g, full_matrices=False)[2][0]
+        along = (vector @ shape)[:, None] * shape
+        spread = np.abs(vector - along)
+        vector = along
+    return CurvatureError.from_vectors(
+        vector,
+        interval,
+        widest_gap=widest,
+        past=around >= n - 1,
+        second_shape=differ,
+        spread_mm=spread,
+    )
 
 
 def _error_vector(

@@ -133,5 +133,5 @@ def test_the_structure_the_fit_whitens_with_is_the_joint_covariance(tmp_path: Pa
     assert terms.curved is not None
     f = terms.curved[0]
     band = dense[0, 6] - structure.common[0] @ structure.common[6]
-    assert band == pytest.approx(f[0, 0] * f[1, 0], rel=1e-9)
+    assert band == pytest.approx(float(f[0, 0] @ f[1, 0]), rel=1e-9)
     assert abs(band) > 0.01 * dense[0, 0]

@@ -49,9 +49,10 @@ class ErrorTerms:
     excess : SmoothExcess, optional
         The smooth fit's own error on each corrected pose, and its part shared by the
         targets of one interval (with a log; without, past the last reference).
-    curved : (ndarray (M, 6), CurvatureError), optional
-        The straight line's own error of each corrected pose, as a vector ``F`` (mm,
-        deg): ``F F^T`` its own, ``F_a F_b^T`` between two targets of one interval.
+    curved : (ndarray (M, 6, K), CurvatureError), optional
+        The straight line's own error of each corrected pose, as vectors ``F`` (mm,
+        deg; K = 1, or 7 where the legs' histories differ: their own parts leg by leg):
+        ``F F^T`` its own, ``F_a F_b^T`` between two targets of one interval.
     """
 
     jacobian: TargetJacobian
@@ -66,7 +67,7 @@ class ErrorTerms:
         out = None if self.excess is None else self.excess.cov
         if self.curved is not None:
             f = self.curved[0]
-            out = f[:, :, None] * f[:, None, :] + (0.0 if out is None else out)
+            out = np.einsum("mpk,mqk->mpq", f, f) + (0.0 if out is None else out)
         return out
 
     def shared(self) -> list[tuple[IntArray, IntArray, FloatArray]]:
@@ -76,7 +77,7 @@ class ErrorTerms:
         ``V_a V_b^T`` their covariance."""
         terms = []
         if self.curved is not None:
-            terms.append((self.curved[0][:, :, None], self.curved[1].interval))
+            terms.append((self.curved[0], self.curved[1].interval))
         if self.excess is not None:
             terms.append((self.excess.vectors, self.excess.interval))
         out = []
@@ -176,10 +177,13 @@ def structured_covariance(
         # target or two, and a thousand targets)
         f, error = terms.curved
         assert error.interval is not None
+        k = f.shape[2]
         mine = np.flatnonzero(error.interval >= 0)
         groups, column = np.unique(error.interval[mine], return_inverse=True)
-        rows = (6 * mine[:, None] + np.arange(6)).ravel()
+        shape = (mine.size, 6, k)  # a target's rows, its interval's k columns
+        rows = np.broadcast_to((6 * mine[:, None] + np.arange(6))[:, :, None], shape)
+        columns = np.broadcast_to(column[:, None, None] * k + np.arange(k), shape)
         banded = sparse.csr_matrix(
-            (f[mine].ravel(), (rows, np.repeat(column, 6))), shape=(m * 6, groups.size)
+            (f[mine].ravel(), (rows.ravel(), columns.ravel())), shape=(m * 6, groups.size * k)
         )
     return structure.plus(common, banded)

@@ -173,7 +173,7 @@ def past_last_error(result: ProcessResult, legs_cov_mm2: FloatArray) -> FloatArr
     total = np.sum(first**2, axis=1)
     share = np.where(total > 0, np.maximum(0.0, 1.0 - noise / np.where(total > 0, total, 1.0)), 0.0)
     out[past, :, 0] = np.sqrt(share)[:, None] * first
-    curved = curvature_error(t, growth, legs_cov_mm2, ts[past], line)
+    curved = curvature_error(t, growth, legs_cov_mm2, ts[past], line, by_leg=False)
     assert curved.vector_mm is not None
     out[past, :, 1] = curved.vector_mm
     return out
@@ -183,7 +183,7 @@ def curvature_excess(
     result: ProcessResult, chain: PoseChain, legs_cov_mm2: FloatArray
 ) -> tuple[FloatArray, CurvatureError] | None:
     """The interpolation's own error between references carried to the corrected poses,
-    each target's error vector (M, 6: mm, deg; its covariance ``F F^T``, and ``F_a F_b^T``
+    each target's error vectors (M, 6, K: mm, deg; its covariance ``F F^T``, and ``F_a F_b^T``
     between two targets of one interval, :attr:`CurvatureError.interval`), and its
     evaluation (:mod:`hexatherm.core.curvature`); None when no target has it.
 
@@ -255,7 +255,11 @@ def curvature_excess(
     if not error.evaluated.any():
         return None
     assert error.vector_mm is not None
-    return np.einsum("mpl,ml->mp", to_pose_factor(result, chain), error.vector_mm), error
+    factor = to_pose_factor(result, chain)
+    f = np.einsum("mpl,ml->mp", factor, error.vector_mm)[:, :, None]
+    if error.spread_mm is not None:  # each leg's own part: a column a leg
+        f = np.concatenate([f, factor * error.spread_mm[:, None, :]], axis=2)
+    return f, error
 
 
 def to_pose_factor(result: ProcessResult, chain: PoseChain) -> FloatArray:

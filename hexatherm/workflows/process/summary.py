@@ -6,6 +6,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from hexatherm.core.curvature import LEGS_DIFFER
 from hexatherm.workflows.process.carryerror import carry_line, carry_warning
 
 if TYPE_CHECKING:
@@ -40,6 +41,26 @@ def past_warning(uncertainty: PoseUncertainty) -> str:
         "(a heating switched on 300-600 s before the last reference, 200 s before such a "
         "target: linear claimed 1.2-11x of its corrected Tx error, smooth 0.3-1.1x); "
         "measure a reference after the last target, or give the session its log"
+    )
+
+
+def differ_warning(uncertainty: PoseUncertainty) -> str:
+    """A warning when the references' growth follows two or more shapes over the legs
+    beyond its noise without a thermocouple log (:func:`~hexatherm.core.curvature.second_shape`):
+    the legs' histories differ, and O's carry, extrapolated back from the references
+    along one history in time, does not hold how each leg grew before R0 (a limit,
+    docs/uncertainty.md)."""
+    curved = uncertainty.curvature
+    if curved is None or curved.source != "curvature" or not curved.second_shape > LEGS_DIFFER:
+        return ""
+    return (
+        f"warning: the references' growth follows a second shape over the legs "
+        f"{curved.second_shape:.2g}x its noise and there is no thermocouple log: the legs' "
+        "histories differ (lagging one another, heated unevenly), and O's carry to R0's "
+        "state, extrapolated back from the references, does not hold how each leg grew "
+        "before R0 (the air drifting with the legs lagging 0-400 s: the corrected Ty "
+        "claimed 0.65x of its error; a leg heated from between R0 and R1: Rz 0.84x); "
+        "measure O and R0 with the legs settled, or give the session its log"
     )
 
 
@@ -114,6 +135,9 @@ def uncertainty_summary(uncertainty: PoseUncertainty) -> list[str]:
                 "corrected Tx error; a step inside one interval 0.42x); give the session "
                 "its log"
             )
+    differ = differ_warning(uncertainty)
+    if differ:
+        lines.append(differ)
     past = past_warning(uncertainty)
     if past:
         lines.append(past)
