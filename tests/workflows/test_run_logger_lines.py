@@ -5,17 +5,20 @@ from __future__ import annotations
 
 import socket
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
 import pytest
 
+from hexatherm.devices.probestream import format_number, parse_numbers
 from hexatherm.devices.serialport import PortSettings
 from hexatherm.devices.sim.thermocouples import ThermocoupleSimulator, format_sample
 from hexatherm.errors import AcquisitionError, InputError
 from hexatherm.workflows.acquire.run import session_from_log
 from hexatherm.workflows.process.pipeline import process_session
 from hexatherm.workflows.run.support import _Thermocouples
+from tests.waiting import wait_for
 from tests.workflows.test_run import make_bench
 
 SHORT = {"targets": [[5.0, -3.0, 4.0, 1.0, -2.0, 3.0]], "points_per_ball": 6}
@@ -28,13 +31,32 @@ def burst_line(k: int) -> bytes:
 
 
 class FloodingLogger(ThermocoupleSimulator):
-    """The twin's logger, but every connection first gets :data:`BURST` lines at once."""
+    """The twin's logger, but every connection first gets :data:`BURST` lines at once, and
+    the logger's own lines once the run has taken the burst's last line as a row (in
+    ``session``'s temperatures.csv).
+
+    Were they sent at once, a log whose thread is held up past the whole burst (a loaded
+    machine) takes the burst and the first line in one batch: a flood whose newest row is
+    that line, no row of the burst kept (the flake at load 25+; a drain held back until
+    the burst and a line arrived fails so every time)."""
+
+    def __init__(self, *args: Any, session: Path, **kwargs: Any) -> None:
+        self.session = session
+        super().__init__(*args, **kwargs)
 
     def _serve(self, sock: socket.socket) -> None:
         try:
             sock.sendall(b"".join(burst_line(k) for k in range(BURST)))
         except OSError:
             return
+        values = parse_numbers(burst_line(BURST - 1), 6)
+        assert values is not None
+        row = "," + ",".join(format_number(v) for v in values) + "\n"
+        table = self.session / "temperatures.csv"
+        wait_for(
+            lambda: self._closing.is_set() or (table.is_file() and row in table.read_text()),
+            "the burst's last row",
+        )
         super()._serve(sock)
 
 
@@ -42,7 +64,9 @@ def test_a_flooding_logger_keeps_the_newest_rows_and_the_session_processes(
     tmp_path: Path,
 ) -> None:
     b = make_bench(tmp_path, **SHORT)  # type: ignore[arg-type]
-    logger = FloodingLogger(b.world.thermocouples_C, clock=b.world.clock, period_s=10.0)
+    logger = FloodingLogger(
+        b.world.thermocouples_C, clock=b.world.clock, period_s=10.0, session=b.session
+    )
     try:
         b.run(temperature_port=PortSettings(logger.url))
     finally:

@@ -23,7 +23,7 @@ from click.testing import CliRunner
 from hexatherm.cli import main
 from hexatherm.devices.controller import InPositionCriteria
 from hexatherm.devices.serialport import PortSettings
-from hexatherm.devices.sim.thermocouples import SentSample
+from hexatherm.devices.sim.thermocouples import SentSample, format_sample
 from hexatherm.errors import AcquisitionError
 from hexatherm.io.records import iso_to_seconds
 from hexatherm.workflows.acquire.run import session_from_log
@@ -54,34 +54,67 @@ def read_rows(session: Path) -> tuple[np.ndarray, np.ndarray]:
     return times, table[CHANNELS].to_numpy()
 
 
+def _in_order(rows: list[tuple[float, ...]], lines: list[tuple[float, ...]]) -> int:
+    """How many of ``rows`` are ``lines`` from the first, in order."""
+    n = 0
+    while n < min(len(rows), len(lines)) and rows[n] == lines[n]:
+        n += 1
+    return n
+
+
 def split_by_connection(values: np.ndarray, sent: Sequence[SentSample]) -> list[tuple[int, int]]:
     """Which lines (first, count) of each of the logger's connections the rows hold, checking
-    that they
-    are, in order, consecutive lines of the first connection, then of the second, ...:
-    nothing doubled, nothing missing in between. A connection's first lines may be missing
-    (pyserial flushes the input when it opens a port) and so may its last ones (in flight
-    when it dropped): lines that never reached hexatherm."""
-    by_connection: dict[int, list[list[float]]] = {}
+    that they are, in order, consecutive lines of the first connection, then of the second,
+    ...: nothing doubled, nothing missing in between. A connection's first lines may be
+    missing (pyserial flushes the input when it opens a port) and so may its last ones (in
+    flight when it dropped): lines that never reached hexatherm.
+
+    Lines of the same values (three decimals of a temperature that hardly moves: the twin's
+    legs near the end of their heating) do not tell where a connection's rows start: of the
+    lines equal to its first row, the one from which the most rows follow in order is taken
+    (the earliest of those). Taking the first equal line failed when the line dropped at the
+    open had the values of the first one that arrived (a loaded machine, an accelerated
+    clock): the rows were then checked one line out of step."""
+    by_connection: dict[int, list[tuple[float, ...]]] = {}
     for number, _, _, line in sent:
-        by_connection.setdefault(number, []).append([float(v) for v in line.split(b",")])
+        by_connection.setdefault(number, []).append(tuple(float(v) for v in line.split(b",")))
+    rows = [tuple(row) for row in np.asarray(values, dtype=float).tolist()]
     counts: list[tuple[int, int]] = []
     k = 0
     for number in sorted(by_connection):
         lines = by_connection[number]
-        start = next((i for i, v in enumerate(lines) if np.array_equal(values[k], v)), None)
-        if k == len(values) or start is None:
+        starts = [i for i, line in enumerate(lines) if k < len(rows) and line == rows[k]]
+        if not starts:
             counts.append((0, 0))
             continue
-        n = 0
-        while (
-            k < len(values)
-            and start + n < len(lines)
-            and np.array_equal(values[k], lines[start + n])
-        ):
-            k, n = k + 1, n + 1
+        runs = [_in_order(rows[k:], lines[start:]) for start in starts]
+        n = max(runs)
+        start = starts[runs.index(n)]
         counts.append((start, n))
-    assert k == len(values), f"row {k + 2} of temperatures.csv is no line the logger sent next"
+        k += n
+    assert k == len(rows), f"row {k + 2} of temperatures.csv is no line the logger sent next"
     return counts
+
+
+def test_rows_are_matched_to_the_lines_sent_however_alike_the_lines() -> None:
+    """The check above against its own truth: rows that are a connection's lines after its
+    first were dropped, where the dropped line had the values of the next (A, A, B, C: the
+    rows A, B, C), are found in order; a line missing in between, or doubled, is not."""
+    a, b, c, d, e = ([20.0 + x, 21.0, 22.0, 23.0, 24.0, 25.0, 19.0] for x in range(5))
+
+    def sent(*connections: list[list[float]]) -> list[SentSample]:
+        return [
+            (number, 0.0, tuple(v), format_sample(v))
+            for number, lines in enumerate(connections, start=1)
+            for v in lines
+        ]
+
+    lines = sent([a, a, b, c], [d, e])
+    assert split_by_connection(np.array([a, b, c, e]), lines) == [(1, 3), (1, 1)]
+    assert split_by_connection(np.array([a, a, b, d]), lines) == [(0, 3), (0, 1)]
+    for wrong in ([a, c, d], [a, b, b, c], [a, b, c, e, d]):
+        with pytest.raises(AssertionError, match="is no line the logger sent next"):
+            split_by_connection(np.array(wrong), lines)
 
 
 def test_run_logs_the_twins_thermocouples_replayably_and_process_uses_them(tmp_path: Path) -> None:
