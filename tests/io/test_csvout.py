@@ -9,7 +9,7 @@ import pandas as pd
 
 from hexatherm.io import csvout
 from hexatherm.io.csvfile import centres_to_csv
-from hexatherm.io.csvout import RESOLUTION, csv_text, fixed_text, resolution_of
+from hexatherm.io.csvout import RESOLUTION, csv_bytes, csv_text, fixed_text, resolution_of
 from hexatherm.io.records import Records
 from hexatherm.workflows.replay import DEFAULT_TOLERANCES
 
@@ -133,6 +133,8 @@ def test_the_joined_text_is_what_pandas_writes() -> None:
     for frame in frames:
         for rounded in (True, False):
             assert csv_text(frame, rounded) == _pandas_text(frame, rounded)
+            # the bytes written (process's tables): the text's UTF-8, laid out or pandas'
+            assert csv_bytes(frame, rounded) == _pandas_text(frame, rounded).encode("utf-8")
 
 
 def _former_digits(n: np.ndarray, count: int) -> np.ndarray:

@@ -44,7 +44,7 @@ import pandas as pd
 
 from hexatherm.core.geometry import to_um_urad
 from hexatherm.core.plan import known_indices
-from hexatherm.io.csvout import csv_text
+from hexatherm.io.csvout import csv_bytes
 from hexatherm.io.outputs import output_dir
 from hexatherm.workflows.process.measured import nominal_fit_diameter_mm
 
@@ -293,13 +293,13 @@ def write_results(
     if quality is not None:
         tables["quality.csv"] = quality_file_frame(quality)
     texts = {
-        name: csv_text(frame, resolutions={"jacobian_rcond": RCOND_RESOLUTION})
+        name: csv_bytes(frame, resolutions={"jacobian_rcond": RCOND_RESOLUTION})
         for name, frame in tables.items()
     }
     inputs = [*session_inputs(result), *extra_inputs]
     with output_dir(out, inputs=inputs, overwrite=overwrite, notes=notes) as tmp:
         for name, text in texts.items():
-            (tmp / name).write_text(text, encoding="utf-8", newline="")
+            (tmp / name).write_bytes(text)
     return [Path(out) / name for name in texts]
 
 
