@@ -158,10 +158,12 @@ class QualityReport:
                 worst = np.nanmin(shown) if at_least else np.nanmax(shown)
                 worst_text = f"{worst:.4g}"
             failing = self.failing_texts(check)
-            ran = self.ran(check)
+            # whether it ran at a step: up to the first such cell (not a flag per step)
+            flags = (bool, np.bool_)
+            ran = any(type(ok) in flags for ok in self.frame[f"ok_{check}"].tolist())
             status = (
                 "n/a (could not run: " + _why_not(check, self.frame) + ")"
-                if not ran.any()
+                if not ran
                 else "ok"
                 if not failing
                 else (
