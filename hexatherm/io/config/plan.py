@@ -100,8 +100,6 @@ _PLAN_STEP_LINE = re.compile(
     rf"( *)- +\{{ *label: +([A-Za-z0-9][A-Za-z0-9-]*) *, *kind: +(origin|reference|target) *,"
     rf" *pose: +{_POSE} *\}}{_END}"
 )
-#: the step lines of a text, each a whole line (:func:`_step_block`)
-_PLAN_STEP_LINES = re.compile(rf"^{_PLAN_STEP_LINE.pattern}$", re.MULTILINE)
 _BLANK_LINE = re.compile(r" *(?:#.*)?")
 #: characters that the fast reader leaves to YAML (tabs, controls, CR of old Macs)
 _IRREGULAR = re.compile(r"[^\n\x20-\x7e]")
@@ -135,8 +133,7 @@ def _read_plan_fast(text: str) -> Plan | None:
     indent = None  # of the step lines
     in_steps = False
     step_line = _PLAN_STEP_LINE.fullmatch
-    lines = text.split("\n")
-    for number, line in enumerate(lines):
+    for line in text.split("\n"):
         match = step_line(line)
         if match is not None:
             if not in_steps or (indent is not None and match[1] != indent):
@@ -155,11 +152,6 @@ def _read_plan_fast(text: str) -> Plan | None:
             return None
         found[key] = match
         in_steps = key == "steps"
-        if in_steps and not labels:
-            block = _step_block("\n".join(lines[number + 1 :]))
-            if block is not None:  # every line after it a step's, of one indentation
-                labels, kinds, numbers = block
-                break
     if "format" not in found or "reference_pose" not in found or not labels:
         return None
     for label in labels:
@@ -185,24 +177,6 @@ def _read_plan_fast(text: str) -> Plan | None:
         )
     except StepError:
         return None
-
-
-def _step_block(text: str) -> tuple[list[str], list[str], list[str]] | None:
-    """The labels, kinds and pose numbers of ``text`` when its every line (but an empty
-    last) is a step line (``_PLAN_STEP_LINE``), all of one indentation; else None (then
-    :func:`_read_plan_fast` reads it line by line). One search of the text, not a match
-    per line (a plan of 20,000 steps)."""
-    steps = _PLAN_STEP_LINES.findall(text)
-    # each match is one whole line, and no line holds two: as many as there are lines
-    if len(steps) != text.count("\n") + (not text.endswith("\n")):
-        return None
-    if len({step[0] for step in steps}) != 1:
-        return None
-    return (
-        [step[1] for step in steps],
-        [step[2] for step in steps],
-        [number for step in steps for number in step[3:]],
-    )
 
 
 def plan_to_yaml(plan: Plan) -> str:
