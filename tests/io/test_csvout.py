@@ -217,3 +217,12 @@ def test_column_fields_are_the_former_texts_per_cell() -> None:
         frame["Tx_mm"] = rng.normal(size=n)
         for rounded in (True, False):
             assert csv_text(frame, rounded) == _pandas_text(frame, rounded)
+
+
+def test_four_digit_table_is_the_formatted_texts() -> None:
+    """``_DIGITS4`` made by numpy (issue 37, p10k) against the texts it was made of."""
+    from hexatherm.io import csvout
+
+    former = np.frombuffer("".join(f"{i:04d}" for i in range(10000)).encode(), np.uint8)
+    np.testing.assert_array_equal(csvout._DIGITS4, former.reshape(10000, 4))
+    assert csvout._DIGITS4.dtype == np.uint8 and csvout._DIGITS4.flags.c_contiguous
