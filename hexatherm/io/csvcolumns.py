@@ -246,6 +246,10 @@ def iso_times_from_bytes(
     return None if cut is None else cut[:2]
 
 
+#: the bytes of :data:`ASCII_BLANKS`
+BLANK_BYTES = np.zeros(256, dtype=bool)
+BLANK_BYTES[list(ASCII_BLANKS.encode("ascii"))] = True
+
 #: the longest name :func:`times_and_names_from_bytes` cuts from the bytes (a longer one:
 #: pandas reads the names)
 NAME_WIDTH = 64
@@ -256,13 +260,17 @@ for _low, _high in ((b"A", b"Z"), (b"a", b"z"), (b"0", b"9"), (b"-", b"-")):
 
 
 def times_and_names_from_bytes(
-    raw: bytes, column: int, count: int, names: tuple[int, ...] = ()
+    raw: bytes, column: int, count: int, names: tuple[int, ...] = (), no_blanks: bool = False
 ) -> tuple[npt.NDArray[np.float64], bool, list[npt.NDArray[np.str_]]] | None:
     """:func:`iso_times_from_bytes`, and the fields ``names`` (indices below ``count``)
     of every line as str arrays, cut from the same split of the bytes: each a name of
     1 to :data:`NAME_WIDTH` of :data:`NAME_BYTES`, else None (the caller reads the file
     another way). The arrays are what ``numpy.asarray(list_of_names, dtype=str)`` makes
-    (a unicode array as wide as the longest name)."""
+    (a unicode array as wide as the longest name).
+
+    With ``no_blanks``, None also when a line past the header holds one of
+    :data:`ASCII_BLANKS` (every blank is below ``,``: the split finds them among the
+    bytes it looks at, so that the caller need not scan the file for them again)."""
     data = np.frombuffer(raw, dtype=np.uint8)
     start = raw.find(b"\n") + 1
     if start <= 0 or start >= data.size or not 0 <= column < count:
@@ -284,6 +292,8 @@ def times_and_names_from_bytes(
         feeds = found_bytes == 10
         separators = feeds | (found_bytes == 44)
         if not separators.all():
+            if no_blanks and BLANK_BYTES[found_bytes[~separators]].any():
+                return None
             found, feeds = found[separators], feeds[separators]
         if found.size % count:
             return None

@@ -358,13 +358,14 @@ def _fast_measurement_csv(raw: bytes, path: str, kind: RecordKind | None) -> Rec
     ):
         return None
     numeric = [c for c in columns if c not in ("label", "ball", "time")]
-    # no value can hold a blank to strip: the parser need not look for them
-    blank_free = _blank_free(raw)
     # ISO times of one layout and the names straight from the bytes (no Python string per
     # row; pandas then reads the numbers only), else the times alone, else pandas reads
-    # them as text
+    # them as text; the cut is None where a line holds a blank (the header, of known
+    # names, holds none), else no value can hold a blank to strip: the parser need not
+    # look for them
     time_column = BASE_COLUMNS.index("time")
-    cut = times_and_names_from_bytes(raw, time_column, len(columns), (0, 1)) if blank_free else None
+    cut = times_and_names_from_bytes(raw, time_column, len(columns), (0, 1), True)
+    blank_free = cut is not None or _blank_free(raw)
     times = cut[:2] if cut is not None else None
     if blank_free and cut is None:
         times = iso_times_from_bytes(raw, time_column, len(columns))

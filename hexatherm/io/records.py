@@ -357,12 +357,15 @@ def check_groups(records: Records, *, keep_later: bool = False) -> Records:
         change = (label[1:] != label[:-1]) | (ball[1:] != ball[:-1])
         starts = np.concatenate(([0], np.flatnonzero(change) + 1))
     stops = np.append(starts[1:], n)
-    groups: dict[tuple[str, str], list[int]] = {}
-    # each group's step and ball as Python strings at once (not two numpy scalars a group)
-    keys = zip(label[starts].astype(str).tolist(), ball[starts].astype(str).tolist(), strict=True)
-    for g, key in enumerate(keys):
-        groups.setdefault(key, []).append(g)
-    repeated = {key: gs for key, gs in groups.items() if len(gs) > 1}
+    first_label, first_ball = label[starts].astype(str), ball[starts].astype(str)
+    repeated: dict[tuple[str, str], list[int]] = {}
+    if not _distinct_pairs(first_label, first_ball):
+        groups: dict[tuple[str, str], list[int]] = {}
+        # each group's step and ball as Python strings at once (not two numpy scalars a group)
+        keys = zip(first_label.tolist(), first_ball.tolist(), strict=True)
+        for g, key in enumerate(keys):
+            groups.setdefault(key, []).append(g)
+        repeated = {key: gs for key, gs in groups.items() if len(gs) > 1}
     keep = None
     if repeated and not keep_later:
         key, gs = min(repeated.items(), key=lambda item: item[1][1])
@@ -406,6 +409,18 @@ def check_groups(records: Records, *, keep_later: bool = False) -> Records:
     if records.kind == "points" and number is not None:
         _refuse_repeated_numbers(records, np.asarray(number))
     return records
+
+
+def _distinct_pairs(first: npt.NDArray[np.str_], second: npt.NDArray[np.str_]) -> bool:
+    """Whether no two of the pairs ``(first[i], second[i])`` are equal, by sorting them
+    (a scanning campaign's 60,000 groups are not put in a dict one by one). numpy's texts
+    compare as equal what Python's do (and a text with trailing NULs as equal to it
+    without them): True here means no pair repeated as Python sees them either."""
+    if first.size < 2:
+        return True
+    order = np.lexsort((second, first))
+    a, b = first[order], second[order]
+    return not bool(np.any((a[1:] == a[:-1]) & (b[1:] == b[:-1])))
 
 
 def refuse_groups_in_two_files(records: Sequence[Records]) -> None:

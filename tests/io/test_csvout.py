@@ -9,7 +9,7 @@ import pandas as pd
 
 from hexatherm.io import csvout
 from hexatherm.io.csvfile import centres_to_csv
-from hexatherm.io.csvout import RESOLUTION, csv_text, fixed_text, resolution_of
+from hexatherm.io.csvout import RESOLUTION, csv_bytes, csv_text, fixed_text, resolution_of
 from hexatherm.io.records import Records
 from hexatherm.workflows.replay import DEFAULT_TOLERANCES
 
@@ -133,6 +133,8 @@ def test_the_joined_text_is_what_pandas_writes() -> None:
     for frame in frames:
         for rounded in (True, False):
             assert csv_text(frame, rounded) == _pandas_text(frame, rounded)
+            # the bytes written (process's tables): the text's UTF-8, laid out or pandas'
+            assert csv_bytes(frame, rounded) == _pandas_text(frame, rounded).encode("utf-8")
 
 
 def _former_digits(n: np.ndarray, count: int) -> np.ndarray:
@@ -215,3 +217,12 @@ def test_column_fields_are_the_former_texts_per_cell() -> None:
         frame["Tx_mm"] = rng.normal(size=n)
         for rounded in (True, False):
             assert csv_text(frame, rounded) == _pandas_text(frame, rounded)
+
+
+def test_four_digit_table_is_the_formatted_texts() -> None:
+    """``_DIGITS4`` made by numpy (issue 37, p10k) against the texts it was made of."""
+    from hexatherm.io import csvout
+
+    former = np.frombuffer("".join(f"{i:04d}" for i in range(10000)).encode(), np.uint8)
+    np.testing.assert_array_equal(csvout._DIGITS4, former.reshape(10000, 4))
+    assert csvout._DIGITS4.dtype == np.uint8 and csvout._DIGITS4.flags.c_contiguous

@@ -96,3 +96,38 @@ def test_names_are_cut_or_left_to_pandas_by_their_bytes():
     assert cut is not None and cut[2][0][0] == "y" * 64 and cut[2][0].dtype == np.dtype("U64")
     # names after the time are not cut (they need not be followed by 16 bytes)
     assert csvcolumns.times_and_names_from_bytes(raw, 1, 6, (0, 2)) is None
+
+
+#: every blank the reader strips, and bytes below ',' that are not blanks
+_BELOW_COMMA = [*(c.encode() for c in csvcolumns.ASCII_BLANKS), b"\x01", b"\x0d", b"!", b"+"]
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_the_cut_finds_the_blanks_the_former_scan_found(seed, monkeypatch):
+    """The cut's ``no_blanks`` (issue 37, p10k) against the former way: a scan of the
+    whole file for blanks (``csvfile._blank_free``) before the cut."""
+    rng = np.random.default_rng(100 + seed)
+    monkeypatch.setattr(csvcolumns, "_TIME_SCAN", int(rng.choice([64, 300, 1 << 21])))
+    ijk = bool(seed % 2)
+    count = 9 if ijk else 6
+    raw = _file(rng, int(rng.integers(1, 80)), ijk=ijk, runs=seed % 4 < 2)
+    cases = [raw]
+    for _ in range(40):
+        at = int(rng.integers(raw.find(b"\n") + 1, len(raw)))
+        edit = _BELOW_COMMA[int(rng.integers(len(_BELOW_COMMA)))]
+        cases.append(raw[:at] + edit + raw[at + int(rng.integers(0, 2)) :])
+    blanks = 0
+    for case in cases:
+        new = csvcolumns.times_and_names_from_bytes(case, 5, count, (0, 1), True)
+        plain = csvcolumns.times_and_names_from_bytes(case, 5, count, (0, 1))
+        former = plain if csvfile._blank_free(case) else None
+        blanks += not csvfile._blank_free(case)
+        assert (new is None) == (former is None)
+        if new is not None:
+            assert former is not None
+            np.testing.assert_array_equal(new[0], former[0])
+            assert new[1] == former[1]
+            for a, b in zip(new[2], former[2], strict=True):
+                np.testing.assert_array_equal(a, b)
+        _same(csvfile._fast_measurement_csv(case, "p.csv", None), _former(case, monkeypatch))
+    assert blanks >= 10  # the edits put blanks in most cases

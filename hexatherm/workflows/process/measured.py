@@ -13,6 +13,7 @@ from typing import TypeVar
 import numpy as np
 import numpy.typing as npt
 
+from hexatherm.core.plan import name_indices
 from hexatherm.errors import FitError, InputError, PlanError
 from hexatherm.io.files import STRICT, ReadOptions
 from hexatherm.io.measurements import read_measurements
@@ -239,8 +240,6 @@ def assemble_centres(records: list[Records], session: Session) -> StepCentres:
     ball that was not measured.
     """
     plan, balls = session.plan, session.balls
-    step_index = {label: i for i, label in enumerate(plan.labels)}
-    ball_index = {name: j for j, name in enumerate(balls.names)}
     n, k = len(plan.labels), len(balls.names)
     sums = np.zeros((n, k, 3))
     counts = np.zeros((n, k), dtype=int)
@@ -262,8 +261,7 @@ def assemble_centres(records: list[Records], session: Session) -> StepCentres:
     for rec in records:
         if rec.kind != "centres":
             raise ValueError("fit points records before assembling centres")
-        si = np.array([step_index.get(s, -1) for s in rec.label])
-        bi = np.array([ball_index.get(b, -1) for b in rec.ball])
+        si, bi = name_indices(plan.labels, rec.label), name_indices(balls.names, rec.ball)
         if np.any(si < 0):
             row = int(np.argmax(si < 0))
             raise InputError(

@@ -43,7 +43,8 @@ import numpy as np
 import pandas as pd
 
 from hexatherm.core.geometry import to_um_urad
-from hexatherm.io.csvout import csv_text
+from hexatherm.core.plan import known_indices
+from hexatherm.io.csvout import csv_bytes
 from hexatherm.io.outputs import output_dir
 from hexatherm.workflows.process.measured import nominal_fit_diameter_mm
 
@@ -228,7 +229,7 @@ def fits_frame(result: ProcessResult) -> pd.DataFrame:
     diameter, plus the tip's when points are not probe-compensated).
     """
     balls = result.session.balls
-    nominal = dict(zip(balls.names, nominal_fit_diameter_mm(balls), strict=True))
+    nominal = nominal_fit_diameter_mm(balls)
     frames = []
     for rec in result.records:
         n = len(rec)
@@ -244,7 +245,8 @@ def fits_frame(result: ProcessResult) -> pd.DataFrame:
                     "file": Path(rec.path).name,
                     "n": rec.extra.get("n", np.full(n, 1)),
                     "diameter_mm": diameter,
-                    "diameter_dev_um": (diameter - np.array([nominal[b] for b in rec.ball])) * 1e3,
+                    "diameter_dev_um": (diameter - nominal[known_indices(balls.names, rec.ball)])
+                    * 1e3,
                     "form_um": rec.extra.get("form_um", nan),
                     "rms_um": rec.extra.get("rms_um", nan),
                     "cap_deg": rec.extra.get("cap_deg", nan),
@@ -291,13 +293,13 @@ def write_results(
     if quality is not None:
         tables["quality.csv"] = quality_file_frame(quality)
     texts = {
-        name: csv_text(frame, resolutions={"jacobian_rcond": RCOND_RESOLUTION})
+        name: csv_bytes(frame, resolutions={"jacobian_rcond": RCOND_RESOLUTION})
         for name, frame in tables.items()
     }
     inputs = [*session_inputs(result), *extra_inputs]
     with output_dir(out, inputs=inputs, overwrite=overwrite, notes=notes) as tmp:
         for name, text in texts.items():
-            (tmp / name).write_text(text, encoding="utf-8", newline="")
+            (tmp / name).write_bytes(text)
     return [Path(out) / name for name in texts]
 
 

@@ -50,6 +50,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from hexatherm.core.plan import known_indices
 from hexatherm.core.plausibility import implied_warming_K, temperature_span_K
 from hexatherm.core.registration import check_distances
 from hexatherm.errors import HexathermError, InputWarning
@@ -157,10 +158,12 @@ class QualityReport:
                 worst = np.nanmin(shown) if at_least else np.nanmax(shown)
                 worst_text = f"{worst:.4g}"
             failing = self.failing_texts(check)
-            ran = self.ran(check)
+            # whether it ran at a step: up to the first such cell (not a flag per step)
+            flags = (bool, np.bool_)
+            ran = any(type(ok) in flags for ok in self.frame[f"ok_{check}"].tolist())
             status = (
                 "n/a (could not run: " + _why_not(check, self.frame) + ")"
-                if not ran.any()
+                if not ran
                 else "ok"
                 if not failing
                 else (
@@ -262,16 +265,16 @@ def _row_max(values: FloatArray) -> FloatArray:
 def _ball_values(result: ProcessResult) -> tuple[FloatArray, FloatArray]:
     """Form error (um) and diameter deviation (um) of every step and ball (NaN: unknown)."""
     plan, balls = result.session.plan, result.session.balls
-    step_index = {label: i for i, label in enumerate(plan.labels)}
     # a repeated O or R0 (averaged into one step): the worst of its measurements
-    step_index.update({label: step_index[kept] for label, kept in result.repeat_of.items()})
-    ball_index = {name: j for j, name in enumerate(balls.names)}
+    step_names = [*plan.labels, *result.repeat_of]
+    step_of = np.arange(len(step_names), dtype=np.intp)
+    step_of[len(plan.labels) :] = known_indices(plan.labels, list(result.repeat_of.values()))
     nominal_mm = nominal_fit_diameter_mm(balls)
     shape = (len(plan.labels), len(balls.names))
     form, diameter = np.full(shape, np.nan), np.full(shape, np.nan)
     for rec in result.records:
-        si = np.array([step_index[s] for s in rec.label], dtype=np.intp)
-        bi = np.array([ball_index[b] for b in rec.ball], dtype=np.intp)
+        si = step_of[known_indices(step_names, rec.label)]
+        bi = known_indices(balls.names, rec.ball)
         if "form_um" in rec.extra:
             values = pd.to_numeric(pd.Series(rec.extra["form_um"]), errors="coerce").to_numpy()
             np.fmax.at(form, (si, bi), values)
