@@ -346,7 +346,7 @@ class Hexapod:
                 x = x - np.linalg.solve(jac, resid[..., None])[..., 0]
             except np.linalg.LinAlgError:
                 break
-        x = self.fgm(q, initial_poses=start)
+        x = self.fgm(q, initial_poses=start, tol_mm=tol_mm)
         return x, self.jacobian(x)
 
     def fgm(

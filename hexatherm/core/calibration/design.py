@@ -19,6 +19,7 @@ from hexatherm.core.calibration.fit import (
     observability,
     refuse_rank_deficient,
 )
+from hexatherm.core.calibration.heldout import heldout_residuals
 from hexatherm.core.calibration.model import LEVELS, CalibrationModel, Level, check_level
 from hexatherm.core.calibration.weights import (
     BandedCovariance,
@@ -175,27 +176,7 @@ def _score(
     n_res = 6 * x_cmd.shape[0]
     rss = max(fit.chi_square, n_res * 1e-30)  # an exact fit: the BIC's floor
     bic = float(n_res * np.log(rss / n_res) + fit.model.n_free * np.log(n_res))
-    held = np.full(x_cmd.shape, np.nan)
-    squares, notes = 0.0, []
-    for f in np.unique(folds):
-        train, test = np.flatnonzero(folds != f), np.flatnonzero(folds == f)
-        try:
-            part = fit_calibration(
-                nominal,
-                x_cmd[train],
-                x_meas[train],
-                weights.subset(train),
-                level=level,
-                residuals=residuals,
-                start=fit.parameters,
-            )
-        except CalibrationError as error:
-            notes.append(f"fold {f + 1}: {error}")
-            squares = float("nan")
-            continue
-        held[test] = x_meas[test] - part.predict(x_cmd[test])
-        white = weights.subset(test).whiten(held[test])
-        squares += float(white @ white)
+    held, squares, notes = heldout_residuals(nominal, fit, x_cmd, x_meas, weights, folds, residuals)
     rms_w = float(np.sqrt(squares / n_res))
     return LevelScore(level, fit, bic, held, rms_w, "; ".join(notes))
 

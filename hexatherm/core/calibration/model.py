@@ -15,6 +15,7 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
+from hexatherm.core.calibration.derivatives import StandDerivatives
 from hexatherm.core.geometry import (
     Convention,
     angles_from_rotation,
@@ -438,19 +439,28 @@ class CalibrationModel:
 
     def _stand(
         self, geometry: Hexapod, theta: FloatArray, q_cmd: FloatArray, start: FloatArray
-    ) -> tuple[FloatArray, FloatArray]:
-        """Poses (N, 6) the geometry stands at for commanded legs, in its base frame,
-        and their derivatives (N, 6, 48) (implicit function theorem on IGM = q)."""
-        q, dq = self._true_legs(theta, q_cmd)
-        poses = geometry.fgm(q, start, tol_mm=PREDICTION_TOL_MM, stroke_check=False)
-        jac = geometry.jacobian(poses)
-        rhs = dq - self._igm_by_joints(geometry, poses)
-        return poses, np.asarray(np.linalg.solve(jac, rhs), float)
+    ) -> tuple[FloatArray, StandDerivatives]:
+        """Poses (N, 6) the geometry stands at for commanded legs, in its base frame, and
+        their derivatives by the parameters (factored: :class:`StandDerivatives`). The
+        FGM is :meth:`~hexatherm.core.hexapod.Hexapod.fgm_near`: plain Newton from a start
+        whose legs are within a thousandth of a leg (a warm start), else the certified FGM.
+        """
+        _, _, offsets, gains = split_parameters(theta)
+        travel = q_cmd - self.home_leg_mm
+        q = q_cmd + offsets + gains * travel
+        poses, jac = geometry.fgm_near(q, start, tol_mm=PREDICTION_TOL_MM)
+        legs = geometry.leg_vectors(poses)
+        units = legs / np.linalg.norm(legs, axis=2, keepdims=True)
+        rot = rotation_from_angles(poses[:, 3:], geometry.convention)
+        platform = np.einsum("nji,nkj->nki", rot, units)  # R^T u
+        return poses, StandDerivatives(
+            np.asarray(np.linalg.inv(jac), float), units, platform, travel
+        )
 
     def _stand_with_origin(
         self, geometry: Hexapod, theta: FloatArray, x_cmd: FloatArray
-    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        """Frame O (6,) and the poses (N, 6) in the base frame, with derivatives.
+    ) -> tuple[FloatArray, StandDerivatives]:
+        """Frame O and the poses, (N + 1, 6) in the base frame, with derivatives.
 
         One FGM for O and the poses. Its start is the commanded pose (the zero pose for
         O), or, when the same poses were solved for parameters within
@@ -468,14 +478,14 @@ class CalibrationModel:
         if len(self._warm) >= 8:
             self._warm.clear()
         self._warm[key] = (theta.copy(), poses)
-        return poses[0], d[0], poses[1:], d[1:]
+        return poses, d
 
     def origin(self, theta: npt.ArrayLike) -> tuple[FloatArray, FloatArray]:
         """Frame O of a geometry: the pose (6,) it stands at for the zero command, in
         its base frame, and the derivatives (6, 48)."""
         t = _check_theta(theta)
         pose, d = self._stand(self.hexapod(t), t, self.home_leg_mm[None], np.zeros((1, 6)))
-        return pose[0], d[0]
+        return pose[0], d.times()[0]
 
     def predict(
         self, theta: npt.ArrayLike, commanded_poses: npt.ArrayLike
@@ -497,9 +507,11 @@ class CalibrationModel:
         """
         t = _check_theta(theta)
         x_cmd = np.atleast_2d(check_poses(commanded_poses, "commanded pose"))
-        origin, d_origin, stand, d_stand = self._stand_with_origin(self.hexapod(t), t, x_cmd)
-        poses, d_a, d_b = relative_pose(origin, stand, self.nominal.convention)
-        return poses, d_a @ d_origin + d_b @ d_stand
+        stand, d = self._stand_with_origin(self.hexapod(t), t, x_cmd)
+        poses, d_a, d_b = relative_pose(stand[0], stand[1:], self.nominal.convention)
+        jac = d[1:].times(d_b)
+        jac += (d_a.reshape(-1, 6) @ d[:1].times()[0]).reshape(jac.shape)
+        return poses, jac
 
     def leg_residuals(
         self, theta: npt.ArrayLike, commanded_poses: npt.ArrayLike, measured_poses: npt.ArrayLike
@@ -526,7 +538,7 @@ class CalibrationModel:
         if x_meas.shape != x_cmd.shape:
             raise ValueError(f"measured poses {x_meas.shape} do not match {x_cmd.shape}")
         geometry = self.hexapod(t)
-        origin, d_origin = self._stand(geometry, t, self.home_leg_mm[None], np.zeros((1, 6)))
+        origin, d_origin = self.origin(t)  # (6,) and (6, 48)
         placed, d_a, d_b = compose_pose(origin, x_meas, self.nominal.convention)
         legs_jac = geometry.jacobian(placed)
         q_true, d_true = self._true_legs(t, self.commanded_legs(x_cmd))

@@ -47,7 +47,8 @@ def diagnose(
 
     folder = session if session.is_dir() else session.parent
     out_dir = out if out is not None else folder / "diagnosis"
-    inputs = read_session(session).input_files()
+    spec = read_session(session)  # read once: read_for_diagnosis is given it
+    inputs = spec.input_files()
     extra_inputs = ([hexapod_path] if hexapod_path is not None else []) + template_inputs
     inputs += extra_inputs
     # before any work: never into, around or onto the session's files (checked again
@@ -57,7 +58,7 @@ def diagnose(
     # provenance.json's and the report's digests of the bytes read, not a second and a
     # third read of the measurements (a scanning session's 150 MB)
     with digests_kept():
-        data = read_for_diagnosis(session, hexapod_path, reading)
+        data = read_for_diagnosis(session, hexapod_path, reading, spec)
         if on_read is not None:
             on_read(data)
         result = run_diagnosis(data, progress)

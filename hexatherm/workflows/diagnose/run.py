@@ -113,10 +113,13 @@ def read_for_diagnosis(
     path: str | Path,
     hexapod_path: str | Path | None = None,
     reading: ReadOptions = STRICT,
+    session: Session | None = None,
 ) -> SessionData:
     """Read a session (and optionally another hexapod file) for the diagnosis; ``reading``
-    as in :func:`~hexatherm.workflows.process.measured.read_measured`."""
-    session = read_session(path)
+    as in :func:`~hexatherm.workflows.process.measured.read_measured`; ``session``: its
+    session file already read (``diagnose`` reads it first, to check the output folder
+    against its inputs: a plan of 20,002 steps takes a quarter of a second)."""
+    session = read_session(path) if session is None else session
     if session.temperatures is None:
         raise InputError(
             "the diagnosis compares the measurements with the twin, which needs "
