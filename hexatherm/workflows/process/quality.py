@@ -63,6 +63,8 @@ __all__ = ["CHECKS", "NA", "QualityReport", "parse_threshold", "quality_checks"]
 
 #: the ``ok_<check>`` entry of a check that could not run on a step
 NA = "na"
+#: the types of an ``ok_<check>`` entry where the check ran (its pass or fail)
+_RAN = (bool, np.bool_)
 
 
 #: check name -> (value column, threshold field, value must be at least the threshold)
@@ -111,13 +113,17 @@ class QualityReport:
     def ran(self, check: str) -> pd.Series:
         """Whether ``check`` could run at each step (boolean)."""
         column = self.frame[f"ok_{check}"]
-        flags = (bool, np.bool_)
         return pd.Series(
-            [type(ok) in flags for ok in column.tolist()],
+            [type(ok) in _RAN for ok in column.tolist()],
             index=column.index,
             dtype=bool,
             name=column.name,
         )
+
+    def ran_anywhere(self, check: str) -> bool:
+        """Whether ``check`` could run at any step (asked up to the first step it ran at,
+        not a flag per step)."""
+        return any(type(ok) in _RAN for ok in self.frame[f"ok_{check}"].tolist())
 
     @property
     def failed_steps(self) -> list[str]:
@@ -158,12 +164,9 @@ class QualityReport:
                 worst = np.nanmin(shown) if at_least else np.nanmax(shown)
                 worst_text = f"{worst:.4g}"
             failing = self.failing_texts(check)
-            # whether it ran at a step: up to the first such cell (not a flag per step)
-            flags = (bool, np.bool_)
-            ran = any(type(ok) in flags for ok in self.frame[f"ok_{check}"].tolist())
             status = (
                 "n/a (could not run: " + _why_not(check, self.frame) + ")"
-                if not ran
+                if not self.ran_anywhere(check)
                 else "ok"
                 if not failing
                 else (

@@ -236,7 +236,7 @@ def quality_summary(quality: QualityReport) -> Table:
             else float(np.nanmin(shown) if at_least else np.nanmax(shown))
         )
         failing = frame.loc[quality.failing(check), "label"].astype(str).tolist()
-        if not quality.ran(check).any():
+        if not quality.ran_anywhere(check):
             status = "could not run"
         elif failing:
             status = f"failed at {len(failing)} step(s): " + ", ".join(failing)
